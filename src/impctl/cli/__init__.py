@@ -1,0 +1,42 @@
+"""The ``impctl`` command line: one click group, one module per family of subcommands.
+
+Bad input raises :class:`impctl.errors.InputError`; :func:`main` prints it as one line on
+stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..errors import InputError
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="impctl")
+def cli() -> None:
+    """Identify a house's 5R1C thermal parameters from night-time heat-pump experiments."""
+
+
+def _register() -> None:
+    # Each subcommand module adds itself to the group; keep imports light (no torch here).
+    from . import simulate_cmd  # noqa: F401
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: run the CLI, turning bad input into one line and exit status 2."""
+    _register()
+    try:
+        cli.main(args=argv, standalone_mode=False)
+    except InputError as exc:
+        click.echo(f"impctl: {exc}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("impctl: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)

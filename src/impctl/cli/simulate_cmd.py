@@ -1,0 +1,1 @@
+"""``impctl simulate`` (filled in by the foundation work)."""

@@ -1,0 +1,150 @@
+"""Strict CSV tables: timestamps and numbers checked row by row, one clear error line.
+
+Row numbers in errors are file line numbers (the header is row 1).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import InputError
+
+_OFFSET = re.compile(r"(Z|[+-]\d\d:?\d\d)$")
+
+
+def _first_bad(mask: np.ndarray) -> int:
+    return int(np.argmax(mask)) + 2
+
+
+def parse_timestamps(raw: pd.Series, path: str | Path, tz: str, column: str = "timestamp"):
+    """Parse ISO 8601 strings into a tz-aware DatetimeIndex in ``tz``.
+
+    Strings with a UTC offset keep their instant; naive strings are local time in ``tz``.
+    """
+    text = raw.astype(str).str.strip()
+    empty = (raw.isna() | (text == "")).to_numpy()
+    if empty.any():
+        raise InputError(f"empty {column}", path, f"row {_first_bad(empty)}")
+    parsed = pd.to_datetime(text, format="ISO8601", utc=True, errors="coerce")
+    bad = parsed.isna().to_numpy()
+    if bad.any():
+        row = _first_bad(bad)
+        raise InputError(
+            f"cannot parse {column} {text.iloc[row - 2]!r} as ISO 8601", path, f"row {row}"
+        )
+    has_offset = text.str.contains(_OFFSET).to_numpy()
+    if has_offset.all():
+        return pd.DatetimeIndex(parsed).tz_convert(tz)
+    if has_offset.any():
+        row = _first_bad(~has_offset)
+        raise InputError(f"{column} mixes UTC offsets and local times", path, f"row {row}")
+    naive = pd.DatetimeIndex(pd.to_datetime(text, format="ISO8601"))
+    try:
+        return naive.tz_localize(tz, ambiguous="raise", nonexistent="raise")
+    except Exception as exc:  # pytz/zoneinfo raise several types for DST gaps and folds
+        raise InputError(
+            f"local {column} is ambiguous or does not exist in {tz} ({exc}); "
+            "write timestamps with a UTC offset",
+            path,
+        ) from None
+
+
+def read_table(
+    path: str | Path,
+    *,
+    required: Iterable[str],
+    numeric: Iterable[str] = (),
+    optional: Iterable[str] = (),
+    may_be_empty: Iterable[str] = (),
+    tz: str = "UTC",
+) -> pd.DataFrame:
+    """Read a CSV with a ``timestamp`` column and numeric columns, rejecting bad cells.
+
+    Parameters
+    ----------
+    path : the CSV file
+    required : columns that must be in the header
+    numeric : columns (required or optional) that hold numbers
+    optional : further columns that may appear; anything else is ignored
+    may_be_empty : numeric columns whose empty cells mean "none" (kept as NaN)
+    tz : time zone for naive timestamps
+
+    Returns
+    -------
+    DataFrame with a tz-aware ``timestamp`` column and float numeric columns.
+
+    Raises
+    ------
+    InputError
+        Missing file, empty file, missing column, bad timestamp, text/NaN in a number column.
+    """
+    path = Path(path)
+    required = tuple(required)
+    numeric = tuple(numeric)
+    may_be_empty = set(may_be_empty)
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except pd.errors.EmptyDataError:
+        raise InputError("file is empty", path) from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise InputError(f"not a readable CSV: {str(exc).splitlines()[0]}", path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path) from None
+    df.columns = [str(c).strip() for c in df.columns]
+    for col in required:
+        if col not in df.columns:
+            raise InputError(f"missing column '{col}' (header: {','.join(df.columns)})", path,
+                             "row 1")
+    if df.empty:
+        raise InputError("no data rows", path)
+    out = pd.DataFrame(index=range(len(df)))
+    out["timestamp"] = parse_timestamps(df["timestamp"], path, tz)
+    for col in numeric:
+        if col not in df.columns:
+            continue
+        text = df[col].str.strip()
+        empty = (text == "").to_numpy()
+        values = pd.to_numeric(text.where(~empty, None), errors="coerce").to_numpy(dtype=float)
+        bad = (np.isnan(values) & ~empty) | np.isinf(values)
+        if col not in may_be_empty:
+            bad |= empty
+        if bad.any():
+            row = _first_bad(bad)
+            cell = text.iloc[row - 2]
+            what = "empty cell" if cell == "" else f"{cell!r} is not a finite number"
+            raise InputError(f"column '{col}': {what}", path, f"row {row}")
+        out[col] = values
+    for col in optional:
+        if col in df.columns and col not in out.columns:
+            out[col] = df[col].str.strip()
+    return out
+
+
+def step_seconds(timestamps: pd.DatetimeIndex | pd.Series, path: str | Path) -> float | None:
+    """The constant spacing of ``timestamps`` [s]; ``None`` for a single row.
+
+    Raises
+    ------
+    InputError
+        Non-increasing or unequal spacing, naming the first offending row.
+    """
+    ts = pd.DatetimeIndex(timestamps)
+    if len(ts) < 2:
+        return None
+    deltas = np.diff(ts.asi8) / 1e9
+    if deltas[0] <= 0:
+        raise InputError("timestamps must increase", path, "row 3")
+    bad = deltas != deltas[0]
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(
+            f"unequal steps: {deltas[i]:g} s here, {deltas[0]:g} s before", path, f"row {i + 3}"
+        )
+    return float(deltas[0])
