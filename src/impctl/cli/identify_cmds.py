@@ -1,0 +1,1 @@
+"""Subcommands (to be filled in)."""

@@ -1,0 +1,1 @@
+"""Kronoterm heat pump over Modbus: register map, decoding, safe client."""

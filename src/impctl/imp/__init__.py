@@ -1,0 +1,1 @@
+"""The Identification Measurement Procedure: night plans, measured-night data, features."""

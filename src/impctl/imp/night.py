@@ -1,0 +1,48 @@
+"""One IMP night's samples: the common currency of simulated and measured nights."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+NightKind = Literal["constrained", "normal"]
+
+
+@dataclass(frozen=True)
+class NightSamples:
+    """Samples of one IMP night, whatever their source (simulation, heat pump, CSV).
+
+    Attributes
+    ----------
+    night_id : str
+        Identifier (e.g. ``"2026-01-12"`` or the CSV's ``night`` value).
+    kind : {"constrained", "normal"}
+        Heating switched off, or held at ``setpoint_c``.
+    start : pandas.Timestamp
+        Time zone-aware start of the window (time 0 of ``time_s``).
+    time_s : ndarray
+        Sample times since ``start`` [s], increasing.
+    t_air_c, t_out_c : ndarray
+        Indoor air and outdoor temperature [°C].
+    q_hc_w : ndarray
+        Thermal heat output of the heating [W].
+    setpoint_c : float
+        T_set of the night [°C] (for constrained nights the band centre); NaN if unknown.
+    """
+
+    night_id: str
+    kind: NightKind
+    start: pd.Timestamp
+    time_s: np.ndarray
+    t_air_c: np.ndarray
+    t_out_c: np.ndarray
+    q_hc_w: np.ndarray
+    setpoint_c: float = float("nan")
+
+    @property
+    def duration_h(self) -> float:
+        """Covered time [h] from the first to the last sample."""
+        return float(self.time_s[-1] - self.time_s[0]) / 3600.0 if len(self.time_s) else 0.0
