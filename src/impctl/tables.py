@@ -14,7 +14,7 @@ import pandas as pd
 
 from .errors import InputError
 
-_OFFSET = re.compile(r"(Z|[+-]\d\d:?\d\d)$")
+_OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
 
 
 def _first_bad(mask: np.ndarray) -> int:
@@ -138,7 +138,7 @@ def step_seconds(timestamps: pd.DatetimeIndex | pd.Series, path: str | Path) -> 
     ts = pd.DatetimeIndex(timestamps)
     if len(ts) < 2:
         return None
-    deltas = np.diff(ts.asi8) / 1e9
+    deltas = (ts[1:] - ts[:-1]).total_seconds().to_numpy()
     if deltas[0] <= 0:
         raise InputError("timestamps must increase", path, "row 3")
     bad = deltas != deltas[0]

@@ -79,11 +79,12 @@ class _Step:
 
 
 def _as_2d(name: str, value: ArrayLike | None, n_steps: int | None, n_houses: int) -> NDArray:
+    """Shape (n_steps, 1) or (n_steps, n_houses); shared inputs are not copied per house."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
         if n_steps is None:
             raise ValueError(f"{name}: cannot infer the number of steps from a scalar")
-        return np.full((n_steps, n_houses), float(arr))
+        return np.broadcast_to(arr, (n_steps, 1))
     if arr.ndim == 1:
         arr = arr[:, None]
     if arr.ndim != 2 or arr.shape[1] not in (1, n_houses):
@@ -91,7 +92,7 @@ def _as_2d(name: str, value: ArrayLike | None, n_steps: int | None, n_houses: in
                          f"(n_steps, {n_houses})")
     if n_steps is not None and arr.shape[0] != n_steps:
         raise ValueError(f"{name}: {arr.shape[0]} steps, expected {n_steps}")
-    return np.broadcast_to(arr, (arr.shape[0], n_houses))
+    return arr
 
 
 def simulate(
@@ -138,7 +139,7 @@ def simulate(
     n_houses = house.n_houses or 1
     t_e = _as_2d("t_out_c", t_out_c, None, n_houses)
     n_steps = t_e.shape[0]
-    nan = np.full((n_steps, 1), np.nan)
+    nan = np.broadcast_to(np.nan, (n_steps, 1))
     sp = _as_2d("setpoint_c", nan if setpoint_c is None else setpoint_c, n_steps, n_houses)
     forced = _as_2d("phi_hc_w", nan if phi_hc_w is None else phi_hc_w, n_steps, n_houses)
     phi_int = _as_2d("internal_gains_w", internal_gains_w, n_steps, n_houses)

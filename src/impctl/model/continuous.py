@@ -68,7 +68,5 @@ def air_derivative(
     t_m = mass_from_air(t_air, t_e, phi_hc, net)
     dt_m = mass_derivative(t_m, t_e, phi_hc, net)
     den = net.h_tr_is + net.h_ve
-    return (
-        net.h_tr_is / (den * (net.h_tr_ms + net.h_tr_2)) * (net.h_tr_ms * dt_m + net.h_tr_2 * dt_e_dt)
-        + net.h_ve / den * dt_e_dt
-    )
+    surface_rate = (net.h_tr_ms * dt_m + net.h_tr_2 * dt_e_dt) / (net.h_tr_ms + net.h_tr_2)
+    return net.h_tr_is / den * surface_rate + net.h_ve / den * dt_e_dt
