@@ -1,0 +1,12 @@
+"""SQLite storage of IMP nights, samples, the restore journal, trigger requests and fits.
+
+One file in the state directory, WAL mode, every write committed at once (a sample taken is a
+sample kept, even if the process is killed the next instant). The schema is versioned with
+``PRAGMA user_version`` and migrated forward on open. Times are stored as UTC ISO 8601 strings;
+temperatures in °C, powers in W.
+"""
+
+from .db import SCHEMA_VERSION, Store
+from .records import JournalEntry, Night, Sample, TriggerRequest
+
+__all__ = ["SCHEMA_VERSION", "JournalEntry", "Night", "Sample", "Store", "TriggerRequest"]

@@ -1,0 +1,372 @@
+"""The SQLite store: schema, migrations and the queries the daemon and CLI need."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+
+from ..errors import InputError
+from .records import SAMPLE_COLUMNS, JournalEntry, Night, Sample, TriggerRequest
+
+# Each entry migrates from version i to i + 1; never edit a released entry, append a new one.
+_MIGRATIONS: tuple[str, ...] = (
+    """
+    CREATE TABLE nights (
+        id INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL CHECK (kind IN ('constrained', 'normal')),
+        setpoint_c REAL NOT NULL,
+        t_min_c REAL,
+        t_max_c REAL,
+        window_start TEXT NOT NULL,
+        window_end TEXT NOT NULL,
+        state TEXT NOT NULL,
+        source TEXT NOT NULL,
+        valid INTEGER,
+        reasons TEXT NOT NULL DEFAULT '[]',
+        started TEXT,
+        ended TEXT
+    );
+    CREATE TABLE samples (
+        night_id INTEGER NOT NULL REFERENCES nights(id),
+        ts TEXT NOT NULL,
+        t_air_c REAL, t_out_c REAL, q_hc_w REAL, p_el_w REAL, t_supply_c REAL, t_return_c REAL,
+        working_function INTEGER, defrost INTEGER, error_bits INTEGER, loop_mode INTEGER,
+        setpoint_c REAL, dhw_active INTEGER,
+        PRIMARY KEY (night_id, ts)
+    );
+    CREATE TABLE journal (
+        id INTEGER PRIMARY KEY,
+        night_id INTEGER REFERENCES nights(id),
+        register TEXT NOT NULL,
+        address INTEGER NOT NULL,
+        raw_value INTEGER NOT NULL,
+        recorded TEXT NOT NULL,
+        restored TEXT
+    );
+    CREATE INDEX journal_pending ON journal(register) WHERE restored IS NULL;
+    CREATE TABLE requests (
+        id INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL CHECK (kind IN ('constrained', 'normal')),
+        setpoint_c REAL,
+        run_when TEXT NOT NULL CHECK (run_when IN ('now', 'tonight')),
+        created TEXT NOT NULL,
+        taken TEXT,
+        extra TEXT NOT NULL DEFAULT '{}'
+    );
+    CREATE TABLE campaign (
+        seq INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL,
+        setpoint_c REAL NOT NULL,
+        night_id INTEGER REFERENCES nights(id)
+    );
+    CREATE TABLE fits (
+        id INTEGER PRIMARY KEY,
+        created TEXT NOT NULL,
+        nights TEXT NOT NULL,
+        result TEXT NOT NULL
+    );
+    CREATE TABLE events (
+        id INTEGER PRIMARY KEY,
+        ts TEXT NOT NULL,
+        level TEXT NOT NULL,
+        message TEXT NOT NULL
+    );
+    """,
+)
+SCHEMA_VERSION = len(_MIGRATIONS)
+
+
+def _now() -> datetime:
+    return datetime.now(UTC)
+
+
+def _iso(ts: datetime | None) -> str | None:
+    if ts is None:
+        return None
+    if ts.tzinfo is None:
+        raise ValueError("naive datetime: store only time zone-aware instants")
+    return ts.astimezone(UTC).isoformat()
+
+
+def _dt(text: str | None) -> datetime | None:
+    return None if text is None else datetime.fromisoformat(text)
+
+
+class Store:
+    """The impctl SQLite database (WAL mode, schema migrated on open).
+
+    Parameters
+    ----------
+    path : str or Path
+        Database file; its directory is created if missing.
+
+    Raises
+    ------
+    InputError
+        The file is not an impctl database, or was written by a newer impctl.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+        self._db.row_factory = sqlite3.Row
+        try:
+            self._db.execute("PRAGMA journal_mode=WAL")
+            # FULL: a committed sample survives a power cut of the gateway, not only a crash.
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._migrate()
+        except sqlite3.DatabaseError as exc:
+            self._db.close()
+            raise InputError(f"not a usable impctl database: {exc}", self.path) from None
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def close(self) -> None:
+        """Close the connection."""
+        self._db.close()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _migrate(self) -> None:
+        version = self._db.execute("PRAGMA user_version").fetchone()[0]
+        if version > SCHEMA_VERSION:
+            raise InputError(
+                f"database schema {version} is newer than this impctl ({SCHEMA_VERSION}); "
+                "upgrade impctl", self.path)
+        for target in range(version + 1, SCHEMA_VERSION + 1):
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                for statement in _MIGRATIONS[target - 1].split(";"):
+                    if statement.strip():
+                        self._db.execute(statement)
+                self._db.execute(f"PRAGMA user_version = {target}")
+                self._db.execute("COMMIT")
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+
+    @property
+    def schema_version(self) -> int:
+        """The schema version of the open file."""
+        return int(self._db.execute("PRAGMA user_version").fetchone()[0])
+
+    def integrity_check(self) -> str:
+        """SQLite's ``PRAGMA integrity_check`` result (``"ok"`` when sound)."""
+        return str(self._db.execute("PRAGMA integrity_check").fetchone()[0])
+
+    # -- nights ----------------------------------------------------------------------------
+    def create_night(self, kind: str, setpoint_c: float, window_start: datetime,
+                     window_end: datetime, *, t_min_c: float | None = None,
+                     t_max_c: float | None = None, source: str = "schedule") -> int:
+        """Record a new night in state ``planned``; returns its id."""
+        cur = self._db.execute(
+            "INSERT INTO nights (kind, setpoint_c, t_min_c, t_max_c, window_start, window_end,"
+            " state, source) VALUES (?, ?, ?, ?, ?, ?, 'planned', ?)",
+            (kind, setpoint_c, t_min_c, t_max_c, _iso(window_start), _iso(window_end), source),
+        )
+        return int(cur.lastrowid)
+
+    def set_night_state(self, night_id: int, state: str, *, started: datetime | None = None,
+                        ended: datetime | None = None) -> None:
+        """Move a night to ``state``; ``started``/``ended`` are set when given."""
+        self._db.execute(
+            "UPDATE nights SET state = ?, started = COALESCE(?, started),"
+            " ended = COALESCE(?, ended) WHERE id = ?",
+            (state, _iso(started), _iso(ended), night_id),
+        )
+
+    def assess_night(self, night_id: int, valid: bool, reasons: Sequence[str]) -> None:
+        """Store the validity verdict and its reasons."""
+        self._db.execute("UPDATE nights SET valid = ?, reasons = ? WHERE id = ?",
+                         (int(valid), json.dumps(list(reasons)), night_id))
+
+    def night(self, night_id: int) -> Night | None:
+        """One night, or None."""
+        row = self._db.execute("SELECT * FROM nights WHERE id = ?", (night_id,)).fetchone()
+        return None if row is None else _night(row)
+
+    def nights(self, *, states: Iterable[str] | None = None, valid: bool | None = None,
+               ids: Iterable[int] | None = None) -> list[Night]:
+        """Nights in id order, optionally filtered by state, validity or id."""
+        sql, args = "SELECT * FROM nights WHERE 1", []
+        if states is not None:
+            states = list(states)
+            sql += f" AND state IN ({','.join('?' * len(states))})"
+            args += states
+        if valid is not None:
+            sql += " AND valid = ?"
+            args.append(int(valid))
+        if ids is not None:
+            ids = list(ids)
+            sql += f" AND id IN ({','.join('?' * len(ids))})"
+            args += ids
+        return [_night(r) for r in self._db.execute(sql + " ORDER BY id", args)]
+
+    # -- samples ---------------------------------------------------------------------------
+    def add_sample(self, sample: Sample) -> None:
+        """Commit one sample at once."""
+        values = [getattr(sample, c) for c in SAMPLE_COLUMNS]
+        values = [int(v) if isinstance(v, bool) else v for v in values]
+        self._db.execute(
+            f"INSERT OR REPLACE INTO samples (night_id, ts, {', '.join(SAMPLE_COLUMNS)})"
+            f" VALUES (?, ?, {', '.join('?' * len(SAMPLE_COLUMNS))})",
+            [sample.night_id, _iso(sample.ts), *values],
+        )
+
+    def samples(self, night_id: int) -> list[Sample]:
+        """The samples of one night in time order."""
+        rows = self._db.execute(
+            "SELECT * FROM samples WHERE night_id = ? ORDER BY ts", (night_id,)).fetchall()
+        out = []
+        for r in rows:
+            kw = {c: r[c] for c in SAMPLE_COLUMNS}
+            for flag in ("defrost", "dhw_active"):
+                kw[flag] = None if kw[flag] is None else bool(kw[flag])
+            out.append(Sample(night_id=r["night_id"], ts=_dt(r["ts"]), **kw))
+        return out
+
+    def sample_count(self, night_id: int) -> int:
+        """Number of samples of one night."""
+        return int(self._db.execute(
+            "SELECT COUNT(*) FROM samples WHERE night_id = ?", (night_id,)).fetchone()[0])
+
+    # -- restore journal -------------------------------------------------------------------
+    def journal_record(self, night_id: int | None, register: str, address: int,
+                       raw_value: int) -> JournalEntry:
+        """Record the owner's value of ``register`` before the first write.
+
+        If an unrestored entry for the register already exists (an earlier restore did not
+        complete), that entry is kept and returned: the owner's value is the one recorded
+        before impctl ever touched the register, never a value impctl wrote itself.
+        """
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            row = self._db.execute(
+                "SELECT * FROM journal WHERE register = ? AND restored IS NULL",
+                (register,)).fetchone()
+            if row is None:
+                cur = self._db.execute(
+                    "INSERT INTO journal (night_id, register, address, raw_value, recorded)"
+                    " VALUES (?, ?, ?, ?, ?)",
+                    (night_id, register, address, raw_value, _iso(_now())))
+                row = self._db.execute("SELECT * FROM journal WHERE id = ?",
+                                       (cur.lastrowid,)).fetchone()
+            self._db.execute("COMMIT")
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        return _journal(row)
+
+    def journal_pending(self) -> list[JournalEntry]:
+        """Entries whose restore has not been confirmed by read-back."""
+        rows = self._db.execute("SELECT * FROM journal WHERE restored IS NULL ORDER BY id")
+        return [_journal(r) for r in rows]
+
+    def journal_mark_restored(self, entry_id: int) -> None:
+        """Mark an entry restored (after the read-back matched)."""
+        self._db.execute("UPDATE journal SET restored = ? WHERE id = ?",
+                         (_iso(_now()), entry_id))
+
+    # -- manual trigger requests -----------------------------------------------------------
+    def add_request(self, kind: str, setpoint_c: float | None, when: str) -> int:
+        """Queue a manual night for the daemon; returns the request id."""
+        cur = self._db.execute(
+            "INSERT INTO requests (kind, setpoint_c, run_when, created) VALUES (?, ?, ?, ?)",
+            (kind, setpoint_c, when, _iso(_now())))
+        return int(cur.lastrowid)
+
+    def pending_requests(self) -> list[TriggerRequest]:
+        """Requests not yet taken by the daemon, oldest first."""
+        rows = self._db.execute("SELECT * FROM requests WHERE taken IS NULL ORDER BY id")
+        return [_request(r) for r in rows]
+
+    def take_request(self, request_id: int) -> bool:
+        """Mark a request taken; False if another taker was first."""
+        cur = self._db.execute("UPDATE requests SET taken = ? WHERE id = ? AND taken IS NULL",
+                               (_iso(_now()), request_id))
+        return cur.rowcount == 1
+
+    # -- campaign plan ---------------------------------------------------------------------
+    def set_campaign(self, plan: Sequence[tuple[str, float]]) -> None:
+        """Replace the campaign plan (kind, setpoint °C) keeping links of entries that match."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            old = {r["seq"]: r for r in self._db.execute("SELECT * FROM campaign")}
+            self._db.execute("DELETE FROM campaign")
+            for seq, (kind, sp) in enumerate(plan):
+                keep = old.get(seq)
+                link = keep["night_id"] if keep and (keep["kind"], keep["setpoint_c"]) == (
+                    kind, sp) else None
+                self._db.execute("INSERT INTO campaign VALUES (?, ?, ?, ?)",
+                                 (seq, kind, sp, link))
+            self._db.execute("COMMIT")
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+
+    def campaign(self) -> list[tuple[int, str, float, int | None, bool | None]]:
+        """The plan: (seq, kind, setpoint °C, linked night id, that night's validity)."""
+        rows = self._db.execute(
+            "SELECT c.seq, c.kind, c.setpoint_c, c.night_id, n.valid FROM campaign c"
+            " LEFT JOIN nights n ON n.id = c.night_id ORDER BY c.seq")
+        return [(r[0], r[1], r[2], r[3], None if r[4] is None else bool(r[4])) for r in rows]
+
+    def link_campaign(self, seq: int, night_id: int) -> None:
+        """Attach a night to a plan entry (replacing an earlier, invalid attempt)."""
+        self._db.execute("UPDATE campaign SET night_id = ? WHERE seq = ?", (night_id, seq))
+
+    # -- fits and events -------------------------------------------------------------------
+    def add_fit(self, night_ids: Sequence[int], result: dict) -> int:
+        """Store a fit result (JSON-serialisable dict)."""
+        cur = self._db.execute("INSERT INTO fits (created, nights, result) VALUES (?, ?, ?)",
+                               (_iso(_now()), json.dumps(list(night_ids)), json.dumps(result)))
+        return int(cur.lastrowid)
+
+    def last_fit(self) -> tuple[datetime, list[int], dict] | None:
+        """The newest fit: (created, night ids, result), or None."""
+        row = self._db.execute("SELECT * FROM fits ORDER BY id DESC LIMIT 1").fetchone()
+        if row is None:
+            return None
+        return _dt(row["created"]), json.loads(row["nights"]), json.loads(row["result"])
+
+    def add_event(self, level: str, message: str) -> None:
+        """Keep a notable event (link lost, restore done, abort) for ``impctl status``."""
+        self._db.execute("INSERT INTO events (ts, level, message) VALUES (?, ?, ?)",
+                         (_iso(_now()), level, message))
+
+    def events(self, limit: int = 20) -> list[tuple[datetime, str, str]]:
+        """The newest events first."""
+        rows = self._db.execute("SELECT ts, level, message FROM events ORDER BY id DESC LIMIT ?",
+                                (limit,))
+        return [(_dt(r[0]), r[1], r[2]) for r in rows]
+
+
+def _night(row: sqlite3.Row) -> Night:
+    return Night(
+        id=row["id"], kind=row["kind"], setpoint_c=row["setpoint_c"], t_min_c=row["t_min_c"],
+        t_max_c=row["t_max_c"], window_start=_dt(row["window_start"]),
+        window_end=_dt(row["window_end"]), state=row["state"], source=row["source"],
+        valid=None if row["valid"] is None else bool(row["valid"]),
+        reasons=tuple(json.loads(row["reasons"])), started=_dt(row["started"]),
+        ended=_dt(row["ended"]),
+    )
+
+
+def _journal(row: sqlite3.Row) -> JournalEntry:
+    return JournalEntry(id=row["id"], night_id=row["night_id"], register=row["register"],
+                        address=row["address"], raw_value=row["raw_value"],
+                        recorded=_dt(row["recorded"]), restored=_dt(row["restored"]))
+
+
+def _request(row: sqlite3.Row) -> TriggerRequest:
+    return TriggerRequest(id=row["id"], kind=row["kind"], setpoint_c=row["setpoint_c"],
+                          when=row["run_when"], created=_dt(row["created"]),
+                          taken=_dt(row["taken"]), extra=json.loads(row["extra"]))
