@@ -1,4 +1,149 @@
-"""impctl-sim console entry (to be filled in)."""
+"""``impctl-sim``: run the simulated Kronoterm heat pump as a Modbus server.
 
-def main() -> None:
-    raise SystemExit("impctl-sim: not implemented yet")
+Prints one ``impctl-sim: serving …`` line (with the bound port and the clock spec another process
+can pass to ``VirtualClock.from_spec``), then serves until SIGINT/SIGTERM. Bad input prints one
+line on stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+
+import click
+
+from impctl.errors import InputError
+from impctl.heatpump.clock import VirtualClock
+from impctl.heatpump.registers import Generation
+from impctl.model import default_house, load_house
+from impctl.weather import read_weather
+
+from .config import SimConfig
+from .faults import parse_faults
+from .plant import PlantParams
+from .server import KronotermSimulator
+
+
+@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--house", type=click.Path(dir_okay=False, path_type=Path),
+              help="House TOML (impctl.model.load_house); default: the built-in house.")
+@click.option("--host", default="127.0.0.1", show_default=True, help="TCP address to bind.")
+@click.option("--port", default=5020, show_default=True, type=int, help="TCP port (0 = free).")
+@click.option("--allow-remote", is_flag=True, help="Allow binding to a non-loopback address.")
+@click.option("--rtu", metavar="PORT_OR_URL",
+              help="Serve Modbus RTU on a serial device or pyserial URL "
+                   "(socket://127.0.0.1:PORT = RTU over TCP) instead of Modbus TCP.")
+@click.option("--baudrate", default=19200, show_default=True, type=int, help="RTU baud rate.")
+@click.option("--generation", type=click.Choice([g.value for g in Generation]),
+              default="extended", show_default=True, help="Register set exposed.")
+@click.option("--speed", default=1.0, show_default=True, type=float,
+              help="Simulated seconds per wall-clock second.")
+@click.option("--epoch", help="Simulated start time, ISO 8601 with zone (default: now).")
+@click.option("--wall-epoch", type=float, help="Wall-clock anchor, POSIX s (default: now).")
+@click.option("--clock", "clock_spec", help="Full clock spec (overrides --epoch/--speed).")
+@click.option("--clock-file", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the clock spec to this file for other processes.")
+@click.option("--faults", default="none", show_default=True,
+              help="Faults at start, e.g. 'delay=2,greeting,fixed-tid,missing=2103'.")
+@click.option("--faults-file", type=click.Path(dir_okay=False, path_type=Path),
+              help="File with faults, re-read whenever it changes (run-time switching).")
+@click.option("--weather", type=click.Path(dir_okay=False, path_type=Path),
+              help="Weather file (EPW or timestamp,t_out CSV); default: built-in generator.")
+@click.option("--weather-seed", default=0, show_default=True, type=int)
+@click.option("--setpoint", default=21.0, show_default=True, type=float,
+              help="Initial loop-1 setpoint [°C].")
+@click.option("--no-thermostat", is_flag=True, help="No room thermostat: 2160 reads -400.")
+@click.option("--heat-meter-id", type=int, help="Also answer as a heat meter on this unit id.")
+@click.option("--dhw-period-h", type=float, help="DHW charging every this many hours.")
+@click.option("--defrost", is_flag=True, help="Defrost cycles below +5 °C outdoors.")
+@click.option("--noise", default=0.0, show_default=True, type=float,
+              help="Sensor noise SD on T_air/T_out [K].")
+@click.option("--seed", default=0, show_default=True, type=int, help="Noise seed.")
+@click.option("-v", "--verbose", count=True, help="More logging (-vv for pymodbus debug).")
+def cli(house, host, port, allow_remote, rtu, baudrate, generation, speed, epoch, wall_epoch,
+        clock_spec, clock_file, faults, faults_file, weather, weather_seed, setpoint,
+        no_thermostat, heat_meter_id, dhw_period_h, defrost, noise, seed, verbose) -> None:
+    """Simulated Kronoterm heat pump (5R1C house) on a real Modbus server."""
+    logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if clock_spec:
+        clock = VirtualClock.from_spec(clock_spec)
+    else:
+        start = _parse_epoch(epoch) if epoch else datetime.now(UTC)
+        clock = VirtualClock(start, speed, wall_epoch)
+    params = PlantParams(dhw_period_s=None if dhw_period_h is None else dhw_period_h * 3600,
+                         defrost_period_s=5400.0 if defrost else None)
+    config = SimConfig(
+        house=load_house(house) if house else default_house(),
+        generation=Generation(generation),
+        weather=read_weather(weather) if weather else None,
+        weather_seed=weather_seed, clock=clock, plant=params, setpoint_c=setpoint,
+        room_thermostat=not no_thermostat, heat_meter_id=heat_meter_id, noise_sd_k=noise,
+        seed=seed, faults=parse_faults(faults),
+    )
+    asyncio.run(_serve(config, host, port, allow_remote, rtu, baudrate, faults_file, clock_file))
+
+
+def _parse_epoch(text: str) -> datetime:
+    try:
+        value = datetime.fromisoformat(text)
+    except ValueError:
+        raise InputError(f"not an ISO 8601 time: {text!r}", place="--epoch") from None
+    if value.tzinfo is None:
+        raise InputError("the epoch needs a time zone, e.g. 2026-01-10T18:00+01:00",
+                         place="--epoch")
+    return value
+
+
+async def _serve(config: SimConfig, host: str, port: int, allow_remote: bool, rtu: str | None,
+                 baudrate: int, faults_file: Path | None, clock_file: Path | None) -> None:
+    sim = KronotermSimulator(config, faults_file=faults_file)
+    bound = await sim.start(host, port, rtu=rtu, baudrate=baudrate, allow_remote=allow_remote)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    if clock_file:
+        clock_file.write_text(sim.clock.spec() + "\n")
+    if rtu is None:
+        where = f"tcp {sim.host}:{bound}"
+    else:
+        where = f"rtu socket://{sim.host}:{bound}" if rtu.startswith("socket://") else f"rtu {rtu}"
+    click.echo(f"impctl-sim: serving {where} unit {config.unit_id} "
+               f"{config.generation.value}; faults {sim.faults.describe()}; "
+               f"clock {sim.clock.spec()}")
+    sys.stdout.flush()
+    try:
+        await stop.wait()
+    finally:
+        await sim.stop()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point; bad input → one line on stderr, exit status 2."""
+    try:
+        cli.main(args=argv, standalone_mode=False)
+    except InputError as exc:
+        click.echo(f"impctl-sim: {exc}", err=True)
+        sys.exit(2)
+    except click.exceptions.Abort:
+        click.echo("impctl-sim: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except (OSError, RuntimeError) as exc:  # e.g. the port is taken
+        click.echo(f"impctl-sim: {exc}", err=True)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        main()

@@ -21,7 +21,7 @@ def cli() -> None:
 
 def _register() -> None:
     # Each subcommand module adds itself to the group; keep imports light (no torch here).
-    from . import fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
+    from . import device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -30,7 +30,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         cli.main(args=argv, standalone_mode=False)
     except InputError as exc:
-        click.echo(f"impctl: {exc}", err=True)
+        for line in str(exc).splitlines():  # a config error may list several problems
+            click.echo(f"impctl: {line}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
         click.echo("impctl: aborted", err=True)

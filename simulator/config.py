@@ -1,0 +1,88 @@
+"""Configuration of one simulated Kronoterm installation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from impctl.heatpump.clock import VirtualClock
+from impctl.heatpump.registers import Generation
+from impctl.model import HouseParameters, default_house
+from impctl.weather import winter_weather
+
+from .faults import Faults
+from .plant import PlantParams, WeatherFeed
+
+#: Kronoterm's factory unit id.
+DEFAULT_UNIT_ID = 20
+
+
+@dataclass
+class SimConfig:
+    """What to simulate.
+
+    Attributes
+    ----------
+    house : HouseParameters
+        One house (e.g. from ``impctl.model.load_house``).
+    generation : Generation
+        Register set exposed (compact TT3000 or extended).
+    weather : pandas.Series, optional
+        Outdoor temperature [°C] on a time zone-aware index, wrapped around when the clock runs
+        past its end. Default: ``impctl.weather.winter_weather`` from a day before the clock's
+        epoch, 62 days, seed ``weather_seed``.
+    weather_seed : int
+    clock : VirtualClock, optional
+        Default: real time.
+    plant : PlantParams
+    setpoint_c : float
+        Initial loop-1 setpoint (2187) [°C].
+    room_thermostat : bool
+        A Kronoterm room thermostat on loop 1 (2160 reads T_air); ``False`` → 2160 reads −400.
+    unit_id : int
+        Modbus unit id of the heat pump.
+    heat_meter_id : int, optional
+        Also answer as an external heat meter with this unit id (address 0–1: thermal power W,
+        uint32 high word first).
+    step_s : float
+        Model step [simulated s].
+    warmup_s : float
+        Simulated time run before the start so the house is near its periodic state [s].
+    noise_sd_k : float
+        Standard deviation of Gaussian noise on the T_air and T_out sensors [K].
+    seed : int
+        Seed of the sensor noise.
+    faults : Faults
+        Faults active from the start.
+    """
+
+    house: HouseParameters = field(default_factory=default_house)
+    generation: Generation = Generation.EXTENDED
+    weather: pd.Series | None = None
+    weather_seed: int = 0
+    clock: VirtualClock | None = None
+    plant: PlantParams = field(default_factory=PlantParams)
+    setpoint_c: float = 21.0
+    room_thermostat: bool = True
+    unit_id: int = DEFAULT_UNIT_ID
+    heat_meter_id: int | None = None
+    step_s: float = 10.0
+    warmup_s: float = 4 * 86400.0
+    noise_sd_k: float = 0.0
+    seed: int = 0
+    faults: Faults = field(default_factory=Faults)
+
+    def weather_feed(self, clock: VirtualClock) -> WeatherFeed:
+        """The outdoor-temperature source for ``clock``."""
+        if self.weather is not None:
+            return WeatherFeed(self.weather)
+        start = pd.Timestamp(clock.epoch).floor("D") - pd.Timedelta(days=5)
+        return WeatherFeed(winter_weather(start=start, days=62, step_s=900,
+                                          seed=self.weather_seed))
+
+
+def constant_weather(t_out_c: float) -> pd.Series:
+    """Weather that never changes (useful in tests): two samples a day apart, same value."""
+    index = pd.DatetimeIndex(["2000-01-01", "2000-01-02"], tz="UTC")
+    return pd.Series([t_out_c, t_out_c], index=index, name="t_out")

@@ -1,0 +1,239 @@
+"""Device-side commands: daemon, trigger, status, nights, restore, export.
+
+None of these import torch, scikit-learn or pandas at module level (export imports pandas
+only when it runs).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import sys
+from datetime import timedelta
+from pathlib import Path
+
+import click
+
+from ..errors import InputError
+from . import cli
+
+DEFAULT_CONFIG = "/etc/impctl/config.toml"
+_config_option = click.option(
+    "--config", "config_path", type=click.Path(path_type=Path), default=DEFAULT_CONFIG,
+    show_default=True, help="Daemon configuration (TOML).")
+
+
+def _load(config_path: Path):
+    from ..daemon.config import load_config
+
+    return load_config(config_path)
+
+
+def _setup_logging(level: str) -> None:
+    # Under systemd (JOURNAL_STREAM set) journald adds timestamps; a <N> prefix sets priority.
+    journald = "JOURNAL_STREAM" in os.environ
+    fmt = "%(levelname)s %(name)s: %(message)s" if journald else (
+        "%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+    class _Prio(logging.Formatter):
+        def format(self, record: logging.LogRecord) -> str:
+            text = super().format(record)
+            if not journald:
+                return text
+            prio = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4,
+                    logging.ERROR: 3, logging.CRITICAL: 2}.get(record.levelno, 6)
+            return f"<{prio}>{text}"
+
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_Prio(fmt))
+    logging.basicConfig(level=level.upper(), handlers=[handler], force=True)
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    logging.getLogger("apscheduler").setLevel(logging.WARNING)  # one line per job run is noise
+
+
+@cli.command("daemon")
+@_config_option
+def daemon_command(config_path: Path) -> None:
+    """Run the impctl service (systemd Type=notify): schedule and run IMP nights."""
+    from ..daemon.service import Daemon
+
+    cfg = _load(config_path)
+    _setup_logging(cfg.log_level)
+    sys.exit(asyncio.run(Daemon(cfg).run()))
+
+
+@cli.command("trigger")
+@_config_option
+@click.option("--kind", type=click.Choice(["constrained", "normal"]), required=True,
+              help="Heating off (constrained) or held at the setpoint (normal).")
+@click.option("--setpoint", type=float, default=None,
+              help="T_set [°C] (default: the campaign's constrained setpoint).")
+@click.option("--tonight", "when", flag_value="tonight", default=True,
+              help="Run at tonight's window (default).")
+@click.option("--now", "when", flag_value="now", help="Start now (preheat, then the window).")
+@click.option("--foreground", is_flag=True,
+              help="Run one night in this process, without a daemon (Ctrl-C restores).")
+def trigger_command(config_path: Path, kind: str, setpoint: float | None, when: str,
+                    foreground: bool) -> None:
+    """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
+    from ..store import Store
+
+    cfg = _load(config_path)
+    sp = cfg.campaign.constrained_setpoint_c if setpoint is None else setpoint
+    lo, hi = cfg.heatpump.writes.loop1_setpoint_c
+    band = cfg.night.comfort_band_k
+    top = sp + band if kind == "constrained" else sp
+    if not lo <= sp <= hi or top > hi:
+        raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
+                         f"[{lo:g}, {hi:g}] °C", place="--setpoint")
+    if foreground:
+        _setup_logging(cfg.log_level)
+        sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when)))
+    with Store(cfg.db_path) as store:
+        rid = store.add_request(kind, sp, when)
+    click.echo(f"queued request {rid}: {kind} night at {sp:g} °C ({when}) for the daemon")
+
+
+async def _foreground_night(cfg, kind: str, sp: float, when: str) -> int:
+    import signal
+
+    from ..controller import NightController, NightRequest
+    from ..daemon.schedule import next_act_time, window_after_act
+    from ..daemon.service import clock_from_config, open_client, policy_from_config
+    from ..store import Store
+
+    clock = clock_from_config(cfg)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    with Store(cfg.db_path) as store:
+        client = open_client(cfg, clock)
+        await client.connect(max_wait_s=60.0)
+        try:
+            if when == "now":
+                s_min, e_min = cfg.window_minutes
+                start = clock.now() + timedelta(hours=cfg.night.preheat_h)
+                end = start + timedelta(minutes=(e_min - s_min) % 1440)
+            else:
+                start, end = window_after_act(next_act_time(cfg, clock.now()), cfg)
+            ctl = NightController(client, store, clock, policy_from_config(cfg),
+                                  on_status=lambda t: click.echo(t, err=True), stop=stop)
+            night = await ctl.run(NightRequest(kind, sp, start, end, cfg.night.comfort_band_k,
+                                               source="trigger"))
+        finally:
+            client.close()
+    click.echo(f"night {night.id}: {night.state}, {'valid' if night.valid else 'not valid'}"
+               f" — {'; '.join(night.reasons)}")
+    return 0 if night.state in ("done", "aborted", "refused") else 1
+
+
+@cli.command("restore")
+@_config_option
+@click.option("--timeout", "timeout_s", type=float, default=60.0, show_default=True,
+              help="Keep retrying a lost link this long [s].")
+def restore_command(config_path: Path, timeout_s: float) -> None:
+    """Restore the journaled owner's settings now (also systemd's ExecStopPost)."""
+    from ..store import Store
+
+    cfg = _load(config_path)
+    _setup_logging(cfg.log_level)
+    with Store(cfg.db_path) as store:
+        if not store.journal_pending():
+            click.echo("nothing to restore")
+            return
+        left = asyncio.run(_restore(cfg, store, timeout_s))
+    if left:
+        click.echo("still pending: " + ", ".join(e.register for e in left), err=True)
+        sys.exit(1)
+    click.echo("restored and verified")
+
+
+async def _restore(cfg, store, timeout_s: float):
+    from ..controller import restore_all
+    from ..daemon.service import clock_from_config, open_client
+    from ..heatpump import ModbusLinkError
+    from ..heatpump.clock import VirtualClock
+
+    clock = clock_from_config(cfg)
+    client = open_client(cfg, clock)
+    try:
+        try:
+            await client.connect(max_wait_s=timeout_s)
+        except ModbusLinkError as exc:
+            click.echo(f"heat pump not reachable: {exc}", err=True)
+            return store.journal_pending()
+        # The timeout is in real seconds, whatever clock the nights run on.
+        return await restore_all(client, store, clock=VirtualClock.real(),
+                                 timeout_s=timeout_s, retry_s=1.0)
+    finally:
+        client.close()
+
+
+@cli.command("status")
+@_config_option
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+def status_command(config_path: Path, as_json: bool) -> None:
+    """Current night and live values, campaign progress, last fit, link health, writes."""
+    from .device_status import collect_status, format_status
+
+    cfg = _load(config_path)
+    status = collect_status(cfg)
+    click.echo(json.dumps(status, indent=2, default=str) if as_json else format_status(status))
+
+
+@cli.command("nights")
+@_config_option
+def nights_command(config_path: Path) -> None:
+    """List the stored nights with their validity and reasons."""
+    from ..store import Store
+
+    cfg = _load(config_path)
+    with Store(cfg.db_path) as store:
+        rows = store.nights()
+        click.echo(f"{'id':>4} {'kind':<11} {'T_set °C':>8} {'window start (local)':<22} "
+                   f"{'state':<11} {'valid':<5} {'samples':>7}  reasons")
+        from zoneinfo import ZoneInfo
+
+        tz = ZoneInfo(cfg.timezone)
+        for n in rows:
+            valid = "-" if n.valid is None else ("yes" if n.valid else "no")
+            click.echo(f"{n.id:>4} {n.kind:<11} {n.setpoint_c:>8.1f} "
+                       f"{n.window_start.astimezone(tz):%Y-%m-%d %H:%M %Z}  {n.state:<11} "
+                       f"{valid:<5} {store.sample_count(n.id):>7}  {'; '.join(n.reasons)}")
+
+
+@cli.command("export")
+@_config_option
+@click.option("--db", "db_path", type=click.Path(path_type=Path), default=None,
+              help="Store file (default: impctl.db in the config's state_dir).")
+@click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv",
+              show_default=True)
+@click.option("--nights", "night_ids", default=None,
+              help="Comma-separated night ids (default: all valid nights).")
+@click.option("--all", "include_invalid", is_flag=True, help="Include nights not valid.")
+@click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
+              help="NIGHTS file to write (timestamp,t_air,t_out,q_hc,setpoint,heating,night,"
+                   "kind).")
+def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids: str | None,
+                   include_invalid: bool, out_path: Path) -> None:
+    """Write stored nights in the measured-data format of ``impctl fit``."""
+    from ..store import Store
+    from ..store.export import export_nights
+
+    if db_path is None:
+        db_path = _load(config_path).db_path
+    if not Path(db_path).exists():
+        raise InputError("no such store file", db_path)
+    ids = None
+    if night_ids:
+        try:
+            ids = [int(x) for x in night_ids.split(",") if x.strip()]
+        except ValueError:
+            raise InputError(f"expected comma-separated ids, got {night_ids!r}",
+                             place="--nights") from None
+    with Store(db_path) as store:
+        n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids))
+    click.echo(f"wrote {n} samples to {out_path}")

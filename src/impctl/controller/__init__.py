@@ -1,0 +1,16 @@
+"""The IMP night state machine: prepare → act → sample → end → restore → assess."""
+
+from .assess import assess_night
+from .night import NightController, NightRefused, sample_from_snapshot
+from .plan import NightPolicy, NightRequest
+from .restore import restore_all
+
+__all__ = [
+    "NightController",
+    "NightPolicy",
+    "NightRefused",
+    "NightRequest",
+    "assess_night",
+    "restore_all",
+    "sample_from_snapshot",
+]

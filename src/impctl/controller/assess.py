@@ -1,0 +1,56 @@
+"""Is a finished night good data? Coverage, defrost, DHW priority, errors, missing sensors."""
+
+from __future__ import annotations
+
+from ..store import Store
+from .plan import NightPolicy
+
+#: Working function code of domestic hot water (2001 = 1): heating is interrupted meanwhile.
+_DHW = 1
+
+
+def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool, list[str]]:
+    """Judge the samples of one night inside its window.
+
+    Returns
+    -------
+    (valid, reasons) — reasons say why a night is not valid, and note minor issues of a
+    valid one. Thresholds: coverage ≥ ``policy.min_coverage`` of the expected samples up to the
+    night's end; defrost and DHW each ≤ 10 % of the samples; no error bits; T_air, T_out and
+    Q_HC each missing in ≤ 10 % of the samples.
+    """
+    night = store.night(night_id)
+    samples = [s for s in store.samples(night_id)
+               if night.window_start <= s.ts <= night.window_end]
+    reasons: list[str] = []
+    end = night.ended or night.window_end
+    covered_until = min(end, night.window_end)
+    span_s = max(0.0, (covered_until - night.window_start).total_seconds())
+    expected = span_s / policy.sample_interval_s
+    if span_s < 3 * 3600:
+        reasons.append(f"window data covers only {span_s / 3600:.1f} h (< 3 h)")
+    if expected > 0:
+        coverage = len(samples) / (expected + 1)
+        if coverage < policy.min_coverage:
+            reasons.append(f"coverage {coverage:.0%} < {policy.min_coverage:.0%}")
+    if not samples:
+        return False, reasons or ["no samples in the window"]
+    n = len(samples)
+
+    def share(pred) -> float:
+        return sum(1 for s in samples if pred(s)) / n
+
+    for label, pred in (
+        ("defrost", lambda s: s.defrost),
+        ("DHW priority interrupting heating", lambda s: s.working_function == _DHW),
+    ):
+        frac = share(pred)
+        if frac > 0.10:
+            reasons.append(f"{label} in {frac:.0%} of samples")
+    if any(s.error_bits for s in samples):
+        reasons.append("heat-pump error bits during the night")
+    for label, attr in (("T_air", "t_air_c"), ("T_out", "t_out_c"), ("Q_HC", "q_hc_w")):
+        frac = share(lambda s, a=attr: getattr(s, a) is None)
+        if frac > 0.10:
+            reasons.append(f"{label} missing in {frac:.0%} of samples")
+    return not reasons, reasons

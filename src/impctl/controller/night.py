@@ -1,0 +1,341 @@
+"""The IMP night state machine: prepare → act → sample → end → restore → assess.
+
+Safety rules this module keeps:
+
+* the owner's loop-1 setpoint and mode are journaled in the store BEFORE the first write;
+* every write goes through the safe client (whitelist, clamp, compare, read-back, budget);
+* whatever ends the night — its window, T_min, an abort, an exception, cancellation (SIGTERM)
+  — the ``finally`` restores the journal and verifies it by read-back; if the process dies
+  instead, the journal stays pending and the next start (orphan sweep) or ``impctl restore``
+  restores it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from datetime import datetime, timedelta
+
+from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
+from ..heatpump.clock import VirtualClock
+from ..store import Night, Sample, Store
+from .assess import assess_night
+from .plan import NightPolicy, NightRequest
+from .restore import restore_all
+
+_LOG = logging.getLogger(__name__)
+_SETPOINT, _MODE = 2187, 2042
+_JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
+_REMOTE_OFF_FUNCTION = 7
+
+
+class NightRefused(Exception):
+    """The night did not start: the heat pump or the weather is not fit for it."""
+
+
+class _Abort(Exception):
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
+    """A store sample from a snapshot (missing readings become None)."""
+    v = snap.values()
+
+    def flag(x: float | None) -> bool | None:
+        return None if x is None else bool(x)
+
+    return Sample(
+        night_id=night_id, ts=snap.timestamp, t_air_c=v["t_air_c"], t_out_c=v["t_out_c"],
+        q_hc_w=v["q_hc_w"], p_el_w=v["p_el_w"], t_supply_c=v["t_supply_c"],
+        t_return_c=v["t_return_c"],
+        working_function=None if v["working_function"] is None else int(v["working_function"]),
+        defrost=flag(v["defrost"]), error_bits=_error_bits(snap),
+        loop_mode=None if v["loop1_mode"] is None else int(v["loop1_mode"]),
+        setpoint_c=v["loop1_setpoint_c"],
+        dhw_active=None if v["working_function"] is None else int(v["working_function"]) == 1,
+    )
+
+
+def _error_bits(snap: Snapshot) -> int | None:
+    """errors_1 | errors_2 << 16 (None when neither could be read)."""
+    e1, e2 = snap.errors_1.value, snap.errors_2.value
+    if e1 is None and e2 is None:
+        return None
+    return int(e1 or 0) | (int(e2 or 0) << 16)
+
+
+def _alarm(snap: Snapshot) -> str | None:
+    """Why the heat pump is not fit to run an experiment now, or None."""
+    if snap.error_summary.value == 2:
+        return "heat pump reports an error (2006 = 2)"
+    bits = _error_bits(snap)
+    if bits:
+        return f"heat pump error bits set (2114/2115 = {bits:#x})"
+    if snap.error_active.value:
+        return "heat pump error display active (2113)"
+    return None
+
+
+class NightController:
+    """Runs IMP nights against one heat pump and records them in the store.
+
+    Parameters
+    ----------
+    client : HeatPumpClient, connected
+    store : Store
+    clock : VirtualClock (real time, or the simulator's accelerated clock)
+    policy : NightPolicy
+    on_status : callable(str), optional
+        Receives one-line progress for systemd STATUS= and the CLI.
+    stop : asyncio.Event, optional
+        Set it to abort the running night (then restore) — the daemon's SIGTERM path.
+    """
+
+    def __init__(self, client: HeatPumpClient, store: Store, clock: VirtualClock,
+                 policy: NightPolicy, *, on_status: Callable[[str], None] | None = None,
+                 stop: asyncio.Event | None = None):
+        self.client, self.store, self.clock, self.policy = client, store, clock, policy
+        self.on_status = on_status or (lambda text: None)
+        self.stop = stop or asyncio.Event()
+        self.last_snapshot: Snapshot | None = None
+        self.last_good_read: datetime | None = None
+
+    # -- timing ----------------------------------------------------------------------------
+    async def _sleep_until(self, when: datetime) -> None:
+        """Sleep until the simulated instant ``when`` or until a stop is requested."""
+        delay = self.clock.wall_seconds(when.timestamp() - self.clock.now_s())
+        if delay > 0:
+            try:
+                await asyncio.wait_for(self.stop.wait(), timeout=delay)
+            except TimeoutError:
+                pass
+
+    # -- the night ---------------------------------------------------------------------------
+    async def run(self, req: NightRequest) -> Night:
+        """Run one night to its end; returns the stored, assessed night.
+
+        The heat pump is restored before this returns, whatever happened (unless the process
+        dies, in which case the journal drives the restore at the next start).
+        """
+        night_id = self.store.create_night(
+            req.kind, req.setpoint_c, req.window_start, req.window_end, t_min_c=req.t_min_c,
+            t_max_c=req.t_max_c, source=req.source)
+        if req.campaign_seq is not None:
+            self.store.link_campaign(req.campaign_seq, night_id)
+        log = _LOG.getChild(f"night{night_id}")
+        state, reasons = "done", []
+        wrote = False
+        try:
+            self.store.set_night_state(night_id, "preparing")
+            first = await self._prepare(night_id, req, log)
+            self.store.set_night_state(night_id, "active", started=self.clock.now())
+            wrote = True
+            end_reason = await self._act_and_sample(night_id, req, first, log)
+            reasons.append(end_reason)
+        except NightRefused as exc:
+            state, reasons = "refused", [str(exc)]
+            log.warning("night refused: %s", exc)
+        except _Abort as exc:
+            state, reasons = "aborted", [exc.reason]
+            log.warning("night aborted: %s", exc.reason)
+        except asyncio.CancelledError:
+            state, reasons = "aborted", ["stopped (cancelled)"]
+            log.warning("night cancelled: restoring the heat pump")
+            await self._finish(night_id, state, reasons, wrote, log)
+            raise
+        except HeatPumpError as exc:
+            state, reasons = "aborted", [f"heat pump: {exc}"]
+            log.error("night aborted by a heat-pump error: %s", exc)
+        await self._finish(night_id, state, reasons, wrote, log)
+        return self.store.night(night_id)
+
+    async def _finish(self, night_id: int, state: str, reasons: list[str], wrote: bool,
+                      log: logging.Logger) -> None:
+        self.store.set_night_state(night_id, "restoring" if wrote else state)
+        if self.store.journal_pending():
+            self.on_status(f"night {night_id}: restoring the heat pump")
+            # Shielded: a second cancellation must not interrupt putting the heating back.
+            left = await asyncio.shield(restore_all(
+                self.client, self.store, clock=self.clock,
+                timeout_s=self.policy.restore_timeout_s,
+                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
+            if left:
+                reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
+        self.store.set_night_state(night_id, state, ended=self.clock.now())
+        if state == "refused":
+            self.store.assess_night(night_id, False, reasons)
+        else:
+            valid, why = assess_night(self.store, night_id, self.policy)
+            self.store.assess_night(night_id, valid and state == "done", reasons + why)
+        night = self.store.night(night_id)
+        log.info("night %d %s, %s: %s", night_id, night.state,
+                 "valid" if night.valid else "not valid", "; ".join(night.reasons))
+        self.on_status(f"night {night_id} {night.state} "
+                       f"({'valid' if night.valid else 'not valid'})")
+
+    async def _snapshot(self, night_id: int | None, log: logging.Logger) -> Snapshot | None:
+        """One poll; stores it as a sample; None when the link failed (the incident is
+        logged once, when it starts)."""
+        try:
+            snap = await self.client.snapshot()
+        except ModbusLinkError as exc:
+            if self.last_good_read is None or self.last_snapshot is not None:
+                log.warning("heat-pump link lost: %s", exc)
+                self.store.add_event("warning", f"link lost: {exc}")
+            self.last_snapshot = None
+            return None
+        if self.last_snapshot is None and self.last_good_read is not None:
+            log.info("heat-pump link back")
+            self.store.add_event("info", "link back")
+        self.last_snapshot = snap
+        self.last_good_read = self.clock.now()
+        if night_id is not None:
+            self.store.add_sample(sample_from_snapshot(night_id, snap))
+        return snap
+
+    async def _prepare(self, night_id: int, req: NightRequest, log) -> Snapshot:
+        """Check the heat pump and weather (re-checking until the start grace runs out),
+        then journal the owner's state before any write."""
+        act_at = req.window_start - timedelta(hours=self.policy.preheat_h)
+        give_up = max(act_at, self.clock.now()) + timedelta(seconds=self.policy.start_grace_s)
+        await self._sleep_until(act_at)
+        try:
+            self.client.require_heat_power()
+        except HeatPumpError as exc:
+            raise NightRefused(str(exc)) from None
+        while True:
+            if self.stop.is_set():
+                raise NightRefused("stopped before the night started")
+            problem = None
+            snap = await self._snapshot(None, log)
+            if snap is None:
+                problem = "heat pump not reachable"
+            else:
+                problem = self._unfit(snap, req)
+            if problem is None:
+                break
+            if self.clock.now() >= give_up:
+                raise NightRefused(problem)
+            self.on_status(f"night {night_id}: waiting ({problem})")
+            await self._sleep_until(self.clock.now() + timedelta(
+                seconds=self.policy.sample_interval_s))
+        budget = self.client.budget
+        if budget is None:
+            raise NightRefused("no write budget configured: writes are refused")
+        day = self.clock.now().date()
+        for ma, _ in _JOURNALED:
+            if budget.remaining(ma, day) < 2:
+                raise NightRefused(f"daily write budget of register {ma} nearly used up "
+                                   f"({budget.used(ma, day)}/{budget.limit(ma)})")
+        for ma, name in _JOURNALED:
+            reading = await self.client.read(ma)
+            if reading.raw is None:
+                raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
+            self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
+        log.info("journaled owner's state: setpoint %s °C, loop-1 mode %s",
+                 snap.loop1_setpoint_c.value, snap.loop1_mode.value)
+        return snap
+
+    def _unfit(self, snap: Snapshot, req: NightRequest) -> str | None:
+        alarm = _alarm(snap)
+        if alarm:
+            return alarm
+        if snap.working_function.value == _REMOTE_OFF_FUNCTION:
+            return "heat pump is remote-off (working function 7)"
+        if snap.system_on.value == 0:
+            return "heating system switched off by the owner (2012 = 0)"
+        if snap.loop1_mode.value == 0:
+            return "loop 1 switched off by the owner (2042 = 0)"
+        if snap.defrost.value:
+            return "defrost running"
+        if snap.t_air_c.missing:
+            return f"no indoor temperature: {snap.t_air_c.reason}"
+        if snap.t_out_c.missing:
+            return f"no outdoor temperature: {snap.t_out_c.reason}"
+        t_out = snap.t_out_c.value
+        if not self.policy.t_out_min_c <= t_out <= self.policy.t_out_max_c:
+            return (f"outdoor {t_out:.1f} °C outside the band {self.policy.t_out_min_c:g}…"
+                    f"{self.policy.t_out_max_c:g} °C")
+        return None
+
+    async def _act_and_sample(self, night_id: int, req: NightRequest, first: Snapshot,
+                              log) -> str:
+        """Write the night's settings and sample until the end; returns why it ended."""
+        policy = self.policy
+        preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
+        result = await self.client.set_loop1_setpoint(preheat_target)
+        if result.clamped:
+            log.warning("setpoint %.1f °C clamped to %.1f °C by the configured limits",
+                        result.requested, result.target)
+        if first.loop1_mode.value == 2:
+            # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
+            await self.client.set_loop1_mode(1)
+        switched_off = False
+        deadline = req.window_end + timedelta(seconds=policy.deadline_grace_s)
+        interval = timedelta(seconds=policy.sample_interval_s)
+        next_at = self.clock.now()
+        while True:
+            if self.stop.is_set():
+                raise _Abort("stop requested (signal)")
+            now = self.clock.now()
+            if now >= deadline:
+                raise _Abort("hard deadline passed")
+            if req.kind == "constrained" and not switched_off and now >= req.window_start:
+                await self._switch_off(log)
+                switched_off = True
+            snap = await self._snapshot(night_id, log)
+            reason = self._check(snap, req, switched_off, now)
+            if reason is not None:
+                return reason
+            self.on_status(self._status_line(night_id, req, snap))
+            next_at = max(next_at + interval, self.clock.now())
+            if next_at >= req.window_end:
+                await self._sleep_until(req.window_end)
+                final = await self._snapshot(night_id, log)
+                if final is not None:
+                    self._check(final, req, switched_off, self.clock.now())
+                return "window ended"
+            await self._sleep_until(next_at)
+
+    async def _switch_off(self, log) -> None:
+        if self.policy.constrained_action == "loop_off":
+            await self.client.set_loop1_mode(0)
+            log.info("heating switched off (loop-1 mode 0)")
+        else:
+            await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c)
+            log.info("heating set back to the floor %.1f °C", self.policy.setpoint_floor_c)
+
+    def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,
+               now: datetime) -> str | None:
+        """Abort (raises) or end (returns the reason) conditions after a poll."""
+        if snap is None:
+            lost_s = (now - (self.last_good_read or now)).total_seconds()
+            if lost_s > self.policy.link_lost_limit_s:
+                raise _Abort(f"heat-pump link lost for {lost_s / 60:.0f} min")
+            return None
+        alarm = _alarm(snap)
+        if alarm:
+            raise _Abort(alarm)
+        t_air = snap.t_air_c.value
+        if t_air is None:
+            return None  # a missing sample is judged by the assessment (coverage)
+        if t_air < req.t_min_c - self.policy.abort_margin_k:
+            raise _Abort(f"T_air {t_air:.1f} °C below T_min − margin "
+                         f"({req.t_min_c - self.policy.abort_margin_k:.1f} °C)")
+        if req.kind == "constrained" and switched_off and t_air <= req.t_min_c:
+            return f"reached T_min {req.t_min_c:.1f} °C"
+        return None
+
+    @staticmethod
+    def _status_line(night_id: int, req: NightRequest, snap: Snapshot | None) -> str:
+        if snap is None:
+            return f"night {night_id} ({req.kind}): link lost"
+        t_air = snap.t_air_c.value
+        q = snap.q_hc_w.value
+        return (f"night {night_id} ({req.kind} {req.setpoint_c:g} °C) "
+                f"{snap.timestamp:%Y-%m-%d %H:%M}Z T_air "
+                f"{'—' if t_air is None else f'{t_air:.1f}'} °C, Q_HC "
+                f"{'—' if q is None else f'{q:.0f}'} W")

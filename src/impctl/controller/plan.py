@@ -1,0 +1,91 @@
+"""What one night should do, and the rules it runs under (units in the names)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+
+
+@dataclass(frozen=True)
+class NightRequest:
+    """One IMP night to run.
+
+    Attributes
+    ----------
+    kind : {"constrained", "normal"}
+    setpoint_c : T_set [°C]; a constrained night runs from T_max = T_set + ΔT to T_min = T_set − ΔT
+    window_start, window_end : absolute instants (time zone-aware); the window's length is
+        real elapsed time, so a night across a DST change lasts 6 or 8 hours of wall clock
+    comfort_band_k : ΔT [K]
+    source : "schedule" or "trigger"
+    campaign_seq : the campaign plan entry the night serves, if any
+    """
+
+    kind: str
+    setpoint_c: float
+    window_start: datetime
+    window_end: datetime
+    comfort_band_k: float = 1.5
+    source: str = "schedule"
+    campaign_seq: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("constrained", "normal"):
+            raise ValueError(f"kind must be constrained or normal, got {self.kind!r}")
+        if self.window_start.tzinfo is None or self.window_end.tzinfo is None:
+            raise ValueError("window instants must be time zone-aware")
+        if not self.window_end > self.window_start:
+            raise ValueError("window_end must follow window_start")
+
+    @property
+    def t_max_c(self) -> float:
+        """Upper comfort limit T_set + ΔT [°C]."""
+        return self.setpoint_c + self.comfort_band_k
+
+    @property
+    def t_min_c(self) -> float:
+        """Lower comfort limit T_set − ΔT [°C]."""
+        return self.setpoint_c - self.comfort_band_k
+
+    @property
+    def duration_h(self) -> float:
+        """Window length in absolute time [h]."""
+        return (self.window_end - self.window_start) / timedelta(hours=1)
+
+
+@dataclass(frozen=True)
+class NightPolicy:
+    """How nights run; every field from the ``[night]`` config section.
+
+    Attributes
+    ----------
+    sample_interval_s : one snapshot per interval [s]
+    abort_margin_k : abort when T_air < T_min − margin [K]
+    link_lost_limit_s : abort when the last good read is older than this [s]
+    t_out_min_c, t_out_max_c : outdoor band a night may start in [°C]
+    constrained_action : "loop_off" (loop-1 mode 0, DHW unaffected) or "setpoint_floor"
+    setpoint_floor_c : loop-1 setpoint used by "setpoint_floor" [°C]
+    preheat_h : the setpoint (T_max on constrained nights, T_set on normal ones) is written
+        this long before the window, so the house starts the window settled [h]
+    start_grace_s : how long refusal conditions (defrost, alarm, outdoor band) may be
+        re-checked before the night is given up [s]
+    deadline_grace_s : hard deadline after the window's end [s]
+    min_coverage : fraction of the expected samples a valid night needs
+    emission_lag_h : the paper's emitter lag after switch-off [h] (for the assessment)
+    restore_timeout_s : how long a restore keeps retrying a lost link before giving up for
+        now (the journal keeps it pending for the next attempt) [s]
+    """
+
+    sample_interval_s: float = 60.0
+    abort_margin_k: float = 0.5
+    link_lost_limit_s: float = 900.0
+    t_out_min_c: float = -25.0
+    t_out_max_c: float = 8.0
+    constrained_action: str = "loop_off"
+    setpoint_floor_c: float = 18.0
+    preheat_h: float = 2.0
+    start_grace_s: float = 1800.0
+    deadline_grace_s: float = 600.0
+    min_coverage: float = 0.8
+    emission_lag_h: float = 1.0
+    restore_timeout_s: float = 3600.0

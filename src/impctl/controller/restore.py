@@ -1,0 +1,81 @@
+"""Put the owner's settings back: the journal → the heat pump, verified by read-back.
+
+Used at a night's end, on every abort, on SIGTERM, by ``impctl restore`` (also systemd's
+ExecStopPost) and by the orphan sweep at daemon start. A restore writes the journaled raw
+value verbatim: it is the owner's value, so it is not clamped to impctl's experiment limits.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
+from ..heatpump.clock import VirtualClock
+from ..store import JournalEntry, Store
+
+_LOG = logging.getLogger(__name__)
+
+
+async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry) -> bool:
+    """Restore one journal entry; True when the read-back shows the owner's value."""
+    await client.restore_raw(entry.address + 1, entry.raw_value)
+    store.journal_mark_restored(entry.id)
+    store.add_event("info", f"restored {entry.register} (register {entry.address + 1}) "
+                            f"to raw {entry.raw_value}")
+    _LOG.info("restored %s (register %d) to raw %d, verified by read-back", entry.register,
+              entry.address + 1, entry.raw_value)
+    return True
+
+
+async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClock,
+                      timeout_s: float, retry_s: float = 5.0) -> list[JournalEntry]:
+    """Restore every pending journal entry, retrying while the link is down.
+
+    Parameters
+    ----------
+    client : a connected (or reconnectable) HeatPumpClient
+    store : the store holding the journal
+    clock : for the simulated-time timeout
+    timeout_s : give up after this many (simulated) seconds; entries stay pending
+    retry_s : pause between attempts [wall s]
+
+    Returns
+    -------
+    The entries still pending (empty when everything was restored and verified).
+    """
+    deadline = clock.now_s() + timeout_s
+    reported = False
+    while True:
+        pending = store.journal_pending()
+        if not pending:
+            return []
+        for entry in pending:
+            try:
+                await restore_entry(client, store, entry)
+            except ModbusLinkError as exc:
+                if not reported:  # one line per incident, not one per retry
+                    _LOG.warning("restore of %s waits for the heat pump link: %s",
+                                 entry.register, exc)
+                    store.add_event("warning", f"restore waiting for link: {exc}")
+                    reported = True
+                break
+            except HeatPumpError as exc:
+                _LOG.error("restore of %s failed: %s", entry.register, exc)
+                store.add_event("error", f"restore of {entry.register} failed: {exc}")
+                break
+        if not store.journal_pending():
+            if reported:
+                _LOG.info("restore completed after the link came back")
+            return []
+        if clock.now_s() >= deadline:
+            left = store.journal_pending()
+            _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
+                       ", ".join(e.register for e in left))
+            return left
+        await asyncio.sleep(retry_s)
+        try:
+            if not client.link.connected:
+                await client.link.connect(max_wait_s=retry_s)
+        except ModbusLinkError:
+            pass

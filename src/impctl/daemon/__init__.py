@@ -1,0 +1,1 @@
+"""The impctl daemon: configuration, scheduling of IMP nights, systemd integration."""

@@ -1,0 +1,253 @@
+"""The daemon's TOML configuration: schema, defaults, validation with one line per problem.
+
+Every key is documented in ``deploy/config.example.toml``. Temperatures °C, durations s unless the
+key says ``_h`` or ``_min``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..heatpump import HeatPumpConfig
+from ..heatpump import config_from_mapping as heatpump_from_mapping
+
+
+class ConfigError(InputError):
+    """Several config problems at once; ``str()`` gives one line per problem."""
+
+    def __init__(self, problems: list[InputError]):
+        self.problems = problems
+        super().__init__("\n".join(str(p) for p in problems))
+
+    def _line(self) -> str:  # InputError formats its own line; keep the joined lines as-is
+        return "\n".join(str(p) for p in self.problems)
+
+
+@dataclass(frozen=True)
+class NightConfig:
+    """How one IMP night runs."""
+
+    window: str = "22:00-05:00"
+    comfort_band_k: float = 1.5
+    sample_interval_s: float = 60.0
+    abort_margin_k: float = 0.5
+    link_lost_limit_s: float = 900.0
+    t_out_min_c: float = -25.0
+    t_out_max_c: float = 8.0
+    constrained_action: str = "loop_off"  # "loop_off" (mode 0) or "setpoint_floor"
+    setpoint_floor_c: float = 18.0
+    preheat_h: float = 2.0
+    emission_lag_h: float = 1.0
+    min_coverage: float = 0.8
+    max_comfort_band_k: float = 3.0
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Which nights to run and when to fit."""
+
+    constrained_nights: int = 2
+    constrained_setpoint_c: float = 21.0
+    normal_setpoints_c: tuple[float, ...] = (21.0, 22.0, 23.0)
+    normal_nights_per_setpoint: int = 1
+    misfire_grace_s: float = 3600.0
+    fit_when_complete: bool = True
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class ClockConfig:
+    """Simulated time for the demo and tests: ``speed`` × real time from ``epoch``."""
+
+    epoch: str = ""                      # ISO 8601 instant; empty = real time
+    speed: float = 1.0
+    wall_epoch_s: float = 0.0            # POSIX s at which the clock showed epoch; 0 = start
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole daemon configuration."""
+
+    state_dir: str = "/var/lib/impctl"
+    timezone: str = "Europe/Ljubljana"
+    log_level: str = "info"
+    model_dir: str = ""
+    heatpump: HeatPumpConfig = field(default_factory=HeatPumpConfig)
+    night: NightConfig = field(default_factory=NightConfig)
+    campaign: CampaignConfig = field(default_factory=CampaignConfig)
+    clock: ClockConfig = field(default_factory=ClockConfig)
+    source: str = ""
+
+    @property
+    def db_path(self) -> Path:
+        """The SQLite store in the state directory."""
+        return Path(self.state_dir) / "impctl.db"
+
+    @property
+    def budget_path(self) -> Path:
+        """The write-counter database in the state directory."""
+        return Path(self.state_dir) / "writes.db"
+
+    @property
+    def window_minutes(self) -> tuple[int, int]:
+        """The night window as minutes after local midnight (start, end)."""
+        return _window(self.night.window)
+
+
+_SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig}
+
+
+def _window(text: str) -> tuple[int, int]:
+    a, b = text.split("-")
+    out = []
+    for part in (a, b):
+        h, m = part.strip().split(":")
+        hh, mm = int(h), int(m)
+        if not (0 <= hh < 24 and 0 <= mm < 60):
+            raise ValueError(text)
+        out.append(hh * 60 + mm)
+    return out[0], out[1]
+
+
+def _coerce(value: Any, default: Any, where: str, problems: list[str]) -> Any:
+    if isinstance(default, bool):
+        if isinstance(value, bool):
+            return value
+        problems.append(f"{where}: must be true or false, got {value!r}")
+    elif isinstance(default, int):
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        problems.append(f"{where}: must be an integer, got {value!r}")
+    elif isinstance(default, float):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        problems.append(f"{where}: must be a number, got {value!r}")
+    elif isinstance(default, str):
+        if isinstance(value, str):
+            return value
+        problems.append(f"{where}: must be a string, got {value!r}")
+    elif isinstance(default, tuple):
+        if isinstance(value, list) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            return tuple(float(v) for v in value)
+        problems.append(f"{where}: must be a list of numbers, got {value!r}")
+    return default
+
+
+def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
+    known = {f.name: f for f in fields(cls) if f.name != "source"}
+    kwargs = {}
+    for key, value in data.items():
+        where = f"key '{prefix}{key}'"
+        if key not in known:
+            problems.append(f"{where}: unknown key")
+            continue
+        if key == "heatpump" and cls is Config:
+            if not isinstance(value, dict):
+                problems.append(f"{where}: must be a [table]")
+                continue
+            try:
+                kwargs[key] = heatpump_from_mapping(value)
+            except InputError as exc:
+                problems.append(" ".join(p for p in (exc.place, exc.problem) if p))
+            continue
+        if key in _SECTIONS and cls is Config:
+            if not isinstance(value, dict):
+                problems.append(f"{where}: must be a [table]")
+                continue
+            kwargs[key] = _build(_SECTIONS[key], value, f"{key}.", problems)
+            continue
+        default = known[key].default
+        kwargs[key] = _coerce(value, default, where, problems)
+    return cls(**kwargs)
+
+
+def _check(cfg: Config, problems: list[str]) -> None:
+    night, camp = cfg.night, cfg.campaign
+    lo, hi = cfg.heatpump.writes.loop1_setpoint_c
+
+    def bad(key: str, text: str) -> None:
+        problems.append(f"key '{key}': {text}")
+
+    if cfg.heatpump.writes.daily_budget < 4:
+        bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
+    try:
+        start, end = _window(night.window)
+        if start == end:
+            bad("night.window", "start and end are the same")
+    except ValueError:
+        bad("night.window", f"expected HH:MM-HH:MM, got {night.window!r}")
+    if not 0 < night.comfort_band_k <= night.max_comfort_band_k:
+        bad("night.comfort_band_k",
+            f"must lie in (0, {night.max_comfort_band_k:g}] K (night.max_comfort_band_k)")
+    if not 5 <= night.sample_interval_s <= 900:
+        bad("night.sample_interval_s", "must lie in 5–900 s")
+    if night.abort_margin_k < 0 or night.abort_margin_k > 2:
+        bad("night.abort_margin_k", "must lie in 0–2 K")
+    if night.link_lost_limit_s < night.sample_interval_s:
+        bad("night.link_lost_limit_s", "must be at least night.sample_interval_s")
+    if night.constrained_action not in ("loop_off", "setpoint_floor"):
+        bad("night.constrained_action", "must be 'loop_off' or 'setpoint_floor'")
+    if not lo <= night.setpoint_floor_c <= hi:
+        bad("night.setpoint_floor_c",
+            f"must lie within heatpump.writes.loop1_setpoint_c = [{lo:g}, {hi:g}] °C")
+    if not 0 < night.min_coverage <= 1:
+        bad("night.min_coverage", "must lie in (0, 1]")
+    if night.t_out_min_c >= night.t_out_max_c:
+        bad("night.t_out_max_c", "must be above night.t_out_min_c")
+    band = night.comfort_band_k
+    for sp in (camp.constrained_setpoint_c, *camp.normal_setpoints_c):
+        key = ("campaign.constrained_setpoint_c" if sp == camp.constrained_setpoint_c
+               else "campaign.normal_setpoints_c")
+        if not lo <= sp <= hi:
+            bad(key, f"{sp:g} °C is outside the safety limits heatpump.writes.loop1_setpoint_c "
+                     f"= [{lo:g}, {hi:g}] °C")
+    if camp.constrained_setpoint_c + band > hi:
+        bad("campaign.constrained_setpoint_c",
+            f"T_max = T_set + ΔT = {camp.constrained_setpoint_c + band:g} °C exceeds the "
+            f"safety limit {hi:g} °C")
+    if camp.constrained_setpoint_c - band - night.abort_margin_k < 14.0:
+        bad("night.comfort_band_k", "T_min − abort margin would fall below 14 °C")
+    if camp.constrained_nights < 0 or camp.normal_nights_per_setpoint < 0:
+        bad("campaign.constrained_nights", "night counts must be >= 0")
+    if cfg.clock.speed <= 0:
+        bad("clock.speed", "must be > 0")
+    if cfg.log_level.lower() not in ("debug", "info", "warning", "error"):
+        bad("log_level", "must be debug, info, warning or error")
+    try:
+        from zoneinfo import ZoneInfo
+
+        ZoneInfo(cfg.timezone)
+    except Exception:
+        bad("timezone", f"unknown time zone {cfg.timezone!r}")
+
+
+def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
+    """Validate a parsed TOML mapping; raises :class:`ConfigError` listing every problem."""
+    problems: list[str] = []
+    cfg = _build(Config, data, "", problems)
+    if not problems:
+        _check(cfg, problems)
+    if problems:
+        raise ConfigError([InputError(p, source) for p in problems])
+    return Config(**{**{f.name: getattr(cfg, f.name) for f in fields(Config)},
+                     "source": str(source or "")})
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate the daemon configuration file."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid TOML: {exc}", path) from None
+    return config_from_mapping(data, path)

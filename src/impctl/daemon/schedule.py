@@ -1,0 +1,89 @@
+"""When nights run: the local window, the campaign plan, real vs accelerated time.
+
+Times: the window is local wall time in the configured zone; every instant handed on is
+time zone-aware, and durations are differences of absolute instants (a 22:00–05:00 window
+across a DST change lasts 6 or 8 hours).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+from zoneinfo import ZoneInfo
+
+from apscheduler.triggers.cron import CronTrigger
+
+from ..controller import NightRequest
+from ..heatpump.clock import VirtualClock
+from ..store import Store
+from .config import Config
+
+
+def campaign_plan(cfg: Config) -> list[tuple[str, float]]:
+    """The configured campaign as (kind, T_set °C) entries, constrained nights first."""
+    camp = cfg.campaign
+    plan = [("constrained", camp.constrained_setpoint_c)] * camp.constrained_nights
+    for sp in camp.normal_setpoints_c:
+        plan += [("normal", sp)] * camp.normal_nights_per_setpoint
+    return plan
+
+
+def window_for(start_local_date, cfg: Config) -> tuple[datetime, datetime]:
+    """The night window that starts on ``start_local_date`` (a date), as aware instants."""
+    tz = ZoneInfo(cfg.timezone)
+    s_min, e_min = cfg.window_minutes
+    start = datetime(start_local_date.year, start_local_date.month, start_local_date.day,
+                     s_min // 60, s_min % 60, tzinfo=tz)
+    end_date = start_local_date + timedelta(days=1 if e_min <= s_min else 0)
+    end = datetime(end_date.year, end_date.month, end_date.day, e_min // 60, e_min % 60,
+                   tzinfo=tz)
+    return start, end
+
+
+def act_trigger(cfg: Config) -> CronTrigger:
+    """Cron trigger of a night's first action: preheat_h before the local window start."""
+    s_min, _ = cfg.window_minutes
+    act_min = int(round(s_min - cfg.night.preheat_h * 60)) % (24 * 60)
+    return CronTrigger(hour=act_min // 60, minute=act_min % 60, timezone=cfg.timezone)
+
+
+def next_act_time(cfg: Config, now: datetime) -> datetime:
+    """The next instant (aware) at which a night's preheat starts, after ``now``."""
+    return act_trigger(cfg).get_next_fire_time(None, now)
+
+
+def window_after_act(act: datetime, cfg: Config) -> tuple[datetime, datetime]:
+    """The window that a preheat starting at ``act`` belongs to."""
+    local = (act + timedelta(hours=cfg.night.preheat_h) + timedelta(minutes=1)).astimezone(
+        ZoneInfo(cfg.timezone))
+    return window_for(local.date(), cfg)
+
+
+def wall_time(clock: VirtualClock, sim: datetime) -> datetime:
+    """The wall-clock instant at which ``clock`` shows ``sim`` (identity for real time)."""
+    wall_s = clock.wall_epoch_s + (sim.timestamp() - clock.epoch_s) / clock.factor
+    return datetime.fromtimestamp(wall_s, sim.tzinfo)
+
+
+def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:
+    """The request for the night whose preheat starts at ``act``: a pending ``--tonight``
+    trigger first, else the first campaign entry without a valid night; None when done."""
+    start, end = window_after_act(act, cfg)
+    band = cfg.night.comfort_band_k
+    for req in store.pending_requests():
+        if req.when == "tonight" and store.take_request(req.id):
+            sp = req.setpoint_c if req.setpoint_c is not None else (
+                cfg.campaign.constrained_setpoint_c)
+            return NightRequest(req.kind, sp, start, end, band, source="trigger")
+    if not cfg.campaign.enabled:
+        return None
+    for seq, kind, sp, _night_id, valid in store.campaign():
+        if not valid:
+            return NightRequest(kind, sp, start, end, band, source="schedule",
+                                campaign_seq=seq)
+    return None
+
+
+def campaign_complete(store: Store) -> bool:
+    """Every plan entry has a valid night."""
+    rows = store.campaign()
+    return bool(rows) and all(valid for *_, valid in rows)

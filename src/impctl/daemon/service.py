@@ -1,0 +1,296 @@
+"""The long-running daemon: orphan sweep, APScheduler jobs, manual triggers, fits, systemd.
+
+Never imports torch, scikit-learn or pandas: classification and the fit run in a subprocess
+(``impctl export`` then ``impctl fit``) and only their JSON result comes back.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import signal
+import sys
+from datetime import datetime, timedelta
+from pathlib import Path
+
+from apscheduler.schedulers.asyncio import AsyncIOScheduler
+from apscheduler.triggers.date import DateTrigger
+
+from ..controller import NightController, NightPolicy, NightRequest, restore_all
+from ..heatpump import HeatPumpClient, ModbusLinkError, WriteBudget
+from ..heatpump.clock import VirtualClock
+from ..store import Store
+from .config import Config
+from .schedule import (
+    act_trigger,
+    campaign_complete,
+    campaign_plan,
+    next_act_time,
+    next_campaign_night,
+    wall_time,
+)
+from .systemd import Notifier
+
+_LOG = logging.getLogger("impctl.daemon")
+_INTERRUPTED = ("preparing", "active", "restoring")
+
+
+def clock_from_config(cfg: Config) -> VirtualClock:
+    """Real time, or the accelerated clock shared with the simulator (``[clock]``)."""
+    if not cfg.clock.epoch:
+        return VirtualClock.real()
+    epoch = datetime.fromisoformat(cfg.clock.epoch)
+    return VirtualClock(epoch, cfg.clock.speed, cfg.clock.wall_epoch_s or None)
+
+
+def policy_from_config(cfg: Config) -> NightPolicy:
+    """The controller's rules from the ``[night]`` section."""
+    n = cfg.night
+    return NightPolicy(
+        sample_interval_s=n.sample_interval_s, abort_margin_k=n.abort_margin_k,
+        link_lost_limit_s=n.link_lost_limit_s, t_out_min_c=n.t_out_min_c,
+        t_out_max_c=n.t_out_max_c, constrained_action=n.constrained_action,
+        setpoint_floor_c=n.setpoint_floor_c, preheat_h=n.preheat_h,
+        min_coverage=n.min_coverage, emission_lag_h=n.emission_lag_h)
+
+
+def open_client(cfg: Config, clock: VirtualClock) -> HeatPumpClient:
+    """The safe heat-pump client with the persistent write budget of the state directory."""
+    budget = WriteBudget(cfg.budget_path, cfg.heatpump.writes.daily_budget)
+    return HeatPumpClient(cfg.heatpump, clock=clock, budget=budget)
+
+
+def sweep_orphans(store: Store) -> list[int]:
+    """Mark nights that were running when the process died as interrupted (not valid)."""
+    ids = []
+    for night in store.nights(states=_INTERRUPTED):
+        store.set_night_state(night.id, "interrupted")
+        store.assess_night(night.id, False, ["interrupted: impctl stopped during the night"])
+        store.add_event("warning", f"night {night.id} was interrupted; restoring")
+        ids.append(night.id)
+    return ids
+
+
+class Daemon:
+    """The impctl service.
+
+    Parameters
+    ----------
+    cfg : Config
+    clock : VirtualClock, optional (default from ``cfg.clock``)
+    """
+
+    def __init__(self, cfg: Config, clock: VirtualClock | None = None):
+        self.cfg = cfg
+        self.clock = clock or clock_from_config(cfg)
+        self.stop = asyncio.Event()
+        self.notifier = Notifier()
+        self.store: Store | None = None
+        self.client: HeatPumpClient | None = None
+        self.controller: NightController | None = None
+        self.scheduler: AsyncIOScheduler | None = None
+        self._night_task: asyncio.Task | None = None
+        self._fit_task: asyncio.Task | None = None
+        self._connected = asyncio.Event()
+        self._accelerated = False
+
+    # -- lifecycle -------------------------------------------------------------------------
+    async def run(self) -> int:
+        """Run until SIGTERM/SIGINT; returns the exit status."""
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, self._request_stop, sig)
+        self.store = Store(self.cfg.db_path)
+        self.client = open_client(self.cfg, self.clock)
+        self.controller = NightController(
+            self.client, self.store, self.clock, policy_from_config(self.cfg),
+            on_status=self._status, stop=self.stop)
+        self.store.set_campaign(campaign_plan(self.cfg))
+        orphans = sweep_orphans(self.store)
+        self.notifier.ready(f"started; {len(orphans)} interrupted night(s) to restore")
+        _LOG.info("impctl daemon started (state %s, heat pump %s, clock %r)",
+                  self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
+        watchdog = asyncio.create_task(self._watchdog())
+        try:
+            await self._connect()
+            if not self.stop.is_set() and self.store.journal_pending():
+                self._status("restoring the owner's settings after an interruption")
+                await restore_all(self.client, self.store, clock=self.clock,
+                                  timeout_s=policy_from_config(self.cfg).restore_timeout_s,
+                                  retry_s=2.0)
+            if not self.stop.is_set():
+                self._start_scheduler()
+                self._status(self._idle_status())
+                await self.stop.wait()
+        finally:
+            await self._shutdown()
+            watchdog.cancel()
+        return 0
+
+    def _request_stop(self, sig: int) -> None:
+        _LOG.info("received %s: stopping (restoring first if a night runs)",
+                  signal.Signals(sig).name)
+        self.notifier.stopping("stopping: restoring the heat pump if needed")
+        self.stop.set()
+
+    async def _connect(self) -> None:
+        while not self.stop.is_set():
+            try:
+                await self.client.connect(max_wait_s=30.0)
+                self._connected.set()
+                _LOG.info("heat pump connected: %s, generation %s, Q_HC from %s",
+                          self.cfg.heatpump.link.describe(), self.client.generation.value,
+                          self.client.heat_power_source() or "nowhere (IMP nights refused)")
+                return
+            except ModbusLinkError as exc:
+                self._status(f"waiting for the heat pump: {exc}")
+
+    async def _shutdown(self) -> None:
+        if self._night_task is not None and not self._night_task.done():
+            # The controller sees the stop event, aborts and restores; wait for it.
+            try:
+                await asyncio.wait_for(asyncio.shield(self._night_task), timeout=80.0)
+            except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
+                _LOG.error("night did not finish cleanly on stop: %r", exc)
+        if self.store is not None and self.store.journal_pending() and self._connected.is_set():
+            await restore_all(self.client, self.store, clock=self.clock, timeout_s=60.0,
+                              retry_s=1.0)
+        if self.scheduler is not None and self.scheduler.running:
+            self.scheduler.shutdown(wait=False)
+        if self._fit_task is not None:
+            self._fit_task.cancel()
+        if self.client is not None:
+            self.client.close()
+        if self.store is not None:
+            self.store.close()
+        _LOG.info("impctl daemon stopped")
+
+    # -- systemd ---------------------------------------------------------------------------
+    def _status(self, text: str) -> None:
+        self.notifier.status(text)
+        _LOG.debug("status: %s", text)
+
+    def _idle_status(self) -> str:
+        rows = self.store.campaign()
+        done = sum(1 for *_, valid in rows if valid)
+        return f"idle; campaign {done}/{len(rows)} valid nights"
+
+    async def _watchdog(self) -> None:
+        """WATCHDOG=1 only while the event loop runs and the store answers."""
+        interval = (self.notifier.watchdog_interval_s or 30.0) / 2
+        while True:
+            try:
+                if self.store is not None:
+                    self.store.nights(states=["active"])  # the store still answers
+                self.notifier.watchdog()
+            except Exception as exc:  # noqa: BLE001 - a sick store must stop the pings
+                _LOG.error("health check failed, withholding the watchdog ping: %s", exc)
+            await asyncio.sleep(interval)
+
+    # -- scheduling ------------------------------------------------------------------------
+    def _start_scheduler(self) -> None:
+        self.scheduler = AsyncIOScheduler(timezone=self.cfg.timezone)
+        grace = int(self.cfg.campaign.misfire_grace_s)
+        self._accelerated = not (self.clock.factor == 1.0
+                                 and abs(self.clock.epoch_s - self.clock.wall_epoch_s) < 1)
+        if not self._accelerated:
+            self.scheduler.add_job(self._night_job, act_trigger(self.cfg), id="imp-night",
+                                   replace_existing=True, misfire_grace_time=grace,
+                                   coalesce=True, max_instances=1)
+        else:
+            self._schedule_accelerated()
+        self.scheduler.add_job(self._poll_requests, "interval", seconds=1.0,
+                               id="trigger-poll", replace_existing=True, coalesce=True,
+                               max_instances=1)
+        self.scheduler.start()
+        job = self.scheduler.get_job("imp-night")
+        _LOG.info("next night job at %s (wall clock)", job.next_run_time if job else None)
+
+    def _schedule_accelerated(self) -> None:
+        """Simulated time: the same cron rule, evaluated on the virtual clock and mapped to
+        the wall-clock instant at which the virtual clock reaches it."""
+        act = next_act_time(self.cfg, self.clock.now() + timedelta(seconds=1))
+        self.scheduler.add_job(self._night_job, DateTrigger(run_date=wall_time(self.clock, act)),
+                               id="imp-night", replace_existing=True,
+                               misfire_grace_time=max(1, int(self.cfg.campaign.misfire_grace_s
+                                                             / self.clock.factor)),
+                               kwargs={"act": act})
+
+    async def _night_job(self, act: datetime | None = None) -> None:
+        try:
+            if self._night_task is not None and not self._night_task.done():
+                _LOG.warning("night job skipped: a night is still running")
+                return
+            req = next_campaign_night(self.store, self.cfg, act or self.clock.now())
+            if req is None:
+                self._status(self._idle_status() + "; nothing to run tonight")
+                return
+            await self._run_night(req)
+        finally:
+            if self._accelerated and self.scheduler is not None and not self.stop.is_set():
+                self._schedule_accelerated()
+
+    async def _poll_requests(self) -> None:
+        if self.stop.is_set() or (self._night_task is not None and not self._night_task.done()):
+            return
+        for req in self.store.pending_requests():
+            if req.when != "now" or not self.store.take_request(req.id):
+                continue
+            s_min, e_min = self.cfg.window_minutes
+            length = timedelta(minutes=(e_min - s_min) % (24 * 60))
+            start = self.clock.now() + timedelta(hours=self.cfg.night.preheat_h)
+            sp = req.setpoint_c if req.setpoint_c is not None else (
+                self.cfg.campaign.constrained_setpoint_c)
+            _LOG.info("manual trigger %d: %s night at %.1f °C now", req.id, req.kind, sp)
+            await self._run_night(NightRequest(req.kind, sp, start, start + length,
+                                               self.cfg.night.comfort_band_k,
+                                               source="trigger"))
+            return
+
+    async def _run_night(self, req: NightRequest) -> None:
+        self._night_task = asyncio.current_task()
+        night = await self.controller.run(req)
+        self._status(self._idle_status())
+        if (night.valid and self.cfg.campaign.fit_when_complete and campaign_complete(self.store)
+                and self._needs_fit()):
+            self._fit_task = asyncio.create_task(self.run_fit())
+
+    def _needs_fit(self) -> bool:
+        last = self.store.last_fit()
+        valid = [n.id for n in self.store.nights(valid=True)]
+        return last is None or sorted(last[1]) != sorted(valid)
+
+    # -- the fit, in a subprocess ------------------------------------------------------------
+    async def run_fit(self) -> dict | None:
+        """Export the valid nights and run ``impctl fit`` in a subprocess; store the result."""
+        work = Path(self.cfg.state_dir) / "fit"
+        work.mkdir(parents=True, exist_ok=True)
+        nights_csv, out_json = work / "nights.csv", work / "fit.json"
+        ids = [n.id for n in self.store.nights(valid=True)]
+        base = [sys.executable, "-c", "from impctl.cli import main; main()"]
+        model_dir = self.cfg.model_dir or str(Path(self.cfg.state_dir) / "models")
+        steps = [
+            [*base, "export", "--db", str(self.cfg.db_path), "--format", "csv",
+             "--out", str(nights_csv)],
+            [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
+             "--model-dir", model_dir],
+        ]
+        self._status(f"fitting {len(ids)} nights in a subprocess")
+        for cmd in steps:
+            proc = await asyncio.create_subprocess_exec(
+                *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+                env={**os.environ, "OMP_NUM_THREADS": "1"})
+            out, err = await proc.communicate()
+            if proc.returncode != 0:
+                _LOG.error("fit step %s failed (%d): %s", cmd[3], proc.returncode,
+                           err.decode(errors="replace").strip().splitlines()[-1:] or "")
+                self.store.add_event("error", f"fit failed at {cmd[3]}")
+                return None
+        result = json.loads(out_json.read_text())
+        self.store.add_fit(ids, result)
+        self.store.add_event("info", f"fit stored ({len(ids)} nights)")
+        _LOG.info("fit stored for nights %s", ids)
+        self._status(self._idle_status() + "; fit stored")
+        return result

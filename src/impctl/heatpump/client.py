@@ -1,0 +1,283 @@
+"""The heat-pump client: generation detection, decoded reads, snapshots, safe writes."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from datetime import datetime
+
+from .budget import WriteBudget
+from .clock import VirtualClock
+from .config import ExternalRegister, HeatPumpConfig, LinkConfig
+from .decode import Reading, decode, to_int16, uint32
+from .errors import HeatPumpError, ModbusDeviceError, UnsupportedFeature, WriteRefused
+from .link import ModbusLink
+from .registers import Generation, Register, register
+from .snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
+from .writes import WriteResult, safe_write
+
+_LOG = logging.getLogger(__name__)
+
+#: Registers probed to tell the extended set from the compact one (reference §1.6).
+PROBES = (2371, 2372, 2130, 2327)
+_NO_Q_HC = ("compact (TT3000) controller has no heat-power register (2329) and no heat meter "
+            "is configured")
+
+
+@dataclass(frozen=True)
+class GenerationReport:
+    """Result of :meth:`HeatPumpClient.detect_generation`.
+
+    Attributes
+    ----------
+    generation : Generation
+    evidence : dict
+        Probed register number → what it returned ("plausible 3.2", "exception 2", …).
+    """
+
+    generation: Generation
+    evidence: dict[int, str]
+
+
+class HeatPumpClient:
+    """Reads and safely writes a Kronoterm heat pump over Modbus.
+
+    Parameters
+    ----------
+    config : HeatPumpConfig
+    clock : VirtualClock, optional
+        Source of timestamps and of the budget's day; real time by default.
+    budget : WriteBudget, optional
+        Required for writes; without it every write is refused.
+
+    Examples
+    --------
+    >>> async with HeatPumpClient(cfg, budget=WriteBudget(path, 12)) as hp:  # doctest: +SKIP
+    ...     snap = await hp.snapshot()
+    ...     await hp.set_loop1_setpoint(18.0)
+    """
+
+    def __init__(self, config: HeatPumpConfig, *, clock: VirtualClock | None = None,
+                 budget: WriteBudget | None = None) -> None:
+        self.config = config
+        self.clock = clock or VirtualClock.real()
+        self.budget = budget
+        if budget is not None and budget.daily_limit != config.writes.daily_budget:
+            _LOG.warning("write budget file allows %d writes/day but heatpump.writes."
+                         "daily_budget is %d; the file's limit applies", budget.daily_limit,
+                         config.writes.daily_budget)
+        self.link = ModbusLink(config.link)
+        self._ext_links: dict[LinkConfig, ModbusLink] = {}
+        self._generation = (None if config.generation == "auto"
+                            else Generation(config.generation))
+
+    async def __aenter__(self) -> HeatPumpClient:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    async def connect(self, max_wait_s: float | None = None) -> None:
+        """Connect (own retry loop, see :meth:`ModbusLink.connect`) and detect the generation
+        if it is not configured."""
+        await self.link.connect(max_wait_s)
+        if self._generation is None:
+            await self.detect_generation()
+
+    def close(self) -> None:
+        """Close all links."""
+        self.link.close()
+        for link in self._ext_links.values():
+            link.close()
+
+    @property
+    def generation(self) -> Generation:
+        """The controller generation (configured or detected)."""
+        if self._generation is None:
+            raise HeatPumpError("controller generation unknown: connect() or "
+                                "detect_generation() first")
+        return self._generation
+
+    async def detect_generation(self) -> GenerationReport:
+        """Probe 2371 (COP), 2372 (SCOP), 2130 (loop-1 water) and 2327 (load).
+
+        Any plausible value means the extended set; answers of "illegal address" (exception 2)
+        or implausible values on all four mean compact.
+
+        Raises
+        ------
+        ModbusDeviceError
+            Any other exception response (e.g. 6, busy): nothing can be concluded.
+        ModbusLinkError
+            No answer.
+        """
+        evidence: dict[int, str] = {}
+        extended = False
+        for ma in PROBES:
+            reg = register(ma)
+            try:
+                words = await self.link.read(reg.address, 1)
+            except ModbusDeviceError as exc:
+                if exc.exception_code != 2:  # busy/failing is no evidence of a missing register
+                    raise
+                evidence[ma] = "exception 2 (illegal address)"
+                continue
+            reading = decode(reg, words, self.clock.now())
+            plausible = _plausible(ma, reading)
+            evidence[ma] = f"{'plausible' if plausible else 'implausible'} {reading.raw}"
+            extended = extended or plausible
+        self._generation = Generation.EXTENDED if extended else Generation.COMPACT
+        _LOG.info("controller generation: %s (%s)", self._generation.value, evidence)
+        if not extended and self.config.heat_meter is None:
+            _LOG.warning("%s: Q_HC cannot be read; experiments that need it will refuse to run",
+                         _NO_Q_HC)
+        return GenerationReport(self._generation, evidence)
+
+    def heat_power_source(self) -> str | None:
+        """Where Q_HC comes from (``"heat meter …"``, ``"register 2329"``) or ``None``."""
+        if self.config.heat_meter is not None:
+            return f"heat meter {self.config.heat_meter.describe()}"
+        return "register 2329" if self.generation is Generation.EXTENDED else None
+
+    def require_heat_power(self) -> str:
+        """The Q_HC source, or :class:`UnsupportedFeature` for an IMP that needs it."""
+        source = self.heat_power_source()
+        if source is None:
+            raise UnsupportedFeature(f"{_NO_Q_HC}; configure [heatpump.heat_meter] or run only "
+                                     "experiments that do not need the heat output")
+        return source
+
+    async def read(self, key: str | int) -> Reading:
+        """Read and decode one register (missing if not on this controller)."""
+        reg = register(key)
+        now = self.clock.now()
+        if not reg.in_generation(self.generation):
+            return Reading.unavailable(reg.name, reg.unit, now,
+                                       f"not on a {self.generation.value} controller",
+                                       f"register {reg.ma}")
+        words = await self.link.read(reg.address, reg.words)
+        return decode(reg, words, self.clock.now())
+
+    async def read_external(self, ext: ExternalRegister, name: str, unit: str) -> Reading:
+        """Read a value from an external device (room sensor, heat meter)."""
+        link = self._link_for(ext)
+        source = f"external {ext.describe()}"
+        try:
+            words = await link.read(ext.address, ext.words, device_id=ext.device_id)
+        except ModbusDeviceError as exc:
+            return Reading.unavailable(name, unit, self.clock.now(), str(exc), source)
+        raw = to_int16(words[0]) if ext.datatype == "int16" else words[0]
+        if ext.words == 2:
+            raw = uint32(words)
+            if ext.datatype == "int32" and raw & 0x80000000:
+                raw -= 1 << 32
+        value = raw * ext.scale
+        stamp = self.clock.now()
+        low, high = ext.valid
+        if not low <= value <= high:
+            return Reading(name, None, unit, stamp, True,
+                           f"{value:g} {unit} outside the valid range {low:g}…{high:g}", raw,
+                           source)
+        return Reading(name, value, unit, stamp, raw=raw, source=source)
+
+    def _link_for(self, ext: ExternalRegister) -> ModbusLink:
+        if ext.link is None:
+            return self.link
+        if ext.link not in self._ext_links:
+            self._ext_links[ext.link] = ModbusLink(ext.link)
+        return self._ext_links[ext.link]
+
+    async def snapshot(self) -> Snapshot:
+        """Read everything one poll needs, in contiguous FC 03 blocks.
+
+        A block answered with a Modbus exception marks its readings missing; a link failure
+        raises :class:`ModbusLinkError` (nothing partial is returned then).
+        """
+        gen = self.generation
+        start = self.clock.now()
+        regs = [register(n) for n in SNAPSHOT_REGISTERS.values()]
+        room = self.config.room_sensor
+        if not isinstance(room, ExternalRegister):
+            regs.append(register("room_" + room))
+        if self.config.heat_meter is None:
+            regs.append(register("power_thermal"))
+        words: dict[int, tuple[int, datetime]] = {}
+        failed: dict[int, str] = {}
+        for first, count in plan_blocks([r for r in regs if r.in_generation(gen)], gen):
+            try:
+                block = await self.link.read(first - 1, count)
+            except ModbusDeviceError as exc:
+                for ma in range(first, first + count):
+                    failed[ma] = f"Modbus exception {exc.exception_code}"
+                continue
+            stamp = self.clock.now()
+            for i, word in enumerate(block):
+                words[first + i] = (word, stamp)
+
+        def from_register(reg: Register) -> Reading:
+            source = f"register {reg.ma}"
+            if not reg.in_generation(gen):
+                return Reading.unavailable(reg.name, reg.unit, start,
+                                           f"not on a {gen.value} controller", source)
+            if reg.ma in failed:
+                return Reading.unavailable(reg.name, reg.unit, start, failed[reg.ma], source)
+            got = [words[ma] for ma in range(reg.ma, reg.ma + reg.words)]
+            return decode(reg, [w for w, _ in got], got[0][1])
+
+        fields = {f: from_register(register(r)) for f, r in SNAPSHOT_REGISTERS.items()}
+        if isinstance(room, ExternalRegister):
+            fields["t_air_c"] = await self.read_external(room, "t_air", "°C")
+        else:
+            fields["t_air_c"] = from_register(register("room_" + room))
+        if self.config.heat_meter is not None:
+            fields["q_hc_w"] = await self.read_external(self.config.heat_meter, "q_hc", "W")
+        elif gen is Generation.EXTENDED:
+            fields["q_hc_w"] = from_register(register("power_thermal"))
+        else:
+            fields["q_hc_w"] = Reading.unavailable("q_hc", "W", start, _NO_Q_HC)
+        return Snapshot(timestamp=start, generation=gen, **fields)
+
+    async def write(self, key: str | int, value: float) -> WriteResult:
+        """Safely write one whitelisted register (see :mod:`impctl.heatpump.writes`)."""
+        reg = register(key)
+        if not reg.in_generation(self.generation):
+            raise WriteRefused(f"register {reg.ma} is not on a {self.generation.value} "
+                               "controller")
+        return await safe_write(self.link, reg, value, self.config.writes, self.budget,
+                                self.clock)
+
+    async def restore(self, key: str | int, value: float) -> WriteResult:
+        """Put an owner's value back (physical unit): whitelisted and plausibility-checked but
+        not clamped to the experiment limits; may use the budget's restore reserve."""
+        reg = register(key)
+        if not reg.in_generation(self.generation):
+            raise WriteRefused(f"register {reg.ma} is not on a {self.generation.value} "
+                               "controller")
+        return await safe_write(self.link, reg, value, self.config.writes, self.budget,
+                                self.clock, restore=True)
+
+    async def restore_raw(self, key: str | int, raw: int) -> WriteResult:
+        """:meth:`restore` from a journaled raw (signed int16) register value."""
+        reg = register(key)
+        return await self.restore(reg, raw * reg.scale)
+
+    async def set_loop1_setpoint(self, t_c: float) -> WriteResult:
+        """Write the loop-1 desired temperature (2187) [°C], clamped to the configured limits."""
+        return await self.write(2187, t_c)
+
+    async def set_loop1_mode(self, mode: int) -> WriteResult:
+        """Write the loop-1 mode (2042): 0 off, 1 on, 2 by schedule."""
+        return await self.write(2042, mode)
+
+
+def _plausible(ma: int, reading: Reading) -> bool:
+    if reading.missing or reading.value is None:
+        return False
+    value = reading.value
+    if ma in (2371, 2372):
+        return 0.0 < value <= 10.0
+    if ma == 2327:
+        return 0.0 < value <= 100.0
+    return value != 0.0  # 2130: a real loop-water temperature (0 is what absent ones read)
+

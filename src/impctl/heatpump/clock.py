@@ -1,0 +1,116 @@
+"""A virtual clock shared by the simulator and the daemon, across processes.
+
+Simulated time is defined from three numbers only::
+
+    sim_time = epoch + (wall_now − wall_epoch) × factor
+
+``epoch`` is the simulated instant at the wall-clock instant ``wall_epoch`` (POSIX seconds) and
+``factor`` the speed-up. Two processes built from the same three numbers (e.g. from
+:meth:`VirtualClock.spec`) compute the same simulated time, to the precision of their system
+clocks. With ``factor = 1`` and ``epoch = wall_epoch`` it is the real time.
+
+This module imports nothing from the simulator or the model so the daemon can use it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime
+
+from ..errors import InputError
+
+
+class VirtualClock:
+    """Real or accelerated time.
+
+    Parameters
+    ----------
+    epoch : datetime, optional
+        Simulated time at ``wall_epoch`` (time zone-aware). Default: the wall time at
+        ``wall_epoch`` (so ``factor = 1`` gives real time).
+    factor : float, default 1
+        Simulated seconds per wall-clock second (> 0).
+    wall_epoch_s : float, optional
+        Wall-clock anchor [POSIX s]. Default: now.
+    wall : callable, optional
+        Source of wall time [POSIX s]; ``time.time`` by default (tests may inject one).
+    """
+
+    def __init__(
+        self,
+        epoch: datetime | None = None,
+        factor: float = 1.0,
+        wall_epoch_s: float | None = None,
+        *,
+        wall: Callable[[], float] = time.time,
+    ) -> None:
+        if not factor > 0:
+            raise InputError(f"clock factor must be > 0, got {factor}", place="clock")
+        if epoch is not None and epoch.tzinfo is None:
+            raise InputError("clock epoch must carry a time zone", place="clock")
+        self._wall = wall
+        self.factor = float(factor)
+        self.wall_epoch_s = float(wall() if wall_epoch_s is None else wall_epoch_s)
+        self.epoch_s = self.wall_epoch_s if epoch is None else epoch.timestamp()
+
+    @classmethod
+    def real(cls) -> VirtualClock:
+        """The real wall clock (factor 1, simulated time = wall time)."""
+        return cls(None, 1.0, 0.0)
+
+    @property
+    def epoch(self) -> datetime:
+        """Simulated time at the wall anchor (UTC)."""
+        return datetime.fromtimestamp(self.epoch_s, UTC)
+
+    def now_s(self) -> float:
+        """Simulated time now [POSIX s]."""
+        return self.epoch_s + (self._wall() - self.wall_epoch_s) * self.factor
+
+    def now(self) -> datetime:
+        """Simulated time now (UTC, time zone-aware)."""
+        return datetime.fromtimestamp(self.now_s(), UTC)
+
+    def wall_seconds(self, sim_s: float) -> float:
+        """Wall-clock seconds that ``sim_s`` simulated seconds take."""
+        return sim_s / self.factor
+
+    def sim_seconds(self, wall_s: float) -> float:
+        """Simulated seconds that pass in ``wall_s`` wall-clock seconds."""
+        return wall_s * self.factor
+
+    def spec(self) -> str:
+        """A one-line description another process can pass to :meth:`from_spec`."""
+        return (f"epoch={self.epoch.isoformat()},factor={self.factor!r},"
+                f"wall_epoch={self.wall_epoch_s!r}")
+
+    @classmethod
+    def from_spec(cls, spec: str, *, wall: Callable[[], float] = time.time) -> VirtualClock:
+        """Rebuild a clock from :meth:`spec` output (``epoch=…,factor=…,wall_epoch=…``).
+
+        Raises
+        ------
+        InputError
+            On a malformed spec.
+        """
+        parts: dict[str, str] = {}
+        for item in spec.split(","):
+            key, sep, value = item.partition("=")
+            if not sep:
+                raise InputError(f"clock spec item {item!r} is not key=value", place="clock")
+            parts[key.strip()] = value.strip()
+        unknown = set(parts) - {"epoch", "factor", "wall_epoch"}
+        if unknown or "epoch" not in parts:
+            raise InputError(f"clock spec needs epoch, factor, wall_epoch: {spec!r}",
+                             place="clock")
+        try:
+            epoch = datetime.fromisoformat(parts["epoch"])
+            factor = float(parts.get("factor", "1"))
+            wall_epoch = float(parts["wall_epoch"]) if "wall_epoch" in parts else None
+        except ValueError as exc:
+            raise InputError(f"bad clock spec {spec!r}: {exc}", place="clock") from None
+        return cls(epoch, factor, wall_epoch, wall=wall)
+
+    def __repr__(self) -> str:
+        return f"VirtualClock({self.spec()})"

@@ -1,0 +1,235 @@
+"""The Modbus wire: FC 03 block reads and FC 06 single writes, serialised, with reconnects.
+
+pymodbus (~=3.16) does the framing. This layer adds what the field needed (reference §1.7,
+runtime notes §1.3):
+
+* its own connect loop with doubling back-off (pymodbus never retries a failed first connect);
+  pymodbus' background reconnect is switched off so there is one owner of the connection;
+* after every fresh connect, a short wait and then the receive buffer is discarded, so a
+  gateway's unsolicited greeting (often its MAC) never lands in the middle of the first
+  answer and desynchronises the framer (pymodbus clears its buffer when it sends; the wait is
+  what keeps a late greeting out of a pending answer);
+* optional tolerance of a fixed MBAP transaction id (rewritten to the pending request's);
+* one request at a time (an asyncio lock), an optional gap between requests;
+* reads retried with a reconnect in between, Modbus exception responses never retried;
+* only FC 03 and FC 06 exist here: there is no way to send FC 16.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from dataclasses import dataclass
+
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
+from pymodbus.exceptions import ModbusException
+from pymodbus.framer import FramerType
+
+from .config import LinkConfig
+from .errors import ModbusDeviceError, ModbusLinkError
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass
+class LinkStats:
+    """Counters of one link, for health metrics."""
+
+    requests: int = 0
+    failures: int = 0
+    retries: int = 0
+    connects: int = 0
+    drained_bytes: int = 0
+    last_ok_monotonic: float | None = None
+
+
+class ModbusLink:
+    """One Modbus master connection (TCP or RTU), used only through :meth:`read`/:meth:`write`.
+
+    Parameters
+    ----------
+    config : LinkConfig
+    """
+
+    def __init__(self, config: LinkConfig) -> None:
+        self.config = config
+        self.stats = LinkStats()
+        self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
+        self._lock = asyncio.Lock()
+        self._last_request = 0.0
+
+    @property
+    def connected(self) -> bool:
+        """Whether the underlying transport is up."""
+        return self._client is not None and self._client.connected
+
+    def _make_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
+        cfg = self.config
+        common = dict(timeout=cfg.timeout_s, retries=cfg.retries, reconnect_delay=0,
+                      trace_packet=self._trace_packet if cfg.tolerate_fixed_tid else None)
+        if cfg.transport == "tcp":
+            return AsyncModbusTcpClient(cfg.host, port=cfg.port, **common)
+        return AsyncModbusSerialClient(cfg.serial_port, framer=FramerType.RTU,
+                                       baudrate=cfg.baudrate, bytesize=8, parity="N",
+                                       stopbits=1, **common)
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        # Gateways answering with a fixed MBAP transaction id: give the response the id of the
+        # one pending request (requests are serialised, so there is exactly one).
+        client = self._client
+        if sending or client is None or self.config.transport != "tcp" or len(data) < 2:
+            return data
+        tid = client.ctx.request_transaction_id
+        return tid.to_bytes(2, "big") + data[2:]
+
+    async def connect(self, max_wait_s: float | None = None) -> None:
+        """Connect, retrying with doubling back-off, then drain unsolicited bytes.
+
+        Parameters
+        ----------
+        max_wait_s : float, optional
+            Give up after this long [s]; ``None`` = keep trying forever.
+
+        Raises
+        ------
+        ModbusLinkError
+            When ``max_wait_s`` passed without a connection.
+        """
+        first, most = self.config.connect_backoff_s
+        delay = first
+        deadline = None if max_wait_s is None else time.monotonic() + max_wait_s
+        while True:
+            if self._client is not None:
+                self._client.close()
+            self._client = self._make_client()
+            if await self._client.connect():
+                break
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                self._client.close()
+                raise ModbusLinkError(f"cannot connect to {self.config.describe()} "
+                                      f"within {max_wait_s:g} s")
+            _LOG.warning("cannot connect to %s; retrying in %.1f s",
+                         self.config.describe(), delay)
+            await asyncio.sleep(delay if left is None else min(delay, left))
+            delay = min(2 * delay, most)
+        self.stats.connects += 1
+        await self._drain()
+        _LOG.info("connected to %s", self.config.describe())
+
+    async def _drain(self) -> None:
+        if not self.config.drain_s or self._client is None:
+            return
+        await asyncio.sleep(self.config.drain_s)
+        ctx = self._client.ctx
+        if ctx.recv_buffer:
+            self.stats.drained_bytes += len(ctx.recv_buffer)
+            _LOG.info("discarded %d unsolicited byte(s) after connect: %s",
+                      len(ctx.recv_buffer), ctx.recv_buffer[:32].hex())
+            ctx.recv_buffer = b""
+
+    def close(self) -> None:
+        """Close the connection (a later request reconnects)."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    async def read(self, address: int, count: int, device_id: int | None = None) -> list[int]:
+        """FC 03: read ``count`` holding registers from zero-based ``address``.
+
+        Returns
+        -------
+        list of int
+            The unsigned 16-bit words, exactly ``count`` of them.
+
+        Raises
+        ------
+        ModbusDeviceError
+            Exception response (not retried).
+        ModbusLinkError
+            No valid answer after ``attempts`` tries with reconnects.
+        """
+        if not 1 <= count <= 125:
+            raise ValueError(f"FC 03 reads 1–125 registers, not {count}")
+        unit = self.config.device_id if device_id is None else device_id
+        last: Exception | None = None
+        for attempt in range(self.config.attempts):
+            if attempt:
+                self.stats.retries += 1
+                await asyncio.sleep(self.config.retry_delay_s)
+            try:
+                rr = await self._request("read", address, count, unit)
+            except ModbusLinkError as exc:
+                last = exc
+                _LOG.warning("read %d×%d from unit %d failed (try %d/%d): %s", address, count,
+                             unit, attempt + 1, self.config.attempts, exc)
+                self.close()
+                continue
+            if len(rr.registers) != count:
+                last = ModbusLinkError(f"asked for {count} registers at {address}, "
+                                       f"got {len(rr.registers)}")
+                self.close()
+                continue
+            return list(rr.registers)
+        self.stats.failures += 1
+        raise ModbusLinkError(f"read of {count} register(s) at address {address} from "
+                              f"{self.config.describe()} failed: {last}")
+
+    async def write(self, address: int, word: int, device_id: int | None = None) -> None:
+        """FC 06: write one holding register, sent exactly once (no retry, no resend).
+
+        Raises
+        ------
+        ModbusDeviceError
+            Exception response.
+        ModbusLinkError
+            No answer, or an answer that does not echo the request.
+        """
+        if not 0 <= word <= 0xFFFF:
+            raise ValueError(f"register word {word} is not in 0…65535")
+        unit = self.config.device_id if device_id is None else device_id
+        try:
+            rr = await self._request("write", address, word, unit)
+        except ModbusLinkError:
+            self.stats.failures += 1
+            self.close()
+            raise
+        if rr.address != address or list(rr.registers[:1]) != [word]:
+            raise ModbusLinkError(f"write echo mismatch at {address}: sent {word}, echo "
+                                  f"{rr.address}/{list(rr.registers)}")
+
+    async def _request(self, op: str, address: int, arg: int, unit: int):
+        async with self._lock:
+            if not self.connected:
+                await self.connect(max_wait_s=self.config.timeout_s)
+            gap = self.config.request_gap_s - (time.monotonic() - self._last_request)
+            if gap > 0:
+                await asyncio.sleep(gap)
+            client = self._client
+            assert client is not None
+            self.stats.requests += 1
+            retries = client.ctx.retries
+            try:
+                if op == "read":
+                    rr = await client.read_holding_registers(address, count=arg, device_id=unit)
+                else:
+                    # pymodbus would resend a write after a timeout: a second EEPROM write the
+                    # budget never counted. Writes go out exactly once; the caller reads back.
+                    client.ctx.retries = 0
+                    rr = await client.write_register(address, arg, device_id=unit)
+            except (ModbusException, OSError) as exc:
+                if self.config.tolerate_fixed_tid:
+                    # A late answer would carry the next request's id after the rewrite.
+                    client.close()
+                raise ModbusLinkError(str(exc)) from exc
+            finally:
+                client.ctx.retries = retries
+                self._last_request = time.monotonic()
+            if rr.isError():
+                code = getattr(rr, "exception_code", 0)
+                raise ModbusDeviceError(
+                    f"unit {unit} answered FC {rr.function_code & 0x7F} at address {address} "
+                    f"with Modbus exception {code}", code, address)
+            self.stats.last_ok_monotonic = time.monotonic()
+            return rr

@@ -1,0 +1,218 @@
+"""Safe writes: whitelist, clamp, compare before writing, budget, write, read back.
+
+The order matters and is the safety argument:
+
+1. only whitelisted registers (2187, 2042; 2049/2052 and 2014 when configured), never 2017,
+   2018, 2113, 539 or 2197 — refused before any traffic;
+2. the value is clamped to the configured limits (mode registers: an exact documented code);
+3. the register is read; if it already holds the value, nothing is written (no EEPROM wear);
+4. the write is counted against the register's daily budget *before* it is sent;
+5. FC 06, then read back (after a pause; the first answer may still be the old value) until
+   it matches, else :class:`WriteVerifyError`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+from ..errors import InputError
+from .budget import WriteBudget
+from .clock import VirtualClock
+from .config import WritePolicy
+from .decode import decode, encode, raw_value
+from .errors import ModbusLinkError, WriteRefused, WriteVerifyError
+from .link import ModbusLink
+from .registers import FORBIDDEN_WRITES, Kind, Register
+
+_LOG = logging.getLogger(__name__)
+_MODES = frozenset({0, 1, 2})
+
+Rule = tuple[float, float] | frozenset[int]
+
+
+@dataclass(frozen=True)
+class WriteResult:
+    """What a safe write did.
+
+    Attributes
+    ----------
+    name, ma : register name and documented number.
+    requested : value asked for (physical unit).
+    target : value after clamping (physical unit).
+    clamped : the requested value lay outside the configured limits.
+    written : ``False`` when the register already held the target (nothing sent).
+    previous : value before the write (physical unit).
+    read_back : value read back after the write (physical unit), or ``previous`` if unchanged.
+    used_today : writes of this register counted today, including this one.
+    """
+
+    name: str
+    ma: int
+    requested: float
+    target: float
+    clamped: bool
+    written: bool
+    previous: float
+    read_back: float
+    used_today: int
+
+
+def write_rules(policy: WritePolicy) -> Mapping[int, Rule]:
+    """Writable register → clamp limits (physical unit) or the set of allowed codes."""
+    rules: dict[int, Rule] = {2187: policy.loop1_setpoint_c, 2042: _MODES}
+    if policy.loop2_setpoint_c is not None:
+        rules.update({2049: policy.loop2_setpoint_c, 2052: _MODES})
+    if policy.correction_k is not None:
+        rules[2014] = (float(policy.correction_k[0]), float(policy.correction_k[1]))
+    if FORBIDDEN_WRITES & set(rules):  # guards against a future edit of this table
+        raise RuntimeError("a forbidden register slipped into the write whitelist")
+    return rules
+
+
+def _rule(reg: Register, policy: WritePolicy) -> Rule:
+    if reg.ma in FORBIDDEN_WRITES:
+        raise WriteRefused(f"register {reg.ma} ({reg.name}) is never written by impctl")
+    rule = write_rules(policy).get(reg.ma)
+    if rule is None:
+        raise WriteRefused(f"register {reg.ma} ({reg.name}) is not in the write whitelist "
+                           "for this configuration")
+    return rule
+
+
+def _finite(reg: Register, value: float) -> float:
+    if not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise InputError(f"write value must be a finite number, got {value!r}",
+                         place=f"register {reg.ma}")
+    return float(value)
+
+
+def _mode(reg: Register, value: float, codes: frozenset[int]) -> float:
+    if value != int(value) or int(value) not in codes:
+        raise WriteRefused(f"register {reg.ma} ({reg.name}) accepts only {sorted(codes)}, "
+                           f"not {value!r}")
+    return float(int(value))
+
+
+def check_target(reg: Register, value: float, policy: WritePolicy) -> float:
+    """Apply the whitelist and limits; return the value to write.
+
+    Raises
+    ------
+    WriteRefused
+        Forbidden or not whitelisted register, or a mode code that is not documented.
+    InputError
+        A value that is not a finite number.
+    """
+    rule = _rule(reg, policy)
+    value = _finite(reg, value)
+    if isinstance(rule, frozenset):
+        return _mode(reg, value, rule)
+    low, high = rule
+    return min(max(value, low), high)
+
+
+def check_restore(reg: Register, value: float, policy: WritePolicy) -> float:
+    """Validate an owner's value being put back: whitelisted and plausible, *not* clamped.
+
+    The owner's setpoint may lie outside impctl's experiment limits; it is still refused when
+    it is no documented mode code, no plausible temperature (sentinel or outside −60…150 °C) or
+    outside the documented −4…4 K of the correction.
+    """
+    rule = _rule(reg, policy)
+    value = _finite(reg, value)
+    if isinstance(rule, frozenset):
+        return _mode(reg, value, rule)
+    if reg.kind is Kind.TEMP:
+        reading = decode(reg, [encode(reg, value)], datetime.now(UTC))
+        if reading.missing:
+            raise WriteRefused(f"register {reg.ma}: will not restore {value!r} "
+                               f"({reading.reason})")
+    elif reg.ma == 2014 and not -4 <= value <= 4:
+        raise WriteRefused(f"register 2014: will not restore {value!r} (outside -4…4 K)")
+    return value
+
+
+async def safe_write(link: ModbusLink, reg: Register, value: float, policy: WritePolicy,
+                     budget: WriteBudget | None, clock: VirtualClock, *,
+                     restore: bool = False) -> WriteResult:
+    """Write ``value`` to ``reg`` following the module's five steps.
+
+    Parameters
+    ----------
+    restore : bool
+        Put back an owner's journaled value: validated by :func:`check_restore` instead of
+        clamped, and allowed to use ``policy.restore_reserve`` writes beyond the daily budget
+        (so a used-up budget can never keep the heating off).
+
+    Raises
+    ------
+    WriteRefused, WriteBudgetExceeded
+        Nothing was sent.
+    ModbusDeviceError
+        The device rejected the write (exception response).
+    ModbusLinkError
+        The link failed before the write, or both the write and every read-back failed.
+    WriteVerifyError
+        The value read back differs from the value written.
+    """
+    limited = (check_restore if restore else check_target)(reg, value, policy)
+    if budget is None:
+        raise WriteRefused("no write budget configured; writes are disabled")
+    clamped = limited != float(value)
+    if clamped:
+        _LOG.warning("register %d (%s): %s %s clamped to %s %s", reg.ma, reg.name, value,
+                     reg.unit, limited, reg.unit)
+    word = encode(reg, limited)
+    target = raw_value(reg, word)
+    current = (await link.read(reg.address, 1))[0]
+    previous = raw_value(reg, current)
+    if current == word:
+        _LOG.info("register %d (%s) already %s %s; not written", reg.ma, reg.name, target,
+                  reg.unit)
+        return WriteResult(reg.name, reg.ma, float(value), target, clamped, False,
+                           previous, previous, budget.used(reg.ma, clock.now().date()))
+    reserve = policy.restore_reserve if restore else 0
+    used = budget.consume(reg.ma, clock.now().date(), reserve=reserve)
+    write_error: ModbusLinkError | None = None
+    try:
+        await link.write(reg.address, word)
+    except ModbusLinkError as exc:
+        # The write may have landed even though its answer was lost: let the read-back decide.
+        write_error = exc
+        _LOG.warning("register %d: write not confirmed (%s); checking by read-back", reg.ma,
+                     exc)
+    read_back = await _read_back(link, reg, word, policy)
+    if read_back != word:
+        shown = "nothing" if read_back is None else f"{raw_value(reg, read_back)} {reg.unit}"
+        msg = (f"register {reg.ma} ({reg.name}): wrote {target} {reg.unit}, read back {shown} "
+               f"after {policy.verify_attempts} attempt(s)")
+        _LOG.error(msg)
+        if read_back is None and write_error is not None:
+            raise ModbusLinkError(msg) from write_error
+        raise WriteVerifyError(msg, reg.ma, word, read_back)
+    _LOG.warning("register %d (%s): %s → %s %s %s and verified (%d/%d today)", reg.ma,
+                 reg.name, previous, target, reg.unit, "restored" if restore else "written",
+                 used, budget.limit(reg.ma))
+    return WriteResult(reg.name, reg.ma, float(value), target, clamped, True, previous,
+                       target, used)
+
+
+async def _read_back(link: ModbusLink, reg: Register, word: int,
+                     policy: WritePolicy) -> int | None:
+    seen: int | None = None
+    for _ in range(policy.verify_attempts):
+        await asyncio.sleep(policy.verify_delay_s)
+        try:
+            seen = (await link.read(reg.address, 1))[0]
+        except ModbusLinkError as exc:
+            _LOG.warning("register %d read-back failed: %s", reg.ma, exc)
+            continue
+        if seen == word:
+            return seen
+    return seen
