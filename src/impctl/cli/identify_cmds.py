@@ -1,1 +1,111 @@
-"""Subcommands (to be filled in)."""
+"""``impctl train`` and ``impctl classify``: the virtual population and the range classifiers.
+
+Heavy modules (scikit-learn, the population) are imported inside the commands, so the CLI and
+the daemon start fast.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from ..errors import InputError
+from . import cli
+
+#: Fewest households ``impctl train`` accepts: a test split of 20 % must hold every class.
+MIN_HOUSEHOLDS = 20
+
+
+@cli.command()
+@click.option("--households", default=900, show_default=True, type=int,
+              help="Virtual households to simulate.")
+@click.option("--seed", default=0, show_default=True, type=int,
+              help="Seed of the households, their weather days, the noise, the split, the forests.")
+@click.option("--weather", "weather_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="EPW file or timestamp,t_out CSV [°C]; default: built-in winter.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Model directory [default: $IMPCTL_MODEL_DIR or the per-user data dir].")
+def train(households: int, seed: int, weather_path: Path | None, out: Path | None) -> None:
+    """Simulate the IMP on virtual households and train the parameter-range classifiers.
+
+    Writes OUT/models.json and OUT/<parameter>.joblib (the classifiers), OUT/dataset/ (Parquet
+    and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
+    Table III), then prints the report.
+    """
+    from ..identify.classifiers import default_model_dir, save_models
+    from ..identify.dataset import generate_dataset
+    from ..identify.report import format_report
+    from ..identify.training import TrainConfig, train_classifiers
+    from ..identify.virtual_imp import ImpSimConfig, usable_nights
+    from ..weather import read_weather
+
+    if households < MIN_HOUSEHOLDS:
+        raise InputError(f"--households must be >= {MIN_HOUSEHOLDS}, got {households}")
+    imp = ImpSimConfig()
+    weather = None
+    if weather_path is not None:
+        weather = read_weather(weather_path, imp.tz)
+        found = len(usable_nights(weather, imp))
+        if found < imp.days:
+            raise InputError(
+                f"only {found} usable nights (22:00–05:00 with {imp.spinup_days:g} days of data "
+                f"before, mean T_out < {imp.max_t_out_c:g} °C); {imp.days} are needed",
+                weather_path)
+    out = out if out is not None else default_model_dir()
+    if out.exists() and not out.is_dir():
+        raise InputError("--out must be a directory", out)
+
+    with click.progressbar(length=households, label="simulating households",
+                           file=sys.stderr) as bar:
+        dataset = generate_dataset(households, seed, weather=weather, weather_path=weather_path,
+                                   imp=imp, progress=bar.update)
+    cfg = TrainConfig()
+    n_forests = 2 * len(dataset.manifest["ranges"])
+    with click.progressbar(length=n_forests, label="training classifiers",
+                           file=sys.stderr) as bar:
+        models, reports = train_classifiers(dataset, cfg, seed, progress=bar.update)
+    report_json = {name: r.as_dict() for name, r in reports.items()}
+    dataset.save(out / "dataset")
+    save_models(models, out, seed=seed, n_households=households,
+                emission_lag_h=imp.emitter_lag_h, report=report_json,
+                dataset_manifest=dataset.manifest)
+    text = format_report(reports, small=cfg.small_campaign)
+    (out / "report.txt").write_text(text)
+    (out / "report.json").write_text(json.dumps(report_json, indent=2) + "\n")
+    click.echo(text)
+    click.echo(f"models, dataset and report written to {out}")
+
+
+@cli.command()
+@click.option("--nights", "nights_path", required=True,
+              type=click.Path(dir_okay=False, path_type=Path),
+              help="NIGHTS.csv: timestamp,t_air,t_out,q_hc[,setpoint,heating,night,kind].")
+@click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Where `impctl train` wrote the models [default: per-user data dir].")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+              help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
+def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
+    """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
+    from ..identify.classifiers import classify_nights
+    from ..identify.ranges import UNITS
+    from ..imp import read_nights
+
+    nights = read_nights(nights_path, tz)
+    results = classify_nights(nights, model_dir)
+    kinds = {k: sum(n.kind == k for n in nights) for k in ("constrained", "normal")}
+    if as_json:
+        click.echo(json.dumps({
+            "classes": {name: r.as_dict() for name, r in results.items()},
+            "nights": {**kinds, "ids": [n.night_id for n in nights]},
+        }, indent=2))
+        return
+    click.echo(f"{len(nights)} nights: {kinds['constrained']} constrained, "
+               f"{kinds['normal']} normal")
+    click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}{'probability':>11}")
+    for name, r in results.items():
+        rng = f"{r.range[0]:g} – {r.range[1]:g}"
+        click.echo(f"{name:<12}{rng:>16}  {UNITS.get(name, ''):<13}{100 * r.probability:>10.0f} %")

@@ -1,0 +1,218 @@
+"""Saved range classifiers: where they live, how they are stored, and classifying measured nights.
+
+A model directory holds one ``<parameter>.joblib`` per classified parameter (a fitted
+:class:`~.estimator.RangeClassifier`) and ``models.json`` with their metadata: format, ranges and
+labels, campaign and night feature names, the emitter lag, the training seed and size, package
+versions and the evaluation report. :func:`load_models` refuses, with one line saying what to do,
+a directory without models, another format, other features, or another scikit-learn version.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError
+from ..imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
+from .campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
+from .dataset import package_versions
+from .ranges import labels_of
+
+MODEL_FORMAT = 1
+METADATA_FILE = "models.json"
+RETRAIN = "run `impctl train` to train them"
+
+
+def default_model_dir() -> Path:
+    """Directory of the trained models: ``$IMPCTL_MODEL_DIR``, else the per-user data directory.
+
+    The per-user default is ``platformdirs.user_data_path("impctl") / "models"`` (e.g.
+    ``~/.local/share/impctl/models`` on Linux). The daemon, running as a service user, points
+    ``IMPCTL_MODEL_DIR`` (or ``--model-dir``) at its state directory.
+    """
+    env = os.environ.get("IMPCTL_MODEL_DIR")
+    if env:
+        return Path(env)
+    import platformdirs
+
+    return platformdirs.user_data_path("impctl", appauthor=False) / "models"
+
+
+@dataclass(frozen=True)
+class ClassResult:
+    """The class of one parameter.
+
+    Attributes
+    ----------
+    parameter : str
+    label : str
+        Most probable range label, e.g. ``"200-300"``.
+    range : (float, float)
+        That range, in the parameter's unit.
+    probability : float
+        Its probability (0–1), the share of the forest's votes.
+    probabilities : dict
+        Every range label → probability.
+    """
+
+    parameter: str
+    label: str
+    range: tuple[float, float]
+    probability: float
+    probabilities: dict[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …}``."""
+        return {"range": list(self.range), "label": self.label,
+                "probability": self.probability, "probabilities": dict(self.probabilities)}
+
+
+def save_models(models: dict, directory: str | Path, *, seed: int, n_households: int,
+                emission_lag_h: float, report: dict | None = None,
+                dataset_manifest: dict | None = None) -> Path:
+    """Write ``models`` (parameter → fitted RangeClassifier) and ``models.json`` into ``directory``.
+
+    Files are written under temporary names and renamed, so a reader never sees half a model.
+    """
+    import joblib
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    params = {}
+    for name, model in models.items():
+        target = directory / f"{name}.joblib"
+        tmp = target.with_suffix(".joblib.tmp")
+        joblib.dump(model, tmp, compress=3)
+        os.replace(tmp, target)
+        params[name] = {"file": target.name, "ranges": [list(r) for r in model.ranges],
+                        "labels": labels_of(tuple(model.ranges))}
+    meta = {
+        "format": MODEL_FORMAT,
+        "parameters": params,
+        "campaign_features": list(CAMPAIGN_FEATURE_NAMES),
+        "night_features": list(NIGHT_FEATURE_NAMES),
+        "emission_lag_h": float(emission_lag_h),
+        "seed": int(seed),
+        "n_households": int(n_households),
+        "versions": package_versions(),
+        "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "report": report or {},
+        "dataset": dataset_manifest or {},
+    }
+    tmp = directory / (METADATA_FILE + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=2) + "\n")
+    os.replace(tmp, directory / METADATA_FILE)
+    return directory
+
+
+def _minor(version: str) -> str:
+    return ".".join(version.split(".")[:2])
+
+
+def load_models(model_dir: str | Path | None = None) -> tuple[dict, dict]:
+    """Load the classifiers of ``model_dir`` (default :func:`default_model_dir`).
+
+    Returns
+    -------
+    models : dict parameter → RangeClassifier
+    metadata : dict (the content of ``models.json``)
+
+    Raises
+    ------
+    InputError
+        No models, unreadable metadata, another model format, other features, another
+        scikit-learn version, a missing or foreign model file.
+    """
+    directory = Path(model_dir) if model_dir is not None else default_model_dir()
+    meta_path = directory / METADATA_FILE
+    if not meta_path.is_file():
+        raise InputError(f"no trained models here; {RETRAIN}", directory)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"unreadable model metadata ({exc}); {RETRAIN} again", meta_path) from None
+    if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise InputError(f"model format {got!r}, this impctl reads {MODEL_FORMAT}; {RETRAIN} "
+                         "again", meta_path)
+    if meta.get("campaign_features") != list(CAMPAIGN_FEATURE_NAMES) or \
+            meta.get("night_features") != list(NIGHT_FEATURE_NAMES):
+        raise InputError("models were trained on other features than this impctl computes; "
+                         f"{RETRAIN} again", meta_path)
+    import sklearn
+
+    saved = str(meta.get("versions", {}).get("scikit-learn", "unknown"))
+    if _minor(saved) != _minor(sklearn.__version__):
+        raise InputError(f"models were trained with scikit-learn {saved}, this is "
+                         f"{sklearn.__version__}; {RETRAIN} again", meta_path)
+    import joblib
+
+    from .estimator import RangeClassifier
+
+    models = {}
+    for name, info in meta.get("parameters", {}).items():
+        path = directory / str(info.get("file", ""))
+        try:
+            model = joblib.load(path)
+        except Exception as exc:  # joblib/pickle raise many types for damaged files
+            raise InputError(f"cannot load the {name} model ({type(exc).__name__}); {RETRAIN} "
+                             "again", path) from None
+        ranges = [list(r) for r in getattr(model, "ranges", ())]
+        if not isinstance(model, RangeClassifier) or ranges != info.get("ranges"):
+            raise InputError(f"not the {name} model models.json describes; {RETRAIN} again",
+                             path)
+        models[name] = model
+    if not models:
+        raise InputError(f"models.json lists no models; {RETRAIN}", meta_path)
+    return models, meta
+
+
+def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = None
+                    ) -> dict[str, ClassResult]:
+    """Put a house into parameter ranges from its measured (or simulated) IMP nights.
+
+    All nights are combined into one campaign row (:mod:`impctl.identify.campaign`) before the
+    forests classify it.
+
+    Parameters
+    ----------
+    nights : list of NightSamples
+    model_dir : path, optional
+        Default :func:`default_model_dir`.
+
+    Returns
+    -------
+    dict
+        Parameter (``"floor_area"``, ``"c_f"``, ``"u_walls"`` with the default ranges) →
+        :class:`ClassResult`.
+
+    Raises
+    ------
+    InputError
+        No nights, or no usable trained models (telling the user to run ``impctl train``).
+    """
+    models, meta = load_models(model_dir)
+    if not nights:
+        raise InputError("no nights to classify")
+    lag = float(meta.get("emission_lag_h", 1.0))
+    row = campaign_features([night_features(n, lag) for n in nights])
+    x = pd.DataFrame([row], columns=list(CAMPAIGN_FEATURE_NAMES))
+    out = {}
+    for name, model in models.items():
+        proba = model.predict_proba(x)[0]
+        best = int(np.argmax(proba))
+        out[name] = ClassResult(
+            parameter=name,
+            label=str(model.classes_[best]),
+            range=tuple(float(v) for v in model.ranges[best]),  # type: ignore[arg-type]
+            probability=float(proba[best]),
+            probabilities={str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)},
+        )
+    return out

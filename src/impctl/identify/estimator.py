@@ -1,0 +1,93 @@
+"""A scikit-learn estimator that puts a parameter into one of its ranges with a random forest.
+
+:mod:`impctl.identify` imports this module lazily, so light consumers (the daemon) do not load
+scikit-learn.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from sklearn.base import BaseEstimator, ClassifierMixin
+
+from .ranges import DEFAULT_RANGES, bin_values, labels_of
+
+
+class RangeClassifier(ClassifierMixin, BaseEstimator):
+    """Random forest whose classes are the ranges of one house parameter.
+
+    ``fit`` takes the parameter's VALUES and bins them into ``ranges``; ``predict`` returns range
+    labels such as ``"60-100"``; ``predict_proba`` has one column per range (also ranges absent
+    from the training data, with probability 0).
+
+    Parameters
+    ----------
+    ranges : tuple of (low, high)
+        Contiguous, increasing ranges of the parameter (its unit).
+    n_estimators : int, default 300
+    min_samples_leaf : int, default 5
+        Larger leaves: smoother probabilities and a model a third the size.
+    max_features : {"sqrt", "log2"}, int, float or None, default "sqrt"
+    random_state : int or None
+    n_jobs : int or None
+        Trees built in parallel (``-1``: all cores).
+
+    Attributes
+    ----------
+    classes_ : ndarray of str
+        Range labels, in range order.
+    forest_ : sklearn.ensemble.RandomForestClassifier
+    n_features_in_ : int
+    feature_names_in_ : ndarray of str (when fitted on a DataFrame)
+    """
+
+    def __init__(
+        self,
+        ranges: tuple[tuple[float, float], ...] = DEFAULT_RANGES["floor_area"],
+        n_estimators: int = 300,
+        min_samples_leaf: int = 5,
+        max_features: str | int | float | None = "sqrt",
+        random_state: int | None = None,
+        n_jobs: int | None = None,
+    ):
+        self.ranges = ranges
+        self.n_estimators = n_estimators
+        self.min_samples_leaf = min_samples_leaf
+        self.max_features = max_features
+        self.random_state = random_state
+        self.n_jobs = n_jobs
+
+    def fit(self, X: ArrayLike, y: ArrayLike) -> RangeClassifier:
+        """Fit on features ``X`` (n_samples, n_features; NaN allowed) and parameter values ``y``."""
+        from sklearn.ensemble import RandomForestClassifier
+
+        self.classes_ = np.array(labels_of(tuple(self.ranges)))
+        index = bin_values(y, tuple(self.ranges))
+        self.forest_ = RandomForestClassifier(
+            n_estimators=self.n_estimators,
+            min_samples_leaf=self.min_samples_leaf,
+            max_features=self.max_features,
+            random_state=self.random_state,
+            n_jobs=self.n_jobs,
+        ).fit(X, index)
+        self.n_features_in_ = self.forest_.n_features_in_
+        if hasattr(self.forest_, "feature_names_in_"):
+            self.feature_names_in_ = self.forest_.feature_names_in_
+        return self
+
+    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Probability of each range, shape (n_samples, n_ranges)."""
+        proba = self.forest_.predict_proba(X)
+        out = np.zeros((proba.shape[0], len(self.classes_)))
+        out[:, self.forest_.classes_] = proba
+        return out
+
+    def predict(self, X: ArrayLike) -> NDArray[np.str_]:
+        """Most probable range label per sample."""
+        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+
+    def score(self, X: ArrayLike, y: ArrayLike, sample_weight: ArrayLike | None = None) -> float:
+        """Accuracy against parameter VALUES ``y`` (binned into the ranges)."""
+        truth = self.classes_[bin_values(y, tuple(self.ranges))]
+        hit = (self.predict(X) == truth).astype(float)
+        return float(np.average(hit, weights=sample_weight))

@@ -1,0 +1,231 @@
+"""NIGHTS.csv: measured IMP nights, the input of ``impctl classify`` and ``impctl fit``.
+
+Format (one header row, then one row per sample; row numbers in errors are file lines)::
+
+    timestamp,t_air,t_out,q_hc[,setpoint][,heating][,night][,kind]
+
+* ``timestamp`` — ISO 8601, strictly increasing (within each night when ``night`` is given);
+  naive times are local time in ``tz``.
+* ``t_air``, ``t_out`` — indoor air and outdoor temperature [°C].
+* ``q_hc`` — thermal heat output of the heating [W] (not electrical power), ≥ 0.
+* ``setpoint`` (optional, may be empty) — T_set [°C]; for constrained nights the band centre.
+* ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
+* ``night`` (optional) — night identifier; rows of one night must be contiguous.
+* ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
+
+Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
+outside every window are ignored, and windows with fewer than two samples are dropped. Without
+``kind`` a night is ``constrained`` when the heating is off (``heating`` = 0, or without that
+column Q_HC ≤ :data:`~impctl.imp.features.Q_ON_W`) in at least :data:`OFF_FRACTION` of its samples
+during the first hour, else ``normal``.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError
+from ..tables import read_table
+from .features import Q_ON_W
+from .night import NightSamples
+from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
+
+REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
+#: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).
+PLAUSIBLE = {
+    "t_air": (-40.0, 60.0, "°C"),
+    "t_out": (-60.0, 60.0, "°C"),
+    "q_hc": (0.0, 100_000.0, "W"),
+    "setpoint": (5.0, 35.0, "°C"),
+}
+#: Share of the first hour's samples that must be "heating off" for an unlabelled constrained night.
+OFF_FRACTION = 0.8
+
+
+def _row(index: int) -> str:
+    return f"row {index + 2}"
+
+
+def _check_values(table: pd.DataFrame, path: Path) -> None:
+    for col, (lo, hi, unit) in PLAUSIBLE.items():
+        if col not in table:
+            continue
+        values = table[col].to_numpy(dtype=float)
+        bad = np.isfinite(values) & ((values < lo) | (values > hi))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}", path, _row(i)
+            )
+    if "heating" in table:
+        heating = table["heating"].to_numpy(dtype=float)
+        bad = (heating != 0) & (heating != 1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"column 'heating': {heating[i]:g} is not 1 or 0", path, _row(i))
+    if "kind" in table:
+        kinds = table["kind"]
+        bad = ~kinds.isin(NIGHT_KINDS).to_numpy()
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"column 'kind': {kinds.iloc[i]!r} is not 'constrained' or 'normal'", path, _row(i)
+            )
+    if "night" in table:
+        empty = (table["night"] == "").to_numpy()
+        if empty.any():
+            raise InputError("column 'night': empty cell", path, _row(int(np.argmax(empty))))
+    back = (table["timestamp"].diff().dt.total_seconds() <= 0).to_numpy().copy()
+    if "night" in table:  # labelled nights may overlap (e.g. simulated); each must increase
+        back &= (table["night"] == table["night"].shift()).to_numpy()
+    if back.any():
+        i = int(np.argmax(back))
+        raise InputError("timestamps must strictly increase", path, _row(i))
+
+
+def _window_ids(
+    stamps: pd.Series, tz: str, window: tuple[dt.time, dt.time]
+) -> tuple[pd.Series, dict[str, pd.Timestamp]]:
+    """Night id (ISO date of the window start, '' outside every window) and window starts."""
+    local = stamps.dt.tz_convert(tz)
+    day = local.dt.tz_localize(None).dt.normalize()
+    tod = (local.dt.tz_localize(None) - day).dt.total_seconds()
+    start_s = window[0].hour * 3600 + window[0].minute * 60 + window[0].second
+    end_s = window[1].hour * 3600 + window[1].minute * 60 + window[1].second
+    if end_s < start_s:  # the window spans midnight
+        late, early = tod >= start_s, tod <= end_s
+        date = day.where(~early, day - pd.Timedelta(days=1))
+        inside = late | early
+    else:
+        inside = (tod >= start_s) & (tod <= end_s)
+        date = day
+    ids = date.dt.strftime("%Y-%m-%d").where(inside, "")
+    plan = NightPlan("normal", window_start=window[0], window_end=window[1])
+    starts = {d: plan.window(d, tz)[0] for d in ids.unique() if d}
+    return ids, starts
+
+
+def _infer_kind(time_s: np.ndarray, off: np.ndarray) -> str:
+    first_hour = time_s < 3600.0
+    sel = off[first_hour] if first_hour.any() else off[:1]
+    return "constrained" if sel.mean() >= OFF_FRACTION else "normal"
+
+
+def read_nights(
+    path: str | Path,
+    tz: str = "Europe/Ljubljana",
+    *,
+    window: tuple[dt.time, dt.time] = DEFAULT_WINDOW,
+) -> list[NightSamples]:
+    """Read NIGHTS.csv (format in the module docstring) into one :class:`NightSamples` per night.
+
+    Parameters
+    ----------
+    path : str or Path
+    tz : str
+        Time zone of naive timestamps and of the night windows.
+    window : (time, time)
+        Local window used to cut nights when the file has no ``night`` column.
+
+    Returns
+    -------
+    list of NightSamples, in time order
+
+    Raises
+    ------
+    InputError
+        One line naming the file, the row and the problem: missing column, bad number or
+        timestamp, implausible value, timestamps not increasing, a night split or with a changing
+        ``kind``, a labelled night with fewer than two samples, no night at all.
+    """
+    path = Path(path)
+    table = read_table(
+        path,
+        required=REQUIRED_COLUMNS,
+        numeric=("t_air", "t_out", "q_hc", "setpoint", "heating"),
+        optional=("night", "kind"),
+        may_be_empty=("setpoint",),
+        tz=tz,
+    )
+    _check_values(table, path)
+    explicit = "night" in table
+    if explicit:
+        ids = table["night"]
+        change = ids.ne(ids.shift()).to_numpy()
+        run_ids = ids[change]
+        dup = run_ids.duplicated().to_numpy()
+        if dup.any():
+            i = int(np.flatnonzero(change)[np.argmax(dup)])
+            raise InputError(f"night {ids.iloc[i]!r} is split: its rows must be contiguous",
+                             path, _row(i))
+        starts = {n: table["timestamp"].iloc[int(np.argmax((ids == n).to_numpy()))]
+                  for n in run_ids}
+    else:
+        ids, starts = _window_ids(table["timestamp"], tz, window)
+
+    off = (table["heating"] == 0) if "heating" in table else (table["q_hc"] <= Q_ON_W)
+    nights: list[NightSamples] = []
+    for night_id, rows in table.groupby(ids, sort=False).groups.items():
+        if night_id == "":
+            continue
+        idx = np.asarray(rows)
+        if len(idx) < 2:
+            if explicit:
+                raise InputError(f"night {night_id!r} has only one sample", path, _row(idx[0]))
+            continue
+        part = table.iloc[idx]
+        start = starts[night_id]
+        time_s = (part["timestamp"] - start).dt.total_seconds().to_numpy()
+        if "kind" in part:
+            kinds = part["kind"].to_numpy()
+            changed = kinds != kinds[0]
+            if changed.any():
+                raise InputError(f"night {night_id!r} changes kind from {kinds[0]!r}",
+                                 path, _row(idx[int(np.argmax(changed))]))
+            kind = str(kinds[0])
+        else:
+            kind = _infer_kind(time_s, off.to_numpy()[idx])
+        setpoint = np.nan
+        if "setpoint" in part and part["setpoint"].notna().any():
+            setpoint = float(np.nanmedian(part["setpoint"].to_numpy(dtype=float)))
+        nights.append(NightSamples(
+            night_id=str(night_id),
+            kind=kind,  # type: ignore[arg-type]
+            start=start,
+            time_s=time_s,
+            t_air_c=part["t_air"].to_numpy(dtype=float),
+            t_out_c=part["t_out"].to_numpy(dtype=float),
+            q_hc_w=part["q_hc"].to_numpy(dtype=float),
+            setpoint_c=setpoint,
+        ))
+    if not nights:
+        what = "no night with two or more samples" if explicit else (
+            f"no two samples inside one {window[0]:%H:%M}–{window[1]:%H:%M} window")
+        raise InputError(what, path)
+    return sorted(nights, key=lambda n: n.start)
+
+
+def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
+    """Write nights as NIGHTS.csv (all optional columns; timestamps with their UTC offset).
+
+    ``heating`` is 1 on normal nights and, on constrained nights, 1 only where Q_HC shows the
+    heating back on. :func:`read_nights` reads the file back into the same nights.
+    """
+    frames = []
+    for night in nights:
+        stamps = night.start + pd.to_timedelta(np.asarray(night.time_s, float), unit="s")
+        q = np.asarray(night.q_hc_w, float)
+        heating = np.ones(len(q), int) if night.kind == "normal" else (q > Q_ON_W).astype(int)
+        frames.append(pd.DataFrame({
+            "timestamp": stamps.map(lambda t: t.isoformat()),
+            "t_air": night.t_air_c, "t_out": night.t_out_c, "q_hc": q,
+            "setpoint": night.setpoint_c, "heating": heating,
+            "night": night.night_id, "kind": night.kind,
+        }))
+    path = Path(path)
+    pd.concat(frames, ignore_index=True).to_csv(path, index=False, float_format="%.9g")
+    return path

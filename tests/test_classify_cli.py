@@ -1,0 +1,104 @@
+"""``impctl train`` and ``impctl classify`` end to end, run as real subprocesses."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from impctl.identify import ImpSimConfig, sample_households, simulate_imp
+from impctl.imp import write_nights
+
+
+def run_cli(*args: str, env_home: Path | None = None) -> subprocess.CompletedProcess:
+    env = None
+    if env_home is not None:
+        import os
+
+        env = {**os.environ, "XDG_DATA_HOME": str(env_home), "IMPCTL_MODEL_DIR": ""}
+    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
+                          capture_output=True, text=True, timeout=300, env=env)
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("models")
+    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert "paper train/test" in done.stdout and "floor_area" in done.stdout
+    return out
+
+
+@pytest.fixture(scope="module")
+def nights_csv(tmp_path_factory) -> Path:
+    result = simulate_imp(sample_households(1, seed=8), config=ImpSimConfig(days=3), seed=8)
+    path = tmp_path_factory.mktemp("nights") / "nights.csv"
+    return write_nights(result.nights_of(0), path)
+
+
+def test_train_writes_models_dataset_and_report(model_dir):
+    names = {p.name for p in model_dir.iterdir()}
+    assert {"models.json", "floor_area.joblib", "c_f.joblib", "u_walls.joblib", "report.txt",
+            "report.json", "dataset"} <= names
+    assert {p.name for p in (model_dir / "dataset").iterdir()} == {
+        "households.parquet", "nights.parquet", "manifest.json"}
+    report = json.loads((model_dir / "report.json").read_text())
+    assert report["c_f"]["n_test_households"] == 4 and report["c_f"]["paper_test_accuracy"] == 0.78
+    meta = json.loads((model_dir / "models.json").read_text())
+    assert meta["seed"] == 4 and meta["dataset"]["n_households"] == 20
+
+
+def test_classify_prints_table_and_json(model_dir, nights_csv):
+    done = run_cli("classify", "--nights", str(nights_csv), "--model-dir", str(model_dir))
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == "18 nights: 9 constrained, 9 normal"
+    assert [ln.split()[0] for ln in lines[2:]] == ["floor_area", "c_f", "u_walls"]
+    done = run_cli("classify", "--nights", str(nights_csv), "--model-dir", str(model_dir),
+                   "--json")
+    data = json.loads(done.stdout)
+    for name in ("floor_area", "c_f", "u_walls"):
+        cls = data["classes"][name]
+        assert cls["range"][0] < cls["range"][1] and 0 < cls["probability"] <= 1
+        assert cls["probability"] == max(cls["probabilities"].values())
+    assert data["nights"]["constrained"] == 9
+
+
+def _one_error_line(done: subprocess.CompletedProcess, *words: str) -> str:
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    for w in words:
+        assert w in lines[0]
+    return lines[0]
+
+
+def test_classify_bad_file_names_file_and_row(tmp_path, model_dir):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22,1,2000\n"
+                   "2026-01-12T22:10,22,x,2000\n")
+    _one_error_line(run_cli("classify", "--nights", str(bad), "--model-dir", str(model_dir)),
+                    str(bad), "row 3", "'t_out'")
+    _one_error_line(run_cli("classify", "--nights", str(tmp_path / "none.csv")),
+                    "file not found")
+
+
+def test_classify_without_models_says_to_train(tmp_path, nights_csv):
+    _one_error_line(run_cli("classify", "--nights", str(nights_csv), env_home=tmp_path),
+                    "no trained models", "impctl train")
+
+
+def test_train_bad_input_writes_nothing(tmp_path):
+    out = tmp_path / "out"
+    _one_error_line(run_cli("train", "--households", "5", "--out", str(out)), "--households")
+    weather = tmp_path / "w.csv"
+    weather.write_text("timestamp,t_out\n2026-01-12T00:00,1.0\n2026-01-12T01:00,warm\n")
+    _one_error_line(run_cli("train", "--weather", str(weather), "--out", str(out)),
+                    str(weather), "row 3")
+    weather.write_text("timestamp,t_out\n2026-01-12T00:00,1.0\n2026-01-12T01:00,1.0\n")
+    _one_error_line(run_cli("train", "--weather", str(weather), "--out", str(out)),
+                    "usable nights")
+    assert not out.exists()

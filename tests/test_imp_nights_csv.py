@@ -1,0 +1,113 @@
+"""NIGHTS.csv: reading labelled and unlabelled nights, and refusing bad files clearly."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from impctl.errors import InputError
+from impctl.imp import night_features, read_nights, write_nights
+
+TZ = "Europe/Ljubljana"
+
+
+def _log(start: str, hours: float, step_min: int = 10) -> pd.DataFrame:
+    """A continuous log: heating off 22:00–05:00 on the first night, on otherwise."""
+    stamps = pd.date_range(start, periods=int(hours * 60 / step_min), freq=f"{step_min}min",
+                           tz=TZ)
+    n = len(stamps)
+    local_hour = stamps.hour
+    first_night = (stamps >= pd.Timestamp(start, tz=TZ).normalize() + pd.Timedelta(hours=22)) & (
+        stamps <= pd.Timestamp(start, tz=TZ).normalize() + pd.Timedelta(hours=29))
+    heating = np.where(first_night, 0, 1)
+    return pd.DataFrame({
+        "timestamp": [t.isoformat() for t in stamps],
+        "t_air": np.where(heating == 1, 22.0, 23.0 - 0.01 * np.arange(n)),
+        "t_out": 1.0 - 0.1 * (local_hour % 7),
+        "q_hc": np.where(heating == 1, 3000.0, 0.0),
+        "heating": heating,
+    })
+
+
+def test_unlabelled_log_is_cut_into_windows_and_kinds_inferred(tmp_path):
+    path = tmp_path / "log.csv"
+    _log("2026-01-12 20:00", 34).to_csv(path, index=False)     # until 06:00 on the 14th
+    nights = read_nights(path, TZ)
+    assert [n.night_id for n in nights] == ["2026-01-12", "2026-01-13"]
+    assert [n.kind for n in nights] == ["constrained", "normal"]
+    first = nights[0]
+    assert first.start == pd.Timestamp("2026-01-12 22:00", tz=TZ)
+    assert first.time_s[0] == 0.0 and first.time_s[-1] == 7 * 3600.0   # end inclusive
+    assert len(first.time_s) == 43
+
+
+def test_kind_inferred_from_heat_output_without_heating_column(tmp_path):
+    path = tmp_path / "log.csv"
+    _log("2026-01-12 20:00", 34).drop(columns="heating").to_csv(path, index=False)
+    assert [n.kind for n in read_nights(path, TZ)] == ["constrained", "normal"]
+
+
+def test_window_across_dst_change_is_six_hours(tmp_path):
+    stamps = pd.date_range("2026-03-28 21:00", "2026-03-29 06:00", freq="30min", tz=TZ)
+    df = pd.DataFrame({"timestamp": [t.isoformat() for t in stamps], "t_air": 22.0,
+                       "t_out": 3.0, "q_hc": 2000.0})
+    path = tmp_path / "dst.csv"
+    df.to_csv(path, index=False)
+    (night,) = read_nights(path, TZ)
+    assert night.duration_h == 6.0 and night.kind == "normal"
+
+
+def test_write_then_read_gives_the_same_nights_and_features(tmp_path):
+    from impctl.identify import ImpSimConfig, sample_households, simulate_imp
+
+    result = simulate_imp(sample_households(1, seed=5), config=ImpSimConfig(days=2), seed=5)
+    nights = result.nights_of(0)
+    back = read_nights(write_nights(nights, tmp_path / "n.csv"), TZ)
+    assert len(back) == len(nights) == 12
+    by_id = {n.night_id: n for n in back}
+    for night in nights:
+        got = by_id[night.night_id]
+        assert got.kind == night.kind and got.start == night.start
+        np.testing.assert_allclose(got.time_s, night.time_s)
+        assert night_features(got) == pytest.approx(night_features(night), rel=1e-5,
+                                                    nan_ok=True)
+
+
+GOOD = ("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22.0,1.0,2000\n"
+        "2026-01-12T22:10,22.0,1.0,2100\n")
+
+
+@pytest.mark.parametrize("text, words", [
+    ("", "file is empty"),
+    ("timestamp,t_air,t_out\n2026-01-12T22:00,22,1\n", "missing column 'q_hc'"),
+    (GOOD + "2026-01-12T22:20,22.0,abc,2000\n", "row 4: column 't_out': 'abc' is not"),
+    (GOOD + "2026-01-12T22:20,,1.0,2000\n", "row 4: column 't_air': empty cell"),
+    (GOOD + "2026-01-12T22:10,22.0,1.0,2000\n", "row 4: timestamps must strictly increase"),
+    (GOOD + "2026-01-12T22:20,2150,1.0,2000\n", "row 4: column 't_air': 2150 is outside"),
+    (GOOD + "2026-01-12T22:20,22,1.0,-300\n", "row 4: column 'q_hc': -300 is outside"),
+    (GOOD + "yesterday,22,1.0,300\n", "row 4: cannot parse timestamp"),
+    ("timestamp,t_air,t_out,q_hc,heating\n2026-01-12T22:00,22,1,0,2\n", "row 2: column 'heating'"),
+    ("timestamp,t_air,t_out,q_hc,kind\n2026-01-12T22:00,22,1,0,cold\n", "row 2: column 'kind'"),
+    ("timestamp,t_air,t_out,q_hc,night,kind\n2026-01-12T22:00,22,1,0,a,normal\n"
+     "2026-01-12T22:10,22,1,0,a,constrained\n", "row 3: night 'a' changes kind"),
+    ("timestamp,t_air,t_out,q_hc,night\n2026-01-12T22:00,22,1,0,a\n2026-01-12T22:10,22,1,0,b\n"
+     "2026-01-12T22:20,22,1,0,a\n", "row 4: night 'a' is split"),
+    ("timestamp,t_air,t_out,q_hc,night\n2026-01-12T22:00,22,1,0,a\n", "night 'a' has only one"),
+    ("timestamp,t_air,t_out,q_hc\n2026-01-12T12:00,22,1,0\n2026-01-12T13:00,22,1,0\n",
+     "no two samples inside one 22:00–05:00 window"),
+])
+def test_bad_files_give_one_line_naming_file_and_row(tmp_path, text, words):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        read_nights(path, TZ)
+    line = str(err.value)
+    assert "\n" not in line and str(path) in line and words in line
+
+
+def test_missing_file_is_named(tmp_path):
+    with pytest.raises(InputError, match="file not found"):
+        read_nights(Path(tmp_path / "nope.csv"))
