@@ -21,7 +21,7 @@ def cli() -> None:
 
 def _register() -> None:
     # Each subcommand module adds itself to the group; keep imports light (no torch here).
-    from . import device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
+    from . import demo_cmd, device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
 
 
 def main(argv: list[str] | None = None) -> None:

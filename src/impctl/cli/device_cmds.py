@@ -140,6 +140,9 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
 
     cfg = _load(config_path)
     _setup_logging(cfg.log_level)
+    if not cfg.db_path.exists():
+        click.echo("nothing to restore (no store yet)")
+        return
     with Store(cfg.db_path) as store:
         if not store.journal_pending():
             click.echo("nothing to restore")
@@ -191,7 +194,7 @@ def nights_command(config_path: Path) -> None:
     from ..store import Store
 
     cfg = _load(config_path)
-    with Store(cfg.db_path) as store:
+    with Store(cfg.db_path, create=False) as store:
         rows = store.nights()
         click.echo(f"{'id':>4} {'kind':<11} {'T_set °C':>8} {'window start (local)':<22} "
                    f"{'state':<11} {'valid':<5} {'samples':>7}  reasons")
@@ -225,8 +228,6 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
 
     if db_path is None:
         db_path = _load(config_path).db_path
-    if not Path(db_path).exists():
-        raise InputError("no such store file", db_path)
     ids = None
     if night_ids:
         try:
@@ -234,6 +235,6 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
         except ValueError:
             raise InputError(f"expected comma-separated ids, got {night_ids!r}",
                              place="--nights") from None
-    with Store(db_path) as store:
+    with Store(db_path, create=False) as store:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids))
     click.echo(f"wrote {n} samples to {out_path}")

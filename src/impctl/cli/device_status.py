@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from zoneinfo import ZoneInfo
 
 
@@ -12,7 +11,7 @@ def collect_status(cfg) -> dict:
     from ..store import Store
 
     out: dict = {"state_dir": cfg.state_dir}
-    with Store(cfg.db_path) as store:
+    with Store(cfg.db_path, create=False) as store:
         running = store.nights(states=["preparing", "active", "restoring"])
         if running:
             night = running[-1]
@@ -41,7 +40,11 @@ def collect_status(cfg) -> dict:
         out["pending_restore"] = [e.register for e in store.journal_pending()]
         out["pending_requests"] = len(store.pending_requests())
     if cfg.budget_path.exists():
-        day = datetime.now(UTC).date()
+        from ..daemon.service import clock_from_config
+
+        # The budget counts per UTC day of the clock the daemon runs on (the accelerated
+        # clock of a demo or test, else real time).
+        day = clock_from_config(cfg).now().date()
         with WriteBudget(cfg.budget_path, cfg.heatpump.writes.daily_budget) as budget:
             out["writes_today"] = {str(ma): f"{budget.used(ma, day)}/{budget.limit(ma)}"
                                    for ma in (2187, 2042)}

@@ -16,8 +16,9 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     -------
     (valid, reasons) — reasons say why a night is not valid, and note minor issues of a
     valid one. Thresholds: coverage ≥ ``policy.min_coverage`` of the expected samples up to the
-    night's end; defrost and DHW each ≤ 10 % of the samples; no error bits; T_air, T_out and
-    Q_HC each missing in ≤ 10 % of the samples.
+    night's end; at least 3 h of data (for constrained nights: after switch-off plus the
+    emission lag, which is what the fit uses); defrost and DHW each ≤ 10 % of the samples;
+    no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples.
     """
     night = store.night(night_id)
     samples = [s for s in store.samples(night_id)
@@ -27,8 +28,12 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     covered_until = min(end, night.window_end)
     span_s = max(0.0, (covered_until - night.window_start).total_seconds())
     expected = span_s / policy.sample_interval_s
-    if span_s < 3 * 3600:
-        reasons.append(f"window data covers only {span_s / 3600:.1f} h (< 3 h)")
+    # The fit uses a constrained night only from switch-off + emission lag, and needs 3 h of
+    # it; a night that reached T_min sooner is complete but carries too little cooling.
+    usable_s = span_s - (policy.emission_lag_h * 3600 if night.kind == "constrained" else 0)
+    if usable_s < 3 * 3600:
+        after = " after the emission lag" if night.kind == "constrained" else ""
+        reasons.append(f"only {max(usable_s, 0) / 3600:.1f} h of data{after} (< 3 h)")
     if expected > 0:
         coverage = len(samples) / (expected + 1)
         if coverage < policy.min_coverage:

@@ -101,16 +101,22 @@ class Store:
     Parameters
     ----------
     path : str or Path
-        Database file; its directory is created if missing.
+        Database file; with ``create`` its directory is created if missing.
+    create : bool, default True
+        False for readers (status, export, report): a missing file is an error instead of
+        a new, empty database.
 
     Raises
     ------
     InputError
-        The file is not an impctl database, or was written by a newer impctl.
+        No such file (``create=False``), not an impctl database, or written by a newer impctl.
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, create: bool = True):
         self.path = Path(path)
+        if not create and not self.path.exists():
+            raise InputError("no impctl store here (has the daemon run? check state_dir)",
+                             self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
         self._db.row_factory = sqlite3.Row

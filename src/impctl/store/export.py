@@ -2,7 +2,8 @@
 
 Columns: ``timestamp`` (ISO 8601, UTC offset), ``t_air`` and ``t_out`` [°C], ``q_hc`` [W thermal],
 ``setpoint`` [°C], ``heating`` (1 normal night, 0 constrained), ``night`` (id), ``kind``.
-Samples with a missing T_air, T_out or Q_HC are left out (the format has no missing values).
+Only samples inside each night's window are written (not the preheat before it), and those
+with a missing T_air, T_out or Q_HC are left out (the format has no missing values).
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
     rows = []
     for night in nights:
         for s in store.samples(night.id):
+            # Only the window: the preheat before it (heating on, also on constrained nights)
+            # is not part of the night; `impctl fit` takes a night's first row as its start
+            # (the switch-off of a constrained night).
+            if not night.window_start <= s.ts <= night.window_end:
+                continue
             if s.t_air_c is None or s.t_out_c is None or s.q_hc_w is None:
                 continue
             rows.append({

@@ -1,0 +1,84 @@
+"""``impctl demo`` and ``impctl report``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..errors import InputError
+from . import cli
+
+
+def _nights(text: str) -> tuple[int, int]:
+    try:
+        c, n = (int(x) for x in text.split("+"))
+    except ValueError:
+        raise InputError(f"expected CONSTRAINED+NORMAL such as 2+6, got {text!r}",
+                         place="--nights") from None
+    if c < 1 or n < 1:
+        raise InputError("a campaign needs at least one night of each kind", place="--nights")
+    return c, n
+
+
+@cli.command("demo")
+@click.option("--house", "house_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Demo your own virtual house (house TOML).")
+@click.option("--nights", default="2+6", show_default=True,
+              help="Constrained + normal nights of the campaign.")
+@click.option("--speed", type=float, default=20000.0, show_default=True,
+              help="Simulated seconds per wall-clock second.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("impctl-demo"), show_default=True, help="Output directory.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the weather and of the classifier training.")
+@click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Classifier cache [default: the per-user data dir].")
+@click.option("--households", type=int, default=900, show_default=True,
+              help="Virtual households for training when no cached models fit.")
+def demo_command(house_path, nights, speed, out, seed, model_dir, households) -> None:
+    """Run the whole product against a simulated heat pump and write the report.
+
+    Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on an accelerated clock →
+    classifiers (trained or cached) → Neural-ODE fit → report and a truth-vs-estimate table.
+    """
+    from ..demo import DemoOptions, run_demo
+
+    if speed <= 0 or speed > 30000:
+        raise InputError("must lie in (0, 30000] (the Modbus polling keeps up to ~20000)",
+                         place="--speed")
+    c, n = _nights(nights)
+    run_demo(DemoOptions(out=out, house_path=house_path, constrained_nights=c, normal_nights=n,
+                         speed=speed, seed=seed, model_dir=model_dir, households=households),
+             echo=click.echo)
+
+
+@cli.command("report")
+@click.option("--config", "config_path", type=click.Path(path_type=Path),
+              default="/etc/impctl/config.toml", show_default=True)
+@click.option("--db", "db_path", type=click.Path(path_type=Path), default=None,
+              help="Store file (default: impctl.db in the config's state_dir).")
+@click.option("--fit", "fit_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="A fit JSON (default: the newest fit in the store).")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("impctl-report"), show_default=True)
+def report_command(config_path, db_path, fit_path, out) -> None:
+    """Write the HTML report with its PNG figures for a campaign."""
+    import json
+
+    from ..report import write_report
+
+    tz = "Europe/Ljubljana"
+    if db_path is None:
+        from ..daemon.config import load_config
+
+        cfg = load_config(config_path)
+        db_path, tz = cfg.db_path, cfg.timezone
+    fit = None
+    if fit_path is not None:
+        try:
+            fit = json.loads(Path(fit_path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(f"not a readable fit JSON: {exc}", fit_path) from None
+    page = write_report(db_path, out, fit=fit, tz=tz)
+    click.echo(f"report: {page}")

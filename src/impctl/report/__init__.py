@@ -1,0 +1,151 @@
+"""The campaign report: PNG figures and one self-contained HTML page.
+
+Inputs are the store (nights, samples, validity) and a fit result (the ``impctl fit`` JSON,
+whose ``predictions`` carry the fitted curves). Nothing here imports torch.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+from ..model import HouseParameters
+from ..store import Store
+from . import figures
+from .summary import demo_summary, format_summary
+
+__all__ = ["demo_summary", "format_summary", "write_report"]
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(path.read_bytes()).decode()
+    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
+
+
+def _table(headers: list[str], rows: list[list[str]]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
+                   for r in rows)
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _fmt(x, spec=".3g") -> str:
+    return "—" if x is None else format(x, spec)
+
+
+def _nights_table(store: Store, tz: str) -> str:
+    zone = ZoneInfo(tz)
+    rows = []
+    for n in store.nights():
+        rows.append([n.id, n.kind, f"{n.setpoint_c:g}",
+                     f"{n.window_start.astimezone(zone):%Y-%m-%d %H:%M}",
+                     f"{(n.window_end - n.window_start).total_seconds() / 3600:.1f}",
+                     n.state, "yes" if n.valid else "no", store.sample_count(n.id),
+                     "; ".join(n.reasons)])
+    return _table(["id", "kind", "T_set °C", "window start (local)", "window h", "state",
+                   "valid", "samples", "data quality / reasons"], rows)
+
+
+def _lumped_table(fit: dict) -> str:
+    rows = []
+    for key, label, unit, scale in (("hlc", "HLC", "W/K", 1.0), ("c_m", "C_m", "MJ/K", 1e6),
+                                    ("tau", "τ", "h", 1.0)):
+        e = fit["lumped"][key]
+        v, lo, hi = (None if e.get(k) is None else e[k] / scale for k in ("value", "low", "high"))
+        rows.append([label, unit, _fmt(v, ".4g"), f"{_fmt(lo, '.4g')} … {_fmt(hi, '.4g')}",
+                     "data" if e.get("determined", True) else "not determined"])
+    return _table(["quantity", "unit", "estimate", "95 % interval", "determined by"], rows)
+
+
+def _param_table(fit: dict, truth: HouseParameters | None) -> str:
+    rows = []
+    true = truth.as_dict() if truth is not None else {}
+    for name, value in fit["parameters"].items():
+        rng = fit.get("bounds", {}).get(name)
+        row = [name, fit.get("units", {}).get(name, ""), _fmt(value),
+               "—" if not rng else f"{rng[0]:.3g} – {rng[1]:.3g}",
+               "data" if fit.get("determined", {}).get(name) else
+               f"{fit.get('basis', {}).get(name, 'prior')} only"]
+        if truth is not None:
+            row.insert(3, _fmt(float(true[name])))
+        rows.append(row)
+    headers = ["parameter", "unit", "estimate", "search range", "determined by"]
+    if truth is not None:
+        headers.insert(3, "true")
+    return _table(headers, rows)
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:14px}td,th{border:1px solid #ccc;
+padding:3px 8px;text-align:left}th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}
+.note{background:#fff8e0;border-left:4px solid #e0b000;padding:.5em 1em}pre{background:#f6f6f6;
+padding:1em;overflow-x:auto}"""
+
+
+def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = None,
+                 truth: HouseParameters | None = None, summary: dict | None = None,
+                 tz: str = "Europe/Ljubljana") -> Path:
+    """Write OUT/report.html and OUT/fig_*.png; returns the HTML path.
+
+    Parameters
+    ----------
+    db_path : the impctl store
+    out : output directory
+    fit : a fit result (``impctl fit`` JSON); default: the newest fit in the store
+    truth : the true house (demo, simulations) for the comparison columns
+    summary : the demo summary (:func:`demo_summary`), printed on the page
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with Store(db_path, create=False) as store:
+        if fit is None:
+            last = store.last_fit()
+            if last is None:
+                from ..errors import InputError
+
+                raise InputError("no fit stored yet: run a campaign (or impctl fit) first",
+                                 db_path)
+            fit = last[2]
+        nights_html = _nights_table(store, tz)
+    figs = [
+        figures.night_fits(fit, out / "fig_nights.png"),
+        figures.heat_demand(fit, out / "fig_heat_demand.png"),
+        figures.class_probabilities(fit, out / "fig_classes.png"),
+        figures.parameter_ranges(fit, out / "fig_parameters.png", truth),
+    ]
+    notes = fit.get("notes", [])
+    val = fit.get("validation", {}).get("mean", {}) or {}
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>impctl report</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>impctl: house identification report</h1>",
+        "<h2>What the nights determine</h2>", _lumped_table(fit),
+        f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",
+        "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
+        "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),
+        f"<p>ε = {_fmt(val.get('eps_pct'), '.1f')} %, ΔQ_total = "
+        f"{_fmt(val.get('dq_total_kwh'), '.2f')} kWh, ΔQ_power = "
+        f"{_fmt(val.get('dq_power_kw'), '.3f')} kW (the paper's Table V: 18.7–20.2 %).</p>",
+        "<h2>Parameter classes</h2>", _img(figs[2]),
+        "<h2>Physical parameters</h2>", _param_table(fit, truth), _img(figs[3]),
+        "<h2>Identifiability</h2><div class='note'><p>Night data determine the lumped "
+        "heat-loss coefficient HLC, the heat capacity C_m and the time constant τ. The seven "
+        "physical parameters enter the night-time equations only through a few combinations "
+        "(u_walls·walls_area, u_windows·windows_area, c_f·floor_area): a parameter marked "
+        "'class range only' or 'physical bounds only' is a point inside the search range "
+        "consistent with the data, not a measurement.</p>"
+        + "".join(f"<p>{html.escape(n)}</p>" for n in notes) + "</div>",
+        "<h2>Nights and their data quality</h2>", nights_html,
+    ]
+    if summary is not None:
+        parts += ["<h2>Demo: truth vs estimate</h2>",
+                  f"<pre>{html.escape(format_summary(summary))}</pre>"]
+    parts += ["<h2>Fit settings</h2>",
+              f"<pre>{html.escape(json.dumps(fit.get('fit', {}), indent=2))}</pre>",
+              "</body></html>"]
+    page = out / "report.html"
+    page.write_text("\n".join(parts), encoding="utf-8")
+    return page

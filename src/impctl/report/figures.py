@@ -1,0 +1,119 @@
+"""The report's PNG figures, drawn from a fit result (matplotlib, Agg backend)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+_COLORS = {"constrained": "tab:blue", "normal": "tab:red"}
+
+
+def night_fits(fit: dict, path: Path) -> Path:
+    """Measured vs fitted T_air per night (the paper's Fig. 5); constrained nights blue,
+    normal nights red."""
+    plt = _plt()
+    preds = fit.get("predictions") or []
+    n = max(1, len(preds))
+    cols = min(4, n)
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+    for ax in axes.flat[len(preds):]:
+        ax.axis("off")
+    if not preds:
+        axes[0, 0].text(0.5, 0.5, "no fitted curves in this result", ha="center")
+    for ax, p in zip(axes.flat, preds, strict=False):
+        t_h = np.asarray(p["time_s"], dtype=float) / 3600.0
+        color = _COLORS.get(p["kind"], "k")
+        ax.plot(t_h, p["t_air_measured_c"], ".", ms=2.5, color="0.35", label="measured")
+        if p.get("t_air_model_c") is not None:
+            ax.plot(t_h, p["t_air_model_c"], "-", lw=1.4, color=color, label="fitted")
+        ax.set_title(f"night {p['night_id']} · {p['kind']}", fontsize=8, color=color)
+        ax.set_xlabel("h since window start", fontsize=7)
+        ax.set_ylabel("T_air [°C]", fontsize=7)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def heat_demand(fit: dict, path: Path) -> Path:
+    """Heat delivered per normal night [kWh]: measured vs predicted (Fig. 3/4 style)."""
+    plt = _plt()
+    rows = fit.get("validation", {}).get("normal", []) or []
+    fig, ax = plt.subplots(figsize=(6.5, 3.0))
+    if rows:
+        x = np.arange(len(rows))
+        meas = [r["q_measured_kwh"] for r in rows]
+        model = [r["q_model_kwh"] for r in rows]
+        ax.bar(x - 0.2, meas, 0.4, label="measured", color="0.55")
+        ax.bar(x + 0.2, model, 0.4, label="predicted (fitted model)", color="tab:red")
+        ax.set_xticks(x, [str(r["night_id"]) for r in rows], fontsize=7)
+        ax.set_xlabel("normal night")
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no normal nights", ha="center", transform=ax.transAxes)
+    ax.set_ylabel("heat over the night [kWh]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def class_probabilities(fit: dict, path: Path) -> Path:
+    """The classified range of floor area, mass class and wall U with its probability."""
+    plt = _plt()
+    classes = fit.get("classes", {})
+    fig, ax = plt.subplots(figsize=(6.5, 2.4))
+    names = list(classes)
+    probs = [classes[n].get("probability") or 0.0 for n in names]
+    labels = []
+    for n in names:
+        lo, hi = classes[n]["range"]
+        labels.append(f"{n}\n{lo:g}–{hi:g}\n({classes[n].get('source', '')})")
+    ax.barh(range(len(names)), probs, color="tab:green")
+    ax.set_yticks(range(len(names)), labels, fontsize=7)
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("probability of the chosen range (forest vote share)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def parameter_ranges(fit: dict, path: Path, truth=None) -> Path:
+    """Each parameter's estimate inside its search range (normalised to 0–1), with the true
+    value when known; filled markers = determined by the data."""
+    plt = _plt()
+    names = list(fit["parameters"])
+    bounds = fit.get("bounds", {})
+    fig, ax = plt.subplots(figsize=(6.5, 2.8))
+    true = truth.as_dict() if truth is not None else {}
+    for i, name in enumerate(names):
+        lo, hi = bounds.get(name, (0.0, 1.0))
+        span = (hi - lo) or 1.0
+        est = (fit["parameters"][name] - lo) / span
+        det = fit.get("determined", {}).get(name, False)
+        ax.plot([0, 1], [i, i], color="0.8", lw=6, solid_capstyle="butt")
+        ax.plot(est, i, "o", color="tab:red", mfc="tab:red" if det else "white")
+        if name in true:
+            ax.plot((float(true[name]) - lo) / span, i, "|", color="k", ms=14)
+    ax.set_yticks(range(len(names)), names, fontsize=7)
+    ax.set_xlim(-0.05, 1.05)
+    ax.set_xlabel("position in the search range (0 = low bound, 1 = high); | = true value")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
