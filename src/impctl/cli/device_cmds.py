@@ -184,7 +184,8 @@ def status_command(config_path: Path, as_json: bool) -> None:
 
     cfg = _load(config_path)
     status = collect_status(cfg)
-    click.echo(json.dumps(status, indent=2, default=str) if as_json else format_status(status))
+    click.echo(json.dumps(status, indent=2, default=str) if as_json
+               else format_status(status, cfg.timezone))
 
 
 @cli.command("nights")

@@ -67,7 +67,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
         if s:
             def fmt(v, unit, spec=".1f"):
                 return "—" if v is None else f"{v:{spec}} {unit}"
-            lines.append(f"live:      {s['ts'].astimezone(zone):%Y-%m-%d %H:%M} "
+            lines.append(f"live:      {s['ts'].astimezone(zone):%Y-%m-%d %H:%M %Z} "
                          f"T_air {fmt(s['t_air_c'], '°C')}, T_out {fmt(s['t_out_c'], '°C')}, "
                          f"Q_HC {fmt(s['q_hc_w'], 'W', '.0f')}, "
                          f"P_el {fmt(s['p_el_w'], 'W', '.0f')}")

@@ -1,1 +1,122 @@
-"""Subcommands (to be filled in)."""
+"""``impctl fit``: the night-time Neural-ODE fit of a house's 5R1C parameters.
+
+torch is imported inside the command only, so the CLI (and the daemon) start without it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import click
+
+from ..errors import InputError
+from . import cli
+
+_NEEDS = {
+    "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
+                   "{lag:g} h emission lag) — it carries the time constant τ",
+    "normal": "a normal night (setpoint held, heat power logged, at least {h:g} h) — it carries "
+              "the absolute scale: HLC and C_m",
+}
+
+
+def _write_json(path: Path, data: dict) -> None:
+    # Write beside the target and rename, so a failed run never leaves half a file.
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2, ensure_ascii=False)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@cli.command("fit")
+@click.option("--nights", "nights_path", required=True,
+              type=click.Path(dir_okay=False, path_type=Path),
+              help="NIGHTS.csv: timestamp,t_air,t_out,q_hc[,setpoint,heating,night,kind].")
+@click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Trained range classifiers [default: per-user data dir].")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Write the full result as JSON here.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Draw measured vs fitted T_air and heat power (PNG).")
+@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+              help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
+@click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
+              show_default=True,
+              help="instant: temperatures are readings, q_hc the mean power until the next "
+                   "row; interval: every value is the mean over the interval starting at its "
+                   "timestamp.")
+@click.option("--normal-model", type=click.Choice(["demand", "series", "mean"]),
+              default="demand", show_default=True,
+              help="Normal nights: heat power predicted from the held T_air (demand), or the "
+                   "paper's eq. 5 driven by the measured power series or its night mean.")
+@click.option("--ach-infl", default=0.01, show_default=True, type=float,
+              help="Fixed infiltration air changes [1/h] (the classifiers' population).")
+@click.option("--ach-vent", default=0.0, show_default=True, type=float,
+              help="Fixed ventilation air changes [1/h].")
+def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
+        plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
+        ach_vent: float) -> None:
+    """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
+
+    Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
+    what determines each (the data, or only the class range / physical bounds), and the heat
+    demand and T_air validation per night.
+    """
+    from ..identify.fit import NightFit
+    from ..identify.fit_data import prepare_nights
+    from ..identify.fit_report import fit_to_dict, format_table, plot_fit
+    from ..imp import EMISSION_LAG_H, read_nights
+
+    if ach_infl < 0 or ach_vent < 0 or ach_infl + ach_vent <= 0:
+        raise InputError("--ach-infl and --ach-vent must be >= 0 with a positive sum")
+    nights = read_nights(nights_path, tz)
+    estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
+                         ach_vent=ach_vent)
+    kept, _, skipped = prepare_nights(nights, estimator.emission_lag_h, estimator.min_night_h,
+                                      estimator.resume_threshold_w)
+    missing = [_NEEDS[k].format(h=estimator.min_night_h, lag=EMISSION_LAG_H)
+               for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
+    if missing:
+        found = ", ".join(f"{n.night_id} ({n.kind})" for n in nights) or "none"
+        why = "; ".join(f"{i}: {r}" for i, r in skipped)
+        raise InputError(
+            "too little data to fit: missing " + " and ".join(missing)
+            + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
+
+    classes, ranges, notes = _classes(nights, model_dir)
+    estimator.fit(nights, ranges)
+    summary = fit_to_dict(estimator, classes, notes)
+    click.echo(format_table(summary))
+    if json_path is not None:
+        _write_json(json_path, summary)
+        click.echo(f"JSON written to {json_path}")
+    if plot_path is not None:
+        plot_fit(estimator, plot_path)
+        click.echo(f"plot written to {plot_path}")
+
+
+def _classes(nights, model_dir):
+    """Classified ranges, or — without usable classifiers — the prior, said out loud."""
+    from ..identify import DEFAULT_RANGES
+    from ..identify.classifiers import classify_nights
+
+    try:
+        results = classify_nights(nights, model_dir)
+    except InputError as exc:
+        classes = {name: {"range": (rs[0][0], rs[-1][1]), "probability": None,
+                          "source": "prior"} for name, rs in DEFAULT_RANGES.items()}
+        note = (f"no classification ({exc.problem}); floor_area, c_f and u_walls were searched "
+                "over their whole prior ranges, so the fit rests on the nights alone")
+        return classes, {n: c["range"] for n, c in classes.items()}, [note]
+    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier"}
+               for name, r in results.items()}
+    return classes, {n: c["range"] for n, c in classes.items()}, []

@@ -1,140 +1,20 @@
-"""``impctl simulate``: run the 5R1C model over a drivers file, or the built-in demo house."""
+"""``impctl simulate``: run the 5R1C model over a drivers file, or the built-in house.
+
+numpy and pandas are imported inside the command so that other commands (the daemon above
+all) start without them.
+"""
 
 from __future__ import annotations
 
-import os
-import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import click
-import numpy as np
-import pandas as pd
 
 from ..errors import InputError
-from ..model import HouseParameters, default_house, load_house, simulate
-from ..tables import read_table, step_seconds
-from ..weather import DEFAULT_TZ, read_weather, winter_weather
 from . import cli
 
-_NUMERIC = ("t_out", "setpoint", "phi_hc", "internal_gains", "solar_gains")
-_MAY_BE_EMPTY = ("setpoint", "phi_hc")
-
-
-@dataclass(frozen=True)
-class _Window:
-    """A daily local-time window [start, end) in minutes after midnight; may cross midnight."""
-
-    start_min: int
-    end_min: int
-
-    def contains(self, index: pd.DatetimeIndex) -> np.ndarray:
-        minute = (index.hour * 60 + index.minute).to_numpy()
-        if self.start_min <= self.end_min:
-            return (minute >= self.start_min) & (minute < self.end_min)
-        return (minute >= self.start_min) | (minute < self.end_min)
-
-
-def _parse_window(text: str) -> _Window:
-    try:
-        a, b = text.split("-")
-        parts = [tuple(int(x) for x in t.strip().split(":")) for t in (a, b)]
-        if any(len(p) != 2 or not (0 <= p[0] < 24 and 0 <= p[1] < 60) for p in parts):
-            raise ValueError
-    except ValueError:
-        raise InputError(f"expected HH:MM-HH:MM, got {text!r}", place="--heating-off") from None
-    (h1, m1), (h2, m2) = parts
-    return _Window(h1 * 60 + m1, h2 * 60 + m2)
-
-
-def _read_drivers(path: Path, step: float | None, tz: str) -> tuple[pd.DataFrame, float]:
-    table = read_table(
-        path, required=("timestamp", "t_out"), numeric=_NUMERIC, may_be_empty=_MAY_BE_EMPTY,
-        tz=tz,
-    )
-    data_step = step_seconds(table["timestamp"], path)
-    if step is not None and data_step is not None and step != data_step:
-        raise InputError(
-            f"--step {step:g} s differs from the data's step {data_step:g} s", path, "row 3"
-        )
-    dt_s = step if step is not None else data_step
-    if dt_s is None:
-        raise InputError("one row only: give the time step with --step", path)
-    return table, dt_s
-
-
-def _write_atomically(df: pd.DataFrame, out: Path) -> None:
-    """Write to a temporary file beside ``out`` and rename, so no half file is left behind."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            df.to_csv(fh, index=False, float_format="%.4f")
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def run_drivers(
-    house: HouseParameters,
-    table: pd.DataFrame,
-    dt_s: float,
-    setpoint_c: float | None,
-    heating_off: _Window | None,
-    t_m_init_c: float | None,
-) -> pd.DataFrame:
-    """Simulate one house over a drivers table; returns the OUT.csv frame (°C, W)."""
-    index = pd.DatetimeIndex(table["timestamp"])
-    n = len(table)
-    if "setpoint" in table:
-        sp = table["setpoint"].to_numpy(dtype=float)
-    else:
-        sp = np.full(n, np.nan if setpoint_c is None else float(setpoint_c))
-        if heating_off is not None:
-            sp[heating_off.contains(index)] = np.nan
-    forced = table["phi_hc"].to_numpy(dtype=float) if "phi_hc" in table else None
-    if t_m_init_c is None:
-        finite = sp[np.isfinite(sp)]
-        t_m_init_c = float(finite[0]) if finite.size else 20.0
-    sim = simulate(
-        house,
-        table["t_out"].to_numpy(dtype=float),
-        dt_s,
-        setpoint_c=sp,
-        phi_hc_w=forced,
-        internal_gains_w=table["internal_gains"].to_numpy() if "internal_gains" in table else 0.0,
-        solar_gains_w=table["solar_gains"].to_numpy() if "solar_gains" in table else 0.0,
-        t_m_init_c=t_m_init_c,
-    )
-    return pd.DataFrame(
-        {
-            "timestamp": [t.isoformat() for t in index],
-            "t_out": table["t_out"].to_numpy(),
-            "t_air": sim.t_air_c,
-            "t_s": sim.t_s_c,
-            "t_m": sim.t_m_c,
-            "phi_hc": sim.phi_hc_w,
-        }
-    )
-
-
-def _summary(house: HouseParameters, out: pd.DataFrame, dt_s: float, label: str) -> str:
-    energy_kwh = float(out["phi_hc"].sum()) * dt_s / 3.6e6
-    rows = [
-        ("house", label, ""),
-        ("steps", f"{len(out)} × {dt_s:g}", "s"),
-        ("HLC", f"{float(house.hlc_w_per_k):.1f}", "W/K"),
-        ("C_m", f"{float(house.c_m_j_per_k) / 1e6:.2f}", "MJ/K"),
-        ("tau", f"{float(house.tau_h):.1f}", "h"),
-        ("mean t_out", f"{out['t_out'].mean():.2f}", "°C"),
-        ("mean heating power", f"{out['phi_hc'].mean():.0f}", "W"),
-        ("heat delivered", f"{energy_kwh:.1f}", "kWh"),
-        ("min t_air", f"{out['t_air'].min():.2f}", "°C"),
-        ("max t_air", f"{out['t_air'].max():.2f}", "°C"),
-    ]
-    width = max(len(r[0]) for r in rows)
-    return "\n".join(f"{k:<{width}}  {v:>14} {u}" for k, v, u in rows)
+#: impctl.weather.DEFAULT_TZ, repeated here to keep pandas out of the CLI's import.
+_DEFAULT_TZ = "Europe/Ljubljana"
 
 
 @cli.command("simulate")
@@ -158,7 +38,7 @@ def _summary(house: HouseParameters, out: pd.DataFrame, dt_s: float, label: str)
 @click.option("--days", type=float, default=31.0, show_default=True,
               help="Length of the built-in weather [days] (no --drivers).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Built-in weather seed.")
-@click.option("--tz", default=DEFAULT_TZ, show_default=True,
+@click.option("--tz", default=_DEFAULT_TZ, show_default=True,
               help="Time zone of naive timestamps and of --heating-off.")
 def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint, heating_off,
                      t_m_init, step, days, seed, tz) -> None:
@@ -167,15 +47,22 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     With no arguments: the built-in default house over built-in winter weather (one month,
     hourly, heating at 21 °C), printing a summary.
     """
+    import pandas as pd
+
+    from ..drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
+    from ..model import default_house, load_house
+    from ..tables import step_seconds
+    from ..weather import read_weather, winter_weather
+
     house = load_house(house_path) if house_path else default_house()
     label = str(house_path) if house_path else "built-in default (150 m², medium)"
-    window = _parse_window(heating_off) if heating_off else None
+    window = parse_window(heating_off) if heating_off else None
     if step is not None and not step > 0:
         raise InputError("must be > 0 s", place="--step")
     if drivers_path and weather_path:
         raise click.UsageError("give --drivers or --weather, not both")
     if drivers_path:
-        table, dt_s = _read_drivers(drivers_path, step, tz)
+        table, dt_s = read_drivers(drivers_path, step, tz)
     else:
         if weather_path:
             t_out = read_weather(weather_path, tz=tz)
@@ -189,7 +76,7 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     sp = None if has_sp_column else (21.0 if setpoint is None else setpoint)
     out = run_drivers(house, table, dt_s, sp, window, t_m_init)
     if out_path:
-        _write_atomically(out, out_path)
-    click.echo(_summary(house, out, dt_s, label))
+        write_atomically(out, out_path)
+    click.echo(summary(house, out, dt_s, label))
     if out_path:
         click.echo(f"wrote {len(out)} rows to {out_path}")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import datetime
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,9 @@ class NightRequest:
     @property
     def duration_h(self) -> float:
         """Window length in absolute time [h]."""
-        return (self.window_end - self.window_start) / timedelta(hours=1)
+        # Not `window_end - window_start`: with the same tzinfo on both (the local zone)
+        # Python subtracts wall-clock times, so a night across a DST change would be 7 h.
+        return (self.window_end.timestamp() - self.window_start.timestamp()) / 3600.0
 
 
 @dataclass(frozen=True)

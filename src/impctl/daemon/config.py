@@ -99,6 +99,9 @@ class Config:
 
 
 _SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig}
+#: Marker left in the problem list when [heatpump] could not be read: its safety limits are
+#: unknown then, so the setpoints are not checked against the defaults (no invented problems).
+_HEATPUMP_FAILED = "\0heatpump"
 
 
 def _window(text: str) -> tuple[int, int]:
@@ -154,6 +157,7 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
                 kwargs[key] = heatpump_from_mapping(value)
             except InputError as exc:
                 problems.append(" ".join(p for p in (exc.place, exc.problem) if p))
+                problems.append(_HEATPUMP_FAILED)
             continue
         if key in _SECTIONS and cls is Config:
             if not isinstance(value, dict):
@@ -166,7 +170,7 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
     return cls(**kwargs)
 
 
-def _check(cfg: Config, problems: list[str]) -> None:
+def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     night, camp = cfg.night, cfg.campaign
     lo, hi = cfg.heatpump.writes.loop1_setpoint_c
 
@@ -192,7 +196,7 @@ def _check(cfg: Config, problems: list[str]) -> None:
         bad("night.link_lost_limit_s", "must be at least night.sample_interval_s")
     if night.constrained_action not in ("loop_off", "setpoint_floor"):
         bad("night.constrained_action", "must be 'loop_off' or 'setpoint_floor'")
-    if not lo <= night.setpoint_floor_c <= hi:
+    if limits_known and not lo <= night.setpoint_floor_c <= hi:
         bad("night.setpoint_floor_c",
             f"must lie within heatpump.writes.loop1_setpoint_c = [{lo:g}, {hi:g}] °C")
     if not 0 < night.min_coverage <= 1:
@@ -200,13 +204,13 @@ def _check(cfg: Config, problems: list[str]) -> None:
     if night.t_out_min_c >= night.t_out_max_c:
         bad("night.t_out_max_c", "must be above night.t_out_min_c")
     band = night.comfort_band_k
-    for sp in (camp.constrained_setpoint_c, *camp.normal_setpoints_c):
-        key = ("campaign.constrained_setpoint_c" if sp == camp.constrained_setpoint_c
-               else "campaign.normal_setpoints_c")
+    setpoints = [("campaign.constrained_setpoint_c", camp.constrained_setpoint_c)]
+    setpoints += [("campaign.normal_setpoints_c", sp) for sp in camp.normal_setpoints_c]
+    for key, sp in setpoints if limits_known else ():
         if not lo <= sp <= hi:
             bad(key, f"{sp:g} °C is outside the safety limits heatpump.writes.loop1_setpoint_c "
                      f"= [{lo:g}, {hi:g}] °C")
-    if camp.constrained_setpoint_c + band > hi:
+    if limits_known and camp.constrained_setpoint_c + band > hi:
         bad("campaign.constrained_setpoint_c",
             f"T_max = T_set + ΔT = {camp.constrained_setpoint_c + band:g} °C exceeds the "
             f"safety limit {hi:g} °C")
@@ -230,8 +234,11 @@ def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
     """Validate a parsed TOML mapping; raises :class:`ConfigError` listing every problem."""
     problems: list[str] = []
     cfg = _build(Config, data, "", problems)
-    if not problems:
-        _check(cfg, problems)
+    # Check the values too when some keys were bad (those fell back to their defaults), so
+    # one run lists every problem, one line each.
+    limits_known = _HEATPUMP_FAILED not in problems
+    problems = [p for p in problems if p != _HEATPUMP_FAILED]
+    _check(cfg, problems, limits_known)
     if problems:
         raise ConfigError([InputError(p, source) for p in problems])
     return Config(**{**{f.name: getattr(cfg, f.name) for f in fields(Config)},

@@ -19,7 +19,8 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from apscheduler.triggers.date import DateTrigger
 
 from ..controller import NightController, NightPolicy, NightRequest, restore_all
-from ..heatpump import HeatPumpClient, ModbusLinkError, WriteBudget
+from ..controller.restore import restore_entry
+from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudget
 from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
@@ -34,7 +35,8 @@ from .schedule import (
 from .systemd import Notifier
 
 _LOG = logging.getLogger("impctl.daemon")
-_INTERRUPTED = ("preparing", "active", "restoring")
+# "planned" too: a night created just before the process died never reached "preparing".
+_INTERRUPTED = ("planned", "preparing", "active", "restoring")
 
 
 def clock_from_config(cfg: Config) -> VirtualClock:
@@ -73,6 +75,11 @@ def sweep_orphans(store: Store) -> list[int]:
     return ids
 
 
+def _log_crash(task: asyncio.Task) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        _LOG.error("%s failed", task.get_name(), exc_info=task.exception())
+
+
 class Daemon:
     """The impctl service.
 
@@ -95,6 +102,9 @@ class Daemon:
         self._fit_task: asyncio.Task | None = None
         self._connected = asyncio.Event()
         self._accelerated = False
+        # Held by a night and by the background restore: never both at once (a restore
+        # marking an entry done while a night re-journals it would lose the owner's value).
+        self._heat_pump_lock = asyncio.Lock()
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -113,18 +123,21 @@ class Daemon:
         _LOG.info("impctl daemon started (state %s, heat pump %s, clock %r)",
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
         watchdog = asyncio.create_task(self._watchdog())
+        restorer = asyncio.create_task(self._restore_pending())
         try:
             await self._connect()
             if not self.stop.is_set() and self.store.journal_pending():
                 self._status("restoring the owner's settings after an interruption")
-                await restore_all(self.client, self.store, clock=self.clock,
-                                  timeout_s=policy_from_config(self.cfg).restore_timeout_s,
-                                  retry_s=2.0)
+                async with self._heat_pump_lock:
+                    await restore_all(self.client, self.store, clock=self.clock,
+                                      timeout_s=policy_from_config(self.cfg).restore_timeout_s,
+                                      retry_s=2.0)
             if not self.stop.is_set():
                 self._start_scheduler()
                 self._status(self._idle_status())
                 await self.stop.wait()
         finally:
+            restorer.cancel()
             await self._shutdown()
             watchdog.cancel()
         return 0
@@ -166,6 +179,36 @@ class Daemon:
         if self.store is not None:
             self.store.close()
         _LOG.info("impctl daemon stopped")
+
+    async def _restore_pending(self) -> None:
+        """Put the owner's settings back whenever the journal holds any and no night runs.
+
+        A night's own restore gives up after ``restore_timeout_s`` (the journal stays
+        pending); without this loop a link that comes back later would leave the heating in
+        the experiment's state until the next night or restart.
+        """
+        interval = max(0.5, min(5.0, self.clock.wall_seconds(self.cfg.night.sample_interval_s)))
+        waiting = False
+        while True:
+            await asyncio.sleep(interval)
+            if (self.stop.is_set() or not self._connected.is_set()
+                    or self._heat_pump_lock.locked() or not self.store.journal_pending()):
+                continue
+            async with self._heat_pump_lock:
+                try:
+                    for entry in self.store.journal_pending():
+                        await restore_entry(self.client, self.store, entry)
+                except (ModbusLinkError, HeatPumpError) as exc:
+                    if not waiting:  # one line per incident, not one per retry
+                        _LOG.warning("owner's settings still to restore: %s", exc)
+                        self.store.add_event("warning", f"restore pending: {exc}")
+                        self._status("RESTORE PENDING: waiting for the heat pump")
+                        waiting = True
+                    continue
+            _LOG.info("owner's settings restored%s", " after the link came back"
+                      if waiting else "")
+            waiting = False
+            self._status(self._idle_status())
 
     # -- systemd ---------------------------------------------------------------------------
     def _status(self, text: str) -> None:
@@ -244,14 +287,18 @@ class Daemon:
             sp = req.setpoint_c if req.setpoint_c is not None else (
                 self.cfg.campaign.constrained_setpoint_c)
             _LOG.info("manual trigger %d: %s night at %.1f °C now", req.id, req.kind, sp)
-            await self._run_night(NightRequest(req.kind, sp, start, start + length,
-                                               self.cfg.night.comfort_band_k,
-                                               source="trigger"))
+            # Its own task, so this 1 s poll job returns at once (a job still running at its
+            # next run time makes APScheduler log a warning every second all night).
+            self._night_task = asyncio.create_task(self._run_night(NightRequest(
+                req.kind, sp, start, start + length, self.cfg.night.comfort_band_k,
+                source="trigger")), name=f"manual night {req.id}")
+            self._night_task.add_done_callback(_log_crash)
             return
 
     async def _run_night(self, req: NightRequest) -> None:
         self._night_task = asyncio.current_task()
-        night = await self.controller.run(req)
+        async with self._heat_pump_lock:
+            night = await self.controller.run(req)
         self._status(self._idle_status())
         if (night.valid and self.cfg.campaign.fit_when_complete and campaign_complete(self.store)
                 and self._needs_fit()):
@@ -282,7 +329,12 @@ class Daemon:
             proc = await asyncio.create_subprocess_exec(
                 *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
                 env={**os.environ, "OMP_NUM_THREADS": "1"})
-            out, err = await proc.communicate()
+            try:
+                out, err = await proc.communicate()
+            except asyncio.CancelledError:  # the daemon stops: do not leave the fit running
+                proc.kill()
+                await proc.wait()
+                raise
             if proc.returncode != 0:
                 _LOG.error("fit step %s failed (%d): %s", cmd[3], proc.returncode,
                            err.decode(errors="replace").strip().splitlines()[-1:] or "")

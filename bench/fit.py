@@ -1,0 +1,414 @@
+"""Benchmark of the night-time Neural-ODE fit against the truth and simple baselines.
+
+Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior]
+          [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
+
+Validation population: ``impctl.identify.population.sample_households`` with seed 20260 (the
+classifiers are trained with other seeds, so they never saw these houses). Each household runs
+the IMP protocol of ``impctl.identify.fit_synth`` on its own seeded winter weather, simulated
+with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained, 6 normal
+at 22/23/24 °C); constrained nights pre-heat to T_set + 1.5 °C and cool 22:00–05:00 (the paper's
+case study), normal nights step up from the 21 °C day. Measurements: T_air and T_out rounded to
+0.1 °C, each heat-power sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds
+(temperatures are readings, power the mean until the next sample).
+
+Ranges for floor_area, c_f, u_walls: ``classifier`` (the trained forests of ``impctl train`` on
+the household's nights — the whole pipeline), ``true`` (the class holding the true value) or
+``prior`` (the union of the classes).
+
+Reported per sample step:
+* median and 90th percentile of |relative error| of HLC, τ and C_m; share of households whose
+  true value lies in the fit's 95 % interval (coverage);
+* heat demand ε: each method's house replayed (Annex C, noise-free) through the same weather
+  and setpoints as the truth, |E_model − E_true|/E_true per normal night, mean per household —
+  an out-of-sample prediction (the fit's own in-sample ε uses fitted initial mass temperatures
+  and is near zero by construction);
+* Table IV-style errors of the seven parameters next to the prior-midpoint baseline and the share
+  of households where the fit flags each parameter as determined by the data;
+* baselines from the same nights: coheating HLC, log-linear τ, C_m = τ·HLC, scipy least squares on
+  the exact discretisation (same model and ranges, one start); the prior midpoint;
+* how often the likelihood-ratio test rejects the classifiers' ranges;
+* fit time per household (one core).
+``--compare N`` adds the normal-night models (demand / series / mean) and ``--adam N`` the
+paper's optimiser (Adam, backprop through odeint) on N households; ``--virtual-imp N`` fits N
+households simulated by the classifiers' own IMP simulator (a second, independent protocol).
+Targets: median HLC ≤ 3 %, τ ≤ 3 %, C_m ≤ 15 %, ε ≤ 8 %, coverage ≥ 90 %, ≤ 2 s per household.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+
+import numpy as np
+import torch
+
+from impctl.identify import baselines
+from impctl.identify.fit import NightFit
+from impctl.identify.fit_data import prepare_nights, search_bounds
+from impctl.identify.fit_synth import imp_schedule, run_schedule, sample_nights
+from impctl.identify.node import PARAM_NAMES
+from impctl.identify.population import sample_households
+from impctl.model import HouseParameters
+
+VAL_SEED = 20260
+CLASS_RANGES = {
+    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
+    "c_f": ((0.8, 1.65), (1.65, 3.7)),
+    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
+}
+ACH = (0.0, 0.01)
+TARGETS = {"hlc": 3.0, "tau": 3.0, "c_m": 15.0, "eps": 8.0, "coverage": 90.0, "time": 2.0}
+
+
+def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
+    out = {}
+    for name, rs in CLASS_RANGES.items():
+        v = float(getattr(house, name))
+        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
+    return out
+
+
+def classifier_ranges(nights, model_dir):
+    from impctl.identify import classify_nights
+
+    return {k: tuple(v.range) for k, v in classify_nights(nights, model_dir).items()}
+
+
+def house_from(params: dict[str, float]) -> HouseParameters:
+    return HouseParameters(**{n: params[n] for n in PARAM_NAMES}, ach_vent=ACH[0],
+                           ach_infl=ACH[1])
+
+
+def demand_eps(houses: list[HouseParameters], sched, truth_energy: np.ndarray) -> np.ndarray:
+    """Mean |E − E_true|/E_true [%] over the normal nights, per household (NaN if no house)."""
+    ok = [h is not None for h in houses]
+    out = np.full(len(houses), np.nan)
+    if not any(ok):
+        return out
+    idx = np.flatnonzero(ok)
+    sub = HouseParameters.stack([houses[i] for i in idx])
+    sched_sub = _sub_schedule(sched, idx)
+    sim, _ = run_schedule(sub, sched_sub)
+    e = window_energy(sim, sched_sub)
+    out[idx] = 100.0 * np.mean(np.abs(e - truth_energy[:, idx]) / truth_energy[:, idx], axis=0)
+    return out
+
+
+def _sub_schedule(sched, idx):
+    from dataclasses import replace
+
+    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
+
+
+def window_energy(sim, sched) -> np.ndarray:
+    """Heat delivered in each normal-night window [kWh], (n_normal, n_houses)."""
+    phi = np.atleast_2d(sim.phi_hc_w.T).T
+    rows = [phi[w0:w1].sum(axis=0) * sched.dt_s / 3.6e6
+            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
+    return np.array(rows)
+
+
+def rel(est, true):
+    return 100.0 * (np.asarray(est, float) - np.asarray(true, float)) / np.asarray(true, float)
+
+
+def stats(err) -> tuple[float, float]:
+    a = np.abs(np.asarray(err, float))
+    a = a[np.isfinite(a)]
+    if not len(a):
+        return float("nan"), float("nan")
+    return float(np.median(a)), float(np.percentile(a, 90))
+
+
+def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args) -> dict:
+    n = houses_arr.n_houses
+    sched = imp_schedule(n, seed=VAL_SEED)
+    sim, sp = run_schedule(houses_arr, sched)
+    truth_e = window_energy(sim, sched)
+    res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
+                           "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
+                           "eps_in", "per_night_mean")}
+    for i in range(n):
+        house = houses_arr.take(i)
+        nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
+                               power_noise=0.05, seed=VAL_SEED + i)
+        if range_source == "true":
+            ranges = true_ranges(house)
+        elif range_source == "classifier":
+            ranges = classifier_ranges(nights, args.model_dir)
+        else:
+            ranges = None
+        hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
+        fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
+                       ach_vent=ACH[0], ach_infl=ACH[1]).fit(nights, ranges)
+        kept, _, _ = prepare_nights(nights)
+        box = search_bounds(ranges)
+        t0 = time.perf_counter()
+        lsq = baselines.least_squares_fit(kept, box, ACH) if args.lsq else None
+        res["lsq_time"].append(time.perf_counter() - t0)
+        mid = {k: 0.5 * (lo + hi) for k, (lo, hi) in box.items()}
+        res["fit"].append(fit)
+        res["lsq"].append(lsq)
+        res["coh_hlc"].append(baselines.coheating_hlc(kept))
+        res["loglin_tau"].append(baselines.loglinear_tau(kept))
+        res["mid"].append(mid)
+        res["time"].append(fit.fit_time_s_)
+        res["truth"].append(house)
+        res["ranges_hit"].append(hit)
+        res["eps_in"].append(fit.validation_["mean"].get("eps_pct", np.nan))
+        res["fit_house"].append(_safe_house(fit.parameters_))
+        res["lsq_house"].append(_safe_house(lsq) if lsq else None)
+        res["mid_house"].append(_safe_house(mid))
+        res["per_night_mean"].append(fit.per_night_mean_)
+        res.setdefault("class_check", []).append(fit.class_check_)
+        if args.verbose:
+            q = fit.lumped_
+            print(f"  house {i:3d}: HLC {rel(q['hlc'].value, house.hlc_w_per_k):+6.1f} %  "
+                  f"tau {rel(q['tau'].value, house.tau_h):+6.1f} %  "
+                  f"C_m {rel(q['c_m'].value, house.c_m_j_per_k):+6.1f} %  "
+                  f"{fit.fit_time_s_:.2f} s", flush=True)
+    res["eps_fit"] = demand_eps(res["fit_house"], sched, truth_e)
+    res["eps_lsq"] = demand_eps(res["lsq_house"], sched, truth_e) if args.lsq else None
+    res["eps_mid"] = demand_eps(res["mid_house"], sched, truth_e)
+    res["eps_pn"] = demand_eps([_safe_house(p["parameters"]) for p in res["per_night_mean"]],
+                               sched, truth_e)
+    # Steady-state demand from the coheating HLC: E = HLC·∫(T_air − T_out)dt per window.
+    res["eps_coh"] = coheating_eps(res["coh_hlc"], sched, sim, truth_e)
+    return res
+
+
+def coheating_eps(hlc, sched, sim, truth_e):
+    t_air = np.atleast_2d(sim.t_air_c.T).T
+    rows = [((t_air[w0:w1] - sched.t_out_c[w0:w1]).sum(axis=0) * sched.dt_s / 3.6e6)
+            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
+    e = np.array(rows) * np.asarray(hlc)[None, :]
+    return 100.0 * np.mean(np.abs(e - truth_e) / truth_e, axis=0)
+
+
+def _safe_house(params):
+    try:
+        return house_from(params)
+    except Exception:  # a parameter set outside the model's domain cannot be replayed
+        return None
+
+
+def report(res: dict, step_s: float, range_source: str, args) -> None:
+    truth = res["truth"]
+    t_hlc = [h.hlc_w_per_k for h in truth]
+    t_tau = [h.tau_h for h in truth]
+    t_cm = [h.c_m_j_per_k for h in truth]
+    fits = res["fit"]
+
+    def lumped(name):
+        return [f.lumped_[name] for f in fits]
+
+    cov = {}
+    for name, t in (("hlc", t_hlc), ("tau", t_tau), ("c_m", t_cm)):
+        est = lumped(name)
+        cov[name] = 100.0 * np.mean([e.low <= v <= e.high for e, v in zip(est, t, strict=True)])
+    rows = []
+    e_fit = {k: rel([e.value for e in lumped(k)], t)
+             for k, t in (("hlc", t_hlc), ("tau", t_tau), ("c_m", t_cm))}
+    rows.append(("NODE joint (default)", e_fit["hlc"], e_fit["tau"], e_fit["c_m"],
+                 res["eps_fit"], cov, np.median(res["time"])))
+    pn = res["per_night_mean"]
+    rows.append(("NODE per-night mean", rel([p["lumped"]["hlc"] for p in pn], t_hlc),
+                 rel([p["lumped"]["tau"] for p in pn], t_tau),
+                 rel([p["lumped"]["c_m"] for p in pn], t_cm), res["eps_pn"], None, None))
+    if args.lsq:
+        lsq = res["lsq"]
+        rows.append(("scipy least_squares (exact)", rel([x["hlc"] for x in lsq], t_hlc),
+                     rel([x["tau"] for x in lsq], t_tau), rel([x["c_m"] for x in lsq], t_cm),
+                     res["eps_lsq"], None, np.median(res["lsq_time"])))
+    coh, ll = np.asarray(res["coh_hlc"]), np.asarray(res["loglin_tau"])
+    rows.append(("coheating HLC / log-lin τ / τ·HLC", rel(coh, t_hlc), rel(ll, t_tau),
+                 rel(coh * ll * 3600.0, t_cm), res["eps_coh"], None, None))
+    mids = [house_from(m) for m in res["mid"]]
+    rows.append(("prior midpoint", rel([h.hlc_w_per_k for h in mids], t_hlc),
+                 rel([h.tau_h for h in mids], t_tau), rel([h.c_m_j_per_k for h in mids], t_cm),
+                 res["eps_mid"], None, None))
+
+    print(f"\n### sample step {step_s:g} s, ranges: {range_source}, "
+          f"{len(truth)} households, normal-night model '{args.normal_model}'")
+    hits = res["ranges_hit"]
+    if hits and hits[0]:
+        share = {k: 100.0 * np.mean([h[k] for h in hits]) for k in hits[0]}
+        all_in = 100.0 * np.mean([all(h.values()) for h in hits])
+        print("true value inside the range used: " + ", ".join(
+            f"{k} {v:.0f} %" for k, v in share.items()) + f"; all three {all_in:.0f} %")
+        checks = res["class_check"]
+        rej = np.array([c["rejected"] for c in checks])
+        wrong = np.array([not all(h.values()) for h in hits])
+        chi2 = np.array([c.get("chi2", np.nan) for c in checks])
+        print(f"class ranges rejected by the likelihood-ratio test: {100 * rej.mean():.0f} % "
+              f"of households ({rej[wrong].sum()} of {wrong.sum()} with a wrong class, "
+              f"{rej[~wrong].sum()} of {(~wrong).sum()} with right classes); "
+              f"median Δχ² right {np.nanmedian(chi2[~wrong]) if (~wrong).any() else np.nan:.1f}"
+              f", wrong {np.nanmedian(chi2[wrong]) if wrong.any() else np.nan:.1f}")
+    print("| method | HLC med / P90 % | τ med / P90 % | C_m med / P90 % | ε med / P90 % "
+          "| coverage HLC/τ/C_m % | time s |")
+    print("|---|---|---|---|---|---|---|")
+    for name, eh, et, ec, eps, cv, tm in rows:
+        cells = [f"{a:.1f} / {b:.1f}" for a, b in (stats(eh), stats(et), stats(ec), stats(eps))]
+        cv_s = f"{cv['hlc']:.0f} / {cv['tau']:.0f} / {cv['c_m']:.0f}" if cv else "–"
+        tm_s = f"{tm:.2f}" if tm is not None else "–"
+        print(f"| {name} | " + " | ".join(cells) + f" | {cv_s} | {tm_s} |")
+    t = np.asarray(res["time"])
+    print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
+          "in-sample ε (fitted initial mass temperatures) median "
+          f"{np.nanmedian(res['eps_in']):.2f} %")
+
+    print("\n| parameter | true range in population | NODE med / P90 % "
+          "| prior midpoint med / P90 % | flagged determined % |")
+    print("|---|---|---|---|---|")
+    for name in PARAM_NAMES:
+        tv = np.array([float(getattr(h, name)) for h in truth])
+        fv = np.array([f.parameters_[name] for f in fits])
+        mv = np.array([m[name] for m in res["mid"]])
+        det = 100.0 * np.mean([f.determined_[name] for f in fits])
+        a, b = stats(rel(fv, tv))
+        c, d = stats(rel(mv, tv))
+        print(f"| {name} | {tv.min():.3g}–{tv.max():.3g} | {a:.1f} / {b:.1f} | {c:.1f} / {d:.1f} "
+              f"| {det:.0f} |")
+
+    med = {k: stats(v)[0] for k, v in e_fit.items()}
+    eps_med = stats(res["eps_fit"])[0]
+    print("\ntargets (median): " + ", ".join([
+        _verdict("HLC", med["hlc"], TARGETS["hlc"]), _verdict("τ", med["tau"], TARGETS["tau"]),
+        _verdict("C_m", med["c_m"], TARGETS["c_m"]), _verdict("ε", eps_med, TARGETS["eps"])]))
+    print("coverage ≥ 90 %: " + ", ".join(
+        f"{k} {v:.0f} % {'met' if v >= TARGETS['coverage'] else 'NOT met'}"
+        for k, v in cov.items()))
+    print(f"time ≤ 2 s: max {t.max():.2f} s {'met' if t.max() <= TARGETS['time'] else 'NOT met'}")
+
+
+def compare(houses_arr: HouseParameters, args) -> None:
+    """Normal-night models (series / mean / demand) and optimisers (LM / Adam) side by side."""
+    n = houses_arr.n_houses
+    sched = imp_schedule(n, seed=VAL_SEED)
+    sim, sp = run_schedule(houses_arr, sched)
+    truth_e = window_energy(sim, sched)
+    variants = [("demand", "lm"), ("series", "lm"), ("mean", "lm")]
+    if args.adam:
+        variants.append(("demand", "adam"))
+    print(f"\n### variants on {n} households, 5-min samples, true class ranges")
+    print("| normal nights | optimiser | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
+          "| ε med / P90 % | time med / max s |")
+    print("|---|---|---|---|---|---|---|")
+    for model, opt in variants:
+        errs = {"hlc": [], "tau": [], "c_m": []}
+        houses, times = [], []
+        for i in range(n):
+            if opt == "adam" and i >= args.adam:
+                break
+            house = houses_arr.take(i)
+            nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
+                                   power_noise=0.05, seed=VAL_SEED + i)
+            fit = NightFit(normal_model=model, optimizer=opt, n_starts=args.starts,
+                           max_iter=40, per_night=False).fit(nights, true_ranges(house))
+            for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
+                         ("c_m", house.c_m_j_per_k)):
+                errs[k].append(rel(fit.lumped_[k].value, t))
+            houses.append(_safe_house(fit.parameters_))
+            times.append(fit.fit_time_s_)
+        m = len(houses)
+        houses += [None] * (n - m)
+        eps = demand_eps(houses, sched, truth_e)[:m]
+        cells = [f"{a:.1f} / {b:.1f}" for a, b in (stats(errs["hlc"]), stats(errs["tau"]),
+                                                   stats(errs["c_m"]), stats(eps))]
+        label = opt if opt == "lm" else f"adam ({m} houses, 400 steps)"
+        print(f"| {model} | {label} | " + " | ".join(cells)
+              + f" | {np.median(times):.2f} / {np.max(times):.2f} |", flush=True)
+
+
+def virtual_imp_check(n: int, args) -> None:
+    """The fit on the classifiers' own IMP simulator: steady normal nights (spun up at T_set),
+    an emitter ramp during the lag, constrained nights cut at T_min, "interval" stamps."""
+    from impctl.identify.virtual_imp import ImpSimConfig, simulate_imp
+
+    houses = sample_households(n, seed=VAL_SEED + 1)
+    cfg = ImpSimConfig(days=2, step_s=600.0, noise_t_air_k=0.0, noise_q_rel=0.05)
+    res = simulate_imp(houses, config=cfg, seed=VAL_SEED)
+    errs = {"hlc": [], "tau": [], "c_m": []}
+    cover = {k: [] for k in errs}
+    times, kept = [], []
+    for i in range(n):
+        house = houses.take(i)
+        nights = res.nights_of(i)
+        cons = [x for x in nights if x.kind == "constrained"][:2]
+        normal = [x for x in nights if x.kind == "normal"]
+        fit = NightFit(timestamps="interval").fit(cons + normal, true_ranges(house))
+        kept.append(sum(x.kind == "constrained" for x in fit.nights_))
+        for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
+                     ("c_m", house.c_m_j_per_k)):
+            e = fit.lumped_[k]
+            errs[k].append(rel(e.value, t))
+            cover[k].append(e.low <= t <= e.high)
+        times.append(fit.fit_time_s_)
+    print(f"\n### cross-check on impctl.identify.virtual_imp ({n} households, 10-min samples, "
+          "interval stamps, 2 constrained + 6 normal nights, true class ranges)")
+    print(f"constrained nights still ≥ 3 h after the lag: {np.mean(kept) / 2 * 100:.0f} %")
+    print("| HLC med / P90 % | τ med / P90 % | C_m med / P90 % | coverage HLC/τ/C_m % "
+          "| time med / max s |")
+    print("|---|---|---|---|---|")
+    cells = [f"{a:.1f} / {b:.1f}" for a, b in (stats(errs["hlc"]), stats(errs["tau"]),
+                                               stats(errs["c_m"]))]
+    cov = " / ".join(f"{100 * np.mean(cover[k]):.0f}" for k in ("hlc", "tau", "c_m"))
+    print("| " + " | ".join(cells) + f" | {cov} | {np.median(times):.2f} / "
+          f"{np.max(times):.2f} |")
+
+
+def _verdict(name, value, target):
+    return f"{name} {value:.1f} % {'met' if value <= target else 'NOT met'} (≤ {target:g} %)"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=50)
+    ap.add_argument("--ranges", choices=("classifier", "true", "prior"), default="classifier")
+    ap.add_argument("--steps", default="300,3600", help="sample steps [s], comma-separated")
+    ap.add_argument("--normal-model", default="demand")
+    ap.add_argument("--model-dir", default=None,
+                    help="trained classifiers (default: impctl's per-user model directory)")
+    ap.add_argument("--starts", type=int, default=4)
+    ap.add_argument("--no-lsq", dest="lsq", action="store_false")
+    ap.add_argument("--quick", action="store_true", help="10 households, 5-min samples only")
+    ap.add_argument("--verbose", action="store_true")
+    ap.add_argument("--compare", type=int, default=0, metavar="N",
+                    help="also compare normal-night models and optimisers on N households")
+    ap.add_argument("--adam", type=int, default=0, metavar="N",
+                    help="include Adam (backprop through odeint) on N of those households")
+    ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
+                    help="also fit N households simulated by impctl.identify.virtual_imp")
+    args = ap.parse_args()
+    if args.quick:
+        args.households, args.steps = 10, "300"
+    torch.set_num_threads(1)
+    print("command: " + " ".join(["python"] + sys.argv))
+    print(f"machine: {platform.processor() or platform.machine()}, python "
+          f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
+    houses = sample_households(args.households, seed=VAL_SEED)
+    source = args.ranges
+    if source == "classifier":
+        from impctl.errors import InputError
+        from impctl.identify import load_models
+
+        try:
+            load_models(args.model_dir)
+        except InputError as exc:
+            print(f"classifiers unavailable ({exc}): using the prior ranges instead")
+            source = "prior"
+    if args.compare:
+        compare(sample_households(args.compare, seed=VAL_SEED), args)
+    if args.virtual_imp:
+        virtual_imp_check(args.virtual_imp, args)
+    for step in (float(s) for s in args.steps.split(",") if s):
+        res = run_step(houses, step, source, args)
+        report(res, step, source, args)
+
+
+if __name__ == "__main__":
+    main()

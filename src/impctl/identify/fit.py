@@ -1,0 +1,409 @@
+"""Night-time Neural-ODE fit of the 5R1C parameters (the paper's step 4).
+
+:class:`NightFit` fits the seven Table IV parameters — each inside a sigmoid-bounded range: the
+classified range for floor_area, c_f and u_walls, physical bounds for the others — plus one free
+initial mass temperature per night, to IMP nights (:class:`~impctl.imp.night.NightSamples`).
+The dynamics are the paper's eq. 6 on constrained nights (from switch-off + the emission lag) and
+eq. 5 (or its demand form) on normal nights, integrated by ``torchdiffeq`` (:mod:`.node`); the
+optimiser is :mod:`.fit_lm`. Two modes are always computed: one joint fit over all nights with
+shared parameters (the headline) and per-night fits averaged afterwards (the paper's way).
+
+What is reported as *measured* is what the data determines (identifiability.md): the lumped
+HLC, C_m and τ with 95 % intervals, and for each physical parameter whether the data pins it
+down or only its search range does (:mod:`.fit_uncertainty`).
+
+Class ranges are a prior, and a wrong class biases even the lumped quantities. The joint fit is
+therefore run twice in the same batch — inside the class ranges and inside the whole prior
+ranges — and a likelihood-ratio test decides: if the data fit clearly better outside the class
+ranges, the classification is reported as contradicted and the prior-range fit is used.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from ..errors import InputError
+from ..imp.features import Q_ON_W
+from ..imp.night import NightSamples
+from ..imp.plan import EMISSION_LAG_H
+from ..model.continuous import mass_from_air
+from . import fit_lm
+from .fit_data import noise_levels, prepare_nights, search_bounds, validation_table
+from .fit_uncertainty import laplace
+from .node import (
+    DTYPE,
+    PARAM_NAMES,
+    ROW_AIR,
+    ROW_DEMAND,
+    bounds_tensor,
+    build_rows,
+    lumped,
+    network,
+    pack_nights,
+    to_physical,
+)
+
+NORMAL_MODELS = ("demand", "series", "mean")
+LUMPED_NAMES = ("hlc", "c_m", "tau")
+#: Likelihood-ratio threshold for "the data contradict the class ranges", applied to the loss
+#: drop from the class box to the prior box in units of the autocorrelation-inflated σ: χ² with
+#: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
+#: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
+CLASS_REJECT_CHI2 = 3.84
+
+
+class NightFit:
+    """Fit the night-time 5R1C model to IMP nights (scikit-learn style estimator).
+
+    Parameters
+    ----------
+    normal_model : {"demand", "series", "mean"}
+        How normal nights enter. "mean": the paper's eq. 5 with Φ_HC the night's mean power;
+        "series": eq. 5 driven by the measured Φ_HC series; "demand" (default): the same 5R1C
+        equations read the other way round — the held T_air drives the model and the heat power
+        is its output, compared with the measured power. Measured on the benchmark (``bench/fit.py
+        --compare``, 20 households, 5-min samples): median HLC error 19 % (mean: the mass keeps
+        charging after the setpoint step, identifiability.md §11.1), 3.5 % (series: the power
+        noise enters as an input, errors in variables, §11.3) and 0.8 % (demand).
+    emission_lag_h : float
+        Constrained nights are fitted from switch-off + this lag [h] (the paper's 1 h).
+    ach_vent, ach_infl : float
+        Fixed air changes [1/h]; default the paper's (and the virtual population's) 0 and 0.01.
+    timestamps : {"instant", "interval"}
+        Sample convention (:func:`~impctl.identify.node.pack_nights`).
+    smooth_air_h : float
+        Width [h] of the moving average of the held T_air that drives "demand" rows, so that
+        quantisation flicker does not reach the predicted power through the massless air node.
+    physical_bounds : dict, optional
+        Search bounds of the non-classified parameters (default :data:`PHYSICAL_BOUNDS`), and the
+        prior ranges of the classified ones.
+    n_starts : int
+        Starts per problem (the first at the centre of the box, the others random); the best is
+        kept.
+    max_iter : int
+        Levenberg–Marquardt iterations (per pass).
+    optimizer : {"lm", "adam"}
+        Levenberg–Marquardt (default) or the paper's Adam with backprop through the solver
+        (10·max_iter steps; much slower, see ``bench/fit.py --compare``).
+    per_night : bool
+        Also fit each night alone (the paper's per-night-then-average mode).
+    min_night_h : float
+        Nights shorter than this after cutting [h] are skipped (``skipped_``).
+    ridge : float
+        Weight of the weak prior at the centre of each range (decides exactly flat directions).
+    resume_threshold_w : float
+        Heat power [W] that marks resumed heating on a constrained night.
+    seed : int
+        Seed of the random starts.
+
+    Attributes (after :meth:`fit`)
+    ------------------------------
+    parameters_ : dict[str, float]  joint-fit physical parameters (units as the house TOML)
+    bounds_ : dict[str, (lo, hi)]   the search box of the reported fit
+    determined_ : dict[str, bool]   whether the data (not the box) pins each parameter down
+    lumped_ : dict[str, Estimate]   hlc [W/K], c_m [J/K], tau [h] with 95 % intervals
+    class_check_ : dict             likelihood-ratio test of the class ranges (see module doc)
+    t_m0_c_ : dict[str, float]      fitted initial mass temperature per night [°C]
+    per_night_ : list[dict]         per-night fits (parameters, lumped) — the paper's mode
+    per_night_mean_ : dict          their averaged parameters and lumped values
+    validation_ : dict              heat demand on normal nights, T_air RMSE on constrained ones
+    predictions_ : list[dict]       measured vs fitted series per night (for plots)
+    sigma_ : dict[str, float]       residual standard deviation per group
+    skipped_ : list[(night_id, reason)]
+    loss_, n_iter_, fit_time_s_ : float, int, float
+    """
+
+    def __init__(self, *, normal_model: str = "demand", emission_lag_h: float = EMISSION_LAG_H,
+                 ach_vent: float = 0.0, ach_infl: float = 0.01, timestamps: str = "instant",
+                 smooth_air_h: float = 1.0,
+                 physical_bounds: dict[str, tuple[float, float]] | None = None,
+                 n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
+                 per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
+                 resume_threshold_w: float = Q_ON_W, seed: int = 0):
+        self.normal_model = normal_model
+        self.emission_lag_h = emission_lag_h
+        self.ach_vent = ach_vent
+        self.ach_infl = ach_infl
+        self.timestamps = timestamps
+        self.smooth_air_h = smooth_air_h
+        self.physical_bounds = physical_bounds
+        self.n_starts = n_starts
+        self.max_iter = max_iter
+        self.optimizer = optimizer
+        self.per_night = per_night
+        self.min_night_h = min_night_h
+        self.ridge = ridge
+        self.resume_threshold_w = resume_threshold_w
+        self.seed = seed
+
+    def fit(self, nights: Sequence[NightSamples],
+            ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
+        """Fit to ``nights`` with floor_area, c_f, u_walls bounded by ``ranges`` (if given).
+
+        Raises
+        ------
+        InputError
+            When no night is usable (each skipped night is named).
+        """
+        if self.normal_model not in NORMAL_MODELS:
+            raise ValueError(f"normal_model must be one of {NORMAL_MODELS}")
+        if self.optimizer not in ("lm", "adam"):
+            raise ValueError("optimizer must be 'lm' or 'adam'")
+        started = time.perf_counter()
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # the per-household target is for one core
+        try:
+            self._fit(nights, ranges)
+        finally:
+            torch.set_num_threads(threads)
+        self.fit_time_s_ = time.perf_counter() - started
+        return self
+
+    # ------------------------------------------------------------------ fit
+    def _fit(self, nights, ranges) -> None:
+        kept, offsets, self.skipped_ = prepare_nights(
+            nights, self.emission_lag_h, self.min_night_h, self.resume_threshold_w)
+        if not kept:
+            why = "; ".join(f"{i}: {r}" for i, r in self.skipped_) or "no nights given"
+            raise InputError(f"no usable night to fit ({why})")
+        class_box = search_bounds(ranges, self.physical_bounds)
+        prior_box = search_bounds(None, self.physical_bounds)
+        with_prior = class_box != prior_box
+        self.classified_ = sorted(ranges or {})
+        self.nights_ = kept
+        packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
+                                            smooth_air_s=3600.0 * self.smooth_air_h)
+        self._ctx = fit_lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
+        cons = packed.constrained
+        demand = ~cons & torch.tensor(self.normal_model == "demand")
+        self._row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
+        self._phi_n, self._phi_in_n = self._air_input(packed, self.normal_model)
+        self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
+        self.sigma_ = noise_levels(kept)
+
+        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box),
+                           bounds_tensor(prior_box))
+        rows = self._rows(lay)
+        t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
+                                  lay["box"][lay["row_problem"]])
+        result = self._optimise(rows, lay["u0"], t_m0, lay["group"])
+        self.n_iter_ = result.n_iter
+        # The residual σ per group, now from the fit itself, scales the intervals. When it is
+        # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
+        # the joint problems are refitted with the new weights.
+        guess = dict(self.sigma_)
+        self._update_sigma(rows, result, self._best(result, lay, 0))
+        ratio = [self.sigma_[k] / guess[k] for k in guess]
+        if max(ratio) > 1.4 or min(ratio) < 0.7:
+            self._refit_joint(lay, result)
+        rows = self._rows(lay)
+
+        best = self._best(result, lay, 0)
+        self.class_check_ = {"applied": with_prior, "rejected": False}
+        if with_prior:
+            best = self._class_check(rows, result, lay, best, ranges)
+        self.bounds_ = class_box if best in lay["class"] else prior_box
+        sel = rows.problem == best
+        self._sub = rows.subset(sel)
+        self._u = result.u[best]
+        self._t_m0 = result.t_m0[sel]
+        self.loss_ = float(result.loss[best])
+        self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
+        self.parameters_ = self._param_dict(self._u, self._sub.box[0])
+        est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
+                      has_power=bool((~cons).any()))
+        self.lumped_ = est["lumped"]
+        self.determined_ = est["determined"]
+        self.range_fraction_sd_ = est["range_fraction_sd"]
+        self.residual_autocorrelation_ = est["autocorrelation"]
+        self.cov_u_ = est["cov_u"]
+        self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
+        self._validate()
+
+    def _layout(self, n: int, with_prior: bool, class_box, prior_box) -> dict:
+        """Problems: joint starts in the class box, [joint starts in the prior box], per night.
+
+        Groups (for "keep the best" and early stopping): 0 class joint, 1 prior joint,
+        2 + i night i.
+        """
+        s = max(1, self.n_starts)
+        starts = self._starts(s)
+        kinds = [("class", j, -1) for j in range(s)]
+        if with_prior:
+            kinds += [("prior", j, -1) for j in range(s)]
+        if self.per_night:
+            kinds += [("night", j, i) for j in range(s) for i in range(n)]
+        row_problem, row_night, group, box, u0 = [], [], [], [], []
+        for p, (kind, j, i) in enumerate(kinds):
+            nights = range(n) if i < 0 else [i]
+            row_problem += [p] * len(nights)
+            row_night += list(nights)
+            group.append({"class": 0, "prior": 1}.get(kind, 2 + i))
+            box.append(prior_box if kind == "prior" else class_box)
+            u0.append(starts[j])
+        def idx(k):
+            return [p for p, x in enumerate(kinds) if x[0] == k]
+        return {"kinds": kinds, "class": idx("class"), "prior": idx("prior"),
+                "night": idx("night"), "row_problem": torch.tensor(row_problem),
+                "row_night": torch.tensor(row_night), "group": torch.tensor(group),
+                "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
+
+    def _rows(self, lay: dict, only: list[int] | None = None) -> fit_lm.Rows:
+        sig = torch.tensor([self.sigma_["constrained_t_air_k"], self.sigma_["normal_t_air_k"],
+                            self.sigma_["normal_power_w"]], dtype=DTYPE)
+        problem, night = lay["row_problem"], lay["row_night"]
+        box, n_prob = lay["box"], lay["n_problems"]
+        if only is not None:  # the problems `only`, renumbered 0…len(only)−1
+            keep = torch.isin(problem, torch.tensor(only))
+            remap = torch.full((n_prob,), -1, dtype=torch.long)
+            remap[torch.tensor(only)] = torch.arange(len(only))
+            problem, night = remap[problem[keep]], night[keep]
+            box, n_prob = box[torch.tensor(only)], len(only)
+        return fit_lm.Rows(problem, night, self._row_type_n[night], self._phi_n[night],
+                           self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
+
+    def _refit_joint(self, lay: dict, result: fit_lm.LMResult) -> None:
+        joint = lay["class"] + lay["prior"]
+        rows = self._rows(lay, joint)
+        sel = torch.isin(lay["row_problem"], torch.tensor(joint))
+        second = self._optimise(rows, result.u[joint], result.t_m0[sel], lay["group"][joint])
+        result.u[joint], result.t_m0[sel], result.loss[joint] = second.u, second.t_m0, \
+            second.loss
+        self.n_iter_ += second.n_iter
+        self._update_sigma(rows, second, int(torch.argmin(second.loss[:len(lay["class"])])))
+
+    def _class_check(self, rows, result, lay, best_class, ranges) -> int:
+        """Likelihood-ratio test of the class ranges against the whole prior ranges."""
+        best_prior = self._best(result, lay, 1)
+        sub = rows.subset(rows.problem == best_prior)
+        est = laplace(self._ctx, sub, result.u[best_prior], result.t_m0[rows.problem ==
+                      best_prior], self._group_n, has_power=True, summary_only=True)
+        drop = float(result.loss[best_class] - result.loss[best_prior]) / est["inflation"]
+        x = to_physical(result.u[best_prior], lay["box"][best_prior])
+        outside = [n for n, (lo, hi) in (ranges or {}).items()
+                   if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
+        rejected = drop > CLASS_REJECT_CHI2
+        self.class_check_ = {"applied": True, "chi2": drop, "threshold": CLASS_REJECT_CHI2,
+                             "rejected": rejected, "outside": outside if rejected else []}
+        return best_prior if rejected else best_class
+
+    def _best(self, result, lay, group: int) -> int:
+        members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
+        return members[int(torch.argmin(result.loss[members]))]
+
+    # ------------------------------------------------------------ pieces
+    def _air_input(self, packed, model: str) -> tuple[torch.Tensor, torch.Tensor]:
+        """Φ_HC of AIR rows at the nodes and on the intervals: 0 on constrained nights (eq. 6)."""
+        cons = packed.constrained[:, None]
+        if model == "mean":
+            mean = packed.q_mean_w[:, None].expand_as(packed.q_w)
+            node, interval = mean, mean
+        else:
+            node, interval = packed.q_w, packed.q_in_w
+        return torch.where(cons, 0.0, node), torch.where(cons, 0.0, interval)
+
+    def _starts(self, s: int) -> torch.Tensor:
+        rng = np.random.default_rng(self.seed)
+        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES)))
+        u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
+        u[0] = 0.0
+        return u
+
+    def _initial_mass(self, u_rows, night, box_rows) -> torch.Tensor:
+        packed = self._packed
+        net = network(to_physical(u_rows, box_rows), self.ach_vent, self.ach_infl)
+        demand = self._row_type_n[night] == ROW_DEMAND
+        phi0 = torch.where(demand, packed.q_mean_w[night], self._phi_n[night, 0])
+        return mass_from_air(packed.t_air_c[night, 0], packed.t_out_c[night, 0], phi0, net)
+
+    def _optimise(self, rows, u0, t_m0, groups) -> fit_lm.LMResult:
+        if self.optimizer == "adam":
+            return fit_lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
+        return fit_lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
+                                          max_iter=self.max_iter)
+
+    def _update_sigma(self, rows, result, best) -> None:
+        sel = rows.problem == best
+        sub = rows.subset(sel)
+        with torch.no_grad():
+            raw = fit_lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
+        mask = self._packed.mask[sub.night]
+        groups = self._group_n[sub.night]
+        floors = (0.005, 0.005, 1.0)
+        n_all = int(mask.sum())
+        for g, key in enumerate(("constrained_t_air_k", "normal_t_air_k", "normal_power_w")):
+            m = mask & (groups == g)[:, None]
+            n_g = int(m.sum())
+            if n_g:
+                # Degrees of freedom: each night's θ_m,0 and the group's share of the 7
+                # parameters are fitted to these residuals (matters for hourly data).
+                dof = max(1.0, n_g - int((groups == g).sum()) - 7.0 * n_g / n_all)
+                rms = float(raw[m].pow(2).sum() / dof) ** 0.5
+                self.sigma_[key] = max(floors[g], rms)
+
+    def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
+        return dict(zip(PARAM_NAMES, to_physical(u, box).tolist(), strict=True))
+
+    def _per_night(self, result, lay):
+        if not lay["night"]:
+            return [], {}
+        n = self._packed.n_nights
+        members = torch.tensor(lay["night"]).view(-1, n)      # (starts, nights)
+        best = members[result.loss[members].argmin(0), torch.arange(n)]
+        params = to_physical(result.u[best], lay["box"][best])
+        q = lumped(params, self.ach_vent, self.ach_infl)
+        entries = []
+        for i, nid in enumerate(self._packed.night_ids):
+            kind = self._packed.kinds[i]
+            entries.append({
+                "night_id": nid, "kind": kind,
+                "parameters": dict(zip(PARAM_NAMES, params[i].tolist(), strict=True)),
+                "lumped": dict(zip(LUMPED_NAMES, q[i].tolist(), strict=True)),
+                # a night without heat power carries no absolute scale
+                "determines": ["tau"] if kind == "constrained" else ["hlc", "c_m", "tau"],
+            })
+        mean_params = params.mean(0)
+        mean = {"parameters": dict(zip(PARAM_NAMES, mean_params.tolist(), strict=True)),
+                "lumped": dict(zip(LUMPED_NAMES, lumped(mean_params, self.ach_vent,
+                                                        self.ach_infl).tolist(), strict=True))}
+        return entries, mean
+
+    def _validate(self) -> None:
+        """In-sample Tables II/V: heat demand on normal nights, T_air RMSE on constrained ones."""
+        packed = self._packed
+        n = packed.n_nights
+        params = to_physical(self._u, self._sub.box[0]).expand(n, -1)
+        idx = torch.arange(n)
+        with torch.no_grad():
+            t_air = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_AIR),
+                               self._phi_n, self._phi_in_n, self.ach_vent,
+                               self.ach_infl).predict().numpy()
+            q_model = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_DEMAND),
+                                 self._phi_n, self._phi_in_n, self.ach_vent,
+                                 self.ach_infl).predict().numpy()
+        mask = packed.mask.numpy()
+        self.validation_ = validation_table(packed.night_ids, packed.kinds,
+                                            packed.grid_s.numpy(), mask, packed.t_air_c.numpy(),
+                                            packed.q_w.numpy(), t_air, q_model)
+        self.predictions_ = []
+        for i, night in enumerate(self.nights_):
+            m = mask[i]
+            # With the demand model a normal night's T_air is an input, not a prediction.
+            as_input = night.kind == "normal" and self.normal_model == "demand"
+            entry = {"night_id": night.night_id, "kind": night.kind,
+                     "time_s": night.time_s, "t_air_measured_c": night.t_air_c,
+                     "t_air_model_c": None if as_input else t_air[i][m],
+                     "t_out_c": night.t_out_c, "q_measured_w": night.q_hc_w}
+            if night.kind == "normal":
+                entry["q_model_w"] = q_model[i][m]
+            self.predictions_.append(entry)
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (see :mod:`.fit_report`)."""
+        from .fit_report import fit_to_dict
+
+        return fit_to_dict(self)

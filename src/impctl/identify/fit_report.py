@@ -1,0 +1,260 @@
+"""The fit's JSON summary, its printed table and its plot (no torch needed to read a result).
+
+JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, tau h::
+
+    {"schema": "impctl-fit/1",
+     "classes": {"floor_area": {"range": [lo, hi], "probability": p | null, "source": s}, ...},
+     "bounds": {name: [lo, hi]},                     # the search box of all seven
+     "parameters": {name: value},                    # joint fit, the seven of Table IV
+     "units": {name: unit},
+     "determined": {name: bool},                     # does the data pin it down?
+     "basis": {name: "data" | "class range" | "physical bounds"},
+     "fixed": {"ach_vent": ..., "ach_infl": ...},
+     "lumped": {"hlc": {"value", "low", "high", "determined", "unit"}, "c_m": {...}, "tau": {...}},
+     "interval_method": str,
+     "per_night": [{"night_id", "kind", "samples", "hours", "t_m0_c", "parameters", "lumped",
+                    "determines"}],
+     "per_night_average": {"parameters": {...}, "lumped": {...}},
+     "validation": {"normal": [{"night_id", "q_measured_kwh", "q_model_kwh", "dq_total_kwh",
+                                "dq_power_kw", "eps_pct"}],
+                    "constrained": [{"night_id", "rmse_k"}], "mean": {...}, "note": str},
+     "class_check": {"applied", "chi2", "threshold", "rejected", "outside"},
+     "predictions": [{"night_id", "kind", "time_s", "t_air_measured_c", "t_air_model_c" | null,
+                      "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
+     "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
+             "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
+     "skipped": [{"night_id", "reason"}], "notes": [str]}
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# Names and units repeat those of .node so that reading a result needs no torch.
+PARAM_NAMES = (
+    "floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls", "u_windows",
+)
+PARAM_UNITS = {
+    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
+    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)",
+}
+CLASSIFIED = ("floor_area", "c_f", "u_walls")
+INTERVAL_METHOD = (
+    "Laplace: Gauss-Newton curvature of the joint loss at the optimum, per-night initial mass "
+    "temperatures marginalised, residual sigma per group from the fit inflated for lag-1 "
+    "autocorrelation; delta method in log space")
+_WHY_NOT = {
+    "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
+    "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
+    "walls_area": "enters only as H_op = u_walls·walls_area",
+    "windows_area": "enters only as H_w = u_windows·windows_area",
+    "c_f": "enters only through C_m = c_f·A_f",
+    "u_walls": "enters only as H_op = u_walls·walls_area",
+    "u_windows": "enters only as H_w = u_windows·windows_area",
+}
+
+
+_CAVEAT = {
+    "floor_area": "the data — via the mass-charging transient and ISO's fixed h_is, h_ms; "
+                  "C_m is the robust quantity",
+    "c_f": "the data — via C_m and the Table 12 mass-area factor; C_m is the robust quantity",
+}
+
+
+def _f(x: Any) -> Any:
+    if isinstance(x, (np.floating, float)):
+        return None if not np.isfinite(x) else float(x)
+    if isinstance(x, dict):
+        return {k: _f(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_f(v) for v in x]
+    return x
+
+
+def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None) -> dict:
+    """JSON-ready summary of a fitted :class:`~impctl.identify.fit.NightFit` (module docstring).
+
+    Parameters
+    ----------
+    classes : {name: {"range": (lo, hi), "probability": p, "source": str}}, optional
+        How the classified ranges were obtained; default: what the fit was given.
+    notes : extra lines for the reader (e.g. "classifiers not trained: prior ranges used")
+    """
+    if classes is None:
+        classes = {n: {"range": list(fit.bounds_[n]), "probability": None,
+                       "source": "given" if n in fit.classified_ else "prior"}
+                   for n in CLASSIFIED}
+    notes = list(notes or [])
+    check = fit.class_check_
+    if check.get("rejected"):
+        notes.append(
+            f"the nights contradict the classified ranges (likelihood-ratio Δχ² = "
+            f"{check['chi2']:.1f} > {check['threshold']:g}); all values come from the fit over "
+            f"the whole prior ranges" + (f" — outside its class: {', '.join(check['outside'])}"
+                                         if check["outside"] else ""))
+        classes = {n: {**c, "source": c.get("source"), "contradicted": True}
+                   for n, c in classes.items()}
+    basis = {}
+    for name in PARAM_NAMES:
+        if fit.determined_[name]:
+            basis[name] = "data"
+        elif (name in CLASSIFIED and not check.get("rejected")
+              and classes.get(name, {}).get("source") in ("classifier", "given")):
+            basis[name] = "class range"
+        else:
+            basis[name] = "physical bounds"
+    per_night = []
+    by_id = {p["night_id"]: p for p in fit.per_night_}
+    for night in fit.nights_:
+        entry = {"night_id": night.night_id, "kind": night.kind, "samples": len(night.time_s),
+                 "hours": float(night.time_s[-1] - night.time_s[0]) / 3600.0,
+                 "t_m0_c": fit.t_m0_c_[night.night_id]}
+        if night.night_id in by_id:
+            p = by_id[night.night_id]
+            entry.update(parameters=p["parameters"], lumped=p["lumped"],
+                         determines=p["determines"])
+        per_night.append(entry)
+    out = {
+        "schema": "impctl-fit/1",
+        "classes": {n: {"range": list(c["range"]), "probability": c.get("probability"),
+                        "source": c.get("source"), "contradicted": bool(c.get("contradicted"))}
+                    for n, c in classes.items()},
+        "bounds": {n: list(v) for n, v in fit.bounds_.items()},
+        "parameters": dict(fit.parameters_),
+        "units": PARAM_UNITS,
+        "determined": dict(fit.determined_),
+        "basis": basis,
+        "fixed": {"ach_vent": fit.ach_vent, "ach_infl": fit.ach_infl},
+        "lumped": {k: {**v.as_dict(), "unit": u} for (k, v), u in
+                   zip(fit.lumped_.items(), ("W/K", "J/K", "h"), strict=True)},
+        "interval_method": INTERVAL_METHOD,
+        "per_night": per_night,
+        "per_night_average": fit.per_night_mean_,
+        "validation": fit.validation_,
+        "class_check": fit.class_check_,
+        "predictions": [{k: (np.asarray(v, float).round(4).tolist()
+                             if isinstance(v, np.ndarray) else v) for k, v in p.items()}
+                        for p in fit.predictions_],
+        "fit": {"mode": "joint", "normal_model": fit.normal_model, "optimizer": fit.optimizer,
+                "solver": "torchdiffeq.odeint rk4 on the sample grid, float64",
+                "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
+                "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
+                "sigma": fit.sigma_, "time_s": fit.fit_time_s_},
+        "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
+        "notes": notes,
+    }
+    return _f(out)
+
+
+def _fmt(v: float | None, digits: int = 3) -> str:
+    if v is None:
+        return "–"
+    return f"{v:.{digits}g}" if abs(v) < 1e4 else f"{v:.4g}"
+
+
+def format_table(summary: dict) -> str:
+    """The printed form of a :func:`fit_to_dict` summary."""
+    lines = []
+    pn = summary["per_night"]
+    n_c = sum(p["kind"] == "constrained" for p in pn)
+    fit = summary["fit"]
+    lines.append(f"Fitted {len(pn)} nights ({n_c} constrained, {len(pn) - n_c} normal) in "
+                 f"{fit['time_s']:.2f} s — joint fit, normal nights as '{fit['normal_model']}'")
+    for s in summary["skipped"]:
+        lines.append(f"  skipped {s['night_id']}: {s['reason']}")
+    lines.append("")
+    lines.append("Classes")
+    for name, c in summary["classes"].items():
+        p = c["probability"]
+        ptxt = f"p = {p:.2f}" if p is not None else c["source"] or ""
+        rng = f"{c['range'][0]:g}–{c['range'][1]:g}"
+        flag = "  contradicted by the nights" if c.get("contradicted") else ""
+        lines.append(f"  {name:<11} {rng:<10} {PARAM_UNITS[name]:<12} {ptxt}{flag}")
+    lines.append("")
+    lines.append("What the data determines                value       95 % interval")
+    labels = {"hlc": ("HLC, heat loss coefficient", "W/K", 1.0),
+              "c_m": ("C_m, heat capacity", "MJ/K", 1e-6),
+              "tau": ("τ, time constant", "h", 1.0)}
+    for key, (label, unit, k) in labels.items():
+        q = summary["lumped"][key]
+        flag = "" if q["determined"] else "   NOT determined by these nights"
+        lines.append(f"  {label:<28} {unit:<5} {q['value'] * k:>9.4g}   "
+                     f"{q['low'] * k:.4g} – {q['high'] * k:.4g}{flag}")
+    lines.append("")
+    lines.append("Physical parameters (Table IV)       joint  per-night   search range "
+                 "value comes from")
+    avg = summary.get("per_night_average", {}).get("parameters", {})
+    for name in PARAM_NAMES:
+        lo, hi = summary["bounds"][name]
+        basis = summary["basis"][name]
+        if basis == "data":
+            src = _CAVEAT.get(name, "the data")
+        else:
+            src = f"{basis} only — {_WHY_NOT[name]}"
+        rng = f"{_fmt(lo)}–{_fmt(hi)}"
+        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(summary['parameters'][name]):>8}"
+                     f"  {_fmt(avg.get(name)):>9}   {rng:<12} {src}")
+    val = summary["validation"]
+    lines.append("")
+    lines.append("Validation (in-sample: each night's initial mass temperature is fitted)")
+    if val["normal"]:
+        lines.append("  normal night     Q measured kWh  Q model kWh  ΔQ_total kWh  ΔQ_power kW"
+                     "   ε %")
+        for r in val["normal"]:
+            lines.append(f"  {r['night_id']:<16} {r['q_measured_kwh']:>14.2f} "
+                         f"{r['q_model_kwh']:>12.2f} {r['dq_total_kwh']:>13.2f} "
+                         f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
+    for r in val["constrained"]:
+        lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
+    for note in summary["notes"]:
+        lines.append(f"note: {note}")
+    return "\n".join(lines)
+
+
+def plot_fit(fit, path: str | Path) -> None:
+    """Measured vs fitted T_air per night (the paper's Fig. 5) and heat power on normal nights."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    preds = fit.predictions_
+    n = len(preds)
+    fig, axes = plt.subplots(2, n, figsize=(max(6.0, 2.6 * n), 5.5), squeeze=False,
+                             sharey="row")
+    for i, p in enumerate(preds):
+        t_h = np.asarray(p["time_s"]) / 3600.0
+        ax = axes[0, i]
+        ax.plot(t_h, p["t_air_measured_c"], ".", ms=3, label="measured")
+        if p["t_air_model_c"] is not None:
+            ax.plot(t_h, p["t_air_model_c"], "-", lw=1.2, label="fitted")
+        else:
+            ax.text(0.5, 0.08, "held: model input", ha="center", transform=ax.transAxes,
+                    fontsize=7)
+        ax.set_title(f"{p['night_id']}\n{p['kind']}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax2 = axes[1, i]
+        if "q_model_w" in p:
+            ax2.plot(t_h, np.asarray(p["q_measured_w"]) / 1e3, ".", ms=3, label="measured")
+            ax2.plot(t_h, np.asarray(p["q_model_w"]) / 1e3, "-", lw=1.2, label="predicted")
+        else:
+            ax2.text(0.5, 0.5, "heating off", ha="center", va="center",
+                     transform=ax2.transAxes, fontsize=8)
+            ax2.set_xlim(ax.get_xlim())
+        ax2.set_xlabel("h since window start", fontsize=7)
+        ax2.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("T_air [°C]")
+    axes[1, 0].set_ylabel("heat power [kW]")
+    for row in axes:
+        with_lines = [a for a in row if a.get_legend_handles_labels()[0]]
+        if with_lines:
+            with_lines[0].legend(fontsize=7)
+    hlc = fit.lumped_["hlc"]
+    fig.suptitle(f"5R1C night fit: HLC {hlc.value:.0f} W/K [{hlc.low:.0f}–{hlc.high:.0f}], "
+                 f"τ {fit.lumped_['tau'].value:.1f} h", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,171 @@
+"""Simulated IMP nights for testing and benchmarking the fit (no torch).
+
+The protocol mirrors the IMP of the classifiers issue: days held at ``day_setpoint_c``; a
+*normal* night holds T_set (22, 23, 24 °C in turn) 22:00–05:00; a *constrained* night heats to
+T_max = T_set + ΔT from 18:00, switches off at 22:00 and cools until 05:00 (the paper's case
+study: a predefined period). With ``stop_at_t_min`` it stops earlier, at the first step after the
+emission lag with T_air ≤ T_min = T_set − ΔT, and then holds T_min. The T_min test waits for the
+lag because the 5R1C air node is massless: T_air drops 2–5 K the instant the heating stops, which
+would end most nights at once (identifiability.md §11.2). Houses are simulated with the Annex C
+model at a fine step (vectorised over houses); samples are instants for temperatures and interval
+means for the heat power (``q_hc`` at a sample = mean power until the next sample). Measurement
+model: T_air and T_out rounded to ``quantise_k``; each power sample × (1 + ``power_noise``·N(0,
+1)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..imp.night import NightSamples
+from ..model import HouseParameters, simulate
+from ..weather import DEFAULT_TZ, winter_weather
+
+
+@dataclass
+class SynthSchedule:
+    """The simulated schedule, kept so a fitted house can be replayed on the same inputs.
+
+    Attributes
+    ----------
+    index : DatetimeIndex of the simulation steps
+    dt_s : simulation step [s]
+    t_out_c : (n_steps, n_houses) outdoor temperature [°C]
+    setpoint_c : (n_steps, n_houses) heating setpoint [°C], NaN = off
+    windows : per night (night_id, kind, first step, end step (exclusive), T_set)
+    t_m_init_c : mass temperature before the first step [°C]
+    """
+
+    index: pd.DatetimeIndex
+    dt_s: float
+    t_out_c: np.ndarray
+    setpoint_c: np.ndarray
+    windows: list[tuple[str, str, int, int, float]]
+    t_m_init_c: float
+
+
+def night_plan(n_constrained: int, n_normal: int) -> list[str]:
+    """Kinds in night order: constrained nights spread among the normal ones."""
+    kinds = ["normal"] * n_normal
+    for j in range(n_constrained):
+        kinds.insert(min(len(kinds), 1 + j * (n_normal // max(1, n_constrained) + 1)),
+                     "constrained")
+    return kinds
+
+
+def imp_schedule(
+    n_houses: int,
+    *,
+    n_constrained: int = 2,
+    n_normal: int = 6,
+    setpoints_c: tuple[float, ...] = (22.0, 23.0, 24.0),
+    band_k: float = 1.5,
+    day_setpoint_c: float = 21.0,
+    spinup_days: int = 2,
+    start: str = "2026-01-05",
+    sim_step_s: float = 60.0,
+    seed: int = 0,
+    tz: str = DEFAULT_TZ,
+) -> SynthSchedule:
+    """Weather and setpoints for ``n_houses`` houses (own weather per house, seeded)."""
+    kinds = night_plan(n_constrained, n_normal)
+    days = spinup_days + len(kinds) + 1
+    series = [winter_weather(start, days, sim_step_s, seed=seed * 1000 + h, tz=tz)
+              for h in range(n_houses)]
+    index = series[0].index
+    t_out = np.stack([s.to_numpy() for s in series], axis=1)
+    sp = np.full(t_out.shape, day_setpoint_c)
+    per_day = int(round(86400 / sim_step_s))
+    hour = int(round(3600 / sim_step_s))
+    windows = []
+    for j, kind in enumerate(kinds):
+        day0 = (spinup_days + j) * per_day
+        w0, w1 = day0 + 22 * hour, day0 + 29 * hour
+        t_set = setpoints_c[j % len(setpoints_c)]
+        if kind == "normal":
+            sp[w0:w1] = t_set
+        else:
+            sp[w0 - 4 * hour:w0] = t_set + band_k
+            sp[w0:w1] = np.nan
+        night_id = str(index[w0].date())
+        windows.append((night_id, kind, w0, w1, t_set))
+    return SynthSchedule(index, sim_step_s, t_out, sp, windows, day_setpoint_c)
+
+
+def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float = 1.5,
+                 stop_at_t_min: bool = False, emission_lag_h: float = 1.0):
+    """Simulate houses through the schedule (closed loop on T_min if ``stop_at_t_min``).
+
+    Returns the :class:`~impctl.model.Simulation` and the setpoints actually used.
+    """
+    sp = sched.setpoint_c.copy()
+    sim = simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp, t_m_init_c=sched.t_m_init_c)
+    if not stop_at_t_min:
+        return sim, sp
+    lag = int(round(emission_lag_h * 3600 / sched.dt_s))
+    for _, kind, w0, w1, t_set in sched.windows:
+        if kind != "constrained":
+            continue
+        t_air = np.atleast_2d(sim.t_air_c.T).T
+        below = t_air[w0:w1] <= t_set - band_k
+        below[:lag] = False
+        hit = below.any(axis=0)
+        first = np.where(hit, below.argmax(axis=0), w1 - w0)
+        steps = np.arange(w1 - w0)[:, None]
+        sp[w0:w1] = np.where(steps >= first[None, :], t_set - band_k, np.nan)
+    sim = simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp, t_m_init_c=sched.t_m_init_c)
+    return sim, sp
+
+
+def sample_nights(
+    sim,
+    sp: np.ndarray,
+    sched: SynthSchedule,
+    house_index: int,
+    *,
+    sample_step_s: float = 300.0,
+    quantise_k: float = 0.1,
+    power_noise: float = 0.05,
+    seed: int = 0,
+) -> list[NightSamples]:
+    """Cut one house's simulation into measured nights (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    stride = int(round(sample_step_s / sched.dt_s))
+    t_air = np.atleast_2d(sim.t_air_c.T).T[:, house_index]
+    phi = np.atleast_2d(sim.phi_hc_w.T).T[:, house_index]
+    t_out = sched.t_out_c[:, house_index]
+    spc = sp[:, house_index]
+    nights = []
+    for night_id, kind, w0, w1, t_set in sched.windows:
+        # The sample at 05:00 already belongs to the day regime: the window is [22:00, 05:00).
+        steps = np.arange(w0, w1, stride)
+        if kind == "constrained":
+            # The cooling only: samples before the step where heating resumes at T_min.
+            on = ~np.isnan(spc[w0:w1])
+            end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
+            steps = steps[steps < end]
+        q = np.array([phi[s:s + stride].mean() for s in steps])
+        q = q * (1.0 + power_noise * rng.standard_normal(len(q)))
+
+        def quant(x):
+            return np.round(x / quantise_k) * quantise_k if quantise_k > 0 else x
+
+        nights.append(NightSamples(
+            night_id=night_id, kind=kind, start=sched.index[w0],
+            time_s=(steps - w0) * sched.dt_s, t_air_c=quant(t_air[steps]),
+            t_out_c=quant(t_out[steps]), q_hc_w=np.maximum(q, 0.0), setpoint_c=t_set,
+        ))
+    return nights
+
+
+def synth_nights(house: HouseParameters, *, seed: int = 0, sample_step_s: float = 300.0,
+                 quantise_k: float = 0.1, power_noise: float = 0.05, **schedule_kw
+                 ) -> list[NightSamples]:
+    """One house's IMP nights, ready for the fit (convenience for tests and examples)."""
+    sched = imp_schedule(1, seed=seed, **schedule_kw)
+    sim, sp = run_schedule(house, sched)
+    return sample_nights(sim, sp, sched, 0, sample_step_s=sample_step_s, quantise_k=quantise_k,
+                         power_noise=power_noise, seed=seed)

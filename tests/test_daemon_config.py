@@ -1,0 +1,117 @@
+"""Config validation at start: ``impctl daemon --config bad.toml`` exits 2 with one line per
+problem, each naming the file and the key; the documented example config loads."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import tomllib
+
+from daemon_fixtures import ROOT, run_cli
+
+from impctl.daemon.config import CampaignConfig, ClockConfig, Config, NightConfig, load_config
+from impctl.heatpump import HeatPumpConfig, LinkConfig, WritePolicy
+
+EXAMPLE = ROOT / "deploy" / "config.example.toml"
+
+
+def _problems(result, path) -> list[str]:
+    """stderr lines, each checked to be ``impctl: FILE: …`` and returned without the prefix."""
+    lines = result.stderr.splitlines()
+    prefix = f"impctl: {path}: "
+    assert lines and all(line.startswith(prefix) for line in lines), result.stderr
+    return [line[len(prefix):] for line in lines]
+
+
+def test_bad_config_lists_every_problem_one_line_each(tmp_path):
+    state = tmp_path / "state"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f"""
+state_dir = "{state}"
+colour = "blue"                 # unknown key
+
+[night]
+sample_interval_s = "sixty"     # wrong type
+comfort_band_k = 4.0            # wider than max_comfort_band_k (3 K)
+
+[campaign]
+constrained_setpoint_c = 21.0
+normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [16, 23]
+""")
+    result = run_cli("daemon", "--config", str(bad), timeout_s=30)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    problems = _problems(result, bad)
+    assert problems == [
+        "key 'colour': unknown key",
+        "key 'night.sample_interval_s': must be a number, got 'sixty'",
+        "key 'night.comfort_band_k': must lie in (0, 3] K (night.max_comfort_band_k)",
+        "key 'campaign.normal_setpoints_c': 25 °C is outside the safety limits "
+        "heatpump.writes.loop1_setpoint_c = [16, 23] °C",
+        "key 'campaign.constrained_setpoint_c': T_max = T_set + ΔT = 25 °C exceeds the safety "
+        "limit 23 °C",
+    ]
+    assert not state.exists()  # refused before anything was created
+
+
+def test_setpoint_outside_the_configured_limits_and_heatpump_problems(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("""
+[heatpump.writes]
+loop1_setpoint_c = [16.0, 22.0]
+
+[campaign]
+constrained_setpoint_c = 15.0
+normal_setpoints_c = [21.0, 22.5]
+""")
+    problems = _problems(run_cli("daemon", "--config", str(bad), timeout_s=30), bad)
+    assert problems == [
+        "key 'campaign.constrained_setpoint_c': 15 °C is outside the safety limits "
+        "heatpump.writes.loop1_setpoint_c = [16, 22] °C",
+        "key 'campaign.normal_setpoints_c': 22.5 °C is outside the safety limits "
+        "heatpump.writes.loop1_setpoint_c = [16, 22] °C",
+        "key 'night.comfort_band_k': T_min − abort margin would fall below 14 °C"]
+    bad.write_text("""
+[heatpump]
+port = "502"
+""")
+    result = run_cli("daemon", "--config", str(bad), timeout_s=30)
+    assert result.returncode == 2
+    [line] = _problems(result, bad)
+    assert line.startswith("[heatpump]")
+
+
+def test_not_toml_and_missing_file_are_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[night\n")
+    result = run_cli("daemon", "--config", str(bad), timeout_s=30)
+    assert result.returncode == 2
+    [line] = _problems(result, bad)
+    assert line.startswith("not valid TOML")
+    missing = tmp_path / "none.toml"
+    result = run_cli("daemon", "--config", str(missing), timeout_s=30)
+    assert result.returncode == 2 and _problems(result, missing) == ["file not found"]
+
+
+def test_example_config_loads_and_documents_every_key():
+    cfg = load_config(EXAMPLE)
+    # "every key, with its default unless marked example": the values are the defaults.
+    assert cfg.night == NightConfig() and cfg.campaign == CampaignConfig()
+    assert cfg.clock == ClockConfig() and cfg.heatpump.writes == WritePolicy()
+    assert dataclasses.replace(cfg.heatpump.link, host="127.0.0.1") == LinkConfig()
+    assert (cfg.state_dir, cfg.timezone, cfg.log_level, cfg.model_dir) == (
+        "/var/lib/impctl", "Europe/Ljubljana", "info", "")
+    data = tomllib.loads(EXAMPLE.read_text())
+    for section, cls in (("night", NightConfig), ("campaign", CampaignConfig),
+                         ("clock", ClockConfig)):
+        assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
+    top = {k for k, v in data.items() if not isinstance(v, dict)}
+    assert top == {f.name for f in dataclasses.fields(Config)} - {
+        "heatpump", "night", "campaign", "clock", "source"}
+    hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
+        f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
+    assert set(data["heatpump"]) - {"writes"} == hp_keys
+    # The optional keys are documented as comments.
+    text = EXAMPLE.read_text()
+    for key in ("heat_meter", "loop2_setpoint_c", "correction_k"):
+        assert re.search(rf"^# *\[?(heatpump\.)?{key}", text, re.M), key

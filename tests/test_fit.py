@@ -1,0 +1,233 @@
+"""The night-time fit on simulated IMP nights: recovery of what the data determines, honest
+flags for what it does not, the cutting rules, and the simple baselines."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from impctl.errors import InputError
+from impctl.identify import baselines
+from impctl.identify.fit import NightFit
+from impctl.identify.fit_data import noise_levels, prepare_nights, search_bounds
+from impctl.identify.fit_report import fit_to_dict, format_table
+from impctl.identify.fit_synth import synth_nights
+from impctl.identify.node import PARAM_NAMES
+from impctl.model import HouseParameters
+from impctl.model.house import H_MS, am_factor
+
+HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
+                        c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)
+RANGES = {"floor_area": (100.0, 200.0), "c_f": (0.8, 1.65), "u_walls": (0.2, 1.0)}
+
+
+@pytest.fixture(scope="module")
+def nights_15min():
+    # 2 constrained + 4 normal nights, quantised to 0.1 °C, 5 % power noise, 15-min samples
+    return synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4)
+
+
+@pytest.fixture(scope="module")
+def fitted(nights_15min):
+    return NightFit(normal_model="demand", n_starts=3).fit(nights_15min, RANGES)
+
+
+def rel(a, b):
+    return abs(a / b - 1.0)
+
+
+def test_joint_fit_recovers_hlc_tau_and_cm(fitted):
+    lumped = fitted.lumped_
+    assert rel(lumped["hlc"].value, HOUSE.hlc_w_per_k) < 0.04
+    assert rel(lumped["tau"].value, HOUSE.tau_h) < 0.04
+    assert rel(lumped["c_m"].value, HOUSE.c_m_j_per_k) < 0.10
+    for name, truth in (("hlc", HOUSE.hlc_w_per_k), ("tau", HOUSE.tau_h),
+                        ("c_m", HOUSE.c_m_j_per_k)):
+        e = lumped[name]
+        assert e.determined
+        assert e.low < e.value < e.high
+        # an interval that is not absurdly wide, and that contains the truth here
+        assert e.high / e.low < 1.3
+        assert e.low <= truth <= e.high
+
+
+def test_non_identifiable_parameters_are_not_reported_as_measured(fitted):
+    # u_walls and walls_area enter only as their product: never "determined"
+    assert not fitted.determined_["u_walls"]
+    assert not fitted.determined_["walls_area"]
+    assert not fitted.determined_["wall_height"]   # ach fixed: the volume barely matters
+    for name, (lo, hi) in fitted.bounds_.items():
+        assert lo <= fitted.parameters_[name] <= hi
+    for name in RANGES:
+        assert fitted.bounds_[name] == RANGES[name]
+    summary = fit_to_dict(fitted)
+    assert summary["basis"]["u_walls"] == "class range"
+    assert summary["basis"]["wall_height"] == "physical bounds"
+    text = format_table(summary)
+    assert "u_walls" in text and "only" in text
+
+
+def test_both_modes_and_validation_are_reported(fitted, nights_15min):
+    assert len(fitted.per_night_) == len(nights_15min)
+    for entry in fitted.per_night_:
+        assert set(entry["parameters"]) == set(PARAM_NAMES)
+        assert entry["determines"] == (["tau"] if entry["kind"] == "constrained"
+                                       else ["hlc", "c_m", "tau"])
+    assert set(fitted.per_night_mean_["parameters"]) == set(PARAM_NAMES)
+    val = fitted.validation_
+    assert len(val["normal"]) == 4 and len(val["constrained"]) == 2
+    for r in val["normal"]:
+        assert r["dq_total_kwh"] == pytest.approx(abs(r["q_model_kwh"] - r["q_measured_kwh"]))
+        assert r["eps_pct"] < 5.0
+    # the T_air residual of a constrained night is at the quantisation level
+    assert val["mean"]["rmse_k"] < 0.06
+    summary = fit_to_dict(fitted)
+    json.dumps(summary)  # plain JSON
+    for key in ("classes", "parameters", "determined", "lumped", "per_night", "validation"):
+        assert key in summary
+    assert set(summary["lumped"]) == {"hlc", "c_m", "tau"}
+
+
+def test_mean_power_shortcut_is_biased_when_the_mass_charges(nights_15min):
+    """Normal nights step up from a 21 °C day: the night mean of Φ_HC overstates the HLC
+    (identifiability.md §11.1) while the dynamic model does not."""
+    mean = NightFit(normal_model="mean", n_starts=2, per_night=False).fit(nights_15min, RANGES)
+    demand = NightFit(normal_model="demand", n_starts=2, per_night=False).fit(nights_15min,
+                                                                             RANGES)
+    err_mean = rel(mean.lumped_["hlc"].value, HOUSE.hlc_w_per_k)
+    err_demand = rel(demand.lumped_["hlc"].value, HOUSE.hlc_w_per_k)
+    assert err_mean > 0.08
+    assert err_demand < err_mean / 2
+
+
+def test_hourly_samples_still_give_the_hlc_and_tau():
+    nights = synth_nights(HOUSE, seed=5, sample_step_s=3600.0)
+    fit = NightFit(n_starts=2, normal_model="demand").fit(nights, RANGES)
+    assert all(len(n.time_s) <= 8 for n in fit.nights_)
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.08
+    assert rel(fit.lumped_["tau"].value, HOUSE.tau_h) < 0.08
+
+
+def test_only_constrained_nights_give_tau_but_no_absolute_scale(nights_15min):
+    cons = [n for n in nights_15min if n.kind == "constrained"]
+    fit = NightFit(n_starts=2, per_night=False).fit(cons, RANGES)
+    assert not fit.lumped_["hlc"].determined
+    assert not fit.lumped_["c_m"].determined
+    assert fit.lumped_["tau"].determined
+    assert rel(fit.lumped_["tau"].value, HOUSE.tau_h) < 0.05
+
+
+def test_prepare_nights_cuts_the_emission_lag_and_the_resumed_heating(nights_15min):
+    cons = next(n for n in nights_15min if n.kind == "constrained")
+    q = cons.q_hc_w.copy()
+    q[cons.time_s >= 5 * 3600] = 2500.0      # heating back on at T_min after 5 h
+    resumed = dataclasses.replace(cons, q_hc_w=q)
+    kept, offsets, skipped = prepare_nights([resumed], emission_lag_h=1.0)
+    assert not skipped
+    assert kept[0].time_s[0] == pytest.approx(3600.0) and offsets[0] == pytest.approx(3600.0)
+    assert kept[0].time_s[-1] < 5 * 3600
+    # under 3 h left after the lag → skipped, with the reason
+    short = dataclasses.replace(cons, time_s=cons.time_s[:14], t_air_c=cons.t_air_c[:14],
+                                t_out_c=cons.t_out_c[:14], q_hc_w=cons.q_hc_w[:14])
+    kept, _, skipped = prepare_nights([short])
+    assert not kept and "under the 3 h minimum" in skipped[0][1]
+    with pytest.raises(InputError, match="no usable night"):
+        NightFit().fit([short], RANGES)
+
+
+def test_search_box_respects_eq63_and_the_gain_split_domain():
+    box = search_bounds({"floor_area": (30.0, 60.0), "c_f": (2.6, 3.7), "u_walls": (1.0, 2.0)})
+    h_ms = H_MS * float(am_factor(box["c_f"][0])) * box["floor_area"][0]
+    assert box["u_walls"][1] * box["walls_area"][1] < h_ms
+    a_free = (4.5 - float(am_factor(box["c_f"][1]))) * box["floor_area"][0]
+    assert box["u_windows"][1] * box["windows_area"][1] <= H_MS * a_free
+    with pytest.raises(ValueError):
+        search_bounds({"volume": (1.0, 2.0)})
+
+
+def test_noise_levels_come_from_the_data(nights_15min):
+    sig = noise_levels(nights_15min)
+    mean_q = np.mean([n.q_hc_w.mean() for n in nights_15min if n.kind == "normal"])
+    # 5 % power noise was added; the estimate is within a factor of 1.5 of it
+    assert 0.033 < sig["normal_power_w"] / mean_q < 0.075
+    assert 0.01 <= sig["constrained_t_air_k"] < 0.1
+
+
+def test_baselines_on_textbook_signals():
+    import pandas as pd
+
+    t = np.arange(0, 6 * 3600 + 1, 600.0)
+    start = pd.Timestamp("2026-01-10 23:00", tz="UTC")
+    tau_h = 30.0
+    cooling = baselines.NightSamples("c", "constrained", start, t,
+                                     2.0 + 18.0 * np.exp(-t / 3600 / tau_h),
+                                     np.full(len(t), 2.0), np.zeros(len(t)))
+    assert baselines.loglinear_tau([cooling]) == pytest.approx(tau_h, rel=1e-9)
+    steady = baselines.NightSamples("n", "normal", start, t, np.full(len(t), 22.0),
+                                    np.full(len(t), 2.0), np.full(len(t), 4000.0))
+    assert baselines.coheating_hlc([steady]) == pytest.approx(200.0)
+    assert np.isnan(baselines.coheating_hlc([cooling]))
+
+
+def test_least_squares_baseline_runs_on_the_same_nights(nights_15min):
+    kept, _, _ = prepare_nights(nights_15min)
+    out = baselines.least_squares_fit(kept, search_bounds(RANGES))
+    assert rel(out["hlc"], HOUSE.hlc_w_per_k) < 0.06
+    assert set(PARAM_NAMES) <= set(out)
+
+
+def test_adam_with_backprop_through_the_solver_lowers_the_loss():
+    """The paper's optimiser (Adam, gradients by backprop through odeint) on the same problem
+    as Levenberg–Marquardt: it descends, and LM ends at least as low in far fewer steps."""
+    import torch
+
+    from impctl.identify import fit_lm
+    from impctl.identify.node import bounds_tensor, pack_nights
+
+    nights = synth_nights(HOUSE, seed=6, sample_step_s=3600.0, n_normal=3)
+    kept, offsets, _ = prepare_nights(nights)
+    packed = pack_nights(kept, offsets)
+    ctx = fit_lm.Context(packed, 0.0, 0.01)
+    box = bounds_tensor(search_bounds(RANGES))[None]
+    n = packed.n_nights
+    demand = torch.tensor([k == "normal" for k in packed.kinds])
+    zeros = torch.zeros_like(packed.q_w)
+    scale = torch.where(demand, 1 / 200.0, 1 / 0.05).to(torch.float64)
+    rows = fit_lm.Rows(torch.zeros(n, dtype=torch.long), torch.arange(n), demand.long(),
+                       zeros, zeros, scale, box, 1)
+    u0 = torch.zeros(1, 7, dtype=torch.float64)
+    m0 = packed.t_air_c[:, 0].clone() - 1.0
+    start = float(fit_lm.loss_gradient(ctx, rows, u0, m0)[0])
+    adam = fit_lm.adam(ctx, rows, u0, m0, n_iter=60)
+    lm = fit_lm.levenberg_marquardt(ctx, rows, u0, m0, max_iter=30)
+    assert adam.history[-1] < 0.5 * start
+    assert float(lm.loss[0]) <= float(adam.loss[0]) * 1.0001
+    assert lm.n_iter < 60
+
+
+def test_a_class_range_the_data_contradict_is_rejected():
+    """A heavy 250 m² house put into "60–100 m², light": no C_m inside that box fits, so the
+    likelihood-ratio test rejects the classes and the prior-range fit is reported."""
+    heavy = HouseParameters(floor_area=250.0, wall_height=2.8, walls_area=260.0,
+                            windows_area=50.0, c_f=3.3, u_walls=0.5, u_windows=1.2,
+                            ach_vent=0.0, ach_infl=0.01)
+    nights = synth_nights(heavy, seed=7, sample_step_s=900.0, n_normal=3)
+    wrong = {"floor_area": (60.0, 100.0), "c_f": (0.8, 1.65), "u_walls": (0.2, 1.0)}
+    fit = NightFit(n_starts=2, per_night=False).fit(nights, wrong)
+    check = fit.class_check_
+    assert check["rejected"] and check["chi2"] > check["threshold"]
+    assert "floor_area" in check["outside"] or "c_f" in check["outside"]
+    assert fit.bounds_["floor_area"] == (60.0, 300.0)
+    assert rel(fit.lumped_["c_m"].value, heavy.c_m_j_per_k) < 0.15
+    summary = fit_to_dict(fit, {n: {"range": r, "probability": 0.9, "source": "classifier"}
+                                for n, r in wrong.items()})
+    assert summary["classes"]["c_f"]["contradicted"]
+    assert any("contradict" in note for note in summary["notes"])
+    # the right classes pass the same test
+    right = {"floor_area": (200.0, 300.0), "c_f": (1.65, 3.7), "u_walls": (0.2, 1.0)}
+    ok = NightFit(n_starts=2, per_night=False).fit(nights, right)
+    assert not ok.class_check_["rejected"]
+    assert ok.bounds_["floor_area"] == (200.0, 300.0)

@@ -1,0 +1,120 @@
+"""``impctl fit`` end to end on NIGHTS.csv files, run as a real subprocess."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from impctl.identify.fit_synth import synth_nights
+from impctl.model import HouseParameters
+
+HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, windows_area=25.0,
+                        c_f=2.2, u_walls=0.5, u_windows=1.3, ach_vent=0.0, ach_infl=0.01)
+
+
+def run_cli(*args: str, env_model_dir: Path) -> subprocess.CompletedProcess:
+    import os
+
+    env = {**os.environ, "IMPCTL_MODEL_DIR": str(env_model_dir)}
+    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
+                          capture_output=True, text=True, timeout=300, env=env)
+
+
+def write_nights(path: Path, nights, labelled: bool = True) -> Path:
+    frames = []
+    for n in nights:
+        stamps = n.start + pd.to_timedelta(n.time_s, unit="s")
+        frame = pd.DataFrame({"timestamp": [t.isoformat() for t in stamps], "t_air": n.t_air_c,
+                              "t_out": n.t_out_c, "q_hc": np.round(n.q_hc_w, 1)})
+        if labelled:
+            frame["night"] = n.night_id
+            frame["kind"] = n.kind
+        frames.append(frame)
+    pd.concat(frames).to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def nights():
+    return synth_nights(HOUSE, seed=11, sample_step_s=900.0, n_normal=3)
+
+
+def test_fit_prints_table_writes_json_and_plot(tmp_path, nights):
+    csv = write_nights(tmp_path / "nights.csv", nights)
+    out, png = tmp_path / "fit.json", tmp_path / "fit.png"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--plot", str(png),
+                  env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "HLC" in res.stdout and "u_walls" in res.stdout
+    # without trained classifiers the fit says so and searches the prior ranges
+    assert "no classification" in res.stdout
+    data = json.loads(out.read_text())
+    for key in ("classes", "parameters", "determined", "lumped", "per_night", "validation"):
+        assert key in data
+    assert set(data["classes"]) == {"floor_area", "c_f", "u_walls"}
+    assert data["classes"]["floor_area"]["range"] == [60.0, 300.0]
+    assert data["classes"]["floor_area"]["source"] == "prior"
+    hlc = data["lumped"]["hlc"]
+    assert hlc["low"] <= hlc["value"] <= hlc["high"]
+    # a well insulated house (τ ≈ 64 h) from 3 normal nights at 15 min: ± 7 % is what the
+    # data allow, and the interval says so
+    assert hlc["low"] <= HOUSE.hlc_w_per_k <= hlc["high"]
+    assert abs(hlc["value"] / HOUSE.hlc_w_per_k - 1) < 0.12
+    assert data["determined"]["u_walls"] is False
+    assert len(data["per_night"]) == len(nights)
+    assert len(data["validation"]["normal"]) == 3
+    pred = data["predictions"][0]
+    assert len(pred["time_s"]) == len(pred["t_air_measured_c"]) == len(pred["q_measured_w"])
+    assert png.stat().st_size > 10_000
+
+
+def test_fit_refuses_nights_without_a_constrained_one(tmp_path, nights):
+    csv = write_nights(tmp_path / "normal.csv", [n for n in nights if n.kind == "normal"])
+    out = tmp_path / "fit.json"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
+                  env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 2
+    assert "constrained night" in res.stderr and "τ" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_fit_refuses_a_too_short_constrained_night(tmp_path, nights):
+    short = []
+    for n in nights:
+        if n.kind == "constrained":
+            keep = n.time_s <= 3.0 * 3600      # 2 h left after the 1 h emission lag
+            n = type(n)(n.night_id, n.kind, n.start, n.time_s[keep], n.t_air_c[keep],
+                        n.t_out_c[keep], n.q_hc_w[keep])
+        short.append(n)
+    csv = write_nights(tmp_path / "short.csv", short)
+    res = run_cli("fit", "--nights", str(csv), env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 2
+    assert "under the 3 h minimum" in res.stderr
+
+
+def test_fit_reads_hourly_unlabelled_nights(tmp_path):
+    hourly = synth_nights(HOUSE, seed=12, sample_step_s=3600.0, n_normal=3)
+    csv = write_nights(tmp_path / "hourly.csv", hourly, labelled=False)
+    out = tmp_path / "fit.json"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
+                  env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    data = json.loads(out.read_text())
+    kinds = sorted(p["kind"] for p in data["per_night"])
+    assert kinds.count("constrained") == 2
+    assert abs(data["lumped"]["tau"]["value"] / HOUSE.tau_h - 1) < 0.1
+
+
+def test_the_cli_module_imports_without_torch():
+    code = ("import sys; import impctl.cli.fit_cmd; from impctl.cli import _register; "
+            "_register(); assert 'torch' not in sys.modules, 'torch imported'")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert res.returncode == 0, res.stderr
