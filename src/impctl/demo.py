@@ -104,8 +104,18 @@ def _start_training(opts: DemoOptions, model_dir: Path, progress: _Progress):
         stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
 
 
+def demo_weather(opts: DemoOptions):
+    """The demo's outdoor temperature [°C]: built-in winter weather around the start."""
+    import pandas as pd
+
+    from .weather import winter_weather
+
+    start = pd.Timestamp(opts.start).tz_localize(TZ).floor("D") - pd.Timedelta(days=6)
+    return winter_weather(start=start, days=40, step_s=900, seed=opts.seed + 7, tz=TZ)
+
+
 async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progress,
-                    trainer) -> Path:
+                    trainer, weather) -> Path:
     """Simulator + daemon until the campaign has its valid nights; returns the db path."""
     from impctl_sim import KronotermSimulator, SimConfig
 
@@ -116,10 +126,10 @@ async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progre
     state = opts.out / "state"
     state.mkdir(parents=True, exist_ok=True)
     n_norm = opts.normal_nights
-    setpoints = [21.0, 22.0, 23.0]
+    setpoints = [22.0, 23.0, 24.0]  # the paper's normal-night setpoints; the day is 21 °C
     per_sp = max(1, -(-n_norm // len(setpoints)))
     async with KronotermSimulator(SimConfig(house=house, clock=clock, setpoint_c=21.0,
-                                            weather_seed=opts.seed + 7)) as sim:
+                                            weather=weather)) as sim:
         progress.line(f"simulator: demo house on Modbus TCP 127.0.0.1:{sim.port}, "
                       f"clock ×{opts.speed:g} from {epoch:%Y-%m-%d %H:%M %Z}")
         cfg = config_from_mapping({
@@ -135,6 +145,7 @@ async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progre
             "night": {"sample_interval_s": opts.sample_interval_s, "t_out_max_c": 12.0,
                       "comfort_band_k": 2.0},
             "campaign": {"constrained_nights": opts.constrained_nights,
+                         # T_set 21 = the owner's day setpoint: T_max 23, T_min 19 °C.
                          "constrained_setpoint_c": 21.0,
                          "normal_setpoints_c": setpoints[: min(n_norm, 3)],
                          "normal_nights_per_setpoint": per_sp if n_norm >= 3 else 1,
@@ -202,7 +213,8 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
 
     model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
     trainer = _start_training(opts, model_dir, progress)
-    db_path = asyncio.run(_campaign(opts, house, progress, trainer))
+    weather = demo_weather(opts)
+    db_path = asyncio.run(_campaign(opts, house, progress, trainer, weather))
     if trainer is not None:
         progress.line("waiting for the classifier training to finish")
         if trainer.wait() != 0:
@@ -220,14 +232,17 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     result = json.loads(fit_json.read_text())
     with Store(db_path) as store:
         store.add_fit([n.id for n in store.nights(valid=True)], result)
+    from .report.demand import fitted_house, heat_demand_check
     from .report.summary import demo_summary, format_summary
 
-    summary = demo_summary(house, result, wall_s=time.perf_counter() - progress.t0,
+    with Store(db_path) as store:
+        demand = heat_demand_check(fitted_house(result), store, weather)
+    summary = demo_summary(house, result, demand, wall_s=time.perf_counter() - progress.t0,
                            train_state=progress.train_state)
     progress.line("writing the report")
     from .report import write_report
 
-    write_report(db_path, opts.out, truth=house, fit=result, summary=summary)
+    write_report(db_path, opts.out, truth=house, fit=result, summary=summary, demand=demand)
     (opts.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     echo(format_summary(summary))
     echo(f"report: {opts.out / 'report.html'}")

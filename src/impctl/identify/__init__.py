@@ -40,6 +40,7 @@ _LAZY = {
     "train_classifiers": "training",
     "RangeClassifier": "estimator",
     "campaign_features": "campaign",
+    "NightFit": "fit",
 }
 
 __all__ = ["DEFAULT_RANGES", *_LAZY]

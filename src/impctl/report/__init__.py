@@ -87,7 +87,7 @@ padding:1em;overflow-x:auto}"""
 
 def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = None,
                  truth: HouseParameters | None = None, summary: dict | None = None,
-                 tz: str = "Europe/Ljubljana") -> Path:
+                 demand: dict | None = None, tz: str = "Europe/Ljubljana") -> Path:
     """Write OUT/report.html and OUT/fig_*.png; returns the HTML path.
 
     Parameters
@@ -97,9 +97,10 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     fit : a fit result (``impctl fit`` JSON); default: the newest fit in the store
     truth : the true house (demo, simulations) for the comparison columns
     summary : the demo summary (:func:`demo_summary`), printed on the page
+    demand : an out-of-sample heat-demand check (:mod:`impctl.report.demand`); default: the
+        fit's own validation
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     with Store(db_path, create=False) as store:
         if fit is None:
             last = store.last_fit()
@@ -110,14 +111,18 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
                                  db_path)
             fit = last[2]
         nights_html = _nights_table(store, tz)
+    out.mkdir(parents=True, exist_ok=True)
     figs = [
         figures.night_fits(fit, out / "fig_nights.png"),
-        figures.heat_demand(fit, out / "fig_heat_demand.png"),
+        figures.heat_demand(demand or fit.get("validation", {}), out / "fig_heat_demand.png"),
         figures.class_probabilities(fit, out / "fig_classes.png"),
         figures.parameter_ranges(fit, out / "fig_parameters.png", truth),
     ]
     notes = fit.get("notes", [])
-    val = fit.get("validation", {}).get("mean", {}) or {}
+    val = ((demand or {}).get("mean") or fit.get("validation", {}).get("mean", {}) or {})
+    how = ("the fitted house re-simulated over the whole campaign, against the measured heat "
+           "(out of sample)" if demand and demand.get("mean") else
+           "the fit's own validation (in sample: each night's fitted initial mass temperature)")
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>impctl report</title>",
         f"<style>{_CSS}</style></head><body>",
@@ -128,7 +133,8 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),
         f"<p>ε = {_fmt(val.get('eps_pct'), '.1f')} %, ΔQ_total = "
         f"{_fmt(val.get('dq_total_kwh'), '.2f')} kWh, ΔQ_power = "
-        f"{_fmt(val.get('dq_power_kw'), '.3f')} kW (the paper's Table V: 18.7–20.2 %).</p>",
+        f"{_fmt(val.get('dq_power_kw'), '.3f')} kW (the paper's Table V: 18.7–20.2 %); "
+        f"{html.escape(how)}.</p>",
         "<h2>Parameter classes</h2>", _img(figs[2]),
         "<h2>Physical parameters</h2>", _param_table(fit, truth), _img(figs[3]),
         "<h2>Identifiability</h2><div class='note'><p>Night data determine the lumped "

@@ -20,8 +20,8 @@ _COLORS = {"constrained": "tab:blue", "normal": "tab:red"}
 
 
 def night_fits(fit: dict, path: Path) -> Path:
-    """Measured vs fitted T_air per night (the paper's Fig. 5); constrained nights blue,
-    normal nights red."""
+    """Measured vs fitted T_air per constrained night (the paper's Fig. 5, blue) and measured
+    vs predicted heat power per normal night, where T_air is held and the model's input (red)."""
     plt = _plt()
     preds = fit.get("predictions") or []
     n = max(1, len(preds))
@@ -35,24 +35,38 @@ def night_fits(fit: dict, path: Path) -> Path:
     for ax, p in zip(axes.flat, preds, strict=False):
         t_h = np.asarray(p["time_s"], dtype=float) / 3600.0
         color = _COLORS.get(p["kind"], "k")
-        ax.plot(t_h, p["t_air_measured_c"], ".", ms=2.5, color="0.35", label="measured")
-        if p.get("t_air_model_c") is not None:
-            ax.plot(t_h, p["t_air_model_c"], "-", lw=1.4, color=color, label="fitted")
-        ax.set_title(f"night {p['night_id']} · {p['kind']}", fontsize=8, color=color)
+        if p.get("t_air_model_c") is None and p.get("q_model_w") is not None:
+            # Held nights: T_air is the model's input; the fit predicts the heat power.
+            ax.plot(t_h, np.asarray(p["q_measured_w"]) / 1e3, ".", ms=2.5, color="0.35",
+                    label="measured")
+            ax.plot(t_h, np.asarray(p["q_model_w"]) / 1e3, "-", lw=1.4, color=color,
+                    label="fitted")
+            ax.set_ylabel("heat power [kW]", fontsize=7)
+            ax.set_title(f"night {p['night_id']} · normal (T_air held)", fontsize=8,
+                         color=color)
+        else:
+            ax.plot(t_h, p["t_air_measured_c"], ".", ms=2.5, color="0.35", label="measured")
+            if p.get("t_air_model_c") is not None:
+                ax.plot(t_h, p["t_air_model_c"], "-", lw=1.4, color=color, label="fitted")
+            ax.set_ylabel("T_air [°C]", fontsize=7)
+            ax.set_title(f"night {p['night_id']} · {p['kind']}", fontsize=8, color=color)
         ax.set_xlabel("h since window start", fontsize=7)
-        ax.set_ylabel("T_air [°C]", fontsize=7)
         ax.tick_params(labelsize=7)
-    axes[0, 0].legend(fontsize=7)
+    if preds:
+        axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
 
 
-def heat_demand(fit: dict, path: Path) -> Path:
-    """Heat delivered per normal night [kWh]: measured vs predicted (Fig. 3/4 style)."""
+def heat_demand(validation: dict, path: Path) -> Path:
+    """Heat delivered per normal night [kWh]: measured vs predicted (Fig. 3/4 style).
+
+    ``validation`` holds ``normal`` rows with ``q_measured_kwh`` and ``q_model_kwh``.
+    """
     plt = _plt()
-    rows = fit.get("validation", {}).get("normal", []) or []
+    rows = validation.get("normal", []) or []
     fig, ax = plt.subplots(figsize=(6.5, 3.0))
     if rows:
         x = np.arange(len(rows))
