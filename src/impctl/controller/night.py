@@ -4,10 +4,14 @@ Safety rules this module keeps:
 
 * the owner's loop-1 setpoint and mode are journaled in the store BEFORE the first write;
 * every write goes through the safe client (whitelist, clamp, compare, read-back, budget);
-* whatever ends the night — its window, T_min, an abort, an exception, cancellation (SIGTERM)
-  — the ``finally`` restores the journal and verifies it by read-back; if the process dies
-  instead, the journal stays pending and the next start (orphan sweep) or ``impctl restore``
-  restores it.
+* whatever ends the night — its window, T_min, an abort, an exception (also an unexpected
+  one: a bug, a store that cannot write), cancellation (SIGTERM) — the journal is restored and
+  verified by read-back; if the process dies instead, the journal stays pending and the next
+  start (orphan sweep) or ``impctl restore`` restores it;
+* the night is never run blind: no good read (link lost) or no indoor temperature for longer
+  than ``link_lost_limit_s`` aborts it;
+* one log line per incident (link lost, readings missing), when it starts, and one when it
+  ends; each incident is also noted in the night's reasons.
 """
 
 from __future__ import annotations
@@ -59,6 +63,25 @@ def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
     )
 
 
+def _readings_problem(snap: Snapshot) -> str | None:
+    """Why the readings a night needs are missing (an incident), or None."""
+    codes = sorted({r.reason for r in snap.readings().values()
+                    if r.missing and r.reason and r.reason.startswith("Modbus exception")})
+    if codes:
+        return "heat pump answers " + ", ".join(codes)
+    for name in ("t_air_c", "t_out_c", "q_hc_w"):
+        reading = getattr(snap, name)
+        if reading.missing:
+            return f"{name} missing ({reading.reason})"
+    return None
+
+
+def _span(what: str, since: datetime, until: datetime) -> str:
+    """An incident note: what, from when, how long (UTC)."""
+    minutes = (until - since).total_seconds() / 60
+    return f"incident: {what} from {since:%H:%M}Z for {minutes:.0f} min"
+
+
 def _error_bits(snap: Snapshot) -> int | None:
     """errors_1 | errors_2 << 16 (None when neither could be read)."""
     e1, e2 = snap.errors_1.value, snap.errors_2.value
@@ -102,6 +125,11 @@ class NightController:
         self.stop = stop or asyncio.Event()
         self.last_snapshot: Snapshot | None = None
         self.last_good_read: datetime | None = None
+        self.last_t_air: datetime | None = None  # time of the last sample with T_air
+        self._lost_since: datetime | None = None
+        self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
+        self._incidents: list[str] = []  # notes for the night's reasons
+        self._floor_c: float | None = None
 
     # -- timing ----------------------------------------------------------------------------
     async def _sleep_until(self, when: datetime) -> None:
@@ -128,6 +156,7 @@ class NightController:
         log = _LOG.getChild(f"night{night_id}")
         state, reasons = "done", []
         wrote = False
+        self._incidents, self._problem, self._lost_since = [], None, None
         try:
             self.store.set_night_state(night_id, "preparing")
             first = await self._prepare(night_id, req, log)
@@ -149,12 +178,22 @@ class NightController:
         except HeatPumpError as exc:
             state, reasons = "aborted", [f"heat pump: {exc}"]
             log.error("night aborted by a heat-pump error: %s", exc)
+        except Exception as exc:  # a bug or a failing store must not leave the heating off
+            state, reasons = "aborted", [f"internal error: {exc!r}"]
+            log.exception("night aborted by an unexpected error; restoring the heat pump")
         await self._finish(night_id, state, reasons, wrote, log)
         return self.store.night(night_id)
 
     async def _finish(self, night_id: int, state: str, reasons: list[str], wrote: bool,
                       log: logging.Logger) -> None:
-        self.store.set_night_state(night_id, "restoring" if wrote else state)
+        if self._problem is not None:
+            self._incidents.append(_span(self._problem[0], self._problem[1], self.clock.now()))
+            self._problem = None
+        reasons += self._incidents
+        try:
+            self.store.set_night_state(night_id, "restoring" if wrote else state)
+        except Exception:  # noqa: BLE001 - the restore below matters more than the bookkeeping
+            log.exception("cannot record the night's state; restoring the heat pump anyway")
         if self.store.journal_pending():
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
@@ -185,13 +224,31 @@ class NightController:
             if self.last_good_read is None or self.last_snapshot is not None:
                 log.warning("heat-pump link lost: %s", exc)
                 self.store.add_event("warning", f"link lost: {exc}")
+                self._lost_since = self.clock.now()
             self.last_snapshot = None
             return None
+        now = self.clock.now()
         if self.last_snapshot is None and self.last_good_read is not None:
             log.info("heat-pump link back")
             self.store.add_event("info", "link back")
+            if self._lost_since is not None:
+                self._incidents.append(_span("link lost", self._lost_since, now))
+                self._lost_since = None
         self.last_snapshot = snap
-        self.last_good_read = self.clock.now()
+        self.last_good_read = now
+        if snap.t_air_c.value is not None:
+            self.last_t_air = now
+        problem = _readings_problem(snap)
+        if problem != (self._problem and self._problem[0]):
+            if self._problem is not None:
+                self._incidents.append(_span(self._problem[0], self._problem[1], now))
+                if problem is None:
+                    log.info("readings back: %s is over", self._problem[0])
+                    self.store.add_event("info", f"readings back ({self._problem[0]})")
+            if problem is not None:
+                log.warning("readings missing: %s", problem)
+                self.store.add_event("warning", f"readings missing: {problem}")
+            self._problem = None if problem is None else (problem, now)
         if night_id is not None:
             self.store.add_sample(sample_from_snapshot(night_id, snap))
         return snap
@@ -273,6 +330,12 @@ class NightController:
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
             await self.client.set_loop1_mode(1)
+        # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
+        # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
+        # a cold house and must not abort the night.
+        owner = first.loop1_setpoint_c.value
+        floor = req.t_min_c if owner is None else min(req.t_min_c, owner - req.comfort_band_k)
+        self._floor_c = floor - policy.abort_margin_k
         switched_off = False
         deadline = req.window_end + timedelta(seconds=policy.deadline_grace_s)
         interval = timedelta(seconds=policy.sample_interval_s)
@@ -321,10 +384,18 @@ class NightController:
             raise _Abort(alarm)
         t_air = snap.t_air_c.value
         if t_air is None:
-            return None  # a missing sample is judged by the assessment (coverage)
-        if t_air < req.t_min_c - self.policy.abort_margin_k:
-            raise _Abort(f"T_air {t_air:.1f} °C below T_min − margin "
-                         f"({req.t_min_c - self.policy.abort_margin_k:.1f} °C)")
+            # A missing sample is judged by the assessment (coverage); a night without its
+            # indoor temperature for as long as the link-lost limit is aborted (blind).
+            blind_s = (now - (self.last_t_air or now)).total_seconds()
+            if blind_s > self.policy.link_lost_limit_s:
+                raise _Abort(f"no indoor temperature for {blind_s / 60:.0f} min "
+                             f"({snap.t_air_c.reason})")
+            return None
+        floor = self._floor_c
+        if floor is None:
+            floor = req.t_min_c - self.policy.abort_margin_k
+        if t_air < floor:
+            raise _Abort(f"T_air {t_air:.1f} °C below T_min − margin ({floor:.1f} °C)")
         if req.kind == "constrained" and switched_off and t_air <= req.t_min_c:
             return f"reached T_min {req.t_min_c:.1f} °C"
         return None

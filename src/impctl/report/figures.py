@@ -108,25 +108,44 @@ def class_probabilities(fit: dict, path: Path) -> Path:
 
 
 def parameter_ranges(fit: dict, path: Path, truth=None) -> Path:
-    """Each parameter's estimate inside its search range (normalised to 0–1), with the true
-    value when known; filled markers = determined by the data."""
+    """Left: HLC, C_m and τ with their 95 % intervals (and the truth when known). Right: each
+    physical parameter's estimate inside its search range (0 = low bound, 1 = high); filled
+    markers = determined by the data, open = only by the range."""
     plt = _plt()
     names = list(fit["parameters"])
     bounds = fit.get("bounds", {})
-    fig, ax = plt.subplots(figsize=(6.5, 2.8))
     true = truth.as_dict() if truth is not None else {}
+    fig, (ax_l, ax) = plt.subplots(1, 2, figsize=(9.5, 3.0),
+                                   gridspec_kw={"width_ratios": [1, 1.6]})
+    true_lumped = {} if truth is None else {
+        "hlc": float(truth.hlc_w_per_k), "c_m": float(truth.c_m_j_per_k),
+        "tau": float(truth.tau_h)}
+    for i, key in enumerate(("hlc", "c_m", "tau")):
+        e = fit["lumped"][key]
+        ref = e["value"]
+        if e.get("low") is not None and e.get("high") is not None:
+            ax_l.plot([100 * (e["low"] / ref - 1), 100 * (e["high"] / ref - 1)], [i, i],
+                      color="tab:red", lw=3, alpha=0.5)
+        ax_l.plot(0, i, "o", color="tab:red")
+        if key in true_lumped:
+            ax_l.plot(100 * (true_lumped[key] / ref - 1), i, "|", color="k", ms=14)
+    ax_l.set_yticks(range(3), ["HLC", "C_m", "τ"], fontsize=8)
+    ax_l.axvline(0, color="0.8", lw=0.8)
+    ax_l.set_xlabel("% from the estimate (bar: 95 % interval, |: true)", fontsize=7)
+    ax_l.tick_params(labelsize=7)
     for i, name in enumerate(names):
         lo, hi = bounds.get(name, (0.0, 1.0))
         span = (hi - lo) or 1.0
         est = (fit["parameters"][name] - lo) / span
         det = fit.get("determined", {}).get(name, False)
-        ax.plot([0, 1], [i, i], color="0.8", lw=6, solid_capstyle="butt")
+        ax.plot([0, 1], [i, i], color="0.85", lw=6, solid_capstyle="butt")
         ax.plot(est, i, "o", color="tab:red", mfc="tab:red" if det else "white")
         if name in true:
             ax.plot((float(true[name]) - lo) / span, i, "|", color="k", ms=14)
     ax.set_yticks(range(len(names)), names, fontsize=7)
     ax.set_xlim(-0.05, 1.05)
-    ax.set_xlabel("position in the search range (0 = low bound, 1 = high); | = true value")
+    ax.set_xlabel("position in the search range; | = true value", fontsize=7)
+    ax.tick_params(labelsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
