@@ -6,7 +6,6 @@ key says ``_h`` or ``_min``.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -247,14 +246,6 @@ def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
 
 def load_config(path: str | Path) -> Config:
     """Read and validate the daemon configuration file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid TOML: {exc}", path) from None
-    return config_from_mapping(data, path)
+    from ..model.house import read_toml
+
+    return config_from_mapping(read_toml(path), Path(path))

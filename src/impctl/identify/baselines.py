@@ -22,12 +22,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..imp.night import NightSamples
-from ..model import conductances
+from ..model import TABLE_IV, conductances
 from ..model.continuous import air_temperature, mass_from_air
 
-PARAM_NAMES = (
-    "floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls", "u_windows",
-)
+PARAM_NAMES = TABLE_IV
 
 
 def _span_weights(t: np.ndarray) -> np.ndarray:

@@ -33,14 +33,11 @@ from typing import Any
 
 import numpy as np
 
-# Names and units repeat those of .node so that reading a result needs no torch.
-PARAM_NAMES = (
-    "floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls", "u_windows",
-)
-PARAM_UNITS = {
-    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
-    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)",
-}
+from ..model.house import PARAMETER_UNITS, TABLE_IV
+
+# From the model, not from .node, so that reading a result needs no torch.
+PARAM_NAMES = TABLE_IV
+PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
 CLASSIFIED = ("floor_area", "c_f", "u_walls")
 INTERVAL_METHOD = (
     "Laplace: Gauss-Newton curvature of the joint loss at the optimum, per-night initial mass "

@@ -45,18 +45,13 @@ from torchdiffeq import odeint
 
 from ..imp.night import NightSamples
 from ..model.continuous import air_derivative, air_temperature
-from ..model.house import H_MS, am_factor, conductances
+from ..model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
 
 DTYPE = torch.float64
 
 #: The seven fitted parameters (the paper's Table IV), in this order everywhere.
-PARAM_NAMES = (
-    "floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls", "u_windows",
-)
-PARAM_UNITS = {
-    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
-    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)",
-}
+PARAM_NAMES = TABLE_IV
+PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
 #: Parameters bounded by the classifiers' ranges; the others by :data:`PHYSICAL_BOUNDS`.
 CLASSIFIED = ("floor_area", "c_f", "u_walls")
 #: Search bounds. The three classified ones are the union of the paper's Table III classes and

@@ -12,6 +12,8 @@ from .continuous import (
     surface_temperature,
 )
 from .house import (
+    PARAMETER_UNITS,
+    TABLE_IV,
     Conductances,
     HouseParameters,
     am_factor,
@@ -19,9 +21,12 @@ from .house import (
     default_house,
     house_from_mapping,
     load_house,
+    read_toml,
 )
 
 __all__ = [
+    "PARAMETER_UNITS",
+    "TABLE_IV",
     "Conductances",
     "HouseParameters",
     "Simulation",
@@ -34,6 +39,7 @@ __all__ = [
     "load_house",
     "mass_derivative",
     "mass_from_air",
+    "read_toml",
     "simulate",
     "surface_temperature",
 ]

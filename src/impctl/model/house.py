@@ -158,6 +158,16 @@ def conductances(
     )
 
 
+#: The seven physical parameters the fit estimates (the paper's Table IV), in this order.
+TABLE_IV = ("floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls",
+            "u_windows")
+#: Units of every house parameter (as in the house TOML).
+PARAMETER_UNITS = {
+    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
+    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)", "ach_vent": "1/h",
+    "ach_infl": "1/h", "heat_recovery": "-", "max_heating_power": "W",
+}
+
 _REQUIRED = (
     "floor_area",
     "wall_height",
@@ -358,16 +368,21 @@ def load_house(path: str | Path) -> HouseParameters:
         Unreadable file, TOML syntax error, unknown/missing key, wrong type or bad value.
     """
     path = Path(path)
+    return house_from_mapping(read_toml(path), path)
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file; any failure is an :class:`InputError` naming the file."""
+    path = Path(path)
     try:
         with path.open("rb") as fh:
-            data = tomllib.load(fh)
+            return tomllib.load(fh)
     except FileNotFoundError:
         raise InputError("file not found", path) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML: {exc}", path) from None
-    return house_from_mapping(data, path)
 
 
 def default_house() -> HouseParameters:

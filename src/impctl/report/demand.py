@@ -13,17 +13,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..model import HouseParameters, simulate
+from ..model import TABLE_IV, HouseParameters, simulate
 from ..store import Store
-
-PARAMS = ("floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls",
-          "u_windows")
 
 
 def fitted_house(fit: dict) -> HouseParameters:
     """The house of a fit result (its seven parameters and the fixed air changes)."""
     fixed = fit.get("fixed", {})
-    return HouseParameters(**{k: float(fit["parameters"][k]) for k in PARAMS},
+    return HouseParameters(**{k: float(fit["parameters"][k]) for k in TABLE_IV},
                            ach_vent=float(fixed.get("ach_vent", 0.0)),
                            ach_infl=float(fixed.get("ach_infl", 0.01)))
 

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-from ..model import HouseParameters
+from ..model import PARAMETER_UNITS, TABLE_IV, HouseParameters
 
-PARAMS = ("floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls",
-          "u_windows")
-UNITS = {"floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
-         "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)",
-         "hlc": "W/K", "c_m": "J/K", "tau": "h"}
+PARAMS = TABLE_IV
+UNITS = {**PARAMETER_UNITS, "hlc": "W/K", "c_m": "J/K", "tau": "h"}
 #: The paper's Table V: mean heat-demand error of its fitted model on normal nights.
 PAPER_EPS_PCT = (18.65, 20.17, 19.22)
 
