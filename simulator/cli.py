@@ -8,7 +8,6 @@ line on stderr and exits with status 2.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import signal
 import sys
@@ -125,25 +124,8 @@ async def _serve(config: SimConfig, host: str, port: int, allow_remote: bool, rt
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point; bad input → one line on stderr, exit status 2."""
-    try:
-        cli.main(args=argv, standalone_mode=False)
-    except InputError as exc:
-        click.echo(f"impctl-sim: {exc}", err=True)
-        sys.exit(2)
-    except click.exceptions.Abort:
-        click.echo("impctl-sim: aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
-    except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
-    except (OSError, RuntimeError) as exc:  # e.g. the port is taken
-        click.echo(f"impctl-sim: {exc}", err=True)
-        sys.exit(1)
+    """Console entry point; bad input → one line on stderr, exit status 2; a port that is
+    taken and the like → one line, exit status 1."""
+    from impctl.cli import run_group
 
-
-if __name__ == "__main__":
-    with contextlib.suppress(KeyboardInterrupt):
-        main()
+    run_group(cli, argv, "impctl-sim", fail=(OSError, RuntimeError))

@@ -24,20 +24,30 @@ def _register() -> None:
     from . import demo_cmd, device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the CLI, turning bad input into one line and exit status 2."""
-    _register()
+def run_group(group: click.Group, argv: list[str] | None, prog: str,
+              fail: tuple[type[BaseException], ...] = ()) -> None:
+    """Run a click group: bad input → one line per problem on stderr and exit status 2;
+    exceptions of the types in ``fail`` → one line and exit status 1."""
     try:
-        cli.main(args=argv, standalone_mode=False)
+        group.main(args=argv, prog_name=prog, standalone_mode=False)
     except InputError as exc:
         for line in str(exc).splitlines():  # a config error may list several problems
-            click.echo(f"impctl: {line}", err=True)
+            click.echo(f"{prog}: {line}", err=True)
         sys.exit(2)
     except click.exceptions.Abort:
-        click.echo("impctl: aborted", err=True)
+        click.echo(f"{prog}: aborted", err=True)
         sys.exit(130)
     except click.ClickException as exc:
         exc.show()
         sys.exit(exc.exit_code)
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
+    except fail as exc:
+        click.echo(f"{prog}: {exc}", err=True)
+        sys.exit(1)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: run the CLI, turning bad input into one line and exit status 2."""
+    _register()
+    run_group(cli, argv, "impctl")
