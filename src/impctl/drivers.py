@@ -19,6 +19,9 @@ from .tables import read_table, step_seconds
 
 _NUMERIC = ("t_out", "setpoint", "phi_hc", "internal_gains", "solar_gains")
 _MAY_BE_EMPTY = ("setpoint", "phi_hc")
+#: Plausible temperatures; outside them the file is refused (a sensor sentinel such as −600,
+#: tenths of a degree, Fahrenheit) — as for NIGHTS.csv.
+PLAUSIBLE_C = {"t_out": (-60.0, 60.0), "setpoint": (5.0, 35.0)}
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,13 @@ def read_drivers(path: Path, step: float | None, tz: str) -> tuple[pd.DataFrame,
         path, required=("timestamp", "t_out"), numeric=_NUMERIC, may_be_empty=_MAY_BE_EMPTY,
         tz=tz,
     )
+    for col, (lo, hi) in PLAUSIBLE_C.items():
+        values = table[col].to_numpy(dtype=float) if col in table else np.array([])
+        bad = np.isfinite(values) & ((values < lo) | (values > hi))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} °C",
+                             path, f"row {i + 2}")
     data_step = step_seconds(table["timestamp"], path)
     if step is not None and data_step is not None and step != data_step:
         raise InputError(

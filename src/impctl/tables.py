@@ -97,6 +97,7 @@ def read_table(
         raise InputError(f"not a readable CSV: {str(exc).splitlines()[0]}", path) from None
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path) from None
+    _refuse_ragged_rows(path, len(df.columns))
     df.columns = [str(c).strip() for c in df.columns]
     for col in required:
         if col not in df.columns:
@@ -125,6 +126,19 @@ def read_table(
         if col in df.columns and col not in out.columns:
             out[col] = df[col].str.strip()
     return out
+
+
+def _refuse_ragged_rows(path: Path, n_columns: int) -> None:
+    """A row with fewer cells than the header (pandas would fill them in as empty — e.g. a
+    last line cut off when the logger lost power) is refused; too many cells pandas refuses
+    itself."""
+    import csv
+
+    with path.open(newline="", encoding="utf-8", errors="replace") as fh:
+        for number, row in enumerate(csv.reader(fh), start=1):
+            if row and len(row) < n_columns:
+                raise InputError(f"{len(row)} cells where the header has {n_columns}", path,
+                                 f"row {number}")
 
 
 def step_seconds(timestamps: pd.DatetimeIndex | pd.Series, path: str | Path) -> float | None:

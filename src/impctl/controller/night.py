@@ -186,10 +186,12 @@ class NightController:
 
     async def _finish(self, night_id: int, state: str, reasons: list[str], wrote: bool,
                       log: logging.Logger) -> None:
+        now = self.clock.now()
+        if self._lost_since is not None:  # incidents still going on at the night's end
+            self._incidents.append(_span("link lost", self._lost_since, now))
         if self._problem is not None:
-            self._incidents.append(_span(self._problem[0], self._problem[1], self.clock.now()))
-            self._problem = None
-        reasons += self._incidents
+            self._incidents.append(_span(self._problem[0], self._problem[1], now))
+        self._lost_since = self._problem = None
         try:
             self.store.set_night_state(night_id, "restoring" if wrote else state)
         except Exception:  # noqa: BLE001 - the restore below matters more than the bookkeeping
@@ -203,6 +205,7 @@ class NightController:
                 retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
+        reasons += self._incidents
         self.store.set_night_state(night_id, state, ended=self.clock.now())
         if state == "refused":
             self.store.assess_night(night_id, False, reasons)
@@ -218,13 +221,14 @@ class NightController:
     async def _snapshot(self, night_id: int | None, log: logging.Logger) -> Snapshot | None:
         """One poll; stores it as a sample; None when the link failed (the incident is
         logged once, when it starts)."""
+        polled = self.clock.now()
         try:
             snap = await self.client.snapshot()
         except ModbusLinkError as exc:
             if self.last_good_read is None or self.last_snapshot is not None:
                 log.warning("heat-pump link lost: %s", exc)
                 self.store.add_event("warning", f"link lost: {exc}")
-                self._lost_since = self.clock.now()
+                self._lost_since = polled
             self.last_snapshot = None
             return None
         now = self.clock.now()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sqlite3
 
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
 from ..heatpump.clock import VirtualClock
@@ -18,13 +19,19 @@ _LOG = logging.getLogger(__name__)
 
 
 async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry) -> bool:
-    """Restore one journal entry; True when the read-back shows the owner's value."""
+    """Restore one journal entry; True when the read-back shows the owner's value and the
+    journal records it, False when the heat pump is restored but the store could not record
+    it (the entry stays pending; restoring it again writes nothing)."""
     await client.restore_raw(entry.address + 1, entry.raw_value)
-    store.journal_mark_restored(entry.id)
-    store.add_event("info", f"restored {entry.register} (register {entry.address + 1}) "
-                            f"to raw {entry.raw_value}")
     _LOG.info("restored %s (register %d) to raw %d, verified by read-back", entry.register,
               entry.address + 1, entry.raw_value)
+    try:
+        store.journal_mark_restored(entry.id)
+        store.add_event("info", f"restored {entry.register} (register {entry.address + 1}) "
+                                f"to raw {entry.raw_value}")
+    except sqlite3.Error as exc:  # the heat pump comes first; the record can follow later
+        _LOG.error("restored %s, but the store cannot record it: %s", entry.register, exc)
+        return False
     return True
 
 
@@ -46,27 +53,31 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
     """
     deadline = clock.now_s() + timeout_s
     reported = False
+    unrecorded: set[int] = set()  # restored on the heat pump, the store could not say so
     while True:
-        pending = store.journal_pending()
+        pending = [e for e in store.journal_pending() if e.id not in unrecorded]
         if not pending:
             return []
         for entry in pending:
             try:
-                await restore_entry(client, store, entry)
-            except ModbusLinkError as exc:
-                if not reported:  # one line per incident, not one per retry
-                    _LOG.warning("restore of %s waits for the heat pump link: %s",
-                                 entry.register, exc)
-                    store.add_event("warning", f"restore waiting for link: {exc}")
-                    reported = True
-                break
+                if not await restore_entry(client, store, entry):
+                    unrecorded.add(entry.id)
             except HeatPumpError as exc:
-                _LOG.error("restore of %s failed: %s", entry.register, exc)
-                store.add_event("error", f"restore of {entry.register} failed: {exc}")
-                break
-        if not store.journal_pending():
+                if not reported:  # one line per incident, not one per retry
+                    if isinstance(exc, ModbusLinkError):
+                        _LOG.warning("restore of %s waits for the heat pump link: %s",
+                                     entry.register, exc)
+                        _event(store, "warning", f"restore waiting for link: {exc}")
+                    else:
+                        _LOG.error("restore of %s failed (retrying): %s", entry.register, exc)
+                        _event(store, "error", f"restore of {entry.register} failed: {exc}")
+                    reported = True
+                if isinstance(exc, ModbusLinkError):
+                    break  # the link is down: the other entries cannot get through either
+                # Else try the other entries anyway: heating back on matters most.
+        if not [e for e in store.journal_pending() if e.id not in unrecorded]:
             if reported:
-                _LOG.info("restore completed after the link came back")
+                _LOG.info("restore completed after the heat pump answered again")
             return []
         if clock.now_s() >= deadline:
             left = store.journal_pending()
@@ -79,3 +90,10 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
                 await client.link.connect(max_wait_s=retry_s)
         except ModbusLinkError:
             pass
+
+
+def _event(store: Store, level: str, message: str) -> None:
+    try:
+        store.add_event(level, message)
+    except sqlite3.Error as exc:  # never let the bookkeeping stop a restore
+        _LOG.error("cannot record event %r: %s", message, exc)

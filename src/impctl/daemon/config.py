@@ -6,7 +6,9 @@ key says ``_h`` or ``_min``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -126,17 +128,21 @@ def _coerce(value: Any, default: Any, where: str, problems: list[str]) -> Any:
         problems.append(f"{where}: must be an integer, got {value!r}")
     elif isinstance(default, float):
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
-        problems.append(f"{where}: must be a number, got {value!r}")
+            if math.isfinite(value):
+                return float(value)
+            problems.append(f"{where}: must be a finite number, got {value!r}")
+        else:
+            problems.append(f"{where}: must be a number, got {value!r}")
     elif isinstance(default, str):
         if isinstance(value, str):
             return value
         problems.append(f"{where}: must be a string, got {value!r}")
     elif isinstance(default, tuple):
         if isinstance(value, list) and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value):
             return tuple(float(v) for v in value)
-        problems.append(f"{where}: must be a list of numbers, got {value!r}")
+        problems.append(f"{where}: must be a list of finite numbers, got {value!r}")
     return default
 
 
@@ -202,6 +208,22 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         bad("night.min_coverage", "must lie in (0, 1]")
     if night.t_out_min_c >= night.t_out_max_c:
         bad("night.t_out_max_c", "must be above night.t_out_min_c")
+    if not 0 <= night.preheat_h <= 12:
+        bad("night.preheat_h", "must lie in 0–12 h")
+    if not 0 <= night.emission_lag_h <= 6:
+        bad("night.emission_lag_h", "must lie in 0–6 h")
+    if camp.misfire_grace_s < 0:
+        bad("campaign.misfire_grace_s", "must be >= 0 s")
+    if cfg.clock.epoch:
+        try:
+            aware = datetime.fromisoformat(cfg.clock.epoch).tzinfo is not None
+        except ValueError:
+            aware = None
+        if not aware:
+            bad("clock.epoch", "must be an ISO 8601 instant with its zone, e.g. "
+                               f"2026-01-12T20:00:00+01:00, got {cfg.clock.epoch!r}")
+    if cfg.clock.wall_epoch_s < 0:
+        bad("clock.wall_epoch_s", "must be >= 0 (POSIX seconds; 0 = at start)")
     band = night.comfort_band_k
     setpoints = [("campaign.constrained_setpoint_c", camp.constrained_setpoint_c)]
     setpoints += [("campaign.normal_setpoints_c", sp) for sp in camp.normal_setpoints_c]

@@ -125,6 +125,21 @@ class WriteBudget:
             raise
         return used + 1
 
+    def refund(self, ma: int, day: date) -> None:
+        """Give back one write of ``ma`` on ``day`` that provably never took effect (a restore
+        the device refused, or whose read-back shows the register unchanged), so failed
+        restore attempts cannot use up the budget and its reserve."""
+        db = self._db
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            db.execute("UPDATE daily SET count = count - 1 WHERE day = ? AND ma = ? AND count > 0",
+                       (day.isoformat(), ma))
+            db.execute("UPDATE lifetime SET count = count - 1 WHERE ma = ? AND count > 0", (ma,))
+            db.execute("COMMIT")
+        except sqlite3.Error:
+            db.execute("ROLLBACK")
+            raise
+
     def close(self) -> None:
         """Close the database."""
         self._db.close()

@@ -28,6 +28,7 @@ reads the same structure from a parsed TOML table::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -226,11 +227,45 @@ class HeatPumpConfig:
                              place="key 'room_sensor'")
 
 
+_INTS = frozenset({"port", "baudrate", "device_id", "retries", "attempts", "daily_budget",
+                   "verify_attempts", "restore_reserve", "address"})
+_FLOATS = frozenset({"timeout_s", "retry_delay_s", "drain_s", "request_gap_s", "verify_delay_s",
+                     "scale"})
+_STRINGS = frozenset({"transport", "host", "serial_port", "datatype", "generation"})
+_PAIRS = frozenset({"connect_backoff_s", "loop1_setpoint_c", "loop2_setpoint_c", "correction_k",
+                    "valid"})
+
+
+def _type_problem(key: str, value: Any) -> str | None:
+    """What is wrong with the TOML type of ``value`` at ``key`` (None when it fits)."""
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    if key in _INTS and (not isinstance(value, int) or isinstance(value, bool)):
+        return "must be an integer"
+    if key in _FLOATS and not number(value):
+        return "must be a finite number"
+    if key in _STRINGS and not isinstance(value, str):
+        return "must be a string"
+    if key == "tolerate_fixed_tid" and not isinstance(value, bool):
+        return "must be true or false"
+    if key in _PAIRS and not (isinstance(value, (list, tuple)) and len(value) == 2
+                              and all(number(v) for v in value)):
+        return "must be a pair of finite numbers [low, high]"
+    return None
+
+
 def _build(cls: type, data: Mapping[str, Any], source: str | Path | None, prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise InputError(f"must be a table, got {data!r}", source, f"[{prefix}]")
     known = {f.name for f in fields(cls)}
     unknown = sorted(set(data) - known)
     if unknown:
         raise InputError(f"unknown key(s) {unknown}", source, f"[{prefix}]")
+    for key, value in data.items():
+        problem = _type_problem(key, value)
+        if problem:
+            raise InputError(f"{problem}, got {value!r}", source, f"[{prefix}] key '{key}'")
     kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
     try:
         return cls(**kwargs)
@@ -257,6 +292,9 @@ def config_from_mapping(data: Mapping[str, Any],
         table = data.pop(key, None)
         if table is None or isinstance(table, str):
             return table
+        if not isinstance(table, Mapping):
+            raise InputError(f"must be a table or a name, got {table!r}", source,
+                             f"[heatpump.{key}]")
         table = dict(table)
         link = table.pop("link", None)
         if link is not None:

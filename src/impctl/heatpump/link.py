@@ -12,6 +12,9 @@ runtime notes §1.3):
 * optional tolerance of a fixed MBAP transaction id (rewritten to the pending request's);
 * one request at a time (an asyncio lock), an optional gap between requests;
 * reads retried with a reconnect in between, Modbus exception responses never retried;
+* one log line per incident: the first failure after a good answer is logged (INFO), the
+  retries, reconnects and further failures of the same outage only at DEBUG — the caller
+  (the night controller) says what the incident means, once;
 * only FC 03 and FC 06 exist here: there is no way to send FC 16.
 """
 
@@ -58,6 +61,15 @@ class ModbusLink:
         self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
         self._lock = asyncio.Lock()
         self._last_request = 0.0
+        # True from a failure until the next good answer: one log line per incident.
+        self._trouble = False
+        #: Registers whose last safe write failed (their repeated failures log at DEBUG).
+        self.failed_writes: set[int] = set()
+
+    def _incident(self, msg: str, *args: object) -> None:
+        """Log a failure: the first of an incident at INFO, the rest at DEBUG."""
+        _LOG.log(logging.DEBUG if self._trouble else logging.INFO, msg, *args)
+        self._trouble = True
 
     @property
     def connected(self) -> bool:
@@ -110,13 +122,14 @@ class ModbusLink:
                 self._client.close()
                 raise ModbusLinkError(f"cannot connect to {self.config.describe()} "
                                       f"within {max_wait_s:g} s")
-            _LOG.warning("cannot connect to %s; retrying in %.1f s",
-                         self.config.describe(), delay)
+            self._incident("cannot connect to %s; retrying in %.1f s",
+                           self.config.describe(), delay)
             await asyncio.sleep(delay if left is None else min(delay, left))
             delay = min(2 * delay, most)
         self.stats.connects += 1
         await self._drain()
-        _LOG.info("connected to %s", self.config.describe())
+        _LOG.log(logging.DEBUG if self._trouble or self.stats.connects > 1 else logging.INFO,
+                 "connected to %s", self.config.describe())
 
     async def _drain(self) -> None:
         if not self.config.drain_s or self._client is None:
@@ -162,8 +175,8 @@ class ModbusLink:
                 rr = await self._request("read", address, count, unit)
             except ModbusLinkError as exc:
                 last = exc
-                _LOG.warning("read %d×%d from unit %d failed (try %d/%d): %s", address, count,
-                             unit, attempt + 1, self.config.attempts, exc)
+                self._incident("read %d×%d from unit %d failed (try %d/%d): %s", address,
+                               count, unit, attempt + 1, self.config.attempts, exc)
                 self.close()
                 continue
             if len(rr.registers) != count:
@@ -193,6 +206,7 @@ class ModbusLink:
             rr = await self._request("write", address, word, unit)
         except ModbusLinkError:
             self.stats.failures += 1
+            self._trouble = True
             self.close()
             raise
         if rr.address != address or list(rr.registers[:1]) != [word]:
@@ -232,4 +246,7 @@ class ModbusLink:
                     f"unit {unit} answered FC {rr.function_code & 0x7F} at address {address} "
                     f"with Modbus exception {code}", code, address)
             self.stats.last_ok_monotonic = time.monotonic()
+            if self._trouble:
+                _LOG.debug("link to %s answers again", self.config.describe())
+                self._trouble = False
             return rr

@@ -9,6 +9,12 @@ The order matters and is the safety argument:
 4. the write is counted against the register's daily budget *before* it is sent;
 5. FC 06, then read back (after a pause; the first answer may still be the old value) until
    it matches, else :class:`WriteVerifyError`.
+
+A *restore* that provably did not take effect (the device answered with an exception, or the
+read-back shows the register unchanged) is given back to the budget: retrying a restore
+through a flaky link must never use up the budget and its reserve and so keep the heating
+off for the rest of the day. Repeated failures of the same register are logged once, at the
+first failure, until a write of it succeeds (one line per incident, not per retry).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from .budget import WriteBudget
 from .clock import VirtualClock
 from .config import WritePolicy
 from .decode import decode, encode, raw_value
-from .errors import ModbusLinkError, WriteRefused, WriteVerifyError
+from .errors import ModbusDeviceError, ModbusLinkError, WriteRefused, WriteVerifyError
 from .link import ModbusLink
 from .registers import FORBIDDEN_WRITES, Kind, Register
 
@@ -178,24 +184,36 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
         return WriteResult(reg.name, reg.ma, float(value), target, clamped, False,
                            previous, previous, budget.used(reg.ma, clock.now().date()))
     reserve = policy.restore_reserve if restore else 0
-    used = budget.consume(reg.ma, clock.now().date(), reserve=reserve)
+    day = clock.now().date()
+    used = budget.consume(reg.ma, day, reserve=reserve)
+    # A register whose last write failed: log its repeated failures at DEBUG only.
+    loud = logging.DEBUG if reg.ma in link.failed_writes else logging.WARNING
     write_error: ModbusLinkError | None = None
     try:
         await link.write(reg.address, word)
+    except ModbusDeviceError:
+        if restore:  # an exception response: the device did not execute the write
+            budget.refund(reg.ma, day)
+        link.failed_writes.add(reg.ma)
+        raise
     except ModbusLinkError as exc:
         # The write may have landed even though its answer was lost: let the read-back decide.
         write_error = exc
-        _LOG.warning("register %d: write not confirmed (%s); checking by read-back", reg.ma,
-                     exc)
-    read_back = await _read_back(link, reg, word, policy)
+        _LOG.log(loud, "register %d: write not confirmed (%s); checking by read-back", reg.ma,
+                 exc)
+    read_back = await _read_back(link, reg, word, policy, loud)
     if read_back != word:
         shown = "nothing" if read_back is None else f"{raw_value(reg, read_back)} {reg.unit}"
         msg = (f"register {reg.ma} ({reg.name}): wrote {target} {reg.unit}, read back {shown} "
                f"after {policy.verify_attempts} attempt(s)")
-        _LOG.error(msg)
+        _LOG.log(logging.ERROR if loud == logging.WARNING else loud, msg)
+        if restore and read_back == current:  # unchanged: the restore never took effect
+            budget.refund(reg.ma, day)
+        link.failed_writes.add(reg.ma)
         if read_back is None and write_error is not None:
             raise ModbusLinkError(msg) from write_error
         raise WriteVerifyError(msg, reg.ma, word, read_back)
+    link.failed_writes.discard(reg.ma)
     _LOG.warning("register %d (%s): %s → %s %s %s and verified (%d/%d today)", reg.ma,
                  reg.name, previous, target, reg.unit, "restored" if restore else "written",
                  used, budget.limit(reg.ma))
@@ -204,14 +222,14 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
 
 
 async def _read_back(link: ModbusLink, reg: Register, word: int,
-                     policy: WritePolicy) -> int | None:
+                     policy: WritePolicy, level: int = logging.WARNING) -> int | None:
     seen: int | None = None
     for _ in range(policy.verify_attempts):
         await asyncio.sleep(policy.verify_delay_s)
         try:
             seen = (await link.read(reg.address, 1))[0]
         except ModbusLinkError as exc:
-            _LOG.warning("register %d read-back failed: %s", reg.ma, exc)
+            _LOG.log(level, "register %d read-back failed: %s", reg.ma, exc)
             continue
         if seen == word:
             return seen

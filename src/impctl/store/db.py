@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 from collections.abc import Iterable, Sequence
 from datetime import UTC, datetime
@@ -118,6 +119,12 @@ class Store:
             raise InputError("no impctl store here (has the daemon run? check state_dir)",
                              self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        # A new store is not world-accessible whatever the umask (a shell's 022, not only the
+        # unit's 0027); SQLite gives its -wal and -shm files the database file's permissions.
+        try:
+            os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o640))
+        except FileExistsError:
+            pass
         self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
         self._db.row_factory = sqlite3.Row
         try:
