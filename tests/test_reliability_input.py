@@ -77,6 +77,20 @@ def _short(what: str, exc: Exception) -> str:
     return f"{what}: {type(exc).__name__}: {(str(exc) or '-').splitlines()[0][:90]}"
 
 
+def assert_all_refused(tmp_path: Path, cases, check) -> None:
+    """Run ``check(workdir, case)`` for every ``(what, case)`` in its own directory; collect
+    every failure (a traceback is a failure too) and report them all at once."""
+    failures = []
+    for i, (what, case) in enumerate(cases):
+        work = tmp_path / str(i)
+        work.mkdir()
+        try:
+            check(work, case)
+        except Exception as exc:  # noqa: BLE001 - list every failing case, not just the first
+            failures.append(_short(what, exc))
+    assert not failures, f"{len(failures)} of {len(cases)}:\n" + "\n".join(failures)
+
+
 def files_in(directory: Path) -> set[str]:
     return {str(p.relative_to(directory)) for p in directory.rglob("*")}
 
@@ -237,15 +251,9 @@ def _config_refused(tmp: Path, text: str) -> None:
 
 
 def test_every_single_config_mutation_is_refused(tmp_path):
-    failures = []
-    for i, (what, mutate) in enumerate(CONFIG_MUTATIONS):
-        work = tmp_path / str(i)
-        work.mkdir()
-        try:
-            _config_refused(work, mutate(base_config(work / "state")))
-        except Exception as exc:  # noqa: BLE001 - a traceback is a failure too: list them all
-            failures.append(_short(what, exc))
-    assert not failures, f"{len(failures)} of {len(CONFIG_MUTATIONS)}:\n" + "\n".join(failures)
+    assert_all_refused(tmp_path, CONFIG_MUTATIONS,
+                       lambda work, mutate: _config_refused(
+                           work, mutate(base_config(work / "state"))))
 
 
 @SETTINGS
@@ -372,15 +380,7 @@ def test_every_single_house_mutation_is_refused(tmp_path):
               if k != "ach_vent"]
     cases += [("no air exchange", toml_text(GOOD_HOUSE, {("ach_infl",): "0.0"}))]
     cases += [(f"broken TOML {t[:12]!r}", toml_text(GOOD_HOUSE) + t) for t in _BROKEN_TOML]
-    failures = []
-    for i, (what, text) in enumerate(cases):
-        work = tmp_path / str(i)
-        work.mkdir()
-        try:
-            _house_refused(work, text)
-        except Exception as exc:  # noqa: BLE001 - a traceback is a failure too: list them all
-            failures.append(_short(what, exc))
-    assert not failures, f"{len(failures)} of {len(cases)}:\n" + "\n".join(failures)
+    assert_all_refused(tmp_path, cases, _house_refused)
 
 
 @SETTINGS
@@ -502,15 +502,7 @@ def _nights_refused(work: Path, text: str) -> None:
 def test_every_single_csv_mutation_is_refused(tmp_path, name):
     mutations, check = {"DRIVERS": (DRIVERS_MUTATIONS, _drivers_refused),
                         "NIGHTS": (NIGHTS_MUTATIONS, _nights_refused)}[name]
-    failures = []
-    for i, (what, text) in enumerate(mutations):
-        work = tmp_path / str(i)
-        work.mkdir()
-        try:
-            check(work, text)
-        except Exception as exc:  # noqa: BLE001 - a traceback is a failure too: list them all
-            failures.append(_short(what, exc))
-    assert not failures, f"{len(failures)} of {len(mutations)}:\n" + "\n".join(failures)
+    assert_all_refused(tmp_path, mutations, check)
 
 
 _CELL = st.one_of(st.sampled_from(BAD_NUMBERS + BAD_STAMPS),
