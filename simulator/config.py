@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+from zoneinfo import ZoneInfo
 
 import pandas as pd
 
@@ -12,7 +15,7 @@ from impctl.model import HouseParameters, default_house
 from impctl.weather import winter_weather
 
 from .faults import Faults
-from .plant import PlantParams, WeatherFeed
+from .plant import Plant, PlantLike, PlantParams, RealisticPlant, WeatherFeed
 
 #: Kronoterm's factory unit id.
 DEFAULT_UNIT_ID = 20
@@ -36,6 +39,17 @@ class SimConfig:
     clock : VirtualClock, optional
         Default: real time.
     plant : PlantParams
+        The simulator's heat-pump options: for ``plant_kind="iso"`` all of them; for the
+        realistic plant the DHW schedule, and ``defrost_period_s`` set turns defrost on.
+    plant_kind : {"realistic", "iso"}
+        ``"realistic"`` (default): :mod:`impctl.plant` (air/furniture capacity, hydronic
+        emitter, cycling heat pump, gains, sensors) with ``realism``; ``"iso"``: the ideal 5R1C
+        with a 20-minute emitter and a modulating heat pump (:class:`impctl_sim.Plant`), the
+        simulator before issue 13.
+    realism : impctl.plant.PlantParams, optional
+        Realism options of the realistic plant; default :func:`default_realism`.
+    timezone : str, optional
+        IANA zone of the house (its gains follow the local day); default: the clock epoch's.
     setpoint_c : float
         Initial loop-1 setpoint (2187) [°C].
     room_thermostat : bool
@@ -63,6 +77,9 @@ class SimConfig:
     weather_seed: int = 0
     clock: VirtualClock | None = None
     plant: PlantParams = field(default_factory=PlantParams)
+    plant_kind: str = "realistic"
+    realism: Any = None
+    timezone: str | None = None
     setpoint_c: float = 21.0
     room_thermostat: bool = True
     unit_id: int = DEFAULT_UNIT_ID
@@ -80,6 +97,35 @@ class SimConfig:
         start = pd.Timestamp(clock.epoch).floor("D") - pd.Timedelta(days=5)
         return WeatherFeed(winter_weather(start=start, days=62, step_s=900,
                                           seed=self.weather_seed))
+
+    def make_plant(self, clock: VirtualClock, t_out_c: float) -> PlantLike:
+        """The plant of ``plant_kind``, holding ``setpoint_c`` at ``t_out_c`` [°C]."""
+        if self.plant_kind == "iso":
+            return Plant(self.house, self.plant, setpoint_c=self.setpoint_c)
+        if self.plant_kind != "realistic":
+            raise ValueError(f"plant_kind must be 'realistic' or 'iso', not {self.plant_kind!r}")
+        realism = self.realism if self.realism is not None else default_realism()
+        if self.plant.defrost_period_s is not None:
+            realism = realism.with_section("heat_pump", defrost=1)
+        zone = ZoneInfo(self.timezone) if self.timezone else clock.epoch.tzinfo or UTC
+
+        def utc_offset_h(posix_s: float) -> float:
+            offset = datetime.fromtimestamp(posix_s, zone).utcoffset()
+            return offset.total_seconds() / 3600.0 if offset else 0.0
+
+        return RealisticPlant(self.house, realism, self.plant, setpoint_c=self.setpoint_c,
+                              t_out_c=t_out_c, seed=self.seed, utc_offset_h=utc_offset_h)
+
+
+def default_realism() -> Any:
+    """The simulator's realistic house: :class:`impctl.plant.PlantParams` defaults (radiators,
+    a weather-compensated modulating air-source heat pump with room influence, 230 W of night
+    gains, a 0.1 K room sensor with a 10-minute lag) with defrost off, as the simulator has
+    always started (``--defrost`` or ``[plant.heat_pump] defrost = 1`` turn it on)."""
+    from impctl.plant import PlantParams as Realism
+
+    params = Realism()
+    return params.with_section("heat_pump", defrost=0)
 
 
 def constant_weather(t_out_c: float) -> pd.Series:

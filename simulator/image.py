@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from impctl.heatpump.decode import to_word
 from impctl.heatpump.registers import REGISTERS, Access, Generation, Kind
 
-from .plant import Plant
+from .plant import PlantLike
 
 LAYOUT: Mapping[Generation, tuple[tuple[int, int], ...]] = {
     Generation.EXTENDED: ((2000, 373),),
@@ -63,28 +63,33 @@ def _tenths(value_c: float) -> int:
     return round(value_c * 10.0)
 
 
-def kronoterm_values(plant: Plant, rw: Mapping[int, int], *, room_thermostat: bool,
+def kronoterm_values(plant: PlantLike, rw: Mapping[int, int], *, room_thermostat: bool,
                      t_air_c: float, t_out_c: float) -> dict[int, int]:
     """Signed raw value of every modelled register (uint32 counters as one integer).
 
-    ``t_air_c`` and ``t_out_c`` are what the sensors show (the plant's values plus any noise).
+    ``t_air_c`` and ``t_out_c`` are what the sensors show (the plant's sensors plus any noise).
+    Compressor, pumps, supply/return temperatures and the thermal and electrical power follow
+    the plant's compressor: on the realistic plant they cycle with it, as a real Kronoterm's do.
     """
     on = bool(plant.system_on)
+    running = bool(plant.compressor_on)
     if not on:
         function = 5
     elif plant.dhw_active:
         function = 1
-    elif plant.p_th_w != 0 or plant.defrost_active:
+    elif running or plant.defrost_active:
         function = 0
     else:
         function = 5
-    running = plant.p_th_w > 0
+    protection = int(plant.protection_bits)
     v = {
-        2000: int(on), 2001: function, 2006: 0, 2007: 1, 2008: 0, 2011: int(plant.defrost_active),
+        2000: int(on), 2001: function,
+        2002: (0x2000 if protection & 1 else 0) | (0x4000 if protection & 2 else 0),
+        2006: 0, 2007: 1, 2008: 0, 2011: int(plant.defrost_active),
         2024: 5000 if rw.get(2026, 1) == 0 else rw.get(2023, 480),
         2027: 1, 2028: 2 if plant.dhw_active else 0, 2034: _tenths(plant.t_w_target_c),
-        2037: 1, 2038: int(running), 2039: 0,
-        2044: 1 if plant.loop_mode else 0, 2045: int(plant.heating_enabled),
+        2037: 1, 2038: int(plant.pump_on), 2039: 0,
+        2044: 1 if plant.loop_mode else 0, 2045: int(plant.loop_pump_on),
         2046: int(plant.heat_demand),
         2090: int(plant.hours_heating), 2091: int(plant.hours_dhw),
         2101: _tenths(plant.t_return_c), 2102: _tenths(plant.t_dhw_c), 2103: _tenths(t_out_c),
@@ -96,8 +101,8 @@ def kronoterm_values(plant: Plant, rw: Mapping[int, int], *, room_thermostat: bo
         2160: _tenths(t_air_c) if room_thermostat else -400,
         2161: -400, 2162: -400, 2163: -400,
         2191: _tenths(plant.room_setpoint_c),
-        2318: int(running), 2326: 15,
-        2327: min(100, max(0, round(100 * plant.p_th_w / plant.max_power_w))),
+        2318: int(running), 2319: protection, 2326: 15,
+        2327: int(plant.load_pct),
         2329: round(plant.p_th_w),
         2361: int(plant.e_el_kwh), 2363: int(plant.e_th_kwh * 10),
         2371: round(plant.cop * 100),
@@ -136,7 +141,7 @@ def register_words(values: Mapping[int, int], generation: Generation,
     return blocks
 
 
-def heat_meter_words(plant: Plant) -> list[int]:
+def heat_meter_words(plant: PlantLike) -> list[int]:
     """Heat-meter device image: address 0–1 = space-heating thermal power [W], uint32."""
-    watts = max(0, round(plant.p_th_w if not plant.dhw_active else 0.0))
+    watts = max(0, round(plant.space_heat_metered_w))
     return [watts >> 16, watts & 0xFFFF]

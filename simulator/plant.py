@@ -61,6 +61,12 @@ class PlantParams:
     defrost_draw_w: float = 1500.0
 
 
+def dhw_tank_c(t_tank_c: float, charge_w: float, dt_s: float) -> float:
+    """DHW tank temperature after ``dt_s`` s of charging at ``charge_w`` W [°C] (display only:
+    a 1.2 MJ/K tank losing towards 20 °C with a 2e5 s time constant)."""
+    return t_tank_c + dt_s * (charge_w / 1.2e6 - (t_tank_c - 20.0) / 2.0e5)
+
+
 class WeatherFeed:
     """Outdoor temperature at any simulated time: linear interpolation, wrapped around.
 
@@ -159,6 +165,49 @@ class Plant:
     def _space_power(self) -> float:
         return 0.0 if self.dhw_active else self.p_th_w
 
+    # What the register image shows; the realistic plant has its own sensors and compressor.
+    kind = "iso"
+
+    @property
+    def t_air_sensor_c(self) -> float:
+        """What the room sensor reads before the simulator's optional noise [°C]."""
+        return self.t_air_c
+
+    @property
+    def t_out_sensor_c(self) -> float:
+        """What the outdoor sensor reads before the simulator's optional noise [°C]."""
+        return self.t_out_c
+
+    @property
+    def compressor_on(self) -> bool:
+        """Compressor running (heating, DHW or defrost)."""
+        return self.p_th_w > 0
+
+    @property
+    def pump_on(self) -> bool:
+        """Main circulation pump running."""
+        return self.p_th_w > 0
+
+    @property
+    def loop_pump_on(self) -> bool:
+        """Loop-1 circulation pump running."""
+        return self.heating_enabled
+
+    @property
+    def load_pct(self) -> int:
+        """Compressor load (modulation) [%]."""
+        return min(100, max(0, round(100 * self.p_th_w / self.max_power_w)))
+
+    @property
+    def protection_bits(self) -> int:
+        """2319: b0 anti-cycling lockout, b1 compressor starting (the ideal plant has none)."""
+        return 0
+
+    @property
+    def space_heat_metered_w(self) -> float:
+        """Space-heating heat a heat meter on the loop reads [W]."""
+        return self._space_power()
+
     def _step_constants(self, dt_s: float) -> _Step:
         if dt_s not in self._steps:
             self._steps[dt_s] = _Step(self._net, dt_s)
@@ -197,7 +246,7 @@ class Plant:
         self.q_em_w = q_em
         self.p_th_w = space + dhw
         if p.dhw_period_s is not None:  # without DHW cycles the tank just stays at 48 °C
-            self.t_dhw_c += dt_s * (dhw / 1.2e6 - (self.t_dhw_c - 20.0) / 2.0e5)
+            self.t_dhw_c = dhw_tank_c(self.t_dhw_c, dhw, dt_s)
         t_hot = (self.t_w_c if not self.dhw_active else self.t_dhw_c) + 273.15
         lift = max(t_hot - (t_out_c + 273.15) + 5.0, 1.0)
         self.cop = min(max(p.cop_eta * t_hot / lift, 1.5), 6.5) if self.p_th_w else 0.0
@@ -208,3 +257,196 @@ class Plant:
         self.hours_heating += dt_s / 3600.0 if space > 0 else 0.0
         self.hours_dhw += dt_s / 3600.0 if dhw > 0 else 0.0
         self.time_s += dt_s
+
+
+class RealisticPlant:
+    """The realistic plant of :mod:`impctl.plant` behind the simulator's registers.
+
+    Air and furniture capacity, a hydronic emitter (radiators or underfloor), a heat pump with a
+    heating curve or a room thermostat that modulates down to a minimum and cycles below it,
+    defrost, night gains and imperfect sensors (see :class:`impctl.plant.PlantParams`). This
+    class adds what a Kronoterm controller adds around it: the loop mode, system switch and
+    2014 correction written over Modbus, DHW charges on a schedule, the internal and solar gains
+    of an occupied house over the local day, energy counters and operating hours.
+
+    Parameters
+    ----------
+    house : HouseParameters
+        One house.
+    realism : impctl.plant.PlantParams
+        Realism options (floats).
+    params : PlantParams
+        The simulator's options; used here: the DHW schedule (``dhw_period_s``,
+        ``dhw_duration_s``). Defrost comes from ``realism.heat_pump``.
+    setpoint_c : float
+        Initial loop-1 setpoint [°C]; the plant starts in the steady state holding it.
+    t_out_c : float
+        Outdoor temperature of that steady state [°C].
+    seed : int
+        Sensor noise and gains.
+    utc_offset_h : callable(POSIX s) → hours, optional
+        Local time of the house (gains follow the local day); default UTC.
+    """
+
+    kind = "realistic"
+
+    def __init__(self, house: HouseParameters, realism, params: PlantParams = PlantParams(),
+                 setpoint_c: float = 21.0, t_out_c: float = 0.0, seed: int = 0,
+                 utc_offset_h=None) -> None:
+        from impctl.plant import OUTPUTS
+        from impctl.plant import Plant as _Core
+
+        if house.n_houses is not None:
+            raise ValueError("the simulator runs one house")
+        self.house = house
+        self.params = params
+        self.realism = realism
+        self.core = _Core(house, realism, setpoint_c=setpoint_c, t_out_c=t_out_c, seed=seed)
+        self._rng = np.random.default_rng([seed, 13])
+        self._utc_offset_h = utc_offset_h or (lambda t: 0.0)
+        self._walk = 0.0
+        self._clear: dict[int, float] = {}
+        # Inputs (registers written by the client).
+        self.setpoint_c = setpoint_c
+        self.correction_k = 0
+        self.loop_mode = 1
+        self.system_on = 1
+        #: Fault hook: a compressor that gives no heat while everything reads normal.
+        self.compressor_failed = False
+        self.time_s = 0.0
+        self.t_dhw_c = 48.0
+        self.e_th_kwh = self.e_el_kwh = 0.0
+        self.hours_heating = self.hours_dhw = 0.0
+        self.internal_gains_w = self.solar_gains_w = 0.0
+        self._out = {name: getattr(self.core, name) for name in OUTPUTS}
+
+    # -- inputs ----------------------------------------------------------------------------
+    @property
+    def heating_enabled(self) -> bool:
+        """Loop 1 on (mode 1 or 2) and the system on."""
+        return bool(self.system_on) and self.loop_mode != 0
+
+    @property
+    def room_setpoint_c(self) -> float:
+        """Effective room setpoint: 2187 plus the 2014 correction [°C]."""
+        return self.setpoint_c + self.correction_k
+
+    @property
+    def max_power_w(self) -> float:
+        """Nominal thermal output of the heat pump [W]; setting it ≤ 1 W fails the
+        compressor (no heat, no error reported), as the ideal plant's cap does."""
+        return 1.0 if self.compressor_failed else self.core.nominal_w
+
+    @max_power_w.setter
+    def max_power_w(self, value: float) -> None:
+        self.compressor_failed = value <= 1.0
+
+    # -- outputs ---------------------------------------------------------------------------
+    def __getattr__(self, name: str):
+        out = self.__dict__.get("_out")
+        if out is not None and name in out:
+            return out[name]
+        raise AttributeError(name)
+
+    t_air_sensor_c = property(lambda self: self._out["t_air_sensed_c"],
+                              doc="What the room sensor reads [°C] (lag, noise, resolution).")
+    t_out_sensor_c = property(lambda self: self._out["t_out_sensed_c"],
+                              doc="What the outdoor sensor reads [°C].")
+    dhw_active = property(lambda self: self._out["dhw"], doc="DHW charge running.")
+    defrost_active = property(lambda self: self._out["defrost"], doc="Defrost running.")
+    pump_on = property(lambda self: self._out["pump_on"], doc="Main circulation pump.")
+    q_em_w = property(lambda self: self._out["emitter_w"], doc="Emitter output to the room [W].")
+    t_w_target_c = property(lambda self: self._out["t_water_target_c"],
+                            doc="Target water temperature of the control [°C].")
+    space_heat_metered_w = property(lambda self: 0.0 if self._out["dhw"] else
+                                    self._out["heat_meter_w"],
+                                    doc="Space heat the heat meter reads [W] (meter errors).")
+
+    @property
+    def loop_pump_on(self) -> bool:
+        """Loop-1 circulation pump: runs whenever the loop is on (also between cycles)."""
+        return self.heating_enabled
+
+    @property
+    def p_th_w(self) -> float:
+        """Thermal output the controller reports (2329): metered space heat + DHW [W]."""
+        return self.space_heat_metered_w + self._out["dhw_w"]
+
+    @property
+    def p_el_w(self) -> float:
+        """Electrical power [W]."""
+        return self._out["electric_w"]
+
+    @property
+    def cop(self) -> float:
+        """Instantaneous COP [-] (0 while the compressor is off)."""
+        heat = abs(self._out["heat_pump_w"]) + self._out["dhw_w"]
+        el = self._out["electric_w"] - self.core.core.standby_w[0]
+        return heat / el if self._out["compressor_on"] and el > 0 else 0.0
+
+    @property
+    def heat_demand(self) -> bool:
+        """Room below its setpoint while heating is on (the thermostat demand bit)."""
+        return self.heating_enabled and self._out["t_air_sensed_c"] < self.room_setpoint_c
+
+    @property
+    def load_pct(self) -> int:
+        """Compressor modulation [%] of nominal."""
+        return min(100, max(0, round(100 * self._out["heat_pump_w"] / self.core.nominal_w)))
+
+    @property
+    def protection_bits(self) -> int:
+        """2319: b0 anti-cycling lockout (heating wanted, minimum off time running),
+        b1 compressor starting (within its ramp)."""
+        ctl, hp = self.core.core.control, self.realism.heat_pump
+        timer = float(ctl.timer_s[0])
+        locked = (self.heating_enabled and not self._out["compressor_on"]
+                  and timer < float(hp.min_off_s))
+        starting = self._out["compressor_on"] and timer < float(hp.ramp_s)
+        return int(locked) | (int(starting) << 1)
+
+    # -- step ------------------------------------------------------------------------------
+    def _gains(self, dt_s: float, t_out_c: float) -> tuple[float, float]:
+        """Internal and solar gains of the local hour [W] (levels of ``realism.gains``)."""
+        g = self.realism.gains
+        local_s = self.time_s + 3600.0 * self._utc_offset_h(self.time_s)
+        hour = (local_s / 3600.0) % 24.0
+        night = hour >= 22.0 or hour < 7.0
+        level = float(g.night_w if night else g.day_w)
+        self._walk += float(self._rng.standard_normal()) * math.sqrt(dt_s / 3600.0)
+        internal = min(max(level + float(g.drift_w) * self._walk, 0.0), 2.0 * level)
+        day = int(local_s // 86400)
+        if day not in self._clear:
+            self._clear = {day: float(self._rng.uniform())}
+        sun = math.sin(math.pi * (hour - 8.0) / 8.0) if 8.0 <= hour <= 16.0 else 0.0
+        return internal, float(g.solar_peak_w) * sun * self._clear[day]
+
+    def step(self, dt_s: float, t_out_c: float) -> None:
+        """Advance the plant by ``dt_s`` seconds at outdoor temperature ``t_out_c``."""
+        p = self.params
+        on = bool(self.system_on)
+        dhw = on and p.dhw_period_s is not None and (self.time_s % p.dhw_period_s
+                                                      < p.dhw_duration_s)
+        self.internal_gains_w, self.solar_gains_w = self._gains(dt_s, t_out_c)
+        core = self.core
+        core.setpoint_c = self.room_setpoint_c
+        core.loop_on = self.loop_mode != 0 and not self.compressor_failed
+        core.system_on = on
+        self._out = out = core.step(dt_s, t_out_c, dhw=dhw,
+                                    internal_gains_w=self.internal_gains_w,
+                                    solar_gains_w=self.solar_gains_w)
+        heat = max(out["heat_pump_w"], 0.0) + out["dhw_w"]
+        self.e_th_kwh += heat * dt_s / 3.6e6
+        self.e_el_kwh += out["electric_w"] * dt_s / 3.6e6
+        if out["compressor_on"]:
+            if out["dhw"]:
+                self.hours_dhw += dt_s / 3600.0
+            else:
+                self.hours_heating += dt_s / 3600.0
+        if p.dhw_period_s is not None:
+            self.t_dhw_c = dhw_tank_c(self.t_dhw_c, out["dhw_w"], dt_s)
+        self.time_s += dt_s
+
+
+#: Either plant; the register image and the server use only their common surface.
+PlantLike = Plant | RealisticPlant

@@ -46,7 +46,6 @@ from .image import (
     register_words,
     writable,
 )
-from .plant import Plant
 
 _LOG = logging.getLogger(__name__)
 _MAX_STEPS_PER_TICK = 2000
@@ -125,9 +124,10 @@ class KronotermSimulator:
         self.clock = config.clock or VirtualClock.real()
         self.faults = config.faults
         self.stats = SimStats()
-        self.plant = Plant(config.house, config.plant, setpoint_c=config.setpoint_c)
-        self.rw = initial_rw(config.setpoint_c)
         self._weather = config.weather_feed(self.clock)
+        warm_from = self.clock.now_s() - config.warmup_s
+        self.plant = config.make_plant(self.clock, self._weather.t_out_c(warm_from))
+        self.rw = initial_rw(config.setpoint_c)
         self._rng = np.random.default_rng(config.seed)
         self._faults_file = faults_file
         self._faults_mtime: float | None = None
@@ -225,7 +225,8 @@ class KronotermSimulator:
     # ---- model -----------------------------------------------------------------------------
     def _warm_up(self) -> None:
         start = self.clock.now_s()
-        dt = 300.0
+        # The realistic plant starts steady and costs more per step: coarser warm-up steps.
+        dt = 300.0 if self.plant.kind == "iso" else 600.0
         self.plant.time_s = start - self.config.warmup_s
         while self.plant.time_s + dt <= start:
             self.plant.step(dt, self._weather.t_out_c(self.plant.time_s + dt / 2))
@@ -260,8 +261,8 @@ class KronotermSimulator:
         assert self._server is not None
         cfg = self.config
         values = kronoterm_values(self.plant, self.rw, room_thermostat=cfg.room_thermostat,
-                                  t_air_c=self._sensor(self.plant.t_air_c),
-                                  t_out_c=self._sensor(self.plant.t_out_c))
+                                  t_air_c=self._sensor(self.plant.t_air_sensor_c),
+                                  t_out_c=self._sensor(self.plant.t_out_sensor_c))
         self._internal = True  # lets the action tell model updates from client writes
         try:
             for address, words in register_words(values, cfg.generation,

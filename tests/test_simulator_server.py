@@ -83,7 +83,7 @@ def test_other_unit_ids_get_no_answer():
 
 def test_setpoint_write_changes_the_simulated_house():
     async def body():
-        config = SimConfig(clock=clock(36000.0), step_s=60.0)
+        config = SimConfig(clock=clock(36000.0), step_s=60.0, plant_kind="iso")
         async with simulator(config) as sim, client(sim) as hp:
             start = sim.plant.time_s
             await in_thread(umodbus_call, sim.port, tcp.write_single_register(20, 2186, 180))
@@ -99,8 +99,8 @@ def test_setpoint_write_changes_the_simulated_house():
 
 def test_sensor_noise_is_optional_and_quantised():
     async def body():
-        quiet = SimConfig(clock=clock(1.0))
-        noisy = SimConfig(clock=clock(1.0), noise_sd_k=0.3, seed=4)
+        quiet = SimConfig(clock=clock(1.0), plant_kind="iso")
+        noisy = SimConfig(clock=clock(1.0), noise_sd_k=0.3, seed=4, plant_kind="iso")
         async with simulator(quiet) as a, simulator(noisy) as b:
             seen_a, seen_b = set(), set()
             for _ in range(20):
