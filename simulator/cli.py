@@ -19,18 +19,28 @@ import click
 from impctl.errors import InputError
 from impctl.heatpump.clock import VirtualClock
 from impctl.heatpump.registers import Generation
-from impctl.model import default_house, load_house
+from impctl.model import default_house
 from impctl.weather import read_weather
 
 from .config import SimConfig
 from .faults import parse_faults
-from .plant import PlantParams
+from .plant import PlantParams, describe_plant
 from .server import KronotermSimulator
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--house", type=click.Path(dir_okay=False, path_type=Path),
-              help="House TOML (impctl.model.load_house); default: the built-in house.")
+              help="House TOML (impctl.model.load_house; its optional [plant.*] tables set the "
+                   "realistic plant's options); default: the built-in house.")
+@click.option("--plant", "plant_kind", type=click.Choice(["realistic", "iso"]),
+              default="realistic", show_default=True,
+              help="realistic: air/furniture capacity, hydronic emitter, cycling heat pump, "
+                   "gains, sensors (impctl.plant); iso: the ideal 5R1C with a 20-min emitter.")
+@click.option("--emitter", type=click.Choice(["radiators", "underfloor"]),
+              help="Realistic plant: emitter kind (overrides the house file).")
+@click.option("--control", type=click.Choice(["curve", "thermostat"]),
+              help="Realistic plant: weather curve with room influence, or an on/off room "
+                   "thermostat (overrides the house file).")
 @click.option("--host", default="127.0.0.1", show_default=True, help="TCP address to bind.")
 @click.option("--port", default=5020, show_default=True, type=int, help="TCP port (0 = free).")
 @click.option("--allow-remote", is_flag=True, help="Allow binding to a non-loopback address.")
@@ -64,8 +74,8 @@ from .server import KronotermSimulator
               help="Sensor noise SD on T_air/T_out [K].")
 @click.option("--seed", default=0, show_default=True, type=int, help="Noise seed.")
 @click.option("-v", "--verbose", count=True, help="More logging (-vv for pymodbus debug).")
-def cli(house, host, port, allow_remote, rtu, baudrate, generation, speed, epoch, wall_epoch,
-        clock_spec, clock_file, faults, faults_file, weather, weather_seed, setpoint,
+def cli(house, plant_kind, emitter, control, host, port, allow_remote, rtu, baudrate,
+        generation, speed, epoch, wall_epoch, clock_spec, clock_file, faults, faults_file, weather, weather_seed, setpoint,
         no_thermostat, heat_meter_id, dhw_period_h, defrost, noise, seed, verbose) -> None:
     """Simulated Kronoterm heat pump (5R1C house) on a real Modbus server."""
     logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2),
@@ -77,8 +87,9 @@ def cli(house, host, port, allow_remote, rtu, baudrate, generation, speed, epoch
         clock = VirtualClock(start, speed, wall_epoch)
     params = PlantParams(dhw_period_s=None if dhw_period_h is None else dhw_period_h * 3600,
                          defrost_period_s=5400.0 if defrost else None)
+    house_params, realism = _house_and_realism(house, emitter, control)
     config = SimConfig(
-        house=load_house(house) if house else default_house(),
+        house=house_params, plant_kind=plant_kind, realism=realism,
         generation=Generation(generation),
         weather=read_weather(weather) if weather else None,
         weather_seed=weather_seed, clock=clock, plant=params, setpoint_c=setpoint,
@@ -86,6 +97,34 @@ def cli(house, host, port, allow_remote, rtu, baudrate, generation, speed, epoch
         seed=seed, faults=parse_faults(faults),
     )
     asyncio.run(_serve(config, host, port, allow_remote, rtu, baudrate, faults_file, clock_file))
+
+
+def _house_and_realism(path: Path | None, emitter: str | None, control: str | None):
+    """The house and the realistic plant's options: simulator defaults, then the house
+    file's [plant.*] tables, then the --emitter/--control flags."""
+    from impctl.plant import CONTROL_CURVE, CONTROL_THERMOSTAT, Emitter
+    from impctl.plant.housefile import load_plant
+
+    from .config import default_realism
+
+    if path is None:
+        house, realism = default_house(), default_realism()
+    else:
+        house, realism = load_plant(path, default_realism())
+    if emitter == "underfloor":
+        realism = realism.with_section("emitter", **_fields(Emitter.underfloor()))
+    elif emitter == "radiators":
+        realism = realism.with_section("emitter", **_fields(Emitter()))
+    if control:
+        realism = realism.with_section(
+            "heat_pump", control=CONTROL_CURVE if control == "curve" else CONTROL_THERMOSTAT)
+    return house, realism
+
+
+def _fields(section) -> dict:
+    from dataclasses import fields
+
+    return {f.name: getattr(section, f.name) for f in fields(section)}
 
 
 def _parse_epoch(text: str) -> datetime:
@@ -115,7 +154,7 @@ async def _serve(config: SimConfig, host: str, port: int, allow_remote: bool, rt
         where = f"rtu socket://{sim.host}:{bound}" if rtu.startswith("socket://") else f"rtu {rtu}"
     click.echo(f"impctl-sim: serving {where} unit {config.unit_id} "
                f"{config.generation.value}; faults {sim.faults.describe()}; "
-               f"clock {sim.clock.spec()}")
+               f"clock {sim.clock.spec()}; plant {describe_plant(sim.plant)}")
     sys.stdout.flush()
     try:
         await stop.wait()

@@ -450,3 +450,25 @@ class RealisticPlant:
 
 #: Either plant; the register image and the server use only their common surface.
 PlantLike = Plant | RealisticPlant
+
+
+def describe_plant(plant: PlantLike) -> str:
+    """One line: which plant, and the realistic plant's main options."""
+    if plant.kind == "iso":
+        return f"iso (ideal 5R1C, emitter τ {plant.params.emitter_tau_s / 60:.0f} min)"
+    return "realistic (" + realism_summary(plant.realism) + ")"
+
+
+def realism_summary(realism) -> str:
+    """The realistic plant's main options in a few words (emitter, control, sensor)."""
+    from impctl.plant import CONTROL_CURVE, CONTROL_THERMOSTAT, UNDERFLOOR
+
+    e, hp, s, g = realism.emitter, realism.heat_pump, realism.sensors, realism.gains
+    emitter = "underfloor" if int(e.kind) == UNDERFLOOR else "radiators"
+    control = {CONTROL_CURVE: "weather curve", CONTROL_THERMOSTAT: "room thermostat"}.get(
+        int(hp.control), "ideal control")
+    unit = "on/off" if float(hp.min_modulation) >= 1.0 else (
+        f"modulating ≥ {float(hp.min_modulation):.0%}")
+    return (f"{emitter}, {control}, {unit}, defrost {'on' if int(hp.defrost) else 'off'}, "
+            f"night gains {float(g.night_w):.0f} W, room sensor {float(s.t_air_quantum_k):g} K "
+            f"lag {float(s.t_air_lag_s) / 60:.0f} min")
