@@ -53,7 +53,8 @@ class PlantCore:
         self.floor_area = _b(net.floor_area_m2, n)
         e, hp, cap = params.emitter, params.heat_pump, params.capacities
         self.exponent = _b(e.exponent, n)
-        self.k_w = _b(em.output_constant(self.hlc, e), n)
+        self.k_w = _b(em.output_constant(self.hlc, e, self.floor_area), n)
+        self.g_pipe = _b(em.pipe_conductance(self.k_w, self.hlc, e), n)
         self.nominal_w = _b(hp.sizing, n) * em.design_load_w(self.hlc, e)
         want_em = _b(em.capacity_j_per_k(self.k_w, e, self.floor_area, self.nominal_w), n)
         volume = self.floor_area * _b(house.wall_height, n)
@@ -66,7 +67,8 @@ class PlantCore:
         self.network = Network.build(house, self.split, _b(cap.furniture_rate_per_s, n), n)
         self.solver = Solver(self.network)
         self.controller = Controller(hp, self.nominal_w, self.k_w, self.exponent, self.hlc,
-                                     self.c_em, _b(e.design_water_c, n), n)
+                                     self.c_em, _b(em.node_design_c(self.k_w, self.hlc, e), n),
+                                     n)
         self.ideal = _b(hp.control, n) == CONTROL_IDEAL
         self.any_ideal = bool(self.ideal.any())
         cap_house = _b(house.max_heating_power, n)
@@ -123,7 +125,8 @@ class PlantCore:
         comp = np.where(self.ideal, power > 0, ctl.compressor_on)
         dhw_w = np.where(dhw, self.nominal_w, 0.0)
         half = power / (2.0 * self.flow_w_per_k)
-        supply, ret = sol.water + half, sol.water - half
+        water = sol.water + np.maximum(power, 0.0) / self.g_pipe
+        supply, ret = water + half, water - half
         t_hot = np.where(dhw, 50.0, supply)
         c = cop(t_hot, t_out_c, self.cop_eta)
         p_el = np.where(comp, (np.abs(power) + dhw_w) / c, 0.0) + self.standby_w

@@ -63,7 +63,11 @@ class Plant:
         self.system_on = True
         self.time_s = 0.0
         self._last: dict[str, float | bool] = {}
-        self.step(1e-3, t_out_c)  # fill the outputs without moving the state noticeably
+        # Fill the outputs with a negligible step, then restore the exact start (state and noise).
+        rng_state = self.core.sensors.rng.bit_generator.state
+        self.step(1e-3, t_out_c)
+        self.core.start_steady(setpoint_c, t_out_c)
+        self.core.sensors.rng.bit_generator.state = rng_state
         self.time_s = 0.0
 
     @property
