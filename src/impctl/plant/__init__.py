@@ -12,6 +12,7 @@ houses (batch), :mod:`.stepper` one house step by step.
 """
 
 from .envelope import CapacitySplit, split_capacity
+from .housefile import load_plant, plant_params_from_mapping
 from .params import (
     CONTROL_CURVE,
     CONTROL_IDEAL,
@@ -47,7 +48,9 @@ __all__ = [
     "PlantParams",
     "PlantRun",
     "Sensors",
+    "load_plant",
     "periodic",
+    "plant_params_from_mapping",
     "simulate_plant",
     "split_capacity",
 ]

@@ -104,62 +104,79 @@ class Controller:
         self.defrost_interval = b(hp.defrost_interval_s)
         self.defrost_duration = b(hp.defrost_duration_s)
         self.defrost_w = b(hp.defrost_draw) * self.nominal_w
+        # Precomputed for the per-step arithmetic.
+        self._hlc_per_k = self.hlc / self.k_w
+        self._inv_n = 1.0 / self.n_exp
+        self._c_per_tau = self.c_em / self.tau_c
+        self._p_min_nom = self.p_min_frac * self.nominal_w
+        self._any_thermostat = bool(self.thermostat.any())
+        self._any_defrost = bool(self.defrost_on.any())
+        self._no = np.zeros(n, bool)
 
     def p_max_w(self, t_out_c: Array) -> Array:
         """Capacity at outdoor ``t_out_c`` [W]."""
-        f = np.clip(1.0 + self.cap_per_k * (t_out_c - CAPACITY_REF_C), *CAPACITY_CLIP)
-        return self.nominal_w * f
+        f = 1.0 + self.cap_per_k * (t_out_c - CAPACITY_REF_C)
+        return self.nominal_w * np.minimum(np.maximum(f, CAPACITY_CLIP[0]), CAPACITY_CLIP[1])
 
     def target_water_c(self, setpoint_c: Array, t_air_sensed: Array,
                        t_out_sensed: Array) -> Array:
         """Heating curve with room influence [°C]."""
-        load = self.hlc * np.maximum(setpoint_c - t_out_sensed, 0.0)
-        curve = setpoint_c + self.curve_gain * (load / self.k_w) ** (1.0 / self.n_exp)
+        load = self._hlc_per_k * np.maximum(setpoint_c - t_out_sensed, 0.0)
+        curve = setpoint_c + self.curve_gain * load ** self._inv_n
         target = curve + self.room_k * (setpoint_c - t_air_sensed)
-        return np.clip(target, WATER_MIN_C, self.water_max_c)
+        return np.minimum(np.maximum(target, WATER_MIN_C), self.water_max_c)
 
     def step(self, st: ControlState, dt: float, enabled: NDArray[np.bool_], setpoint_c: Array,
              t_air_sensed: Array, t_out_sensed: Array, t_out_c: Array, t_water_c: Array,
              t_air_c: Array, dhw: NDArray[np.bool_],
-             force_defrost: NDArray[np.bool_]) -> ControlOutput:
-        """Decide this step's output and advance ``st`` by ``dt`` seconds."""
-        sp = np.where(enabled, setpoint_c, 20.0)
-        target = self.target_water_c(sp, t_air_sensed, t_out_sensed)
-        band = 0.5 * self.hyst_room
-        st.calling = np.where(st.calling, t_air_sensed < sp + band, t_air_sensed < sp - band)
+             force_defrost: NDArray[np.bool_] | None) -> ControlOutput:
+        """Decide this step's output and advance ``st`` by ``dt`` seconds.
+
+        ``setpoint_c`` must be finite where ``enabled`` is False (any value).
+        """
+        target = self.target_water_c(setpoint_c, t_air_sensed, t_out_sensed)
         space_on = enabled & ~dhw
-        demand = space_on & (~self.thermostat | st.calling)
+        if self._any_thermostat:
+            band = 0.5 * self.hyst_room
+            st.calling = np.where(st.calling, t_air_sensed < setpoint_c + band,
+                                  t_air_sensed < setpoint_c - band)
+            demand = space_on & (~self.thermostat | st.calling)
+        else:
+            demand = space_on
         d = np.maximum(target - t_air_c, 0.0)
-        p_req = self.k_w * d ** self.n_exp + self.c_em * (target - t_water_c) / self.tau_c
-        p_req = np.where(demand, np.maximum(p_req, 0.0), 0.0)
+        p_req = self.k_w * d ** self.n_exp + self._c_per_tau * (target - t_water_c)
+        p_req = np.maximum(p_req, 0.0) * demand
         p_max = self.p_max_w(t_out_c)
-        p_min = np.minimum(self.p_min_frac * self.nominal_w, p_max)
+        p_min = np.minimum(self._p_min_nom, p_max)
         low = p_req < p_min
-        start = (~st.running & demand & (st.timer_s >= self.min_off)
+        running0 = st.running
+        start = (demand & (st.timer_s >= self.min_off) & ~running0
                  & (~low | ((p_req > 0) & (t_water_c < target - self.hyst_w))))
-        stop = st.running & (~space_on | ((st.timer_s >= self.min_on)
-                                          & (~demand | (low & (t_water_c > target + self.hyst_w)))))
-        switched = start | stop
-        running = (st.running | start) & ~stop
-        # Defrost: reverse cycle after enough run time in the frost band.
-        frosty = (t_out_c >= DEFROST_RANGE_C[0]) & (t_out_c <= DEFROST_RANGE_C[1])
-        begin = running & (st.defrost_left_s <= 0) & (
-            force_defrost | (self.defrost_on & frosty
-                             & (st.run_since_defrost_s >= self.defrost_interval)))
-        st.defrost_left_s = np.where(begin, self.defrost_duration, st.defrost_left_s)
-        st.defrost_left_s = np.where(running, st.defrost_left_s, 0.0)
-        defrosting = st.defrost_left_s > 0
-        cmd = np.clip(p_req, p_min, p_max)
-        prev = np.where(start | (st.power_w < 0), 0.0, st.power_w)
-        power = np.minimum(cmd, prev + self.ramp_w_per_s * dt)
-        power = np.where(running, power, 0.0)
-        power = np.where(defrosting, -self.defrost_w, power)
-        st.run_since_defrost_s = np.where(begin, 0.0, st.run_since_defrost_s
-                                          + np.where(running & ~defrosting, dt, 0.0))
-        st.defrost_left_s = np.maximum(st.defrost_left_s - dt, 0.0)
-        st.timer_s = np.where(switched, dt, st.timer_s + dt)
+        stop = running0 & (~space_on | ((st.timer_s >= self.min_on) & (
+            ~demand | (low & (t_water_c > target + self.hyst_w)))))
+        running = (running0 | start) & ~stop
+        cmd = np.minimum(np.maximum(p_req, p_min), p_max)
+        prev = st.power_w * ~start
+        power = np.minimum(cmd, np.maximum(prev, 0.0) + self.ramp_w_per_s * dt) * running
+        st.timer_s = np.where(start | stop, dt, st.timer_s + dt)
         st.running = running
-        st.power_w = np.where(defrosting, st.power_w, power)
+        if self._any_defrost or force_defrost is not None:
+            # Reverse cycle after enough run time in the frost band.
+            frosty = (t_out_c >= DEFROST_RANGE_C[0]) & (t_out_c <= DEFROST_RANGE_C[1])
+            due = self.defrost_on & frosty & (st.run_since_defrost_s >= self.defrost_interval)
+            if force_defrost is not None:
+                due = due | force_defrost
+            begin = running & (st.defrost_left_s <= 0) & due
+            left = np.where(begin, self.defrost_duration, st.defrost_left_s) * running
+            defrosting = left > 0
+            st.power_w = np.where(defrosting, st.power_w, power)
+            power = np.where(defrosting, -self.defrost_w, power)
+            st.run_since_defrost_s = np.where(begin, 0.0, st.run_since_defrost_s
+                                              + dt * (running & ~defrosting))
+            st.defrost_left_s = np.maximum(left - dt, 0.0)
+        else:
+            defrosting = self._no
+            st.power_w = power
         return ControlOutput(power, running | dhw, defrosting, target, p_max)
 
 

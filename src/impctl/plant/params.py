@@ -85,7 +85,8 @@ class Emitter(_Ranged):
         n [-]; radiators 1.3 ± 0.1 (EN 442), underfloor ≈ 1.1 (RH §2). Range 1.0–1.4.
     design_water_c : float, default 45
         Mean water temperature at design conditions [°C]; heat-pump radiators 40–55, underfloor
-        28–38 (RH §2: UFH water 25–45 °C) [ranges own choice]. Range 28–55.
+        28–38 (RH §2: UFH water 25–45 °C) [ranges own choice]. Range 28–55. Sizes the radiators;
+        for underfloor (sized by its floor area) it sets only the water-to-screed gap.
     design_t_out_c : float, default −10
         Design outdoor temperature [°C] [own choice]. Range −20…−5.
     radiator_j_per_k_per_w : float, default 36
@@ -94,7 +95,8 @@ class Emitter(_Ranged):
     screed_j_per_m2k : float, default 130000
         Underfloor screed [J/(m²K)] (RH §2: 130–250 kJ/(m²K), 65 mm screed to 125 mm slab).
     ufh_area_share : float, default 0.6
-        Floor share with underfloor loops [-] [own choice]. Range 0.3–1.
+        Floor share with underfloor loops [-] [own choice]. Range 0.3–1. Output
+        8.92·Δθ^n W per heated m² (RH §2).
     buffer_l_per_kw : float, default 0
         Buffer tank [L per kW of heat-pump nominal] (RH §3: 10–20 L/kW when fitted). Range 0–20.
     """

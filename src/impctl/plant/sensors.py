@@ -18,11 +18,15 @@ Array = NDArray[np.float64]
 
 #: Resolution of the outdoor-temperature register [K].
 T_OUT_QUANTUM_K = 0.1
+#: Steps of noise drawn at once.
+_BLOCK = 256
 
 
 def quantise(x: Array, quantum: Array) -> Array:
     """Round to multiples of ``quantum`` (0 = no rounding)."""
     q = np.asarray(quantum, dtype=float)
+    if np.all(q > 0):
+        return np.round(x / q) * q
     safe = np.where(q > 0, q, 1.0)
     return np.where(q > 0, np.round(x / safe) * safe, x)
 
@@ -46,6 +50,18 @@ class SensorBank:
         self.any_out_noise = bool(np.any(self.out_noise > 0))
         self.any_meter_noise = bool(np.any(self.meter_noise > 0))
         self.lagged: Array | None = None
+        self.alpha: Array | None = None
+        self._alpha_dt = -1.0
+        self._noise = np.empty((0, 3, n))
+        self._k = 0
+
+    def _draw(self) -> Array:
+        """Standard normals for (air, out, meter) of one step, drawn in blocks for speed."""
+        if self._k >= len(self._noise):
+            self._noise = self.rng.standard_normal((_BLOCK, 3, self.n))
+            self._k = 0
+        self._k += 1
+        return self._noise[self._k - 1]
 
     def reset(self, t_air_c: Array) -> None:
         """Start the sensor housing at ``t_air_c`` [°C]."""
@@ -56,16 +72,22 @@ class SensorBank:
         """Advance the lag by ``dt`` s → (T_air sensed [°C], T_out sensed [°C], heat [W])."""
         if self.lagged is None:
             self.reset(t_air_c)
-        a = np.where(self.lag_s > 0, 1.0 - np.exp(-dt / np.maximum(self.lag_s, 1e-9)), 1.0)
-        self.lagged = self.lagged + a * (t_air_c - self.lagged)
+        if dt != self._alpha_dt:
+            self.alpha = np.where(self.lag_s > 0,
+                                  -np.expm1(-dt / np.maximum(self.lag_s, 1e-9)), 1.0)
+            self._alpha_dt = dt
+        self.lagged = self.lagged + self.alpha * (t_air_c - self.lagged)
         air = self.lagged + self.offset
+        noisy = self.any_air_noise or self.any_out_noise or self.any_meter_noise
+        z = self._draw() if noisy else None
         if self.any_air_noise:
-            air = air + self.noise * self.rng.standard_normal(self.n)
+            air = air + self.noise * z[0]
         out = t_out_c + self.out_offset
         if self.any_out_noise:
-            out = out + self.out_noise * self.rng.standard_normal(self.n)
+            out = out + self.out_noise * z[1]
         heat = heat_w * self.meter_gain
         if self.any_meter_noise:
-            heat = heat * (1.0 + self.meter_noise * self.rng.standard_normal(self.n))
+            heat = heat * (1.0 + self.meter_noise * z[2])
         heat = np.where(self.positive_only, np.maximum(heat, 0.0), heat)
-        return quantise(air, self.quantum), quantise(out, T_OUT_QUANTUM_K), heat
+        out = np.round(out / T_OUT_QUANTUM_K) * T_OUT_QUANTUM_K
+        return quantise(air, self.quantum), out, heat

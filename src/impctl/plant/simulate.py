@@ -53,7 +53,8 @@ class PlantCore:
         self.floor_area = _b(net.floor_area_m2, n)
         e, hp, cap = params.emitter, params.heat_pump, params.capacities
         self.exponent = _b(e.exponent, n)
-        self.k_w = _b(em.output_constant(self.hlc, e), n)
+        self.k_w = _b(em.output_constant(self.hlc, e, self.floor_area), n)
+        self.g_pipe = _b(em.pipe_conductance(self.k_w, self.hlc, e), n)
         self.nominal_w = _b(hp.sizing, n) * em.design_load_w(self.hlc, e)
         want_em = _b(em.capacity_j_per_k(self.k_w, e, self.floor_area, self.nominal_w), n)
         volume = self.floor_area * _b(house.wall_height, n)
@@ -66,7 +67,8 @@ class PlantCore:
         self.network = Network.build(house, self.split, _b(cap.furniture_rate_per_s, n), n)
         self.solver = Solver(self.network)
         self.controller = Controller(hp, self.nominal_w, self.k_w, self.exponent, self.hlc,
-                                     self.c_em, _b(e.design_water_c, n), n)
+                                     self.c_em, _b(em.node_design_c(self.k_w, self.hlc, e), n),
+                                     n)
         self.ideal = _b(hp.control, n) == CONTROL_IDEAL
         self.any_ideal = bool(self.ideal.any())
         cap_house = _b(house.max_heating_power, n)
@@ -104,9 +106,11 @@ class PlantCore:
     # --- one step ------------------------------------------------------------------------
     def step(self, dt: float, t_out_c: Array, setpoint_c: Array, enabled: NDArray[np.bool_],
              phi_int: Array, phi_sol: Array, dhw: NDArray[np.bool_],
-             force_defrost: NDArray[np.bool_]) -> dict[str, Array]:
-        """Advance all houses by ``dt`` seconds; returns this step's outputs (see
-        :data:`OUTPUTS`)."""
+             force_defrost: NDArray[np.bool_] | None = None,
+             want: frozenset[str] | None = None) -> dict[str, Array]:
+        """Advance all houses by ``dt`` seconds; returns this step's outputs (:data:`OUTPUTS`,
+        or only those in ``want``). ``setpoint_c`` must be finite (any value where not
+        ``enabled``)."""
         st = self.state
         g_em = em.secant_conductance(self.k_w, self.exponent, st.water, st.air)
         air_free, k_air = self.solver.prepare(st, dt, t_out_c, phi_int, phi_sol, self.c_em, g_em)
@@ -114,30 +118,38 @@ class PlantCore:
                                    self.sensed_out, t_out_c, st.water, st.air, dhw,
                                    force_defrost)
         power = ctl.power_w
+        comp = ctl.compressor_on
         if self.any_ideal:
             # Annex C C.13: θ_air is affine in P, so the setpoint power is exact.
             need = np.where(enabled & ~dhw, (setpoint_c - air_free) / k_air, 0.0)
             ideal_p = np.minimum(np.maximum(need, 0.0), self.ideal_max_w)
             power = np.where(self.ideal, ideal_p, power)
+            comp = np.where(self.ideal, power > 0, comp)
         sol = self.solver.finish(st, air_free, k_air, power)
-        comp = np.where(self.ideal, power > 0, ctl.compressor_on)
-        dhw_w = np.where(dhw, self.nominal_w, 0.0)
-        half = power / (2.0 * self.flow_w_per_k)
-        supply, ret = sol.water + half, sol.water - half
-        t_hot = np.where(dhw, 50.0, supply)
-        c = cop(t_hot, t_out_c, self.cop_eta)
-        p_el = np.where(comp, (np.abs(power) + dhw_w) / c, 0.0) + self.standby_w
         self.sensed_air, self.sensed_out, meter = self.sensors.read(dt, sol.air, t_out_c, power)
-        return {
+        out = {
             "t_air_c": sol.air, "t_air_sensed_c": self.sensed_air, "t_out_c": t_out_c,
             "t_out_sensed_c": self.sensed_out, "t_mass_c": sol.mass, "t_surface_c": sol.surface,
-            "t_furniture_c": sol.furniture, "t_water_c": sol.water, "t_supply_c": supply,
-            "t_return_c": ret, "t_water_target_c": ctl.target_water_c,
-            "heat_pump_w": power, "emitter_w": sol.emitter_w, "heat_meter_w": meter,
-            "dhw_w": dhw_w, "electric_w": p_el, "compressor_on": comp,
-            "pump_on": enabled | comp, "defrost": ctl.defrost, "dhw": dhw.copy(),
-            "loss_w": sol.loss_w, "gains_w": sol.gains_w,
+            "t_furniture_c": sol.furniture, "t_water_c": sol.water,
+            "t_water_target_c": ctl.target_water_c, "heat_pump_w": power,
+            "emitter_w": sol.emitter_w, "heat_meter_w": meter, "compressor_on": comp,
+            "defrost": ctl.defrost, "dhw": dhw, "loss_w": sol.loss_w, "gains_w": sol.gains_w,
         }
+        if want is None or not want.isdisjoint(_HYDRAULIC):
+            dhw_w = self.nominal_w * dhw
+            water = sol.water + np.maximum(power, 0.0) / self.g_pipe
+            half = power / (2.0 * self.flow_w_per_k)
+            t_hot = np.where(dhw, 50.0, water + half)
+            c = cop(t_hot, t_out_c, self.cop_eta)
+            out.update({
+                "t_supply_c": water + half, "t_return_c": water - half, "dhw_w": dhw_w,
+                "electric_w": (np.abs(power) + dhw_w) / c * comp + self.standby_w,
+                "pump_on": enabled | comp,
+            })
+        return out
+
+
+_HYDRAULIC = frozenset({"t_supply_c", "t_return_c", "dhw_w", "electric_w", "pump_on"})
 
 
 #: Output names of a step (units in the names; booleans for compressor/pump/defrost/dhw).
@@ -248,14 +260,15 @@ def simulate_plant(
     phi_int = _inputs("internal_gains_w", internal_gains_w, n_steps, n, 0.0)
     phi_sol = _inputs("solar_gains_w", solar_gains_w, n_steps, n, 0.0)
     dhw_in = _inputs("dhw", dhw, n_steps, n, 0.0) > 0.5
-    no_defrost = np.zeros(n, bool)
+    want = frozenset(outputs)
     n_rec = n_steps // record_every
+    on = ~np.isnan(sp)
+    sp_fin = np.where(on, sp, 20.0)
     keep = {k: np.empty((n_rec, n), dtype=bool if k in _BOOL else float) for k in outputs}
     for i in range(n_steps):
-        sp_i = sp[i]
-        enabled = ~np.isnan(sp_i)
-        out = core.step(float(dt_s), te[i], np.where(enabled, sp_i, 20.0), enabled, phi_int[i],
-                        phi_sol[i], dhw_in[i], no_defrost)
+        enabled = on[i]
+        out = core.step(float(dt_s), te[i], sp_fin[i], enabled, phi_int[i], phi_sol[i],
+                        dhw_in[i], None, want)
         if (i + 1) % record_every == 0 and (i + 1) // record_every <= n_rec:
             r = (i + 1) // record_every - 1
             for k in outputs:

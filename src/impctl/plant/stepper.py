@@ -12,6 +12,7 @@ import numpy as np
 
 from ..model import HouseParameters
 from .params import PlantParams
+from .sensors import SensorBank
 from .simulate import OUTPUTS, PlantCore
 
 
@@ -63,7 +64,10 @@ class Plant:
         self.system_on = True
         self.time_s = 0.0
         self._last: dict[str, float | bool] = {}
-        self.step(1e-3, t_out_c)  # fill the outputs without moving the state noticeably
+        # Fill the outputs with a negligible step, then restore the exact start (state and noise).
+        self.step(1e-3, t_out_c)
+        self.core.sensors = SensorBank(self.params.sensors, 1, np.random.default_rng(seed))
+        self.core.start_steady(setpoint_c, t_out_c)
         self.time_s = 0.0
 
     @property
@@ -85,7 +89,8 @@ class Plant:
         out = self.core.step(float(dt_s), np.array([float(t_out_c)]),
                              np.array([self.setpoint_c]), np.array([on]),
                              np.array([float(internal_gains_w)]), np.array([float(solar_gains_w)]),
-                             np.array([dhw]), np.array([bool(defrost) and self.system_on]))
+                             np.array([dhw]),
+                             np.array([True]) if defrost and self.system_on else None)
         self._last = {k: (bool(v[0]) if v.dtype == bool else float(v[0]))
                       for k, v in out.items()}
         if not self.system_on:
