@@ -75,8 +75,9 @@ from .server import KronotermSimulator
 @click.option("--seed", default=0, show_default=True, type=int, help="Noise seed.")
 @click.option("-v", "--verbose", count=True, help="More logging (-vv for pymodbus debug).")
 def cli(house, plant_kind, emitter, control, host, port, allow_remote, rtu, baudrate,
-        generation, speed, epoch, wall_epoch, clock_spec, clock_file, faults, faults_file, weather, weather_seed, setpoint,
-        no_thermostat, heat_meter_id, dhw_period_h, defrost, noise, seed, verbose) -> None:
+        generation, speed, epoch, wall_epoch, clock_spec, clock_file, faults, faults_file,
+        weather, weather_seed, setpoint, no_thermostat, heat_meter_id, dhw_period_h, defrost,
+        noise, seed, verbose) -> None:
     """Simulated Kronoterm heat pump (5R1C house) on a real Modbus server."""
     logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -102,6 +103,7 @@ def cli(house, plant_kind, emitter, control, host, port, allow_remote, rtu, baud
 def _house_and_realism(path: Path | None, emitter: str | None, control: str | None):
     """The house and the realistic plant's options: simulator defaults, then the house
     file's [plant.*] tables, then the --emitter/--control flags."""
+    from impctl.model import read_toml
     from impctl.plant import CONTROL_CURVE, CONTROL_THERMOSTAT, Emitter
     from impctl.plant.housefile import load_plant
 
@@ -110,7 +112,9 @@ def _house_and_realism(path: Path | None, emitter: str | None, control: str | No
     if path is None:
         house, realism = default_house(), default_realism()
     else:
-        house, realism = load_plant(path, default_realism())
+        house, realism = load_plant(path)
+        if "defrost" not in read_toml(path).get("plant", {}).get("heat_pump", {}):
+            realism = realism.with_section("heat_pump", defrost=0)  # the simulator's default
     if emitter == "underfloor":
         realism = realism.with_section("emitter", **_fields(Emitter.underfloor()))
     elif emitter == "radiators":

@@ -226,7 +226,7 @@ class KronotermSimulator:
     def _warm_up(self) -> None:
         start = self.clock.now_s()
         # The realistic plant starts steady and costs more per step: coarser warm-up steps.
-        dt = 300.0 if self.plant.kind == "iso" else 600.0
+        dt = 300.0 if self.plant.kind == "iso" else 900.0
         self.plant.time_s = start - self.config.warmup_s
         while self.plant.time_s + dt <= start:
             self.plant.step(dt, self._weather.t_out_c(self.plant.time_s + dt / 2))

@@ -44,11 +44,11 @@ class Rig:
 
 
 def _rig(tmp_path, body, *, house=HEAVY_HOUSE, timeout_s=60.0, link=None, t_out_c=0.0,
-         **policy):
+         plant_kind="realistic", **policy):
     async def outer():
         clock = VirtualClock(EPOCH, SPEED)
         cfg = SimConfig(clock=clock, house=house, weather=constant_weather(t_out_c),
-                        setpoint_c=OWNER_SETPOINT_C)
+                        setpoint_c=OWNER_SETPOINT_C, plant_kind=plant_kind)
         pol = NightPolicy(**{"sample_interval_s": 120.0, "preheat_h": 0.5, **policy})
         async with simulator(cfg) as sim, client(
                 sim, budget=budget(tmp_path),
@@ -128,8 +128,9 @@ def test_unfit_heat_pump_or_weather_refuses_the_night_without_a_write(tmp_path, 
             await rig.owner_state_back()
         else:  # the owner's choice stays as it was
             assert (rig.sim.plant.setpoint_c, rig.sim.plant.loop_mode) == (OWNER_SETPOINT_C, 0)
+    # The ideal plant's outdoor sensor reads exactly 12.0 (the reason quotes it).
     _rig(tmp_path, body, start_grace_s=600.0,
-         t_out_c=12.0 if condition == "warm outdoors" else 0.0)
+         t_out_c=12.0 if condition == "warm outdoors" else 0.0, plant_kind="iso")
 
 
 def test_link_lost_longer_than_the_limit_aborts_and_restores_when_it_comes_back(tmp_path):

@@ -51,7 +51,7 @@ async def _watch(sim, clock: VirtualClock, db_path, trace: Trace, done: asyncio.
 async def _run_night(tmp_path, kind: str, setpoint_c: float):
     clock = VirtualClock(EPOCH, SPEED)
     cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
-                    setpoint_c=OWNER_SETPOINT_C)
+                    setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
     policy = NightPolicy(sample_interval_s=120.0, preheat_h=1.0)
     db_path = tmp_path / "impctl.db"
     async with simulator(cfg) as sim, client(sim, budget=budget(tmp_path)) as hp:

@@ -63,7 +63,7 @@ async def _campaign(tmp_path, epoch: datetime, speed: float, campaign: dict, *,
                     until, timeout_s: float, night: dict | None = None):
     clock = VirtualClock(epoch, speed)
     simcfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
-                       setpoint_c=OWNER_SETPOINT_C)
+                       setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
     async with simulator(simcfg) as sim:
         mapping = daemon_mapping(tmp_path / "state", sim.port, clock,
                                  night={"sample_interval_s": 300, **(night or {})},

@@ -37,7 +37,9 @@ from impctl.heatpump import (
 def test_snapshot_matches_the_simulated_plant():
     async def body():
         # Real-time clock: the model does not step during the few milliseconds of the test.
-        async with simulator(SimConfig(clock=clock(1.0))) as sim, client(sim) as hp:
+        # The ideal plant: its registers show the plant's own values (perfect sensors).
+        async with simulator(SimConfig(clock=clock(1.0), plant_kind="iso")) as sim, \
+                client(sim) as hp:
             assert hp.generation is Generation.EXTENDED
             snap = await hp.snapshot()
             plant = sim.plant
@@ -58,7 +60,7 @@ def test_snapshot_matches_the_simulated_plant():
 
 def test_negative_outdoor_temperature_on_the_wire():
     async def body():
-        config = SimConfig(clock=clock(1.0), weather=constant_weather(-7.3))
+        config = SimConfig(clock=clock(1.0), weather=constant_weather(-7.3), plant_kind="iso")
         async with simulator(config) as sim, client(sim) as hp:
             snap = await hp.snapshot()
             assert snap.t_out_c.value == pytest.approx(-7.3) and snap.t_out_c.raw == -73
@@ -135,7 +137,7 @@ def test_compact_controller_with_external_heat_meter():
 def test_external_room_sensor_on_its_own_link():
     async def body():
         config = SimConfig(clock=clock(1.0), room_thermostat=False,
-                           weather=constant_weather(-2.5))
+                           weather=constant_weather(-2.5), plant_kind="iso")
         async with simulator(config) as sim:
             # Stand-in for an external sensor: a signed ×0.1 register reached over a second
             # connection (its own link), here the simulator's outdoor register.
@@ -231,7 +233,7 @@ def test_connect_loop_gives_up_after_max_wait():
 def test_rtu_over_socket_url():
     async def body():
         port = free_port()
-        config = SimConfig(clock=clock(1.0), weather=constant_weather(-3.4))
+        config = SimConfig(clock=clock(1.0), weather=constant_weather(-3.4), plant_kind="iso")
         async with simulator(config, rtu=f"socket://127.0.0.1:{port}") as sim:
             link = link_config(port, transport="rtu", serial_port=f"socket://127.0.0.1:{port}",
                                baudrate=115200)
@@ -256,7 +258,7 @@ def test_rtu_frame_checked_with_umodbus():
 
     async def body():
         port = free_port()
-        config = SimConfig(clock=clock(1.0), weather=constant_weather(-12.5))
+        config = SimConfig(clock=clock(1.0), weather=constant_weather(-12.5), plant_kind="iso")
         async with simulator(config, rtu=f"socket://127.0.0.1:{port}") as sim:
             words = await in_thread(umodbus_rtu, port)
             assert words[0] == (-125) & 0xFFFF

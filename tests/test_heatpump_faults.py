@@ -115,7 +115,7 @@ def test_late_greeting_desynchronises_a_client_without_drain():
 
 def test_fixed_transaction_id_needs_tolerance():
     async def body():
-        async with simulator() as sim:
+        async with simulator(SimConfig(clock=clock(), plant_kind="iso")) as sim:
             sim.faults.fixed_tid = 20
             adu = bytearray(tcp.read_holding_registers(20, 2102, 1))
             adu[0:2] = (0x1234).to_bytes(2, "big")

@@ -1,0 +1,110 @@
+"""Vectorised comfort screen of constrained nights on the realistic plant (no Modbus).
+
+All houses at once on :class:`impctl.plant.PlantCore` (one loop over time steps): a day at the
+owner's setpoint, an hour's preheat at T_max, heating off; the controller's end rule (restore at
+the first sample whose room reading is ≤ T_min) applied to what the room sensor shows (lag,
+noise, resolution), sampled every ``interval_s`` at every sampling phase; then the heating is
+back (the owner's setpoint and mode, with the heat pump's own anti-short-cycle timer, ramp and
+emitter warm-up) and the lowest true air temperature until 3 h after the restore is the house's
+result.
+
+The undershoot is measured in the room sensor's frame: true T_air + the sensor's placement
+offset. The owner's setpoint, T_min and the comfort they are used to are all on that sensor, so a
+constant offset moves them together; the sensor's lag, noise and resolution, the sampling and the
+plant's inertia after the restore are what can take the room below the floor, and they count.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from impctl.model import HouseParameters
+from impctl.plant import PlantCore, PlantParams
+
+#: Restore delay after the deciding sample: the write and its read-back [s].
+LATENCY_S = 10.0
+
+
+@dataclass(frozen=True)
+class ScreenResult:
+    """Per house (arrays of length n)."""
+
+    reaches_t_min: np.ndarray      # the sensor reaches T_min with the heating off
+    hours_to_t_min: np.ndarray     # from switch-off to the latest restoring sample [h]
+    lowest_c: np.ndarray           # lowest T_air (sensor frame) from switch-off to the end [°C]
+    undershoot_k: np.ndarray       # T_min − lowest (≤ 0: never below T_min) [K]
+    drop_after_restore_k: np.ndarray  # air at the restore − lowest after it [K]
+
+
+def night_realism(realism: PlantParams) -> PlantParams:
+    """The night's realism: the sampled options with steady gains (night level all day, no
+    sun, no drift), so that the screen and the real simulator see the same house."""
+    g = realism.gains
+    return realism.with_section("gains", day_w=g.night_w, drift_w=np.zeros_like(
+        np.asarray(g.night_w, float)), solar_peak_w=np.zeros_like(np.asarray(g.night_w, float)))
+
+
+def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *,
+           t_set_c: float, band_k: float, interval_s: float, dt_s: float = 20.0,
+           window_h: float = 7.0, after_h: float = 3.0, seed: int = 0) -> ScreenResult:
+    """Screen ``n`` houses (arrays over houses); see the module docstring."""
+    n = len(t_out_c)
+    t_min, t_max = t_set_c - band_k, t_set_c + band_k
+    realism = night_realism(realism)
+    core = PlantCore(houses, realism, seed, n=n)
+    core.start_steady(np.full(n, t_set_c), t_out_c)
+    gains = np.broadcast_to(np.asarray(realism.gains.night_w, float), (n,)).copy()
+    zero, off = np.zeros(n), np.zeros(n, bool)
+    on = np.ones(n, bool)
+
+    def run(steps: int, dt: float, setpoint: float, enabled) -> None:
+        sp = np.full(n, setpoint)
+        for _ in range(steps):
+            core.step(dt, t_out_c, sp, enabled, gains, zero, off, want=frozenset())
+
+    run(int(86400 / 120), 120.0, t_set_c, on)           # a day at the owner's setpoint
+    run(int(3600 / dt_s), dt_s, t_max, on)              # the preheat
+    at_switch_off = copy.deepcopy(core)
+    offset = np.broadcast_to(np.asarray(realism.sensors.t_air_offset_k, float), (n,))
+
+    # 1. Heating off all window: when does each sampling phase see T_min?
+    steps = int(window_h * 3600 / dt_s)
+    sensed = np.empty((steps, n))
+    for i in range(steps):
+        out = core.step(dt_s, t_out_c, np.full(n, t_set_c), off, gains, zero, off,
+                        want=frozenset({"t_air_sensed_c"}))
+        sensed[i] = out["t_air_sensed_c"]
+    seen = np.round(sensed * 10.0) / 10.0 <= t_min     # the register's 0.1 K, then the rule
+    every = max(1, int(round(interval_s / dt_s)))
+    restore = np.full(n, -1)
+    for phase in range(every):
+        hit = seen[phase::every]
+        first = np.where(hit.any(axis=0), np.argmax(hit, axis=0) * every + phase, -1)
+        restore = np.maximum(restore, first)
+    reaches = restore >= 0
+    lag = int(np.ceil(LATENCY_S / dt_s))
+    # A house that never reads T_min is restored at the window's end.
+    restore_step = np.where(reaches, restore, steps) + lag
+
+    # 2. The same night again, each house restored at its latest restoring sample.
+    core = at_switch_off
+    total = int((window_h + after_h) * 3600 / dt_s)
+    lowest = np.full(n, np.inf)
+    at_restore = np.full(n, np.nan)
+    low_after = np.full(n, np.inf)
+    for i in range(total):
+        enabled = i >= restore_step
+        out = core.step(dt_s, t_out_c, np.full(n, t_set_c), enabled, gains, zero, off,
+                        want=frozenset({"t_air_c"}))
+        air = out["t_air_c"] + offset
+        lowest = np.minimum(lowest, air)
+        at_restore = np.where(i == restore_step, air, at_restore)
+        low_after = np.where(enabled, np.minimum(low_after, air), low_after)
+    return ScreenResult(
+        reaches_t_min=reaches,
+        hours_to_t_min=np.where(reaches, restore * dt_s / 3600.0, np.inf),
+        lowest_c=lowest, undershoot_k=t_min - lowest,
+        drop_after_restore_k=np.where(reaches, at_restore - low_after, 0.0))
