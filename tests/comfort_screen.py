@@ -47,6 +47,37 @@ def night_realism(realism: PlantParams) -> PlantParams:
         np.asarray(g.night_w, float)), solar_peak_w=np.zeros_like(np.asarray(g.night_w, float)))
 
 
+def holding_t_out_c(houses: HouseParameters, realism: PlantParams, t_hold_c: float,
+                    margin: float = 1.15) -> np.ndarray:
+    """Per house, the lowest outdoor temperature [°C] at which its heat pump still holds
+    ``t_hold_c``: capacity, less what defrosts take in the frost band (the lost run time and the
+    heat drawn from the water), ≥ ``margin`` × the load less the gains; from a grid of
+    −25…+10 °C (+10 if it never does). Colder than that the owner's own heating falls behind,
+    and a constrained night would measure the heat pump, not the experiment."""
+    from impctl.plant.heatpump import DEFROST_RANGE_C
+
+    n = houses.n_houses or 1
+    core = PlantCore(houses, realism, 0, n=n)
+    hp = realism.heat_pump
+
+    def per_house(v) -> np.ndarray:
+        return np.broadcast_to(np.asarray(v, float), (n,))
+
+    gains, hlc = per_house(realism.gains.night_w), per_house(houses.hlc_w_per_k)
+    share = per_house(hp.defrost_duration_s) / (per_house(hp.defrost_duration_s)
+                                                + per_house(hp.defrost_interval_s))
+    draw = per_house(hp.defrost_draw) * core.nominal_w * share * (per_house(hp.defrost) > 0)
+    grid = np.arange(-25.0, 10.01, 0.5)
+    ok = []
+    for t in grid:
+        p_max = core.controller.p_max_w(np.full(n, t))
+        if DEFROST_RANGE_C[0] <= t <= DEFROST_RANGE_C[1]:
+            p_max = p_max * (1.0 - share * (per_house(hp.defrost) > 0)) - draw
+        ok.append(p_max >= margin * hlc * (t_hold_c - t) - gains)
+    ok = np.array(ok)
+    return np.where(ok.any(axis=0), grid[np.argmax(ok, axis=0)], 10.0)
+
+
 def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *,
            t_set_c: float, band_k: float, interval_s: float, dt_s: float = 20.0,
            window_h: float = 7.0, after_h: float = 3.0, seed: int = 0) -> ScreenResult:
