@@ -32,6 +32,8 @@ _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
 _JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
 _REMOTE_OFF_FUNCTION = 7
+#: The T_air trend of the anticipated end needs samples over at least this span [s].
+MIN_TREND_SPAN_S = 600.0
 
 
 class NightRefused(Exception):

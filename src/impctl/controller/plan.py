@@ -76,6 +76,11 @@ class NightPolicy:
     emission_lag_h : the paper's emitter lag after switch-off [h] (for the assessment)
     restore_timeout_s : how long a restore keeps retrying a lost link before giving up for
         now (the journal keeps it pending for the next attempt) [s]
+    anticipate_s : a constrained night also ends when the trend of T_air (least squares over
+        the last ``trend_window_s``) reaches T_min within this time [s]: the room sensor lags,
+        and radiators or a screed must warm up again before the room does, so a house that
+        is still falling fast keeps falling for a while after the restore. 0 = end at T_min.
+    trend_window_s : span of the T_air trend [s]
     """
 
     sample_interval_s: float = 60.0
@@ -91,3 +96,5 @@ class NightPolicy:
     min_coverage: float = 0.8
     emission_lag_h: float = 1.0
     restore_timeout_s: float = 3600.0
+    anticipate_s: float = 1800.0
+    trend_window_s: float = 1800.0
