@@ -12,9 +12,10 @@ The floor is T_min − 0.3 K, or − 0.3 K below the lowest the owner's own heat
 (12 h at the owner's setpoint before the night), whichever is lower: an on/off heat pump with a
 room thermostat, a 0.5 K sensor and defrosts swings the room by a kelvin or two on its own, and
 the experiment is not to blame for that. The undershoot is measured in the room sensor's frame:
-true T_air + the sensor's placement offset. The owner's setpoint, T_min and the comfort they are used to are all on that sensor, so a
-constant offset moves them together; the sensor's lag, noise and resolution, the sampling and the
-plant's inertia after the restore are what can take the room below the floor, and they count.
+true T_air + the sensor's placement offset. The owner's setpoint, T_min and the comfort they
+are used to are all on that sensor, so a constant offset moves them together; the sensor's lag,
+noise and resolution, the sampling and the plant's inertia after the restore are what can take
+the room below the floor, and they count.
 """
 
 from __future__ import annotations
@@ -55,11 +56,11 @@ def end_rule(readings: np.ndarray, t_min_c: float, interval_s: float, anticipate
              window_s: float) -> np.ndarray:
     """Where the controller ends the night: readings (samples × houses) ≤ T_min, or (with
     ``anticipate_s`` > 0) the least-squares trend of the readings over ``window_s`` reaching
-    T_min within ``anticipate_s`` (:class:`impctl.controller.NightPolicy.anticipate_s`)."""
+    T_min within ``anticipate_s`` (:func:`impctl.controller.plan.anticipated_end`, vectorised)."""
     hit = readings <= t_min_c
     if anticipate_s <= 0:
         return hit
-    from impctl.controller.night import MIN_TREND_SPAN_S
+    from impctl.controller.plan import MIN_TREND_SPAN_S
 
     m = int(round(window_s / interval_s)) + 1
     need = int(round(MIN_TREND_SPAN_S / interval_s)) + 1

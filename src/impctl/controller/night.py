@@ -25,15 +25,13 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
 from ..store import Night, Sample, Store
 from .assess import assess_night
-from .plan import NightPolicy, NightRequest
+from .plan import NightPolicy, NightRequest, anticipated_end
 from .restore import restore_all
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
 _JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
 _REMOTE_OFF_FUNCTION = 7
-#: The T_air trend of the anticipated end needs samples over at least this span [s].
-MIN_TREND_SPAN_S = 600.0
 
 
 class NightRefused(Exception):
@@ -132,6 +130,7 @@ class NightController:
         self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
         self._incidents: list[str] = []  # notes for the night's reasons
         self._floor_c: float | None = None
+        self._trend: list[tuple[float, float]] = []  # (POSIX s, T_air °C) since switch-off
 
     # -- timing ----------------------------------------------------------------------------
     async def _sleep_until(self, when: datetime) -> None:
@@ -355,6 +354,7 @@ class NightController:
             if req.kind == "constrained" and not switched_off and now >= req.window_start:
                 await self._switch_off(log)
                 switched_off = True
+                self._trend = []
             snap = await self._snapshot(night_id, log)
             reason = self._check(snap, req, switched_off, now)
             if reason is not None:
@@ -404,6 +404,9 @@ class NightController:
             raise _Abort(f"T_air {t_air:.1f} °C below T_min − margin ({floor:.1f} °C)")
         if req.kind == "constrained" and switched_off and t_air <= req.t_min_c:
             return f"reached T_min {req.t_min_c:.1f} °C"
+        if req.kind == "constrained" and switched_off:
+            self._trend.append((now.timestamp(), t_air))
+            return anticipated_end(self._trend, self.policy, req.t_min_c)
         return None
 
     @staticmethod

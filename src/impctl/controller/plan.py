@@ -98,3 +98,31 @@ class NightPolicy:
     restore_timeout_s: float = 3600.0
     anticipate_s: float = 1800.0
     trend_window_s: float = 1800.0
+
+
+#: The T_air trend of the anticipated end needs samples over at least this span [s].
+MIN_TREND_SPAN_S = 600.0
+
+
+def anticipated_end(trend: list[tuple[float, float]], policy: NightPolicy,
+                    t_min_c: float) -> str | None:
+    """Why a constrained night ends now although T_air is still above T_min, or None.
+
+    ``trend`` holds (POSIX s, T_air °C) readings since the switch-off, the newest last; readings
+    older than ``policy.trend_window_s`` are dropped from it. The night ends when the
+    least-squares trend over at least :data:`MIN_TREND_SPAN_S` reaches T_min within
+    ``policy.anticipate_s``: the room sensor lags, and radiators or a screed must warm up again
+    before the room does, so a room still falling fast keeps falling after the restore.
+    """
+    now_s, t_air = trend[-1]
+    trend[:] = [(t, v) for t, v in trend if now_s - t <= policy.trend_window_s]
+    if policy.anticipate_s <= 0 or now_s - trend[0][0] < MIN_TREND_SPAN_S:
+        return None
+    mean_t = sum(t for t, _ in trend) / len(trend)
+    mean_v = sum(v for _, v in trend) / len(trend)
+    slope = (sum((t - mean_t) * (v - mean_v) for t, v in trend)
+             / sum((t - mean_t) ** 2 for t, _ in trend))  # K/s
+    if slope < 0 and t_air + slope * policy.anticipate_s <= t_min_c:
+        return (f"T_min {t_min_c:.1f} °C anticipated: T_air {t_air:.1f} °C falling "
+                f"{-slope * 3600:.2f} K/h")
+    return None
