@@ -167,6 +167,11 @@ class Controller:
             if force_defrost is not None:
                 due = due | force_defrost
             begin = running & (st.defrost_left_s <= 0) & due
+            if not begin.any() and not st.defrost_left_s.any():
+                # Nobody defrosting or starting to: only the run-time counters move.
+                st.run_since_defrost_s = st.run_since_defrost_s + dt * running
+                st.power_w = power
+                return ControlOutput(power, running | dhw, self._no, target, p_max)
             left = np.where(begin, self.defrost_duration, st.defrost_left_s) * running
             defrosting = left > 0
             st.power_w = np.where(defrosting, st.power_w, power)

@@ -193,7 +193,10 @@ def sample_nights(
             on = ~np.isnan(spc[w0:w1])
             end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
             steps = steps[steps < end]
-        q = np.array([phi[s:s + stride].mean() for s in steps])
+        if steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
+            q = phi[steps[0]:steps[0] + len(steps) * stride].reshape(-1, stride).mean(axis=1)
+        else:
+            q = np.array([phi[s:s + stride].mean() for s in steps])
         q = q * (1.0 + power_noise * rng.standard_normal(len(q)))
 
         def quant(x):
