@@ -142,17 +142,36 @@ class Solver:
 
     def __init__(self, net: Network) -> None:
         self.net = net
+        self._dt_key: tuple[float, int] | None = None
+
+    def _constants(self, dt: float, c_em: Array) -> None:
+        """Per-step constants that depend only on Δt and the capacities (cached)."""
+        n = self.net
+        c_m2 = 2.0 * n.c_mass / dt          # CN: C/dt·(x_t − x_0) = 2C/dt·(x̄ − x_0)
+        c_a = n.c_air / dt
+        # Furniture: f = (c_f f0 + G a)/(c_f + G); flux to air γ_f (f0 − a), γ_f = G·c_f/(c_f+G).
+        g_f = n.g_fur / (1.0 + n.g_fur * dt / np.maximum(n.c_fur, 1e-300))
+        g_f = np.where(n.c_fur > 0, g_f, 0.0)
+        den_m = c_m2 + n.h_ms + n.h_em
+        mu_s = n.h_ms / den_m
+        den_s = n.h_ms * (1.0 - mu_s) + n.h_w + n.h_is
+        sig_a = n.h_is / den_s
+        self._k = dict(
+            c_m2_over_den_m=c_m2 / den_m, h_em_over_den_m=n.h_em / den_m, inv_den_m=1.0 / den_m,
+            c_a=c_a, c_w=c_em / dt, g_f=g_f, mu_s=mu_s, inv_den_s=1.0 / den_s,
+            h_ms_over_den_s=n.h_ms / den_s, h_w_over_den_s=n.h_w / den_s, sig_a=sig_a,
+            den_a0=c_a + n.h_is * (1.0 - sig_a) + n.h_ve + g_f,
+            fur_step=np.where(n.c_fur > 0, g_f * dt / np.maximum(n.c_fur, 1e-300), 1.0),
+        )
+        self._dt_key = (dt, id(c_em))
 
     def prepare(self, st: NodeState, dt: float, t_e: Array, phi_int: Array, phi_sol: Array,
                 c_em: Array, g_em: Array) -> tuple[Array, Array]:
         """Return (air_free, k_air) for this step: θ_air = air_free + k_air·P [°C, K/W]."""
-        n = self.net
-        c_m2 = 2.0 * n.c_mass / dt          # CN: C/dt·(x_t − x_0) = 2C/dt·(x̄ − x_0)
-        c_a = n.c_air / dt
-        c_w = c_em / dt
-        # Furniture: f = (c_f f0 + G a)/(c_f + G); flux to air γ_f (f0 − a), γ_f = G·c_f/(c_f+G).
-        g_f = n.g_fur / (1.0 + n.g_fur * dt / np.maximum(n.c_fur, 1e-300))
-        g_f = np.where(n.c_fur > 0, g_f, 0.0)
+        if self._dt_key != (dt, id(c_em)):
+            self._constants(dt, c_em)
+        n, k = self.net, self._k
+        c_w = k["c_w"]
         # Emitter: w = (c_w w0 + P + G a)/(c_w + G); flux to air γ_w (c_w (w0 − a) + P).
         gam_w = g_em / (c_w + g_em)
         half = 0.5 * phi_int + phi_sol
@@ -160,30 +179,26 @@ class Solver:
         phi_m = n.gain_m * half
         phi_st = n.gain_st * half
         # Mass: m̄ = μ0 + μs·s.
-        den_m = c_m2 + n.h_ms + n.h_em
-        mu0 = (c_m2 * st.mass + n.h_em * t_e + phi_m) / den_m
-        mu_s = n.h_ms / den_m
+        mu0 = k["c_m2_over_den_m"] * st.mass + k["h_em_over_den_m"] * t_e + phi_m * k["inv_den_m"]
         # Surface: s = σ0 + σa·a.
-        den_s = n.h_ms * (1.0 - mu_s) + n.h_w + n.h_is
-        sig0 = (n.h_ms * mu0 + n.h_w * t_e + phi_st) / den_s
-        sig_a = n.h_is / den_s
-        den_a = c_a + n.h_is * (1.0 - sig_a) + n.h_ve + g_f + gam_w * c_w
-        num_a = (c_a * st.air + n.h_is * sig0 + n.h_ve * t_e + g_f * st.furniture
-                 + gam_w * c_w * st.water + phi_ia)
-        self._c = (dt, t_e, c_w, g_em, g_f, mu0, mu_s, sig0, sig_a, phi_int, phi_ia, phi_m,
-                   phi_st)
+        sig0 = (k["h_ms_over_den_s"] * mu0 + k["h_w_over_den_s"] * t_e
+                + phi_st * k["inv_den_s"])
+        gw_cw = gam_w * c_w
+        den_a = k["den_a0"] + gw_cw
+        num_a = (k["c_a"] * st.air + n.h_is * sig0 + n.h_ve * t_e + k["g_f"] * st.furniture
+                 + gw_cw * st.water + phi_ia)
+        self._c = (t_e, c_w, g_em, mu0, sig0, phi_ia, phi_m, phi_st)
         return num_a / den_a, gam_w / den_a
 
     def finish(self, st: NodeState, air_free: Array, k_air: Array, power_w: Array) -> StepSolution:
         """Solve the step for heat-pump power ``power_w`` [W] into the water and update ``st``."""
-        n = self.net
-        dt, t_e, c_w, g_em, g_f, mu0, mu_s, sig0, sig_a, phi_int, phi_ia, phi_m, phi_st = self._c
+        n, k = self.net, self._k
+        t_e, c_w, g_em, mu0, sig0, phi_ia, phi_m, phi_st = self._c
         a = air_free + k_air * power_w
-        s = sig0 + sig_a * a
-        m_bar = mu0 + mu_s * s
+        s = sig0 + k["sig_a"] * a
+        m_bar = mu0 + k["mu_s"] * s
         w = (c_w * st.water + power_w + g_em * a) / (c_w + g_em)
-        f = np.where(n.c_fur > 0, st.furniture + g_f * (a - st.furniture) * dt
-                     / np.maximum(n.c_fur, 1e-300), a)
+        f = st.furniture + k["fur_step"] * (a - st.furniture)
         emitter_w = g_em * (w - a)
         loss = n.h_ve * (a - t_e) + n.h_w * (s - t_e) + n.h_em * (m_bar - t_e)
         gains = phi_ia + phi_m + phi_st

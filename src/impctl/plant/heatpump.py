@@ -67,6 +67,7 @@ class ControlOutput:
     defrost: NDArray[np.bool_]
     target_water_c: Array
     p_max_w: Array
+    demand: NDArray[np.bool_]       # the controller calls for space heat
 
 
 class Controller:
@@ -167,6 +168,11 @@ class Controller:
             if force_defrost is not None:
                 due = due | force_defrost
             begin = running & (st.defrost_left_s <= 0) & due
+            if not begin.any() and not st.defrost_left_s.any():
+                # Nobody defrosting or starting to: only the run-time counters move.
+                st.run_since_defrost_s = st.run_since_defrost_s + dt * running
+                st.power_w = power
+                return ControlOutput(power, running | dhw, self._no, target, p_max, demand)
             left = np.where(begin, self.defrost_duration, st.defrost_left_s) * running
             defrosting = left > 0
             st.power_w = np.where(defrosting, st.power_w, power)
@@ -177,7 +183,7 @@ class Controller:
         else:
             defrosting = self._no
             st.power_w = power
-        return ControlOutput(power, running | dhw, defrosting, target, p_max)
+        return ControlOutput(power, running | dhw, defrosting, target, p_max, demand)
 
 
 def cop(t_supply_c: Array, t_out_c: Array, eta: Array) -> Array:

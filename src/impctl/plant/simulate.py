@@ -119,12 +119,14 @@ class PlantCore:
                                    force_defrost)
         power = ctl.power_w
         comp = ctl.compressor_on
+        demand = ctl.demand
         if self.any_ideal:
             # Annex C C.13: θ_air is affine in P, so the setpoint power is exact.
             need = np.where(enabled & ~dhw, (setpoint_c - air_free) / k_air, 0.0)
             ideal_p = np.minimum(np.maximum(need, 0.0), self.ideal_max_w)
             power = np.where(self.ideal, ideal_p, power)
             comp = np.where(self.ideal, power > 0, comp)
+            demand = np.where(self.ideal, power > 0, demand)
         sol = self.solver.finish(st, air_free, k_air, power)
         self.sensed_air, self.sensed_out, meter = self.sensors.read(dt, sol.air, t_out_c, power)
         out = {
@@ -134,6 +136,7 @@ class PlantCore:
             "t_water_target_c": ctl.target_water_c, "heat_pump_w": power,
             "emitter_w": sol.emitter_w, "heat_meter_w": meter, "compressor_on": comp,
             "defrost": ctl.defrost, "dhw": dhw, "loss_w": sol.loss_w, "gains_w": sol.gains_w,
+            "heat_demand": demand,
         }
         if want is None or not want.isdisjoint(_HYDRAULIC):
             dhw_w = self.nominal_w * dhw
@@ -156,7 +159,7 @@ _HYDRAULIC = frozenset({"t_supply_c", "t_return_c", "dhw_w", "electric_w", "pump
 OUTPUTS = ("t_air_c", "t_air_sensed_c", "t_out_c", "t_out_sensed_c", "t_mass_c", "t_surface_c",
            "t_furniture_c", "t_water_c", "t_supply_c", "t_return_c", "t_water_target_c",
            "heat_pump_w", "emitter_w", "heat_meter_w", "dhw_w", "electric_w", "compressor_on",
-           "pump_on", "defrost", "dhw", "loss_w", "gains_w")
+           "pump_on", "defrost", "dhw", "loss_w", "gains_w", "heat_demand")
 
 
 def _n_of(params: PlantParams) -> int | None:
@@ -277,4 +280,4 @@ def simulate_plant(
     return PlantRun(time_s, keep, core.split)
 
 
-_BOOL = {"compressor_on", "pump_on", "defrost", "dhw"}
+_BOOL = {"compressor_on", "pump_on", "defrost", "dhw", "heat_demand"}
