@@ -386,8 +386,8 @@ class RealisticPlant:
 
     @property
     def heat_demand(self) -> bool:
-        """Room below its setpoint while heating is on (the thermostat demand bit)."""
-        return self.heating_enabled and self._out["t_air_sensed_c"] < self.room_setpoint_c
+        """The control asks for heat (2046 b0: thermostat calling, or the curve's demand)."""
+        return bool(self._out["heat_demand"]) and not self.compressor_failed
 
     @property
     def load_pct(self) -> int:

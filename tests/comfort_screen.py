@@ -30,6 +30,8 @@ from impctl.plant import PlantCore, PlantParams
 
 #: Restore delay after the deciding sample: the write and its read-back [s].
 LATENCY_S = 10.0
+#: real-houses.md §3: the first defrost comes after ≥ ~35 min of run [s].
+EARLIEST_DEFROST_S = 2100.0
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,7 @@ class ScreenResult:
     owner_low_c: np.ndarray        # lowest T_air over 12 h of the owner's own heating [°C]
     undershoot_k: np.ndarray       # min(T_min, owner_low) − lowest (≤ 0: never below) [K]
     drop_after_restore_k: np.ndarray  # air at the restore − lowest after it [K]
+    early_defrost: np.ndarray      # a defrost within 35 min of the restart (see NEEDS.md)
 
 
 def night_realism(realism: PlantParams) -> PlantParams:
@@ -53,7 +56,7 @@ def night_realism(realism: PlantParams) -> PlantParams:
 
 
 def end_rule(readings: np.ndarray, t_min_c: float, interval_s: float, anticipate_s: float,
-             window_s: float) -> np.ndarray:
+             window_s: float, within_k: float = 1.0) -> np.ndarray:
     """Where the controller ends the night: readings (samples × houses) ≤ T_min, or (with
     ``anticipate_s`` > 0) the least-squares trend of the readings over ``window_s`` reaching
     T_min within ``anticipate_s`` (:func:`impctl.controller.plan.anticipated_end`, vectorised)."""
@@ -71,7 +74,8 @@ def end_rule(readings: np.ndarray, t_min_c: float, interval_s: float, anticipate
         t = np.arange(len(w), dtype=float) * interval_s
         t -= t.mean()
         slope[i] = (t @ (w - w.mean(axis=0))) / (t @ t)
-    return hit | (readings + np.minimum(slope, 0.0) * anticipate_s <= t_min_c)
+    near = readings <= t_min_c + within_k
+    return hit | (near & (readings + np.minimum(slope, 0.0) * anticipate_s <= t_min_c))
 
 
 def holding_t_out_c(houses: HouseParameters, realism: PlantParams, t_hold_c: float,
@@ -108,7 +112,8 @@ def holding_t_out_c(houses: HouseParameters, realism: PlantParams, t_hold_c: flo
 def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *,
            t_set_c: float, band_k: float, interval_s: float, dt_s: float = 20.0,
            window_h: float = 7.0, after_h: float = 3.0, seed: int = 0,
-           anticipate_s: float = 0.0, slope_window_s: float = 1800.0) -> ScreenResult:
+           anticipate_s: float = 0.0, slope_window_s: float = 1800.0,
+           anticipate_within_k: float = 1.0) -> ScreenResult:
     """Screen ``n`` houses (arrays over houses); see the module docstring."""
     n = len(t_out_c)
     t_min, t_max = t_set_c - band_k, t_set_c + band_k
@@ -148,7 +153,8 @@ def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *
     every = max(1, int(round(interval_s / dt_s)))
     restore = np.full(n, -1)
     for phase in range(every):
-        hit = end_rule(reading[phase::every], t_min, interval_s, anticipate_s, slope_window_s)
+        hit = end_rule(reading[phase::every], t_min, interval_s, anticipate_s, slope_window_s,
+                       anticipate_within_k)
         first = np.where(hit.any(axis=0), np.argmax(hit, axis=0) * every + phase, -1)
         restore = np.maximum(restore, first)
     reaches = restore >= 0
@@ -162,10 +168,13 @@ def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *
     lowest = np.full(n, np.inf)
     at_restore = np.full(n, np.nan)
     low_after = np.full(n, np.inf)
+    early_defrost = np.zeros(n, bool)
+    first_run = int(EARLIEST_DEFROST_S / dt_s)
     for i in range(total):
         enabled = i >= restore_step
         out = core.step(dt_s, t_out_c, np.full(n, t_set_c), enabled, gains, zero, off,
                         want=frozenset({"t_air_c"}))
+        early_defrost |= enabled & (i < restore_step + first_run) & out["defrost"]
         air = out["t_air_c"] + offset
         lowest = np.minimum(lowest, air)
         at_restore = np.where(i == restore_step, air, at_restore)
@@ -175,4 +184,5 @@ def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *
         hours_to_t_min=np.where(reaches, restore * dt_s / 3600.0, np.inf),
         lowest_c=lowest, owner_low_c=owner_low,
         undershoot_k=np.minimum(t_min, owner_low) - lowest,
-        drop_after_restore_k=np.where(reaches, at_restore - low_after, 0.0))
+        drop_after_restore_k=np.where(reaches, at_restore - low_after, 0.0),
+        early_defrost=early_defrost)

@@ -156,12 +156,21 @@ def test_prescreen_every_house_stays_within_the_margin():
     assert worst_30 < worst_60
 
 
-async def _real_night(vh: VirtualHouse, work: Path) -> dict:
+def _iso_config(vh: VirtualHouse, clock: VirtualClock) -> SimConfig:
+    # The ideal plant: the one the pre-screen above runs.
+    return SimConfig(clock=clock, house=vh.house, weather=constant_weather(vh.t_out_c),
+                     setpoint_c=T_SET, plant=vh.plant_params, plant_kind="iso")
+
+
+async def real_night(make_config, work: Path, air=lambda plant: plant.t_air_c,
+                     owner_h: float = 0.0) -> dict:
+    """One constrained night of the real controller against the real simulator
+    (``make_config(clock)``); the lowest ``air(plant)`` from the switch-off until 45 min after
+    the restore (and over ``owner_h`` hours of the owner's own heating before the night), the
+    night, the owner's state after it."""
     loop = asyncio.get_running_loop()
     clock = VirtualClock(EPOCH, FACTOR, loop.time(), wall=loop.time)
-    cfg = SimConfig(clock=clock, house=vh.house, weather=constant_weather(vh.t_out_c),
-                    setpoint_c=T_SET, plant=vh.plant_params)
-    sim = KronotermSimulator(cfg)
+    sim = KronotermSimulator(make_config(clock))
     await sim.start()
     # A Kronoterm read-back pause of 0.5 s (simulated) — the restore's real delay.
     writes = WritePolicy(verify_delay_s=0.5 / FACTOR)
@@ -172,11 +181,15 @@ async def _real_night(vh: VirtualHouse, work: Path) -> dict:
 
     async def watch() -> None:
         while True:
-            lowest[0] = min(lowest[0], sim.plant.t_air_c)
+            lowest[0] = min(lowest[0], air(sim.plant))
             await asyncio.sleep(5.0 / FACTOR)
 
     try:
         await hp.connect(max_wait_s=5.0)
+        owner_low, until = math.inf, clock.now() + timedelta(hours=owner_h)
+        while clock.now() < until:
+            owner_low = min(owner_low, air(sim.plant))
+            await asyncio.sleep(20.0 / FACTOR)
         with Store(work / "impctl.db") as store:
             policy = NightPolicy(sample_interval_s=INTERVAL_S, abort_margin_k=PROMISE_K,
                                  preheat_h=1.0)
@@ -194,9 +207,9 @@ async def _real_night(vh: VirtualHouse, work: Path) -> dict:
             watcher.cancel()
             samples = store.samples(night.id)
             pending = store.journal_pending()
-        return dict(night=night, lowest=lowest[0], owner=(sim.plant.setpoint_c,
+        return dict(night=night, lowest=lowest[0], owner_low=owner_low, owner=(sim.plant.setpoint_c,
                                                           sim.plant.loop_mode),
-                    pending=pending, end_t_air=sim.plant.t_air_c,
+                    pending=pending, end_t_air=air(sim.plant),
                     seen=min(s.t_air_c for s in samples if s.t_air_c is not None))
     finally:
         hp.close()
@@ -223,7 +236,8 @@ def test_real_controller_keeps_t_air_above_t_min_minus_0_3_k(tmp_path):
         for vh in _houses_to_run():
             work = Path(tmp) / str(vh.index)
             work.mkdir()
-            results.append((vh, run_virtual(_real_night(vh, work), timeout_s=3600.0)))
+            results.append((vh, run_virtual(real_night(lambda c, vh=vh: _iso_config(vh, c), work),
+                                            timeout_s=3600.0)))
     worst_vh, worst = min(results, key=lambda r: r[1]["lowest"])
     print(f"\n{len(results)} real nights: lowest T_air {worst['lowest']:.3f} °C "
           f"(T_min − {T_MIN - worst['lowest']:.3f} K; house {worst_vh.index}, "

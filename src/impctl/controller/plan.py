@@ -80,6 +80,8 @@ class NightPolicy:
         the last ``trend_window_s``) reaches T_min within this time [s]: the room sensor lags,
         and radiators or a screed must warm up again before the room does, so a house that
         is still falling fast keeps falling for a while after the restore. 0 = end at T_min.
+    anticipate_within_k : the trend counts only this close above T_min [K] (not in the fast
+        drop right after the switch-off, while the emitter cools)
     trend_window_s : span of the T_air trend [s]
     """
 
@@ -97,6 +99,7 @@ class NightPolicy:
     emission_lag_h: float = 1.0
     restore_timeout_s: float = 3600.0
     anticipate_s: float = 1800.0
+    anticipate_within_k: float = 1.0
     trend_window_s: float = 1800.0
 
 
@@ -111,12 +114,14 @@ def anticipated_end(trend: list[tuple[float, float]], policy: NightPolicy,
     ``trend`` holds (POSIX s, T_air °C) readings since the switch-off, the newest last; readings
     older than ``policy.trend_window_s`` are dropped from it. The night ends when the
     least-squares trend over at least :data:`MIN_TREND_SPAN_S` reaches T_min within
-    ``policy.anticipate_s``: the room sensor lags, and radiators or a screed must warm up again
+    ``policy.anticipate_s`` while T_air is within ``policy.anticipate_within_k`` of T_min: the
+    room sensor lags, and radiators or a screed must warm up again
     before the room does, so a room still falling fast keeps falling after the restore.
     """
     now_s, t_air = trend[-1]
     trend[:] = [(t, v) for t, v in trend if now_s - t <= policy.trend_window_s]
-    if policy.anticipate_s <= 0 or now_s - trend[0][0] < MIN_TREND_SPAN_S:
+    if (policy.anticipate_s <= 0 or now_s - trend[0][0] < MIN_TREND_SPAN_S
+            or t_air > t_min_c + policy.anticipate_within_k):
         return None
     mean_t = sum(t for t, _ in trend) / len(trend)
     mean_v = sum(v for _, v in trend) / len(trend)
