@@ -36,7 +36,12 @@ def _nights(text: str) -> tuple[int, int]:
               help="Classifier cache [default: the per-user data dir].")
 @click.option("--households", type=int, default=900, show_default=True,
               help="Virtual households for training when no cached models fit.")
-def demo_command(house_path, nights, speed, out, seed, model_dir, households) -> None:
+@click.option("--plant", type=click.Choice(["realistic", "iso"]), default="realistic",
+              show_default=True,
+              help="realistic: air/furniture capacity, radiators, a cycling weather-compensated "
+                   "heat pump, gains, sensors (the house file's [plant.*] tables); iso: the "
+                   "ideal 5R1C the fit assumes.")
+def demo_command(house_path, nights, speed, out, seed, model_dir, households, plant) -> None:
     """Run the whole product against a simulated heat pump and write the report.
 
     Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on an accelerated clock →
@@ -49,7 +54,8 @@ def demo_command(house_path, nights, speed, out, seed, model_dir, households) ->
                          place="--speed")
     c, n = _nights(nights)
     run_demo(DemoOptions(out=out, house_path=house_path, constrained_nights=c, normal_nights=n,
-                         speed=speed, seed=seed, model_dir=model_dir, households=households),
+                         speed=speed, seed=seed, model_dir=model_dir, households=households,
+                         plant=plant),
              echo=click.echo)
 
 

@@ -15,11 +15,12 @@ def _err_pct(est: float | None, true: float) -> float | None:
 
 
 def demo_summary(house: HouseParameters, fit: dict, demand: dict | None = None, *,
-                 wall_s: float, train_state: str) -> dict:
+                 wall_s: float, train_state: str, plant: dict | None = None) -> dict:
     """Compare a fit result (``impctl fit`` JSON) with the demo house's true parameters.
 
     ``demand`` is the out-of-sample heat-demand check (:mod:`impctl.report.demand`); without
-    it the fit's own (in-sample) validation is shown.
+    it the fit's own (in-sample) validation is shown. ``plant`` says which simulated plant
+    produced the nights (``kind``, ``description``, the realism options).
     """
     truth = house.as_dict()
     params = []
@@ -55,6 +56,7 @@ def demo_summary(house: HouseParameters, fit: dict, demand: dict | None = None, 
                         "rmse_k": mean.get("rmse_k"), "paper_eps_pct": PAPER_EPS_PCT,
                         "out_of_sample": bool(demand and demand.get("mean"))},
         "wall_s": wall_s, "classifiers": train_state,
+        "plant": plant or {"kind": "unknown", "description": ""},
     }
 
 
@@ -64,7 +66,9 @@ def _num(x: float | None, spec: str = ".3g") -> str:
 
 def format_summary(s: dict) -> str:
     """The summary as a plain-text table (what the demo prints last)."""
-    lines = ["", "Parameters (the paper's Table IV): true vs estimated",
+    plant = s.get("plant") or {}
+    lines = ["", f"Plant: {plant.get('kind', '?')} ({plant.get('description', '')})",
+             "", "Parameters (the paper's Table IV): true vs estimated",
              f"  {'parameter':<13}{'unit':<13}{'true':>9}{'estimate':>10}{'error':>9}  "
              f"{'search range':<18} determined by"]
     for p in s["parameters"]:
