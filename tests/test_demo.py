@@ -17,8 +17,10 @@ def run_cli(*args: str, timeout: float = 400) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
+    # The ideal plant: the accuracy asserted below is the fit's on its own model (the
+    # realistic default is test_demo_realistic_plant_is_the_default).
     proc = run_cli("demo", "--nights", "1+2", "--households", "40", "--speed", "20000",
-                   "--out", str(out), "--model-dir", str(out / "models"))
+                   "--out", str(out), "--model-dir", str(out / "models"), "--plant", "iso")
     return out, proc
 
 
@@ -43,6 +45,32 @@ def test_short_demo_runs_end_to_end(demo):
     # Product-only parameters are never claimed as measured.
     for name in ("walls_area", "windows_area", "u_windows"):
         assert params[name]["determined"] is False
+
+
+def test_demo_realistic_plant_is_the_default(demo, tmp_path):
+    """Without --plant the demo runs the realistic plant and says so (table and JSON); the
+    classifiers of the ideal run above are reused, so this costs one short campaign + fit."""
+    import shutil
+
+    out_iso, proc_iso = demo
+    assert proc_iso.returncode == 0
+    shutil.copytree(out_iso / "models", tmp_path / "models")
+    out = tmp_path / "demo"
+    proc = run_cli("demo", "--nights", "1+1", "--out", str(out), "--model-dir",
+                   str(tmp_path / "models"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "plant: realistic (radiators, weather curve" in proc.stdout
+    assert "Plant: realistic (radiators, weather curve" in proc.stdout
+    assert "clock ×10000" in proc.stdout and "cached models reused" in proc.stdout
+    assert "simulator loop-1 setpoint back at 21.0 °C, mode 1" in proc.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    plant = summary["plant"]
+    assert plant["kind"] == "realistic"
+    # The demo house's [plant.*] tables reached the simulator.
+    assert plant["realism"]["heat_pump"]["sizing"] == 1.5
+    assert plant["realism"]["sensors"]["t_air_lag_s"] == 600.0
+    lumped = {q["name"]: q for q in summary["lumped"]}
+    assert lumped["hlc"]["error_pct"] is not None
 
 
 def test_demo_report_is_self_contained(demo):

@@ -43,10 +43,10 @@ T_SET, BAND = 21.0, 1.5
 T_MIN, T_MAX = T_SET - BAND, T_SET + BAND
 PROMISE_K = 0.3
 INTERVAL_S = 60.0
-CI_WORST, CI_RANDOM = 3, 1
+CI_WORST, CI_RANDOM = 2, 1
 POLICY = NightPolicy()
 #: Hours of the owner's own heating watched before each real night.
-OWNER_H = 3.0
+OWNER_H = 2.0
 
 
 @functools.cache
