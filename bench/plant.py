@@ -1,6 +1,7 @@
 """Speed of the realistic plant next to the ideal 5R1C, and a figure of its nights.
 
-Run:  .venv/bin/python bench/plant.py [--houses 900] [--repeat 3] [--figure PATH]
+Run:  .venv/bin/python bench/plant.py [--houses 900] [--repeat 3] [--no-dataset] [--figure PATH]
+      (``--houses 0 --figure PATH``: the figure only)
 
 1. **Kernel speed**: one winter day at Δt = 60 s for ``--houses`` houses with realism drawn over
    the documented ranges (``impctl.plant.sampling.sample_params``), in house-hours per second, next
@@ -173,10 +174,11 @@ def main() -> None:
     print(f"python {platform.python_version()}, numpy {np.__version__}, {os.cpu_count()} CPUs, "
           f"{platform.machine()}, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '-')}")
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}\n")
-    print("| model | houses | Δt | 1 winter day, best of "
-          f"{args.repeat} | house-hours/s |\n|---|---|---|---|---|")
-    kernel_speed(args.houses, args.repeat)
-    if args.dataset:
+    if args.houses > 0:
+        print("| model | houses | Δt | 1 winter day, best of "
+              f"{args.repeat} | house-hours/s |\n|---|---|---|---|---|")
+        kernel_speed(args.houses, args.repeat)
+    if args.dataset and args.houses > 0:
         print()
         imp_dataset(args.houses, args.repeat)
     if args.figure:
