@@ -286,6 +286,10 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
         cv_s = f"{cv['hlc']:.0f} / {cv['tau']:.0f} / {cv['c_m']:.0f}" if cv else "–"
         tm_s = f"{tm:.2f}" if tm is not None else "–"
         print(f"| {name} | " + " | ".join(cells) + f" | {cv_s} | {tm_s} |")
+    signed = ", ".join(f"{k} {np.nanmedian(v):+.1f} % ({np.mean(np.asarray(v) < 0):.0%} low)"
+                       for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
+                                    ("C_m", e_fit["c_m"])))
+    print(f"NODE joint, signed median error: {signed}")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
