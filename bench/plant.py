@@ -3,10 +3,10 @@
 Run:  .venv/bin/python bench/plant.py [--houses 900] [--repeat 3] [--no-dataset] [--figure PATH]
       (``--houses 0 --figure PATH``: the figure only)
 
-1. **Kernel speed**: one winter day at Δt = 60 s for ``--houses`` houses with realism drawn over
-   the documented ranges (``impctl.plant.sampling.sample_params``), in house-hours per second, next
-   to the ideal 5R1C (``impctl.model.simulate``) on the same houses, weather and setpoints in the
-   same run.
+1. **Kernel speed**: one winter day at Δt = 60 s for ``--houses`` houses with realism drawn
+   over the documented ranges (``impctl.population.realism.sample_params``), in house-hours per
+   second, next to the ideal 5R1C (``impctl.model.simulate``) on the same houses, weather and
+   setpoints in the same run.
 2. **The realistic IMP dataset**: every house through the IMP schedule of
    ``impctl.population.synth_nights`` (2 spin-up days, 2 constrained + 6 normal nights with the
    days between, 11 days at 60 s, each house its own weather) on the realistic plant, logged as
@@ -32,8 +32,8 @@ import numpy as np
 
 from impctl.model import simulate
 from impctl.plant import Emitter, HeatPump, PlantParams, simulate_plant
-from impctl.plant.sampling import sample_params
 from impctl.population.households import sample_households
+from impctl.population.realism import sample_params
 from impctl.population.synth_nights import (
     imp_schedule,
     run_schedule,
