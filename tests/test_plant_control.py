@@ -17,6 +17,7 @@ from impctl.plant import (
     PlantParams,
     Sensors,
     load_plant,
+    periodic,
     simulate_plant,
 )
 
@@ -158,6 +159,14 @@ def test_step_api_matches_batch():
         assert out["heat_pump_w"] == run["heat_pump_w"][i, 0]
         assert out["compressor_on"] == run["compressor_on"][i, 0]
     assert plant.time_s == pytest.approx(n * 60.0)
+    # DHW charges driven by a schedule, as the simulator does: space heating pauses.
+    plant.loop_on = True
+    dhw_steps = [periodic(i * 60.0, 3600.0, 1200.0, offset_s=0.0) for i in range(120)]
+    assert sum(dhw_steps) == 40
+    outs = [plant.step(60.0, 0.0, dhw=d) for d in dhw_steps]
+    assert all(o["dhw"] and o["heat_pump_w"] == 0 and o["dhw_w"] > 0
+               for o, d in zip(outs, dhw_steps, strict=True) if d)
+    assert any(o["heat_pump_w"] > 0 for o in outs)
     assert plant.t_supply_c >= plant.t_return_c
     assert isinstance(plant.pump_on, bool)
 
