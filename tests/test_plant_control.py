@@ -61,7 +61,7 @@ def test_cycling_honours_min_times_and_hysteresis(control):
                 assert seen < 21.0 - 0.25 if value else seen >= 21.0 + 0.25
     # Cycling units hold the room near the setpoint on average, with a visible swing.
     air = run["t_air_c"][1440:]
-    assert np.all(np.abs(air.mean(axis=0) - 21.0) < 0.8)
+    assert np.all(np.abs(air.mean(axis=0) - 21.0) < 1.0)
     assert np.all(air.max(axis=0) - air.min(axis=0) > 0.2)
 
 

@@ -62,7 +62,8 @@ class SensorBank:
     def _draw(self) -> Array:
         """Standard normals for (air, out, meter) of one step, drawn in blocks for speed."""
         if self._k >= len(self._noise):
-            self._noise = self.rng.standard_normal((_BLOCK, 3, self.n))
+            # float32: the noise needs no more digits, and draws twice as fast.
+            self._noise = self.rng.standard_normal((_BLOCK, 3, self.n), dtype=np.float32)
             self._k = 0
         self._k += 1
         return self._noise[self._k - 1]
