@@ -5,7 +5,7 @@ Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|
           [--plant iso|realistic]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
-(:mod:`impctl.plant`; realism options drawn by ``impctl.plant.sampling.sample_params`` with the
+(:mod:`impctl.plant`; realism options drawn by ``impctl.population.realism.sample_params`` with the
 validation seed): the logged T_air is the room sensor, T_out the outdoor sensor, the power the
 heat meter's interval mean (no extra noise); the demand truth is the true heat-pump output.
 
@@ -56,8 +56,8 @@ from impctl.fit.data import prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
 from impctl.fit.node import PARAM_NAMES
 from impctl.model import HouseParameters
-from impctl.plant.sampling import sample_params
 from impctl.population.households import sample_households
+from impctl.population.realism import sample_params
 from impctl.population.synth_nights import (
     imp_schedule,
     run_schedule,
@@ -286,6 +286,10 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
         cv_s = f"{cv['hlc']:.0f} / {cv['tau']:.0f} / {cv['c_m']:.0f}" if cv else "–"
         tm_s = f"{tm:.2f}" if tm is not None else "–"
         print(f"| {name} | " + " | ".join(cells) + f" | {cv_s} | {tm_s} |")
+    signed = ", ".join(f"{k} {np.nanmedian(v):+.1f} % ({np.mean(np.asarray(v) < 0):.0%} low)"
+                       for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
+                                    ("C_m", e_fit["c_m"])))
+    print(f"NODE joint, signed median error: {signed}")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "

@@ -6,8 +6,8 @@ import numpy as np
 
 from impctl.plant import RADIATORS, UNDERFLOOR
 from impctl.plant.params import SECTIONS
-from impctl.plant.sampling import params_from_table, params_table, sample_params
 from impctl.population import ImpSimConfig, generate_dataset, sample_households
+from impctl.population.realism import params_from_table, params_table, sample_params
 from impctl.population.virtual_imp_plant import simulate_imp_plant
 
 

@@ -31,14 +31,18 @@ class _Ranged:
 
     RANGES: ClassVar[dict[str, tuple[float, float]]] = {}
     SECTION: ClassVar[str] = ""
+    #: Coded fields (kinds, modes, switches): whole numbers only.
+    CODES: ClassVar[frozenset[str]] = frozenset()
 
     def __post_init__(self) -> None:
         for f in fields(self):  # type: ignore[arg-type]
             lo, hi = self.RANGES[f.name]
             v = np.asarray(getattr(self, f.name), dtype=float)
+            place = f"key '{self.SECTION}.{f.name}'"
             if not np.all(np.isfinite(v)) or not np.all((v >= lo) & (v <= hi)):
-                raise InputError(f"must lie in {lo:g}–{hi:g}",
-                                 place=f"key '{self.SECTION}.{f.name}'")
+                raise InputError(f"must lie in {lo:g}–{hi:g}", place=place)
+            if f.name in self.CODES and not np.all(v == np.round(v)):
+                raise InputError(f"must be a whole number {lo:g}–{hi:g}", place=place)
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,7 @@ class Emitter(_Ranged):
     """
 
     SECTION: ClassVar[str] = "plant.emitter"
+    CODES: ClassVar[frozenset[str]] = frozenset({"kind"})
     RANGES: ClassVar[dict[str, tuple[float, float]]] = {
         "kind": (0, 1), "exponent": (1.0, 1.4), "design_water_c": (28.0, 55.0),
         "design_t_out_c": (-20.0, -5.0), "radiator_j_per_k_per_w": (0.0, 50.0),
@@ -178,6 +183,7 @@ class HeatPump(_Ranged):
     """
 
     SECTION: ClassVar[str] = "plant.heat_pump"
+    CODES: ClassVar[frozenset[str]] = frozenset({"control", "defrost"})
     RANGES: ClassVar[dict[str, tuple[float, float]]] = {
         "control": (0, 2), "sizing": (0.9, 1.8), "min_modulation": (0.3, 1.0),
         "capacity_per_k": (0.0, 0.04), "curve_gain": (0.9, 1.3),
@@ -267,6 +273,7 @@ class Sensors(_Ranged):
     """
 
     SECTION: ClassVar[str] = "plant.sensors"
+    CODES: ClassVar[frozenset[str]] = frozenset({"meter_positive_only"})
     RANGES: ClassVar[dict[str, tuple[float, float]]] = {
         "t_air_noise_k": (0.0, 0.3), "t_air_quantum_k": (0.0, 0.5), "t_air_lag_s": (0.0, 900.0),
         "t_air_offset_k": (-1.0, 1.0), "t_out_noise_k": (0.0, 0.5),

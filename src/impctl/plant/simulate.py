@@ -135,9 +135,10 @@ class PlantCore:
             "t_furniture_c": sol.furniture, "t_water_c": sol.water,
             "t_water_target_c": ctl.target_water_c, "heat_pump_w": power,
             "emitter_w": sol.emitter_w, "heat_meter_w": meter, "compressor_on": comp,
-            "defrost": ctl.defrost, "dhw": dhw, "loss_w": sol.loss_w, "gains_w": sol.gains_w,
-            "heat_demand": demand,
+            "defrost": ctl.defrost, "dhw": dhw, "heat_demand": demand,
         }
+        if want is None or "loss_w" in want or "gains_w" in want:
+            out["loss_w"], out["gains_w"] = sol.loss_w, sol.gains_w
         if want is None or not want.isdisjoint(_HYDRAULIC):
             dhw_w = self.nominal_w * dhw
             water = sol.water + np.maximum(power, 0.0) / self.g_pipe

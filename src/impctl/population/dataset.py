@@ -114,7 +114,7 @@ def generate_dataset(
     plant : {"iso", "realistic"}
         ``iso``: the ideal 5R1C (:func:`~.virtual_imp.simulate_imp`); ``realistic``: every
         household on the realistic plant with its realism options drawn over their documented
-        ranges (:func:`impctl.plant.sampling.sample_params`, same seed → same options;
+        ranges (:func:`impctl.population.realism.sample_params`, same seed → same options;
         :func:`~.virtual_imp_plant.simulate_imp_plant`); the options are extra
         ``plant.<section>.<field>`` columns of the households table.
 
@@ -132,7 +132,7 @@ def generate_dataset(
     households = sample_population(n_households, seed, pop_cfg)
     realism = None
     if plant == "realistic":
-        from ..plant.sampling import params_table, sample_params, take_params
+        from .realism import params_table, sample_params, take_params
 
         realism = sample_params(n_households, seed)
     streams = np.random.SeedSequence([int(seed), 0x1_4D9]).spawn(

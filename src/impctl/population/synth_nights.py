@@ -137,7 +137,7 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
                        ) -> tuple[PlantSchedule, np.ndarray]:
     """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
 
-    ``params`` are the houses' realism options (:func:`impctl.plant.sampling.sample_params`);
+    ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
     internal and solar gains follow their ``gains`` section over the schedule's local time. The
     plant starts in the steady state at the day setpoint. Returns what the gateway logs and the
     setpoints used (the schedule's, open loop). ``outputs``: the plant outputs to keep (default

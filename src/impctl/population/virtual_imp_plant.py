@@ -3,7 +3,7 @@
 Same nights, plans, weather days and outputs as :func:`~.virtual_imp.simulate_imp` (one column per
 (household, weather day, plan), one Python loop over time steps), but each household is a real
 heat-pump house: its realism options (``plant_params``, drawn by
-:func:`impctl.plant.sampling.sample_params`) give it air and furniture capacity, radiators or
+:func:`impctl.population.realism.sample_params`) give it air and furniture capacity, radiators or
 underfloor heating, a weather-curve or thermostat controlled heat pump that cycles, defrosts,
 night-time internal gains and the afternoon's sun stored in the mass, and imperfect sensors.
 
@@ -35,7 +35,7 @@ from ..model import HouseParameters
 from ..plant import PlantCore, PlantParams
 from ..plant.envelope import NodeState
 from ..plant.gains import internal_gains_w, solar_gains_w
-from ..plant.sampling import take_params
+from .realism import take_params
 from .virtual_imp import (
     ImpResult,
     ImpSimConfig,

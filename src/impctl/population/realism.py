@@ -26,7 +26,7 @@ from dataclasses import fields
 import numpy as np
 import pandas as pd
 
-from .params import (
+from ..plant.params import (
     CONTROL_CURVE,
     CONTROL_THERMOSTAT,
     RADIATORS,
