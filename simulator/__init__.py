@@ -1,4 +1,6 @@
-"""Kronoterm heat-pump Modbus simulator backed by the 5R1C model (import package ``impctl_sim``).
+"""Kronoterm heat-pump Modbus simulator (import package ``impctl_sim``): the realistic plant of
+:mod:`impctl.plant` by default (:class:`RealisticPlant`), or the ideal 5R1C (:class:`Plant`,
+``SimConfig(plant_kind="iso")``).
 
 In-process use (tests)::
 
@@ -9,9 +11,10 @@ In-process use (tests)::
 Command line: ``impctl-sim --house H.toml --port 5020 --speed 600 --generation extended``.
 """
 
-from .config import SimConfig, constant_weather
+from .config import SimConfig, constant_weather, default_realism
 from .faults import Faults, parse_faults
 from .plant import Plant, PlantParams, WeatherFeed
+from .realistic import RealisticPlant
 from .server import KronotermSimulator, SimStats
 
 __all__ = [
@@ -19,9 +22,11 @@ __all__ = [
     "KronotermSimulator",
     "Plant",
     "PlantParams",
+    "RealisticPlant",
     "SimConfig",
     "SimStats",
     "WeatherFeed",
     "constant_weather",
+    "default_realism",
     "parse_faults",
 ]

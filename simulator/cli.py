@@ -24,7 +24,8 @@ from impctl.weather import read_weather
 
 from .config import SimConfig
 from .faults import parse_faults
-from .plant import PlantParams, describe_plant
+from .plant import PlantParams
+from .realistic import describe_plant
 from .server import KronotermSimulator
 
 

@@ -15,7 +15,8 @@ from impctl.model import HouseParameters, default_house
 from impctl.weather import winter_weather
 
 from .faults import Faults
-from .plant import Plant, PlantLike, PlantParams, RealisticPlant, WeatherFeed
+from .plant import Plant, PlantParams, WeatherFeed
+from .realistic import PlantLike, RealisticPlant
 
 #: Kronoterm's factory unit id.
 DEFAULT_UNIT_ID = 20

@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from impctl.heatpump.decode import to_word
 from impctl.heatpump.registers import REGISTERS, Access, Generation, Kind
 
-from .plant import PlantLike
+from .realistic import PlantLike
 
 LAYOUT: Mapping[Generation, tuple[tuple[int, int], ...]] = {
     Generation.EXTENDED: ((2000, 373),),

@@ -98,7 +98,7 @@ def plant_summary(opts: DemoOptions, realism) -> dict:
                 "modulating heat pump, perfect sensors"}
     from dataclasses import asdict
 
-    from impctl_sim.plant import realism_summary
+    from impctl_sim.realistic import realism_summary
 
     return {"kind": "realistic", "description": realism_summary(realism),
             "realism": asdict(realism)}
