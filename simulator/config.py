@@ -60,8 +60,10 @@ class SimConfig:
     heat_meter_id : int, optional
         Also answer as an external heat meter with this unit id (address 0–1: thermal power W,
         uint32 high word first).
-    step_s : float
-        Model step [simulated s].
+    step_s : float, optional
+        Model step [simulated s]; default 10 s on the ideal plant, 60 s on the realistic one
+        (a step costs ~0.3 ms instead of µs; its fastest effects, timers and ramps, take
+        minutes).
     warmup_s : float
         Simulated time run before the start so the house is near its periodic state [s].
     noise_sd_k : float
@@ -85,11 +87,15 @@ class SimConfig:
     room_thermostat: bool = True
     unit_id: int = DEFAULT_UNIT_ID
     heat_meter_id: int | None = None
-    step_s: float = 10.0
+    step_s: float | None = None
     warmup_s: float = 4 * 86400.0
     noise_sd_k: float = 0.0
     seed: int = 0
     faults: Faults = field(default_factory=Faults)
+
+    def __post_init__(self) -> None:
+        if self.step_s is None:
+            self.step_s = 10.0 if self.plant_kind == "iso" else 60.0
 
     def weather_feed(self, clock: VirtualClock) -> WeatherFeed:
         """The outdoor-temperature source for ``clock``."""

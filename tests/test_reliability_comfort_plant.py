@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 from comfort_screen import holding_t_out_c, night_realism, screen
+from impctl.plant.sampling import sample_params
 from impctl_sim import SimConfig, constant_weather
 from reliability_fixtures import run_virtual
 from test_reliability_comfort import real_night
 
 from impctl.controller import NightPolicy
-from impctl.plant.sampling import sample_params
 from impctl.population import sample_households
 
 SEED, N_HOUSES = 3, 200
@@ -103,8 +103,10 @@ def _houses_to_run() -> list[int]:
 
 def _config(i: int, clock) -> SimConfig:
     houses, realism, t_out = population()
+    # 10-s steps: the restore reaches the plant as fast as on the ideal plant.
     return SimConfig(clock=clock, house=houses.take(i), weather=constant_weather(t_out[i]),
-                     setpoint_c=T_SET, realism=night_realism(realism).take(i), seed=i)
+                     setpoint_c=T_SET, realism=night_realism(realism).take(i), seed=i,
+                     step_s=10.0)
 
 
 def test_real_controller_on_the_realistic_simulator_holds_the_floor(tmp_path):

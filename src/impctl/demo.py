@@ -170,10 +170,10 @@ async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progre
     per_sp = max(1, -(-n_norm // len(setpoints)))
     realistic = opts.plant == "realistic"
     # The realistic plant costs more per step: 2-min steps keep it (and the daemon sharing its
-    # event loop) ahead of a ×20000 clock.
+    # event loop) well ahead of the clock.
     simcfg = SimConfig(house=house, clock=clock, setpoint_c=21.0, weather=weather,
                        plant_kind=opts.plant, realism=realism, timezone=TZ,
-                       step_s=120.0 if realistic else 10.0)
+                       step_s=120.0 if realistic else None)
     async with KronotermSimulator(simcfg) as sim:
         progress.line(f"simulator: demo house on Modbus TCP 127.0.0.1:{sim.port}, "
                       f"clock ×{opts.speed:g} from {epoch:%Y-%m-%d %H:%M %Z}; plant "
