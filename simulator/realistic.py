@@ -12,6 +12,8 @@ import math
 import numpy as np
 
 from impctl.model import HouseParameters
+from impctl.plant import OUTPUTS, periodic
+from impctl.plant import Plant as _Core
 
 from .plant import Plant, PlantParams, dhw_tank_c
 
@@ -50,8 +52,6 @@ class RealisticPlant:
     def __init__(self, house: HouseParameters, realism, params: PlantParams | None = None,
                  setpoint_c: float = 21.0, t_out_c: float = 0.0, seed: int = 0,
                  utc_offset_h=None) -> None:
-        from impctl.plant import OUTPUTS
-        from impctl.plant import Plant as _Core
 
         if house.n_houses is not None:
             raise ValueError("the simulator runs one house")
@@ -182,8 +182,7 @@ class RealisticPlant:
         """Advance the plant by ``dt_s`` seconds at outdoor temperature ``t_out_c``."""
         p = self.params
         on = bool(self.system_on)
-        dhw = on and p.dhw_period_s is not None and (self.time_s % p.dhw_period_s
-                                                      < p.dhw_duration_s)
+        dhw = on and periodic(self.time_s, p.dhw_period_s, p.dhw_duration_s)
         self.internal_gains_w, self.solar_gains_w = self._gains(dt_s, t_out_c)
         core = self.core
         core.setpoint_c = self.room_setpoint_c
