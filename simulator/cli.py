@@ -159,7 +159,8 @@ async def _serve(config: SimConfig, host: str, port: int, allow_remote: bool, rt
         where = f"rtu socket://{sim.host}:{bound}" if rtu.startswith("socket://") else f"rtu {rtu}"
     click.echo(f"impctl-sim: serving {where} unit {config.unit_id} "
                f"{config.generation.value}; faults {sim.faults.describe()}; "
-               f"clock {sim.clock.spec()}; plant {describe_plant(sim.plant)}")
+               f"clock {sim.clock.spec()}")
+    click.echo(f"impctl-sim: plant {describe_plant(sim.plant)}")
     sys.stdout.flush()
     try:
         await stop.wait()

@@ -205,7 +205,8 @@ class SimProcess:
 @contextlib.contextmanager
 def sim_process(tmp_path: Path, epoch: datetime, speed: float, *,
                 house: HouseParameters = HEAVY_HOUSE, t_out_c: float = 0.0,
-                setpoint_c: float = OWNER_SETPOINT_C) -> Iterator[SimProcess]:
+                setpoint_c: float = OWNER_SETPOINT_C,
+                plant: str = "realistic") -> Iterator[SimProcess]:
     """Start ``impctl-sim --port 0 --clock-file F`` and read back its port and clock spec."""
     clock_file = tmp_path / "sim.clock"
     faults_file = tmp_path / "sim.faults"
@@ -215,7 +216,7 @@ def sim_process(tmp_path: Path, epoch: datetime, speed: float, *,
            "--clock-file", str(clock_file), "--faults-file", str(faults_file),
            "--house", str(house_toml(tmp_path / "house.toml", house)),
            "--weather", str(weather_csv(tmp_path / "weather.csv", t_out_c)),
-           "--setpoint", repr(setpoint_c)]
+           "--setpoint", repr(setpoint_c), "--plant", plant]
     with log.open("w") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, cwd=ROOT)
     try:

@@ -784,7 +784,9 @@ def soak_run(tmp_path: Path, nights: int, *, speed: float, sample_interval_s: fl
     constrained = max(1, nights // 3)
     normal = nights - constrained
     out: list[SoakNight] = []
-    with sim_process(tmp_path, epoch, speed) as sim:
+    # The ideal plant: at ×43200 the realistic plant's steps (≈ 0.3 ms each) would not keep
+    # up, and the soak is about the daemon.
+    with sim_process(tmp_path, epoch, speed, plant="iso") as sim:
         state = tmp_path / "state"
         db = state / "impctl.db"
         config = write_config(tmp_path / "config.toml", daemon_mapping(

@@ -73,7 +73,9 @@ def _count(key: str, messages) -> int:
 def test_ready_status_watchdog_and_stopping(tmp_path):
     notify = NotifySocket()
     try:
-        with sim_process(tmp_path, EPOCH, 7200.0) as sim:
+        # The ideal plant: the night's STATUS lines and its "done (valid)" verdict are the
+        # point here, not the plant.
+        with sim_process(tmp_path, EPOCH, 7200.0, plant="iso") as sim:
             mapping = daemon_mapping(tmp_path / "state", sim.port, sim.clock,
                                      night={"window": "22:00-01:00", "preheat_h": 0.5})
             config = write_config(tmp_path / "config.toml", mapping)
