@@ -125,18 +125,23 @@ class MqttBridge:
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
                                  "to %g s)", where, exc, self.cfg.reconnect_max_s)
                     down_since = time.monotonic()
+            except Exception:  # noqa: BLE001 - MQTT must never take the daemon down
+                if down_since is None:
+                    _LOG.exception("MQTT bridge failed; reconnecting with back-off")
+                    down_since = time.monotonic()
             finally:
                 self.connected = False
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
             delay = min(delay * 2, self.cfg.reconnect_max_s)
 
     async def _session(self, client: aiomqtt.Client) -> None:
-        await self._announce(client)
         base = self.cfg.topic
+        # Subscribe first: once Home Assistant sees the buttons, pressing them must work.
         if self.cfg.commands:
             await client.subscribe(f"{base}/cmd/+", qos=1)
         # Home Assistant says "online" here when it (re)starts: announce again then.
         await client.subscribe(f"{self.cfg.discovery_prefix}/status")
+        await self._announce(client)
         listener = asyncio.create_task(self._listen(client))
         try:
             publisher = asyncio.create_task(self._publish_loop(client))
@@ -226,11 +231,11 @@ class MqttBridge:
             except BadCommand as exc:
                 _LOG.warning("MQTT command %s ignored: %s", topic, exc)
                 continue
-            if cmd.name == "night_kind":
-                self.kind = cmd.kind
-                await self._publish_settings(client)
-            elif cmd.name == "night_setpoint":
-                self.setpoint_c = cmd.setpoint_c
+            if cmd.name in ("night_kind", "night_setpoint"):
+                self.kind = cmd.kind or self.kind
+                self.setpoint_c = cmd.setpoint_c or self.setpoint_c
+                _LOG.info("MQTT setting: triggered nights are %s at %g °C", self.kind,
+                          self.setpoint_c)
                 await self._publish_settings(client)
             else:
                 try:

@@ -1,0 +1,274 @@
+"""impctl daemon ↔ a real mosquitto broker ↔ a client subscribed as Home Assistant is.
+
+Every test runs the real ``impctl daemon`` subprocess against an ``impctl-sim`` subprocess on
+the accelerated clock (3600×: a 7 h night lasts 7 s) and a mosquitto process on a free loopback
+port, anonymous or with a ``mosquitto_passwd`` file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from datetime import datetime
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+from daemon_fixtures import (
+    OWNER_MODE,
+    OWNER_SETPOINT_RAW,
+    daemon_mapping,
+    owner_state,
+    run_cli,
+    sim_process,
+    start_daemon,
+    stop_process,
+    store_query,
+    wait_until,
+    write_config,
+)
+from mqtt_fixtures import (
+    broker,
+    check_discovery,
+    home_assistant,
+    mqtt_section,
+    render,
+    retained,
+)
+
+TZ = ZoneInfo("Europe/Ljubljana")
+SPEED = 3600.0
+OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)
+BASE = "impctl/gw1"
+ONE_CONSTRAINED = {"enabled": True, "constrained_nights": 1, "normal_setpoints_c": [],
+                   "fit_when_complete": False}
+#: 9 sensors/binary sensors of state, 4 fit sensors; 5 command entities with commands = true.
+N_ENTITIES = {False: 13, True: 18}
+
+
+@contextlib.contextmanager
+def rig(tmp_path: Path, epoch: datetime, mqtt: dict, campaign: dict | None = None):
+    """(sim, config, db) with an ``[mqtt]`` section."""
+    with sim_process(tmp_path, epoch, SPEED) as sim:
+        mapping = daemon_mapping(
+            tmp_path / "state", sim.port, sim.clock,
+            night={"window": "22:00-05:00", "preheat_h": 0.5},
+            campaign=campaign or {"enabled": False}, mqtt=mqtt)
+        config = write_config(tmp_path / "config.toml", mapping)
+        yield sim, config, tmp_path / "state" / "impctl.db"
+
+
+def _ready(config, db, log):
+    d = start_daemon(config, db, log)
+    wait_until(lambda: "next night job at" in d.output(), 30, "the daemon", proc=d.proc)
+    return d
+
+
+def _configs(ha) -> dict[str, dict]:
+    return {m.topic: json.loads(m.payload) for m in ha.under("homeassistant/")
+            if m.payload and m.topic.endswith("/config")}
+
+
+def _states(ha, since: float = 0.0) -> list[dict]:
+    return [m.json() for m in ha.on(f"{BASE}/state") if m.at >= since]
+
+
+def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
+    pw = tmp_path / "mqtt.password"
+    pw.write_text("impctl-secret\n")
+    users = {"impctl": "impctl-secret", "ha": "ha-secret"}
+    epoch = datetime(2026, 1, 12, 18, 0, tzinfo=TZ)  # the scheduled night acts at 21:30
+    with broker(tmp_path / "broker", users) as b, \
+            home_assistant(b.port, username="ha", password="ha-secret") as ha, \
+            rig(tmp_path, epoch, mqtt_section(b, username="impctl", password_file=str(pw),
+                                              commands=True),
+                campaign=ONE_CONSTRAINED) as (sim, config, db):
+        d = _ready(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: len(_configs(ha)) == N_ENTITIES[True], 20, "discovery",
+                       proc=d.proc)
+            configs = _configs(ha)
+            assert check_discovery(configs) == []
+            # Retained: what Home Assistant gets when it (re)subscribes later.
+            kept = retained(b.port, username="ha", password="ha-secret")
+            assert set(configs) <= set(kept)
+            assert kept[f"{BASE}/availability"].payload == b"online"
+            assert f"{BASE}/fit/hlc" in kept and f"{BASE}/state" not in kept
+            dev = next(iter(configs.values()))["device"]
+            assert dev["name"] == "impctl gw1" and dev["identifiers"] == ["impctl_gw1"]
+            assert "extended controller" in dev["model"]
+            t_air = configs["homeassistant/sensor/gw1/t_air/config"]
+            assert (t_air["device_class"], t_air["unit_of_measurement"],
+                    t_air["state_class"]) == ("temperature", "°C", "measurement")
+            q = configs["homeassistant/sensor/gw1/q_hc/config"]
+            assert (q["device_class"], q["unit_of_measurement"]) == ("power", "W")
+            # No fit yet: the fit sensors are unknown, the coast time unavailable.
+            hlc = ha.latest(f"{BASE}/fit/hlc")
+            assert render(configs["homeassistant/sensor/gw1/hlc/config"][
+                "value_template"], hlc.payload) == "None"
+            coast_conf = configs["homeassistant/sensor/gw1/coast_h/config"]
+            coast = ha.latest(f"{BASE}/fit/coast_h")
+            assert render(coast_conf["availability"][1]["value_template"],
+                          coast.payload) == "offline"
+
+            # The scheduled night: values at the sampling rate, as Home Assistant reads them.
+            def switched_off():
+                return owner_state(sim.port) == (225, 0) and any(
+                    s["night_state"] == "active" for s in _states(ha))
+            wait_until(switched_off, 40, "the night to switch off", proc=d.proc)
+            wait_until(lambda: store_query(db, lambda s: s.sample_count(1)) >= 8, 20,
+                       "samples", proc=d.proc)
+            samples = {s.ts.isoformat(): s for s in store_query(db, lambda st: st.samples(1))}
+            active = [s for s in _states(ha) if s["night_state"] == "active"]
+            assert len(active) >= 5
+            matched = [s for s in active if s["ts"] in samples]
+            assert len(matched) >= 5  # each published value is a stored sample's value
+            for s in matched:
+                row = samples[s["ts"]]
+                assert s["t_air_c"] == round(row.t_air_c, 2)
+                assert s["t_out_c"] == round(row.t_out_c, 2)
+                assert s["night_kind"] == "constrained" and s["experiment_active"]
+            payload = ha.latest(f"{BASE}/state").payload
+            assert render(t_air["value_template"], payload) == str(
+                json.loads(payload)["t_air_c"])
+            active_conf = configs["homeassistant/binary_sensor/gw1/experiment_active/config"]
+            assert render(active_conf["value_template"], payload) == "ON"
+
+            # Malformed commands: one log line each, nothing queued, the night goes on.
+            ha.press(f"{BASE}/cmd/trigger", "{not json")
+            ha.press(f"{BASE}/cmd/trigger", json.dumps({"kind": "normal",
+                                                         "setpoint_c": 30}))
+            wait_until(lambda: d.output().count("MQTT command") >= 2, 10, "the log lines")
+            lines = [ln for ln in d.output().splitlines() if "MQTT command" in ln]
+            assert len(lines) == 2 and all("ignored" in ln for ln in lines)
+            assert "outside the safety limits" in lines[1]
+            assert store_query(db, lambda s: s.pending_requests()) == []
+
+            # The household's stop button: the night ends, the owner's settings come back.
+            ha.press(f"{BASE}/cmd/abort", "abort")
+            wait_until(lambda: owner_state(sim.port) == OWNER, 20, "the restore", proc=d.proc)
+            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, 20,
+                       "the night to be closed", proc=d.proc)
+            night = store_query(db, lambda s: s.night(1))
+            assert (night.state, night.valid) == ("aborted", False)
+            assert night.reasons[0] == "aborted on request (mqtt)"
+            assert store_query(db, lambda s: s.journal_pending()) == []
+            wait_until(lambda: _states(ha)[-1]["night_state"] == "idle", 20, "idle state")
+            assert d.proc.poll() is None  # the daemon keeps running
+
+            # kill -9: the broker publishes the last will, retained.
+            d.proc.kill()
+            d.proc.wait(10)
+            wait_until(lambda: ha.latest(f"{BASE}/availability").payload == b"offline", 20,
+                       "the last will")
+            kept = retained(b.port, f"{BASE}/availability", username="ha",
+                            password="ha-secret")
+            assert kept[f"{BASE}/availability"].payload == b"offline"
+        finally:
+            stop_process(d.proc)
+
+
+def test_broker_outage_mid_night_loses_no_sample(tmp_path):
+    epoch = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+    with broker(tmp_path / "broker") as b, home_assistant(b.port) as ha, \
+            rig(tmp_path, epoch, mqtt_section(b, commands=True)) as (sim, config, db):
+        d = _ready(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: len(_configs(ha)) == N_ENTITIES[True], 20, "discovery",
+                       proc=d.proc)
+            # The trigger button, with the kind and setpoint set through the select/number.
+            ha.press(f"{BASE}/cmd/night_kind", "normal")
+            ha.press(f"{BASE}/cmd/night_setpoint", "22")
+            wait_until(lambda: (ha.latest(f"{BASE}/settings") or None) and ha.latest(
+                f"{BASE}/settings").json() == {"kind": "normal", "setpoint_c": 22.0}, 10,
+                "the settings")
+            ha.press(f"{BASE}/cmd/trigger", "now")
+            wait_until(lambda: owner_state(sim.port)[0] == 220, 20, "the triggered night",
+                       proc=d.proc)
+            wait_until(lambda: store_query(db, lambda s: s.sample_count(1)) >= 5, 20,
+                       "samples", proc=d.proc)
+
+            b.stop()  # the broker goes away mid-night
+            before = store_query(db, lambda s: s.sample_count(1))
+            wall = time.monotonic()
+            time.sleep(2.0)
+            during = store_query(db, lambda s: s.sample_count(1)) - before
+            b.start()
+            restarted = time.monotonic()
+            # Retained messages died with the broker: impctl announces itself again.
+            wait_until(lambda: any(m.at > restarted for m in ha.under("homeassistant/")), 20,
+                       "discovery after the restart", proc=d.proc)
+            wait_until(lambda: any(s["night_state"] == "active"
+                                   for s in _states(ha, restarted)), 20,
+                       "values after the restart", proc=d.proc)
+            assert ha.latest(f"{BASE}/availability").payload == b"online"
+            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, 30,
+                       "the night to finish", proc=d.proc)
+            night = store_query(db, lambda s: s.night(1))
+            assert (night.state, night.valid, night.kind, night.setpoint_c) == (
+                "done", True, "normal", 22.0), night.reasons
+            assert owner_state(sim.port) == OWNER
+            # Sampling went on while the broker was down: 2 s = 2 simulated hours at one
+            # sample per 120 s is 60 samples; a loaded machine may delay some, none is lost.
+            assert during >= 20, (during, time.monotonic() - wall)
+            ts = [s.ts for s in store_query(db, lambda st: st.samples(1))]
+            assert all((b_ - a).total_seconds() > 0 for a, b_ in zip(ts, ts[1:], strict=False))
+        finally:
+            assert stop_process(d.proc) == 0
+        log = d.output()
+        assert log.count("MQTT broker") == 2, log  # one line when it went, one when back
+        assert "unavailable" in log and "back after" in log
+
+
+def test_refused_credentials_and_skip_tonight(tmp_path):
+    """Wrong password: one log line however many retries, and nights are unaffected; then
+    the right password and a skip_tonight from Home Assistant keep the scheduled night off."""
+    pw = tmp_path / "mqtt.password"
+    pw.write_text("wrong\n")
+    users = {"impctl": "right", "ha": "ha-secret"}
+    epoch = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+    with broker(tmp_path / "broker", users) as b, \
+            rig(tmp_path, epoch, mqtt_section(b, username="impctl", password_file=str(pw),
+                                              commands=True)) as (sim, config, db):
+        d = _ready(config, db, tmp_path / "daemon.log")
+        try:
+            queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
+                             "--config", str(config))
+            assert queued.returncode == 0, queued.stderr
+            wait_until(lambda: store_query(db, lambda s: s.night(1) and s.night(1).valid)
+                       is not None, 40, "the night", proc=d.proc)
+            night = store_query(db, lambda s: s.night(1))
+            assert (night.state, night.valid) == ("done", True), night.reasons
+            assert owner_state(sim.port) == OWNER
+        finally:
+            assert stop_process(d.proc) == 0
+        log = d.output()
+        refusals = b.log.read_text().count("not authorised")
+        assert refusals >= 3, b.log.read_text()  # it kept retrying…
+        lines = [ln for ln in log.splitlines() if "MQTT broker" in ln]
+        assert len(lines) == 1 and "unavailable" in lines[0], lines  # …and said so once
+
+        # The right password; 16:00, the scheduled night would act at 21:30.
+        pw.write_text("right\n")
+        evening = datetime(2026, 1, 12, 16, 0, tzinfo=TZ)
+        (tmp_path / "evening").mkdir()
+    with broker(tmp_path / "broker2", users) as b, \
+            home_assistant(b.port, username="ha", password="ha-secret") as ha, \
+            rig(tmp_path / "evening", evening,
+                mqtt_section(b, username="impctl", password_file=str(pw), commands=True),
+                campaign=ONE_CONSTRAINED) as (sim, config, db):
+        d = _ready(config, db, tmp_path / "daemon2.log")
+        try:
+            wait_until(lambda: ha.latest(f"{BASE}/availability"), 20, "online", proc=d.proc)
+            ha.press(f"{BASE}/cmd/skip_tonight", "skip_tonight")
+            wait_until(lambda: any(s["skip_tonight"] for s in _states(ha)), 10,
+                       "the skip to show", proc=d.proc)
+            wait_until(lambda: "night skipped on request" in d.output(), 20, "the night job",
+                       proc=d.proc)
+            wait_until(lambda: sim.clock.now().astimezone(TZ).hour >= 23, 20, "23:00")
+            assert store_query(db, lambda s: s.nights()) == []
+            assert owner_state(sim.port) == OWNER
+        finally:
+            assert stop_process(d.proc) == 0
+        # A clean stop says offline itself (no last will is sent then).
+        assert ha.latest(f"{BASE}/availability").payload == b"offline"
