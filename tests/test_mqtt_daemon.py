@@ -257,9 +257,13 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             rig(tmp_path / "evening", evening,
                 mqtt_section(b, username="impctl", password_file=str(pw), commands=True),
                 campaign=ONE_CONSTRAINED) as (sim, config, db):
+        # A retained command left on the broker must not act at every (re)connect.
+        ha.client.publish(f"{BASE}/cmd/abort", "abort", qos=1, retain=True).wait_for_publish(5)
         d = _ready(config, db, tmp_path / "daemon2.log")
         try:
             wait_until(lambda: ha.latest(f"{BASE}/availability"), 20, "online", proc=d.proc)
+            wait_until(lambda: "retained messages are not commands" in d.output(), 10,
+                       "the retained command to be refused", proc=d.proc)
             ha.press(f"{BASE}/cmd/skip_tonight", "skip_tonight")
             wait_until(lambda: any(s["skip_tonight"] for s in _states(ha)), 10,
                        "the skip to show", proc=d.proc)
@@ -268,6 +272,8 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             wait_until(lambda: sim.clock.now().astimezone(TZ).hour >= 23, 20, "23:00")
             assert store_query(db, lambda s: s.nights()) == []
             assert owner_state(sim.port) == OWNER
+            assert d.output().count("retained messages are not commands") == 1
+            assert "abort requested" not in d.output()
         finally:
             assert stop_process(d.proc) == 0
         # A clean stop says offline itself (no last will is sent then).

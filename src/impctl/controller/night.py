@@ -147,7 +147,12 @@ class NightController:
     async def _sleep_until(self, when: datetime) -> None:
         """Sleep until the simulated instant ``when`` or until a stop is requested."""
         delay = self.clock.wall_seconds(when.timestamp() - self.clock.now_s())
-        if delay > 0:
+        if 0 < delay <= 1.0:  # short: an abort is seen at the next check anyway
+            try:
+                await asyncio.wait_for(self.stop.wait(), timeout=delay)
+            except TimeoutError:
+                pass
+        elif delay > 0:  # long (real-time nights): wake on a stop or an abort
             waits = [asyncio.ensure_future(e.wait()) for e in (self.stop, self._aborted)]
             try:
                 await asyncio.wait(waits, timeout=delay, return_when=asyncio.FIRST_COMPLETED)

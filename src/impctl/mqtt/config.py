@@ -7,12 +7,15 @@ names a file holding it (mode 0600, readable by the service). Durations in s.
 from __future__ import annotations
 
 import math
+import os
 import re
 import socket
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+#: Name of the systemd credential that holds the password when password_file is empty.
+CREDENTIAL = "mqtt.password"
 _ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 # Topic levels: no MQTT wildcards, no empty level, no leading/trailing slash.
 _TOPIC = re.compile(r"^[^#+/\s]+(/[^#+/\s]+)*$")
@@ -32,7 +35,8 @@ class MqttConfig:
     ----------
     host, port : the broker (port 1883, or 8883 with TLS by convention)
     tls : bool, connect with TLS; ``ca_file`` is the CA bundle (empty = the system's)
-    username, password_file : credentials; the password is read from the file at start
+    username, password_file : credentials; the password is read from the file at each
+        connect (empty: the systemd credential ``mqtt.password``, if the unit loads one)
     client_id : MQTT client id, also the device id in Home Assistant
     base_topic : prefix of impctl's own topics (default ``impctl/<client_id>``)
     discovery_prefix : Home Assistant's discovery prefix
@@ -62,10 +66,15 @@ class MqttConfig:
         return self.base_topic or f"impctl/{self.client_id}"
 
     def password(self) -> str | None:
-        """The password from ``password_file`` (first line), or None without one."""
-        if not self.password_file:
-            return None
-        lines = Path(self.password_file).read_text().splitlines()
+        """The password: first line of ``password_file``, else of the systemd credential
+        ``mqtt.password`` (``LoadCredential=``, see README), else None."""
+        path = self.password_file
+        if not path:
+            creds = os.environ.get("CREDENTIALS_DIRECTORY")
+            if not creds or not (Path(creds) / CREDENTIAL).is_file():
+                return None
+            path = str(Path(creds) / CREDENTIAL)
+        lines = Path(path).read_text().splitlines()
         return lines[0] if lines else ""
 
 
