@@ -104,6 +104,12 @@ def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
                     t_air["state_class"]) == ("temperature", "°C", "measurement")
             q = configs["homeassistant/sensor/gw1/q_hc/config"]
             assert (q["device_class"], q["unit_of_measurement"]) == ("power", "W")
+            # Home Assistant restarts (birth message): impctl announces itself again.
+            t = time.monotonic()
+            ha.press("homeassistant/status", "online")
+            wait_until(lambda: len({m.topic for m in ha.under("homeassistant/")
+                                    if m.at > t and m.topic.endswith("/config")})
+                       == N_ENTITIES[True], 10, "discovery again", proc=d.proc)
             # No fit yet: the fit sensors are unknown, the coast time unavailable.
             hlc = ha.latest(f"{BASE}/fit/hlc")
             assert render(configs["homeassistant/sensor/gw1/hlc/config"][

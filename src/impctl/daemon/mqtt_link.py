@@ -21,6 +21,7 @@ from ..heatpump.clock import VirtualClock
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
     from ..mqtt.commands import Command
+    from ..mqtt.discovery import DeviceIdentity
     from ..mqtt.payloads import LiveState
     from .service import Daemon
 
@@ -29,6 +30,10 @@ _RUNNING = ("preparing", "active", "restoring")
 #: A skip request older than this is stale (it was for a night that has passed) [h].
 SKIP_VALID_H = 24.0
 _TASKS: set[asyncio.Task] = set()
+try:
+    _VERSION = metadata.version("impctl")
+except metadata.PackageNotFoundError:
+    _VERSION = "unknown"
 
 
 class MqttLink:
@@ -41,6 +46,17 @@ class MqttLink:
         self.bridge: MqttBridge | None = None
 
     # -- StateSource -------------------------------------------------------------------------
+    def identity(self) -> DeviceIdentity:
+        from ..mqtt.discovery import DeviceIdentity
+
+        d = self.daemon
+        try:
+            model = f"Kronoterm heat pump, {d.client.generation.value} controller"
+        except HeatPumpError:  # not connected yet: announced again once detected
+            model = "Kronoterm heat pump (controller not yet detected)"
+        return DeviceIdentity(model=model, link=d.cfg.heatpump.link.describe(),
+                              sw_version=_VERSION)
+
     def live(self) -> LiveState:
         from ..mqtt.payloads import LiveState
 
@@ -115,22 +131,12 @@ def start_mqtt(daemon: Daemon) -> MqttLink | None:
     if cfg.mqtt is None:
         return None
     from ..mqtt.bridge import MqttBridge
-    from ..mqtt.discovery import DeviceIdentity, Limits
+    from ..mqtt.discovery import Limits
 
-    try:
-        version = metadata.version("impctl")
-    except metadata.PackageNotFoundError:
-        version = "unknown"
-    try:
-        generation = daemon.client.generation.value
-    except HeatPumpError:
-        generation = cfg.heatpump.generation
     lo, hi = cfg.heatpump.writes.loop1_setpoint_c
     link = MqttLink(daemon)
     link.bridge = MqttBridge(
         cfg.mqtt, link,
-        DeviceIdentity(model=f"Kronoterm heat pump, {generation} controller",
-                       link=cfg.heatpump.link.describe(), sw_version=version),
         Limits(setpoint_min_c=lo, setpoint_max_c=hi,
                comfort_band_k=cfg.night.comfort_band_k,
                default_setpoint_c=cfg.campaign.constrained_setpoint_c))

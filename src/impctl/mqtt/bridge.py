@@ -39,6 +39,9 @@ class StateSource(Protocol):
     def live(self) -> LiveState:
         """The current state (no I/O beyond the local store)."""
 
+    def identity(self) -> DeviceIdentity:
+        """The heat pump as far as known (the controller generation once detected)."""
+
     async def refresh(self) -> None:
         """Read the heat pump when no night does so (idle); must not raise."""
 
@@ -56,13 +59,12 @@ class MqttBridge:
     ----------
     cfg : MqttConfig
     source : StateSource
-    device : DeviceIdentity
     limits : Limits (the trigger's safety limits; also the number entity's range)
     """
 
-    def __init__(self, cfg: MqttConfig, source: StateSource, device: DeviceIdentity,
-                 limits: Limits) -> None:
-        self.cfg, self.source, self.device, self.limits = cfg, source, device, limits
+    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits) -> None:
+        self.cfg, self.source, self.limits = cfg, source, limits
+        self._device: DeviceIdentity | None = None  # as last announced
         self.kind = "constrained"
         self.setpoint_c = limits.default_setpoint_c
         self.connected = False
@@ -163,7 +165,8 @@ class MqttBridge:
             listener.cancel()
 
     async def _announce(self, client: aiomqtt.Client) -> None:
-        for topic, payload in discovery_messages(self.cfg, self.device, self.limits):
+        self._device = self.source.identity()
+        for topic, payload in discovery_messages(self.cfg, self._device, self.limits):
             await client.publish(topic, payload, qos=1, retain=True)
         await client.publish(f"{self.cfg.topic}/availability", ONLINE, qos=1, retain=True)
         await self._publish_settings(client)
@@ -190,7 +193,8 @@ class MqttBridge:
         idle_s = self.cfg.idle_interval_s
         last_refresh = -1e9
         while True:
-            if self._rediscover.is_set():
+            # Again when Home Assistant restarted, or the heat pump's identity became known.
+            if self._rediscover.is_set() or self.source.identity() != self._device:
                 self._rediscover.clear()
                 await self._announce(client)
             state = self.source.live()
