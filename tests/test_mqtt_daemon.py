@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import signal
 import time
 from datetime import datetime
 from pathlib import Path
@@ -243,13 +244,16 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
                              "--config", str(config))
             assert queued.returncode == 0, queued.stderr
-            wait_until(lambda: store_query(db, lambda s: s.night(1) and s.night(1).valid)
-                       is not None, 40, "the night", proc=d.proc)
-            night = store_query(db, lambda s: s.night(1))
-            assert (night.state, night.valid) == ("done", True), night.reasons
-            assert owner_state(sim.port) == OWNER
+            # The night runs while impctl keeps being refused (a whole valid night with a
+            # broker that never answers: test_silent_broker_blocks_neither_nights_nor_shutdown).
+            wait_until(lambda: b.log.read_text().count("not authorised") >= 3, 30,
+                       "three refused connections", proc=d.proc)
+            wait_until(lambda: store_query(db, lambda s: s.sample_count(1)) >= 10, 20,
+                       "samples", proc=d.proc)
+            assert owner_state(sim.port)[0] == 220
         finally:
             assert stop_process(d.proc) == 0
+        assert owner_state(sim.port) == OWNER  # stopped mid-night: restored before exit
         log = d.output()
         refusals = b.log.read_text().count("not authorised")
         assert refusals >= 3, b.log.read_text()  # it kept retrying…
@@ -304,3 +308,41 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             assert stop_process(d.proc) == 0
         # A clean stop says offline itself (no last will is sent then).
         assert ha.latest(f"{BASE}/availability").payload == b"offline"
+
+
+def test_silent_broker_blocks_neither_nights_nor_shutdown(tmp_path):
+    """A "broker" that accepts the TCP connection and never answers (a hung broker, a
+    half-open NAT): the night runs and is valid, the outage is one log line, SIGTERM still
+    stops the daemon promptly."""
+    import socket
+
+    hole = socket.socket()
+    hole.bind(("127.0.0.1", 0))
+    hole.listen(8)  # the kernel completes the handshakes; nothing ever reads or answers
+    try:
+        epoch = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+        mqtt = {"host": "127.0.0.1", "port": hole.getsockname()[1], "client_id": "gw1",
+                "reconnect_max_s": 1.0, "commands": True}
+        with rig(tmp_path, epoch, mqtt) as (sim, config, db):
+            d = _ready(config, db, tmp_path / "daemon.log")
+            try:
+                queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
+                                 "--config", str(config))
+                assert queued.returncode == 0, queued.stderr
+                wait_until(lambda: store_query(db, lambda s: s.night(1) and s.night(1).valid)
+                           is not None, 40, "the night", proc=d.proc)
+                night = store_query(db, lambda s: s.night(1))
+                assert (night.state, night.valid) == ("done", True), night.reasons
+                assert owner_state(sim.port) == OWNER
+                wait_until(lambda: "unavailable" in d.output(), 30, "the outage line",
+                           proc=d.proc)
+                t0 = time.monotonic()
+                d.proc.send_signal(signal.SIGTERM)
+                assert d.proc.wait(20) == 0
+                assert time.monotonic() - t0 < 10.0
+            finally:
+                stop_process(d.proc)
+        lines = [ln for ln in d.output().splitlines() if "MQTT broker" in ln]
+        assert len(lines) == 1 and "unavailable" in lines[0], lines
+    finally:
+        hole.close()
