@@ -64,12 +64,14 @@ class MqttLink:
         state = LiveState()
         running = store.nights(states=_RUNNING)
         snap, ok = self._idle, self._idle_ok
+        last = d.controller.last_snapshot if d.controller else None
         if running:
             night = running[-1]
             state.night_state, state.night_kind, state.night_id = (night.state, night.kind,
                                                                    night.id)
-            snap = d.controller.last_snapshot if d.controller else None
-            ok = snap is not None
+            snap, ok = last, last is not None
+        elif last is not None and (snap is None or last.timestamp > snap.timestamp):
+            snap, ok = last, True  # a night's last sample is newer than the idle read
         if snap is not None:
             state.ts = snap.timestamp
             state.t_air_c = snap.t_air_c.value
