@@ -130,16 +130,35 @@ class NightController:
         self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
         self._incidents: list[str] = []  # notes for the night's reasons
         self._floor_c: float | None = None
+        self._abort_reason: str | None = None  # a household's stop request (abort())
+        self._aborted = asyncio.Event()
+        self._running = False
+
+    def abort(self, reason: str) -> bool:
+        """End the running night now and restore, leaving the process running (the
+        household's stop button). Returns False when no night is running."""
+        if not self._running:
+            return False
+        self._abort_reason = reason
+        self._aborted.set()
+        return True
 
     # -- timing ----------------------------------------------------------------------------
     async def _sleep_until(self, when: datetime) -> None:
         """Sleep until the simulated instant ``when`` or until a stop is requested."""
         delay = self.clock.wall_seconds(when.timestamp() - self.clock.now_s())
-        if delay > 0:
+        if 0 < delay <= 1.0:  # short: an abort is seen at the next check anyway
             try:
                 await asyncio.wait_for(self.stop.wait(), timeout=delay)
             except TimeoutError:
                 pass
+        elif delay > 0:  # long (real-time nights): wake on a stop or an abort
+            waits = [asyncio.ensure_future(e.wait()) for e in (self.stop, self._aborted)]
+            try:
+                await asyncio.wait(waits, timeout=delay, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                for w in waits:
+                    w.cancel()
 
     # -- the night ---------------------------------------------------------------------------
     async def run(self, req: NightRequest) -> Night:
@@ -157,6 +176,8 @@ class NightController:
         state, reasons = "done", []
         wrote = False
         self._incidents, self._problem, self._lost_since = [], None, None
+        self._abort_reason, self._running = None, True
+        self._aborted.clear()
         try:
             self.store.set_night_state(night_id, "preparing")
             first = await self._prepare(night_id, req, log)
@@ -173,6 +194,7 @@ class NightController:
         except asyncio.CancelledError:
             state, reasons = "aborted", ["stopped (cancelled)"]
             log.warning("night cancelled: restoring the heat pump")
+            self._running = False
             await self._finish(night_id, state, reasons, wrote, log)
             raise
         except HeatPumpError as exc:
@@ -181,6 +203,7 @@ class NightController:
         except Exception as exc:  # a bug or a failing store must not leave the heating off
             state, reasons = "aborted", [f"internal error: {exc!r}"]
             log.exception("night aborted by an unexpected error; restoring the heat pump")
+        self._running = False
         await self._finish(night_id, state, reasons, wrote, log)
         return self.store.night(night_id)
 
@@ -268,6 +291,8 @@ class NightController:
         except HeatPumpError as exc:
             raise NightRefused(str(exc)) from None
         while True:
+            if self._abort_reason is not None:
+                raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise NightRefused("stopped before the night started")
             problem = None
@@ -345,6 +370,8 @@ class NightController:
         interval = timedelta(seconds=policy.sample_interval_s)
         next_at = self.clock.now()
         while True:
+            if self._abort_reason is not None:
+                raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise _Abort("stop requested (signal)")
             now = self.clock.now()

@@ -15,6 +15,7 @@ from typing import Any
 from ..errors import InputError
 from ..heatpump import HeatPumpConfig
 from ..heatpump import config_from_mapping as heatpump_from_mapping
+from ..mqtt.config import MqttConfig, mqtt_from_mapping
 
 
 class ConfigError(InputError):
@@ -81,6 +82,7 @@ class Config:
     night: NightConfig = field(default_factory=NightConfig)
     campaign: CampaignConfig = field(default_factory=CampaignConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     source: str = ""
 
     @property
@@ -163,6 +165,12 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
             except InputError as exc:
                 problems.append(" ".join(p for p in (exc.place, exc.problem) if p))
                 problems.append(_HEATPUMP_FAILED)
+            continue
+        if key == "mqtt" and cls is Config:  # [mqtt], parsed by impctl.mqtt.config
+            if not isinstance(value, dict):
+                problems.append(f"{where}: must be a [table]")
+                continue
+            kwargs[key] = mqtt_from_mapping(value, problems)
             continue
         if key in _SECTIONS and cls is Config:
             if not isinstance(value, dict):

@@ -24,6 +24,7 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudg
 from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
+from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .schedule import (
     act_trigger,
     campaign_complete,
@@ -105,6 +106,7 @@ class Daemon:
         # Held by a night and by the background restore: never both at once (a restore
         # marking an entry done while a night re-journals it would lose the owner's value).
         self._heat_pump_lock = asyncio.Lock()
+        self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -123,6 +125,7 @@ class Daemon:
         _LOG.info("impctl daemon started (state %s, heat pump %s, clock %r)",
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
         watchdog = asyncio.create_task(self._watchdog())
+        self.mqtt = start_mqtt(self)  # MQTT hook: never awaited by the control loop
         restorer = asyncio.create_task(self._restore_pending())
         try:
             await self._connect()
@@ -174,6 +177,8 @@ class Daemon:
             self.scheduler.shutdown(wait=False)
         if self._fit_task is not None:
             self._fit_task.cancel()
+        if self.mqtt is not None:  # MQTT hook: "offline" after the restore, before closing
+            await self.mqtt.stop()
         if self.client is not None:
             self.client.close()
         if self.store is not None:
@@ -214,6 +219,8 @@ class Daemon:
     def _status(self, text: str) -> None:
         self.notifier.status(text)
         _LOG.debug("status: %s", text)
+        if self.mqtt is not None:  # MQTT hook: publish now (every sample during a night)
+            self.mqtt.wake()
 
     def _idle_status(self) -> str:
         rows = self.store.campaign()
@@ -247,6 +254,10 @@ class Daemon:
         self.scheduler.add_job(self._poll_requests, "interval", seconds=1.0,
                                id="trigger-poll", replace_existing=True, coalesce=True,
                                max_instances=1)
+        # Household commands (abort, skip_tonight) queued in the store, e.g. over MQTT.
+        self.scheduler.add_job(run_commands, "interval", seconds=1.0, args=[self],
+                               id="command-poll", replace_existing=True, coalesce=True,
+                               max_instances=1)
         self.scheduler.start()
         job = self.scheduler.get_job("imp-night")
         _LOG.info("next night job at %s (wall clock)", job.next_run_time if job else None)
@@ -265,6 +276,9 @@ class Daemon:
         try:
             if self._night_task is not None and not self._night_task.done():
                 _LOG.warning("night job skipped: a night is still running")
+                return
+            if skip_tonight(self):  # a household's skip_tonight (issue 17)
+                self._status(self._idle_status() + "; tonight skipped on request")
                 return
             req = next_campaign_night(self.store, self.cfg, act or self.clock.now())
             if req is None:

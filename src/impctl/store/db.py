@@ -10,7 +10,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import InputError
-from .records import SAMPLE_COLUMNS, JournalEntry, Night, Sample, TriggerRequest
+from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
 
 # Each entry migrates from version i to i + 1; never edit a released entry, append a new one.
 _MIGRATIONS: tuple[str, ...] = (
@@ -74,6 +74,16 @@ _MIGRATIONS: tuple[str, ...] = (
         ts TEXT NOT NULL,
         level TEXT NOT NULL,
         message TEXT NOT NULL
+    );
+    """,
+    # 2: household commands (abort, skip_tonight) queued for the daemon, e.g. over MQTT.
+    """
+    CREATE TABLE commands (
+        id INTEGER PRIMARY KEY,
+        name TEXT NOT NULL CHECK (name IN ('abort', 'skip_tonight')),
+        source TEXT NOT NULL,
+        created TEXT NOT NULL,
+        taken TEXT
     );
     """,
 )
@@ -305,6 +315,30 @@ class Store:
         """Mark a request taken; False if another taker was first."""
         cur = self._db.execute("UPDATE requests SET taken = ? WHERE id = ? AND taken IS NULL",
                                (_iso(_now()), request_id))
+        return cur.rowcount == 1
+
+    # -- household commands (abort, skip_tonight) ------------------------------------------
+    def add_command(self, name: str, source: str) -> int:
+        """Queue a command for the daemon (``abort`` or ``skip_tonight``); returns its id."""
+        cur = self._db.execute(
+            "INSERT INTO commands (name, source, created) VALUES (?, ?, ?)",
+            (name, source, _iso(_now())))
+        return int(cur.lastrowid)
+
+    def pending_commands(self, name: str | None = None) -> list[Command]:
+        """Commands not yet taken, oldest first (only ``name`` when given)."""
+        sql, args = "SELECT * FROM commands WHERE taken IS NULL", []
+        if name is not None:
+            sql += " AND name = ?"
+            args.append(name)
+        return [Command(id=r["id"], name=r["name"], source=r["source"],
+                        created=_dt(r["created"]), taken=_dt(r["taken"]))
+                for r in self._db.execute(sql + " ORDER BY id", args)]
+
+    def take_command(self, command_id: int) -> bool:
+        """Mark a command taken; False if another taker was first."""
+        cur = self._db.execute("UPDATE commands SET taken = ? WHERE id = ? AND taken IS NULL",
+                               (_iso(_now()), command_id))
         return cur.rowcount == 1
 
     # -- campaign plan ---------------------------------------------------------------------
