@@ -10,6 +10,10 @@ Safety rules this module keeps:
   start (orphan sweep) or ``impctl restore`` restores it;
 * the night is never run blind: no good read (link lost) or no indoor temperature for longer
   than ``link_lost_limit_s`` aborts it;
+* the owner comes first: a loop-1 setpoint or mode that differs at a sample from what impctl
+  last wrote (the owner, a thermostat app or ``impctl restore`` changed it), or the heating
+  system switched off, ends the night at once (not valid); the changed register keeps the
+  owner's new value (its journal entry is closed, not restored) and the others are restored;
 * one log line per incident (link lost, readings missing), when it starts, and one when it
   ends; each incident is also noted in the night's reasons.
 """
@@ -42,6 +46,13 @@ class _Abort(Exception):
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
+
+
+def _fmt(ma: int, value: float | None) -> str:
+    """A register value as people write it: modes as integers, setpoints in °C."""
+    if value is None:
+        return "—"
+    return f"{value:.1f} °C" if ma == _SETPOINT else f"{value:.0f}"
 
 
 def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
@@ -130,6 +141,7 @@ class NightController:
         self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
         self._incidents: list[str] = []  # notes for the night's reasons
         self._floor_c: float | None = None
+        self._held: dict[int, float] = {}  # register → the value impctl last put there
 
     # -- timing ----------------------------------------------------------------------------
     async def _sleep_until(self, when: datetime) -> None:
@@ -157,6 +169,7 @@ class NightController:
         state, reasons = "done", []
         wrote = False
         self._incidents, self._problem, self._lost_since = [], None, None
+        self._held = {}
         try:
             self.store.set_night_state(night_id, "preparing")
             first = await self._prepare(night_id, req, log)
@@ -296,8 +309,10 @@ class NightController:
             if reading.raw is None:
                 raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
             self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
-        log.info("journaled owner's state: setpoint %s °C, loop-1 mode %s",
-                 snap.loop1_setpoint_c.value, snap.loop1_mode.value)
+            if reading.value is not None:
+                self._held[ma] = reading.value
+        log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
+                 _fmt(_SETPOINT, snap.loop1_setpoint_c.value), _fmt(_MODE, snap.loop1_mode.value))
         return snap
 
     def _unfit(self, snap: Snapshot, req: NightRequest) -> str | None:
@@ -327,13 +342,13 @@ class NightController:
         """Write the night's settings and sample until the end; returns why it ended."""
         policy = self.policy
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
-        result = await self.client.set_loop1_setpoint(preheat_target)
+        result = self._hold(await self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:
             log.warning("setpoint %.1f °C clamped to %.1f °C by the configured limits",
                         result.requested, result.target)
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
-            await self.client.set_loop1_mode(1)
+            self._hold(await self.client.set_loop1_mode(1))
         # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
         # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
         # a cold house and must not abort the night.
@@ -354,6 +369,7 @@ class NightController:
                 await self._switch_off(log)
                 switched_off = True
             snap = await self._snapshot(night_id, log)
+            self._owner_check(snap, log)
             reason = self._check(snap, req, switched_off, now)
             if reason is not None:
                 return reason
@@ -363,16 +379,54 @@ class NightController:
                 await self._sleep_until(req.window_end)
                 final = await self._snapshot(night_id, log)
                 if final is not None:
+                    self._owner_check(final, log)
                     self._check(final, req, switched_off, self.clock.now())
                 return "window ended"
             await self._sleep_until(next_at)
 
+    def _hold(self, result):
+        """Remember what a write left in the register (to tell the owner's changes apart)."""
+        self._held[result.ma] = result.read_back
+        return result
+
+    def _owner_check(self, snap: Snapshot | None, log) -> None:
+        """End the night when the owner changed what impctl holds (raises ``_Abort``).
+
+        The changed registers' journal entries are closed, so the restore that follows puts
+        back only what the owner did not touch, and never overwrites their new choice.
+        """
+        if snap is None:
+            return
+        changes = []
+        for ma, reading in ((_SETPOINT, snap.loop1_setpoint_c), (_MODE, snap.loop1_mode)):
+            held = self._held.get(ma)
+            if held is None or reading.value is None or reading.raw is None:
+                continue
+            if abs(reading.value - held) > 1e-6:
+                changes.append((ma, held, reading))
+        if snap.system_on.value == 0:
+            changes.append((2012, None, snap.system_on))
+        if not changes:
+            return
+        names = dict(_JOURNALED)
+        for ma, _held, reading in changes:
+            for entry in self.store.journal_pending():
+                if entry.register == names.get(ma):
+                    self.store.journal_mark_owner_changed(entry.id, int(reading.raw))
+        what = "; ".join(
+            "heating system switched off (2012 = 0)" if ma == 2012 else
+            f"{names[ma].replace('_', ' ')} ({ma}) {_fmt(ma, held)} → {_fmt(ma, r.value)}"
+            for ma, held, r in changes)
+        self.store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
+        raise _Abort(f"owner changed the heat pump mid-night: {what}; night ended, the "
+                     "owner's setting kept")
+
     async def _switch_off(self, log) -> None:
         if self.policy.constrained_action == "loop_off":
-            await self.client.set_loop1_mode(0)
+            self._hold(await self.client.set_loop1_mode(0))
             log.info("heating switched off (loop-1 mode 0)")
         else:
-            await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c)
+            self._hold(await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c))
             log.info("heating set back to the floor %.1f °C", self.policy.setpoint_floor_c)
 
     def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,

@@ -24,11 +24,13 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudg
 from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
+from .lock import HEARTBEAT_S, DaemonLock
 from .schedule import (
     act_trigger,
     campaign_complete,
     campaign_plan,
     next_act_time,
+    drop_expired_requests,
     next_campaign_night,
     wall_time,
 )
@@ -105,6 +107,7 @@ class Daemon:
         # Held by a night and by the background restore: never both at once (a restore
         # marking an entry done while a night re-journals it would lose the owner's value).
         self._heat_pump_lock = asyncio.Lock()
+        self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -113,6 +116,11 @@ class Daemon:
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self._request_stop, sig)
         self.store = Store(self.cfg.db_path)
+        try:
+            self._lock = DaemonLock(self.cfg.state_dir).acquire()
+        except BaseException:
+            self.store.close()
+            raise
         self.client = open_client(self.cfg, self.clock)
         self.controller = NightController(
             self.client, self.store, self.clock, policy_from_config(self.cfg),
@@ -140,6 +148,7 @@ class Daemon:
             restorer.cancel()
             await self._shutdown()
             watchdog.cancel()
+            self._lock.release()
         return 0
 
     def _request_stop(self, sig: int) -> None:
@@ -149,6 +158,7 @@ class Daemon:
         self.stop.set()
 
     async def _connect(self) -> None:
+        failed = False
         while not self.stop.is_set():
             try:
                 await self.client.connect(max_wait_s=30.0)
@@ -158,6 +168,10 @@ class Daemon:
                           self.client.heat_power_source() or "nowhere (IMP nights refused)")
                 return
             except ModbusLinkError as exc:
+                if not failed:  # WARNING, so log_level = "warning" shows it; once per outage
+                    _LOG.warning("cannot connect to the heat pump (%s): %s; retrying",
+                                 self.cfg.heatpump.link.describe(), exc)
+                    failed = True
                 self._status(f"waiting for the heat pump: {exc}")
 
     async def _shutdown(self) -> None:
@@ -222,12 +236,13 @@ class Daemon:
 
     async def _watchdog(self) -> None:
         """WATCHDOG=1 only while the event loop runs and the store answers."""
-        interval = (self.notifier.watchdog_interval_s or 30.0) / 2
+        interval = min((self.notifier.watchdog_interval_s or 30.0) / 2, HEARTBEAT_S)
         while True:
             try:
                 if self.store is not None:
                     self.store.nights(states=["active"])  # the store still answers
                 self.notifier.watchdog()
+                self._lock.heartbeat()  # what `impctl status` shows as alive
             except Exception as exc:  # noqa: BLE001 - a sick store must stop the pings
                 _LOG.error("health check failed, withholding the watchdog ping: %s", exc)
             await asyncio.sleep(interval)
@@ -278,6 +293,7 @@ class Daemon:
     async def _poll_requests(self) -> None:
         if self.stop.is_set() or (self._night_task is not None and not self._night_task.done()):
             return
+        drop_expired_requests(self.store, self.clock.now())
         for req in self.store.pending_requests():
             if req.when != "now" or not self.store.take_request(req.id):
                 continue
@@ -320,7 +336,7 @@ class Daemon:
         model_dir = self.cfg.model_dir or str(Path(self.cfg.state_dir) / "models")
         steps = [
             [*base, "export", "--db", str(self.cfg.db_path), "--format", "csv",
-             "--out", str(nights_csv)],
+             "--out", str(nights_csv), "--force"],
             [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
              "--model-dir", model_dir],
         ]
