@@ -343,3 +343,7 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
                           force=force)
     click.echo(f"wrote {n} samples to {out_path}")
+
+
+# `impctl check-config` lives in its own module; importing it registers the command.
+from . import device_config  # noqa: E402, F401

@@ -169,7 +169,7 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
                 kwargs[key] = heatpump_from_mapping(value)
             except InputError as exc:
                 for p in getattr(exc, "problems", [exc]):  # every [heatpump] problem
-                    problems.append(" ".join(x for x in (p.place, p.problem) if x))
+                    problems.append(": ".join(x for x in (p.place, p.problem) if x))
                 problems.append(_HEATPUMP_FAILED)
             continue
         if key in _SECTIONS and cls is Config:

@@ -29,8 +29,8 @@ from .schedule import (
     act_trigger,
     campaign_complete,
     campaign_plan,
-    next_act_time,
     drop_expired_requests,
+    next_act_time,
     next_campaign_night,
     wall_time,
 )
