@@ -159,9 +159,13 @@ class Daemon:
 
     async def _connect(self) -> None:
         failed = False
+        # The first try is short, so an unreachable heat pump is reported within seconds.
+        wait_s = max(5.0, 3 * self.cfg.heatpump.link.timeout_s)
         while not self.stop.is_set():
             try:
-                await self.client.connect(max_wait_s=30.0)
+                if not await self._until_stop(self.client.connect(
+                        max_wait_s=wait_s if not failed else 30.0)):
+                    return  # stop requested while connecting
                 self._connected.set()
                 _LOG.info("heat pump connected: %s, generation %s, Q_HC from %s",
                           self.cfg.heatpump.link.describe(), self.client.generation.value,
@@ -169,10 +173,24 @@ class Daemon:
                 return
             except ModbusLinkError as exc:
                 if not failed:  # WARNING, so log_level = "warning" shows it; once per outage
-                    _LOG.warning("cannot connect to the heat pump (%s): %s; retrying",
-                                 self.cfg.heatpump.link.describe(), exc)
+                    _LOG.warning("heat pump not reachable: %s; retrying", exc)
                     failed = True
                 self._status(f"waiting for the heat pump: {exc}")
+
+    async def _until_stop(self, coro) -> bool:
+        """Run ``coro`` unless a stop is requested first (then cancel it); True when it ran."""
+        work = asyncio.ensure_future(coro)
+        stopper = asyncio.ensure_future(self.stop.wait())
+        try:
+            await asyncio.wait({work, stopper}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            stopper.cancel()
+        if not work.done():
+            work.cancel()
+            await asyncio.gather(work, return_exceptions=True)
+            return False
+        work.result()
+        return True
 
     async def _shutdown(self) -> None:
         if self._night_task is not None and not self._night_task.done():
