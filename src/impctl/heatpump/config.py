@@ -342,18 +342,18 @@ def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
             bad(key, f"{problem}, got {value!r}")
             continue
         kwargs[key] = tuple(value) if isinstance(value, list) else value
-    for key in required:
-        if key not in data:
-            bad(key, "missing (required)")
-    for name, f in spec.items():  # fields without a default
-        if (name not in data and name not in required and f.default is MISSING
-                and f.default_factory is MISSING):
-            bad(name, "missing (required)")
-    if len(problems) > before:
-        return None
-    probe = SimpleNamespace(**{**{n: _default(f) for n, f in spec.items()}, **kwargs})
-    for key, text in _CHECKS[cls](probe):
-        bad(key, text)
+    missing = [k for k in required if k not in data] + [
+        n for n, f in spec.items()  # fields without a default
+        if n not in data and n not in required and f.default is MISSING
+        and f.default_factory is MISSING]
+    for key in missing:
+        bad(key, "missing (required)")
+    bad_values = {k for k in data if k in spec and k not in kwargs}
+    if not missing and not bad_values:
+        # The value checks too, on the keys that could be read, so one run lists everything.
+        probe = SimpleNamespace(**{**{n: _default(f) for n, f in spec.items()}, **kwargs})
+        for key, text in _CHECKS[cls](probe):
+            bad(key, text)
     if len(problems) > before:
         return None
     return cls(**kwargs)
