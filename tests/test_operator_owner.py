@@ -61,8 +61,9 @@ async def _night_with_owner(tmp_path, kind: str, setpoint_c: float, owner_action
                                                                   preheat_h=0.5))
             task = asyncio.create_task(ctl.run(req))
             # Mid-night: the constrained night has switched off, the normal one holds T_set.
-            if kind == "constrained":
-                await wait_for(lambda: sim.plant.loop_mode == 0, 30)
+            if kind == "constrained":  # switched off, verified, and sampled so
+                await wait_for(lambda: any(s.loop_mode == 0 and s.ts >= start
+                                           for s in store.samples(1)), 30)
             else:
                 await wait_for(lambda: sim.plant.setpoint_c == setpoint_c
                                and store.sample_count(1) > 20, 30)
