@@ -78,8 +78,14 @@ def test_second_daemon_refused_and_status_tells_a_dead_daemon(tmp_path):
             assert st["daemon"]["pid"] == d.proc.pid
             assert 0 <= st["daemon"]["heartbeat_age_s"] < 30
             assert st["current_night"]["supervised"] is True
+            # What runs at the next night: the campaign's constrained night (this one is not
+            # valid yet), with numbers, not strings, for the write counters.
+            assert st["next_night"]["kind"] == "constrained"
+            assert st["next_night"]["source"] == "schedule"
+            assert st["writes_today"]["2042"] == {"used": 1, "limit": 12}
             text = run_cli("status", "--config", str(config)).stdout
             assert f"daemon:    running (PID {d.proc.pid}, heartbeat" in text
+            assert "next:      constrained night (T_max 22.5 → T_min 19.5 °C, campaign)" in text
 
             d.proc.kill()  # kill -9 mid-night
             d.proc.wait(10)

@@ -29,6 +29,7 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
 from ..store import Night, Sample, Store
 from .assess import assess_night
+from .owner import describe_changes, fmt_register, owner_changes
 from .plan import NightPolicy, NightRequest
 from .restore import restore_all
 
@@ -46,13 +47,6 @@ class _Abort(Exception):
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
-
-
-def _fmt(ma: int, value: float | None) -> str:
-    """A register value as people write it: modes as integers, setpoints in °C."""
-    if value is None:
-        return "—"
-    return f"{value:.1f} °C" if ma == _SETPOINT else f"{value:.0f}"
 
 
 def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
@@ -312,7 +306,8 @@ class NightController:
             if reading.value is not None:
                 self._held[ma] = reading.value
         log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
-                 _fmt(_SETPOINT, snap.loop1_setpoint_c.value), _fmt(_MODE, snap.loop1_mode.value))
+                 fmt_register(_SETPOINT, snap.loop1_setpoint_c.value),
+                 fmt_register(_MODE, snap.loop1_mode.value))
         return snap
 
     def _unfit(self, snap: Snapshot, req: NightRequest) -> str | None:
@@ -395,28 +390,15 @@ class NightController:
         The changed registers' journal entries are closed, so the restore that follows puts
         back only what the owner did not touch, and never overwrites their new choice.
         """
-        if snap is None:
-            return
-        changes = []
-        for ma, reading in ((_SETPOINT, snap.loop1_setpoint_c), (_MODE, snap.loop1_mode)):
-            held = self._held.get(ma)
-            if held is None or reading.value is None or reading.raw is None:
-                continue
-            if abs(reading.value - held) > 1e-6:
-                changes.append((ma, held, reading))
-        if snap.system_on.value == 0:
-            changes.append((2012, None, snap.system_on))
+        changes = owner_changes(snap, self._held)
         if not changes:
             return
         names = dict(_JOURNALED)
-        for ma, _held, reading in changes:
+        for change in changes:
             for entry in self.store.journal_pending():
-                if entry.register == names.get(ma):
-                    self.store.journal_mark_owner_changed(entry.id, int(reading.raw))
-        what = "; ".join(
-            "heating system switched off (2012 = 0)" if ma == 2012 else
-            f"{names[ma].replace('_', ' ')} ({ma}) {_fmt(ma, held)} → {_fmt(ma, r.value)}"
-            for ma, held, r in changes)
+                if entry.register == names.get(change.ma):
+                    self.store.journal_mark_owner_changed(entry.id, change.raw)
+        what = describe_changes(changes)
         self.store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
         raise _Abort(f"owner changed the heat pump mid-night: {what}; night ended, the "
                      "owner's setting kept")
