@@ -174,3 +174,37 @@ def test_connect_failure_is_a_warning(tmp_path):
     lines = [x for x in d.output().splitlines() if "not reachable" in x]
     assert len(lines) == 1 and " WARNING impctl.daemon: " in lines[0]  # once per outage
     assert STAMP.match(lines[0])
+
+
+def test_foreground_night_holds_the_lock_and_shows_as_alive(tmp_path):
+    import subprocess
+
+    from daemon_fixtures import IMPCTL, ROOT
+
+    morning = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+    with sim_process(tmp_path, morning, 1200.0) as sim:
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            tmp_path / "state", sim.port, sim.clock,
+            night={"window": "02:30-04:00", "preheat_h": 0.25}))
+        fg = subprocess.Popen([*IMPCTL, "trigger", "--kind", "normal", "--setpoint", "22",
+                               "--now", "--foreground", "--config", str(config)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              cwd=ROOT)
+        try:
+            wait_until(lambda: owner_state(sim.port)[0] == 220, 30, "the foreground night",
+                       proc=fg)
+            st = _status(config)
+            assert st["daemon"]["running"] and st["daemon"]["pid"] == fg.pid
+            assert st["daemon"]["role"] == "trigger --foreground"
+            assert st["daemon"]["heartbeat_age_s"] < 30
+            second = run_cli("daemon", "--config", str(config), timeout_s=30)
+            assert second.returncode == 2 and f"PID {fg.pid}" in second.stderr
+            out, err = fg.communicate(timeout=60)
+        finally:
+            if fg.poll() is None:
+                fg.kill()
+                fg.communicate()
+        assert fg.returncode == 0, err
+        assert out.startswith("night 1: done")
+        assert owner_state(sim.port) == OWNER
+        assert _status(config)["daemon"]["running"] is False

@@ -127,8 +127,8 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         _setup_logging(cfg.log_level, cfg.timezone)
         with Store(cfg.db_path):  # creates the state directory, or one clear line
             pass
-        with DaemonLock(cfg.state_dir, role="trigger --foreground"):
-            sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when)))
+        with DaemonLock(cfg.state_dir, role="trigger --foreground") as lock:
+            sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
     expires = _request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
         rid = store.add_request(kind, sp, when, expires=expires)
@@ -184,8 +184,15 @@ def _cancel_requests(cfg) -> None:
         click.echo(f"cancelled request {r.id}: {r.kind} night ({r.when})")
 
 
-async def _foreground_night(cfg, kind: str, sp: float, when: str) -> int:
+async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     import signal
+
+    from ..daemon.lock import HEARTBEAT_S
+
+    async def heartbeat() -> None:  # `impctl status` shows this process as alive
+        while True:
+            lock.heartbeat()
+            await asyncio.sleep(HEARTBEAT_S)
 
     from ..controller import NightController, NightRequest
     from ..daemon.schedule import next_act_time, window_after_act
@@ -209,8 +216,12 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str) -> int:
                 start, end = window_after_act(next_act_time(cfg, clock.now()), cfg)
             ctl = NightController(client, store, clock, policy_from_config(cfg),
                                   on_status=lambda t: click.echo(t, err=True), stop=stop)
-            night = await ctl.run(NightRequest(kind, sp, start, end, cfg.night.comfort_band_k,
-                                               source="trigger"))
+            beat = asyncio.create_task(heartbeat())
+            try:
+                night = await ctl.run(NightRequest(kind, sp, start, end,
+                                                   cfg.night.comfort_band_k, source="trigger"))
+            finally:
+                beat.cancel()
         finally:
             client.close()
     click.echo(f"night {night.id}: {night.state}, {'valid' if night.valid else 'not valid'}"
