@@ -121,12 +121,17 @@ class Daemon:
         except BaseException:
             self.store.close()
             raise
-        self.client = open_client(self.cfg, self.clock)
-        self.controller = NightController(
-            self.client, self.store, self.clock, policy_from_config(self.cfg),
-            on_status=self._status, stop=self.stop)
-        self.store.set_campaign(campaign_plan(self.cfg))
-        orphans = sweep_orphans(self.store)
+        try:
+            self.client = open_client(self.cfg, self.clock)
+            self.controller = NightController(
+                self.client, self.store, self.clock, policy_from_config(self.cfg),
+                on_status=self._status, stop=self.stop)
+            self.store.set_campaign(campaign_plan(self.cfg))
+            orphans = sweep_orphans(self.store)
+        except BaseException:  # e.g. a store that cannot write: never keep the lock
+            self._lock.release()
+            self.store.close()
+            raise
         self.notifier.ready(f"started; {len(orphans)} interrupted night(s) to restore")
         _LOG.info("impctl daemon started (state %s, heat pump %s, clock %r)",
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
