@@ -30,6 +30,9 @@ def test_bad_config_lists_every_problem_one_line_each(tmp_path):
 state_dir = "{state}"
 colour = "blue"                 # unknown key
 
+[heatpump]
+host = "192.168.1.50"
+
 [night]
 sample_interval_s = "sixty"     # wrong type
 comfort_band_k = 4.0            # wider than max_comfort_band_k (3 K)
@@ -57,6 +60,9 @@ normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [
 def test_setpoint_outside_the_configured_limits_and_heatpump_problems(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("""
+[heatpump]
+host = "192.168.1.50"
+
 [heatpump.writes]
 loop1_setpoint_c = [16.0, 22.0]
 
@@ -73,6 +79,7 @@ normal_setpoints_c = [21.0, 22.5]
         "key 'night.comfort_band_k': T_min − abort margin would fall below 14 °C"]
     bad.write_text("""
 [heatpump]
+host = "gw"
 port = "502"
 """)
     result = run_cli("daemon", "--config", str(bad), timeout_s=30)

@@ -89,6 +89,8 @@ class TriggerRequest:
     created: datetime
     taken: datetime | None = None
     extra: dict = field(default_factory=dict)
+    expires: datetime | None = None  # on the daemon's clock; None = never
+    outcome: str | None = None  # "taken", "cancelled" or "expired" once no longer pending
 
 
 @dataclass(frozen=True)
