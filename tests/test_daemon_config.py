@@ -138,7 +138,8 @@ def test_example_documents_every_mqtt_key_and_mqtt_is_checked(tmp_path):
     mqtt_keys = {f.name for f in dataclasses.fields(MqttConfig)}
     lines = [ln for ln in block.splitlines() if ln.split(" = ")[0] in mqtt_keys]
     good = tmp_path / "good.toml"
-    good.write_text(f'state_dir = "{tmp_path}"\n[mqtt]\n' + "\n".join(lines) + "\n")
+    good.write_text(f'state_dir = "{tmp_path}"\n[heatpump]\nhost = "127.0.0.1"\n[mqtt]\n'
+                    + "\n".join(lines) + "\n")
     cfg = load_config(good).mqtt
     assert cfg.host == "192.168.1.10" and cfg.port == 1883 and not cfg.commands
     assert cfg.client_id.startswith("impctl-") and cfg.topic == f"impctl/{cfg.client_id}"
@@ -146,6 +147,8 @@ def test_example_documents_every_mqtt_key_and_mqtt_is_checked(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(f"""
 state_dir = "{tmp_path / 'state'}"
+[heatpump]
+host = "127.0.0.1"
 [mqtt]
 port = 70000
 password_file = "{tmp_path / 'missing.password'}"

@@ -242,7 +242,7 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
         d = _ready(config, db, tmp_path / "daemon.log")
         try:
             queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
-                             "--config", str(config))
+                             "--force", "--config", str(config))
             assert queued.returncode == 0, queued.stderr
             # The night runs while impctl keeps being refused (a whole valid night with a
             # broker that never answers: test_silent_broker_blocks_neither_nights_nor_shutdown).
@@ -331,7 +331,7 @@ def test_silent_broker_blocks_neither_nights_nor_shutdown(tmp_path):
             d = _ready(config, db, tmp_path / "daemon.log")
             try:
                 queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
-                                 "--config", str(config))
+                                 "--force", "--config", str(config))
                 assert queued.returncode == 0, queued.stderr
                 wait_until(lambda: store_query(db, lambda s: s.night(1) and s.night(1).valid)
                            is not None, 40, "the night", proc=d.proc)

@@ -94,6 +94,7 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
                     cancel: bool, foreground: bool) -> None:
     """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
     from ..daemon.lock import DaemonLock, probe
+    from ..daemon.schedule import request_expiry
     from ..daemon.service import clock_from_config
     from ..store import Store
 
@@ -129,7 +130,7 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
             pass
         with DaemonLock(cfg.state_dir, role="trigger --foreground") as lock:
             sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
-    expires = _request_expiry(cfg, clock, when, expires_h)
+    expires = request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
         rid = store.add_request(kind, sp, when, expires=expires)
     tz = ZoneInfo(cfg.timezone)
@@ -153,17 +154,6 @@ def _daytime(cfg, now) -> str | None:
         return None
     return (f"it is {local:%H:%M %Z}, outside the night window {cfg.night.window} and its "
             f"{cfg.night.preheat_h:g} h preheat")
-
-
-def _request_expiry(cfg, clock, when: str, expires_h: float | None):
-    """The instant (daemon's clock) after which the daemon drops the request unstarted."""
-    from ..daemon.schedule import next_act_time, window_after_act
-
-    now = clock.now()
-    if expires_h is None and when == "tonight":
-        return window_after_act(next_act_time(cfg, now), cfg)[1]
-    # Real hours: on an accelerated demo clock, as long in simulated time as it takes.
-    return now + timedelta(hours=(1.0 if expires_h is None else expires_h) * clock.factor)
 
 
 def _cancel_requests(cfg) -> None:

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
+from .schedule import request_expiry
 
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
@@ -111,7 +112,9 @@ class MqttLink:
     def submit(self, command: Command) -> str:
         store = self.daemon.store
         if command.name == "trigger":
-            rid = store.add_request(command.kind, command.setpoint_c, command.when)
+            expires = request_expiry(self.daemon.cfg, self.daemon.clock, command.when)
+            rid = store.add_request(command.kind, command.setpoint_c, command.when,
+                                    expires=expires)
             return (f"queued request {rid}: {command.kind} night at {command.setpoint_c:g} °C "
                     f"({command.when})")
         cid = store.add_command(command.name, "mqtt")

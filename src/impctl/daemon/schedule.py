@@ -121,3 +121,15 @@ def campaign_complete(store: Store) -> bool:
     """Every plan entry has a valid night."""
     rows = store.campaign()
     return bool(rows) and all(valid for *_, valid in rows)
+
+
+def request_expiry(cfg: Config, clock: VirtualClock, when: str,
+                   expires_h: float | None = None) -> datetime:
+    """The instant (daemon's clock) after which the daemon drops a manual request unstarted:
+    ``expires_h`` real hours, by default 1 h for ``now`` and the end of its night for
+    ``tonight`` — the same rule for the CLI and for commands from Home Assistant."""
+    now = clock.now()
+    if expires_h is None and when == "tonight":
+        return window_after_act(next_act_time(cfg, now), cfg)[1]
+    # Real hours: on an accelerated demo clock, as long in simulated time as it takes.
+    return now + timedelta(hours=(1.0 if expires_h is None else expires_h) * clock.factor)
