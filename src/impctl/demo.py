@@ -276,7 +276,8 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
     progress.line("exporting the valid nights and fitting (impctl fit)")
-    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv)), check=True,
+    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
+                        "--force"), check=True,
                    capture_output=True)
     fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
                               "--model-dir", str(model_dir)), capture_output=True, text=True)
