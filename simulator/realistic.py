@@ -52,7 +52,6 @@ class RealisticPlant:
     def __init__(self, house: HouseParameters, realism, params: PlantParams | None = None,
                  setpoint_c: float = 21.0, t_out_c: float = 0.0, seed: int = 0,
                  utc_offset_h=None) -> None:
-
         if house.n_houses is not None:
             raise ValueError("the simulator runs one house")
         self.house = house
@@ -163,7 +162,7 @@ class RealisticPlant:
         return int(locked) | (int(starting) << 1)
 
     # -- step ------------------------------------------------------------------------------
-    def _gains(self, dt_s: float, t_out_c: float) -> tuple[float, float]:
+    def _gains(self, dt_s: float) -> tuple[float, float]:
         """Internal and solar gains of the local hour [W] (levels of ``realism.gains``)."""
         g = self.realism.gains
         local_s = self.time_s + 3600.0 * self._utc_offset_h(self.time_s)
@@ -183,7 +182,7 @@ class RealisticPlant:
         p = self.params
         on = bool(self.system_on)
         dhw = on and periodic(self.time_s, p.dhw_period_s, p.dhw_duration_s)
-        self.internal_gains_w, self.solar_gains_w = self._gains(dt_s, t_out_c)
+        self.internal_gains_w, self.solar_gains_w = self._gains(dt_s)
         core = self.core
         core.setpoint_c = self.room_setpoint_c
         core.loop_on = self.loop_mode != 0 and not self.compressor_failed
