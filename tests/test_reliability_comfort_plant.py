@@ -1,7 +1,7 @@
 """Comfort on the realistic plant: constrained nights on 200 random realistic houses.
 
 The houses: the virtual population's prior (seed 3) with every realism option of
-:func:`impctl.plant.sampling.sample_params` drawn over its documented range (radiators and
+:func:`impctl.population.realism.sample_params` drawn over its documented range (radiators and
 underfloor, weather curve and room thermostat, inverter and on/off units, anti-short-cycle
 timers, defrost, furniture, a room sensor with a lag of up to 15 min, 0.1 or 0.5 K resolution,
 noise and a placement offset), night gains, and a constant cold night between +5 °C and the
@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 from comfort_screen import holding_t_out_c, night_realism, screen
-from impctl.plant.sampling import sample_params
 from impctl_sim import SimConfig, constant_weather
 from reliability_fixtures import run_virtual
 from test_reliability_comfort import real_night
 
 from impctl.controller import NightPolicy
 from impctl.population import sample_households
+from impctl.population.realism import sample_params
 
 SEED, N_HOUSES = 3, 200
 T_SET, BAND = 21.0, 1.5
