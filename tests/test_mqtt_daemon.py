@@ -51,8 +51,9 @@ N_ENTITIES = {False: 13, True: 18}
 
 @contextlib.contextmanager
 def rig(tmp_path: Path, epoch: datetime, mqtt: dict, campaign: dict | None = None):
-    """(sim, config, db) with an ``[mqtt]`` section."""
-    with sim_process(tmp_path, epoch, SPEED) as sim:
+    """(sim, config, db) with an ``[mqtt]`` section (the ideal plant: its sensors read the
+    outdoor temperature exactly, which the payload checks rely on)."""
+    with sim_process(tmp_path, epoch, SPEED, plant="iso") as sim:
         mapping = daemon_mapping(
             tmp_path / "state", sim.port, sim.clock,
             night={"window": "22:00-05:00", "preheat_h": 0.5, "sample_interval_s": 300},
