@@ -14,6 +14,7 @@ import click
 
 from ..errors import InputError
 from . import cli
+from .checks import house_limit, time_zone
 
 _NEEDS = {
     "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
@@ -47,7 +48,7 @@ def _write_json(path: Path, data: dict) -> None:
               default=None, help="Write the full result as JSON here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Draw measured vs fitted T_air and heat power (PNG).")
-@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+@click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 @click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
               show_default=True,
@@ -59,9 +60,12 @@ def _write_json(path: Path, data: dict) -> None:
               help="Normal nights: heat power predicted from the held T_air (demand), or the "
                    "paper's eq. 5 driven by the measured power series or its night mean.")
 @click.option("--ach-infl", default=0.01, show_default=True, type=float,
-              help="Fixed infiltration air changes [1/h] (the classifiers' population).")
+              callback=house_limit("ach_infl", "1/h"),
+              help="Fixed infiltration air changes [1/h] (the classifiers' population); "
+                   "0–20.")
 @click.option("--ach-vent", default=0.0, show_default=True, type=float,
-              help="Fixed ventilation air changes [1/h].")
+              callback=house_limit("ach_vent", "1/h"),
+              help="Fixed ventilation air changes [1/h]; 0–20.")
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
         ach_vent: float) -> None:

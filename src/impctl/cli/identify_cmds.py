@@ -14,6 +14,7 @@ import click
 
 from ..errors import InputError
 from . import cli
+from .checks import time_zone
 
 #: Fewest households ``impctl train`` accepts: a test split of 20 % must hold every class.
 MIN_HOUSEHOLDS = 20
@@ -86,7 +87,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
 @click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Where `impctl train` wrote the models [default: per-user data dir].")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+@click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""

@@ -325,34 +325,17 @@ class HouseParameters:
 def house_from_mapping(data: dict[str, Any], source: str | Path | None = None) -> HouseParameters:
     """Validate a mapping with exactly the house-file keys and build the parameters.
 
+    Every key is checked at once against :data:`~impctl.model.house_limits.HOUSE_LIMITS`
+    (unknown, missing, not a number, implausible); then the ISO 13790 domain of the whole house.
+
     Raises
     ------
     InputError
-        Naming ``source`` and the offending key.
+        Naming ``source`` and the offending key; one line per problem.
     """
-    known = set(_REQUIRED) | set(_OPTIONAL)
-    for key in data:
-        if key not in known:
-            raise InputError(
-                f"unknown key (expected: {', '.join(_REQUIRED + tuple(_OPTIONAL))})",
-                source,
-                f"key '{key}'",
-            )
-    values: dict[str, float] = {}
-    for key in _REQUIRED + tuple(_OPTIONAL):
-        if key not in data:
-            if key in _OPTIONAL:
-                values[key] = _OPTIONAL[key]
-                continue
-            raise InputError("missing key", source, f"key '{key}'")
-        value = data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(
-                f"must be a number, got {type(value).__name__} {value!r}", source, f"key '{key}'"
-            )
-        if not math.isfinite(value) and not (key == "max_heating_power" and value > 0):
-            raise InputError("must be a finite number", source, f"key '{key}'")
-        values[key] = float(value)
+    from .house_limits import check_house_values
+
+    values = check_house_values(data, _REQUIRED + tuple(_OPTIONAL), _OPTIONAL, source)
     try:
         return HouseParameters(**values)
     except InputError as exc:
