@@ -25,6 +25,10 @@ SIM_DAYS = (0.1, 3660.0)
 SIM_STEP_S = (1.0, 86400.0)
 
 
+def _num(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e12 else f"{x:g}"
+
+
 def in_range(value: float | None, bounds: tuple[float, float], place: str, unit: str = "",
              *, low_open: bool = False) -> float | None:
     """``value`` if it is ``None`` or a finite number inside ``bounds``; else InputError.
@@ -40,8 +44,8 @@ def in_range(value: float | None, bounds: tuple[float, float], place: str, unit:
     low_ok = value > lo if low_open else value >= lo
     if not (low_ok and value <= hi):
         sign = "(" if low_open else "["
-        raise InputError(f"{value:g}{unit} is outside the plausible range "
-                         f"{sign}{lo:g}, {hi:g}]{unit}", place=place)
+        raise InputError(f"{_num(value)}{unit} is outside the plausible range "
+                         f"{sign}{_num(lo)}, {_num(hi)}]{unit}", place=place)
     return value
 
 
