@@ -19,9 +19,9 @@ import time
 
 import numpy as np
 
-from impctl.identify.dataset import generate_dataset
-from impctl.identify.report import format_report
-from impctl.identify.training import TrainConfig, train_classifiers
+from impctl.classifiers.report import format_report
+from impctl.classifiers.training import TrainConfig, train_classifiers
+from impctl.population.dataset import generate_dataset
 
 
 def main() -> None:

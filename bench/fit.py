@@ -3,9 +3,9 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
 
-Validation population: ``impctl.identify.population.sample_households`` with seed 20260 (the
+Validation population: ``impctl.population.households.sample_households`` with seed 20260 (the
 classifiers are trained with other seeds, so they never saw these houses). Each household runs
-the IMP protocol of ``impctl.identify.fit_synth`` on its own seeded winter weather, simulated
+the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained, 6 normal
 at 22/23/24 °C); constrained nights pre-heat to T_set + 1.5 °C and cool 22:00–05:00 (the paper's
 case study), normal nights step up from the 21 °C day. Measurements: T_air and T_out rounded to
@@ -45,13 +45,13 @@ import time
 import numpy as np
 import torch
 
-from impctl.identify import baselines
-from impctl.identify.fit import NightFit
-from impctl.identify.fit_data import prepare_nights, search_bounds
-from impctl.identify.fit_synth import imp_schedule, run_schedule, sample_nights
-from impctl.identify.node import PARAM_NAMES
-from impctl.identify.population import sample_households
+from impctl.fit import baselines
+from impctl.fit.data import prepare_nights, search_bounds
+from impctl.fit.estimator import NightFit
+from impctl.fit.node import PARAM_NAMES
 from impctl.model import HouseParameters
+from impctl.population.households import sample_households
+from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
 
 VAL_SEED = 20260
 CLASS_RANGES = {
@@ -72,7 +72,7 @@ def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
 
 
 def classifier_ranges(nights, model_dir):
-    from impctl.identify import classify_nights
+    from impctl.classifiers import classify_nights
 
     return {k: tuple(v.range) for k, v in classify_nights(nights, model_dir).items()}
 
@@ -327,7 +327,7 @@ def compare(houses_arr: HouseParameters, args) -> None:
 def virtual_imp_check(n: int, args) -> None:
     """The fit on the classifiers' own IMP simulator: steady normal nights (spun up at T_set),
     an emitter ramp during the lag, constrained nights cut at T_min, "interval" stamps."""
-    from impctl.identify.virtual_imp import ImpSimConfig, simulate_imp
+    from impctl.population.virtual_imp import ImpSimConfig, simulate_imp
 
     houses = sample_households(n, seed=VAL_SEED + 1)
     cfg = ImpSimConfig(days=2, step_s=600.0, noise_t_air_k=0.0, noise_q_rel=0.05)
@@ -348,7 +348,7 @@ def virtual_imp_check(n: int, args) -> None:
             errs[k].append(rel(e.value, t))
             cover[k].append(e.low <= t <= e.high)
         times.append(fit.fit_time_s_)
-    print(f"\n### cross-check on impctl.identify.virtual_imp ({n} households, 10-min samples, "
+    print(f"\n### cross-check on impctl.population.virtual_imp ({n} households, 10-min samples, "
           "interval stamps, 2 constrained + 6 normal nights, true class ranges)")
     print(f"constrained nights still ≥ 3 h after the lag: {np.mean(kept) / 2 * 100:.0f} %")
     print("| HLC med / P90 % | τ med / P90 % | C_m med / P90 % | coverage HLC/τ/C_m % "
@@ -382,7 +382,7 @@ def main() -> None:
     ap.add_argument("--adam", type=int, default=0, metavar="N",
                     help="include Adam (backprop through odeint) on N of those households")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
-                    help="also fit N households simulated by impctl.identify.virtual_imp")
+                    help="also fit N households simulated by impctl.population.virtual_imp")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"
@@ -393,8 +393,8 @@ def main() -> None:
     houses = sample_households(args.households, seed=VAL_SEED)
     source = args.ranges
     if source == "classifier":
+        from impctl.classifiers import load_models
         from impctl.errors import InputError
-        from impctl.identify import load_models
 
         try:
             load_models(args.model_dir)

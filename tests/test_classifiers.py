@@ -12,30 +12,32 @@ import pandas as pd
 import pytest
 from sklearn.base import clone
 
-from impctl.errors import InputError
-from impctl.identify import (
+from impctl.classifiers import (
     ClassResult,
-    ImpSimConfig,
-    PopulationConfig,
     RangeClassifier,
     classify_nights,
     default_model_dir,
-    generate_dataset,
     load_models,
-    sample_households,
     save_models,
-    simulate_imp,
     train_classifiers,
 )
-from impctl.identify.campaign import (
+from impctl.classifiers.campaign import (
     CAMPAIGN_FEATURE_NAMES,
     aggregate_nights,
     campaign_features,
     random_campaigns,
 )
-from impctl.identify.ranges import bin_values, validate_ranges
-from impctl.identify.training import TrainConfig, household_split
+from impctl.classifiers.training import TrainConfig, household_split
+from impctl.errors import InputError
 from impctl.imp import NIGHT_FEATURE_NAMES, night_features
+from impctl.population import (
+    ImpSimConfig,
+    PopulationConfig,
+    generate_dataset,
+    sample_households,
+    simulate_imp,
+)
+from impctl.population.ranges import bin_values, validate_ranges
 
 U_RANGES = {"u_walls": ((0.2, 1.0), (1.0, 2.0))}
 FAST = TrainConfig(n_estimators=60, campaigns_per_household=4)
@@ -194,8 +196,9 @@ def test_default_model_dir(monkeypatch, tmp_path):
     assert default_model_dir() == tmp_path / "data" / "impctl" / "models"
 
 
-def test_importing_identify_loads_neither_torch_nor_scikit_learn():
-    code = ("import sys, impctl.identify as i; i.default_model_dir(); i.DEFAULT_RANGES; "
+def test_importing_the_pipeline_packages_loads_neither_torch_nor_scikit_learn():
+    code = ("import sys, impctl.cli, impctl.population as p, impctl.classifiers as c, impctl.fit; "
+            "c.default_model_dir(); c.DEFAULT_RANGES; p.DEFAULT_RANGES; "
             "print(sorted(m for m in ('torch', 'sklearn') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout

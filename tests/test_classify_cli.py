@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from impctl.identify import ImpSimConfig, sample_households, simulate_imp
 from impctl.imp import write_nights
+from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
 
 def run_cli(*args: str, env_home: Path | None = None) -> subprocess.CompletedProcess:

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from impctl.errors import InputError
-from impctl.identify import baselines
-from impctl.identify.fit import NightFit
-from impctl.identify.fit_data import noise_levels, prepare_nights, search_bounds
-from impctl.identify.fit_report import fit_to_dict, format_table
-from impctl.identify.fit_synth import synth_nights
-from impctl.identify.node import PARAM_NAMES
+from impctl.fit import baselines
+from impctl.fit.data import noise_levels, prepare_nights, search_bounds
+from impctl.fit.estimator import NightFit
+from impctl.fit.node import PARAM_NAMES
+from impctl.fit.report import fit_to_dict, format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
+from impctl.population.synth_nights import synth_nights
 
 HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
                         c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)
@@ -184,8 +184,8 @@ def test_adam_with_backprop_through_the_solver_lowers_the_loss():
     as Levenberg–Marquardt: it descends, and LM ends at least as low in far fewer steps."""
     import torch
 
-    from impctl.identify import fit_lm
-    from impctl.identify.node import bounds_tensor, pack_nights
+    from impctl.fit import lm as fit_lm
+    from impctl.fit.node import bounds_tensor, pack_nights
 
     nights = synth_nights(HOUSE, seed=6, sample_step_s=3600.0, n_normal=3)
     kept, offsets, _ = prepare_nights(nights)

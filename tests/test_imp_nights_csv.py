@@ -61,7 +61,7 @@ def test_window_across_dst_change_is_six_hours(tmp_path):
 
 
 def test_write_then_read_gives_the_same_nights_and_features(tmp_path):
-    from impctl.identify import ImpSimConfig, sample_households, simulate_imp
+    from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
     result = simulate_imp(sample_households(1, seed=5), config=ImpSimConfig(days=2), seed=5)
     nights = result.nights_of(0)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from impctl.identify import fit_lm
-from impctl.identify.baselines import exact_linear
-from impctl.identify.node import (
+from impctl.fit import lm as fit_lm
+from impctl.fit.baselines import exact_linear
+from impctl.fit.node import (
     DTYPE,
     PARAM_NAMES,
     PHYSICAL_BOUNDS,

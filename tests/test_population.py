@@ -7,7 +7,8 @@ import pandas as pd
 import pytest
 
 from impctl.errors import InputError
-from impctl.identify import (
+from impctl.imp import NIGHT_FEATURE_NAMES
+from impctl.population import (
     DEFAULT_RANGES,
     ImpSimConfig,
     PopulationConfig,
@@ -16,9 +17,8 @@ from impctl.identify import (
     sample_population,
     simulate_imp,
 )
-from impctl.identify.dataset import Dataset
-from impctl.identify.virtual_imp import usable_nights
-from impctl.imp import NIGHT_FEATURE_NAMES
+from impctl.population.dataset import Dataset
+from impctl.population.virtual_imp import usable_nights
 from impctl.weather import winter_weather
 
 TZ = "Europe/Ljubljana"
@@ -67,7 +67,7 @@ def test_config_for_ranges_and_bad_ranges():
 @pytest.fixture(scope="module")
 def quiet_run():
     pop = sample_population(12, seed=2)
-    from impctl.identify.population import households_from_table
+    from impctl.population.households import households_from_table
 
     result = simulate_imp(households_from_table(pop), config=ImpSimConfig(days=3, **QUIET),
                           seed=2)

@@ -54,8 +54,8 @@ from sim_fixtures import hp_config, link_config
 
 from impctl.controller import NightController, NightPolicy, NightRequest
 from impctl.heatpump import HeatPumpClient, VirtualClock, WriteBudget, WritePolicy
-from impctl.identify.population import sample_households
 from impctl.model import HouseParameters
+from impctl.population.households import sample_households
 from impctl.store import Store
 
 SEED = 3

@@ -80,7 +80,7 @@ class _Progress:
 
 def _models_ok(model_dir: Path) -> bool:
     try:
-        from .identify.classifiers import load_models
+        from .classifiers.saved import load_models
 
         load_models(model_dir)
         return True
@@ -212,7 +212,7 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     logging.getLogger("apscheduler").setLevel(logging.WARNING)
     progress = _Progress(echo)
-    from .identify.classifiers import default_model_dir
+    from .classifiers.saved import default_model_dir
 
     model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
     trainer = _start_training(opts, model_dir, progress)

@@ -75,9 +75,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     what determines each (the data, or only the class range / physical bounds), and the heat
     demand and T_air validation per night.
     """
-    from ..identify.fit import NightFit
-    from ..identify.fit_data import prepare_nights
-    from ..identify.fit_report import fit_to_dict, format_table, plot_fit
+    from ..fit.data import prepare_nights
+    from ..fit.estimator import NightFit
+    from ..fit.report import fit_to_dict, format_table, plot_fit
     from ..imp import EMISSION_LAG_H, read_nights
 
     if ach_infl < 0 or ach_vent < 0 or ach_infl + ach_vent <= 0:
@@ -110,8 +110,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
 def _classes(nights, model_dir):
     """Classified ranges, or — without usable classifiers — the prior, said out loud."""
-    from ..identify import DEFAULT_RANGES
-    from ..identify.classifiers import classify_nights
+    from ..classifiers.saved import classify_nights
+    from ..population.ranges import DEFAULT_RANGES
 
     try:
         results = classify_nights(nights, model_dir)

@@ -36,11 +36,11 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
     Table III), then prints the report.
     """
-    from ..identify.classifiers import default_model_dir, save_models
-    from ..identify.dataset import generate_dataset
-    from ..identify.report import format_report
-    from ..identify.training import TrainConfig, train_classifiers
-    from ..identify.virtual_imp import ImpSimConfig, usable_nights
+    from ..classifiers.report import format_report
+    from ..classifiers.saved import default_model_dir, save_models
+    from ..classifiers.training import TrainConfig, train_classifiers
+    from ..population.dataset import generate_dataset
+    from ..population.virtual_imp import ImpSimConfig, usable_nights
     from ..weather import read_weather
 
     if households < MIN_HOUSEHOLDS:
@@ -91,9 +91,9 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
-    from ..identify.classifiers import classify_nights
-    from ..identify.ranges import UNITS
+    from ..classifiers.saved import classify_nights
     from ..imp import read_nights
+    from ..population.ranges import UNITS
 
     nights = read_nights(nights_path, tz)
     results = classify_nights(nights, model_dir)

@@ -12,7 +12,7 @@ is back on (Q_HC > :data:`Q_ON_W`, i.e. T_min reached) or at the end of the samp
 
 Every night gets every feature; the ones of the other kind are NaN. A feature that needs
 ``MIN_SAMPLES`` samples and has fewer is NaN. The range classifiers combine a household's nights
-(:mod:`impctl.identify.campaign`) and use only the features that do not depend on the 5R1C
+(:mod:`impctl.classifiers.campaign`) and use only the features that do not depend on the 5R1C
 switch-off artefact; the reasons are given there.
 """
 

@@ -5,12 +5,12 @@ classified range for floor_area, c_f and u_walls, physical bounds for the others
 initial mass temperature per night, to IMP nights (:class:`~impctl.imp.night.NightSamples`).
 The dynamics are the paper's eq. 6 on constrained nights (from switch-off + the emission lag) and
 eq. 5 (or its demand form) on normal nights, integrated by ``torchdiffeq`` (:mod:`.node`); the
-optimiser is :mod:`.fit_lm`. Two modes are always computed: one joint fit over all nights with
+optimiser is :mod:`.lm`. Two modes are always computed: one joint fit over all nights with
 shared parameters (the headline) and per-night fits averaged afterwards (the paper's way).
 
 What is reported as *measured* is what the data determines (identifiability.md): the lumped
 HLC, C_m and τ with 95 % intervals, and for each physical parameter whether the data pins it
-down or only its search range does (:mod:`.fit_uncertainty`).
+down or only its search range does (:mod:`.uncertainty`).
 
 Class ranges are a prior, and a wrong class biases even the lumped quantities. The joint fit is
 therefore run twice in the same batch — inside the class ranges and inside the whole prior
@@ -31,9 +31,8 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
-from . import fit_lm
-from .fit_data import noise_levels, prepare_nights, search_bounds, validation_table
-from .fit_uncertainty import laplace
+from . import lm
+from .data import noise_levels, prepare_nights, search_bounds, validation_table
 from .node import (
     DTYPE,
     PARAM_NAMES,
@@ -46,6 +45,7 @@ from .node import (
     pack_nights,
     to_physical,
 )
+from .uncertainty import laplace
 
 NORMAL_MODELS = ("demand", "series", "mean")
 LUMPED_NAMES = ("hlc", "c_m", "tau")
@@ -74,7 +74,7 @@ class NightFit:
     ach_vent, ach_infl : float
         Fixed air changes [1/h]; default the paper's (and the virtual population's) 0 and 0.01.
     timestamps : {"instant", "interval"}
-        Sample convention (:func:`~impctl.identify.node.pack_nights`).
+        Sample convention (:func:`~impctl.fit.node.pack_nights`).
     smooth_air_h : float
         Width [h] of the moving average of the held T_air that drives "demand" rows, so that
         quantisation flicker does not reach the predicted power through the massless air node.
@@ -177,7 +177,7 @@ class NightFit:
         self.nights_ = kept
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h)
-        self._ctx = fit_lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
+        self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
         cons = packed.constrained
         demand = ~cons & torch.tensor(self.normal_model == "demand")
         self._row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
@@ -252,7 +252,7 @@ class NightFit:
                 "row_night": torch.tensor(row_night), "group": torch.tensor(group),
                 "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
 
-    def _rows(self, lay: dict, only: list[int] | None = None) -> fit_lm.Rows:
+    def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
         sig = torch.tensor([self.sigma_["constrained_t_air_k"], self.sigma_["normal_t_air_k"],
                             self.sigma_["normal_power_w"]], dtype=DTYPE)
         problem, night = lay["row_problem"], lay["row_night"]
@@ -263,10 +263,10 @@ class NightFit:
             remap[torch.tensor(only)] = torch.arange(len(only))
             problem, night = remap[problem[keep]], night[keep]
             box, n_prob = box[torch.tensor(only)], len(only)
-        return fit_lm.Rows(problem, night, self._row_type_n[night], self._phi_n[night],
+        return lm.Rows(problem, night, self._row_type_n[night], self._phi_n[night],
                            self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
 
-    def _refit_joint(self, lay: dict, result: fit_lm.LMResult) -> None:
+    def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
         joint = lay["class"] + lay["prior"]
         rows = self._rows(lay, joint)
         sel = torch.isin(lay["row_problem"], torch.tensor(joint))
@@ -320,17 +320,17 @@ class NightFit:
         phi0 = torch.where(demand, packed.q_mean_w[night], self._phi_n[night, 0])
         return mass_from_air(packed.t_air_c[night, 0], packed.t_out_c[night, 0], phi0, net)
 
-    def _optimise(self, rows, u0, t_m0, groups) -> fit_lm.LMResult:
+    def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer == "adam":
-            return fit_lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
-        return fit_lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
+            return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
+        return lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
                                           max_iter=self.max_iter)
 
     def _update_sigma(self, rows, result, best) -> None:
         sel = rows.problem == best
         sub = rows.subset(sel)
         with torch.no_grad():
-            raw = fit_lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
+            raw = lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
         mask = self._packed.mask[sub.night]
         groups = self._group_n[sub.night]
         floors = (0.005, 0.005, 1.0)
@@ -403,7 +403,7 @@ class NightFit:
             self.predictions_.append(entry)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (see :mod:`.fit_report`)."""
-        from .fit_report import fit_to_dict
+        """JSON-ready summary (see :mod:`.report`)."""
+        from .report import fit_to_dict
 
         return fit_to_dict(self)

@@ -20,10 +20,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
+from ..population.dataset import Dataset
+from ..population.ranges import PAPER_TABLE_III, bin_values, labels_of, validate_ranges
 from .campaign import CAMPAIGN_FEATURE_NAMES, aggregate_nights, night_cube, random_campaigns
-from .dataset import Dataset
 from .estimator import RangeClassifier
-from .ranges import PAPER_TABLE_III, bin_values, labels_of, validate_ranges
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ def train_classifiers(
     Parameters
     ----------
     dataset : Dataset
-        From :func:`~.dataset.generate_dataset`; its manifest's ranges are used.
+        From :func:`~impctl.population.dataset.generate_dataset`; its manifest's ranges are used.
     config : TrainConfig, optional
     seed : int
         Seeds the split, the campaigns and the forests.

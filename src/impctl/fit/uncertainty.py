@@ -24,8 +24,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from . import fit_lm
-from .fit_data import Estimate, lag1_autocorrelation
+from . import lm
+from .data import Estimate, lag1_autocorrelation
 from .node import DTYPE, PARAM_NAMES, lumped, to_physical
 
 Z95 = 1.959964
@@ -34,7 +34,7 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 GROUP_NAMES = ("constrained", "normal_t_air", "normal_power")
 
 
-def laplace(ctx: fit_lm.Context, sub: fit_lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
+def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
             group_n: torch.Tensor, *, has_power: bool, summary_only: bool = False) -> dict:
     """Intervals and flags at the optimum ``u`` (7,) of the one problem in ``sub``.
 
@@ -45,7 +45,7 @@ def laplace(ctx: fit_lm.Context, sub: fit_lm.Rows, u: torch.Tensor, t_m0: torch.
     ``autocorrelation`` (group → ρ), ``cov_u`` (7×7)
     """
     with torch.no_grad():
-        raw = fit_lm.raw_residuals(ctx, sub, u[None], t_m0).numpy()
+        raw = lm.raw_residuals(ctx, sub, u[None], t_m0).numpy()
     mask = ctx.packed.mask[sub.night].numpy()
     groups = group_n[sub.night]
     inflate = torch.ones(3, dtype=DTYPE)
@@ -58,11 +58,11 @@ def laplace(ctx: fit_lm.Context, sub: fit_lm.Rows, u: torch.Tensor, t_m0: torch.
     out = {"inflation": float(inflate.max()), "autocorrelation": rhos}
     if summary_only:
         return out
-    scaled = fit_lm.Rows(sub.problem, sub.night, sub.row_type, sub.phi_w, sub.phi_in_w,
+    scaled = lm.Rows(sub.problem, sub.night, sub.row_type, sub.phi_w, sub.phi_in_w,
                          sub.scale / inflate[groups].sqrt(), sub.box, 1)
     with torch.no_grad():
-        ne = fit_lm._normal_equations(ctx, scaled, u[None], t_m0)
-        s_mat, _, _ = fit_lm.schur(ne, scaled)
+        ne = lm._normal_equations(ctx, scaled, u[None], t_m0)
+        s_mat, _, _ = lm.schur(ne, scaled)
     cov = torch.linalg.pinv(s_mat[0], hermitian=True)
     fisher = s_mat[0] - ctx.ridge * torch.eye(len(PARAM_NAMES), dtype=DTYPE)
     box = sub.box[0]

@@ -24,7 +24,7 @@ drop alone passes T_min in 97 % of the simulated constrained nights, so a T_min 
 them right after the lag — an artefact that real houses, whose emitters, air and furniture smooth
 the drop, do not show (identifiability.md §11.2). The classifiers use only the constrained nights'
 decay rate, which does not depend on the drop or on where a night ends
-(:mod:`impctl.identify.campaign`).
+(:mod:`impctl.classifiers.campaign`).
 
 Observed samples: T_air with optional Gaussian noise, then quantised to ``quantum_k`` (the heat
 pump reports 0.1 °C); T_out quantised the same way; Q_HC = the heat pump's output (zero while it is

@@ -2,7 +2,7 @@
 
 Files in a dataset directory:
 
-* ``households.parquet`` — one row per household (:func:`~.population.sample_population`);
+* ``households.parquet`` — one row per household (:func:`~.households.sample_population`);
 * ``nights.parquet`` — one row per night (:class:`~.virtual_imp.ImpResult` ``nights``);
 * ``manifest.json`` — seed, sizes, population and IMP settings, ranges, feature names and units,
   weather source, package versions, creation time.
@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from ..imp import NIGHT_FEATURES
-from .population import PopulationConfig, households_from_table, sample_population
+from .households import PopulationConfig, households_from_table, sample_population
 from .ranges import DEFAULT_RANGES, Ranges, validate_ranges
 from .virtual_imp import ImpSimConfig, default_weather, simulate_imp
 

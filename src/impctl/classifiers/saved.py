@@ -21,9 +21,9 @@ import pandas as pd
 
 from ..errors import InputError
 from ..imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
+from ..population.dataset import package_versions
+from ..population.ranges import labels_of
 from .campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
-from .dataset import package_versions
-from .ranges import labels_of
 
 MODEL_FORMAT = 1
 METADATA_FILE = "models.json"
@@ -178,7 +178,7 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
                     ) -> dict[str, ClassResult]:
     """Put a house into parameter ranges from its measured (or simulated) IMP nights.
 
-    All nights are combined into one campaign row (:mod:`impctl.identify.campaign`) before the
+    All nights are combined into one campaign row (:mod:`impctl.classifiers.campaign`) before the
     forests classify it.
 
     Parameters

@@ -72,7 +72,7 @@ def _f(x: Any) -> Any:
 
 
 def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None) -> dict:
-    """JSON-ready summary of a fitted :class:`~impctl.identify.fit.NightFit` (module docstring).
+    """JSON-ready summary of a fitted :class:`~impctl.fit.NightFit` (module docstring).
 
     Parameters
     ----------

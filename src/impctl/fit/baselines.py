@@ -6,7 +6,7 @@
   per-sample difference is badly wrong when T_out drifts, §11.4).
 * C_m ≈ τ·HLC from the two.
 * :func:`least_squares_fit` — the same 5R1C night model and residuals as the default
-  :class:`~impctl.identify.fit.NightFit` (eq. 6 T_air on constrained nights, heat power given the
+  :class:`~impctl.fit.NightFit` (eq. 6 T_air on constrained nights, heat power given the
   held T_air on normal nights), integrated by the *exact* discretisation of the linear ODE for
   piecewise-linear inputs and fitted by ``scipy.optimize.least_squares`` (bounded, trust-region,
   one start at the centre of the box).

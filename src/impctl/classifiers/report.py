@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .ranges import CF_NAMES, UNITS
+from ..population.ranges import CF_NAMES, UNITS
 from .training import ParameterReport
 
 #: Goals of the classifiers issue: household-level test accuracy per parameter.

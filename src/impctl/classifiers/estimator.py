@@ -1,6 +1,6 @@
 """A scikit-learn estimator that puts a parameter into one of its ranges with a random forest.
 
-:mod:`impctl.identify` imports this module lazily, so light consumers (the daemon) do not load
+:mod:`impctl.classifiers` imports this module lazily, so light consumers (the daemon) do not load
 scikit-learn.
 """
 
@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, ClassifierMixin
 
-from .ranges import DEFAULT_RANGES, bin_values, labels_of
+from ..population.ranges import DEFAULT_RANGES, bin_values, labels_of
 
 
 class RangeClassifier(ClassifierMixin, BaseEstimator):
