@@ -79,13 +79,17 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     from ..fit.estimator import NightFit
     from ..fit.report import fit_to_dict, format_table, plot_fit
     from ..imp import EMISSION_LAG_H, read_nights
+    from ..imp.gaps import cut_at_gaps
+    from ..imp.plausibility import check_units, hlc_problem
 
-    if ach_infl < 0 or ach_vent < 0 or ach_infl + ach_vent <= 0:
-        raise InputError("--ach-infl and --ach-vent must be >= 0 with a positive sum")
+    if ach_infl + ach_vent <= 0:
+        raise InputError("--ach-infl and --ach-vent must have a positive sum")
     nights = read_nights(nights_path, tz)
+    check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
                          ach_vent=ach_vent)
-    kept, _, skipped = prepare_nights(nights, estimator.emission_lag_h, estimator.min_night_h,
+    cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
+    kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
                                       estimator.resume_threshold_w)
     missing = [_NEEDS[k].format(h=estimator.min_night_h, lag=EMISSION_LAG_H)
                for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
@@ -96,9 +100,13 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
             "too little data to fit: missing " + " and ".join(missing)
             + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
 
-    classes, ranges, notes = _classes(nights, model_dir)
+    classes, ranges, notes = _classes(cut, model_dir)
     estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
+    # A fitted HLC no dwelling has is a unit or column problem: refuse it, write nothing.
+    why = hlc_problem(summary["lumped"]["hlc"]["value"], "the fitted HLC")
+    if why is not None:
+        raise InputError(why, nights_path)
     click.echo(format_table(summary))
     if json_path is not None:
         _write_json(json_path, summary)

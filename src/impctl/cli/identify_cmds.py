@@ -93,17 +93,24 @@ def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) 
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
     from ..classifiers.saved import classify_nights
     from ..imp import read_nights
+    from ..imp.gaps import cut_at_gaps
+    from ..imp.plausibility import check_units
     from ..population.ranges import UNITS
 
     nights = read_nights(nights_path, tz)
+    check_units(nights, nights_path)
+    nights, gaps = cut_at_gaps(nights)
     results = classify_nights(nights, model_dir)
     kinds = {k: sum(n.kind == k for n in nights) for k in ("constrained", "normal")}
     if as_json:
         click.echo(json.dumps({
             "classes": {name: r.as_dict() for name, r in results.items()},
             "nights": {**kinds, "ids": [n.night_id for n in nights]},
+            "gaps": [g.as_dict() for g in gaps],
         }, indent=2))
         return
+    for g in gaps:
+        click.echo(f"gap: {g.describe()}")
     click.echo(f"{len(nights)} nights: {kinds['constrained']} constrained, "
                f"{kinds['normal']} normal")
     click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}{'probability':>11}")
