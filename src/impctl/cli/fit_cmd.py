@@ -14,7 +14,15 @@ import click
 
 from ..errors import InputError
 from . import cli
-from .checks import house_limit, time_zone
+from .checks import bounded, house_limit, time_zone
+
+#: Nights fitted by default / accepted by --max-nights: the fit's memory and time grow about
+#: linearly with the nights (bench/fit_large.py); an IMP campaign has 5–8.
+DEFAULT_MAX_NIGHTS = 30
+MAX_NIGHTS_RANGE = (2, 120)
+#: Largest NIGHTS.csv read [MB] (~600,000 rows, 5.7 years of 5-minute data): reading takes
+#: about 16× the file size in memory, on top of torch's ~370 MB.
+MAX_FILE_MB = 25.0
 
 _NEEDS = {
     "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
@@ -66,9 +74,14 @@ def _write_json(path: Path, data: dict) -> None:
 @click.option("--ach-vent", default=0.0, show_default=True, type=float,
               callback=house_limit("ach_vent", "1/h"),
               help="Fixed ventilation air changes [1/h]; 0–20.")
+@click.option("--max-nights", default=DEFAULT_MAX_NIGHTS, show_default=True, type=int,
+              callback=bounded(MAX_NIGHTS_RANGE),
+              help="Fit at most this many nights: the most recent ones, a third of them "
+                   "constrained (memory and time grow with the nights; "
+                   f"{MAX_NIGHTS_RANGE[0]}–{MAX_NIGHTS_RANGE[1]}).")
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
-        ach_vent: float) -> None:
+        ach_vent: float, max_nights: int) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -84,6 +97,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
+    _refuse_huge(nights_path)
+    if _size_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
+        click.echo(f"reading {nights_path} ({_size_mb(nights_path):.0f} MB) …", err=True)
     nights = read_nights(nights_path, tz)
     check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
@@ -91,6 +107,16 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
     kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
                                       estimator.resume_threshold_w)
+    chosen = _most_recent(kept, max_nights)
+    if len(chosen) < len(kept):
+        ids = {n.night_id for n in chosen}
+        nights = [n for n in nights if n.night_id in ids]
+        cut = [n for n in cut if n.night_id in ids]
+        first, last = chosen[0].night_id, chosen[-1].night_id
+        limit_note = (f"{len(kept)} usable nights in the file; the fit uses the {len(chosen)} "
+                      f"most recent ({first} … {last}; --max-nights {max_nights})")
+    else:
+        limit_note = None
     missing = [_NEEDS[k].format(h=estimator.min_night_h, lag=EMISSION_LAG_H)
                for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
     if missing:
@@ -101,6 +127,10 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
             + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
 
     classes, ranges, notes = _classes(cut, model_dir)
+    if limit_note:
+        notes.append(limit_note)
+    click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
+               f"constrained) …", err=True)
     estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
     # A fitted HLC no dwelling has is a unit or column problem: refuse it, write nothing.
@@ -114,6 +144,35 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if plot_path is not None:
         plot_fit(estimator, plot_path)
         click.echo(f"plot written to {plot_path}")
+
+
+def _size_mb(path: Path) -> float:
+    try:
+        return path.stat().st_size / 1e6
+    except OSError:
+        return 0.0  # read_nights names the problem
+
+
+def _refuse_huge(path: Path) -> None:
+    """A file above :data:`MAX_FILE_MB` is refused before it is read (a gateway has 1–4 GB)."""
+    size_mb = _size_mb(path)
+    if size_mb > MAX_FILE_MB:
+        raise InputError(
+            f"{size_mb:.0f} MB is more than the {MAX_FILE_MB:g} MB impctl fit reads (about "
+            "600,000 rows; a gateway has 1–4 GB of memory): keep the campaign's weeks only, "
+            "e.g. the last 60 days", path)
+
+
+def _most_recent(kept: list, max_nights: int) -> list:
+    """At most ``max_nights`` nights, the most recent; a third of them (at least one)
+    constrained when there are enough, the rest normal; in time order."""
+    cons = [n for n in kept if n.kind == "constrained"]
+    normal = [n for n in kept if n.kind == "normal"]
+    n_cons = min(len(cons), max(1, max_nights // 3))
+    n_normal = min(len(normal), max_nights - n_cons)
+    n_cons = min(len(cons), max_nights - n_normal)
+    chosen = cons[len(cons) - n_cons:] + normal[len(normal) - n_normal:]
+    return sorted(chosen, key=lambda n: n.start)
 
 
 def _classes(nights, model_dir):

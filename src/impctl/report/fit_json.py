@@ -37,6 +37,11 @@ def fit_problem(fit: Any) -> str | None:
     schema = fit.get("schema", "impctl-fit/1")
     if not isinstance(schema, str) or not schema.startswith("impctl-fit/"):
         return f"key 'schema' is {schema!r}, not 'impctl-fit/…'"
+    for key in ("bounds", "units", "determined", "basis", "classes", "validation"):
+        if key in fit and not isinstance(fit[key], dict):
+            return f"key '{key}' is not an object"
+    if not isinstance(fit.get("interval_method", ""), str):
+        return "key 'interval_method' is not a string"
     notes = fit.get("notes", [])
     if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
         return "key 'notes' is not a list of strings"
@@ -56,7 +61,7 @@ def fit_problem(fit: Any) -> str | None:
     for name, value in params.items():
         if not _number(value):
             return f"key 'parameters.{name}' is not a number"
-    for name, rng in (fit.get("bounds") or {}).items():
+    for name, rng in fit.get("bounds", {}).items():
         if not _pair(rng):
             return f"key 'bounds.{name}' is not a [low, high] pair"
     classes = fit.get("classes", {})
@@ -76,8 +81,8 @@ def _curves_problem(fit: dict) -> str | None:
         return "key 'predictions' is not a list"
     for i, p in enumerate(preds):
         where = f"predictions[{i}]"
-        if not isinstance(p, dict) or not _numbers(p.get("time_s")) or not all(
-                k in p for k in ("night_id", "kind")):
+        if not isinstance(p, dict) or not _numbers(p.get("time_s")) or "night_id" not in p \
+                or not isinstance(p.get("kind"), str):
             return f"key '{where}' lacks time_s, night_id or kind"
         n = len(p["time_s"])
         for col in ("t_air_measured_c", "t_air_model_c", "q_measured_w", "q_model_w"):
@@ -89,9 +94,15 @@ def _curves_problem(fit: dict) -> str | None:
         elif p.get("t_air_measured_c") is None:
             return f"key '{where}.t_air_measured_c' missing"
     validation = fit.get("validation", {})
-    if not isinstance(validation, dict):
-        return "key 'validation' is not an object"
-    for i, row in enumerate(validation.get("normal") or []):
+    mean = validation.get("mean") or {}
+    if not isinstance(mean, dict) or not all(
+            mean.get(k) is None or _number(mean[k])
+            for k in ("eps_pct", "dq_total_kwh", "dq_power_kw", "rmse_k")):
+        return "key 'validation.mean' is not an object of numbers"
+    rows = validation.get("normal") or []
+    if not isinstance(rows, list):
+        return "key 'validation.normal' is not a list"
+    for i, row in enumerate(rows):
         if not isinstance(row, dict) or "night_id" not in row or not all(
                 _number(row.get(k)) for k in ("q_measured_kwh", "q_model_kwh")):
             return f"key 'validation.normal[{i}]' lacks night_id, q_measured_kwh or q_model_kwh"
