@@ -348,7 +348,7 @@ _JSON = st.recursive(st.none() | st.booleans() | st.integers(-5, 5) | st.text(ma
                      max_leaves=4)
 
 
-@settings(max_examples=10, deadline=None, derandomize=True)
+@settings(max_examples=6, deadline=None, derandomize=True)
 @given(st.data())
 def test_fuzzed_fit_json_is_refused_cleanly_or_reported_completely(store_and_fit, data):
     """Any value anywhere in a real fit JSON: exit 2 with nothing written, or a complete

@@ -229,8 +229,10 @@ CONFIG_MUTATIONS = config_mutations()
 
 
 def _write(path: Path, text: str) -> Path:
+    # "\xff" marks deliberate binary garbage; a fuzzed cell may add characters beyond latin-1
+    # to it (seen under load), which stay garbage as "?".
     path.write_bytes(text.encode("utf-8", errors="surrogateescape")
-                     if "\xff" not in text else text.encode("latin-1"))
+                     if "\xff" not in text else text.encode("latin-1", errors="replace"))
     return path
 
 
