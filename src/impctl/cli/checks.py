@@ -57,14 +57,17 @@ def bounded(bounds: tuple[float, float], unit: str = "", *, low_open: bool = Fal
     return callback
 
 
-def house_limit(key: str, unit: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
+def house_limit(key: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
     """A click ``callback``: the option must lie in the house file's limits for ``key``
     (:data:`impctl.model.house_limits.HOUSE_LIMITS`, imported only when the option is parsed,
     so the CLI starts without numpy)."""
     def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
-        from ..model.house_limits import HOUSE_LIMITS
+        from ..model.house_limits import limit_problem
 
-        return in_range(value, HOUSE_LIMITS[key], max(param.opts, key=len), unit)
+        why = None if value is None else limit_problem(key, float(value))
+        if why is not None:
+            raise InputError(why, place=max(param.opts, key=len))
+        return value
     return callback
 
 

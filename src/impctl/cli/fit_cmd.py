@@ -68,11 +68,11 @@ def _write_json(path: Path, data: dict) -> None:
               help="Normal nights: heat power predicted from the held T_air (demand), or the "
                    "paper's eq. 5 driven by the measured power series or its night mean.")
 @click.option("--ach-infl", default=0.01, show_default=True, type=float,
-              callback=house_limit("ach_infl", "1/h"),
+              callback=house_limit("ach_infl"),
               help="Fixed infiltration air changes [1/h] (the classifiers' population); "
                    "0–20.")
 @click.option("--ach-vent", default=0.0, show_default=True, type=float,
-              callback=house_limit("ach_vent", "1/h"),
+              callback=house_limit("ach_vent"),
               help="Fixed ventilation air changes [1/h]; 0–20.")
 @click.option("--max-nights", default=DEFAULT_MAX_NIGHTS, show_default=True, type=int,
               callback=bounded(MAX_NIGHTS_RANGE),
