@@ -427,11 +427,12 @@ def test_fit_uses_the_most_recent_nights_and_says_so(tmp_path, nights_csv):
 
 
 def test_a_file_above_the_documented_size_is_refused_before_reading(tmp_path):
-    from impctl.cli.fit_cmd import MAX_FILE_MB
+    from impctl.cli.checks import MAX_FILE_MB
 
     big = tmp_path / "big.csv"
     with big.open("wb") as fh:
         fh.truncate(int((MAX_FILE_MB + 1) * 1e6))
     (line,) = _fit_refused(tmp_path, big)
     assert "MB" in line and "last 60 days" in line
+    refused(cli("classify", "--nights", str(big)), big)
     assert math.isfinite(MAX_FILE_MB)

@@ -14,15 +14,12 @@ import click
 
 from ..errors import InputError
 from . import cli
-from .checks import bounded, house_limit, time_zone
+from .checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
 
 #: Nights fitted by default / accepted by --max-nights: the fit's memory and time grow about
 #: linearly with the nights (bench/fit_large.py); an IMP campaign has 5–8.
 DEFAULT_MAX_NIGHTS = 30
 MAX_NIGHTS_RANGE = (2, 120)
-#: Largest NIGHTS.csv read [MB] (~600,000 rows, 5.7 years of 5-minute data): 576,000 rows
-#: (24 MB) took 47 s and 531 MB peak RSS with 30 nights fitted (bench/fit_large.py).
-MAX_FILE_MB = 25.0
 
 _NEEDS = {
     "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
@@ -97,9 +94,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
-    _refuse_huge(nights_path)
-    if _size_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
-        click.echo(f"reading {nights_path} ({_size_mb(nights_path):.0f} MB) …", err=True)
+    refuse_large_file(nights_path, MAX_FILE_MB)
+    if file_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
+        click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)
     nights = read_nights(nights_path, tz)
     check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
@@ -144,23 +141,6 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if plot_path is not None:
         plot_fit(estimator, plot_path)
         click.echo(f"plot written to {plot_path}")
-
-
-def _size_mb(path: Path) -> float:
-    try:
-        return path.stat().st_size / 1e6
-    except OSError:
-        return 0.0  # read_nights names the problem
-
-
-def _refuse_huge(path: Path) -> None:
-    """A file above :data:`MAX_FILE_MB` is refused before it is read (a gateway has 1–4 GB)."""
-    size_mb = _size_mb(path)
-    if size_mb > MAX_FILE_MB:
-        raise InputError(
-            f"{size_mb:.0f} MB is more than the {MAX_FILE_MB:g} MB impctl fit reads (about "
-            "600,000 rows; a gateway has 1–4 GB of memory): keep the campaign's weeks only, "
-            "e.g. the last 60 days", path)
 
 
 def _most_recent(kept: list, max_nights: int) -> list:

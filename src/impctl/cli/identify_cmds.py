@@ -14,7 +14,7 @@ import click
 
 from ..errors import InputError
 from . import cli
-from .checks import time_zone
+from .checks import MAX_FILE_MB, refuse_large_file, time_zone
 
 #: Fewest households ``impctl train`` accepts: a test split of 20 % must hold every class.
 MIN_HOUSEHOLDS = 20
@@ -97,6 +97,7 @@ def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) 
     from ..imp.plausibility import check_units
     from ..population.ranges import UNITS
 
+    refuse_large_file(nights_path, MAX_FILE_MB)
     nights = read_nights(nights_path, tz)
     check_units(nights, nights_path)
     nights, gaps = cut_at_gaps(nights)
