@@ -5,9 +5,12 @@ torch is imported inside the command only, so the CLI (and the daemon) start wit
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 import click
@@ -128,7 +131,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         notes.append(limit_note)
     click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
                f"constrained) …", err=True)
-    estimator.fit(nights, ranges)
+    with _ticking("fitting"):
+        estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
     # A fitted HLC no dwelling has is a unit or column problem: refuse it, write nothing.
     why = hlc_problem(summary["lumped"]["hlc"]["value"], "the fitted HLC")
@@ -141,6 +145,25 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if plot_path is not None:
         plot_fit(estimator, plot_path)
         click.echo(f"plot written to {plot_path}")
+
+
+@contextlib.contextmanager
+def _ticking(what: str, every_s: float = 5.0):
+    """A line on stderr every ``every_s`` seconds while the block runs (long fits)."""
+    done = threading.Event()
+    started = time.monotonic()
+
+    def tick() -> None:
+        while not done.wait(every_s):
+            click.echo(f"  … {what}, {time.monotonic() - started:.0f} s", err=True)
+
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
 
 
 def _most_recent(kept: list, max_nights: int) -> list:
