@@ -69,6 +69,18 @@ def test_house_floor_area_1e9_and_every_other_problem_at_once(tmp_path):
     assert files_in(tmp_path) == {"house.toml"}
 
 
+def test_every_iso_domain_problem_of_a_house_is_listed_at_once(tmp_path):
+    house = tmp_path / "house.toml"
+    house.write_text(toml_text({**GOOD_HOUSE, "floor_area": 12.0, "walls_area": 5000.0,
+                                "windows_area": 400.0, "c_f": 3.7, "u_walls": 4.0,
+                                "u_windows": 6.0, "ach_infl": 0.0}))
+    code, _, err = cli("simulate", "--house", str(house), "--out", str(tmp_path / "o.csv"))
+    assert code == 2 and "Traceback" not in err
+    assert [x.split("key '")[1].split("'")[0] for x in err.splitlines()] == [
+        "ach_infl", "u_walls", "windows_area"]
+    assert files_in(tmp_path) == {"house.toml"}
+
+
 @FAST
 @given(st.sampled_from(sorted(HOUSE_LIMITS)), st.booleans(), st.floats(1.0001, 1e6))
 def test_every_house_parameter_has_documented_bounds(key, above, factor):
