@@ -126,6 +126,9 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     if not out.parent.is_dir():
         raise InputError(f"the folder {out.parent} does not exist", out)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)  # mkdtemp makes it 0700; OUT gets the usual permissions
     try:
         _render(tmp, fit, truth, summary, demand, nights_html)
         if out.exists():
