@@ -42,7 +42,7 @@ MAX_STEPS = 3_200_000
               help="Time step [s] (default: from the timestamps); 1–86400.")
 @click.option("--days", type=float, default=31.0, show_default=True,
               callback=bounded(SIM_DAYS, "days"),
-              help="Length of the built-in weather [days] (no --drivers); 1 h … 10 years.")
+              help="Length of the built-in weather [days] (no --drivers); 0.1–3660.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Built-in weather seed.")
 @click.option("--tz", default=_DEFAULT_TZ, show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of --heating-off.")
