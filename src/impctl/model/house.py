@@ -346,7 +346,9 @@ def house_from_mapping(data: dict[str, Any], source: str | Path | None = None) -
     """
     from .house_limits import check_house_values
 
-    values = check_house_values(data, _REQUIRED + tuple(_OPTIONAL), _OPTIONAL, source)
+    # The optional [plant.*] tables belong to impctl.plant (impctl.plant.load_plant), not the 5R1C.
+    envelope = {key: value for key, value in data.items() if key != "plant"}
+    values = check_house_values(envelope, _REQUIRED + tuple(_OPTIONAL), _OPTIONAL, source)
     try:
         return HouseParameters(**values)
     except InputError as exc:
