@@ -24,7 +24,7 @@ from test_reliability_input import cli, refused
 from impctl.errors import InputError
 from impctl.imp import read_nights
 from impctl.imp.gaps import MIN_GAP_S, cut_at_gaps, gap_indices
-from impctl.imp.plausibility import check_units, hlc_problem
+from impctl.imp.plausibility import check_units, fit_problem, hlc_problem
 
 FAST = settings(max_examples=60, deadline=None, derandomize=True)
 __all__ = ["nights", "nights_csv"]  # module-scoped fixtures shared with test_operator_options
@@ -40,9 +40,12 @@ def test_fit_on_q_hc_in_kw_is_refused_naming_the_unit(tmp_path, nights_csv, labe
     assert "kW" in line
 
 
-@pytest.mark.parametrize("factor, words", [(0.03, "far too small"), (0.02, "far too small")])
-def test_power_too_small_for_the_temperature_difference_is_refused(tmp_path, nights_csv,
-                                                                     factor, words):
+@pytest.mark.parametrize("factor, words", [(0.03, "far too small"), (0.04, "far too small"),
+                                           (13.0, "far too large")])
+def test_power_implausible_for_the_temperature_difference_is_refused(tmp_path, nights_csv,
+                                                                       factor, words):
+    """q_hc × 0.03, × 0.04 or × 13 (a wrong unit or column): the fit would end at a bound of
+    its search box with exit 0 — refused before fitting, naming the cause."""
     bad = scaled(nights_csv, tmp_path / "bad.csv", factor)
     (line,) = fit_refused(tmp_path, bad)
     assert words in line and "10–2,000 W/K" in line
@@ -72,6 +75,9 @@ def test_a_fitted_hlc_outside_a_dwelling_names_the_likely_cause():
     assert "looks like kW" in hlc_problem(0.15, "HLC")
     assert "far too small" in hlc_problem(1e-6, "HLC")
     assert "far too large" in hlc_problem(5000.0, "HLC")
+    assert fit_problem(150.0, 19.0) is None
+    assert "misses the measured heat" in fit_problem(150.0, 150.0)
+    assert "the fitted HLC" in fit_problem(5.0, 10.0)
 
 
 # -- 8. gaps ---------------------------------------------------------------------------------------

@@ -93,7 +93,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     from ..fit.report import fit_to_dict, format_table, plot_fit
     from ..imp import EMISSION_LAG_H, read_nights
     from ..imp.gaps import cut_at_gaps
-    from ..imp.plausibility import check_units, hlc_problem
+    from ..imp.plausibility import check_units, fit_problem
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
@@ -134,8 +134,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     with _ticking("fitting"):
         estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
-    # A fitted HLC no dwelling has is a unit or column problem: refuse it, write nothing.
-    why = hlc_problem(summary["lumped"]["hlc"]["value"], "the fitted HLC")
+    # A fit no house gives is a unit or column problem: refuse it, write nothing.
+    why = fit_problem(summary["lumped"]["hlc"]["value"],
+                      (summary["validation"].get("mean") or {}).get("eps_pct"))
     if why is not None:
         raise InputError(why, nights_path)
     click.echo(format_table(summary))
