@@ -97,6 +97,10 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
+    from ..store.export import refuse_database
+
+    refuse_database(json_path, "--json")
+    refuse_database(plot_path, "--plot")
     refuse_large_file(nights_path, MAX_FILE_MB)
     if file_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
         click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)

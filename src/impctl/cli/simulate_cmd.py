@@ -58,8 +58,10 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     from ..drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
     from ..model import default_house, load_house
     from ..tables import step_seconds
+    from ..store.export import refuse_database
     from ..weather import read_weather, winter_weather
 
+    refuse_database(out_path, "--out")
     house = load_house(house_path) if house_path else default_house()
     label = str(house_path) if house_path else "built-in default (150 m², medium)"
     window = parse_window(heating_off) if heating_off else None
