@@ -57,8 +57,8 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
 
     from ..drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
     from ..model import default_house, load_house
-    from ..tables import step_seconds
     from ..store.export import refuse_database
+    from ..tables import step_seconds
     from ..weather import read_weather, winter_weather
 
     refuse_database(out_path, "--out")
