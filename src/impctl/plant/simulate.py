@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..model import HouseParameters
 from . import emitter as em
 from .envelope import CapacitySplit, Network, NodeState, Solver, split_capacity, steady_state
-from .heatpump import Controller, ControlState, cop
+from .heatpump import Controller, ControlState, cop, nominal_output_w
 from .params import CONTROL_IDEAL, PlantParams
 from .sensors import SensorBank
 
@@ -55,7 +55,8 @@ class PlantCore:
         self.exponent = _b(e.exponent, n)
         self.k_w = _b(em.output_constant(self.hlc, e, self.floor_area), n)
         self.g_pipe = _b(em.pipe_conductance(self.k_w, self.hlc, e), n)
-        self.nominal_w = _b(hp.sizing, n) * em.design_load_w(self.hlc, e)
+        self.nominal_w = _b(nominal_output_w(hp, em.design_load_w(self.hlc, e),
+                                             e.design_t_out_c), n)
         want_em = _b(em.capacity_j_per_k(self.k_w, e, self.floor_area, self.nominal_w), n)
         volume = self.floor_area * _b(house.wall_height, n)
         self.split: CapacitySplit = split_capacity(

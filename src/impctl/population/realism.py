@@ -21,7 +21,7 @@ The same seed gives the same parameters.
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pandas as pd
@@ -92,6 +92,8 @@ def sample_params(n: int, seed: int | np.random.SeedSequence = 0) -> PlantParams
         meter_noise=u(Sensors, "meter_noise"),
         meter_positive_only=np.ones(n),
     )
+    # Drawn last so that adding it left every earlier draw (and so every house) unchanged.
+    heat_pump = replace(heat_pump, defrost_min_run_s=u(HeatPump, "defrost_min_run_s"))
     return PlantParams(capacities, emitter, heat_pump, gains, sensors)
 
 
