@@ -13,7 +13,9 @@ from impctl.errors import InputError
 from impctl.model import HouseParameters, default_house
 from impctl.plant import (
     Emitter,
+    Gains,
     HeatPump,
+    HouseGains,
     Plant,
     PlantParams,
     Sensors,
@@ -21,6 +23,7 @@ from impctl.plant import (
     periodic,
     simulate_plant,
 )
+from impctl.plant.gains import solar_gains_w, sun_shape
 
 
 def _runs(flags: np.ndarray) -> list[tuple[bool, int, int]]:
@@ -144,6 +147,33 @@ def test_default_heat_pump_holds_the_design_point():
     f = 1.0 + hp.capacity_per_k * (-15.0 - 7.0)
     assert Plant(house, cold).nominal_w * f == pytest.approx(
         hp.sizing * house.network.hlc_w_per_k * 35.0, rel=1e-12)
+
+
+def test_house_gains_step_by_step_follow_the_batch_profiles():
+    """HouseGains (one house, step-wise) gives the batch functions' levels and sun shape: night
+    and day levels, the sun only 08:00–16:00 with one clearness per local day, the walk's drift
+    clipped to 0…2× the level."""
+    g = Gains(night_w=200.0, day_w=500.0, drift_w=0.0, solar_peak_w=1000.0)
+    hg = HouseGains(g, seed=4)
+    t = np.arange(0, 3 * 86400, 600.0) + 0.5 * 86400          # from noon of day 0, 10-min steps
+    out = np.array([hg.step(600.0, s) for s in t])
+    hour = (t / 3600.0) % 24
+    night = (hour >= 22) | (hour < 7)
+    assert (out[night, 0] == 200.0).all() and (out[~night, 0] == 500.0).all()
+    assert (out[(hour < 8) | (hour > 16), 1] == 0).all()
+    sunny = (hour > 8) & (hour < 16)
+    clear = out[sunny, 1] / (1000.0 * sun_shape(hour[sunny]))
+    days = (t[sunny] // 86400).astype(int)
+    per_day = [np.ptp(clear[days == d]) for d in np.unique(days)]
+    assert max(per_day) < 1e-12 and len({round(c, 9) for c in clear}) == len(per_day)
+    # The batch profile has the same shape: solar / sun_shape is one clearness per day.
+    batch = solar_gains_w(hour, t // 86400, g, 1, np.random.default_rng(0))[:, 0]
+    ratio = batch[sunny] / (1000.0 * sun_shape(hour[sunny]))
+    assert all(np.ptp(ratio[days == d]) < 1e-12 for d in np.unique(days))
+    # Drift: a random walk, clipped at 0 and 2× the level.
+    walk = HouseGains(Gains(night_w=100.0, drift_w=80.0), seed=1)
+    vals = np.array([walk.step(3600.0, 23 * 3600.0)[0] for _ in range(200)])
+    assert vals.min() >= 0.0 and vals.max() <= 200.0 and vals.std() > 20.0
 
 
 def test_dhw_pauses_space_heating_and_loop_off_stops_it():

@@ -51,8 +51,15 @@ def internal_gains_w(hour_local: Array, gains: Gains, n: int,
     level = np.where(night, np.broadcast_to(np.asarray(gains.night_w, float), (n,)),
                      np.broadcast_to(np.asarray(gains.day_w, float), (n,)))
     drift = np.broadcast_to(np.asarray(gains.drift_w, float), (n,))
-    walk = np.cumsum(rng.standard_normal((h.shape[0], n)), axis=0) * np.sqrt(dt_s / 3600.0)
-    return np.clip(level + drift * walk, 0.0, 2.0 * level)
+    # In place (the same operations in the same order as level + drift·walk): this series is
+    # n_steps × n houses, the largest array of a population run.
+    walk = rng.standard_normal((h.shape[0], n))
+    np.cumsum(walk, axis=0, out=walk)
+    walk *= np.sqrt(dt_s / 3600.0)
+    np.multiply(drift, walk, out=walk)
+    np.add(level, walk, out=walk)
+    level *= 2.0
+    return np.clip(walk, 0.0, level, out=walk)
 
 
 def solar_gains_w(hour_local: Array, day_index: Array, gains: Gains, n: int,
