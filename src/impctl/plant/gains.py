@@ -75,6 +75,10 @@ def solar_gains_w(hour_local: Array, day_index: Array, gains: Gains, n: int,
     d0 = int(days.min())
     clear = rng.uniform(0.0, 1.0, (int(days.max()) - d0 + 1, n))
     peak = np.broadcast_to(np.asarray(gains.solar_peak_w, float), (n,))
+    if days.shape[1] == 1:
+        # One day number per step (the common case): a row lookup, much faster than
+        # take_along_axis over the full (n_steps, n) index.
+        return peak * shape * clear[(days[:, 0] - d0).astype(int)]
     return peak * shape * np.take_along_axis(clear, np.broadcast_to(days - d0, shape.shape)
                                              .astype(int), axis=0)
 
