@@ -143,6 +143,8 @@ class Controller:
         self._c_per_tau = self.c_em / self.tau_c
         self._p_min_nom = self.p_min_frac * self.nominal_w
         self._any_thermostat = bool(self.thermostat.any())
+        self._half_band = 0.5 * self.hyst_room
+        self._not_thermostat = ~self.thermostat
         self._any_defrost = bool(self.defrost_on.any())
         self._no = np.zeros(n, bool)
 
@@ -169,10 +171,10 @@ class Controller:
         target = self.target_water_c(setpoint_c, t_air_sensed, t_out_sensed)
         space_on = enabled & ~dhw
         if self._any_thermostat:
-            band = 0.5 * self.hyst_room
+            band = self._half_band
             st.calling = np.where(st.calling, t_air_sensed < setpoint_c + band,
                                   t_air_sensed < setpoint_c - band)
-            demand = space_on & (~self.thermostat | st.calling)
+            demand = space_on & (self._not_thermostat | st.calling)
         else:
             demand = space_on
         d = np.maximum(target - t_air_c, 0.0)
