@@ -23,6 +23,8 @@ Array = NDArray[np.float64]
 
 #: Local hours of the night level of internal gains [h].
 NIGHT_HOURS = (22.0, 7.0)
+#: Rows per block when building (n_steps, n) series in place.
+_ROWS = 512
 #: Local hours of daylight for the solar profile [h] [own choice, a winter day].
 SUN_HOURS = (8.0, 16.0)
 
@@ -48,20 +50,25 @@ def internal_gains_w(hour_local: Array, gains: Gains, n: int,
     h = np.asarray(hour_local, dtype=float)
     h = h[:, None] if h.ndim == 1 else h
     night = _is_night(h)
-    level = np.where(night, np.broadcast_to(np.asarray(gains.night_w, float), (n,)),
-                     np.broadcast_to(np.asarray(gains.day_w, float), (n,)))
+    night_w = np.broadcast_to(np.asarray(gains.night_w, float), (n,))
+    day_w = np.broadcast_to(np.asarray(gains.day_w, float), (n,))
     drift = np.broadcast_to(np.asarray(gains.drift_w, float), (n,))
-    # In place (the same operations in the same order as level + drift·walk): this series is
-    # n_steps × n houses, the largest array of a population run.
+    # In place and by blocks of rows: this series is n_steps × n houses, the largest array of a
+    # population run, and every fresh full-size temporary costs a first touch of its memory.
+    # Same operations in the same order as clip(level + drift·walk, 0, 2·level).
     walk = rng.standard_normal((h.shape[0], n))
     np.cumsum(walk, axis=0, out=walk)
     walk *= np.sqrt(dt_s / 3600.0)
-    np.multiply(drift, walk, out=walk)
-    np.add(level, walk, out=walk)
-    level *= 2.0
-    # np.clip with array bounds is several times slower than the two ufuncs it stands for.
-    np.maximum(walk, 0.0, out=walk)
-    return np.minimum(walk, level, out=walk)
+    for b in range(0, walk.shape[0], _ROWS):
+        w = walk[b:b + _ROWS]
+        level = np.where(night[b:b + _ROWS], night_w, day_w)
+        np.multiply(drift, w, out=w)
+        np.add(level, w, out=w)
+        level *= 2.0
+        # np.clip with array bounds is several times slower than the two ufuncs it stands for.
+        np.maximum(w, 0.0, out=w)
+        np.minimum(w, level, out=w)
+    return walk
 
 
 def solar_gains_w(hour_local: Array, day_index: Array, gains: Gains, n: int,
@@ -75,10 +82,13 @@ def solar_gains_w(hour_local: Array, day_index: Array, gains: Gains, n: int,
     d0 = int(days.min())
     clear = rng.uniform(0.0, 1.0, (int(days.max()) - d0 + 1, n))
     peak = np.broadcast_to(np.asarray(gains.solar_peak_w, float), (n,))
-    if days.shape[1] == 1:
-        # One day number per step (the common case): a row lookup, much faster than
-        # take_along_axis over the full (n_steps, n) index.
-        return peak * shape * clear[(days[:, 0] - d0).astype(int)]
+    if days.shape[1] == 1 and shape.shape[1] == 1:
+        # One day number and hour per step (the common case): a row lookup, then the
+        # (peak·shape)·clearness product by blocks of rows, in place (no full-size temporaries).
+        out = clear[(days[:, 0] - d0).astype(int)]
+        for b in range(0, out.shape[0], _ROWS):
+            np.multiply(peak * shape[b:b + _ROWS], out[b:b + _ROWS], out=out[b:b + _ROWS])
+        return out
     return peak * shape * np.take_along_axis(clear, np.broadcast_to(days - d0, shape.shape)
                                              .astype(int), axis=0)
 
