@@ -15,7 +15,8 @@ temperature, the water temperature):
   θ_w > θ_w* + h, start when θ_w < θ_w* − h), honouring the minimum on and off times. Loop off,
   system off and DHW stop space heating at once (the minimum off time still applies after).
 * **Defrost** (outdoor −12…+5 °C): after ``defrost_interval_s`` of compressor run time, and
-  not before ``defrost_min_run_s`` since the compressor's last start, the unit reverses for
+  not before ``defrost_min_run_s`` since the compressor's last space-heating start (a DHW
+  charge counts as a stop), the unit reverses for
   ``defrost_duration_s`` and draws ``defrost_draw``·P_nom from the water.
 * **Sizing** (:func:`nominal_output_w`): P_nom is set so that the mean output at the design
   outdoor temperature, defrosts included, is ``sizing`` × the design load.
