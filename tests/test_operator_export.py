@@ -86,6 +86,22 @@ def test_export_onto_the_store_is_refused_and_the_journal_survives(tmp_path, cap
     assert code == 0 and "normal" in out
 
 
+def test_fit_and_simulate_never_write_onto_the_store(tmp_path, capsys):
+    # "No command may destroy the journal": the other commands that write files refuse an
+    # SQLite database (or its -wal side file) as their output, before doing any work.
+    state = tmp_path / "state"
+    db = _store(state)
+    nights = tmp_path / "nights.csv"
+    nights.write_text("timestamp,t_air,t_out,q_hc\n")
+    for args in (("fit", "--nights", str(nights), "--json", str(db)),
+                 ("fit", "--nights", str(nights), "--plot", f"{db}-wal"),
+                 ("simulate", "--out", str(db))):
+        code, out, err = _run(capsys, *args)
+        assert code == 2 and out == "", (args, out, err)
+        assert len(err.splitlines()) == 1 and "never writes onto" in err, err
+        _intact(db)
+
+
 def test_existing_file_needs_force_directory_and_missing_dir_refused(tmp_path, capsys):
     state = tmp_path / "state"
     _store(state)

@@ -246,6 +246,14 @@ async def _watch(cfg, clock, sim, progress: _Progress, trainer, task) -> None:
 
 def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     """Run the whole demo; returns the summary dict (also written to OUT/summary.json)."""
+    # Inputs first: a bad house file or --out must leave nothing behind (not even demo.log).
+    if opts.plant not in ("realistic", "iso"):
+        raise InputError("must be realistic or iso", place="--plant")
+    if opts.speed is None:
+        opts = replace(opts, speed=DEFAULT_SPEED[opts.plant])
+    house, realism = _house_and_realism(opts)
+    if opts.out.exists() and not opts.out.is_dir():
+        raise InputError("--out must be a directory", opts.out)
     opts.out.mkdir(parents=True, exist_ok=True)
     # The daemon's own log (every write, restore and night verdict) goes to a file; the
     # console shows the demo's progress lines.
@@ -254,11 +262,6 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
                         handlers=[logging.FileHandler(opts.out / "demo.log", mode="w")])
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     logging.getLogger("apscheduler").setLevel(logging.WARNING)
-    if opts.plant not in ("realistic", "iso"):
-        raise InputError("must be realistic or iso", place="--plant")
-    if opts.speed is None:
-        opts = replace(opts, speed=DEFAULT_SPEED[opts.plant])
-    house, realism = _house_and_realism(opts)
     plant = plant_summary(opts, realism)
     progress = _Progress(echo)
     progress.line(f"plant: {plant['kind']} ({plant['description']})")

@@ -117,3 +117,24 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
         Path(tmp).unlink(missing_ok=True)
         raise
     return len(df)
+
+
+def refuse_database(out: Path | None, option: str) -> None:
+    """Refuse an output path that is an SQLite database or one of its side files (raises
+    :class:`InputError`): the store holds the restore journal, and no command may write onto
+    it (``fit --json``, ``fit --plot``, ``simulate --out``; ``export`` checks more)."""
+    if out is None:
+        return
+    out = Path(out)
+    candidates = [out] + [out.with_name(out.name[: -len(suffix)])
+                          for suffix in ("-wal", "-shm", "-journal")
+                          if out.name.endswith(suffix)]
+    for path in candidates:
+        try:
+            with path.open("rb") as fh:
+                head = fh.read(len(_SQLITE_MAGIC))
+        except OSError:
+            continue
+        if head == _SQLITE_MAGIC:
+            raise InputError("is an SQLite database (or its journal); impctl never writes onto "
+                             "one", out, option)
