@@ -141,6 +141,7 @@ def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *
     run(int(86400 / 120), 120.0, t_set_c, on, int(43200 / 120))
     run(int(3600 / dt_s), dt_s, t_max, on, 10**9)
     at_switch_off = copy.deepcopy(core)
+    sensed_at_switch_off = core.sensed_air.copy()
 
     # 1. Heating off all window: when does each sampling phase see T_min?
     steps = int(window_h * 3600 / dt_s)
@@ -157,10 +158,18 @@ def screen(houses: HouseParameters, realism: PlantParams, t_out_c: np.ndarray, *
                        anticipate_within_k)
         first = np.where(hit.any(axis=0), np.argmax(hit, axis=0) * every + phase, -1)
         restore = np.maximum(restore, first)
+    # The controller does not switch off a house the preheat left within
+    # NightPolicy.switch_off_min_k of T_min (preheat_short): its heating stays on.
+    from impctl.controller.plan import NightPolicy
+
+    at_start = np.round(sensed_at_switch_off * 10.0) / 10.0
+    kept_on = at_start < t_min + NightPolicy().switch_off_min_k
+    restore = np.where(kept_on, -1, restore)
     reaches = restore >= 0
     lag = int(np.ceil(LATENCY_S / dt_s))
     # A house that never reads T_min is restored at the window's end.
     restore_step = np.where(reaches, restore, steps) + lag
+    restore_step = np.where(kept_on, 0, restore_step)
 
     # 2. The same night again, each house restored at its latest restoring sample.
     core = at_switch_off

@@ -67,7 +67,7 @@ def test_demo_realistic_plant_is_the_default(demo, tmp_path):
     plant = summary["plant"]
     assert plant["kind"] == "realistic"
     # The demo house's [plant.*] tables reached the simulator.
-    assert plant["realism"]["heat_pump"]["sizing"] == 1.5
+    assert plant["realism"]["heat_pump"]["min_modulation"] == 0.4
     assert plant["realism"]["sensors"]["t_air_lag_s"] == 600.0
     lumped = {q["name"]: q for q in summary["lumped"]}
     assert lumped["hlc"]["error_pct"] is not None

@@ -30,7 +30,7 @@ from ..heatpump.clock import VirtualClock
 from ..store import Night, Sample, Store
 from .assess import assess_night
 from .owner import describe_changes, fmt_register, owner_changes
-from .plan import NightPolicy, NightRequest, anticipated_end
+from .plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from .restore import restore_all
 
 _LOG = logging.getLogger(__name__)
@@ -389,6 +389,9 @@ class NightController:
             if now >= deadline:
                 raise _Abort("hard deadline passed")
             if req.kind == "constrained" and not switched_off and now >= req.window_start:
+                too_cold = preheat_short(self.last_snapshot, req, policy)
+                if too_cold:  # switching off would only take the room under T_min
+                    return too_cold
                 await self._switch_off(log)
                 switched_off = True
                 self._trend = []

@@ -80,6 +80,9 @@ class NightPolicy:
         the last ``trend_window_s``) reaches T_min within this time [s]: the room sensor lags,
         and radiators or a screed must warm up again before the room does, so a house that
         is still falling fast keeps falling for a while after the restore. 0 = end at T_min.
+    switch_off_min_k : a constrained night switches the heating off only if T_air is at least
+        this far above T_min at the window's start [K]; a house that the preheat could not
+        lift that far would only drop under T_min at once and keep falling after the restore
     anticipate_within_k : the trend counts only this close above T_min [K] (not in the fast
         drop right after the switch-off, while the emitter cools)
     trend_window_s : span of the T_air trend [s]
@@ -99,6 +102,7 @@ class NightPolicy:
     emission_lag_h: float = 1.0
     restore_timeout_s: float = 3600.0
     anticipate_s: float = 1800.0
+    switch_off_min_k: float = 1.5
     anticipate_within_k: float = 1.0
     trend_window_s: float = 1800.0
 
@@ -131,3 +135,13 @@ def anticipated_end(trend: list[tuple[float, float]], policy: NightPolicy,
         return (f"T_min {t_min_c:.1f} °C anticipated: T_air {t_air:.1f} °C falling "
                 f"{-slope * 3600:.2f} K/h")
     return None
+
+
+def preheat_short(snap, req: NightRequest, policy: NightPolicy) -> str | None:
+    """Why a constrained night must not switch the heating off (T_air, as last read, less than
+    ``policy.switch_off_min_k`` above T_min at the window's start), or None."""
+    t_air = None if snap is None else snap.t_air_c.value
+    if t_air is None or t_air >= req.t_min_c + policy.switch_off_min_k:
+        return None
+    return (f"preheat reached only {t_air:.1f} °C (< T_min + {policy.switch_off_min_k:g} K): "
+            "heating left on")
