@@ -13,8 +13,8 @@ below the lowest the owner's own heating lets the room go if that is lower (an o
 a coarse thermostat and defrosts swings the room by a kelvin on its own).
 
 1. *Screen, all 200 houses* (``comfort_screen.screen``, vectorised, ~3 s): with the shipped
-   controller rule (end at T_min or when T_air's trend reaches it within 30 min) and, for
-   comparison, the plain T_min rule the controller had before.
+   controller rules (no switch-off when the preheat left T_air under T_min + 1.5 K; end at T_min
+   or when T_air's trend reaches it within 30 min) and, for comparison, without the trend rule.
 2. *The real thing*: the worst houses of the screen and two random ones run the real
    :class:`~impctl.controller.NightController` against the real simulator (realistic plant) over
    Modbus TCP and a real store, on the virtual-time loop (as ``test_reliability_comfort``).
