@@ -136,7 +136,8 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                              if isinstance(v, np.ndarray) else v) for k, v in p.items()}
                         for p in fit.predictions_],
         "fit": {"mode": "joint", "normal_model": fit.normal_model, "optimizer": fit.optimizer,
-                "solver": "torchdiffeq.odeint rk4 on the sample grid, float64",
+                "solver": "torchdiffeq.odeint rk4, every sample interval batched in its normalised "
+                          "time, chained by the exact linear recurrence; float64",
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
                 "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
                 "sigma": fit.sigma_, "time_s": fit.fit_time_s_},
