@@ -45,6 +45,7 @@ from .node import (
     pack_nights,
     to_physical,
 )
+from .resample import coarsen
 from .uncertainty import laplace
 
 NORMAL_MODELS = ("demand", "series", "mean")
@@ -99,6 +100,10 @@ class NightFit:
         Heat power [W] that marks resumed heating on a constrained night.
     seed : int
         Seed of the random starts.
+    fit_step_s : float
+        Rows finer than this [s] are combined into blocks of this length before the fit
+        (temperatures by a centred mean, power by the block's mean; :mod:`.resample`); 0 keeps
+        every row. Only with "instant" stamps.
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -123,7 +128,7 @@ class NightFit:
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
-                 resume_threshold_w: float = Q_ON_W, seed: int = 0):
+                 resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -139,6 +144,7 @@ class NightFit:
         self.ridge = ridge
         self.resume_threshold_w = resume_threshold_w
         self.seed = seed
+        self.fit_step_s = fit_step_s
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -170,6 +176,8 @@ class NightFit:
         if not kept:
             why = "; ".join(f"{i}: {r}" for i, r in self.skipped_) or "no nights given"
             raise InputError(f"no usable night to fit ({why})")
+        if self.timestamps == "instant":
+            kept = [coarsen(n, self.fit_step_s) for n in kept]
         class_box = search_bounds(ranges, self.physical_bounds)
         prior_box = search_bounds(None, self.physical_bounds)
         with_prior = class_box != prior_box
