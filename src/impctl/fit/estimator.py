@@ -45,6 +45,7 @@ from .node import (
     pack_nights,
     to_physical,
 )
+from .quality import adequacy, night_quality
 from .resample import coarsen
 from .uncertainty import laplace
 
@@ -119,6 +120,11 @@ class NightFit:
     predictions_ : list[dict]       measured vs fitted series per night (for plots)
     sigma_ : dict[str, float]       residual standard deviation per group
     skipped_ : list[(night_id, reason)]
+    night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
+                                    discharge, T_air resolution, used/usable_h/reason
+                                    (:mod:`.quality`)
+    adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
+                                    the model describes the data well enough for its intervals
     loss_, n_iter_, fit_time_s_ : float, int, float
     """
 
@@ -203,7 +209,7 @@ class NightFit:
         # The residual σ per group, now from the fit itself, scales the intervals. When it is
         # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
         # the joint problems are refitted with the new weights.
-        guess = dict(self.sigma_)
+        guess = self.noise_ = dict(self.sigma_)
         self._update_sigma(rows, result, self._best(result, lay, 0))
         ratio = [self.sigma_[k] / guess[k] for k in guess]
         if max(ratio) > 1.4 or min(ratio) < 0.7:
@@ -231,6 +237,22 @@ class NightFit:
         self.cov_u_ = est["cov_u"]
         self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
         self._validate()
+        self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
+        self.night_quality_ = self._night_quality(nights)
+
+    def _night_quality(self, nights) -> list[dict]:
+        used = {n.night_id: n for n in self.nights_}
+        why = dict(self.skipped_)
+        out = []
+        for night in nights:
+            q = night_quality(night, self.resume_threshold_w)
+            kept = used.get(night.night_id)
+            q["used"] = kept is not None
+            q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
+                             if kept is not None else 0.0)
+            q["reason"] = why.get(night.night_id)
+            out.append(q)
+        return out
 
     def _layout(self, n: int, with_prior: bool, class_box, prior_box) -> dict:
         """Problems: joint starts in the class box, [joint starts in the prior box], per night.

@@ -23,7 +23,13 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                       "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
-     "skipped": [{"night_id", "reason"}], "notes": [str]}
+     "skipped": [{"night_id", "reason"}], "notes": [str],
+     "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
+                        "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
+                        "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
+     "adequacy": {"adequate": bool, "statement": str,
+                  "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
+                             "rmse_over_noise", "lag1_autocorrelation"}}}}
 """
 
 from __future__ import annotations
@@ -62,6 +68,8 @@ _CAVEAT = {
 
 
 def _f(x: Any) -> Any:
+    if isinstance(x, np.integer):
+        return int(x)
     if isinstance(x, (np.floating, float)):
         return None if not np.isfinite(x) else float(x)
     if isinstance(x, dict):
@@ -144,6 +152,13 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
         "notes": notes,
     }
+    # added keys (schema stays impctl-fit/1: readers of the old keys are unaffected)
+    if getattr(fit, "night_quality_", None) is not None:
+        out["night_quality"] = fit.night_quality_
+    if getattr(fit, "adequacy_", None) is not None:
+        out["adequacy"] = fit.adequacy_
+        if not fit.adequacy_["adequate"]:
+            notes.append(fit.adequacy_["statement"])
     return _f(out)
 
 
@@ -207,9 +222,49 @@ def format_table(summary: dict) -> str:
                          f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
     for r in val["constrained"]:
         lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
+    lines += _quality_lines(summary)
     for note in summary["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)
+
+
+def quality_rows(summary: dict) -> list[list[str]]:
+    """Night-quality rows (also the HTML report's table): one per given night."""
+    def num(v, spec):
+        return "–" if v is None else format(v, spec)
+
+    rows = []
+    for q in summary.get("night_quality", []):
+        stops = ", ".join(f"{i['kind']} {i['minutes']:.0f} min at {i['start_h']:.1f} h"
+                          for i in q["interruptions"]) or "none"
+        rows.append([str(q["night_id"]), q["kind"], num(q["usable_h"], ".1f"),
+                     num(q["cycles_per_h"], ".1f"), num(q["emitter_discharge_h"], ".1f"),
+                     num(q.get("night_gain_w"), ".0f"), num(q["t_air_resolution_k"], ".3g"),
+                     stops, "used" if q["used"] else f"not used: {q['reason']}"])
+    return rows
+
+
+QUALITY_HEADERS = ["night", "kind", "usable h", "cycles/h", "emitter discharge h",
+                   "night gain W", "T_air resolution K", "DHW/defrost interruptions", "use"]
+
+
+def _quality_lines(summary: dict) -> list[str]:
+    lines = []
+    rows = quality_rows(summary)
+    if rows:
+        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(QUALITY_HEADERS)]
+        lines += ["", "Night quality"]
+        for r in [QUALITY_HEADERS, *rows]:
+            lines.append("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
+    adequacy = summary.get("adequacy")
+    if adequacy:
+        lines += ["", "Model adequacy (residuals of the joint fit)"]
+        for group, g in adequacy["groups"].items():
+            lines.append(f"  {group:<13} RMSE {g['rmse']:.3g} {g['unit']} "
+                         f"({g['rmse_over_noise']:.1f}× the reading noise), lag-1 "
+                         f"autocorrelation {g['lag1_autocorrelation']:.2f}")
+        lines.append(f"  {adequacy['statement']}")
+    return lines
 
 
 def plot_fit(fit, path: str | Path) -> None:

@@ -146,6 +146,12 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
         + "".join(f"<p>{html.escape(n)}</p>" for n in notes) + "</div>",
         "<h2>Nights and their data quality</h2>", nights_html,
     ]
+    if fit.get("night_quality"):
+        from ..fit.report import QUALITY_HEADERS, quality_rows
+
+        parts += ["<h2>Night quality and model adequacy</h2>",
+                  _table(QUALITY_HEADERS, quality_rows(fit)),
+                  f"<p>{html.escape((fit.get('adequacy') or {}).get('statement', ''))}</p>"]
     if summary is not None:
         parts += ["<h2>Demo: truth vs estimate</h2>",
                   f"<pre>{html.escape(format_summary(summary))}</pre>"]
