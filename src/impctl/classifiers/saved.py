@@ -57,7 +57,8 @@ class ClassResult:
     range : (float, float)
         That range, in the parameter's unit.
     probability : float
-        Its probability (0–1), the share of the forest's votes.
+        Its probability (0–1): calibrated on households the forest never saw when
+        ``calibrated`` (models from ``impctl train`` since issue 14), else the share of votes.
     probabilities : dict
         Every range label → probability.
     """
@@ -67,11 +68,13 @@ class ClassResult:
     range: tuple[float, float]
     probability: float
     probabilities: dict[str, float] = field(default_factory=dict)
+    calibrated: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …}``."""
         return {"range": list(self.range), "label": self.label,
-                "probability": self.probability, "probabilities": dict(self.probabilities)}
+                "probability": self.probability, "probabilities": dict(self.probabilities),
+                "calibrated": self.calibrated}
 
 
 def save_models(models: dict, directory: str | Path, *, seed: int, n_households: int,
@@ -214,5 +217,6 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
             range=tuple(float(v) for v in model.ranges[best]),  # type: ignore[arg-type]
             probability=float(proba[best]),
             probabilities={str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)},
+            calibrated=bool(getattr(model, "calibrated_", False)),
         )
     return out
