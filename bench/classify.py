@@ -1,6 +1,10 @@
 """Time to generate the virtual population and to train the range classifiers; their accuracy.
 
 Run:  .venv/bin/python bench/classify.py [--households 900] [--seed 0] [--repeat 3]
+          [--plant iso|realistic]
+
+``--plant realistic`` draws the households' realism (emitters, heat pumps, gains, sensors) and
+runs their nights on :mod:`impctl.plant` (60 s steps; the ≤ 5 s target is for the ideal 5R1C).
 
 Generates the 900-household dataset (15 weather days × 6 IMP nights each = 81,000 nights,
 vectorised 5R1C at 10-min steps; target ≤ 5 s), trains the three Random-Forest range
@@ -29,6 +33,7 @@ def main() -> None:
     parser.add_argument("--households", type=int, default=900)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--plant", choices=("iso", "realistic"), default="iso")
     args = parser.parse_args()
     print(f"python {platform.python_version()}, numpy {np.__version__}, "
           f"{os.cpu_count()} CPUs, {platform.machine()}")
@@ -37,8 +42,9 @@ def main() -> None:
     gen_s = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        dataset = generate_dataset(args.households, args.seed)
+        dataset = generate_dataset(args.households, args.seed, plant=args.plant)
         gen_s.append(time.perf_counter() - t0)
+    print(f"plant: {args.plant}")
     print(f"dataset: {args.households} households, {len(dataset.nights):,} nights, "
           f"{len(dataset.nights.columns)} columns")
     print(f"generate: best {min(gen_s):.2f} s of {args.repeat} (target ≤ 5 s); "

@@ -2,7 +2,13 @@
 
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
+          [--plant iso|realistic]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
+
+``--plant realistic``: the same houses, weather and schedule on the realistic plant
+(:mod:`impctl.plant`; realism options drawn by ``impctl.population.realism.sample_params`` with the
+validation seed): the logged T_air is the room sensor, T_out the outdoor sensor, the power the
+heat meter's interval mean (no extra noise); the demand truth is the true heat-pump output.
 
 Validation population: ``impctl.population.households.sample_households`` with seed 20260 (the
 classifiers are trained with other seeds, so they never saw these houses). Each household runs
@@ -52,7 +58,13 @@ from impctl.fit.estimator import NightFit
 from impctl.fit.node import PARAM_NAMES
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
-from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+from impctl.population.realism import sample_params
+from impctl.population.synth_nights import (
+    imp_schedule,
+    run_schedule,
+    run_schedule_plant,
+    sample_nights,
+)
 
 VAL_SEED = 20260
 CLASS_RANGES = {
@@ -124,18 +136,36 @@ def stats(err) -> tuple[float, float]:
     return float(np.median(a)), float(np.percentile(a, 90))
 
 
+class _TrueHeat:
+    """The realistic plant's true heat-pump output, for the demand truth (not the meter)."""
+
+    def __init__(self, logged):
+        self.phi_hc_w = logged.run["heat_pump_w"]
+
+
+def simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
+    """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output)."""
+    if plant == "iso":
+        sim, sp = run_schedule(houses_arr, sched)
+        return sim, sp, sim
+    params = sample_params(houses_arr.n_houses, VAL_SEED)
+    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED)
+    return logged, sp, _TrueHeat(logged)
+
+
 def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args) -> dict:
     n = houses_arr.n_houses
     sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp = run_schedule(houses_arr, sched)
-    truth_e = window_energy(sim, sched)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    truth_e = window_energy(heat, sched)
+    noise = 0.05 if args.plant == "iso" else 0.0   # the realistic plant's meter has its own
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
                            "eps_in", "per_night_mean")}
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
-                               power_noise=0.05, seed=VAL_SEED + i)
+                               power_noise=noise, seed=VAL_SEED + i)
         if range_source == "true":
             ranges = true_ranges(house)
         elif range_source == "classifier":
@@ -257,6 +287,10 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
         cv_s = f"{cv['hlc']:.0f} / {cv['tau']:.0f} / {cv['c_m']:.0f}" if cv else "–"
         tm_s = f"{tm:.2f}" if tm is not None else "–"
         print(f"| {name} | " + " | ".join(cells) + f" | {cv_s} | {tm_s} |")
+    signed = ", ".join(f"{k} {np.nanmedian(v):+.1f} % ({np.mean(np.asarray(v) < 0):.0%} low)"
+                       for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
+                                    ("C_m", e_fit["c_m"])))
+    print(f"NODE joint, signed median error: {signed}")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
@@ -290,8 +324,9 @@ def compare(houses_arr: HouseParameters, args) -> None:
     """Normal-night models (series / mean / demand) and optimisers (LM / Adam) side by side."""
     n = houses_arr.n_houses
     sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp = run_schedule(houses_arr, sched)
-    truth_e = window_energy(sim, sched)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    truth_e = window_energy(heat, sched)
+    noise = 0.05 if args.plant == "iso" else 0.0
     variants = [("demand", "lm"), ("series", "lm"), ("mean", "lm")]
     if args.adam:
         variants.append(("demand", "adam"))
@@ -307,7 +342,7 @@ def compare(houses_arr: HouseParameters, args) -> None:
                 break
             house = houses_arr.take(i)
             nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
-                                   power_noise=0.05, seed=VAL_SEED + i)
+                                   power_noise=noise, seed=VAL_SEED + i)
             fit = NightFit(normal_model=model, optimizer=opt, n_starts=args.starts,
                            max_iter=40, per_night=False).fit(nights, true_ranges(house))
             for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
@@ -449,11 +484,15 @@ def main() -> None:
                     help="the demo's export (impctl demo --out D writes D/nights.csv) for --speed")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
                     help="also fit N households simulated by impctl.population.virtual_imp")
+    ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
+                    help="validation houses on the ideal 5R1C (iso) or on the realistic plant "
+                         "(impctl.plant, realism drawn with seed 20260)")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"
     torch.set_num_threads(1)
     print("command: " + " ".join(["python"] + sys.argv))
+    print(f"plant: {args.plant}")
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
     if args.speed:

@@ -28,7 +28,12 @@ MIN_HOUSEHOLDS = 20
               default=None, help="EPW file or timestamp,t_out CSV [°C]; default: built-in winter.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Model directory [default: $IMPCTL_MODEL_DIR or the per-user data dir].")
-def train(households: int, seed: int, weather_path: Path | None, out: Path | None) -> None:
+@click.option("--plant", type=click.Choice(["realistic", "iso"]), default="realistic",
+              show_default=True,
+              help="Virtual households on the realistic plant (emitters, cycling heat pumps, "
+                   "gains, sensors; impctl.plant) or the ideal ISO 5R1C.")
+def train(households: int, seed: int, weather_path: Path | None, out: Path | None,
+          plant: str) -> None:
     """Simulate the IMP on virtual households and train the parameter-range classifiers.
 
     Writes OUT/models.json and OUT/<parameter>.joblib (the classifiers), OUT/dataset/ (Parquet
@@ -61,7 +66,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     with click.progressbar(length=households, label="simulating households",
                            file=sys.stderr) as bar:
         dataset = generate_dataset(households, seed, weather=weather, weather_path=weather_path,
-                                   imp=imp, progress=bar.update)
+                                   imp=imp, progress=bar.update, plant=plant)
     cfg = TrainConfig()
     n_forests = 2 * len(dataset.manifest["ranges"])
     with click.progressbar(length=n_forests, label="training classifiers",

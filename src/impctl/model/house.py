@@ -330,7 +330,8 @@ def house_from_mapping(data: dict[str, Any], source: str | Path | None = None) -
     InputError
         Naming ``source`` and the offending key.
     """
-    known = set(_REQUIRED) | set(_OPTIONAL)
+    # The optional [plant.*] tables belong to impctl.plant (load_plant_params), not to the 5R1C.
+    known = set(_REQUIRED) | set(_OPTIONAL) | {"plant"}
     for key in data:
         if key not in known:
             raise InputError(

@@ -7,6 +7,9 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 * :func:`sample_households`, :func:`sample_population`, :class:`PopulationConfig`
   (:mod:`.households`)
 * :func:`simulate_imp`, :class:`ImpSimConfig`, :class:`ImpResult` (:mod:`.virtual_imp`)
+* :func:`simulate_imp_plant` (:mod:`.virtual_imp_plant`): the same nights on the realistic plant
+  (:mod:`impctl.plant`); :func:`sample_params` (:mod:`.realism`): every household's realism
+  options drawn over their documented ranges
 * :func:`generate_dataset`, :class:`Dataset` (:mod:`.dataset`)
 * :func:`synth_nights` (:mod:`.synth_nights`): fine-step simulated nights for the fit's tests
   and benches
@@ -28,6 +31,8 @@ _LAZY = {
     "ImpResult": "virtual_imp",
     "ImpSimConfig": "virtual_imp",
     "simulate_imp": "virtual_imp",
+    "simulate_imp_plant": "virtual_imp_plant",
+    "sample_params": "realism",
     "Dataset": "dataset",
     "generate_dataset": "dataset",
     "synth_nights": "synth_nights",

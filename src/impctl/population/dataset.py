@@ -30,6 +30,8 @@ from .virtual_imp import ImpSimConfig, default_weather, simulate_imp
 #: paces the progress bar. Fixed, so a seed gives the same dataset whatever the machine.
 CHUNK_HOUSEHOLDS = 100
 DATASET_FORMAT = 1
+#: The plants a population can live on (see :func:`generate_dataset`).
+PLANTS = ("iso", "realistic")
 
 
 def package_versions() -> dict[str, str]:
@@ -89,6 +91,7 @@ def generate_dataset(
     population: PopulationConfig | None = None,
     imp: ImpSimConfig | None = None,
     progress: Callable[[int], None] | None = None,
+    plant: str = "iso",
 ) -> Dataset:
     """Draw ``n_households`` and run the IMP on all of them (vectorised in blocks).
 
@@ -108,6 +111,12 @@ def generate_dataset(
     imp : ImpSimConfig, optional
     progress : callable, optional
         Called with the number of households finished after each block.
+    plant : {"iso", "realistic"}
+        ``iso``: the ideal 5R1C (:func:`~.virtual_imp.simulate_imp`); ``realistic``: every
+        household on the realistic plant with its realism options drawn over their documented
+        ranges (:func:`impctl.population.realism.sample_params`, same seed → same options;
+        :func:`~.virtual_imp_plant.simulate_imp_plant`); the options are extra
+        ``plant.<section>.<field>`` columns of the households table.
 
     Returns
     -------
@@ -118,7 +127,14 @@ def generate_dataset(
     imp_cfg = imp or ImpSimConfig()
     if weather is None:
         weather = default_weather(seed, imp_cfg.tz)
+    if plant not in PLANTS:
+        raise ValueError(f"plant must be one of {PLANTS}, got {plant!r}")
     households = sample_population(n_households, seed, pop_cfg)
+    realism = None
+    if plant == "realistic":
+        from .realism import params_table, sample_params, take_params
+
+        realism = sample_params(n_households, seed)
     streams = np.random.SeedSequence([int(seed), 0x1_4D9]).spawn(
         -(-n_households // CHUNK_HOUSEHOLDS))
     parts = []
@@ -126,16 +142,26 @@ def generate_dataset(
         lo = block * CHUNK_HOUSEHOLDS
         hi = min(lo + CHUNK_HOUSEHOLDS, n_households)
         chunk = households_from_table(households.iloc[lo:hi])
-        result = simulate_imp(chunk, weather, imp_cfg, stream, keep_samples=False)
+        if realism is None:
+            result = simulate_imp(chunk, weather, imp_cfg, stream, keep_samples=False)
+        else:
+            from .virtual_imp_plant import simulate_imp_plant
+
+            result = simulate_imp_plant(chunk, take_params(realism, np.arange(lo, hi),
+                                                           n_households),
+                                        weather, imp_cfg, stream, keep_samples=False)
         result.nights["household"] += lo
         parts.append(result.nights)
         if progress is not None:
             progress(hi - lo)
     nights = pd.concat(parts, ignore_index=True)
     households.insert(0, "household", np.arange(n_households))
+    if realism is not None:
+        households = pd.concat([households, params_table(realism, n_households)], axis=1)
     manifest = {
         "format": DATASET_FORMAT,
         "seed": int(seed),
+        "plant": plant,
         "n_households": int(n_households),
         "n_nights": int(len(nights)),
         "population": pop_cfg.as_dict(),

@@ -120,6 +120,48 @@ def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float = 1
     return sim, sp
 
 
+@dataclass
+class PlantSchedule:
+    """What the gateway logs from :func:`run_schedule_plant` (arrays (n_steps, n_houses)):
+    ``t_air_c`` the room sensor, ``phi_hc_w`` the heat meter, ``t_out_c`` the outdoor sensor;
+    ``run`` the full :class:`impctl.plant.PlantRun` (true temperatures and powers)."""
+
+    t_air_c: np.ndarray
+    phi_hc_w: np.ndarray
+    t_out_c: np.ndarray
+    run: object
+
+
+def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
+                       seed: int = 0, outputs: tuple[str, ...] | None = None
+                       ) -> tuple[PlantSchedule, np.ndarray]:
+    """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
+
+    ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
+    internal and solar gains follow their ``gains`` section over the schedule's local time. The
+    plant starts in the steady state at the day setpoint. Returns what the gateway logs and the
+    setpoints used (the schedule's, open loop). ``outputs``: the plant outputs to keep (default
+    the logged ones and the true T_air and heat output).
+    """
+    from ..plant import simulate_plant
+    from ..plant.gains import internal_gains_w, solar_gains_w
+
+    n = sched.t_out_c.shape[1]
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6A1]))
+    local = sched.index.tz_convert(sched.index.tz) if sched.index.tz else sched.index
+    hours = (local.hour + local.minute / 60.0).to_numpy()
+    day = (local.normalize().tz_localize(None).asi8 // 86_400_000_000_000)
+    g_int = internal_gains_w(hours, params.gains, n, rng, sched.dt_s)
+    g_sol = solar_gains_w(hours, day, params.gains, n, rng)
+    run = simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,
+                         internal_gains_w=g_int, solar_gains_w=g_sol,
+                         t_init_c=sched.t_m_init_c, seed=int(rng.integers(2**31)),
+                         outputs=outputs or ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w",
+                                             "heat_pump_w", "t_air_c"))
+    logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
+    return logged, sched.setpoint_c.copy()
+
+
 def sample_nights(
     sim,
     sp: np.ndarray,
@@ -131,12 +173,16 @@ def sample_nights(
     power_noise: float = 0.05,
     seed: int = 0,
 ) -> list[NightSamples]:
-    """Cut one house's simulation into measured nights (see the module docstring)."""
+    """Cut one house's simulation into measured nights (see the module docstring).
+
+    ``sim`` is an Annex C :class:`~impctl.model.Simulation` or a :class:`PlantSchedule` (then
+    T_out comes from its outdoor sensor; pass ``power_noise=0``: the meter has its own).
+    """
     rng = np.random.default_rng(seed)
     stride = int(round(sample_step_s / sched.dt_s))
     t_air = np.atleast_2d(sim.t_air_c.T).T[:, house_index]
     phi = np.atleast_2d(sim.phi_hc_w.T).T[:, house_index]
-    t_out = sched.t_out_c[:, house_index]
+    t_out = (sim.t_out_c if isinstance(sim, PlantSchedule) else sched.t_out_c)[:, house_index]
     spc = sp[:, house_index]
     nights = []
     for night_id, kind, w0, w1, t_set in sched.windows:
@@ -147,7 +193,10 @@ def sample_nights(
             on = ~np.isnan(spc[w0:w1])
             end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
             steps = steps[steps < end]
-        q = np.array([phi[s:s + stride].mean() for s in steps])
+        if steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
+            q = phi[steps[0]:steps[0] + len(steps) * stride].reshape(-1, stride).mean(axis=1)
+        else:
+            q = np.array([phi[s:s + stride].mean() for s in steps])
         q = q * (1.0 + power_noise * rng.standard_normal(len(q)))
 
         def quant(x):

@@ -1,0 +1,58 @@
+"""The virtual population on the realistic plant: randomised realism, reproducible draws."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impctl.plant import RADIATORS, UNDERFLOOR
+from impctl.plant.params import SECTIONS
+from impctl.population import ImpSimConfig, generate_dataset, sample_households
+from impctl.population.realism import params_from_table, params_table, sample_params
+from impctl.population.virtual_imp_plant import simulate_imp_plant
+
+
+def test_sample_params_cover_documented_ranges_and_repeat():
+    n = 400
+    a, b, c = sample_params(n, 5), sample_params(n, 5), sample_params(n, 6)
+    ta, tb, tc = (params_table(p, n) for p in (a, b, c))
+    assert ta.equals(tb) and not ta.equals(tc)
+    for name, cls in SECTIONS.items():
+        for key, (lo, hi) in cls.RANGES.items():
+            col = ta[f"{name}.{key}"]
+            assert col.between(lo, hi).all(), (name, key)
+    kind = ta["emitter.kind"]
+    assert set(kind) == {RADIATORS, UNDERFLOOR} and 0.3 < (kind == UNDERFLOOR).mean() < 0.5
+    assert set(ta["heat_pump.control"]) == {0, 1}                   # never the ideal control
+    assert 0.2 < (ta["heat_pump.min_modulation"] == 1.0).mean() < 0.4
+    assert set(ta["sensors.t_air_quantum_k"]) == {0.1, 0.5}
+    assert ta["gains.night_w"].min() < 150 and ta["gains.night_w"].max() > 350
+    assert params_table(params_from_table(ta), n).equals(ta)
+
+
+def test_realistic_nights_differ_from_iso_as_real_houses_do():
+    """Same households and weather days: on the realistic plant the constrained nights start
+    without the ISO air-node jump and the normal-night heat reads as a meter's interval mean."""
+    houses = sample_households(6, seed=2)
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,))
+    res = simulate_imp_plant(houses, sample_params(6, 2), config=cfg, seed=3)
+    cons = (res.nights["kind"] == "constrained").to_numpy()
+    t_air = res.t_air_c[:, cons]
+    assert np.nanmax(np.abs(np.diff(t_air[:6], axis=0))) < 1.5
+    q = res.q_hc_w[:, ~cons]
+    assert (q >= 0).all() and (q[res.valid[:, ~cons]] > 0).mean() > 0.5
+    assert np.isfinite(res.nights["decay_rate_per_h"][cons]).all()
+
+
+def test_generate_dataset_realistic_is_reproducible():
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,))
+    a = generate_dataset(8, seed=4, imp=cfg, plant="realistic")
+    b = generate_dataset(8, seed=4, imp=cfg, plant="realistic")
+    assert a.manifest["plant"] == "realistic"
+    assert a.households.equals(b.households) and a.nights.equals(b.nights)
+    assert "emitter.kind" in a.households and "sensors.t_air_lag_s" in a.households
+    iso = generate_dataset(8, seed=4, imp=cfg)
+    assert iso.manifest["plant"] == "iso" and "emitter.kind" not in iso.households
+    same = ["floor_area", "c_f", "u_walls"]
+    assert iso.households[same].equals(a.households[same])
+    assert not np.allclose(iso.nights["decay_rate_per_h"].fillna(0),
+                           a.nights["decay_rate_per_h"].fillna(0))
