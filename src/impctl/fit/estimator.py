@@ -35,6 +35,8 @@ from . import lm
 from .data import noise_levels, prepare_nights, search_bounds, validation_table
 from .node import (
     DTYPE,
+    NUISANCE_BOUNDS,
+    NUISANCE_NAMES,
     PARAM_NAMES,
     ROW_AIR,
     ROW_DEMAND,
@@ -47,7 +49,7 @@ from .node import (
 )
 from .quality import adequacy, night_quality
 from .resample import coarsen
-from .uncertainty import laplace
+from .uncertainty import Z95, laplace
 
 NORMAL_MODELS = ("demand", "series", "mean")
 LUMPED_NAMES = ("hlc", "c_m", "tau")
@@ -56,6 +58,9 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 #: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
 #: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
 CLASS_REJECT_CHI2 = 3.84
+#: χ² with 3 degrees of freedom at 95 %: the nuisance terms (night gain, emitter amplitude and
+#: time constant) are kept when they lower the inflation-scaled loss by more than this.
+NUISANCE_CHI2 = 7.81
 
 
 class NightFit:
@@ -134,7 +139,8 @@ class NightFit:
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
-                 resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0):
+                 resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
+                 night_gain: bool = True, emitter_state: bool = True):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -151,6 +157,8 @@ class NightFit:
         self.resume_threshold_w = resume_threshold_w
         self.seed = seed
         self.fit_step_s = fit_step_s
+        self.night_gain = night_gain
+        self.emitter_state = emitter_state
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -199,8 +207,12 @@ class NightFit:
         self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
         self.sigma_ = noise_levels(kept)
 
-        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box),
-                           bounds_tensor(prior_box))
+        nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
+            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state),
+            strict=True)}
+        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
+        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
+                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, plain))
         rows = self._rows(lay)
         t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
                                   lay["box"][lay["row_problem"]])
@@ -216,11 +228,14 @@ class NightFit:
             self._refit_joint(lay, result)
         rows = self._rows(lay)
 
-        best = self._best(result, lay, 0)
+        best = self._best(result, lay, 2 if lay["simple"] else 0)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
             best = self._class_check(rows, result, lay, best, ranges)
-        self.bounds_ = class_box if best in lay["class"] else prior_box
+        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
+        if lay["simple"] and best in lay["simple"]:
+            best = self._nuisance_check(rows, result, lay, best)
+        self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
         self._u = result.u[best]
@@ -231,10 +246,12 @@ class NightFit:
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
         self.lumped_ = est["lumped"]
+        self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
+        self.nuisance_ = self._nuisance()
         self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
         self._validate()
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
@@ -251,34 +268,46 @@ class NightFit:
             q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
                              if kept is not None else 0.0)
             q["reason"] = why.get(night.night_id)
+            gain = (self.nuisance_ or {}).get("night_gain_w")
+            if gain is not None and kept is not None:
+                q["night_gain_w"] = gain["value"]   # one value per campaign
             out.append(q)
         return out
 
-    def _layout(self, n: int, with_prior: bool, class_box, prior_box) -> dict:
-        """Problems: joint starts in the class box, [joint starts in the prior box], per night.
+    def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
+        """Problems: joint starts in the class box with the nuisance terms ("class"), the same
+        without them ("simple"), [joint starts in the prior box, without], per night (without).
 
-        Groups (for "keep the best" and early stopping): 0 class joint, 1 prior joint,
-        2 + i night i.
+        Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
+        night i. Without nuisance terms to test, "class" is the plain class box and there is
+        no "simple" group.
         """
         s = max(1, self.n_starts)
         starts = self._starts(s)
+        with_nuisance = bool((nuisance_box[len(PARAM_NAMES):, 1]
+                              > nuisance_box[len(PARAM_NAMES):, 0]).any())
         kinds = [("class", j, -1) for j in range(s)]
+        if with_nuisance:
+            kinds += [("simple", j, -1) for j in range(s)]
         if with_prior:
             kinds += [("prior", j, -1) for j in range(s)]
         if self.per_night:
             kinds += [("night", j, i) for j in range(s) for i in range(n)]
+        boxes = {"class": nuisance_box, "simple": class_box, "prior": prior_box,
+                 "night": class_box}
         row_problem, row_night, group, box, u0 = [], [], [], [], []
         for p, (kind, j, i) in enumerate(kinds):
             nights = range(n) if i < 0 else [i]
             row_problem += [p] * len(nights)
             row_night += list(nights)
-            group.append({"class": 0, "prior": 1}.get(kind, 2 + i))
-            box.append(prior_box if kind == "prior" else class_box)
+            group.append({"class": 0, "prior": 1, "simple": 2}.get(kind, 3 + i))
+            box.append(boxes[kind])
             u0.append(starts[j])
         def idx(k):
             return [p for p, x in enumerate(kinds) if x[0] == k]
         return {"kinds": kinds, "class": idx("class"), "prior": idx("prior"),
-                "night": idx("night"), "row_problem": torch.tensor(row_problem),
+                "simple": idx("simple"), "night": idx("night"),
+                "row_problem": torch.tensor(row_problem),
                 "row_night": torch.tensor(row_night), "group": torch.tensor(group),
                 "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
 
@@ -297,7 +326,7 @@ class NightFit:
                            self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
 
     def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
-        joint = lay["class"] + lay["prior"]
+        joint = lay["class"] + lay["simple"] + lay["prior"]
         rows = self._rows(lay, joint)
         sel = torch.isin(lay["row_problem"], torch.tensor(joint))
         second = self._optimise(rows, result.u[joint], result.t_m0[sel], lay["group"][joint])
@@ -321,6 +350,19 @@ class NightFit:
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
 
+    def _nuisance_check(self, rows, result, lay, best_simple) -> int:
+        """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
+        likelihood-ratio test says the data need them (Δχ² over the 3 extra parameters)."""
+        best_nuis = self._best(result, lay, 0)
+        sub = rows.subset(rows.problem == best_nuis)
+        est = laplace(self._ctx, sub, result.u[best_nuis], result.t_m0[rows.problem ==
+                      best_nuis], self._group_n, has_power=True, summary_only=True)
+        drop = float(result.loss[best_simple] - result.loss[best_nuis]) / est["inflation"]
+        selected = drop > NUISANCE_CHI2
+        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": NUISANCE_CHI2,
+                                "selected": selected}
+        return best_nuis if selected else best_simple
+
     def _best(self, result, lay, group: int) -> int:
         members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
         return members[int(torch.argmin(result.loss[members]))]
@@ -338,7 +380,7 @@ class NightFit:
 
     def _starts(self, s: int) -> torch.Tensor:
         rng = np.random.default_rng(self.seed)
-        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES)))
+        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES)))
         u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
         u[0] = 0.0
         return u
@@ -375,8 +417,29 @@ class NightFit:
                 rms = float(raw[m].pow(2).sum() / dof) ** 0.5
                 self.sigma_[key] = max(floors[g], rms)
 
+    def _nuisance(self) -> dict[str, dict]:
+        """The nuisance terms with 95 % intervals (Gauss–Newton, through the sigmoid map);
+        None for a term switched off."""
+        box = self._sub.box[0]
+        x = to_physical(self._u, box)
+        out = {}
+        cov = self.cov_u_
+        for j, name in enumerate(NUISANCE_NAMES):
+            i = len(PARAM_NAMES) + j
+            lo, hi = (float(v) for v in box[i])
+            if hi <= lo:
+                out[name] = None
+                continue
+            sig = torch.sigmoid(self._u[i])
+            sd = float((hi - lo) * sig * (1 - sig) * cov[i, i].clamp_min(0).sqrt())
+            v = float(x[i])
+            out[name] = {"value": v, "low": max(lo, v - Z95 * sd), "high": min(hi, v + Z95 * sd),
+                         "bounds": [lo, hi]}
+        return out
+
     def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
-        return dict(zip(PARAM_NAMES, to_physical(u, box).tolist(), strict=True))
+        return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
+                        strict=True))
 
     def _per_night(self, result, lay):
         if not lay["night"]:
@@ -384,7 +447,7 @@ class NightFit:
         n = self._packed.n_nights
         members = torch.tensor(lay["night"]).view(-1, n)      # (starts, nights)
         best = members[result.loss[members].argmin(0), torch.arange(n)]
-        params = to_physical(result.u[best], lay["box"][best])
+        params = to_physical(result.u[best], lay["box"][best])[:, :len(PARAM_NAMES)]
         q = lumped(params, self.ach_vent, self.ach_infl)
         entries = []
         for i, nid in enumerate(self._packed.night_ids):

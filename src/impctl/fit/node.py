@@ -69,10 +69,27 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
 ROW_AIR = 0
 ROW_DEMAND = 1
 
+#: Nuisance terms of the night model a real house needs (real-houses.md §2, §4, §7), fitted
+#: after the seven (a row of parameters then has 10 entries): a constant heat input to the air
+#: node over the campaign (sleepers, base load; negative = extra loss) [W], and on constrained
+#: nights the heat the emitter (and the air/furniture) still releases after the fit start,
+#: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
+NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h")
+NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
+    "night_gain_w": (-200.0, 800.0),
+    "emitter_w": (0.0, 4000.0),
+    "emitter_tau_h": (0.2, 8.0),
+}
 
-def bounds_tensor(bounds: dict[str, tuple[float, float]]) -> torch.Tensor:
-    """Bounds as a (7, 2) tensor in :data:`PARAM_NAMES` order."""
-    return torch.tensor([bounds[n] for n in PARAM_NAMES], dtype=DTYPE)
+
+def bounds_tensor(bounds: dict[str, tuple[float, float]],
+                  nuisance: dict[str, tuple[float, float]] | None = None) -> torch.Tensor:
+    """Bounds as a (7, 2) tensor in :data:`PARAM_NAMES` order; (10, 2) with ``nuisance``
+    bounds appended in :data:`NUISANCE_NAMES` order (``(0, 0)`` switches a term off)."""
+    names = [bounds[n] for n in PARAM_NAMES]
+    if nuisance is not None:
+        names += [nuisance[n] for n in NUISANCE_NAMES]
+    return torch.tensor(names, dtype=DTYPE)
 
 
 def to_physical(u: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
@@ -378,7 +395,8 @@ def build_rows(
     Parameters
     ----------
     packed : the nights
-    params : (R, 7) physical parameters per row (:data:`PARAM_NAMES` order)
+    params : (R, 7) physical parameters per row (:data:`PARAM_NAMES` order), or (R, 10) with
+        the :data:`NUISANCE_NAMES` terms appended
     t_m0_c : (R,) mass temperature at grid time 0 [°C]
     night_index : (R,) which packed night each row models
     row_type : (R,) :data:`ROW_AIR` or :data:`ROW_DEMAND`
@@ -402,6 +420,22 @@ def build_rows(
     u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
     u1_air = b[:, None] * te_s
     z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
+    gain = torch.zeros_like(a_air)
+    if params.shape[-1] > len(PARAM_NAMES):
+        # Extra heat to the air node, x(t) = gain (+ the emitter's release on constrained
+        # nights), linear between the nodes: it enters like Φ_HC (z stays continuous).
+        gain, em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in range(3))
+        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
+        cons = packed.constrained[night_index][:, None]
+        x = gain[:, None] + torch.where(cons, em_w[:, None] * torch.exp(
+            -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0)
+        h = torch.diff(grid, dim=1)
+        x_slope = torch.zeros_like(x)
+        x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
+        coef = (a_air * k_phi + d)[:, None]
+        u0_air = u0_air + coef * x
+        u1_air = u1_air + coef * x_slope
+        phi_w = phi_w + x
 
     # DEMAND rows: θ_m driven by measured T_air, T_out; surface node balance without Φ_st.
     s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
@@ -433,7 +467,8 @@ def build_rows(
         ode=ode,
         z0=torch.where(demand, t_m0_c, z0_air),
         out_c=torch.where(demand, c_m, torch.ones_like(c_m)),
-        out_v=torch.where(dm, c_air[:, None] * ta + c_e[:, None] * te, k_phi[:, None] * phi_w),
+        out_v=torch.where(dm, c_air[:, None] * ta + c_e[:, None] * te - gain[:, None],
+                          k_phi[:, None] * phi_w),
         measured=torch.where(dm, packed.q_w[night_index], packed.t_air_c[night_index]),
         mask=mask,
         mean_next=mean_next,

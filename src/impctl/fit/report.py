@@ -27,6 +27,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
                         "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
+     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h":
+                  {"value", "low", "high", "bounds"} | null},
      "adequacy": {"adequate": bool, "statement": str,
                   "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
                              "rmse_over_noise", "lag1_autocorrelation"}}}}
@@ -46,9 +48,10 @@ PARAM_NAMES = TABLE_IV
 PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
 CLASSIFIED = ("floor_area", "c_f", "u_walls")
 INTERVAL_METHOD = (
-    "Laplace: Gauss-Newton curvature of the joint loss at the optimum, per-night initial mass "
-    "temperatures marginalised, residual sigma per group from the fit inflated for lag-1 "
-    "autocorrelation; delta method in log space")
+    "the wider of (a) Laplace: Gauss-Newton curvature of the joint loss at the optimum, "
+    "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
+    "inflated for lag-1 autocorrelation, and (b) a night-clustered sandwich covariance (robust "
+    "to model error: widens when the nights disagree); delta method in log space")
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
     "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
@@ -153,6 +156,17 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "notes": notes,
     }
     # added keys (schema stays impctl-fit/1: readers of the old keys are unaffected)
+    if getattr(fit, "interval_source_", None) is not None:
+        out["fit"]["interval_source"] = fit.interval_source_
+    if getattr(fit, "nuisance_check_", None) is not None:
+        out["fit"]["nuisance_check"] = fit.nuisance_check_
+    if getattr(fit, "nuisance_", None) is not None:
+        out["nuisance"] = fit.nuisance_
+        out["fit"]["nuisance_terms"] = (
+            "night_gain_w: constant heat to the air node over the campaign; emitter_w, "
+            "emitter_tau_h: heat still released after the fit start on constrained nights, "
+            "emitter_w·exp(−t/emitter_tau_h); bounded, fitted with the seven, not measured "
+            "quantities of the product")
     if getattr(fit, "night_quality_", None) is not None:
         out["night_quality"] = fit.night_quality_
     if getattr(fit, "adequacy_", None) is not None:
@@ -222,6 +236,13 @@ def format_table(summary: dict) -> str:
                          f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
     for r in val["constrained"]:
         lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
+    nuis = summary.get("nuisance") or {}
+    if any(nuis.values()):
+        lines += ["", "Nuisance terms (fitted so that the numbers above stay right; not products)"]
+        for name, v in nuis.items():
+            if v:
+                lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
+                             f"   (bounds {v['bounds'][0]:g}–{v['bounds'][1]:g})")
     lines += _quality_lines(summary)
     for note in summary["notes"]:
         lines.append(f"note: {note}")

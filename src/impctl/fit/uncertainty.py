@@ -7,8 +7,11 @@ normal T_air, normal heat power) — is inverted into a covariance. Each group's
 inflated by sqrt((1 + ρ)/(1 − ρ)), ρ its lag-1 residual autocorrelation, because quantised,
 slowly varying temperatures give correlated residuals (an effective-sample-size correction).
 The lumped HLC, C_m and τ get 95 % intervals by the delta method in log space (so they stay
-positive). A bootstrap over nights was not chosen: with two constrained nights it cannot
-resample the τ information meaningfully.
+positive). Under model error the curvature alone is too confident, so each lumped quantity's
+interval is the wider of that Laplace interval and a night-clustered sandwich (robust)
+interval, S⁻¹·(Σ_nights g̃·g̃ᵀ)·S⁻¹ with g̃ a night's score: it widens when the nights pull the
+parameters apart more than their noise explains. A bootstrap over nights was not chosen: with
+two constrained nights it cannot resample the τ information meaningfully.
 
 "Determined": the Fisher information of the data alone (no ridge, no bounds), expressed in the
 fraction x = (θ − lo)/(hi − lo) of each parameter's search range, regularised by a N(0, 100²)
@@ -64,14 +67,23 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
         ne = lm._normal_equations(ctx, scaled, u[None], t_m0)
         s_mat, _, _ = lm.schur(ne, scaled)
     cov = torch.linalg.pinv(s_mat[0], hermitian=True)
-    fisher = s_mat[0] - ctx.ridge * torch.eye(len(PARAM_NAMES), dtype=DTYPE)
+    fisher = s_mat[0] - ctx.ridge * torch.eye(len(u), dtype=DTYPE)
     box = sub.box[0]
+    # Night-clustered sandwich: S⁻¹·(Σ_nights g̃ g̃ᵀ)·S⁻¹ with g̃ each night's score after its
+    # θ_m,0 is eliminated. It grows when the nights disagree in a way the model cannot
+    # reconcile (model error), which the Laplace curvature cannot see.
+    n_rows = len(t_m0)
+    score = ne.g_rows - ne.c * (ne.gm / (ne.d + 1e-12))[:, None]
+    meat = score.T @ score * (n_rows / max(n_rows - 1, 1))
+    cov_sandwich = cov @ meat @ cov
 
     uu = u.clone().requires_grad_(True)
     q = lumped(to_physical(uu, box), ctx.ach_vent, ctx.ach_infl)
     jac = torch.stack([torch.autograd.grad(q[i], uu, retain_graph=True)[0] for i in range(3)])
     q = q.detach()
-    sd_log = torch.einsum("ij,jk,ik->i", jac, cov, jac).clamp_min(0).sqrt() / q
+    sd_laplace = torch.einsum("ij,jk,ik->i", jac, cov, jac).clamp_min(0).sqrt() / q
+    sd_sandwich = torch.einsum("ij,jk,ik->i", jac, cov_sandwich, jac).clamp_min(0).sqrt() / q
+    sd_log = torch.maximum(sd_laplace, sd_sandwich)
     estimates = {}
     for i, name in enumerate(LUMPED_NAMES):
         determined = bool(Z95 * sd_log[i] < np.log(1.5))
@@ -88,7 +100,9 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     val, vec = torch.linalg.eigh(0.5 * (fisher_x + fisher_x.T))
     cov_x = vec @ torch.diag(1.0 / (val.clamp_min(0) + _X_PRIOR)) @ vec.T
     sd_x = cov_x.diagonal().clamp_min(0).sqrt()
-    sd = dict(zip(PARAM_NAMES, sd_x.tolist(), strict=True))
-    out.update(lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
+    sd = dict(zip(PARAM_NAMES, sd_x[:len(PARAM_NAMES)].tolist(), strict=True))
+    out.update(interval_source={n: ("sandwich" if float(sd_sandwich[i]) > float(sd_laplace[i])
+                                    else "laplace") for i, n in enumerate(LUMPED_NAMES)},
+               lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
                range_fraction_sd=sd, cov_u=cov)
     return out
