@@ -174,7 +174,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             ranges = None
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
-                       ach_vent=ACH[0], ach_infl=ACH[1], night_gain=args.nuisance,
+                       ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
@@ -480,7 +480,7 @@ def main() -> None:
     ap.add_argument("--adam", type=int, default=0, metavar="N",
                     help="include Adam (backprop through odeint) on N of those households")
     ap.add_argument("--no-nuisance", dest="nuisance", action="store_false",
-                    help="fit without the night-gain and emitter terms (the issue-4 model)")
+                    help="fit without the emitter-release term (the issue-4 model)")
     ap.add_argument("--speed", action="store_true",
                     help="only the speed figures (impctl fit wall time, in-process time)")
     ap.add_argument("--demo-csv", default=None,

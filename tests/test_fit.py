@@ -231,3 +231,46 @@ def test_a_class_range_the_data_contradict_is_rejected():
     ok = NightFit(n_starts=2, per_night=False).fit(nights, right)
     assert not ok.class_check_["rejected"]
     assert ok.bounds_["floor_area"] == (200.0, 300.0)
+
+
+def _with_emitter_release(nights, house):
+    """Constrained nights of the same house with an underfloor floor still releasing heat
+    after switch-off (3 kW decaying over 2.5 h, invisible to the heat meter)."""
+    from impctl.model import simulate
+
+    dt = 60.0
+    t = np.arange(0, 7 * 3600, dt)
+    out = []
+    for n in nights:
+        if n.kind != "constrained":
+            out.append(n)
+            continue
+        t_out = np.interp(t, n.time_s, n.t_out_c)
+        sim = simulate(house, t_out, dt, phi_hc_w=3000.0 * np.exp(-t / 9000.0),
+                       t_m_init_c=21.5)
+        idx = np.arange(0, len(t), 15)
+        out.append(dataclasses.replace(n, time_s=t[idx], t_air_c=np.round(sim.t_air_c[idx], 1),
+                                       t_out_c=t_out[idx], q_hc_w=np.zeros(len(idx))))
+    return out
+
+
+def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, nights_15min):
+    # the ideal 5R1C: the likelihood-ratio test keeps the plain model
+    assert fitted.nuisance_check_["applied"] and not fitted.nuisance_check_["selected"]
+    assert fitted.nuisance_["emitter_w"] is None
+    # heat still released after switch-off: without the term τ is biased and its interval
+    # misses; with it τ is right and the interval holds
+    nights = _with_emitter_release(nights_15min, HOUSE)
+    plain = NightFit(n_starts=3, emitter_state=False).fit(nights, RANGES)
+    fit = NightFit(n_starts=3).fit(nights, RANGES)
+    assert rel(plain.lumped_["tau"].value, HOUSE.tau_h) > 0.08
+    assert not plain.lumped_["tau"].low <= HOUSE.tau_h <= plain.lumped_["tau"].high
+    assert fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] > 20
+    assert rel(fit.lumped_["tau"].value, HOUSE.tau_h) < 0.05
+    assert fit.lumped_["tau"].low <= HOUSE.tau_h <= fit.lumped_["tau"].high
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    em = fit.nuisance_["emitter_tau_h"]
+    assert em["low"] <= 2.5 <= em["high"]
+    summary = fit_to_dict(fit)
+    assert summary["fit"]["nuisance_check"]["selected"] and summary["nuisance"]["emitter_w"]
+    assert "Nuisance terms" in format_table(summary)

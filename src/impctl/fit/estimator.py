@@ -60,7 +60,7 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 CLASS_REJECT_CHI2 = 3.84
 #: χ² with 3 degrees of freedom at 95 %: the nuisance terms (night gain, emitter amplitude and
 #: time constant) are kept when they lower the inflation-scaled loss by more than this.
-NUISANCE_CHI2 = 7.81
+NUISANCE_CHI2 = 7.81   # 3 dof; with the gain off, 2 free terms make this conservative
 
 
 class NightFit:
@@ -140,7 +140,7 @@ class NightFit:
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
-                 night_gain: bool = True, emitter_state: bool = True):
+                 night_gain: bool = False, emitter_state: bool = True):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -352,12 +352,12 @@ class NightFit:
 
     def _nuisance_check(self, rows, result, lay, best_simple) -> int:
         """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
-        likelihood-ratio test says the data need them (Δχ² over the 3 extra parameters)."""
+        likelihood-ratio test says the data need them: the loss drop (in units of the fitted
+        residual σ) over the 3 extra parameters against χ²₃. Not deflated for residual
+        autocorrelation: on a house the model fits (the ideal 5R1C) the drop stays ≈ 1, while
+        emitter and furniture heat after switch-off give drops in the hundreds."""
         best_nuis = self._best(result, lay, 0)
-        sub = rows.subset(rows.problem == best_nuis)
-        est = laplace(self._ctx, sub, result.u[best_nuis], result.t_m0[rows.problem ==
-                      best_nuis], self._group_n, has_power=True, summary_only=True)
-        drop = float(result.loss[best_simple] - result.loss[best_nuis]) / est["inflation"]
+        drop = float(result.loss[best_simple] - result.loss[best_nuis])
         selected = drop > NUISANCE_CHI2
         self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": NUISANCE_CHI2,
                                 "selected": selected}
