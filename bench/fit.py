@@ -162,6 +162,15 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
                            "eps_in", "per_night_mean")}
+    if args.plant == "realistic":
+        params = sample_params(n, VAL_SEED)
+        kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
+        onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (n,)) >= 0.999
+        control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
+        res["types"] = {
+            "radiators": kind == 0, "underfloor": kind == 1,
+            "modulating": ~onoff, "on/off": onoff,
+            "weather curve": control == 0, "room thermostat": control == 1}
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
@@ -292,6 +301,23 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                        for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
                                     ("C_m", e_fit["c_m"])))
     print(f"NODE joint, signed median error: {signed}")
+    if "types" in res:
+        print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
+              "| coverage HLC/τ/C_m % |")
+        print("|---|---|---|---|---|---|")
+        truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
+        for label, sel in res["types"].items():
+            if not sel.any():
+                continue
+            cells, covs = [], []
+            for k in ("hlc", "tau", "c_m"):
+                cells.append("{:.1f} / {:.1f}".format(*stats(e_fit[k][sel])))
+                ests = [e for e, m in zip(lumped(k), sel, strict=True) if m]
+                tv = np.asarray(truths[k])[sel]
+                covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
+                                                                                  strict=True)]))
+            print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
+                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " |")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
