@@ -274,3 +274,27 @@ def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, 
     summary = fit_to_dict(fit)
     assert summary["fit"]["nuisance_check"]["selected"] and summary["nuisance"]["emitter_w"]
     assert "Nuisance terms" in format_table(summary)
+
+
+def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
+        nights_15min, monkeypatch):
+    """An hour without space heat (DHW recharge) on every normal night: the nights are kept,
+    their power during the interruption and recovery is not compared, the HLC stays right."""
+    nights = []
+    for n in nights_15min:
+        if n.kind == "normal":
+            q = n.q_hc_w.copy()
+            q[(n.time_s >= 3 * 3600) & (n.time_s < 4 * 3600)] = 0.0
+            n = dataclasses.replace(n, q_hc_w=q)
+        nights.append(n)
+    fit = NightFit(n_starts=3).fit(nights, RANGES)
+    assert len(fit.nights_) == len(nights)
+    normal = [q for q in fit.night_quality_ if q["kind"] == "normal"]
+    assert all(q["interruptions"][0]["kind"] == "dhw_or_stop" for q in normal)
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    # compared anyway, the missing hour drags the HLC far down
+    from impctl.fit import estimator
+
+    monkeypatch.setattr(estimator, "power_usable", lambda n, thr: np.ones(len(n.time_s), bool))
+    blind = NightFit(n_starts=3).fit(nights, RANGES)
+    assert blind.lumped_["hlc"].value < 0.9 * HOUSE.hlc_w_per_k

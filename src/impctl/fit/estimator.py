@@ -47,7 +47,7 @@ from .node import (
     pack_nights,
     to_physical,
 )
-from .quality import adequacy, night_quality
+from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
 from .uncertainty import Z95, laplace
 
@@ -197,8 +197,12 @@ class NightFit:
         with_prior = class_box != prior_box
         self.classified_ = sorted(ranges or {})
         self.nights_ = kept
+        # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
+        # only the power during the interruption and its recovery is not compared.
+        power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
-                                            smooth_air_s=3600.0 * self.smooth_air_h)
+                                            smooth_air_s=3600.0 * self.smooth_air_h,
+                                            power_ok=power_ok)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
         cons = packed.constrained
         demand = ~cons & torch.tensor(self.normal_model == "demand")

@@ -165,6 +165,7 @@ class PackedNights:
     mask: torch.Tensor
     next_node: torch.Tensor
     last: torch.Tensor
+    power_ok: torch.Tensor | None = None  # (N, K) bool: the power sample can be compared
 
     @property
     def n_nights(self) -> int:
@@ -186,7 +187,8 @@ def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
 
 
 def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
-                timestamps: str = "instant", smooth_air_s: float = 0.0) -> PackedNights:
+                timestamps: str = "instant", smooth_air_s: float = 0.0,
+                power_ok: Sequence[np.ndarray] | None = None) -> PackedNights:
     """Put prepared nights (already cut to their fit windows) side by side, each on its own
     sample times (padded to the longest night by repeating its last sample: zero-length
     intervals that change nothing).
@@ -201,6 +203,9 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         stamp (hourly logs, the virtual IMP): temperatures then belong to the interval's middle,
         so the nodes move there, and the power on [middle_k, middle_k+1) is (q_k + q_k+1)/2.
     smooth_air_s : width of the moving average applied to the T_air that drives DEMAND rows [s]
+    power_ok : per night, bool per sample: False where the measured power is not the space
+        heating the model describes (a DHW recharge, a defrost and the recovery after them);
+        those samples still drive the model (T_air), their power is not compared
     """
     if timestamps not in TIMESTAMPS:
         raise ValueError(f"timestamps must be one of {TIMESTAMPS}")
@@ -251,6 +256,8 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         t_air_in_c=tt(tai), t_air_in_slope=tt(tai_s), q_w=tt(q), q_in_w=tt(q_in),
         q_mean_w=tt(q_mean), mask=torch.as_tensor(mask), next_node=torch.as_tensor(next_node),
         last=torch.as_tensor(last),
+        power_ok=None if power_ok is None else torch.as_tensor(np.stack([
+            np.concatenate([np.asarray(p, bool), np.ones(k - len(p), bool)]) for p in power_ok])),
     )
 
 
@@ -457,6 +464,8 @@ def build_rows(
         nxt = packed.next_node[night_index]
         mean_next = torch.where(dm, nxt, torch.arange(grid.shape[1]).expand_as(nxt))
         mask = mask & ~(dm & packed.last[night_index])
+    if packed.power_ok is not None:
+        mask = mask & ~(dm & ~packed.power_ok[night_index])
     ode = NightODE(
         grid,
         torch.where(demand, a_dem, a_air),

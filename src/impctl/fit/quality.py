@@ -68,7 +68,8 @@ def interruptions(time_s: np.ndarray, q_w: np.ndarray, threshold_w: float = Q_ON
     out = [{"kind": "defrost", "start_h": float(t[a] / 3600.0), "minutes": float(d / 60.0)}
            for a, b, d in runs(q < -threshold_w)]
     off = list(runs(q <= threshold_w))
-    typical = float(np.median([d for _, _, d in off])) if off else 0.0
+    # the heat pump's own off phases: only a night that cycles (≥ 3 off runs) has them
+    typical = float(np.median([d for _, _, d in off])) if len(off) >= 3 else 0.0
     limit = max(60.0 * min_minutes, 1.5 * typical)
     out += [{"kind": "dhw_or_stop", "start_h": float(t[a] / 3600.0), "minutes": float(d / 60.0)}
             for a, b, d in off if d > limit and not (q[a:b] < -threshold_w).all()]
@@ -162,3 +163,18 @@ def adequacy(sigma_fit: dict[str, float], sigma_data: dict[str, float],
                  "hold at their stated 95 %: " + "; ".join(problems)
                  + ". Treat the values as approximate and the intervals as too narrow.")
     return {"adequate": adequate, "groups": groups, "statement": statement}
+
+
+def power_usable(night: NightSamples, threshold_w: float = Q_ON_W) -> np.ndarray:
+    """Per sample of a held night: False inside a DHW/defrost interruption and during the
+    recovery after it (as long again as the interruption, the heat debt being repaid), where
+    the measured power is not the house's space-heating demand. True everywhere on a
+    constrained night."""
+    t = np.asarray(night.time_s, float)
+    ok = np.ones(len(t), bool)
+    if night.kind != "normal" or len(t) < 3:
+        return ok
+    for stop in interruptions(t, night.q_hc_w, threshold_w):
+        a = stop["start_h"] * 3600.0
+        ok &= ~((t >= a) & (t < a + 2 * 60.0 * stop["minutes"]))
+    return ok
