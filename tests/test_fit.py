@@ -32,7 +32,9 @@ def nights_15min():
 
 @pytest.fixture(scope="module")
 def fitted(nights_15min):
-    return NightFit(normal_model="demand", n_starts=3).fit(nights_15min, RANGES)
+    # simulated sensors have no offsets: the statistical intervals alone
+    return NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0)).fit(
+        nights_15min, RANGES)
 
 
 def rel(a, b):
@@ -261,8 +263,9 @@ def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, 
     # heat still released after switch-off: without the term τ is biased and its interval
     # misses; with it τ is right and the interval holds
     nights = _with_emitter_release(nights_15min, HOUSE)
-    plain = NightFit(n_starts=3, emitter_state=False).fit(nights, RANGES)
-    fit = NightFit(n_starts=3).fit(nights, RANGES)
+    plain = NightFit(n_starts=3, emitter_state=False, sensor_offsets_k=(0, 0)).fit(nights,
+                                                                                  RANGES)
+    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0)).fit(nights, RANGES)
     assert rel(plain.lumped_["tau"].value, HOUSE.tau_h) > 0.08
     assert not plain.lumped_["tau"].low <= HOUSE.tau_h <= plain.lumped_["tau"].high
     assert fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] > 20
@@ -298,3 +301,19 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
     monkeypatch.setattr(estimator, "power_usable", lambda n, thr: np.ones(len(n.time_s), bool))
     blind = NightFit(n_starts=3).fit(nights, RANGES)
     assert blind.lumped_["hlc"].value < 0.9 * HOUSE.hlc_w_per_k
+
+
+def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitted):
+    import copy
+
+    f = copy.copy(fitted)
+    f.sensor_offsets_k = (0.5, 1.0)
+    wide = f._with_offset_allowance(fitted.lumped_, fitted.nights_)
+    share = f.offset_allowance_["relative_sd"]
+    assert share == pytest.approx(np.hypot(0.5, 1.0) / f.offset_allowance_["mean_delta_t_k"])
+    for name, e in fitted.lumped_.items():
+        w = wide[name]
+        assert w.value == e.value and w.low < e.low and w.high > e.high
+        sd_stat = np.log(e.high / e.low) / (2 * 1.959964)
+        sd_wide = np.log(w.high / w.low) / (2 * 1.959964)
+        assert sd_wide == pytest.approx(np.hypot(sd_stat, share), rel=1e-6)

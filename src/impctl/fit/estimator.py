@@ -32,7 +32,7 @@ from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
 from . import lm
-from .data import noise_levels, prepare_nights, search_bounds, validation_table
+from .data import Estimate, noise_levels, prepare_nights, search_bounds, validation_table
 from .node import (
     DTYPE,
     NUISANCE_BOUNDS,
@@ -140,7 +140,8 @@ class NightFit:
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
-                 night_gain: bool = False, emitter_state: bool = True):
+                 night_gain: bool = False, emitter_state: bool = True,
+                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0)):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -159,6 +160,7 @@ class NightFit:
         self.fit_step_s = fit_step_s
         self.night_gain = night_gain
         self.emitter_state = emitter_state
+        self.sensor_offsets_k = sensor_offsets_k
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -249,7 +251,7 @@ class NightFit:
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
-        self.lumped_ = est["lumped"]
+        self.lumped_ = self._with_offset_allowance(est["lumped"], kept)
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
@@ -354,6 +356,22 @@ class NightFit:
         self.class_check_ = {"applied": True, "chi2": drop, "threshold": CLASS_REJECT_CHI2,
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
+
+    def _with_offset_allowance(self, lumped_in: dict, nights) -> dict:
+        """Widen the log-space intervals by the sensor-offset share (``sensor_offsets_k``)."""
+        dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
+        mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
+        s_in, s_out = (float(v) for v in self.sensor_offsets_k)
+        share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
+        self.offset_allowance_ = {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
+                                  "relative_sd": share}
+        out = {}
+        for name, e in lumped_in.items():
+            lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
+            sd = np.hypot(0.5 * (lo + hi) / Z95, share)
+            out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
+                                 float(e.value * np.exp(Z95 * sd)), e.determined)
+        return out
 
     def _nuisance_check(self, rows, result, lay, best_simple) -> int:
         """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the

@@ -51,7 +51,8 @@ INTERVAL_METHOD = (
     "the wider of (a) Laplace: Gauss-Newton curvature of the joint loss at the optimum, "
     "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
     "inflated for lag-1 autocorrelation, and (b) a night-clustered sandwich covariance (robust "
-    "to model error: widens when the nights disagree); delta method in log space")
+    "to model error: widens when the nights disagree); delta method in log space; plus, in "
+    "quadrature, the share of uncalibrated sensor offsets (fit.offset_allowance)")
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
     "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
@@ -156,6 +157,8 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "notes": notes,
     }
     # added keys (schema stays impctl-fit/1: readers of the old keys are unaffected)
+    if getattr(fit, "offset_allowance_", None) is not None:
+        out["fit"]["offset_allowance"] = fit.offset_allowance_
     if getattr(fit, "interval_source_", None) is not None:
         out["fit"]["interval_source"] = fit.interval_source_
     if getattr(fit, "nuisance_check_", None) is not None:
