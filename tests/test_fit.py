@@ -304,13 +304,12 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
 
 
 def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitted):
-    import copy
+    from impctl.fit.uncertainty import offset_allowance
 
-    f = copy.copy(fitted)
-    f.sensor_offsets_k = (0.5, 1.0)
-    wide = f._with_offset_allowance(fitted.lumped_, fitted.nights_)
-    share = f.offset_allowance_["relative_sd"]
-    assert share == pytest.approx(np.hypot(0.5, 1.0) / f.offset_allowance_["mean_delta_t_k"])
+    wide, info = offset_allowance(fitted.lumped_, fitted.nights_, (0.5, 1.0))
+    share = info["relative_sd"]
+    assert share == pytest.approx(np.hypot(0.5, 1.0) / info["mean_delta_t_k"])
+    assert fitted.offset_allowance_["relative_sd"] == 0.0   # the fixture's calibrated sensors
     for name, e in fitted.lumped_.items():
         w = wide[name]
         assert w.value == e.value and w.low < e.low and w.high > e.high

@@ -8,8 +8,10 @@ reading a result (:mod:`.report`) needs no torch.
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
 * :func:`fit_to_dict`, :func:`format_table`, :func:`plot_fit` (:mod:`.report`, no torch)
 
-Inside: :mod:`.node` (the ODE), :mod:`.lm` (the optimiser), :mod:`.uncertainty` (intervals),
-:mod:`.baselines` (the methods the fit is compared with).
+Inside: :mod:`.node` (the ODE), :mod:`.solver` (its torchdiffeq integration), :mod:`.lm` (the
+optimiser), :mod:`.uncertainty` (intervals), :mod:`.resample` (fine rows into blocks),
+:mod:`.quality` (night quality, model adequacy; no torch), :mod:`.baselines` (the methods the
+fit is compared with).
 """
 
 from __future__ import annotations

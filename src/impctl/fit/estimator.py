@@ -32,7 +32,7 @@ from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
 from . import lm
-from .data import Estimate, noise_levels, prepare_nights, search_bounds, validation_table
+from .data import noise_levels, prepare_nights, search_bounds, validation_table
 from .node import (
     DTYPE,
     NUISANCE_BOUNDS,
@@ -49,7 +49,7 @@ from .node import (
 )
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
-from .uncertainty import Z95, laplace
+from .uncertainty import laplace, nuisance_intervals, offset_allowance
 
 NORMAL_MODELS = ("demand", "series", "mean")
 LUMPED_NAMES = ("hlc", "c_m", "tau")
@@ -251,13 +251,14 @@ class NightFit:
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
-        self.lumped_ = self._with_offset_allowance(est["lumped"], kept)
+        self.lumped_, self.offset_allowance_ = offset_allowance(est["lumped"], kept,
+                                                                self.sensor_offsets_k)
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
-        self.nuisance_ = self._nuisance()
+        self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
         self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
         self._validate()
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
@@ -357,22 +358,6 @@ class NightFit:
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
 
-    def _with_offset_allowance(self, lumped_in: dict, nights) -> dict:
-        """Widen the log-space intervals by the sensor-offset share (``sensor_offsets_k``)."""
-        dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
-        mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
-        s_in, s_out = (float(v) for v in self.sensor_offsets_k)
-        share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
-        self.offset_allowance_ = {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
-                                  "relative_sd": share}
-        out = {}
-        for name, e in lumped_in.items():
-            lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
-            sd = np.hypot(0.5 * (lo + hi) / Z95, share)
-            out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
-                                 float(e.value * np.exp(Z95 * sd)), e.determined)
-        return out
-
     def _nuisance_check(self, rows, result, lay, best_simple) -> int:
         """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
         likelihood-ratio test says the data need them: the loss drop (in units of the fitted
@@ -439,26 +424,6 @@ class NightFit:
                 dof = max(1.0, n_g - int((groups == g).sum()) - 7.0 * n_g / n_all)
                 rms = float(raw[m].pow(2).sum() / dof) ** 0.5
                 self.sigma_[key] = max(floors[g], rms)
-
-    def _nuisance(self) -> dict[str, dict]:
-        """The nuisance terms with 95 % intervals (Gauss–Newton, through the sigmoid map);
-        None for a term switched off."""
-        box = self._sub.box[0]
-        x = to_physical(self._u, box)
-        out = {}
-        cov = self.cov_u_
-        for j, name in enumerate(NUISANCE_NAMES):
-            i = len(PARAM_NAMES) + j
-            lo, hi = (float(v) for v in box[i])
-            if hi <= lo:
-                out[name] = None
-                continue
-            sig = torch.sigmoid(self._u[i])
-            sd = float((hi - lo) * sig * (1 - sig) * cov[i, i].clamp_min(0).sqrt())
-            v = float(x[i])
-            out[name] = {"value": v, "low": max(lo, v - Z95 * sd), "high": min(hi, v + Z95 * sd),
-                         "bounds": [lo, hi]}
-        return out
 
     def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
         return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),

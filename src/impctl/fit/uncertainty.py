@@ -29,7 +29,7 @@ import torch
 
 from . import lm
 from .data import Estimate, lag1_autocorrelation
-from .node import DTYPE, PARAM_NAMES, lumped, to_physical
+from .node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 
 Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)
@@ -105,4 +105,51 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
                                     else "laplace") for i, n in enumerate(LUMPED_NAMES)},
                lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
                range_fraction_sd=sd, cov_u=cov)
+    return out
+
+
+def offset_allowance(lumped_in: dict, nights, sensor_offsets_k) -> tuple[dict, dict]:
+    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets.
+
+    An offset of the indoor or the outdoor sensor shifts every T_air − T_out alike; the nights
+    cannot reveal it, but it moves HLC, τ and C_m by about offset/ΔT. The share
+    √(σ_in² + σ_out²)/mean ΔT [K/K] is added in quadrature (a type-B component, GUM).
+
+    Returns
+    -------
+    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd"})
+    """
+    dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
+    mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
+    s_in, s_out = (float(v) for v in sensor_offsets_k)
+    share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
+    out = {}
+    for name, e in lumped_in.items():
+        lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
+        sd = np.hypot(0.5 * (lo + hi) / Z95, share)
+        out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
+                             float(e.value * np.exp(Z95 * sd)), e.determined)
+    return out, {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
+                 "relative_sd": share}
+
+
+def nuisance_intervals(u: torch.Tensor, box: torch.Tensor, cov_u: torch.Tensor
+                       ) -> dict[str, dict | None]:
+    """The nuisance terms (:data:`~.node.NUISANCE_NAMES`) with 95 % intervals (Gauss–Newton
+    covariance through the sigmoid map, clipped to the bounds); None for a term switched off."""
+    out: dict[str, dict | None] = {}
+    if len(u) <= len(PARAM_NAMES):
+        return {name: None for name in NUISANCE_NAMES}
+    x = to_physical(u, box)
+    for j, name in enumerate(NUISANCE_NAMES):
+        i = len(PARAM_NAMES) + j
+        lo, hi = (float(v) for v in box[i])
+        if hi <= lo:
+            out[name] = None
+            continue
+        sig = torch.sigmoid(u[i])
+        sd = float((hi - lo) * sig * (1 - sig) * cov_u[i, i].clamp_min(0).sqrt())
+        v = float(x[i])
+        out[name] = {"value": v, "low": max(lo, v - Z95 * sd), "high": min(hi, v + Z95 * sd),
+                     "bounds": [lo, hi]}
     return out
