@@ -15,7 +15,8 @@ waits ``--settle`` seconds and reads, from outside the process:
 
 For comparison it repeats the measurement with a variant that registers only the
 device-side subcommands (``impctl.cli.device_cmds``), i.e. what the daemon would weigh if the
-CLI did not import every subcommand module at start.
+CLI did not import every subcommand module at start, and with ``[mqtt]`` on (issue 17: a
+real mosquitto on loopback, the bridge connected with commands on; needs ``mosquitto``).
 """
 
 from __future__ import annotations
@@ -41,10 +42,12 @@ from daemon_fixtures import (  # noqa: E402
     wait_until,
     write_config,
 )
+from mqtt_fixtures import broker  # noqa: E402
 
 from impctl.heatpump.clock import VirtualClock  # noqa: E402
 
 TARGET_MB = 60.0
+MQTT_VARIANT = "impctl daemon with [mqtt] on"
 FORBIDDEN = ("torch", "sklearn", "pandas")
 WATCHED = (*FORBIDDEN, "numpy", "scipy", "matplotlib", "pyarrow")
 VARIANTS = {
@@ -81,11 +84,14 @@ def loaded_packages(pid: int) -> dict[str, int]:
     return found
 
 
-def measure(code: str, port: int, clock: VirtualClock, work: Path, settle_s: float) -> dict:
+def measure(code: str, port: int, clock: VirtualClock, work: Path, settle_s: float,
+            mqtt: dict | None = None) -> dict:
     state = work / "state"
     mapping = daemon_mapping(
         state, port, clock,
         campaign={"enabled": True, "fit_when_complete": True})
+    if mqtt is not None:
+        mapping["mqtt"] = mqtt
     mapping["log_level"] = "info"
     config = write_config(work / "config.toml", mapping)
     cmd = [PYTHON, "-c", code, "daemon", "--config", str(config)]
@@ -95,6 +101,9 @@ def measure(code: str, port: int, clock: VirtualClock, work: Path, settle_s: flo
     try:
         wait_until(lambda: "next night job at" in log.read_text(), 60, "the daemon to settle",
                    proc=proc)
+        if mqtt is not None:
+            wait_until(lambda: "MQTT connected" in log.read_text(), 30, "the broker",
+                       proc=proc)
         time.sleep(settle_s)
         mem = status_kb(proc.pid)
         pkgs = loaded_packages(proc.pid)
@@ -130,6 +139,15 @@ def main() -> None:
                 sub = work / re.sub(r"\W+", "_", name)
                 sub.mkdir()
                 results[name] = measure(code, port, clock, sub, args.settle)
+            # The deployed daemon again, with [mqtt] on: a real mosquitto on loopback, the
+            # bridge connected, discovery published, commands subscribed (issue 17).
+            sub = work / "mqtt"
+            sub.mkdir()
+            with broker(sub / "broker") as b:
+                results[MQTT_VARIANT] = measure(
+                    VARIANTS["impctl daemon (as deployed)"], port, clock, sub, args.settle,
+                    mqtt={"host": "127.0.0.1", "port": b.port, "client_id": "bench",
+                          "commands": True})
         finally:
             stop_process(sim)
 

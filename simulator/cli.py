@@ -16,6 +16,7 @@ from pathlib import Path
 
 import click
 
+from impctl.cli.checks import SETPOINT_C, bounded
 from impctl.errors import InputError
 from impctl.heatpump.clock import VirtualClock
 from impctl.heatpump.registers import Generation
@@ -27,23 +28,37 @@ from .faults import parse_faults
 from .plant import PlantParams
 from .server import KronotermSimulator
 
+# Option bounds (one line and exit status 2 outside them, never a traceback).
+PORT = (0, 65535)
+BAUDRATE = (300, 4_000_000)
+SPEED = (0.0, 1e6)                 # simulated s per wall s
+WALL_EPOCH_S = (0.0, 1e10)         # POSIX s
+SEED = (0, 2**32 - 1)
+UNIT_ID = (1, 247)                 # Modbus unit ids
+DHW_PERIOD_H = (0.5, 168.0)
+NOISE_K = (0.0, 5.0)
+
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--house", type=click.Path(dir_okay=False, path_type=Path),
               help="House TOML (impctl.model.load_house); default: the built-in house.")
 @click.option("--host", default="127.0.0.1", show_default=True, help="TCP address to bind.")
-@click.option("--port", default=5020, show_default=True, type=int, help="TCP port (0 = free).")
+@click.option("--port", default=5020, show_default=True, type=int, callback=bounded(PORT),
+              help="TCP port (0 = free).")
 @click.option("--allow-remote", is_flag=True, help="Allow binding to a non-loopback address.")
 @click.option("--rtu", metavar="PORT_OR_URL",
               help="Serve Modbus RTU on a serial device or pyserial URL "
                    "(socket://127.0.0.1:PORT = RTU over TCP) instead of Modbus TCP.")
-@click.option("--baudrate", default=19200, show_default=True, type=int, help="RTU baud rate.")
+@click.option("--baudrate", default=19200, show_default=True, type=int,
+              callback=bounded(BAUDRATE), help="RTU baud rate.")
 @click.option("--generation", type=click.Choice([g.value for g in Generation]),
               default="extended", show_default=True, help="Register set exposed.")
 @click.option("--speed", default=1.0, show_default=True, type=float,
+              callback=bounded(SPEED, low_open=True),
               help="Simulated seconds per wall-clock second.")
 @click.option("--epoch", help="Simulated start time, ISO 8601 with zone (default: now).")
-@click.option("--wall-epoch", type=float, help="Wall-clock anchor, POSIX s (default: now).")
+@click.option("--wall-epoch", type=float, callback=bounded(WALL_EPOCH_S, "s"),
+              help="Wall-clock anchor, POSIX s (default: now).")
 @click.option("--clock", "clock_spec", help="Full clock spec (overrides --epoch/--speed).")
 @click.option("--clock-file", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the clock spec to this file for other processes.")
@@ -53,16 +68,19 @@ from .server import KronotermSimulator
               help="File with faults, re-read whenever it changes (run-time switching).")
 @click.option("--weather", type=click.Path(dir_okay=False, path_type=Path),
               help="Weather file (EPW or timestamp,t_out CSV); default: built-in generator.")
-@click.option("--weather-seed", default=0, show_default=True, type=int)
+@click.option("--weather-seed", default=0, show_default=True, type=int, callback=bounded(SEED))
 @click.option("--setpoint", default=21.0, show_default=True, type=float,
-              help="Initial loop-1 setpoint [°C].")
+              callback=bounded(SETPOINT_C, "°C"), help="Initial loop-1 setpoint [°C].")
 @click.option("--no-thermostat", is_flag=True, help="No room thermostat: 2160 reads -400.")
-@click.option("--heat-meter-id", type=int, help="Also answer as a heat meter on this unit id.")
-@click.option("--dhw-period-h", type=float, help="DHW charging every this many hours.")
+@click.option("--heat-meter-id", type=int, callback=bounded(UNIT_ID),
+              help="Also answer as a heat meter on this unit id.")
+@click.option("--dhw-period-h", type=float, callback=bounded(DHW_PERIOD_H, "h"),
+              help="DHW charging every this many hours.")
 @click.option("--defrost", is_flag=True, help="Defrost cycles below +5 °C outdoors.")
 @click.option("--noise", default=0.0, show_default=True, type=float,
-              help="Sensor noise SD on T_air/T_out [K].")
-@click.option("--seed", default=0, show_default=True, type=int, help="Noise seed.")
+              callback=bounded(NOISE_K, "K"), help="Sensor noise SD on T_air/T_out [K].")
+@click.option("--seed", default=0, show_default=True, type=int, callback=bounded(SEED),
+              help="Noise seed.")
 @click.option("-v", "--verbose", count=True, help="More logging (-vv for pymodbus debug).")
 def cli(house, host, port, allow_remote, rtu, baudrate, generation, speed, epoch, wall_epoch,
         clock_spec, clock_file, faults, faults_file, weather, weather_seed, setpoint,

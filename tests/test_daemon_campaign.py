@@ -174,7 +174,9 @@ def test_campaign_across_the_start_of_summer_time(tmp_path):
             return len(nights) >= 2 and all(n.state in FINAL and n.valid is not None
                                             for n in nights)
 
-    epoch = datetime(2026, 3, 28, 19, 30, tzinfo=TZ)
+    # 19:00: the first preheat (20:00) is 0.33 s of wall time away at 10800×, time enough
+    # for the daemon to start on a loaded machine (else the first night is a day later).
+    epoch = datetime(2026, 3, 28, 19, 0, tzinfo=TZ)
     result = run(_campaign(
         tmp_path, epoch, SPEED,
         {"constrained_nights": 0, "normal_setpoints_c": [21.0, 22.0]},

@@ -30,6 +30,9 @@ def test_bad_config_lists_every_problem_one_line_each(tmp_path):
 state_dir = "{state}"
 colour = "blue"                 # unknown key
 
+[heatpump]
+host = "192.168.1.50"
+
 [night]
 sample_interval_s = "sixty"     # wrong type
 comfort_band_k = 4.0            # wider than max_comfort_band_k (3 K)
@@ -57,6 +60,9 @@ normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [
 def test_setpoint_outside_the_configured_limits_and_heatpump_problems(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("""
+[heatpump]
+host = "192.168.1.50"
+
 [heatpump.writes]
 loop1_setpoint_c = [16.0, 22.0]
 
@@ -73,6 +79,7 @@ normal_setpoints_c = [21.0, 22.5]
         "key 'night.comfort_band_k': T_min − abort margin would fall below 14 °C"]
     bad.write_text("""
 [heatpump]
+host = "gw"
 port = "502"
 """)
     result = run_cli("daemon", "--config", str(bad), timeout_s=30)
@@ -107,7 +114,7 @@ def test_example_config_loads_and_documents_every_key():
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "source"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "source"}
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys
@@ -115,3 +122,53 @@ def test_example_config_loads_and_documents_every_key():
     text = EXAMPLE.read_text()
     for key in ("heat_meter", "loop2_setpoint_c", "correction_k"):
         assert re.search(rf"^# *\[?(heatpump\.)?{key}", text, re.M), key
+
+
+def test_example_documents_every_mqtt_key_and_mqtt_is_checked(tmp_path):
+    from impctl.mqtt.config import MqttConfig
+
+    text = EXAMPLE.read_text()
+    assert load_config(EXAMPLE).mqtt is None  # off unless configured
+    for f in dataclasses.fields(MqttConfig):
+        assert re.search(rf"^# {f.name} = ", text, re.M), f.name
+    # The commented block, uncommented, is a valid [mqtt] section.
+    block = "\n".join(line[2:] for line in text.splitlines()
+                      if line.startswith("# ") and "[mqtt]" not in line
+                      and re.match(r"# \w+ = ", line))
+    mqtt_keys = {f.name for f in dataclasses.fields(MqttConfig)}
+    lines = [ln for ln in block.splitlines() if ln.split(" = ")[0] in mqtt_keys]
+    good = tmp_path / "good.toml"
+    good.write_text(f'state_dir = "{tmp_path}"\n[heatpump]\nhost = "127.0.0.1"\n[mqtt]\n'
+                    + "\n".join(lines) + "\n")
+    cfg = load_config(good).mqtt
+    assert cfg.host == "192.168.1.10" and cfg.port == 1883 and not cfg.commands
+    assert cfg.client_id.startswith("impctl-") and cfg.topic == f"impctl/{cfg.client_id}"
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f"""
+state_dir = "{tmp_path / 'state'}"
+[heatpump]
+host = "127.0.0.1"
+[mqtt]
+port = 70000
+password_file = "{tmp_path / 'missing.password'}"
+client_id = "my gateway"
+base_topic = "impctl/#"
+commands = "yes"
+colour = "blue"
+""")
+    result = run_cli("daemon", "--config", str(bad), timeout_s=30)
+    assert result.returncode == 2 and result.stdout == ""
+    assert _problems(result, bad) == [
+        "key 'mqtt.commands': must be true or false, got 'yes'",
+        "key 'mqtt.colour': unknown key",
+        "key 'mqtt.host': required: the broker's host name or address",
+        "key 'mqtt.port': must lie in 1–65535",
+        "key 'mqtt.client_id': only letters, digits, '_' and '-' (1–64 characters): it is "
+        "used in topics and Home Assistant ids, got 'my gateway'",
+        "key 'mqtt.base_topic': must be a topic without wildcards (+ #), spaces or empty "
+        "levels, got 'impctl/#'",
+        "key 'mqtt.password_file': needs mqtt.username",
+        "key 'mqtt.password_file': cannot read it: No such file or directory",
+    ]
+    assert not (tmp_path / "state").exists()

@@ -147,8 +147,9 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
     with rig(tmp_path, night={"preheat_h": 0.5}, epoch=MORNING) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
+            # --force: the daemon's start may take the simulated clock past 05:00 already.
             queued = run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
-                             "--config", str(config))
+                             "--force", "--config", str(config))
             assert queued.returncode == 0, queued.stderr
             assert queued.stdout.startswith("queued request 1: normal night at 22 °C (now)")
             # The running daemon takes it up: the heat pump goes to 22 °C.
@@ -181,8 +182,9 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             # Writes are counted per day of the heat pump's (simulated) clock: the set and
             # the restore of 2187 on the night's day, none on a later day.
             assert night.started.date() == night.ended.date()
-            expected = "2/12" if day == night.ended.date() else "0/12"
-            assert status["writes_today"] == {"2187": expected, "2042": "0/12"}
+            used = 2 if day == night.ended.date() else 0
+            assert status["writes_today"] == {"2187": {"used": used, "limit": 12},
+                                              "2042": {"used": 0, "limit": 12}}
             nights = run_cli("nights", "--config", str(config))
             assert nights.returncode == 0, nights.stderr
             row = nights.stdout.splitlines()[1].split()
@@ -201,7 +203,9 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             assert nothing.returncode == 0 and nothing.stdout.strip() == "nothing to restore"
 
             # `impctl restore` after the daemon died mid-night puts the owner's state back.
-            run_cli("trigger", "--kind", "constrained", "--now", "--config", str(config))
+            # Simulated daytime by now: a --now night then needs --force.
+            run_cli("trigger", "--kind", "constrained", "--now", "--force", "--config",
+                    str(config))
             wait_until(lambda: owner_state(sim.port) == (225, 0), 20,
                        "the constrained night to switch off", proc=d.proc)
             d.proc.kill()

@@ -90,7 +90,7 @@ def test_ready_status_watchdog_and_stopping(tmp_path):
                                               for m in ms), 20, d.proc)
                 # A night's progress shows up in STATUS= lines.
                 assert run_cli("trigger", "--kind", "normal", "--setpoint", "22", "--now",
-                               "--config", str(config)).returncode == 0
+                               "--force", "--config", str(config)).returncode == 0
                 notify.collect(lambda ms: any(m.get("STATUS", "").startswith(
                     "night 1 (normal 22 °C)") and "T_air" in m["STATUS"] for m in ms), 20, d.proc)
                 notify.collect(lambda ms: any(m.get("STATUS") == "night 1 done (valid)"

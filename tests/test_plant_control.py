@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,9 @@ from impctl.errors import InputError
 from impctl.model import HouseParameters, default_house
 from impctl.plant import (
     Emitter,
+    Gains,
     HeatPump,
+    HouseGains,
     Plant,
     PlantParams,
     Sensors,
@@ -20,6 +23,7 @@ from impctl.plant import (
     periodic,
     simulate_plant,
 )
+from impctl.plant.gains import solar_gains_w, sun_shape
 
 
 def _runs(flags: np.ndarray) -> list[tuple[bool, int, int]]:
@@ -35,8 +39,11 @@ def test_cycling_honours_min_times_and_hysteresis(control):
     """An on/off unit in mild weather cycles; every complete run lasts ≥ min_on, every pause
     ≥ min_off, and (curve control) each stop comes with the water above target + hysteresis."""
     houses = HouseParameters.stack([default_house()] * 3)
+    # A flat capacity curve and no defrost: nominal = sizing × design load (a unit sized for a
+    # cold design point would be several times the load at +8 °C and overshoot by design).
     hp = HeatPump(control=control, min_modulation=1.0, min_on_s=np.array([300.0, 600.0, 1200.0]),
-                  min_off_s=np.array([1200.0, 600.0, 300.0]), water_hysteresis_k=2.0)
+                  min_off_s=np.array([1200.0, 600.0, 300.0]), water_hysteresis_k=2.0,
+                  capacity_per_k=0.0, defrost=0)
     dt = 60.0
     n_steps = 2 * 1440
     run = simulate_plant(houses, PlantParams(heat_pump=hp), np.full(n_steps, 8.0), dt,
@@ -61,7 +68,7 @@ def test_cycling_honours_min_times_and_hysteresis(control):
                 assert seen < 21.0 - 0.25 if value else seen >= 21.0 + 0.25
     # Cycling units hold the room near the setpoint on average, with a visible swing.
     air = run["t_air_c"][1440:]
-    assert np.all(np.abs(air.mean(axis=0) - 21.0) < 0.8)
+    assert np.all(np.abs(air.mean(axis=0) - 21.0) < 1.0)
     assert np.all(air.max(axis=0) - air.min(axis=0) > 0.2)
 
 
@@ -85,6 +92,88 @@ def test_modulation_ramp_capacity_and_defrost():
     assert len(blocks) >= 3
     assert all(length * dt == pytest.approx(360.0) for _, _, length in blocks[:-1])
     assert (q[defrost] < 0).all() and (run["heat_meter_w"][defrost] == 0).all()
+
+
+def test_defrost_waits_for_min_run_after_a_start():
+    """Run time before a stop still counts towards the next defrost, but a restarted unit does
+    not defrost before ``defrost_min_run_s`` of run since its start (RH §3: ≥ ~35 min)."""
+    hp = HeatPump(defrost_interval_s=5400.0, defrost_min_run_s=2100.0, min_modulation=0.3,
+                  min_off_s=300.0)
+    house = default_house()
+    dt = 60.0
+    # 80 min heating at 27 °C setpoint (runs flat out), 60 min loop off, then heating again.
+    sp = np.r_[np.full(80, 27.0), np.full(60, np.nan), np.full(150, 27.0)]
+    run = simulate_plant(house, PlantParams(heat_pump=hp), np.full(len(sp), -2.0), dt,
+                         setpoint_c=sp, t_init_c=21.0)
+    on, defrost = run["compressor_on"][:, 0], run["defrost"][:, 0]
+    assert on[:80].all() and not on[80:140].any() and not defrost[:140].any()
+    restart = 140 + int(np.argmax(on[140:]))
+    first = int(np.argmax(defrost))
+    assert on[restart:first].all()
+    # 80 min before the stop + 35 min after the restart ≥ the 90-min interval: the defrost
+    # comes exactly when the minimum run since the start is reached, not in the first minute.
+    assert (first - restart + 1) * dt == pytest.approx(2100.0)
+    # Without the minimum run, the carried-over 80 min would trigger it 10 min after the start.
+    early = PlantParams(heat_pump=replace(hp, defrost_min_run_s=1200.0))
+    run = simulate_plant(house, early, np.full(len(sp), -2.0), dt, setpoint_c=sp, t_init_c=21.0)
+    assert (int(np.argmax(run["defrost"][:, 0])) - restart + 1) * dt == pytest.approx(1200.0)
+
+
+def test_default_heat_pump_holds_the_design_point():
+    """Sized on its design point: at the design outdoor temperature (−10 °C), with no gains,
+    the default heat pump holds the setpoint through its defrosts; its nominal output makes the
+    mean capacity at −10 °C, defrosts included, ``sizing`` × the design load."""
+    house = default_house()
+    params = PlantParams()
+    hp, e = params.heat_pump, params.emitter
+    n = 3 * 1440
+    run = simulate_plant(house, params, np.full(n, e.design_t_out_c), 60.0,
+                         setpoint_c=np.full(n, 20.0), t_init_c=20.0)
+    day3 = slice(2 * 1440, n)
+    air = run["t_air_c"][day3, 0]
+    assert run["defrost"][day3, 0].sum() >= 20 * hp.defrost_duration_s / 60.0   # ≥ 20 defrosts
+    # Held on average, no drift from day to day; each defrost (no buffer) cools the radiators
+    # and dips the room by well under a kelvin.
+    assert air.mean() > 19.7 and air.min() > 19.0
+    assert abs(air.mean() - run["t_air_c"][1440:2 * 1440, 0].mean()) < 0.05
+    design_load = house.network.hlc_w_per_k * (20.0 - e.design_t_out_c)
+    nominal = Plant(house, params).nominal_w
+    f = 1.0 + hp.capacity_per_k * (e.design_t_out_c - 7.0)
+    mean_cap = nominal * (hp.defrost_interval_s * f - hp.defrost_duration_s * hp.defrost_draw) / (
+        hp.defrost_interval_s + hp.defrost_duration_s)
+    assert mean_cap == pytest.approx(hp.sizing * design_load, rel=1e-12)
+    # Below the defrost band the capacity alone is sized: P_nom·f(θ_d) = sizing × load.
+    cold = PlantParams(emitter=Emitter(design_t_out_c=-15.0))
+    f = 1.0 + hp.capacity_per_k * (-15.0 - 7.0)
+    assert Plant(house, cold).nominal_w * f == pytest.approx(
+        hp.sizing * house.network.hlc_w_per_k * 35.0, rel=1e-12)
+
+
+def test_house_gains_step_by_step_follow_the_batch_profiles():
+    """HouseGains (one house, step-wise) gives the batch functions' levels and sun shape: night
+    and day levels, the sun only 08:00–16:00 with one clearness per local day, the walk's drift
+    clipped to 0…2× the level."""
+    g = Gains(night_w=200.0, day_w=500.0, drift_w=0.0, solar_peak_w=1000.0)
+    hg = HouseGains(g, seed=4)
+    t = np.arange(0, 3 * 86400, 600.0) + 0.5 * 86400          # from noon of day 0, 10-min steps
+    out = np.array([hg.step(600.0, s) for s in t])
+    hour = (t / 3600.0) % 24
+    night = (hour >= 22) | (hour < 7)
+    assert (out[night, 0] == 200.0).all() and (out[~night, 0] == 500.0).all()
+    assert (out[(hour < 8) | (hour > 16), 1] == 0).all()
+    sunny = (hour > 8) & (hour < 16)
+    clear = out[sunny, 1] / (1000.0 * sun_shape(hour[sunny]))
+    days = (t[sunny] // 86400).astype(int)
+    per_day = [np.ptp(clear[days == d]) for d in np.unique(days)]
+    assert max(per_day) < 1e-12 and len({round(c, 9) for c in clear}) == len(per_day)
+    # The batch profile has the same shape: solar / sun_shape is one clearness per day.
+    batch = solar_gains_w(hour, t // 86400, g, 1, np.random.default_rng(0))[:, 0]
+    ratio = batch[sunny] / (1000.0 * sun_shape(hour[sunny]))
+    assert all(np.ptp(ratio[days == d]) < 1e-12 for d in np.unique(days))
+    # Drift: a random walk, clipped at 0 and 2× the level.
+    walk = HouseGains(Gains(night_w=100.0, drift_w=80.0), seed=1)
+    vals = np.array([walk.step(3600.0, 23 * 3600.0)[0] for _ in range(200)])
+    assert vals.min() >= 0.0 and vals.max() <= 200.0 and vals.std() > 20.0
 
 
 def test_dhw_pauses_space_heating_and_loop_off_stops_it():

@@ -56,3 +56,25 @@ def test_generate_dataset_realistic_is_reproducible():
     assert iso.households[same].equals(a.households[same])
     assert not np.allclose(iso.nights["decay_rate_per_h"].fillna(0),
                            a.nights["decay_rate_per_h"].fillna(0))
+
+
+def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():
+    """With stop_at_t_min a constrained night's samples end at the first sensed T_air below
+    T_min after the emission lag, and the heating resumes there."""
+    houses = sample_households(6, seed=7)
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), band_k=0.5, stop_at_t_min=True)
+    res = simulate_imp_plant(houses, sample_params(6, 7), config=cfg, seed=1)
+    cons = np.flatnonzero((res.nights["kind"] == "constrained").to_numpy())
+    lag = int(np.ceil(cfg.emitter_lag_h * 3600 / cfg.step_s))
+    stopped = 0
+    for i in cons:
+        t_air, valid = res.t_air_c[:, i], res.valid[:, i]
+        last = int(np.flatnonzero(valid)[-1])
+        below = np.flatnonzero(t_air[lag:] < 22.0 - 0.5) + lag
+        if below.size and below[0] < len(t_air) - 1:
+            stopped += 1
+            assert last == below[0]
+            assert res.q_hc_w[last + 1:, i].max() > 0      # heating resumed after the stop
+        else:
+            assert valid[:int(res.nights["duration_h"].iloc[i] * 6)].all()
+    assert stopped >= 1

@@ -54,7 +54,7 @@ def test_daemon_listens_on_nothing_and_its_store_is_not_world_accessible(tmp_pat
         config = write_config(tmp_path / "config.toml", daemon_mapping(
             state, sim.port, sim.clock, night={"window": "22:00-23:00", "preheat_h": 0.5}))
         # `impctl trigger` before the daemon ever ran creates the store: 0640 under umask 022.
-        queued = subprocess.run([*IMPCTL, "trigger", "--kind", "constrained", "--now",
+        queued = subprocess.run([*IMPCTL, "trigger", "--kind", "constrained", "--now", "--force",
                                  "--config", str(config)], capture_output=True, text=True,
                                 cwd=ROOT, preexec_fn=_shell_umask, timeout=60)
         assert queued.returncode == 0, queued.stderr

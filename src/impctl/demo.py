@@ -199,6 +199,10 @@ async def _watch(cfg, clock, sim, progress: _Progress, trainer, task) -> None:
 
 def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     """Run the whole demo; returns the summary dict (also written to OUT/summary.json)."""
+    # Inputs first: a bad house file or --out must leave nothing behind (not even demo.log).
+    house = load_house(opts.house_path) if opts.house_path else demo_house()
+    if opts.out.exists() and not opts.out.is_dir():
+        raise InputError("--out must be a directory", opts.out)
     opts.out.mkdir(parents=True, exist_ok=True)
     # The daemon's own log (every write, restore and night verdict) goes to a file; the
     # console shows the demo's progress lines.
@@ -207,7 +211,6 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
                         handlers=[logging.FileHandler(opts.out / "demo.log", mode="w")])
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
     logging.getLogger("apscheduler").setLevel(logging.WARNING)
-    house = load_house(opts.house_path) if opts.house_path else demo_house()
     progress = _Progress(echo)
     from .classifiers.saved import default_model_dir
 
@@ -223,7 +226,8 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
     progress.line("exporting the valid nights and fitting (impctl fit)")
-    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv)), check=True,
+    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
+                        "--force"), check=True,
                    capture_output=True)
     fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
                               "--model-dir", str(model_dir)), capture_output=True, text=True)

@@ -22,6 +22,10 @@ _MAY_BE_EMPTY = ("setpoint", "phi_hc")
 #: Plausible temperatures; outside them the file is refused (a sensor sentinel such as −600,
 #: tenths of a degree, Fahrenheit) — as for NIGHTS.csv.
 PLAUSIBLE_C = {"t_out": (-60.0, 60.0), "setpoint": (5.0, 35.0)}
+#: Plausible powers [W]: a dwelling's heating (as NIGHTS.csv q_hc) and its gains; a negative
+#: power (cooling) or one in mW or kW of a wrong column is refused.
+PLAUSIBLE_W = {"phi_hc": (0.0, 100_000.0), "internal_gains": (0.0, 50_000.0),
+               "solar_gains": (0.0, 100_000.0)}
 
 
 @dataclass(frozen=True)
@@ -55,12 +59,14 @@ def read_drivers(path: Path, step: float | None, tz: str) -> tuple[pd.DataFrame,
         path, required=("timestamp", "t_out"), numeric=_NUMERIC, may_be_empty=_MAY_BE_EMPTY,
         tz=tz,
     )
-    for col, (lo, hi) in PLAUSIBLE_C.items():
+    limits = {**{c: (lo, hi, "°C") for c, (lo, hi) in PLAUSIBLE_C.items()},
+              **{c: (lo, hi, "W") for c, (lo, hi) in PLAUSIBLE_W.items()}}
+    for col, (lo, hi, unit) in limits.items():
         values = table[col].to_numpy(dtype=float) if col in table else np.array([])
         bad = np.isfinite(values) & ((values < lo) | (values > hi))
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} °C",
+            raise InputError(f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}",
                              path, f"row {i + 2}")
     data_step = step_seconds(table["timestamp"], path)
     if step is not None and data_step is not None and step != data_step:

@@ -44,14 +44,25 @@ def parse_timestamps(raw: pd.Series, path: str | Path, tz: str, column: str = "t
         row = _first_bad(~has_offset)
         raise InputError(f"{column} mixes UTC offsets and local times", path, f"row {row}")
     naive = pd.DatetimeIndex(pd.to_datetime(text, format="ISO8601"))
-    try:
-        return naive.tz_localize(tz, ambiguous="raise", nonexistent="raise")
-    except Exception as exc:  # pytz/zoneinfo raise several types for DST gaps and folds
+    local = naive.tz_localize(tz, ambiguous="NaT", nonexistent="NaT")
+    bad = local.isna()
+    if bad.any():
+        row = _first_bad(bad)
+        stamp = naive[row - 2]
+        one = naive[row - 2:row - 1]
+        first = one.tz_localize(tz, ambiguous=np.array([True]), nonexistent="NaT")[0]
+        if pd.isna(first):
+            what = "does not exist (clocks skip it at the spring DST change)"
+            how = "write timestamps with their UTC offset"
+        else:
+            second = one.tz_localize(tz, ambiguous=np.array([False]))[0]
+            what = "occurs twice (clocks go back at the autumn DST change)"
+            how = (f"write timestamps with their UTC offset ({first.isoformat()} the first "
+                   f"time, {second.isoformat()} the second)")
         raise InputError(
-            f"local {column} is ambiguous or does not exist in {tz} ({exc}); "
-            "write timestamps with a UTC offset",
-            path,
-        ) from None
+            f"local {column} {stamp:%Y-%m-%d %H:%M} {what} in {tz}, so the time is not known: "
+            f"{how}, or give --tz UTC if the logger's clock runs on UTC", path, f"row {row}")
+    return local
 
 
 def read_table(

@@ -86,7 +86,10 @@ def winter_weather(
     start_ts = pd.Timestamp(start)
     if start_ts.tzinfo is None:
         start_ts = start_ts.tz_localize(tz)
-    n = int(round(days * 86400.0 / step_s))
+    n = int(round(days * 86400.0 / step_s)) if step_s > 0 and days > 0 else 0
+    if n < 1:
+        raise InputError(f"{days:g} days at a {step_s:g} s step hold no sample",
+                         place="--days")
     index = start_ts + pd.to_timedelta(np.arange(n) * step_s, unit="s")
     rng = np.random.default_rng(seed)
     n_days = int(np.ceil(days)) + 2

@@ -55,30 +55,35 @@ def demo_command(house_path, nights, speed, out, seed, model_dir, households) ->
 
 @cli.command("report")
 @click.option("--config", "config_path", type=click.Path(path_type=Path),
-              default="/etc/impctl/config.toml", show_default=True)
+              default="/etc/impctl/config.toml", show_default=True,
+              help="Daemon configuration: where the store is (state_dir) and the time zone of "
+                   "the tables. Not read when --db is given.")
 @click.option("--db", "db_path", type=click.Path(path_type=Path), default=None,
               help="Store file (default: impctl.db in the config's state_dir).")
 @click.option("--fit", "fit_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="A fit JSON (default: the newest fit in the store).")
+              default=None, help="A fit JSON from `impctl fit --json` (default: the newest "
+                                 "fit in the store).")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              default=Path("impctl-report"), show_default=True)
+              default=Path("impctl-report"), show_default=True,
+              help="Output directory for report.html and its fig_*.png figures; created if "
+                   "missing (its parent must exist). Files are written only when the whole "
+                   "report succeeded.")
 def report_command(config_path, db_path, fit_path, out) -> None:
-    """Write the HTML report with its PNG figures for a campaign."""
-    import json
+    """Write the HTML report with its PNG figures for a campaign.
 
+    Reads the nights from the store (--db, or the store of --config) and the fit from --fit or
+    the store; writes OUT/report.html and OUT/fig_nights.png, fig_heat_demand.png,
+    fig_classes.png, fig_parameters.png.
+    """
     from ..report import write_report
+    from ..report.fit_json import read_fit_json
 
     tz = "Europe/Ljubljana"
+    fit = read_fit_json(fit_path) if fit_path is not None else None
     if db_path is None:
         from ..daemon.config import load_config
 
         cfg = load_config(config_path)
         db_path, tz = cfg.db_path, cfg.timezone
-    fit = None
-    if fit_path is not None:
-        try:
-            fit = json.loads(Path(fit_path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError(f"not a readable fit JSON: {exc}", fit_path) from None
     page = write_report(db_path, out, fit=fit, tz=tz)
     click.echo(f"report: {page}")

@@ -11,8 +11,9 @@ import json
 import logging
 import os
 import sys
-from datetime import timedelta
+from datetime import datetime, timedelta
 from pathlib import Path
+from zoneinfo import ZoneInfo
 
 import click
 
@@ -31,13 +32,19 @@ def _load(config_path: Path):
     return load_config(config_path)
 
 
-def _setup_logging(level: str) -> None:
+def _setup_logging(level: str, timezone: str = "UTC") -> None:
     # Under systemd (JOURNAL_STREAM set) journald adds timestamps; a <N> prefix sets priority.
     journald = "JOURNAL_STREAM" in os.environ
     fmt = "%(levelname)s %(name)s: %(message)s" if journald else (
         "%(asctime)s %(levelname)s %(name)s: %(message)s")
+    zone = ZoneInfo(timezone)
 
     class _Prio(logging.Formatter):
+        def formatTime(self, record: logging.LogRecord, datefmt: str | None = None) -> str:
+            # Local time of the configured zone WITH its offset, like the messages' times.
+            return datetime.fromtimestamp(record.created, zone).isoformat(
+                timespec="milliseconds")
+
         def format(self, record: logging.LogRecord) -> str:
             text = super().format(record)
             if not journald:
@@ -60,27 +67,51 @@ def daemon_command(config_path: Path) -> None:
     from ..daemon.service import Daemon
 
     cfg = _load(config_path)
-    _setup_logging(cfg.log_level)
+    _setup_logging(cfg.log_level, cfg.timezone)
     sys.exit(asyncio.run(Daemon(cfg).run()))
 
 
 @cli.command("trigger")
 @_config_option
-@click.option("--kind", type=click.Choice(["constrained", "normal"]), required=True,
-              help="Heating off (constrained) or held at the setpoint (normal).")
+@click.option("--kind", type=click.Choice(["constrained", "normal"]), default=None,
+              help="Heating off (constrained) or held at the setpoint (normal). Required "
+                   "unless --cancel.")
 @click.option("--setpoint", type=float, default=None,
               help="T_set [°C] (default: the campaign's constrained setpoint).")
-@click.option("--tonight", "when", flag_value="tonight", default=True,
-              help="Run at tonight's window (default).")
-@click.option("--now", "when", flag_value="now", help="Start now (preheat, then the window).")
+@click.option("--tonight", is_flag=True, help="Run at the next night window (the default).")
+@click.option("--now", is_flag=True,
+              help="Start now (preheat, then a window's length); outside the night window "
+                   "and its preheat only with --force.")
+@click.option("--expires-h", "expires_h", type=float, default=None,
+              help="Drop the request unstarted after this many hours of real time [h] "
+                   "(default: 1 h for --now; the end of the next night for --tonight).")
+@click.option("--force", is_flag=True, help="Allow a --now night in daytime.")
+@click.option("--cancel", is_flag=True, help="Cancel every request not yet started.")
 @click.option("--foreground", is_flag=True,
               help="Run one night in this process, without a daemon (Ctrl-C restores).")
-def trigger_command(config_path: Path, kind: str, setpoint: float | None, when: str,
-                    foreground: bool) -> None:
+def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
+                    tonight: bool, now: bool, expires_h: float | None, force: bool,
+                    cancel: bool, foreground: bool) -> None:
     """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
+    from ..daemon.lock import DaemonLock, probe
+    from ..daemon.schedule import request_expiry
+    from ..daemon.service import clock_from_config
     from ..store import Store
 
     cfg = _load(config_path)
+    if cancel:
+        if kind or now or tonight or foreground or setpoint is not None:
+            raise InputError("--cancel takes no other option", place="--cancel")
+        _cancel_requests(cfg)
+        return
+    if kind is None:
+        raise InputError("missing --kind constrained|normal", place="--kind")
+    if now and tonight:
+        raise InputError("--now and --tonight are mutually exclusive; choose one",
+                         place="--now/--tonight")
+    if expires_h is not None and not (0 < expires_h <= 72):
+        raise InputError(f"{expires_h:g} h: must lie in (0, 72] h", place="--expires-h")
+    when = "now" if now else "tonight"
     sp = cfg.campaign.constrained_setpoint_c if setpoint is None else setpoint
     lo, hi = cfg.heatpump.writes.loop1_setpoint_c
     band = cfg.night.comfort_band_k
@@ -88,16 +119,70 @@ def trigger_command(config_path: Path, kind: str, setpoint: float | None, when: 
     if not lo <= sp <= hi or top > hi:
         raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
                          f"[{lo:g}, {hi:g}] °C", place="--setpoint")
+    clock = clock_from_config(cfg)
+    daytime = _daytime(cfg, clock.now())
+    if when == "now" and daytime and not force:
+        raise InputError(f"{daytime}: a --now night would run in daytime; add --force to run "
+                         "it anyway, or use --tonight", place="--now")
     if foreground:
-        _setup_logging(cfg.log_level)
-        sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when)))
+        _setup_logging(cfg.log_level, cfg.timezone)
+        with Store(cfg.db_path):  # creates the state directory, or one clear line
+            pass
+        with DaemonLock(cfg.state_dir, role="trigger --foreground") as lock:
+            sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
+    expires = request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
-        rid = store.add_request(kind, sp, when)
-    click.echo(f"queued request {rid}: {kind} night at {sp:g} °C ({when}) for the daemon")
+        rid = store.add_request(kind, sp, when, expires=expires)
+    tz = ZoneInfo(cfg.timezone)
+    click.echo(f"queued request {rid}: {kind} night at {sp:g} °C ({when}) for the daemon; "
+               f"expires unstarted at {expires.astimezone(tz):%Y-%m-%d %H:%M %Z}")
+    info = probe(cfg.state_dir)
+    if not info.running or info.stale:
+        click.echo(f"impctl: warning: daemon {info.describe()}; the request waits until a "
+                   f"daemon starts on {cfg.state_dir} (cancel it with impctl trigger --cancel)",
+                   err=True)
 
 
-async def _foreground_night(cfg, kind: str, sp: float, when: str) -> int:
+def _daytime(cfg, now) -> str | None:
+    """Why ``now`` is daytime (outside the night window and its preheat), or None."""
+    local = now.astimezone(ZoneInfo(cfg.timezone))
+    s_min, e_min = cfg.window_minutes
+    first = (s_min - round(cfg.night.preheat_h * 60)) % 1440
+    minute = local.hour * 60 + local.minute
+    inside = (first <= minute < e_min) if first < e_min else (minute >= first or minute < e_min)
+    if inside:
+        return None
+    return (f"it is {local:%H:%M %Z}, outside the night window {cfg.night.window} and its "
+            f"{cfg.night.preheat_h:g} h preheat")
+
+
+def _cancel_requests(cfg) -> None:
+    from ..store import Store
+
+    if not cfg.db_path.exists():
+        click.echo("nothing to cancel (no store yet)")
+        return
+    with Store(cfg.db_path) as store:
+        done = [r for r in store.pending_requests() if store.close_request(r.id, "cancelled")]
+        for r in done:
+            store.add_event("info", f"request {r.id} cancelled")
+    if not done:
+        click.echo("nothing to cancel: no request is waiting (a night already running is "
+                   "stopped with systemctl restart impctl, which restores)")
+        return
+    for r in done:
+        click.echo(f"cancelled request {r.id}: {r.kind} night ({r.when})")
+
+
+async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     import signal
+
+    from ..daemon.lock import HEARTBEAT_S
+
+    async def heartbeat() -> None:  # `impctl status` shows this process as alive
+        while True:
+            lock.heartbeat()
+            await asyncio.sleep(HEARTBEAT_S)
 
     from ..controller import NightController, NightRequest
     from ..daemon.schedule import next_act_time, window_after_act
@@ -121,8 +206,12 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str) -> int:
                 start, end = window_after_act(next_act_time(cfg, clock.now()), cfg)
             ctl = NightController(client, store, clock, policy_from_config(cfg),
                                   on_status=lambda t: click.echo(t, err=True), stop=stop)
-            night = await ctl.run(NightRequest(kind, sp, start, end, cfg.night.comfort_band_k,
-                                               source="trigger"))
+            beat = asyncio.create_task(heartbeat())
+            try:
+                night = await ctl.run(NightRequest(kind, sp, start, end,
+                                                   cfg.night.comfort_band_k, source="trigger"))
+            finally:
+                beat.cancel()
         finally:
             client.close()
     click.echo(f"night {night.id}: {night.state}, {'valid' if night.valid else 'not valid'}"
@@ -139,7 +228,7 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
     from ..store import Store
 
     cfg = _load(config_path)
-    _setup_logging(cfg.log_level)
+    _setup_logging(cfg.log_level, cfg.timezone)
     if not cfg.db_path.exists():
         click.echo("nothing to restore (no store yet)")
         return
@@ -190,23 +279,31 @@ def status_command(config_path: Path, as_json: bool) -> None:
 
 @cli.command("nights")
 @_config_option
-def nights_command(config_path: Path) -> None:
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+def nights_command(config_path: Path, as_json: bool) -> None:
     """List the stored nights with their validity and reasons."""
     from ..store import Store
 
     cfg = _load(config_path)
+    tz = ZoneInfo(cfg.timezone)
     with Store(cfg.db_path, create=False) as store:
-        rows = store.nights()
-        click.echo(f"{'id':>4} {'kind':<11} {'T_set °C':>8} {'window start (local)':<22} "
-                   f"{'state':<11} {'valid':<5} {'samples':>7}  reasons")
-        from zoneinfo import ZoneInfo
-
-        tz = ZoneInfo(cfg.timezone)
-        for n in rows:
-            valid = "-" if n.valid is None else ("yes" if n.valid else "no")
-            click.echo(f"{n.id:>4} {n.kind:<11} {n.setpoint_c:>8.1f} "
-                       f"{n.window_start.astimezone(tz):%Y-%m-%d %H:%M %Z}  {n.state:<11} "
-                       f"{valid:<5} {store.sample_count(n.id):>7}  {'; '.join(n.reasons)}")
+        rows = [(n, store.sample_count(n.id)) for n in store.nights()]
+    if as_json:
+        click.echo(json.dumps([{
+            "id": n.id, "kind": n.kind, "setpoint_c": n.setpoint_c, "t_min_c": n.t_min_c,
+            "t_max_c": n.t_max_c, "window_start": n.window_start.isoformat(),
+            "window_end": n.window_end.isoformat(), "state": n.state, "source": n.source,
+            "valid": n.valid, "samples": count, "reasons": list(n.reasons),
+            "started": n.started and n.started.isoformat(),
+            "ended": n.ended and n.ended.isoformat()} for n, count in rows], indent=2))
+        return
+    click.echo(f"{'id':>4} {'kind':<11} {'T_set °C':>8} {'window start (local)':<22} "
+               f"{'state':<11} {'valid':<5} {'samples':>7}  reasons")
+    for n, count in rows:
+        valid = "-" if n.valid is None else ("yes" if n.valid else "no")
+        click.echo(f"{n.id:>4} {n.kind:<11} {n.setpoint_c:>8.1f} "
+                   f"{n.window_start.astimezone(tz):%Y-%m-%d %H:%M %Z}  {n.state:<11} "
+                   f"{valid:<5} {count:>7}  {'; '.join(n.reasons)}")
 
 
 @cli.command("export")
@@ -220,10 +317,17 @@ def nights_command(config_path: Path) -> None:
 @click.option("--all", "include_invalid", is_flag=True, help="Include nights not valid.")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
               help="NIGHTS file to write (timestamp,t_air,t_out,q_hc,setpoint,heating,night,"
-                   "kind).")
+                   "kind); its directory must exist.")
+@click.option("--force", is_flag=True,
+              help="Overwrite an existing file (never a database: the store is refused).")
 def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids: str | None,
-                   include_invalid: bool, out_path: Path) -> None:
-    """Write stored nights in the measured-data format of ``impctl fit``."""
+                   include_invalid: bool, out_path: Path, force: bool) -> None:
+    """Write stored nights in the measured-data format of ``impctl fit``.
+
+    Never writes onto the store or another database, into a directory that does not exist,
+    or onto an existing file without --force; unknown night ids or nothing to export give
+    exit status 2 and write nothing.
+    """
     from ..store import Store
     from ..store.export import export_nights
 
@@ -237,5 +341,10 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
             raise InputError(f"expected comma-separated ids, got {night_ids!r}",
                              place="--nights") from None
     with Store(db_path, create=False) as store:
-        n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids))
+        n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
+                          force=force)
     click.echo(f"wrote {n} samples to {out_path}")
+
+
+# `impctl check-config` lives in its own module; importing it registers the command.
+from . import device_config  # noqa: E402, F401

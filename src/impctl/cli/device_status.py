@@ -6,11 +6,19 @@ from zoneinfo import ZoneInfo
 
 
 def collect_status(cfg) -> dict:
-    """Current night with its latest sample, campaign, last fit, link events, write counters."""
+    """Daemon liveness, current night with its latest sample, the next night, campaign, last
+    fit, link events, write counters."""
+    from ..daemon.lock import probe
     from ..heatpump import WriteBudget
     from ..store import Store
 
-    out: dict = {"state_dir": cfg.state_dir}
+    info = probe(cfg.state_dir)
+    out: dict = {"state_dir": cfg.state_dir, "daemon": {
+        "running": info.running, "responding": info.running and not info.stale,
+        "pid": info.pid, "role": info.role,
+        "heartbeat_age_s": None if info.heartbeat_age_s is None else round(
+            info.heartbeat_age_s, 1),
+        "summary": info.describe()}}
     with Store(cfg.db_path, create=False) as store:
         running = store.nights(states=["preparing", "active", "restoring"])
         if running:
@@ -18,6 +26,8 @@ def collect_status(cfg) -> dict:
             samples = store.samples(night.id)
             last = samples[-1] if samples else None
             out["current_night"] = {
+                # Without a live daemon the row is what a dead process left: nobody runs it.
+                "supervised": info.running and not info.stale,
                 "id": night.id, "kind": night.kind, "state": night.state,
                 "setpoint_c": night.setpoint_c, "t_min_c": night.t_min_c,
                 "window_start": night.window_start, "window_end": night.window_end,
@@ -39,6 +49,7 @@ def collect_status(cfg) -> dict:
         out["events"] = [{"ts": t, "level": lvl, "message": m} for t, lvl, m in store.events(8)]
         out["pending_restore"] = [e.register for e in store.journal_pending()]
         out["pending_requests"] = len(store.pending_requests())
+        out["next_night"] = _next_night(store, cfg)
     if cfg.budget_path.exists():
         from ..daemon.service import clock_from_config
 
@@ -46,17 +57,35 @@ def collect_status(cfg) -> dict:
         # clock of a demo or test, else real time).
         day = clock_from_config(cfg).now().date()
         with WriteBudget(cfg.budget_path, cfg.heatpump.writes.daily_budget) as budget:
-            out["writes_today"] = {str(ma): f"{budget.used(ma, day)}/{budget.limit(ma)}"
+            out["writes_today"] = {str(ma): {"used": budget.used(ma, day),
+                                             "limit": budget.limit(ma)}
                                    for ma in (2187, 2042)}
     else:
         out["writes_today"] = {}
     return out
 
 
+def _next_night(store, cfg) -> dict | None:
+    """What the daemon would run at its next night (without taking any request)."""
+    from ..daemon.schedule import next_act_time, peek_next_night
+    from ..daemon.service import clock_from_config
+
+    act = next_act_time(cfg, clock_from_config(cfg).now())
+    req, request_id = peek_next_night(store, cfg, act)
+    if req is None:
+        why = ("campaign complete" if cfg.campaign.enabled else
+               "campaign disabled and no manual request")
+        return {"preheat_start": act, "kind": None, "why_none": why}
+    return {"preheat_start": act, "kind": req.kind, "setpoint_c": req.setpoint_c,
+            "t_min_c": req.t_min_c, "t_max_c": req.t_max_c, "window_start": req.window_start,
+            "window_end": req.window_end, "source": req.source, "request": request_id,
+            "campaign_seq": req.campaign_seq}
+
+
 def format_status(st: dict, tz: str = "UTC") -> str:
     """The status as a few readable lines."""
     zone = ZoneInfo(tz)
-    lines = []
+    lines = [f"daemon:    {st['daemon']['summary']}"]
     cur = st["current_night"]
     if cur is None:
         lines.append("night:     none running")
@@ -64,6 +93,10 @@ def format_status(st: dict, tz: str = "UTC") -> str:
         s = cur["last_sample"] or {}
         lines.append(f"night:     {cur['id']} {cur['kind']} T_set {cur['setpoint_c']:g} °C, "
                      f"{cur['state']}, {cur['samples']} samples")
+        if not cur["supervised"]:
+            lines.append(f"WARNING:   night {cur['id']} is NOT supervised: the process running "
+                         "it is gone; the values below are its last ones. Start the daemon "
+                         "(it restores first) or run impctl restore")
         if s:
             def fmt(v, unit, spec=".1f"):
                 return "—" if v is None else f"{v:{spec}} {unit}"
@@ -71,6 +104,23 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                          f"T_air {fmt(s['t_air_c'], '°C')}, T_out {fmt(s['t_out_c'], '°C')}, "
                          f"Q_HC {fmt(s['q_hc_w'], 'W', '.0f')}, "
                          f"P_el {fmt(s['p_el_w'], 'W', '.0f')}")
+    nxt = st.get("next_night")
+    if nxt is not None:
+        act = nxt["preheat_start"].astimezone(zone)
+        if nxt["kind"] is None:
+            lines.append(f"next:      nothing at the next night ({act:%Y-%m-%d}): "
+                         f"{nxt['why_none']}")
+        else:
+            what = (f"T_max {nxt['t_max_c']:g} → T_min {nxt['t_min_c']:g} °C"
+                    if nxt["kind"] == "constrained" else f"held at {nxt['setpoint_c']:g} °C")
+            origin = (f"manual request {nxt['request']}" if nxt["request"] is not None
+                      else "campaign")
+            lines.append(f"next:      {nxt['kind']} night ({what}, {origin}), window "
+                         f"{nxt['window_start'].astimezone(zone):%Y-%m-%d %H:%M}–"
+                         f"{nxt['window_end'].astimezone(zone):%H:%M %Z}, preheat from "
+                         f"{act:%H:%M}")
+    if st.get("pending_requests"):
+        lines.append(f"requests:  {st['pending_requests']} waiting")
     camp = st["campaign"]
     lines.append(f"campaign:  {camp['valid']}/{camp['planned']} valid nights")
     fit = st["last_fit"]
@@ -85,6 +135,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
     if st["pending_restore"]:
         lines.append("RESTORE PENDING: " + ", ".join(st["pending_restore"]))
-    writes = ", ".join(f"{ma}: {v}" for ma, v in st["writes_today"].items()) or "none"
+    writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
+                       for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
     return "\n".join(lines)

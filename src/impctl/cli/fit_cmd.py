@@ -5,15 +5,24 @@ torch is imported inside the command only, so the CLI (and the daemon) start wit
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 import click
 
 from ..errors import InputError
 from . import cli
+from .checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
+
+#: Nights fitted by default / accepted by --max-nights: the fit's memory and time grow about
+#: linearly with the nights (bench/fit_large.py); an IMP campaign has 5–8.
+DEFAULT_MAX_NIGHTS = 30
+MAX_NIGHTS_RANGE = (2, 120)
 
 _NEEDS = {
     "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
@@ -47,7 +56,7 @@ def _write_json(path: Path, data: dict) -> None:
               default=None, help="Write the full result as JSON here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Draw measured vs fitted T_air and heat power (PNG).")
-@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+@click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 @click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
               show_default=True,
@@ -59,12 +68,20 @@ def _write_json(path: Path, data: dict) -> None:
               help="Normal nights: heat power predicted from the held T_air (demand), or the "
                    "paper's eq. 5 driven by the measured power series or its night mean.")
 @click.option("--ach-infl", default=0.01, show_default=True, type=float,
-              help="Fixed infiltration air changes [1/h] (the classifiers' population).")
+              callback=house_limit("ach_infl"),
+              help="Fixed infiltration air changes [1/h] (the classifiers' population); "
+                   "0–20.")
 @click.option("--ach-vent", default=0.0, show_default=True, type=float,
-              help="Fixed ventilation air changes [1/h].")
+              callback=house_limit("ach_vent"),
+              help="Fixed ventilation air changes [1/h]; 0–20.")
+@click.option("--max-nights", default=DEFAULT_MAX_NIGHTS, show_default=True, type=int,
+              callback=bounded(MAX_NIGHTS_RANGE),
+              help="Fit at most this many nights: the most recent ones, a third of them "
+                   "constrained (memory and time grow with the nights; "
+                   f"{MAX_NIGHTS_RANGE[0]}–{MAX_NIGHTS_RANGE[1]}).")
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
-        ach_vent: float) -> None:
+        ach_vent: float, max_nights: int) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -75,14 +92,35 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     from ..fit.estimator import NightFit
     from ..fit.report import fit_to_dict, format_table, plot_fit
     from ..imp import EMISSION_LAG_H, read_nights
+    from ..imp.gaps import cut_at_gaps
+    from ..imp.plausibility import check_units, fit_problem
 
-    if ach_infl < 0 or ach_vent < 0 or ach_infl + ach_vent <= 0:
-        raise InputError("--ach-infl and --ach-vent must be >= 0 with a positive sum")
+    if ach_infl + ach_vent <= 0:
+        raise InputError("--ach-infl and --ach-vent must have a positive sum")
+    from ..store.export import refuse_database
+
+    refuse_database(json_path, "--json")
+    refuse_database(plot_path, "--plot")
+    refuse_large_file(nights_path, MAX_FILE_MB)
+    if file_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
+        click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)
     nights = read_nights(nights_path, tz)
+    check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
                          ach_vent=ach_vent)
-    kept, _, skipped = prepare_nights(nights, estimator.emission_lag_h, estimator.min_night_h,
+    cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
+    kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
                                       estimator.resume_threshold_w)
+    chosen = _most_recent(kept, max_nights)
+    if len(chosen) < len(kept):
+        ids = {n.night_id for n in chosen}
+        nights = [n for n in nights if n.night_id in ids]
+        cut = [n for n in cut if n.night_id in ids]
+        first, last = chosen[0].night_id, chosen[-1].night_id
+        limit_note = (f"{len(kept)} usable nights in the file; the fit uses the {len(chosen)} "
+                      f"most recent ({first} … {last}; --max-nights {max_nights})")
+    else:
+        limit_note = None
     missing = [_NEEDS[k].format(h=estimator.min_night_h, lag=EMISSION_LAG_H)
                for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
     if missing:
@@ -92,9 +130,19 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
             "too little data to fit: missing " + " and ".join(missing)
             + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
 
-    classes, ranges, notes = _classes(nights, model_dir)
-    estimator.fit(nights, ranges)
+    classes, ranges, notes = _classes(cut, model_dir)
+    if limit_note:
+        notes.append(limit_note)
+    click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
+               f"constrained) …", err=True)
+    with _ticking("fitting"):
+        estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
+    # A fit no house gives is a unit or column problem: refuse it, write nothing.
+    why = fit_problem(summary["lumped"]["hlc"]["value"],
+                      (summary["validation"].get("mean") or {}).get("eps_pct"))
+    if why is not None:
+        raise InputError(why, nights_path)
     click.echo(format_table(summary))
     if json_path is not None:
         _write_json(json_path, summary)
@@ -102,6 +150,37 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if plot_path is not None:
         plot_fit(estimator, plot_path)
         click.echo(f"plot written to {plot_path}")
+
+
+@contextlib.contextmanager
+def _ticking(what: str, every_s: float = 5.0):
+    """A line on stderr every ``every_s`` seconds while the block runs (long fits)."""
+    done = threading.Event()
+    started = time.monotonic()
+
+    def tick() -> None:
+        while not done.wait(every_s):
+            click.echo(f"  … {what}, {time.monotonic() - started:.0f} s", err=True)
+
+    thread = threading.Thread(target=tick, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+
+
+def _most_recent(kept: list, max_nights: int) -> list:
+    """At most ``max_nights`` nights, the most recent; a third of them (at least one)
+    constrained when there are enough, the rest normal; in time order."""
+    cons = [n for n in kept if n.kind == "constrained"]
+    normal = [n for n in kept if n.kind == "normal"]
+    n_cons = min(len(cons), max(1, max_nights // 3))
+    n_normal = min(len(normal), max_nights - n_cons)
+    n_cons = min(len(cons), max_nights - n_normal)
+    chosen = cons[len(cons) - n_cons:] + normal[len(normal) - n_normal:]
+    return sorted(chosen, key=lambda n: n.start)
 
 
 def _classes(nights, model_dir):

@@ -14,6 +14,7 @@ import click
 
 from ..errors import InputError
 from . import cli
+from .checks import MAX_FILE_MB, refuse_large_file, time_zone
 
 #: Fewest households ``impctl train`` accepts: a test split of 20 % must hold every class.
 MIN_HOUSEHOLDS = 20
@@ -94,23 +95,31 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
 @click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Where `impctl train` wrote the models [default: per-user data dir].")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
-@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+@click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
     from ..classifiers.saved import classify_nights
     from ..imp import read_nights
+    from ..imp.gaps import cut_at_gaps
+    from ..imp.plausibility import check_units
     from ..population.ranges import UNITS
 
+    refuse_large_file(nights_path, MAX_FILE_MB)
     nights = read_nights(nights_path, tz)
+    check_units(nights, nights_path)
+    nights, gaps = cut_at_gaps(nights)
     results = classify_nights(nights, model_dir)
     kinds = {k: sum(n.kind == k for n in nights) for k in ("constrained", "normal")}
     if as_json:
         click.echo(json.dumps({
             "classes": {name: r.as_dict() for name, r in results.items()},
             "nights": {**kinds, "ids": [n.night_id for n in nights]},
+            "gaps": [g.as_dict() for g in gaps],
         }, indent=2))
         return
+    for g in gaps:
+        click.echo(f"gap: {g.describe()}")
     click.echo(f"{len(nights)} nights: {kinds['constrained']} constrained, "
                f"{kinds['normal']} normal")
     click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}{'probability':>11}")

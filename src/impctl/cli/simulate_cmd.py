@@ -12,9 +12,12 @@ import click
 
 from ..errors import InputError
 from . import cli
+from .checks import SETPOINT_C, SIM_DAYS, SIM_STEP_S, T_M_INIT_C, bounded, time_zone
 
 #: impctl.weather.DEFAULT_TZ, repeated here to keep pandas out of the CLI's import.
 _DEFAULT_TZ = "Europe/Ljubljana"
+#: Most steps of the built-in weather (a year at 10 s; ~0.5 GB of arrays at the limit).
+MAX_STEPS = 3_200_000
 
 
 @cli.command("simulate")
@@ -26,19 +29,22 @@ _DEFAULT_TZ = "Europe/Ljubljana"
               help="Instead of --drivers: an EPW or timestamp,t_out CSV weather file.")
 @click.option("--out", "out_path", type=click.Path(path_type=Path),
               help="OUT.csv: timestamp,t_out,t_air,t_s,t_m,phi_hc (°C, W).")
-@click.option("--setpoint", type=float, default=None,
-              help="Heating setpoint [°C] when the drivers have no setpoint column (default 21).")
+@click.option("--setpoint", type=float, default=None, callback=bounded(SETPOINT_C, "°C"),
+              help="Heating setpoint [°C] when the drivers have no setpoint column (default 21); "
+                   "5–35.")
 @click.option("--heating-off", "heating_off", default=None,
               help="Daily local window with heating off, e.g. 22:00-05:00.")
 @click.option("--t-m-init", "t_m_init", type=float, default=None,
+              callback=bounded(T_M_INIT_C, "°C"),
               help="Mass temperature before the first step [°C] "
-                   "(default: first setpoint, else 20).")
-@click.option("--step", type=float, default=None,
-              help="Time step [s] (default: from the timestamps).")
+                   "(default: first setpoint, else 20); −40–60.")
+@click.option("--step", type=float, default=None, callback=bounded(SIM_STEP_S, "s"),
+              help="Time step [s] (default: from the timestamps); 1–86400.")
 @click.option("--days", type=float, default=31.0, show_default=True,
-              help="Length of the built-in weather [days] (no --drivers).")
+              callback=bounded(SIM_DAYS, "days"),
+              help="Length of the built-in weather [days] (no --drivers); 0.1–3660.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Built-in weather seed.")
-@click.option("--tz", default=_DEFAULT_TZ, show_default=True,
+@click.option("--tz", default=_DEFAULT_TZ, show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of --heating-off.")
 def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint, heating_off,
                      t_m_init, step, days, seed, tz) -> None:
@@ -51,14 +57,14 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
 
     from ..drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
     from ..model import default_house, load_house
+    from ..store.export import refuse_database
     from ..tables import step_seconds
     from ..weather import read_weather, winter_weather
 
+    refuse_database(out_path, "--out")
     house = load_house(house_path) if house_path else default_house()
     label = str(house_path) if house_path else "built-in default (150 m², medium)"
     window = parse_window(heating_off) if heating_off else None
-    if step is not None and not step > 0:
-        raise InputError("must be > 0 s", place="--step")
     if drivers_path and weather_path:
         raise click.UsageError("give --drivers or --weather, not both")
     if drivers_path:
@@ -70,6 +76,10 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
             dt_s = step or data_step or 3600.0
         else:
             dt_s = step or 3600.0
+            steps = days * 86400.0 / dt_s
+            if not 2 <= steps <= MAX_STEPS:
+                raise InputError(f"--days {days:g} at --step {dt_s:g} s gives {steps:.0f} "
+                                 f"steps; 2 … {MAX_STEPS:,} are simulated", place="--days")
             t_out = winter_weather(days=days, step_s=dt_s, seed=seed, tz=tz)
         table = pd.DataFrame({"timestamp": t_out.index, "t_out": t_out.to_numpy()})
     has_sp_column = "setpoint" in table

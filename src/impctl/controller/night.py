@@ -10,6 +10,10 @@ Safety rules this module keeps:
   start (orphan sweep) or ``impctl restore`` restores it;
 * the night is never run blind: no good read (link lost) or no indoor temperature for longer
   than ``link_lost_limit_s`` aborts it;
+* the owner comes first: a loop-1 setpoint or mode that differs at a sample from what impctl
+  last wrote (the owner, a thermostat app or ``impctl restore`` changed it), or the heating
+  system switched off, ends the night at once (not valid); the changed register keeps the
+  owner's new value (its journal entry is closed, not restored) and the others are restored;
 * one log line per incident (link lost, readings missing), when it starts, and one when it
   ends; each incident is also noted in the night's reasons.
 """
@@ -25,6 +29,7 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
 from ..store import Night, Sample, Store
 from .assess import assess_night
+from .owner import describe_changes, fmt_register, owner_changes
 from .plan import NightPolicy, NightRequest
 from .restore import restore_all
 
@@ -130,16 +135,36 @@ class NightController:
         self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
         self._incidents: list[str] = []  # notes for the night's reasons
         self._floor_c: float | None = None
+        self._held: dict[int, float] = {}  # register → the value impctl last put there
+        self._abort_reason: str | None = None  # a household's stop request (abort())
+        self._aborted = asyncio.Event()
+        self._running = False
+
+    def abort(self, reason: str) -> bool:
+        """End the running night now and restore, leaving the process running (the
+        household's stop button). Returns False when no night is running."""
+        if not self._running:
+            return False
+        self._abort_reason = reason
+        self._aborted.set()
+        return True
 
     # -- timing ----------------------------------------------------------------------------
     async def _sleep_until(self, when: datetime) -> None:
         """Sleep until the simulated instant ``when`` or until a stop is requested."""
         delay = self.clock.wall_seconds(when.timestamp() - self.clock.now_s())
-        if delay > 0:
+        if 0 < delay <= 1.0:  # short: an abort is seen at the next check anyway
             try:
                 await asyncio.wait_for(self.stop.wait(), timeout=delay)
             except TimeoutError:
                 pass
+        elif delay > 0:  # long (real-time nights): wake on a stop or an abort
+            waits = [asyncio.ensure_future(e.wait()) for e in (self.stop, self._aborted)]
+            try:
+                await asyncio.wait(waits, timeout=delay, return_when=asyncio.FIRST_COMPLETED)
+            finally:
+                for w in waits:
+                    w.cancel()
 
     # -- the night ---------------------------------------------------------------------------
     async def run(self, req: NightRequest) -> Night:
@@ -157,6 +182,9 @@ class NightController:
         state, reasons = "done", []
         wrote = False
         self._incidents, self._problem, self._lost_since = [], None, None
+        self._held = {}
+        self._abort_reason, self._running = None, True
+        self._aborted.clear()
         try:
             self.store.set_night_state(night_id, "preparing")
             first = await self._prepare(night_id, req, log)
@@ -173,6 +201,7 @@ class NightController:
         except asyncio.CancelledError:
             state, reasons = "aborted", ["stopped (cancelled)"]
             log.warning("night cancelled: restoring the heat pump")
+            self._running = False
             await self._finish(night_id, state, reasons, wrote, log)
             raise
         except HeatPumpError as exc:
@@ -181,6 +210,7 @@ class NightController:
         except Exception as exc:  # a bug or a failing store must not leave the heating off
             state, reasons = "aborted", [f"internal error: {exc!r}"]
             log.exception("night aborted by an unexpected error; restoring the heat pump")
+        self._running = False
         await self._finish(night_id, state, reasons, wrote, log)
         return self.store.night(night_id)
 
@@ -268,6 +298,8 @@ class NightController:
         except HeatPumpError as exc:
             raise NightRefused(str(exc)) from None
         while True:
+            if self._abort_reason is not None:
+                raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise NightRefused("stopped before the night started")
             problem = None
@@ -296,8 +328,11 @@ class NightController:
             if reading.raw is None:
                 raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
             self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
-        log.info("journaled owner's state: setpoint %s °C, loop-1 mode %s",
-                 snap.loop1_setpoint_c.value, snap.loop1_mode.value)
+            if reading.value is not None:
+                self._held[ma] = reading.value
+        log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
+                 fmt_register(_SETPOINT, snap.loop1_setpoint_c.value),
+                 fmt_register(_MODE, snap.loop1_mode.value))
         return snap
 
     def _unfit(self, snap: Snapshot, req: NightRequest) -> str | None:
@@ -327,13 +362,13 @@ class NightController:
         """Write the night's settings and sample until the end; returns why it ended."""
         policy = self.policy
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
-        result = await self.client.set_loop1_setpoint(preheat_target)
+        result = self._hold(await self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:
             log.warning("setpoint %.1f °C clamped to %.1f °C by the configured limits",
                         result.requested, result.target)
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
-            await self.client.set_loop1_mode(1)
+            self._hold(await self.client.set_loop1_mode(1))
         # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
         # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
         # a cold house and must not abort the night.
@@ -345,6 +380,8 @@ class NightController:
         interval = timedelta(seconds=policy.sample_interval_s)
         next_at = self.clock.now()
         while True:
+            if self._abort_reason is not None:
+                raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise _Abort("stop requested (signal)")
             now = self.clock.now()
@@ -354,6 +391,7 @@ class NightController:
                 await self._switch_off(log)
                 switched_off = True
             snap = await self._snapshot(night_id, log)
+            self._owner_check(snap, log)
             reason = self._check(snap, req, switched_off, now)
             if reason is not None:
                 return reason
@@ -363,16 +401,41 @@ class NightController:
                 await self._sleep_until(req.window_end)
                 final = await self._snapshot(night_id, log)
                 if final is not None:
+                    self._owner_check(final, log)
                     self._check(final, req, switched_off, self.clock.now())
                 return "window ended"
             await self._sleep_until(next_at)
 
+    def _hold(self, result):
+        """Remember what a write left in the register (to tell the owner's changes apart)."""
+        self._held[result.ma] = result.read_back
+        return result
+
+    def _owner_check(self, snap: Snapshot | None, log) -> None:
+        """End the night when the owner changed what impctl holds (raises ``_Abort``).
+
+        The changed registers' journal entries are closed, so the restore that follows puts
+        back only what the owner did not touch, and never overwrites their new choice.
+        """
+        changes = owner_changes(snap, self._held)
+        if not changes:
+            return
+        names = dict(_JOURNALED)
+        for change in changes:
+            for entry in self.store.journal_pending():
+                if entry.register == names.get(change.ma):
+                    self.store.journal_mark_owner_changed(entry.id, change.raw)
+        what = describe_changes(changes)
+        self.store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
+        raise _Abort(f"owner changed the heat pump mid-night: {what}; night ended, the "
+                     "owner's setting kept")
+
     async def _switch_off(self, log) -> None:
         if self.policy.constrained_action == "loop_off":
-            await self.client.set_loop1_mode(0)
+            self._hold(await self.client.set_loop1_mode(0))
             log.info("heating switched off (loop-1 mode 0)")
         else:
-            await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c)
+            self._hold(await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c))
             log.info("heating set back to the floor %.1f °C", self.policy.setpoint_floor_c)
 
     def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,

@@ -15,6 +15,7 @@ from typing import Any
 from ..errors import InputError
 from ..heatpump import HeatPumpConfig
 from ..heatpump import config_from_mapping as heatpump_from_mapping
+from ..mqtt.config import MqttConfig, mqtt_from_mapping
 
 
 class ConfigError(InputError):
@@ -81,6 +82,7 @@ class Config:
     night: NightConfig = field(default_factory=NightConfig)
     campaign: CampaignConfig = field(default_factory=CampaignConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     source: str = ""
 
     @property
@@ -100,6 +102,13 @@ class Config:
 
 
 _SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig}
+#: Operational bounds. The link-lost limit: a house with the heating off may lose ~1 K/h, so
+#: an hour without readings is the most a night may run blind before it is aborted.
+LINK_LOST_LIMIT_MAX_S = 3600.0
+#: Fewer than half the expected samples cannot pin a night's dynamics.
+MIN_COVERAGE_LOW = 0.5
+#: ΔT: T_min = T_set − 3 K (18 °C from 21 °C) is the edge of EN 16798-1 category III comfort.
+COMFORT_BAND_MAX_K = 3.0
 #: Marker left in the problem list when [heatpump] could not be read: its safety limits are
 #: unknown then, so the setpoints are not checked against the defaults (no invented problems).
 _HEATPUMP_FAILED = "\0heatpump"
@@ -161,8 +170,15 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
             try:
                 kwargs[key] = heatpump_from_mapping(value)
             except InputError as exc:
-                problems.append(" ".join(p for p in (exc.place, exc.problem) if p))
+                for p in getattr(exc, "problems", [exc]):  # every [heatpump] problem
+                    problems.append(": ".join(x for x in (p.place, p.problem) if x))
                 problems.append(_HEATPUMP_FAILED)
+            continue
+        if key == "mqtt" and cls is Config:  # [mqtt], parsed by impctl.mqtt.config
+            if not isinstance(value, dict):
+                problems.append(f"{where}: must be a [table]")
+                continue
+            kwargs[key] = mqtt_from_mapping(value, problems)
             continue
         if key in _SECTIONS and cls is Config:
             if not isinstance(value, dict):
@@ -190,6 +206,10 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
             bad("night.window", "start and end are the same")
     except ValueError:
         bad("night.window", f"expected HH:MM-HH:MM, got {night.window!r}")
+    if not 0 < night.max_comfort_band_k <= COMFORT_BAND_MAX_K:
+        bad("night.max_comfort_band_k",
+            f"must lie in (0, {COMFORT_BAND_MAX_K:g}] K: further below the owner's setpoint a "
+            "home is no longer comfortable")
     if not 0 < night.comfort_band_k <= night.max_comfort_band_k:
         bad("night.comfort_band_k",
             f"must lie in (0, {night.max_comfort_band_k:g}] K (night.max_comfort_band_k)")
@@ -199,13 +219,18 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         bad("night.abort_margin_k", "must lie in 0–2 K")
     if night.link_lost_limit_s < night.sample_interval_s:
         bad("night.link_lost_limit_s", "must be at least night.sample_interval_s")
+    elif night.link_lost_limit_s > LINK_LOST_LIMIT_MAX_S:
+        bad("night.link_lost_limit_s",
+            f"must be at most {LINK_LOST_LIMIT_MAX_S:g} s: a night with the heating off is never "
+            "left unwatched longer")
     if night.constrained_action not in ("loop_off", "setpoint_floor"):
         bad("night.constrained_action", "must be 'loop_off' or 'setpoint_floor'")
     if limits_known and not lo <= night.setpoint_floor_c <= hi:
         bad("night.setpoint_floor_c",
             f"must lie within heatpump.writes.loop1_setpoint_c = [{lo:g}, {hi:g}] °C")
-    if not 0 < night.min_coverage <= 1:
-        bad("night.min_coverage", "must lie in (0, 1]")
+    if not MIN_COVERAGE_LOW <= night.min_coverage <= 1:
+        bad("night.min_coverage", f"must lie in [{MIN_COVERAGE_LOW:g}, 1]: a night with less "
+                                  "than half its samples is not data")
     if night.t_out_min_c >= night.t_out_max_c:
         bad("night.t_out_max_c", "must be above night.t_out_min_c")
     if not 0 <= night.preheat_h <= 12:
@@ -254,6 +279,10 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
 def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
     """Validate a parsed TOML mapping; raises :class:`ConfigError` listing every problem."""
     problems: list[str] = []
+    if "heatpump" not in data:
+        # Never a silent default address: the daemon would drive whatever answers there.
+        problems += ["[heatpump]: missing section: set transport and host (tcp) or serial_port "
+                     "(rtu) of the heat pump", _HEATPUMP_FAILED]
     cfg = _build(Config, data, "", problems)
     # Check the values too when some keys were bad (those fell back to their defaults), so
     # one run lists every problem, one line each.
@@ -266,8 +295,23 @@ def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
                      "source": str(source or "")})
 
 
+def read_config_toml(path: str | Path) -> dict:
+    """Parse the TOML file; a UTF-8 byte-order mark (Windows editors write one) is accepted."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path) from None
+    try:
+        return tomllib.loads(raw.decode("utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid TOML: {exc}", path) from None
+
+
 def load_config(path: str | Path) -> Config:
     """Read and validate the daemon configuration file."""
-    from ..model.house import read_toml
-
-    return config_from_mapping(read_toml(path), Path(path))
+    return config_from_mapping(read_config_toml(path), Path(path))

@@ -7,6 +7,7 @@ across a DST change lasts 6 or 8 hours).
 
 from __future__ import annotations
 
+import logging
 from datetime import datetime, timedelta
 from zoneinfo import ZoneInfo
 
@@ -16,6 +17,8 @@ from ..controller import NightRequest
 from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
+
+_LOG = logging.getLogger("impctl.daemon")
 
 
 def campaign_plan(cfg: Config) -> list[tuple[str, float]]:
@@ -64,26 +67,69 @@ def wall_time(clock: VirtualClock, sim: datetime) -> datetime:
     return datetime.fromtimestamp(wall_s, sim.tzinfo)
 
 
-def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:
-    """The request for the night whose preheat starts at ``act``: a pending ``--tonight``
-    trigger first, else the first campaign entry without a valid night; None when done."""
+def drop_expired_requests(store: Store, now: datetime) -> list[int]:
+    """Close the pending manual requests whose expiry (on the daemon's clock) has passed;
+    one log line each. Returns their ids."""
+    dropped = []
+    for req in store.pending_requests():
+        if req.expires is not None and now >= req.expires and store.close_request(
+                req.id, "expired"):
+            _LOG.warning("manual request %d (%s night, %s) expired unstarted at %s; dropped",
+                         req.id, req.kind, req.when, req.expires.isoformat())
+            store.add_event("warning", f"request {req.id} expired unstarted")
+            dropped.append(req.id)
+    return dropped
+
+
+def peek_next_night(store: Store, cfg: Config, act: datetime
+                    ) -> tuple[NightRequest | None, int | None]:
+    """What the night whose preheat starts at ``act`` would run, without taking anything:
+    (request, id of the manual request it comes from or None). A pending ``--tonight``
+    trigger (not expired by ``act``) comes first, then the first campaign entry without a
+    valid night; (None, None) when there is nothing to run."""
     start, end = window_after_act(act, cfg)
     band = cfg.night.comfort_band_k
     for req in store.pending_requests():
-        if req.when == "tonight" and store.take_request(req.id):
+        if req.when == "tonight" and (req.expires is None or act < req.expires):
             sp = req.setpoint_c if req.setpoint_c is not None else (
                 cfg.campaign.constrained_setpoint_c)
-            return NightRequest(req.kind, sp, start, end, band, source="trigger")
+            return NightRequest(req.kind, sp, start, end, band, source="trigger"), req.id
     if not cfg.campaign.enabled:
-        return None
-    for seq, kind, sp, _night_id, valid in store.campaign():
+        return None, None
+    # Before the daemon first ran, the store has no plan yet: the configured one is what runs.
+    rows = store.campaign() or [(seq, kind, sp, None, None)
+                                for seq, (kind, sp) in enumerate(campaign_plan(cfg))]
+    for seq, kind, sp, _night_id, valid in rows:
         if not valid:
             return NightRequest(kind, sp, start, end, band, source="schedule",
-                                campaign_seq=seq)
-    return None
+                                campaign_seq=seq), None
+    return None, None
+
+
+def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:
+    """The request for the night whose preheat starts at ``act``: a pending ``--tonight``
+    trigger first (taken, so it runs once), else the first campaign entry without a valid
+    night; None when done."""
+    drop_expired_requests(store, act)
+    while True:
+        req, request_id = peek_next_night(store, cfg, act)
+        if request_id is None or store.take_request(request_id):
+            return req
 
 
 def campaign_complete(store: Store) -> bool:
     """Every plan entry has a valid night."""
     rows = store.campaign()
     return bool(rows) and all(valid for *_, valid in rows)
+
+
+def request_expiry(cfg: Config, clock: VirtualClock, when: str,
+                   expires_h: float | None = None) -> datetime:
+    """The instant (daemon's clock) after which the daemon drops a manual request unstarted:
+    ``expires_h`` real hours, by default 1 h for ``now`` and the end of its night for
+    ``tonight`` — the same rule for the CLI and for commands from Home Assistant."""
+    now = clock.now()
+    if expires_h is None and when == "tonight":
+        return window_after_act(next_act_time(cfg, now), cfg)[1]
+    # Real hours: on an accelerated demo clock, as long in simulated time as it takes.
+    return now + timedelta(hours=(1.0 if expires_h is None else expires_h) * clock.factor)

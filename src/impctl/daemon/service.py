@@ -24,10 +24,13 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudg
 from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
+from .lock import HEARTBEAT_S, DaemonLock
+from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .schedule import (
     act_trigger,
     campaign_complete,
     campaign_plan,
+    drop_expired_requests,
     next_act_time,
     next_campaign_night,
     wall_time,
@@ -105,6 +108,8 @@ class Daemon:
         # Held by a night and by the background restore: never both at once (a restore
         # marking an entry done while a night re-journals it would lose the owner's value).
         self._heat_pump_lock = asyncio.Lock()
+        self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
+        self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -113,16 +118,27 @@ class Daemon:
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self._request_stop, sig)
         self.store = Store(self.cfg.db_path)
-        self.client = open_client(self.cfg, self.clock)
-        self.controller = NightController(
-            self.client, self.store, self.clock, policy_from_config(self.cfg),
-            on_status=self._status, stop=self.stop)
-        self.store.set_campaign(campaign_plan(self.cfg))
-        orphans = sweep_orphans(self.store)
+        try:
+            self._lock = DaemonLock(self.cfg.state_dir).acquire()
+        except BaseException:
+            self.store.close()
+            raise
+        try:
+            self.client = open_client(self.cfg, self.clock)
+            self.controller = NightController(
+                self.client, self.store, self.clock, policy_from_config(self.cfg),
+                on_status=self._status, stop=self.stop)
+            self.store.set_campaign(campaign_plan(self.cfg))
+            orphans = sweep_orphans(self.store)
+        except BaseException:  # e.g. a store that cannot write: never keep the lock
+            self._lock.release()
+            self.store.close()
+            raise
         self.notifier.ready(f"started; {len(orphans)} interrupted night(s) to restore")
         _LOG.info("impctl daemon started (state %s, heat pump %s, clock %r)",
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
         watchdog = asyncio.create_task(self._watchdog())
+        self.mqtt = start_mqtt(self)  # MQTT hook: never awaited by the control loop
         restorer = asyncio.create_task(self._restore_pending())
         try:
             await self._connect()
@@ -140,6 +156,7 @@ class Daemon:
             restorer.cancel()
             await self._shutdown()
             watchdog.cancel()
+            self._lock.release()
         return 0
 
     def _request_stop(self, sig: int) -> None:
@@ -149,16 +166,39 @@ class Daemon:
         self.stop.set()
 
     async def _connect(self) -> None:
+        failed = False
+        # The first try is short, so an unreachable heat pump is reported within seconds.
+        wait_s = max(5.0, 3 * self.cfg.heatpump.link.timeout_s)
         while not self.stop.is_set():
             try:
-                await self.client.connect(max_wait_s=30.0)
+                if not await self._until_stop(self.client.connect(
+                        max_wait_s=wait_s if not failed else 30.0)):
+                    return  # stop requested while connecting
                 self._connected.set()
                 _LOG.info("heat pump connected: %s, generation %s, Q_HC from %s",
                           self.cfg.heatpump.link.describe(), self.client.generation.value,
                           self.client.heat_power_source() or "nowhere (IMP nights refused)")
                 return
             except ModbusLinkError as exc:
+                if not failed:  # WARNING, so log_level = "warning" shows it; once per outage
+                    _LOG.warning("heat pump not reachable: %s; retrying", exc)
+                    failed = True
                 self._status(f"waiting for the heat pump: {exc}")
+
+    async def _until_stop(self, coro) -> bool:
+        """Run ``coro`` unless a stop is requested first (then cancel it); True when it ran."""
+        work = asyncio.ensure_future(coro)
+        stopper = asyncio.ensure_future(self.stop.wait())
+        try:
+            await asyncio.wait({work, stopper}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            stopper.cancel()
+        if not work.done():
+            work.cancel()
+            await asyncio.gather(work, return_exceptions=True)
+            return False
+        work.result()
+        return True
 
     async def _shutdown(self) -> None:
         if self._night_task is not None and not self._night_task.done():
@@ -174,6 +214,8 @@ class Daemon:
             self.scheduler.shutdown(wait=False)
         if self._fit_task is not None:
             self._fit_task.cancel()
+        if self.mqtt is not None:  # MQTT hook: "offline" after the restore, before closing
+            await self.mqtt.stop()
         if self.client is not None:
             self.client.close()
         if self.store is not None:
@@ -214,6 +256,8 @@ class Daemon:
     def _status(self, text: str) -> None:
         self.notifier.status(text)
         _LOG.debug("status: %s", text)
+        if self.mqtt is not None:  # MQTT hook: publish now (every sample during a night)
+            self.mqtt.wake()
 
     def _idle_status(self) -> str:
         rows = self.store.campaign()
@@ -222,12 +266,13 @@ class Daemon:
 
     async def _watchdog(self) -> None:
         """WATCHDOG=1 only while the event loop runs and the store answers."""
-        interval = (self.notifier.watchdog_interval_s or 30.0) / 2
+        interval = min((self.notifier.watchdog_interval_s or 30.0) / 2, HEARTBEAT_S)
         while True:
             try:
                 if self.store is not None:
                     self.store.nights(states=["active"])  # the store still answers
                 self.notifier.watchdog()
+                self._lock.heartbeat()  # what `impctl status` shows as alive
             except Exception as exc:  # noqa: BLE001 - a sick store must stop the pings
                 _LOG.error("health check failed, withholding the watchdog ping: %s", exc)
             await asyncio.sleep(interval)
@@ -246,6 +291,10 @@ class Daemon:
             self._schedule_accelerated()
         self.scheduler.add_job(self._poll_requests, "interval", seconds=1.0,
                                id="trigger-poll", replace_existing=True, coalesce=True,
+                               max_instances=1)
+        # Household commands (abort, skip_tonight) queued in the store, e.g. over MQTT.
+        self.scheduler.add_job(run_commands, "interval", seconds=1.0, args=[self],
+                               id="command-poll", replace_existing=True, coalesce=True,
                                max_instances=1)
         self.scheduler.start()
         job = self.scheduler.get_job("imp-night")
@@ -266,6 +315,9 @@ class Daemon:
             if self._night_task is not None and not self._night_task.done():
                 _LOG.warning("night job skipped: a night is still running")
                 return
+            if skip_tonight(self):  # a household's skip_tonight (issue 17)
+                self._status(self._idle_status() + "; tonight skipped on request")
+                return
             req = next_campaign_night(self.store, self.cfg, act or self.clock.now())
             if req is None:
                 self._status(self._idle_status() + "; nothing to run tonight")
@@ -278,6 +330,7 @@ class Daemon:
     async def _poll_requests(self) -> None:
         if self.stop.is_set() or (self._night_task is not None and not self._night_task.done()):
             return
+        drop_expired_requests(self.store, self.clock.now())
         for req in self.store.pending_requests():
             if req.when != "now" or not self.store.take_request(req.id):
                 continue
@@ -320,7 +373,7 @@ class Daemon:
         model_dir = self.cfg.model_dir or str(Path(self.cfg.state_dir) / "models")
         steps = [
             [*base, "export", "--db", str(self.cfg.db_path), "--format", "csv",
-             "--out", str(nights_csv)],
+             "--out", str(nights_csv), "--force"],
             [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
              "--model-dir", model_dir],
         ]

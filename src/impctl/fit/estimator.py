@@ -125,6 +125,8 @@ class NightFit:
     predictions_ : list[dict]       measured vs fitted series per night (for plots)
     sigma_ : dict[str, float]       residual standard deviation per group
     skipped_ : list[(night_id, reason)]
+    gaps_ : list[impctl.imp.gaps.Gap]  gaps inside nights; each night was cut to one gap-free
+                                       piece first (rule in :mod:`impctl.imp.gaps`)
     night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
                                     discharge, T_air resolution, used/usable_h/reason
                                     (:mod:`.quality`)
@@ -187,6 +189,9 @@ class NightFit:
 
     # ------------------------------------------------------------------ fit
     def _fit(self, nights, ranges) -> None:
+        from ..imp.gaps import cut_at_gaps
+
+        nights, self.gaps_ = cut_at_gaps(nights, self.emission_lag_h)
         kept, offsets, self.skipped_ = prepare_nights(
             nights, self.emission_lag_h, self.min_night_h, self.resume_threshold_w)
         if not kept:

@@ -24,6 +24,7 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
      "skipped": [{"night_id", "reason"}], "notes": [str],
+     "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
                         "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
@@ -154,6 +155,7 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                 "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
                 "sigma": fit.sigma_, "time_s": fit.fit_time_s_},
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
+        "gaps": [g.as_dict() for g in getattr(fit, "gaps_", [])],
         "notes": notes,
     }
     # added keys (schema stays impctl-fit/1: readers of the old keys are unaffected)
@@ -193,6 +195,10 @@ def format_table(summary: dict) -> str:
     fit = summary["fit"]
     lines.append(f"Fitted {len(pn)} nights ({n_c} constrained, {len(pn) - n_c} normal) in "
                  f"{fit['time_s']:.2f} s — joint fit, normal nights as '{fit['normal_model']}'")
+    for g in summary.get("gaps", []):
+        lines.append(f"  gap in {g['kind']} night {g['night_id']}: no samples for "
+                     f"{g['hours']:.1f} h; cut to {g['kept_from_s'] / 3600:.1f}–"
+                     f"{g['kept_to_s'] / 3600:.1f} h after the window start")
     for s in summary["skipped"]:
         lines.append(f"  skipped {s['night_id']}: {s['reason']}")
     lines.append("")

@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 from ..errors import InputError
@@ -83,27 +84,7 @@ class LinkConfig:
     request_gap_s: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.transport not in ("tcp", "rtu"):
-            raise InputError(f"transport must be 'tcp' or 'rtu', got {self.transport!r}",
-                             place="key 'transport'")
-        if self.transport == "rtu" and not self.serial_port:
-            raise InputError("rtu needs serial_port", place="key 'serial_port'")
-        if self.transport == "rtu" and self.baudrate not in BAUD_RATES:
-            raise InputError(f"baudrate must be one of {BAUD_RATES}", place="key 'baudrate'")
-        if not 1 <= self.device_id <= 247:
-            raise InputError("device_id must be 1–247", place="key 'device_id'")
-        if not 0 < self.port < 65536:
-            raise InputError("port must be 1–65535", place="key 'port'")
-        if not self.timeout_s > 0 or self.retries < 0 or self.attempts < 1:
-            raise InputError("need timeout_s > 0, retries >= 0, attempts >= 1",
-                             place="key 'timeout_s'")
-        lo, hi = self.connect_backoff_s
-        if not 0 < lo <= hi:
-            raise InputError("connect_backoff_s must be (first, max) with 0 < first <= max",
-                             place="key 'connect_backoff_s'")
-        if self.drain_s < 0 or self.request_gap_s < 0 or self.retry_delay_s < 0:
-            raise InputError("drain_s, request_gap_s and retry_delay_s must be >= 0",
-                             place="key 'drain_s'")
+        _raise_first(_link_problems(self))
 
     def describe(self) -> str:
         """Human-readable endpoint, e.g. ``tcp 127.0.0.1:502 unit 20``."""
@@ -134,11 +115,7 @@ class ExternalRegister:
     link: LinkConfig | None = None
 
     def __post_init__(self) -> None:
-        if self.datatype not in DATATYPES:
-            raise InputError(f"datatype must be one of {DATATYPES}", place="key 'datatype'")
-        if not 0 <= self.address <= 0xFFFF or not 1 <= self.device_id <= 247:
-            raise InputError("need 0 <= address <= 65535 and 1 <= device_id <= 247",
-                             place="key 'address'")
+        _raise_first(_external_problems(self))
 
     @property
     def words(self) -> int:
@@ -180,20 +157,7 @@ class WritePolicy:
     restore_reserve: int = 2
 
     def __post_init__(self) -> None:
-        for key in ("loop1_setpoint_c", "loop2_setpoint_c"):
-            limits = getattr(self, key)
-            if limits is not None and not (5.0 <= limits[0] <= limits[1] <= 60.0):
-                raise InputError("limits must satisfy 5 <= min <= max <= 60 °C",
-                                 place=f"key '{key}'")
-        if self.correction_k is not None and not (
-            -4 <= self.correction_k[0] <= self.correction_k[1] <= 4
-        ):
-            raise InputError("limits must lie within -4…4 K", place="key 'correction_k'")
-        if (self.daily_budget < 0 or self.restore_reserve < 0 or self.verify_attempts < 1
-                or self.verify_delay_s < 0):
-            raise InputError("need daily_budget >= 0, restore_reserve >= 0, "
-                             "verify_attempts >= 1, verify_delay_s >= 0",
-                             place="key 'daily_budget'")
+        _raise_first(_write_problems(self))
 
 
 @dataclass(frozen=True)
@@ -217,21 +181,98 @@ class HeatPumpConfig:
     writes: WritePolicy = field(default_factory=WritePolicy)
 
     def __post_init__(self) -> None:
-        if self.generation not in ("auto", "compact", "extended"):
-            raise InputError("generation must be auto, compact or extended",
-                             place="key 'generation'")
-        if not isinstance(self.room_sensor, ExternalRegister) and self.room_sensor not in (
-            "loop1", "loop2"
-        ):
-            raise InputError("room_sensor must be loop1, loop2 or a table",
-                             place="key 'room_sensor'")
+        _raise_first(_heatpump_problems(self))
+
+
+#: Room-setpoint limits [°C] a configuration may allow at all: below 10 °C a home risks
+#: frost damage and damp, above 30 °C no room is meant to be heated (EN 16798-1 design
+#: ranges lie within 16–26 °C); a write outside them is a typo, not an experiment.
+ROOM_SETPOINT_BOUNDS_C = (10.0, 30.0)
+Problem = tuple[str, str]  # (key, what is wrong)
+
+
+def _raise_first(problems: list[Problem]) -> None:
+    if problems:
+        key, text = problems[0]
+        raise InputError(text, place=f"key '{key}'")
+
+
+def _link_problems(c: Any) -> list[Problem]:
+    out: list[Problem] = []
+    if c.transport not in ("tcp", "rtu"):
+        out.append(("transport", f"must be 'tcp' or 'rtu', got {c.transport!r}"))
+    if c.transport == "tcp" and not str(c.host).strip():
+        out.append(("host", "must not be empty (the gateway's IP address or name)"))
+    if c.transport == "rtu" and not c.serial_port:
+        out.append(("serial_port", "rtu needs serial_port"))
+    if c.transport == "rtu" and c.baudrate not in BAUD_RATES:
+        out.append(("baudrate", f"must be one of {BAUD_RATES}"))
+    if not 1 <= c.device_id <= 247:
+        out.append(("device_id", "must be 1–247"))
+    if not 0 < c.port < 65536:
+        out.append(("port", "must be 1–65535"))
+    if not 0 < c.timeout_s <= 60:
+        out.append(("timeout_s", "must lie in (0, 60] s"))
+    if c.retries < 0:
+        out.append(("retries", "must be >= 0"))
+    if c.attempts < 1:
+        out.append(("attempts", "must be >= 1"))
+    lo, hi = c.connect_backoff_s
+    if not 0 < lo <= hi:
+        out.append(("connect_backoff_s", "must be (first, max) with 0 < first <= max"))
+    for key in ("drain_s", "request_gap_s", "retry_delay_s"):
+        if getattr(c, key) < 0:
+            out.append((key, "must be >= 0"))
+    return out
+
+
+def _external_problems(c: Any) -> list[Problem]:
+    out: list[Problem] = []
+    if c.datatype not in DATATYPES:
+        out.append(("datatype", f"must be one of {DATATYPES}"))
+    if not 0 <= c.address <= 0xFFFF:
+        out.append(("address", "must be 0–65535 (the zero-based PDU address)"))
+    if not 1 <= c.device_id <= 247:
+        out.append(("device_id", "must be 1–247"))
+    if not c.valid[0] < c.valid[1]:
+        out.append(("valid", "must be [low, high] with low < high"))
+    return out
+
+
+def _write_problems(c: Any) -> list[Problem]:
+    out: list[Problem] = []
+    lo_b, hi_b = ROOM_SETPOINT_BOUNDS_C
+    for key in ("loop1_setpoint_c", "loop2_setpoint_c"):
+        limits = getattr(c, key)
+        if limits is not None and not (lo_b <= limits[0] <= limits[1] <= hi_b):
+            out.append((key, f"room-setpoint limits must satisfy {lo_b:g} <= min <= max <= "
+                             f"{hi_b:g} °C, got [{limits[0]:g}, {limits[1]:g}]"))
+    if c.correction_k is not None and not -4 <= c.correction_k[0] <= c.correction_k[1] <= 4:
+        out.append(("correction_k", "limits must lie within -4…4 K"))
+    for key, low in (("daily_budget", 0), ("restore_reserve", 0), ("verify_attempts", 1)):
+        if getattr(c, key) < low:
+            out.append((key, f"must be >= {low}"))
+    if c.verify_delay_s < 0:
+        out.append(("verify_delay_s", "must be >= 0"))
+    return out
+
+
+def _heatpump_problems(c: Any) -> list[Problem]:
+    out: list[Problem] = []
+    if c.generation not in ("auto", "compact", "extended"):
+        out.append(("generation", f"must be auto, compact or extended, got {c.generation!r}"))
+    if not isinstance(c.room_sensor, ExternalRegister) and c.room_sensor not in (
+            "loop1", "loop2"):
+        out.append(("room_sensor", f"must be loop1, loop2 or a table, got {c.room_sensor!r}"))
+    return out
 
 
 _INTS = frozenset({"port", "baudrate", "device_id", "retries", "attempts", "daily_budget",
                    "verify_attempts", "restore_reserve", "address"})
 _FLOATS = frozenset({"timeout_s", "retry_delay_s", "drain_s", "request_gap_s", "verify_delay_s",
                      "scale"})
-_STRINGS = frozenset({"transport", "host", "serial_port", "datatype", "generation"})
+_STRINGS = frozenset({"transport", "host", "serial_port", "datatype", "generation",
+                      "room_sensor"})
 _PAIRS = frozenset({"connect_backoff_s", "loop1_setpoint_c", "loop2_setpoint_c", "correction_k",
                     "valid"})
 
@@ -255,55 +296,124 @@ def _type_problem(key: str, value: Any) -> str | None:
     return None
 
 
-def _build(cls: type, data: Mapping[str, Any], source: str | Path | None, prefix: str) -> Any:
+class HeatPumpConfigError(InputError):
+    """Every problem of a ``[heatpump]`` table at once; ``problems`` holds one error each."""
+
+    def __init__(self, problems: list[InputError]):
+        self.problems = problems
+        super().__init__("\n".join(str(p) for p in problems))
+
+    def _line(self) -> str:
+        return "\n".join(str(p) for p in self.problems)
+
+
+_CHECKS = {LinkConfig: _link_problems, ExternalRegister: _external_problems,
+           WritePolicy: _write_problems, HeatPumpConfig: _heatpump_problems}
+
+
+def _default(f: Any) -> Any:
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return None
+
+
+def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
+           problems: list[InputError], required: tuple[str, ...] = ()) -> Any:
+    """Build ``cls`` from a TOML table, appending every problem found to ``problems``;
+    None when there was any (the caller carries on to find the other tables' problems)."""
+    def bad(key: str | None, text: str) -> None:
+        place = f"[{prefix}]" + (f" key '{key}'" if key else "")
+        problems.append(InputError(text, source, place))
+
     if not isinstance(data, Mapping):
-        raise InputError(f"must be a table, got {data!r}", source, f"[{prefix}]")
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise InputError(f"unknown key(s) {unknown}", source, f"[{prefix}]")
+        bad(None, f"must be a table, got {data!r}")
+        return None
+    before = len(problems)
+    spec = {f.name: f for f in fields(cls)}
+    kwargs = {}
     for key, value in data.items():
+        if key not in spec:
+            bad(key, "unknown key")
+            continue
         problem = _type_problem(key, value)
         if problem:
-            raise InputError(f"{problem}, got {value!r}", source, f"[{prefix}] key '{key}'")
-    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-    try:
-        return cls(**kwargs)
-    except InputError as exc:
-        place = f"[{prefix}] {exc.place or ''}".strip()
-        raise InputError(exc.problem, exc.source or source, place) from None
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"bad value: {exc}", source, f"[{prefix}]") from None
+            bad(key, f"{problem}, got {value!r}")
+            continue
+        kwargs[key] = tuple(value) if isinstance(value, list) else value
+    missing = [k for k in required if k not in data] + [
+        n for n, f in spec.items()  # fields without a default
+        if n not in data and n not in required and f.default is MISSING
+        and f.default_factory is MISSING]
+    for key in missing:
+        bad(key, "missing (required)")
+    bad_values = {k for k in data if k in spec and k not in kwargs}
+    if not missing and not bad_values:
+        # The value checks too, on the keys that could be read, so one run lists everything.
+        probe = SimpleNamespace(**{**{n: _default(f) for n, f in spec.items()}, **kwargs})
+        for key, text in _CHECKS[cls](probe):
+            bad(key, text)
+    if len(problems) > before:
+        return None
+    return cls(**kwargs)
 
 
 def config_from_mapping(data: Mapping[str, Any],
                         source: str | Path | None = None) -> HeatPumpConfig:
     """Build a :class:`HeatPumpConfig` from a parsed ``[heatpump]`` TOML table.
 
+    With transport "tcp", ``host`` is required (no silent default address).
+
     Raises
     ------
-    InputError
-        Unknown keys or bad values, with the table named.
+    HeatPumpConfigError
+        Every unknown key, missing key or bad value at once, one line each, with the table
+        named.
     """
+    problems: list[InputError] = []
+    if not isinstance(data, Mapping):
+        raise HeatPumpConfigError([InputError(f"must be a table, got {data!r}", source,
+                                              "[heatpump]")])
     data = dict(data)
-    writes = _build(WritePolicy, data.pop("writes", {}), source, "heatpump.writes")
+    writes = _build(WritePolicy, data.pop("writes", {}), source, "heatpump.writes", problems)
 
-    def external(key: str) -> ExternalRegister | None:
+    def external(key: str) -> ExternalRegister | str | None:
         table = data.pop(key, None)
         if table is None or isinstance(table, str):
             return table
         if not isinstance(table, Mapping):
-            raise InputError(f"must be a table or a name, got {table!r}", source,
-                             f"[heatpump.{key}]")
+            problems.append(InputError(f"must be a table or a name, got {table!r}", source,
+                                       f"[heatpump.{key}]"))
+            return None
         table = dict(table)
         link = table.pop("link", None)
         if link is not None:
-            table["link"] = _build(LinkConfig, link, source, f"heatpump.{key}.link")
-        return _build(ExternalRegister, table, source, f"heatpump.{key}")
+            table["link"] = _build(LinkConfig, link, source, f"heatpump.{key}.link", problems,
+                                   required=("host",) if _tcp(link) else ())
+            if table["link"] is None:
+                table.pop("link")
+        return _build(ExternalRegister, table, source, f"heatpump.{key}", problems,
+                      required=("device_id", "address"))
 
     room = external("room_sensor") or "loop1"
     meter = external("heat_meter")
     generation = data.pop("generation", "auto")
-    link = _build(LinkConfig, data, source, "heatpump")
-    return _build(HeatPumpConfig, {"link": link, "generation": generation, "room_sensor": room,
-                                   "heat_meter": meter, "writes": writes}, source, "heatpump")
+    link = _build(LinkConfig, data, source, "heatpump", problems,
+                  required=("host",) if _tcp(data) else ())
+    if problems:
+        # The top-level checks too (generation, room sensor name), on what could be read.
+        probe = SimpleNamespace(generation=generation, room_sensor=room)
+        problems += [InputError(text, source, f"[heatpump] key '{key}'")
+                     for key, text in _heatpump_problems(probe)]
+        raise HeatPumpConfigError(problems)
+    hp = _build(HeatPumpConfig, {"link": link, "generation": generation, "room_sensor": room,
+                                 "heat_meter": meter, "writes": writes}, source, "heatpump",
+                problems)
+    if problems:
+        raise HeatPumpConfigError(problems)
+    return hp
+
+
+def _tcp(table: Any) -> bool:
+    return isinstance(table, Mapping) and table.get("transport", "tcp") == "tcp"

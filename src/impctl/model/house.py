@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .house_limits import HouseFileError
 
 #: Λ_at, ratio of internal surface area to floor area (ISO 13790 §7.2.2.2).
 LAMBDA_AT = 4.5
@@ -227,36 +228,46 @@ class HouseParameters:
     max_heating_power: Any = math.inf
 
     def __post_init__(self) -> None:
+        problems = self._domain_problems()
+        if len(problems) == 1:
+            raise problems[0]
+        if problems:
+            raise HouseFileError(problems)
+
+    def _domain_problems(self) -> list[InputError]:
+        """Every violated domain rule; the ISO checks of the derived network only when the
+        single values are valid (the network needs them)."""
+        problems = []
         for name in _POSITIVE:
             if not np.all(np.asarray(getattr(self, name)) > 0):
-                raise InputError("must be > 0", place=f"key '{name}'")
+                problems.append(InputError("must be > 0", place=f"key '{name}'"))
         for name in ("ach_vent", "ach_infl"):
             if not np.all(np.asarray(getattr(self, name)) >= 0):
-                raise InputError("must be >= 0", place=f"key '{name}'")
+                problems.append(InputError("must be >= 0", place=f"key '{name}'"))
         c_f = np.asarray(self.c_f)
         if not np.all((c_f >= 0.5) & (c_f <= 5.0)):
-            raise InputError("must lie in 0.5–5 (1e5 J/(m²K))", place="key 'c_f'")
-        if not np.all(np.asarray(self.ach_vent) + np.asarray(self.ach_infl) > 0):
-            raise InputError(
-                "ach_vent + ach_infl must be > 0 (the air node needs some air exchange)",
-                place="key 'ach_infl'",
-            )
+            problems.append(InputError("must lie in 0.5–5 (1e5 J/(m²K))", place="key 'c_f'"))
         hr = np.asarray(self.heat_recovery)
         if not np.all((hr >= 0) & (hr <= 1)):
-            raise InputError("must lie in 0–1", place="key 'heat_recovery'")
+            problems.append(InputError("must lie in 0–1", place="key 'heat_recovery'"))
         if not np.all(np.asarray(self.max_heating_power) > 0):
-            raise InputError("must be > 0 W", place="key 'max_heating_power'")
+            problems.append(InputError("must be > 0 W", place="key 'max_heating_power'"))
+        if problems:
+            return problems
+        if not np.all(np.asarray(self.ach_vent) + np.asarray(self.ach_infl) > 0):
+            problems.append(InputError(
+                "ach_vent + ach_infl must be > 0 (the air node needs some air exchange)",
+                place="key 'ach_infl'"))
         net = self.network
         if not np.all(np.asarray(net.h_tr_op) < np.asarray(net.h_tr_ms)):
-            raise InputError(
+            problems.append(InputError(
                 "u_walls·walls_area must stay below H_tr,ms = 9.1·A_m (ISO 13790 eq. 63)",
-                place="key 'u_walls'",
-            )
+                place="key 'u_walls'"))
         if not np.all(np.asarray(net.a_t_m2 - net.a_m_m2 - net.h_tr_w / H_MS) >= 0):
-            raise InputError(
+            problems.append(InputError(
                 "u_windows·windows_area too large: A_t ≥ A_m + H_tr,w/9.1 fails (ISO C.3)",
-                place="key 'windows_area'",
-            )
+                place="key 'windows_area'"))
+        return problems
 
     @property
     def network(self) -> Conductances:
@@ -325,35 +336,19 @@ class HouseParameters:
 def house_from_mapping(data: dict[str, Any], source: str | Path | None = None) -> HouseParameters:
     """Validate a mapping with exactly the house-file keys and build the parameters.
 
+    Every key is checked at once against :data:`~impctl.model.house_limits.HOUSE_LIMITS`
+    (unknown, missing, not a number, implausible); then the ISO 13790 domain of the whole house.
+
     Raises
     ------
     InputError
-        Naming ``source`` and the offending key.
+        Naming ``source`` and the offending key; one line per problem.
     """
-    # The optional [plant.*] tables belong to impctl.plant (load_plant_params), not to the 5R1C.
-    known = set(_REQUIRED) | set(_OPTIONAL) | {"plant"}
-    for key in data:
-        if key not in known:
-            raise InputError(
-                f"unknown key (expected: {', '.join(_REQUIRED + tuple(_OPTIONAL))})",
-                source,
-                f"key '{key}'",
-            )
-    values: dict[str, float] = {}
-    for key in _REQUIRED + tuple(_OPTIONAL):
-        if key not in data:
-            if key in _OPTIONAL:
-                values[key] = _OPTIONAL[key]
-                continue
-            raise InputError("missing key", source, f"key '{key}'")
-        value = data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(
-                f"must be a number, got {type(value).__name__} {value!r}", source, f"key '{key}'"
-            )
-        if not math.isfinite(value) and not (key == "max_heating_power" and value > 0):
-            raise InputError("must be a finite number", source, f"key '{key}'")
-        values[key] = float(value)
+    from .house_limits import check_house_values
+
+    # The optional [plant.*] tables belong to impctl.plant (impctl.plant.load_plant), not the 5R1C.
+    envelope = {key: value for key, value in data.items() if key != "plant"}
+    values = check_house_values(envelope, _REQUIRED + tuple(_OPTIONAL), _OPTIONAL, source)
     try:
         return HouseParameters(**values)
     except InputError as exc:

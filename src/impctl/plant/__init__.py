@@ -12,6 +12,7 @@ houses (batch), :mod:`.stepper` one house step by step.
 """
 
 from .envelope import CapacitySplit, split_capacity
+from .gains import HouseGains
 from .housefile import load_plant, plant_params_from_mapping
 from .params import (
     CONTROL_CURVE,
@@ -43,6 +44,7 @@ __all__ = [
     "Emitter",
     "Gains",
     "HeatPump",
+    "HouseGains",
     "Plant",
     "PlantCore",
     "PlantParams",

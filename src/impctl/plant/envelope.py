@@ -128,8 +128,22 @@ class StepSolution:
     mass: Array
     water: Array
     emitter_w: Array   # heat the emitter gives the air node
-    loss_w: Array      # heat lost to outside (ventilation, windows, opaque)
-    gains_w: Array     # internal + solar gains entering the network
+    net: Network
+    t_e: Array
+    phi_parts: tuple[Array, Array, Array]
+
+    @property
+    def loss_w(self) -> Array:
+        """Heat lost to outside: ventilation, windows, opaque elements [W]."""
+        n, t_e = self.net, self.t_e
+        return (n.h_ve * (self.air - t_e) + n.h_w * (self.surface - t_e)
+                + n.h_em * (self.mass_mean - t_e))
+
+    @property
+    def gains_w(self) -> Array:
+        """Internal + solar gains entering the network (C.1–C.3) [W]."""
+        a, m, st = self.phi_parts
+        return a + m + st
 
 
 class Solver:
@@ -200,11 +214,10 @@ class Solver:
         w = (c_w * st.water + power_w + g_em * a) / (c_w + g_em)
         f = st.furniture + k["fur_step"] * (a - st.furniture)
         emitter_w = g_em * (w - a)
-        loss = n.h_ve * (a - t_e) + n.h_w * (s - t_e) + n.h_em * (m_bar - t_e)
-        gains = phi_ia + phi_m + phi_st
         mass_end = 2.0 * m_bar - st.mass
         st.air, st.furniture, st.mass, st.water, st.surface = a, f, mass_end, w, s
-        return StepSolution(a, f, s, m_bar, mass_end, w, emitter_w, loss, gains)
+        return StepSolution(a, f, s, m_bar, mass_end, w, emitter_w, n, t_e,
+                            (phi_ia, phi_m, phi_st))
 
 
 def stored_j(split: CapacitySplit, c_em: Array, st: NodeState) -> Array:

@@ -14,8 +14,12 @@ temperature, the water temperature):
   (P_nom per ``ramp_s``); below P_min it cycles on water-temperature hysteresis (stop when
   θ_w > θ_w* + h, start when θ_w < θ_w* − h), honouring the minimum on and off times. Loop off,
   system off and DHW stop space heating at once (the minimum off time still applies after).
-* **Defrost** (outdoor −12…+5 °C): after ``defrost_interval_s`` of compressor run time, the
-  unit reverses for ``defrost_duration_s`` and draws ``defrost_draw``·P_nom from the water.
+* **Defrost** (outdoor −12…+5 °C): after ``defrost_interval_s`` of compressor run time, and
+  not before ``defrost_min_run_s`` since the compressor's last space-heating start (a DHW
+  charge counts as a stop), the unit reverses for
+  ``defrost_duration_s`` and draws ``defrost_draw``·P_nom from the water.
+* **Sizing** (:func:`nominal_output_w`): P_nom is set so that the mean output at the design
+  outdoor temperature, defrosts included, is ``sizing`` × the design load.
 * **DHW** (an input): space heating paused; the compressor heats the tank at P_nom.
 """
 
@@ -38,6 +42,34 @@ CAPACITY_REF_C = 7.0
 CAPACITY_CLIP = (0.4, 1.3)
 #: Clip of the target water temperature: lower bound [°C] and margin above design [K].
 WATER_MIN_C, WATER_MARGIN_K = 15.0, 10.0
+
+
+def capacity_factor(capacity_per_k: Array, t_out_c: Array) -> Array:
+    """Capacity at ``t_out_c`` / nominal (+7 °C) capacity [-], clipped to :data:`CAPACITY_CLIP`."""
+    f = 1.0 + capacity_per_k * (t_out_c - CAPACITY_REF_C)
+    return np.minimum(np.maximum(f, CAPACITY_CLIP[0]), CAPACITY_CLIP[1])
+
+
+def nominal_output_w(hp: HeatPump, design_load_w: Array, design_t_out_c: Array) -> Array:
+    """Nominal (+7 °C) thermal output [W] of a heat pump sized on its design point.
+
+    At the design outdoor temperature θ_d the capacity is P_nom·f(θ_d) (:func:`capacity_factor`);
+    in the defrost band a unit running flat out spends ``defrost_interval_s`` (I) heating and
+    ``defrost_duration_s`` (D) drawing ``defrost_draw``·P_nom (r) from the water, so its mean
+    output is P_nom·(I·f − D·r)/(I + D) (the integrated capacity of EN 14511). P_nom is chosen so
+    that this mean equals ``sizing`` × ``design_load_w`` [W]. With every parameter in its range
+    I·f − D·r ≥ 2100·0.4 − 600 > 0.
+    """
+    f = capacity_factor(np.asarray(hp.capacity_per_k, dtype=float),
+                        np.asarray(design_t_out_c, dtype=float))
+    t_d = np.asarray(design_t_out_c, dtype=float)
+    frosty = ((np.asarray(hp.defrost) > 0) & (t_d >= DEFROST_RANGE_C[0])
+              & (t_d <= DEFROST_RANGE_C[1]))
+    i_s = np.asarray(hp.defrost_interval_s, dtype=float)
+    d_s = np.asarray(hp.defrost_duration_s, dtype=float)
+    integrated = np.where(frosty, (i_s * f - d_s * np.asarray(hp.defrost_draw, dtype=float))
+                          / (i_s + d_s), f)
+    return np.asarray(hp.sizing, dtype=float) * np.asarray(design_load_w, dtype=float) / integrated
 
 
 @dataclass
@@ -103,6 +135,7 @@ class Controller:
         self.tau_c = b(hp.control_tau_s)
         self.defrost_on = b(hp.defrost) > 0
         self.defrost_interval = b(hp.defrost_interval_s)
+        self.defrost_min_run = b(hp.defrost_min_run_s)
         self.defrost_duration = b(hp.defrost_duration_s)
         self.defrost_w = b(hp.defrost_draw) * self.nominal_w
         # Precomputed for the per-step arithmetic.
@@ -111,13 +144,14 @@ class Controller:
         self._c_per_tau = self.c_em / self.tau_c
         self._p_min_nom = self.p_min_frac * self.nominal_w
         self._any_thermostat = bool(self.thermostat.any())
+        self._half_band = 0.5 * self.hyst_room
+        self._not_thermostat = ~self.thermostat
         self._any_defrost = bool(self.defrost_on.any())
         self._no = np.zeros(n, bool)
 
     def p_max_w(self, t_out_c: Array) -> Array:
         """Capacity at outdoor ``t_out_c`` [W]."""
-        f = 1.0 + self.cap_per_k * (t_out_c - CAPACITY_REF_C)
-        return self.nominal_w * np.minimum(np.maximum(f, CAPACITY_CLIP[0]), CAPACITY_CLIP[1])
+        return self.nominal_w * capacity_factor(self.cap_per_k, t_out_c)
 
     def target_water_c(self, setpoint_c: Array, t_air_sensed: Array,
                        t_out_sensed: Array) -> Array:
@@ -138,10 +172,10 @@ class Controller:
         target = self.target_water_c(setpoint_c, t_air_sensed, t_out_sensed)
         space_on = enabled & ~dhw
         if self._any_thermostat:
-            band = 0.5 * self.hyst_room
+            band = self._half_band
             st.calling = np.where(st.calling, t_air_sensed < setpoint_c + band,
                                   t_air_sensed < setpoint_c - band)
-            demand = space_on & (~self.thermostat | st.calling)
+            demand = space_on & (self._not_thermostat | st.calling)
         else:
             demand = space_on
         d = np.maximum(target - t_air_c, 0.0)
@@ -162,9 +196,11 @@ class Controller:
         st.timer_s = np.where(start | stop, dt, st.timer_s + dt)
         st.running = running
         if self._any_defrost or force_defrost is not None:
-            # Reverse cycle after enough run time in the frost band.
+            # Reverse cycle after enough run time in the frost band, never in the first
+            # minutes after a start (timer_s is the time since the last start while running).
             frosty = (t_out_c >= DEFROST_RANGE_C[0]) & (t_out_c <= DEFROST_RANGE_C[1])
-            due = self.defrost_on & frosty & (st.run_since_defrost_s >= self.defrost_interval)
+            due = (self.defrost_on & frosty & (st.run_since_defrost_s >= self.defrost_interval)
+                   & (st.timer_s >= self.defrost_min_run))
             if force_defrost is not None:
                 due = due | force_defrost
             begin = running & (st.defrost_left_s <= 0) & due

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..model import HouseParameters
 from . import emitter as em
 from .envelope import CapacitySplit, Network, NodeState, Solver, split_capacity, steady_state
-from .heatpump import Controller, ControlState, cop
+from .heatpump import Controller, ControlState, cop, nominal_output_w
 from .params import CONTROL_IDEAL, PlantParams
 from .sensors import SensorBank
 
@@ -55,7 +55,8 @@ class PlantCore:
         self.exponent = _b(e.exponent, n)
         self.k_w = _b(em.output_constant(self.hlc, e, self.floor_area), n)
         self.g_pipe = _b(em.pipe_conductance(self.k_w, self.hlc, e), n)
-        self.nominal_w = _b(hp.sizing, n) * em.design_load_w(self.hlc, e)
+        self.nominal_w = _b(nominal_output_w(hp, em.design_load_w(self.hlc, e),
+                                             e.design_t_out_c), n)
         want_em = _b(em.capacity_j_per_k(self.k_w, e, self.floor_area, self.nominal_w), n)
         volume = self.floor_area * _b(house.wall_height, n)
         self.split: CapacitySplit = split_capacity(
@@ -135,9 +136,10 @@ class PlantCore:
             "t_furniture_c": sol.furniture, "t_water_c": sol.water,
             "t_water_target_c": ctl.target_water_c, "heat_pump_w": power,
             "emitter_w": sol.emitter_w, "heat_meter_w": meter, "compressor_on": comp,
-            "defrost": ctl.defrost, "dhw": dhw, "loss_w": sol.loss_w, "gains_w": sol.gains_w,
-            "heat_demand": demand,
+            "defrost": ctl.defrost, "dhw": dhw, "heat_demand": demand,
         }
+        if want is None or "loss_w" in want or "gains_w" in want:
+            out["loss_w"], out["gains_w"] = sol.loss_w, sol.gains_w
         if want is None or not want.isdisjoint(_HYDRAULIC):
             dhw_w = self.nominal_w * dhw
             water = sol.water + np.maximum(power, 0.0) / self.g_pipe
@@ -262,16 +264,19 @@ def simulate_plant(
     sp = _inputs("setpoint_c", setpoint_c, n_steps, n, math.nan)
     phi_int = _inputs("internal_gains_w", internal_gains_w, n_steps, n, 0.0)
     phi_sol = _inputs("solar_gains_w", solar_gains_w, n_steps, n, 0.0)
-    dhw_in = _inputs("dhw", dhw, n_steps, n, 0.0) > 0.5
+    # Per-step rows, not whole (n_steps, n) arrays: a population run is n_steps × 900 houses,
+    # and full-size temporaries cost more than the per-row work.
+    no_dhw = np.zeros(n, bool)
+    dhw_in = None if dhw is None else _inputs("dhw", dhw, n_steps, n, 0.0)
     want = frozenset(outputs)
     n_rec = n_steps // record_every
-    on = ~np.isnan(sp)
-    sp_fin = np.where(on, sp, 20.0)
     keep = {k: np.empty((n_rec, n), dtype=bool if k in _BOOL else float) for k in outputs}
+    dt = float(dt_s)
     for i in range(n_steps):
-        enabled = on[i]
-        out = core.step(float(dt_s), te[i], sp_fin[i], enabled, phi_int[i], phi_sol[i],
-                        dhw_in[i], None, want)
+        sp_i = sp[i]
+        enabled = ~np.isnan(sp_i)
+        out = core.step(dt, te[i], np.where(enabled, sp_i, 20.0), enabled, phi_int[i],
+                        phi_sol[i], no_dhw if dhw_in is None else dhw_in[i] > 0.5, None, want)
         if (i + 1) % record_every == 0 and (i + 1) // record_every <= n_rec:
             r = (i + 1) // record_every - 1
             for k in outputs:

@@ -116,7 +116,7 @@ def generate_dataset(
         household on the realistic plant with its realism options drawn over their documented
         ranges (:func:`impctl.population.realism.sample_params`, same seed → same options;
         :func:`~.virtual_imp_plant.simulate_imp_plant`); the options are extra
-        ``plant.<section>.<field>`` columns of the households table.
+        ``<section>.<field>`` columns (``emitter.kind`` …) of the households table.
 
     Returns
     -------

@@ -13,6 +13,8 @@ another (by emitter kind) or is a choice:
 * buffer: none with probability 0.5, else 10–20 L/kW (RH §3);
 * room sensor resolution: 0.5 K with probability 0.2, else 0.1 K (RH §5);
 * heat-meter systematic error within ±5 % (class 3 MPE, RH §5);
+* ``defrost_min_run_s`` over its range, drawn after everything else (so adding it changed no
+  earlier draw);
 * fixed: air ρc 1200 J/(m³K), max_share 0.6, defrost on (it acts only at −12…+5 °C),
   cop_eta 0.45, standby 20 W, flow sized for 5 K.
 
@@ -21,7 +23,7 @@ The same seed gives the same parameters.
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pandas as pd
@@ -92,6 +94,8 @@ def sample_params(n: int, seed: int | np.random.SeedSequence = 0) -> PlantParams
         meter_noise=u(Sensors, "meter_noise"),
         meter_positive_only=np.ones(n),
     )
+    # Drawn last so that adding it left every earlier draw (and so every house) unchanged.
+    heat_pump = replace(heat_pump, defrost_min_run_s=u(HeatPump, "defrost_min_run_s"))
     return PlantParams(capacities, emitter, heat_pump, gains, sensors)
 
 

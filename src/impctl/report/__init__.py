@@ -9,12 +9,17 @@ from __future__ import annotations
 import base64
 import html
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+from ..errors import InputError
 from ..model import HouseParameters
 from ..store import Store
 from . import figures
+from .fit_json import fit_problem
 from .summary import demo_summary, format_summary
 
 __all__ = ["demo_summary", "format_summary", "write_report"]
@@ -101,17 +106,44 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
         fit's own validation
     """
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out must be a directory", out)
     with Store(db_path, create=False) as store:
+        source = None
         if fit is None:
+            source = db_path
             last = store.last_fit()
             if last is None:
-                from ..errors import InputError
-
                 raise InputError("no fit stored yet: run a campaign (or impctl fit) first",
                                  db_path)
             fit = last[2]
+        why = fit_problem(fit)
+        if why is not None:
+            raise InputError(f"not a fit result: {why}", source)
         nights_html = _nights_table(store, tz)
-    out.mkdir(parents=True, exist_ok=True)
+    # Drawn into a temporary directory beside OUT and moved in only when everything is
+    # written: a failure leaves no half report (and no stray PNGs).
+    if not out.parent.is_dir():
+        raise InputError(f"the folder {out.parent} does not exist", out)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)  # mkdtemp makes it 0700; OUT gets the usual permissions
+    try:
+        _render(tmp, fit, truth, summary, demand, nights_html)
+        if out.exists():
+            for item in tmp.iterdir():
+                os.replace(item, out / item.name)
+            tmp.rmdir()
+        else:
+            os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out / "report.html"
+
+
+def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict | None,
+            demand: dict | None, nights_html: str) -> None:
     figs = [
         figures.night_fits(fit, out / "fig_nights.png"),
         figures.heat_demand(demand or fit.get("validation", {}), out / "fig_heat_demand.png"),
@@ -158,6 +190,4 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     parts += ["<h2>Fit settings</h2>",
               f"<pre>{html.escape(json.dumps(fit.get('fit', {}), indent=2))}</pre>",
               "</body></html>"]
-    page = out / "report.html"
-    page.write_text("\n".join(parts), encoding="utf-8")
-    return page
+    (out / "report.html").write_text("\n".join(parts), encoding="utf-8")

@@ -10,7 +10,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import InputError
-from .records import SAMPLE_COLUMNS, JournalEntry, Night, Sample, TriggerRequest
+from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
 
 # Each entry migrates from version i to i + 1; never edit a released entry, append a new one.
 _MIGRATIONS: tuple[str, ...] = (
@@ -76,6 +76,23 @@ _MIGRATIONS: tuple[str, ...] = (
         message TEXT NOT NULL
     );
     """,
+    # 2: requests expire and can be cancelled; a journal entry can end because the owner
+    # changed the register mid-night (kept, not overwritten) instead of being restored.
+    """
+    ALTER TABLE requests ADD COLUMN expires TEXT;
+    ALTER TABLE requests ADD COLUMN outcome TEXT;
+    ALTER TABLE journal ADD COLUMN outcome TEXT;
+    """,
+    # 3: household commands (abort, skip_tonight) queued for the daemon, e.g. over MQTT.
+    """
+    CREATE TABLE commands (
+        id INTEGER PRIMARY KEY,
+        name TEXT NOT NULL CHECK (name IN ('abort', 'skip_tonight')),
+        source TEXT NOT NULL,
+        created TEXT NOT NULL,
+        taken TEXT
+    );
+    """,
 )
 SCHEMA_VERSION = len(_MIGRATIONS)
 
@@ -118,14 +135,27 @@ class Store:
         if not create and not self.path.exists():
             raise InputError("no impctl store here (has the daemon run? check state_dir)",
                              self.path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.is_dir():
+            raise InputError("is a directory, not an impctl store", self.path)
+        if self.path.parent.exists() and not self.path.parent.is_dir():
+            raise InputError("is a file, not a state directory", self.path.parent)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # state_dir under /proc, a file on the way, no permission
+            raise InputError(f"cannot create the state directory: {exc.strerror}",
+                             self.path.parent) from None
         # A new store is not world-accessible whatever the umask (a shell's 022, not only the
         # unit's 0027); SQLite gives its -wal and -shm files the database file's permissions.
         try:
             os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o640))
         except FileExistsError:
             pass
-        self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+        except OSError as exc:
+            raise InputError(f"cannot create the store: {exc.strerror}", self.path) from None
+        try:
+            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+        except sqlite3.Error as exc:
+            raise InputError(f"cannot open the store: {exc}", self.path) from None
         self._db.row_factory = sqlite3.Row
         try:
             self._db.execute("PRAGMA journal_mode=WAL")
@@ -285,26 +315,72 @@ class Store:
 
     def journal_mark_restored(self, entry_id: int) -> None:
         """Mark an entry restored (after the read-back matched)."""
-        self._db.execute("UPDATE journal SET restored = ? WHERE id = ?",
+        self._db.execute("UPDATE journal SET restored = ?, outcome = 'restored' WHERE id = ?",
                          (_iso(_now()), entry_id))
 
+    def journal_mark_owner_changed(self, entry_id: int, raw_value: int) -> None:
+        """Close an entry without restoring it: the owner set the register themselves
+        (to ``raw_value``) while impctl held it, and the owner's newer choice wins."""
+        self._db.execute(
+            "UPDATE journal SET restored = ?, outcome = ? WHERE id = ? AND restored IS NULL",
+            (_iso(_now()), f"owner changed it to raw {int(raw_value)}", entry_id))
+
     # -- manual trigger requests -----------------------------------------------------------
-    def add_request(self, kind: str, setpoint_c: float | None, when: str) -> int:
-        """Queue a manual night for the daemon; returns the request id."""
+    def add_request(self, kind: str, setpoint_c: float | None, when: str, *,
+                    expires: datetime | None = None) -> int:
+        """Queue a manual night for the daemon; returns the request id.
+
+        ``expires`` (aware, on the daemon's clock): the daemon drops the request unstarted
+        after it; None = never.
+        """
         cur = self._db.execute(
-            "INSERT INTO requests (kind, setpoint_c, run_when, created) VALUES (?, ?, ?, ?)",
-            (kind, setpoint_c, when, _iso(_now())))
+            "INSERT INTO requests (kind, setpoint_c, run_when, created, expires)"
+            " VALUES (?, ?, ?, ?, ?)",
+            (kind, setpoint_c, when, _iso(_now()), _iso(expires)))
         return int(cur.lastrowid)
 
     def pending_requests(self) -> list[TriggerRequest]:
-        """Requests not yet taken by the daemon, oldest first."""
+        """Requests not yet taken, cancelled or expired by the daemon, oldest first."""
         rows = self._db.execute("SELECT * FROM requests WHERE taken IS NULL ORDER BY id")
         return [_request(r) for r in rows]
 
     def take_request(self, request_id: int) -> bool:
-        """Mark a request taken; False if another taker was first."""
-        cur = self._db.execute("UPDATE requests SET taken = ? WHERE id = ? AND taken IS NULL",
-                               (_iso(_now()), request_id))
+        """Mark a request taken; False if another taker was first (or it was cancelled)."""
+        cur = self._db.execute(
+            "UPDATE requests SET taken = ?, outcome = 'taken' WHERE id = ? AND taken IS NULL",
+            (_iso(_now()), request_id))
+        return cur.rowcount == 1
+
+    def close_request(self, request_id: int, outcome: str) -> bool:
+        """End a pending request without running it (``outcome``: "cancelled", "expired");
+        False when it was no longer pending."""
+        cur = self._db.execute(
+            "UPDATE requests SET taken = ?, outcome = ? WHERE id = ? AND taken IS NULL",
+            (_iso(_now()), outcome, request_id))
+        return cur.rowcount == 1
+
+    # -- household commands (abort, skip_tonight) ------------------------------------------
+    def add_command(self, name: str, source: str) -> int:
+        """Queue a command for the daemon (``abort`` or ``skip_tonight``); returns its id."""
+        cur = self._db.execute(
+            "INSERT INTO commands (name, source, created) VALUES (?, ?, ?)",
+            (name, source, _iso(_now())))
+        return int(cur.lastrowid)
+
+    def pending_commands(self, name: str | None = None) -> list[Command]:
+        """Commands not yet taken, oldest first (only ``name`` when given)."""
+        sql, args = "SELECT * FROM commands WHERE taken IS NULL", []
+        if name is not None:
+            sql += " AND name = ?"
+            args.append(name)
+        return [Command(id=r["id"], name=r["name"], source=r["source"],
+                        created=_dt(r["created"]), taken=_dt(r["taken"]))
+                for r in self._db.execute(sql + " ORDER BY id", args)]
+
+    def take_command(self, command_id: int) -> bool:
+        """Mark a command taken; False if another taker was first."""
+        cur = self._db.execute("UPDATE commands SET taken = ? WHERE id = ? AND taken IS NULL",
+                               (_iso(_now()), command_id))
         return cur.rowcount == 1
 
     # -- campaign plan ---------------------------------------------------------------------
@@ -382,4 +458,5 @@ def _journal(row: sqlite3.Row) -> JournalEntry:
 def _request(row: sqlite3.Row) -> TriggerRequest:
     return TriggerRequest(id=row["id"], kind=row["kind"], setpoint_c=row["setpoint_c"],
                           when=row["run_when"], created=_dt(row["created"]),
-                          taken=_dt(row["taken"]), extra=json.loads(row["extra"]))
+                          taken=_dt(row["taken"]), extra=json.loads(row["extra"]),
+                          expires=_dt(row["expires"]), outcome=row["outcome"])

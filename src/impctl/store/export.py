@@ -13,6 +13,7 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from ..errors import InputError
 from .db import Store
 
 COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind")
@@ -40,14 +41,68 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
     return rows
 
 
+#: The first bytes of every SQLite database file.
+_SQLITE_MAGIC = b"SQLite format 3\0"
+
+
+def check_output_file(out: Path, force: bool = False, protect: Iterable[Path] = ()) -> None:
+    """Refuse an output path that would destroy data (raises :class:`InputError`).
+
+    Never onto a directory, a database (the store, its journal and write counters live in
+    SQLite files: refused even with ``force``) or a file in ``protect`` or next to it
+    (``-wal``/``-shm``); never into a directory that does not exist (it is not created); an
+    existing file only with ``force``.
+    """
+    out = Path(out)
+    if out.is_dir():
+        raise InputError("is a directory; give the file to write", out, "--out")
+    if not out.parent.is_dir():
+        raise InputError("directory does not exist (export does not create it)", out.parent,
+                         "--out")
+    target = out.resolve()
+    for path in protect:
+        path = Path(path).resolve()
+        if target in (path, Path(f"{path}-wal"), Path(f"{path}-shm"), Path(f"{path}-journal")):
+            raise InputError("is the impctl store; export never writes onto it", out, "--out")
+    if out.exists():
+        try:
+            with out.open("rb") as fh:
+                head = fh.read(len(_SQLITE_MAGIC))
+        except OSError as exc:
+            raise InputError(f"cannot read: {exc.strerror}", out, "--out") from None
+        if head == _SQLITE_MAGIC:
+            raise InputError("is an SQLite database; export never writes onto a database", out,
+                             "--out")
+        if not force:
+            raise InputError("exists; add --force to overwrite it", out, "--out")
+
+
 def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | None = None,
-                  valid_only: bool = True) -> int:
-    """Write the selected nights to ``out`` as CSV or Parquet, atomically; returns the row count."""
+                  valid_only: bool = True, *, force: bool = False) -> int:
+    """Write the selected nights to ``out`` as CSV or Parquet, atomically; returns the row count.
+
+    Raises :class:`InputError` (nothing written) for an unsafe ``out`` (see
+    :func:`check_output_file`; ``force`` allows overwriting a plain file), an unknown night id,
+    or a selection without a usable sample.
+    """
     import pandas as pd
 
-    df = pd.DataFrame(nights_rows(store, night_ids, valid_only), columns=list(COLUMNS))
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    check_output_file(out, force, protect=[store.path])
+    if night_ids is not None:
+        night_ids = list(night_ids)
+        known = {n.id for n in store.nights(ids=night_ids)}
+        missing = [i for i in night_ids if i not in known]
+        if missing:
+            raise InputError(f"no such night(s) in the store: {', '.join(map(str, missing))}",
+                             store.path, "--nights")
+    rows = nights_rows(store, night_ids, valid_only)
+    if not rows:
+        what = "the selected nights have" if night_ids is not None else (
+            "the store has no valid night with" if valid_only else "the store has")
+        raise InputError(f"nothing to export: {what} no usable samples (see impctl nights)",
+                         store.path)
+    df = pd.DataFrame(rows, columns=list(COLUMNS))
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:
@@ -62,3 +117,24 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
         Path(tmp).unlink(missing_ok=True)
         raise
     return len(df)
+
+
+def refuse_database(out: Path | None, option: str) -> None:
+    """Refuse an output path that is an SQLite database or one of its side files (raises
+    :class:`InputError`): the store holds the restore journal, and no command may write onto
+    it (``fit --json``, ``fit --plot``, ``simulate --out``; ``export`` checks more)."""
+    if out is None:
+        return
+    out = Path(out)
+    candidates = [out] + [out.with_name(out.name[: -len(suffix)])
+                          for suffix in ("-wal", "-shm", "-journal")
+                          if out.name.endswith(suffix)]
+    for path in candidates:
+        try:
+            with path.open("rb") as fh:
+                head = fh.read(len(_SQLITE_MAGIC))
+        except OSError:
+            continue
+        if head == _SQLITE_MAGIC:
+            raise InputError("is an SQLite database (or its journal); impctl never writes onto "
+                             "one", out, option)

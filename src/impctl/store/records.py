@@ -89,3 +89,20 @@ class TriggerRequest:
     created: datetime
     taken: datetime | None = None
     extra: dict = field(default_factory=dict)
+    expires: datetime | None = None  # on the daemon's clock; None = never
+    outcome: str | None = None  # "taken", "cancelled" or "expired" once no longer pending
+
+
+@dataclass(frozen=True)
+class Command:
+    """A household command queued for the running daemon (over MQTT, for instance).
+
+    ``name`` is ``abort`` (end the running night now and restore the owner's settings) or
+    ``skip_tonight`` (do not start the next scheduled night; expires after 24 h).
+    """
+
+    id: int
+    name: str
+    source: str
+    created: datetime
+    taken: datetime | None = None

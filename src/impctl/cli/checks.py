@@ -1,0 +1,105 @@
+"""Checks of command-line options: physical bounds, time zones — one line and exit status 2.
+
+Each check raises :class:`impctl.errors.InputError` naming the option (``place``); the CLI's
+:func:`impctl.cli.run_group` prints it as one line. Kept free of numpy, pandas and torch.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+from ..errors import InputError
+
+#: Setpoints a room can be heated to [°C]: a room thermostat's span, as the NIGHTS.csv and
+#: DRIVERS.csv ``setpoint`` column (impctl.imp.nights_csv.PLAUSIBLE).
+SETPOINT_C = (5.0, 35.0)
+#: Initial mass temperature of a simulation [°C]: anything a building's structure can hold.
+T_M_INIT_C = (-40.0, 60.0)
+#: Length of the built-in weather of ``impctl simulate`` [days] (10 years at most).
+SIM_DAYS = (0.1, 3660.0)
+#: Time step of ``impctl simulate`` [s]: 1 s … 1 day.
+SIM_STEP_S = (1.0, 86400.0)
+#: Largest NIGHTS.csv that ``fit`` and ``classify`` read [MB] (~600,000 rows, 5.7 years of
+#: 5-minute data): 576,000 rows (24 MB) took 47 s and 531 MB peak RSS with 30 nights fitted
+#: (bench/fit_large.py); a gateway has 1–4 GB.
+MAX_FILE_MB = 25.0
+
+
+def _num(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e12 else f"{x:g}"
+
+
+def in_range(value: float | None, bounds: tuple[float, float], place: str, unit: str = "",
+             *, low_open: bool = False) -> float | None:
+    """``value`` if it is ``None`` or a finite number inside ``bounds``; else InputError.
+
+    ``low_open`` excludes the lower bound itself (e.g. a positive length).
+    """
+    if value is None:
+        return None
+    lo, hi = bounds
+    unit = f" {unit}" if unit else ""
+    if not math.isfinite(value):
+        raise InputError(f"must be a finite number, got {value!r}", place=place)
+    low_ok = value > lo if low_open else value >= lo
+    if not (low_ok and value <= hi):
+        sign = "(" if low_open else "["
+        raise InputError(f"{_num(value)}{unit} is outside the plausible range "
+                         f"{sign}{_num(lo)}, {_num(hi)}]{unit}", place=place)
+    return value
+
+
+def bounded(bounds: tuple[float, float], unit: str = "", *, low_open: bool = False
+            ) -> Callable[[click.Context, click.Parameter, Any], Any]:
+    """A click ``callback`` that checks a float option with :func:`in_range`."""
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        return in_range(value, bounds, max(param.opts, key=len), unit, low_open=low_open)
+    return callback
+
+
+def house_limit(key: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
+    """A click ``callback``: the option must lie in the house file's limits for ``key``
+    (:data:`impctl.model.house_limits.HOUSE_LIMITS`, imported only when the option is parsed,
+    so the CLI starts without numpy)."""
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        from ..model.house_limits import limit_problem
+
+        why = None if value is None else limit_problem(key, float(value))
+        if why is not None:
+            raise InputError(why, place=max(param.opts, key=len))
+        return value
+    return callback
+
+
+def file_mb(path) -> float:
+    """Size of ``path`` [MB]; 0 when it cannot be read (the reader then names the problem)."""
+    try:
+        return path.stat().st_size / 1e6
+    except OSError:
+        return 0.0
+
+
+def refuse_large_file(path, max_mb: float) -> None:
+    """A file above ``max_mb`` is refused before it is read, with what to do instead."""
+    size_mb = file_mb(path)
+    if size_mb > max_mb:
+        raise InputError(
+            f"{size_mb:.0f} MB is more than the {max_mb:g} MB read here (about 600,000 rows; "
+            "a gateway has 1–4 GB of memory): keep the campaign's weeks only, e.g. the last "
+            "60 days", path)
+
+
+def time_zone(ctx: click.Context | None, param: click.Parameter | None, value: str) -> str:
+    """A click ``callback`` (or a plain check): ``value`` must be an IANA time-zone name."""
+    from zoneinfo import ZoneInfo
+
+    try:
+        ZoneInfo(value)
+    except (KeyError, ValueError, OSError, TypeError):  # ZoneInfoNotFoundError is a KeyError
+        raise InputError(f"unknown time zone {value!r} (an IANA name such as "
+                         "Europe/Ljubljana or UTC)", place="--tz") from None
+    return value

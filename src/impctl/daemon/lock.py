@@ -1,0 +1,172 @@
+"""One process drives the heat pump per store: a lock file with the holder's PID and heartbeat.
+
+``<state_dir>/daemon.lock`` is held with ``flock(LOCK_EX)`` by ``impctl daemon`` (and by
+``impctl trigger --foreground``) for as long as it runs; the kernel drops the lock when the
+process dies, also on SIGKILL, so a stale file never blocks a restart. The file holds the
+holder's PID and role as JSON; its modification time is the heartbeat, touched by the daemon's
+health loop only while its event loop runs and its store answers. ``impctl status`` and
+``impctl trigger`` read both without taking the lock for more than an instant.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from ..errors import InputError
+
+LOCK_NAME = "daemon.lock"
+#: Wall seconds between heartbeats of a healthy daemon.
+HEARTBEAT_S = 10.0
+#: A heartbeat older than this [wall s] means the holder is alive but stuck.
+STALE_S = 60.0
+
+
+class DaemonRunning(InputError):
+    """Another process already drives the heat pump of this store."""
+
+
+@dataclass(frozen=True)
+class DaemonInfo:
+    """What the lock file says about the process driving the heat pump.
+
+    Attributes
+    ----------
+    running : a process holds the lock now
+    pid : its PID (or the last holder's when not running); None when never started
+    role : "daemon" or "trigger --foreground"
+    heartbeat_age_s : wall seconds since the last heartbeat (None without a lock file)
+    """
+
+    running: bool
+    pid: int | None = None
+    role: str | None = None
+    heartbeat_age_s: float | None = None
+
+    @property
+    def stale(self) -> bool:
+        """Running, but the heartbeat is older than :data:`STALE_S` (hung event loop)."""
+        return self.running and (self.heartbeat_age_s or 0.0) > STALE_S
+
+    def describe(self) -> str:
+        """One line for people, e.g. ``running (PID 812, heartbeat 4 s ago)``."""
+        age = "" if self.heartbeat_age_s is None else f"{_age(self.heartbeat_age_s)} ago"
+        if self.running:
+            who = "" if self.role in (None, "daemon") else f"{self.role}, "
+            if self.stale:
+                return (f"NOT RESPONDING: PID {self.pid} holds the lock but its last heartbeat "
+                        f"was {age}")
+            return f"running ({who}PID {self.pid}, heartbeat {age})"
+        if self.pid is None:
+            return "NOT RUNNING (never started on this store)"
+        return (f"NOT RUNNING: nothing watches the heat pump (last PID {self.pid}, "
+                f"last heartbeat {age})")
+
+
+def _age(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def _read(path: Path) -> tuple[int | None, str | None]:
+    try:
+        data = json.loads(path.read_text() or "{}")
+        return int(data["pid"]), str(data.get("role", "daemon"))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None, None
+
+
+def probe(state_dir: str | Path) -> DaemonInfo:
+    """Is a daemon (or foreground night) driving the heat pump of this state directory?"""
+    path = Path(state_dir) / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return DaemonInfo(False)
+    except OSError:  # not readable by this user: fall back to the PID alone
+        return DaemonInfo(False)
+    try:
+        pid, role = _read(path)
+        age = max(0.0, time.time() - os.fstat(fd).st_mtime)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return DaemonInfo(True, pid, role, age)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return DaemonInfo(False, pid, role, age)
+    finally:
+        os.close(fd)
+
+
+class DaemonLock:
+    """The exclusive lock of one store's heat pump, held for the life of the process.
+
+    Parameters
+    ----------
+    state_dir : the configuration's state directory (must exist)
+    role : what holds it, shown by ``impctl status``
+    """
+
+    def __init__(self, state_dir: str | Path, role: str = "daemon"):
+        self.path = Path(state_dir) / LOCK_NAME
+        self.role = role
+        self._fd: int | None = None
+
+    def acquire(self, wait_s: float = 1.0) -> DaemonLock:
+        """Take the lock, or raise :class:`DaemonRunning` naming the holder's PID.
+
+        Retries for ``wait_s``: ``impctl status`` may hold a shared lock for an instant.
+        """
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o640)
+        except OSError as exc:
+            raise InputError(f"cannot create the lock file: {exc.strerror}", self.path) from None
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() < deadline:
+                    time.sleep(0.05)
+                    continue
+                os.close(fd)
+                pid, role = _read(self.path)
+                who = f"PID {pid}" if pid is not None else "another process"
+                raise DaemonRunning(
+                    f"another impctl {role or 'daemon'} ({who}) already drives the heat pump of "
+                    f"this store; stop it first (systemctl stop impctl)",
+                    self.path.parent) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps({"pid": os.getpid(), "role": self.role,
+                                  "started": datetime.now(UTC).isoformat()}).encode(), 0)
+        self._fd = fd
+        return self
+
+    def heartbeat(self) -> None:
+        """Touch the lock file: the holder is alive and healthy."""
+        if self._fd is not None:
+            os.utime(self._fd)
+
+    def release(self) -> None:
+        """Drop the lock (the file stays, with the last PID and heartbeat)."""
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> DaemonLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

@@ -1,0 +1,200 @@
+"""The daemon's side of MQTT (issue 17): what the bridge reads, and the household commands.
+
+Kept out of ``service.py`` so that the service only has small, named hooks:
+``start_mqtt`` / ``MqttLink.stop`` / ``MqttLink.wake``, ``run_commands`` (the 1 s command
+poll) and ``skip_tonight`` (asked by the night job). Commands go through the store, like
+``impctl trigger``: a command queued by any process is executed here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from datetime import UTC, datetime, timedelta
+from importlib import metadata
+from typing import TYPE_CHECKING
+
+from ..controller import restore_all
+from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
+from ..heatpump.clock import VirtualClock
+from .schedule import request_expiry
+
+if TYPE_CHECKING:
+    from ..mqtt.bridge import MqttBridge
+    from ..mqtt.commands import Command
+    from ..mqtt.discovery import DeviceIdentity
+    from ..mqtt.payloads import LiveState
+    from .service import Daemon
+
+_LOG = logging.getLogger("impctl.daemon")
+_RUNNING = ("preparing", "active", "restoring")
+#: A skip request older than this is stale (it was for a night that has passed) [h].
+SKIP_VALID_H = 24.0
+_TASKS: set[asyncio.Task] = set()
+try:
+    _VERSION = metadata.version("impctl")
+except metadata.PackageNotFoundError:
+    _VERSION = "unknown"
+
+
+class MqttLink:
+    """The :class:`~impctl.mqtt.bridge.StateSource` of a running daemon."""
+
+    def __init__(self, daemon: Daemon):
+        self.daemon = daemon
+        self._idle: Snapshot | None = None
+        self._idle_ok = False
+        self.bridge: MqttBridge | None = None
+
+    # -- StateSource -------------------------------------------------------------------------
+    def identity(self) -> DeviceIdentity:
+        from ..mqtt.discovery import DeviceIdentity
+
+        d = self.daemon
+        try:
+            model = f"Kronoterm heat pump, {d.client.generation.value} controller"
+        except HeatPumpError:  # not connected yet: announced again once detected
+            model = "Kronoterm heat pump (controller not yet detected)"
+        return DeviceIdentity(model=model, link=d.cfg.heatpump.link.describe(),
+                              sw_version=_VERSION)
+
+    def live(self) -> LiveState:
+        from ..mqtt.payloads import LiveState
+
+        d, store = self.daemon, self.daemon.store
+        state = LiveState()
+        running = store.nights(states=_RUNNING)
+        snap, ok = self._idle, self._idle_ok
+        last = d.controller.last_snapshot if d.controller else None
+        if running:
+            night = running[-1]
+            state.night_state, state.night_kind, state.night_id = (night.state, night.kind,
+                                                                   night.id)
+            snap, ok = last, last is not None
+        elif last is not None and (snap is None or last.timestamp > snap.timestamp):
+            snap, ok = last, True  # a night's last sample is newer than the idle read
+        if snap is not None:
+            state.ts = snap.timestamp
+            state.t_air_c = snap.t_air_c.value
+            state.t_out_c = snap.t_out_c.value
+            state.q_hc_w = snap.q_hc_w.value
+        state.link_ok = bool(ok and d._connected.is_set())
+        plan = store.campaign()
+        state.campaign_valid = sum(1 for *_, v in plan if v)
+        state.campaign_planned = len(plan)
+        budget = d.client.budget if d.client else None
+        if budget is not None:
+            day = d.clock.now().date()
+            state.writes = {str(ma): f"{budget.used(ma, day)}/{budget.limit(ma)}"
+                            for ma in (2187, 2042)}
+        state.skip_tonight = bool(store.pending_commands("skip_tonight"))
+        state.restore_pending = [e.register for e in store.journal_pending()]
+        return state
+
+    async def refresh(self) -> None:
+        """One snapshot outside a night, if the heat pump is free (never during a night or
+        a restore: those hold the heat-pump lock and publish their own samples)."""
+        d = self.daemon
+        if not d._connected.is_set() or d._heat_pump_lock.locked() or d.stop.is_set():
+            return
+        async with d._heat_pump_lock:
+            try:
+                self._idle = await d.client.snapshot()
+                self._idle_ok = True
+            except (ModbusLinkError, HeatPumpError) as exc:
+                if self._idle_ok:
+                    _LOG.warning("idle read for MQTT failed: %s", exc)
+                self._idle, self._idle_ok = None, False
+
+    def last_fit(self):
+        return self.daemon.store.last_fit()
+
+    def submit(self, command: Command) -> str:
+        store = self.daemon.store
+        if command.name == "trigger":
+            expires = request_expiry(self.daemon.cfg, self.daemon.clock, command.when)
+            rid = store.add_request(command.kind, command.setpoint_c, command.when,
+                                    expires=expires)
+            return (f"queued request {rid}: {command.kind} night at {command.setpoint_c:g} °C "
+                    f"({command.when})")
+        cid = store.add_command(command.name, "mqtt")
+        return f"queued command {cid} ({command.name})"
+
+    # -- the daemon's hooks ----------------------------------------------------------------------
+    def wake(self) -> None:
+        if self.bridge is not None:
+            self.bridge.wake()
+
+    async def stop(self) -> None:
+        if self.bridge is not None:
+            await self.bridge.stop()
+
+
+def start_mqtt(daemon: Daemon) -> MqttLink | None:
+    """Start the bridge when ``[mqtt]`` is configured; None otherwise (nothing imported)."""
+    cfg = daemon.cfg
+    if cfg.mqtt is None:
+        return None
+    from ..mqtt.bridge import MqttBridge
+    from ..mqtt.discovery import Limits
+
+    lo, hi = cfg.heatpump.writes.loop1_setpoint_c
+    link = MqttLink(daemon)
+    link.bridge = MqttBridge(
+        cfg.mqtt, link,
+        Limits(setpoint_min_c=lo, setpoint_max_c=hi,
+               comfort_band_k=cfg.night.comfort_band_k,
+               default_setpoint_c=cfg.campaign.constrained_setpoint_c))
+    link.bridge.start()
+    return link
+
+
+async def run_commands(daemon: Daemon) -> None:
+    """Execute queued ``abort`` commands (the 1 s poll); ``skip_tonight`` waits for the
+    night job (:func:`skip_tonight`)."""
+    store = daemon.store
+    for cmd in store.pending_commands("abort"):
+        if not store.take_command(cmd.id):
+            continue
+        reason = f"aborted on request ({cmd.source})"
+        if daemon.controller is not None and daemon.controller.abort(reason):
+            _LOG.warning("abort requested (%s): ending the night and restoring", cmd.source)
+            store.add_event("warning", f"abort requested ({cmd.source}): night ended")
+        elif store.journal_pending():
+            # No night runs but the owner's settings are not back: restore, as
+            # `impctl restore` does.
+            _LOG.warning("abort requested (%s): restoring the owner's settings", cmd.source)
+            store.add_event("warning", f"abort requested ({cmd.source}): restoring")
+            if daemon._connected.is_set() and not daemon._heat_pump_lock.locked():
+                # Its own task: this 1 s poll must return at once (a restore may wait for
+                # the link); a held lock means a night or the restorer is at it already.
+                task = asyncio.create_task(_restore(daemon), name="abort restore")
+                _TASKS.add(task)
+                task.add_done_callback(_TASKS.discard)
+        else:
+            _LOG.info("abort requested (%s): no night running, nothing to restore",
+                      cmd.source)
+        if daemon.mqtt is not None:
+            daemon.mqtt.wake()
+
+
+async def _restore(daemon: Daemon) -> None:
+    async with daemon._heat_pump_lock:
+        await restore_all(daemon.client, daemon.store, clock=VirtualClock.real(),
+                          timeout_s=60.0, retry_s=1.0)
+
+
+def skip_tonight(daemon: Daemon) -> bool:
+    """True (and the request consumed) when a household asked to skip this night."""
+    store = daemon.store
+    now = datetime.now(UTC)  # commands are stamped in real time, whatever the night's clock
+    skipped = False
+    for cmd in store.pending_commands("skip_tonight"):
+        if not store.take_command(cmd.id):
+            continue
+        if now - cmd.created <= timedelta(hours=SKIP_VALID_H):
+            skipped = True
+    if skipped:
+        _LOG.warning("night skipped on request (skip_tonight)")
+        store.add_event("info", "night skipped on request")
+    return skipped

@@ -1,0 +1,249 @@
+"""The MQTT side of the daemon: one asyncio task that publishes and listens (aiomqtt).
+
+The daemon never awaits anything here: it calls :meth:`MqttBridge.wake` (no I/O) when it has
+news, and the bridge pulls the state from its :class:`StateSource` when it publishes. A broker
+that is down, slow or refusing the credentials only delays this task: the control loop and the
+samples do not wait for it. Reconnects back off (1 s doubling to ``reconnect_max_s``) and an
+outage is logged once, when it starts, and once when it ends.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import random
+import ssl
+import time
+from datetime import datetime
+from typing import Protocol
+
+import aiomqtt
+
+from .commands import BadCommand, Command, parse_command
+from .config import MqttConfig
+from .discovery import OFFLINE, ONLINE, DeviceIdentity, Limits, discovery_messages
+from .payloads import LiveState, fit_payloads
+
+_LOG = logging.getLogger("impctl.mqtt")
+#: A publish or subscribe the broker does not acknowledge in this time counts as an outage [s].
+_TIMEOUT_S = 10.0
+#: How often the fit results are re-read from the store at most [s].
+_FIT_CHECK_S = 60.0
+_UNSENT = object()
+
+
+class StateSource(Protocol):
+    """What the daemon offers the bridge."""
+
+    def live(self) -> LiveState:
+        """The current state (no I/O beyond the local store)."""
+
+    def identity(self) -> DeviceIdentity:
+        """The heat pump as far as known (the controller generation once detected)."""
+
+    async def refresh(self) -> None:
+        """Read the heat pump when no night does so (idle); must not raise."""
+
+    def last_fit(self) -> tuple[datetime, list[int], dict] | None:
+        """The store's newest fit."""
+
+    def submit(self, command: Command) -> str:
+        """Queue a household command through the store; returns a line for the log."""
+
+
+class MqttBridge:
+    """Publishes impctl's state to a broker in Home Assistant's discovery format.
+
+    Parameters
+    ----------
+    cfg : MqttConfig
+    source : StateSource
+    limits : Limits (the trigger's safety limits; also the number entity's range)
+    """
+
+    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits) -> None:
+        self.cfg, self.source, self.limits = cfg, source, limits
+        self._device: DeviceIdentity | None = None  # as last announced
+        self.kind = "constrained"
+        self.setpoint_c = limits.default_setpoint_c
+        self.connected = False
+        self._wake = asyncio.Event()
+        self._rediscover = asyncio.Event()
+        self._task: asyncio.Task | None = None
+        self._fit_sent: object = _UNSENT
+        self._fit_checked = -1e9
+
+    # -- the daemon's side -----------------------------------------------------------------
+    def start(self) -> None:
+        """Start the bridge task (returns at once)."""
+        self._task = asyncio.create_task(self._run(), name="mqtt bridge")
+
+    def wake(self) -> None:
+        """New values: publish the state now (never blocks)."""
+        self._wake.set()
+
+    async def stop(self, timeout_s: float = 8.0) -> None:
+        """Publish ``offline`` (if connected), disconnect and end the task."""
+        if self._task is None:
+            return
+        self._task.cancel()
+        try:
+            await asyncio.wait_for(self._task, timeout_s)
+        except (asyncio.CancelledError, TimeoutError):
+            pass
+        except Exception as exc:  # noqa: BLE001 - stopping must not fail the daemon's exit
+            _LOG.warning("MQTT bridge ended with %r", exc)
+
+    # -- connection loop ---------------------------------------------------------------------
+    def _client(self) -> aiomqtt.Client:
+        cfg = self.cfg
+        tls = None
+        if cfg.tls:
+            tls = ssl.create_default_context(cafile=cfg.ca_file or None)
+        return aiomqtt.Client(
+            cfg.host, cfg.port, username=cfg.username or None, password=cfg.password(),
+            identifier=cfg.client_id, keepalive=cfg.keepalive_s, timeout=_TIMEOUT_S,
+            will=aiomqtt.Will(f"{cfg.topic}/availability", OFFLINE, qos=1, retain=True),
+            tls_context=tls, logger=logging.getLogger("impctl.mqtt.client"))
+
+    async def _run(self) -> None:
+        delay, down_since = 1.0, None
+        where = f"{self.cfg.host}:{self.cfg.port}"
+        while True:
+            try:
+                async with self._client() as client:
+                    self.connected = True
+                    if down_since is None:
+                        _LOG.info("MQTT connected to %s as %s (topics %s/…)", where,
+                                  self.cfg.client_id, self.cfg.topic)
+                    else:
+                        _LOG.info("MQTT broker %s back after %.0f s", where,
+                                  time.monotonic() - down_since)
+                    delay, down_since = 1.0, None
+                    await self._session(client)
+            except aiomqtt.MqttError as exc:
+                if down_since is None:  # one line per outage, not one per retry
+                    _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
+                                 "to %g s)", where, exc, self.cfg.reconnect_max_s)
+                    down_since = time.monotonic()
+            except Exception:  # noqa: BLE001 - MQTT must never take the daemon down
+                if down_since is None:
+                    _LOG.exception("MQTT bridge failed; reconnecting with back-off")
+                    down_since = time.monotonic()
+            finally:
+                self.connected = False
+            await asyncio.sleep(delay * random.uniform(0.8, 1.2))
+            delay = min(delay * 2, self.cfg.reconnect_max_s)
+
+    async def _session(self, client: aiomqtt.Client) -> None:
+        base = self.cfg.topic
+        # Subscribe first: once Home Assistant sees the buttons, pressing them must work.
+        if self.cfg.commands:
+            await client.subscribe(f"{base}/cmd/+", qos=1)
+        # Home Assistant says "online" here when it (re)starts: announce again then.
+        await client.subscribe(f"{self.cfg.discovery_prefix}/status")
+        await self._announce(client)
+        listener = asyncio.create_task(self._listen(client))
+        try:
+            publisher = asyncio.create_task(self._publish_loop(client))
+            done, _ = await asyncio.wait({listener, publisher},
+                                         return_when=asyncio.FIRST_COMPLETED)
+            for task in (listener, publisher):
+                task.cancel()
+            for task in done:
+                task.result()  # re-raise the MqttError that ended the session
+        except asyncio.CancelledError:
+            # Stopping: say offline ourselves (a clean disconnect sends no last will).
+            try:
+                await client.publish(f"{base}/availability", OFFLINE, qos=1, retain=True,
+                                     timeout=2.0)
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
+            raise
+        finally:
+            listener.cancel()
+
+    async def _announce(self, client: aiomqtt.Client) -> None:
+        self._device = self.source.identity()
+        for topic, payload in discovery_messages(self.cfg, self._device, self.limits):
+            await client.publish(topic, payload, qos=1, retain=True)
+        await client.publish(f"{self.cfg.topic}/availability", ONLINE, qos=1, retain=True)
+        await self._publish_settings(client)
+        self._fit_sent = _UNSENT
+        await self._publish_fit(client)
+
+    async def _publish_settings(self, client: aiomqtt.Client) -> None:
+        if self.cfg.commands:
+            await client.publish(f"{self.cfg.topic}/settings", json.dumps(
+                {"kind": self.kind, "setpoint_c": self.setpoint_c}), qos=1, retain=True)
+
+    async def _publish_fit(self, client: aiomqtt.Client) -> None:
+        self._fit_checked = time.monotonic()
+        fit = self.source.last_fit()
+        key = None if fit is None else (fit[0], tuple(fit[1]))
+        if key == self._fit_sent:
+            return
+        for name, payload in fit_payloads(fit).items():
+            await client.publish(f"{self.cfg.topic}/fit/{name}", json.dumps(payload),
+                                 qos=1, retain=True)
+        self._fit_sent = key
+
+    async def _publish_loop(self, client: aiomqtt.Client) -> None:
+        idle_s = self.cfg.idle_interval_s
+        last_refresh = -1e9
+        while True:
+            # Again when Home Assistant restarted, or the heat pump's identity became known.
+            if self._rediscover.is_set() or self.source.identity() != self._device:
+                self._rediscover.clear()
+                await self._announce(client)
+            state = self.source.live()
+            if state.night_state == "idle" and time.monotonic() - last_refresh >= idle_s:
+                await self.source.refresh()
+                last_refresh = time.monotonic()
+                state = self.source.live()
+            await client.publish(f"{self.cfg.topic}/state", json.dumps(state.as_json()),
+                                 qos=0, retain=False)
+            if time.monotonic() - self._fit_checked >= min(idle_s, _FIT_CHECK_S):
+                await self._publish_fit(client)
+            self._wake.clear()
+            try:
+                await asyncio.wait_for(self._wake.wait(), timeout=idle_s)
+            except TimeoutError:
+                pass
+
+    async def _listen(self, client: aiomqtt.Client) -> None:
+        prefix = f"{self.cfg.topic}/cmd/"
+        async for message in client.messages:
+            topic = str(message.topic)
+            payload = message.payload if isinstance(message.payload, bytes) else str(
+                message.payload or "").encode()
+            if topic == f"{self.cfg.discovery_prefix}/status":
+                if payload.strip().lower() == b"online":
+                    self._rediscover.set()
+                    self.wake()
+                continue
+            if not topic.startswith(prefix) or message.retain:
+                # A retained command would act again at every reconnect: ignore it.
+                if message.retain:
+                    _LOG.warning("MQTT command on %s ignored: retained messages are not "
+                                 "commands", topic)
+                continue
+            name = topic[len(prefix):]
+            try:
+                cmd = parse_command(name, payload, self.limits, self.kind, self.setpoint_c)
+            except BadCommand as exc:
+                _LOG.warning("MQTT command %s ignored: %s", topic, exc)
+                continue
+            if cmd.name in ("night_kind", "night_setpoint"):
+                self.kind = cmd.kind or self.kind
+                self.setpoint_c = cmd.setpoint_c or self.setpoint_c
+                _LOG.info("MQTT setting: triggered nights are %s at %g °C", self.kind,
+                          self.setpoint_c)
+                await self._publish_settings(client)
+            else:
+                try:
+                    _LOG.info("MQTT command %s: %s", cmd.name, self.source.submit(cmd))
+                except Exception as exc:  # noqa: BLE001 - a store error must not end MQTT
+                    _LOG.error("MQTT command %s could not be queued: %s", cmd.name, exc)
+                self.wake()

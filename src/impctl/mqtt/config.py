@@ -1,0 +1,152 @@
+"""The ``[mqtt]`` section of the daemon configuration: parsing and validation.
+
+Off unless the section is present. The password is never in the config: ``password_file``
+names a file holding it (mode 0600, readable by the service). Durations in s.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import socket
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+#: Name of the systemd credential that holds the password when password_file is empty.
+CREDENTIAL = "mqtt.password"
+_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+# Topic levels: no MQTT wildcards, no empty level, no leading/trailing slash.
+_TOPIC = re.compile(r"^[^#+/\s]+(/[^#+/\s]+)*$")
+
+
+def default_client_id() -> str:
+    """``impctl-<hostname>`` reduced to the characters allowed in ids and topics."""
+    host = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:50] or "gateway"
+    return f"impctl-{host}"
+
+
+@dataclass(frozen=True)
+class MqttConfig:
+    """Where and how impctl talks to an MQTT broker (Home Assistant's, usually).
+
+    Attributes
+    ----------
+    host, port : the broker (port 1883, or 8883 with TLS by convention)
+    tls : bool, connect with TLS; ``ca_file`` is the CA bundle (empty = the system's)
+    username, password_file : credentials; the password is read from the file at each
+        connect (empty: the systemd credential ``mqtt.password``, if the unit loads one)
+    client_id : MQTT client id, also the device id in Home Assistant
+    base_topic : prefix of impctl's own topics (default ``impctl/<client_id>``)
+    discovery_prefix : Home Assistant's discovery prefix
+    commands : accept abort / skip_tonight / trigger commands from the broker
+    idle_interval_s : how often values are read and published outside a night [s]
+    keepalive_s : MQTT keep-alive [s]; a dead daemon shows unavailable after ~1.5× this
+    reconnect_max_s : longest pause between reconnect attempts (doubling from 1 s) [s]
+    """
+
+    host: str = ""
+    port: int = 1883
+    tls: bool = False
+    ca_file: str = ""
+    username: str = ""
+    password_file: str = ""
+    client_id: str = ""
+    base_topic: str = ""
+    discovery_prefix: str = "homeassistant"
+    commands: bool = False
+    idle_interval_s: float = 300.0
+    keepalive_s: int = 60
+    reconnect_max_s: float = 300.0
+
+    @property
+    def topic(self) -> str:
+        """The base topic, ``impctl/<client_id>`` unless configured."""
+        return self.base_topic or f"impctl/{self.client_id}"
+
+    def password(self) -> str | None:
+        """The password: first line of ``password_file``, else of the systemd credential
+        ``mqtt.password`` (``LoadCredential=``, see README), else None."""
+        path = self.password_file
+        if not path:
+            creds = os.environ.get("CREDENTIALS_DIRECTORY")
+            if not creds or not (Path(creds) / CREDENTIAL).is_file():
+                return None
+            path = str(Path(creds) / CREDENTIAL)
+        lines = Path(path).read_text().splitlines()
+        return lines[0] if lines else ""
+
+
+def _typed(value: Any, default: Any, where: str, problems: list[str]) -> Any:
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+        kind = "true or false"
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        kind = "an integer"
+    elif isinstance(default, float):
+        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
+              and math.isfinite(value))
+        kind = "a finite number"
+        value = float(value) if ok else value
+    else:
+        ok = isinstance(value, str)
+        kind = "a string"
+    if ok:
+        return value
+    problems.append(f"{where}: must be {kind}, got {value!r}")
+    return default
+
+
+def mqtt_from_mapping(data: dict, problems: list[str], prefix: str = "mqtt.") -> MqttConfig:
+    """Build :class:`MqttConfig` from the ``[mqtt]`` table; appends one line per problem
+    (``key 'mqtt.port': …``) to ``problems`` and returns what could be read."""
+    known = {f.name: f.default for f in fields(MqttConfig)}
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        where = f"key '{prefix}{key}'"
+        if key not in known:
+            problems.append(f"{where}: unknown key")
+            continue
+        kwargs[key] = _typed(value, known[key], where, problems)
+    cfg = MqttConfig(**kwargs)
+    if not cfg.client_id:
+        cfg = MqttConfig(**{**kwargs, "client_id": default_client_id()})
+
+    def bad(key: str, text: str) -> None:
+        problems.append(f"key '{prefix}{key}': {text}")
+
+    if not cfg.host:
+        bad("host", "required: the broker's host name or address")
+    if not 1 <= cfg.port <= 65535:
+        bad("port", "must lie in 1–65535")
+    if not _ID.match(cfg.client_id):
+        bad("client_id", "only letters, digits, '_' and '-' (1–64 characters): it is used "
+                         f"in topics and Home Assistant ids, got {cfg.client_id!r}")
+    for key in ("base_topic", "discovery_prefix"):
+        text = getattr(cfg, key)
+        if text and not _TOPIC.match(text):
+            bad(key, f"must be a topic without wildcards (+ #), spaces or empty levels, "
+                     f"got {text!r}")
+    if not cfg.discovery_prefix:
+        bad("discovery_prefix", "must not be empty")
+    if cfg.password_file:
+        if not cfg.username:
+            bad("password_file", "needs mqtt.username")
+        try:
+            cfg.password()
+        except OSError as exc:
+            bad("password_file", f"cannot read it: {exc.strerror or exc}")
+    if cfg.ca_file:
+        if not cfg.tls:
+            bad("ca_file", "only used with mqtt.tls = true")
+        elif not Path(cfg.ca_file).is_file():
+            bad("ca_file", f"no such file: {cfg.ca_file}")
+    if not 10 <= cfg.idle_interval_s <= 3600:
+        bad("idle_interval_s", "must lie in 10–3600 s")
+    if not 5 <= cfg.keepalive_s <= 3600:
+        bad("keepalive_s", "must lie in 5–3600 s")
+    if not 1 <= cfg.reconnect_max_s <= 3600:
+        bad("reconnect_max_s", "must lie in 1–3600 s")
+    return cfg

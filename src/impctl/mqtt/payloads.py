@@ -1,0 +1,99 @@
+"""What is published: the live state object and the fit results, as JSON-ready dicts.
+
+Units are in the key names (``_c`` °C, ``_w`` W, ``_h`` h). A value that is missing is
+``null`` (Home Assistant shows "unknown"), never a number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any
+
+
+@dataclass
+class LiveState:
+    """Everything ``<base>/state`` carries; the daemon fills it, the bridge publishes it.
+
+    Attributes
+    ----------
+    ts : when the values were read (aware), or None
+    t_air_c, t_out_c : °C; q_hc_w : W (None = missing)
+    night_state : "idle", "preparing", "active" or "restoring"
+    night_kind : "constrained", "normal" or "none"
+    night_id : id of the running night, or None
+    campaign_valid, campaign_planned : nights
+    link_ok : the last read of the heat pump succeeded
+    writes : register → "used/limit" today
+    skip_tonight : a skip request is pending
+    restore_pending : journaled registers still to restore
+    """
+
+    ts: datetime | None = None
+    t_air_c: float | None = None
+    t_out_c: float | None = None
+    q_hc_w: float | None = None
+    night_state: str = "idle"
+    night_kind: str = "none"
+    night_id: int | None = None
+    campaign_valid: int = 0
+    campaign_planned: int = 0
+    link_ok: bool = False
+    writes: dict[str, str] = field(default_factory=dict)
+    skip_tonight: bool = False
+    restore_pending: list[str] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, Any]:
+        """The JSON object of ``<base>/state``."""
+        used = 0
+        for text in self.writes.values():
+            used += int(text.split("/")[0])
+        return {
+            "ts": None if self.ts is None else self.ts.isoformat(),
+            "t_air_c": _round(self.t_air_c, 2), "t_out_c": _round(self.t_out_c, 2),
+            "q_hc_w": _round(self.q_hc_w, 0),
+            "night_state": self.night_state, "night_kind": self.night_kind,
+            "night_id": self.night_id,
+            "experiment_active": self.night_state in ("preparing", "active", "restoring"),
+            "campaign": f"{self.campaign_valid}/{self.campaign_planned}",
+            "campaign_valid": self.campaign_valid, "campaign_planned": self.campaign_planned,
+            "link_ok": self.link_ok, "writes_today": used, "writes": dict(self.writes),
+            "skip_tonight": self.skip_tonight, "restore_pending": list(self.restore_pending),
+        }
+
+
+def _round(value: float | None, digits: int) -> float | None:
+    return None if value is None else round(float(value), digits)
+
+
+def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict]:
+    """The retained ``<base>/fit/<name>`` payloads from the store's last fit.
+
+    HLC in W/K, C_m in MJ/K (the fit JSON holds J/K), τ and the coast time in h. The interval
+    goes to attributes (``low``, ``high``); a quantity the nights do not determine
+    (``determined: false``) has ``value: null`` and keeps its interval: it is never shown as
+    measured. ``coast_h`` comes from the fit's ``flexibility`` block, null when absent.
+    """
+    if fit is None:
+        return {name: {"value": None} for name in ("hlc", "c_m", "tau", "coast_h")}
+    created, nights, result = fit
+    common = {"fit_created": created.isoformat(), "nights": list(nights)}
+    lumped = result.get("lumped") or {}
+    out: dict[str, dict] = {}
+    for name, scale, unit in (("hlc", 1.0, "W/K"), ("c_m", 1e-6, "MJ/K"), ("tau", 1.0, "h")):
+        q = lumped.get(name) or {}
+        determined = bool(q.get("determined", False))
+
+        def scaled(key: str, q: dict = q, scale: float = scale) -> float | None:
+            v = q.get(key)
+            return None if v is None else round(float(v) * scale, 3)
+
+        out[name] = {"value": scaled("value") if determined else None,
+                     "low": scaled("low"), "high": scaled("high"),
+                     "determined": determined, "unit": unit, **common}
+    flex = result.get("flexibility") or {}
+    coast = flex.get("coast_h")
+    out["coast_h"] = {"value": None if coast is None else round(float(coast), 2),
+                      "low": flex.get("coast_h_low"), "high": flex.get("coast_h_high"),
+                      "rebound_kwh": flex.get("rebound_kwh"), "unit": "h", **common}
+    return out
