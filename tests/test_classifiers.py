@@ -129,9 +129,10 @@ def test_training_learns_an_identifiable_parameter_and_reports_baselines(trained
     assert r.test_accuracy > r.majority_accuracy
     assert 0.0 <= r.shuffled_accuracy <= 1.0
     assert r.paper_test_accuracy == 0.84 and len(r.test_households) == 12
-    # probabilities: calibrated on held-out training households, better than the prior
-    assert r.calibrated and models["u_walls"].calibrated_
-    assert r.brier < r.brier_prior
+    # probabilities: 48 training households are too few to hold 20 % out for calibration, so
+    # the vote shares are kept (and said so); they still beat the prior
+    assert not r.calibrated and not models["u_walls"].calibrated_
+    assert r.brier == r.brier_votes and r.brier < r.brier_prior
     assert sum(b[2] for b in r.reliability) == 12 * len(r.labels)
     m = models["u_walls"]
     p = m.predict_proba(pd.DataFrame(np.zeros((1, m.n_features_in_)), columns=m.feature_names_in_))

@@ -12,6 +12,11 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 
 from ..population.ranges import DEFAULT_RANGES, bin_values, labels_of
 
+#: Fewest held-out households worth calibrating on; below that the forest keeps every training
+#: household and its vote shares (a sigmoid fitted to a handful of houses is noise, and the
+#: households it takes away can flip a borderline class).
+MIN_CALIBRATION_GROUPS = 40
+
 
 class RangeClassifier(ClassifierMixin, BaseEstimator):
     """Random forest whose classes are the ranges of one house parameter.
@@ -37,8 +42,9 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         held out, the forest is trained on the rest, and scikit-learn's
         ``CalibratedClassifierCV`` maps its votes to calibrated probabilities on the held-out
         households (whole households, so no campaign of a calibration house was seen by the
-        forest). Without groups, or when the held-out households miss a class, the vote shares
-        are kept (``calibrated_`` False).
+        forest). Without groups, with fewer than :data:`MIN_CALIBRATION_GROUPS` held-out
+        households, or when they miss a class, the forest keeps all rows and its vote shares
+        (``calibrated_`` False).
     calibration_fraction : float, default 0.2
 
     Attributes
@@ -82,7 +88,8 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         self.classes_ = np.array(labels_of(tuple(self.ranges)))
         index = bin_values(y, tuple(self.ranges))
         fit_rows, cal_rows = np.arange(len(index)), None
-        if self.calibration is not None and groups is not None:
+        n_cal = 0 if groups is None else len(np.unique(groups)) * self.calibration_fraction
+        if self.calibration is not None and n_cal >= MIN_CALIBRATION_GROUPS:
             from sklearn.model_selection import StratifiedGroupKFold
 
             folds = max(2, int(round(1.0 / self.calibration_fraction)))
