@@ -135,8 +135,8 @@ class Attribution:
             self._foreign(f"{len(data)} byte(s) while no request was pending: {data[:16].hex()}")
             return
         window.received += len(data)
-        if self.transport == "tcp" and len(data) >= 2:
-            window.tids.append(int.from_bytes(data[:2], "big"))
+        if self.transport == "tcp":
+            window.tids.extend(_mbap_tids(data))
 
     def end(self, function_code: int, arg: int, is_error: bool | None) -> str | None:
         """The request finished (``is_error`` None = no answer). Returns why the answer cannot
@@ -167,12 +167,17 @@ class Attribution:
 
     # -- quirks ------------------------------------------------------------------------------
     def _check_tids(self, window: _Window) -> None:
-        if window.sent_tid and all(t != window.sent_tid for t in window.tids):
-            for tid in set(window.tids):
-                self._mismatched_tids[tid] += 1
-            tid, n = self._mismatched_tids.most_common(1)[0]
-            if n >= 2 and self.tids_usable:
-                self.note("fixed_tid", f"{tid} in {n} answers")
+        # A fixed-TID gateway: request after request, answers carry one and the same foreign
+        # id and never ours. Late duplicates carry varying old ids, or ours shows up too.
+        if not window.sent_tid or window.sent_tid in window.tids or len(set(window.tids)) != 1:
+            self._mismatched_tids.clear()
+            return
+        self._mismatched_tids[window.tids[0]] += 1
+        tid, n = self._mismatched_tids.most_common(1)[0]
+        if len(self._mismatched_tids) > 1:
+            self._mismatched_tids = Counter({window.tids[0]: 1})
+        elif n >= 2 and self.tids_usable:
+            self.note("fixed_tid", f"{tid} in {n} answers in a row")
 
     def _foreign(self, detail: str) -> None:
         if not self.tids_usable:
@@ -188,3 +193,12 @@ class Attribution:
         if quirk not in self.quirks:
             _LOG.warning("Modbus quirk recognised: %s", text)
         self.quirks[quirk] = text
+
+
+def _mbap_tids(data: bytes) -> list[int]:
+    """Transaction ids of the MBAP frames in ``data`` (a chunk may hold several frames)."""
+    tids = []
+    while len(data) >= 7:
+        tids.append(int.from_bytes(data[:2], "big"))
+        data = data[6 + int.from_bytes(data[4:6], "big"):]
+    return tids

@@ -18,6 +18,8 @@ from .writes import WriteResult, safe_write
 
 _LOG = logging.getLogger(__name__)
 
+#: Reads of one snapshot before it is given up as unattributable (issue 15).
+_SNAPSHOT_TRIES = 3
 #: Registers probed to tell the extended set from the compact one (reference §1.6).
 PROBES = (2371, 2372, 2130, 2327)
 _NO_Q_HC = ("compact (TT3000) controller has no heat-power register (2329) and no heat meter "
@@ -202,19 +204,21 @@ class HeatPumpClient:
             regs.append(register("room_" + room))
         if self.config.heat_meter is None:
             regs.append(register("power_thermal"))
-        words: dict[int, tuple[int, datetime]] = {}
-        failed: dict[int, str] = {}
-        for first, count in plan_blocks([r for r in regs if r.in_generation(gen)], gen):
-            try:
-                block = await self.link.read(first - 1, count)
-            except ModbusDeviceError as exc:
-                for ma in range(first, first + count):
-                    failed[ma] = f"Modbus exception {exc.exception_code}"
-                continue
-            stamp = self.clock.now()
-            for i, word in enumerate(block):
-                words[first + i] = (word, stamp)
-
+        blocks = plan_blocks([r for r in regs if r.in_generation(gen)], gen)
+        for _ in range(_SNAPSHOT_TRIES):
+            before = self.link.anomalies
+            words, failed = await self._read_blocks(blocks)
+            await self.link.settle()
+            if self.link.anomalies == before:
+                break
+            # Some answer in this poll may belong to another request: read it all again on
+            # a fresh connection; after the last try nothing of it is used.
+            self.link.close()
+        else:
+            why = ("unattributable answers on the link (" + ", ".join(self.link.quirks)
+                   + "); sample marked missing")
+            words, failed = {}, {ma: why for first, count in blocks
+                                 for ma in range(first, first + count)}
         def from_register(reg: Register) -> Reading:
             source = f"register {reg.ma}"
             if not reg.in_generation(gen):
@@ -237,6 +241,22 @@ class HeatPumpClient:
         else:
             fields["q_hc_w"] = Reading.unavailable("q_hc", "W", start, _NO_Q_HC)
         return Snapshot(timestamp=start, generation=gen, **fields)
+
+    async def _read_blocks(self, blocks: list[tuple[int, int]]
+                           ) -> tuple[dict[int, tuple[int, datetime]], dict[int, str]]:
+        words: dict[int, tuple[int, datetime]] = {}
+        failed: dict[int, str] = {}
+        for first, count in blocks:
+            try:
+                block = await self.link.read(first - 1, count)
+            except ModbusDeviceError as exc:
+                for ma in range(first, first + count):
+                    failed[ma] = f"Modbus exception {exc.exception_code}"
+                continue
+            stamp = self.clock.now()
+            for i, word in enumerate(block):
+                words[first + i] = (word, stamp)
+        return words, failed
 
     async def write(self, key: str | int, value: float) -> WriteResult:
         """Safely write one whitelisted register (see :mod:`impctl.heatpump.writes`)."""

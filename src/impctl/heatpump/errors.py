@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 #: Modbus exception codes that say "not now" rather than "never": 5 acknowledge, 6 device
 #: busy, 10 gateway path unavailable, 11 gateway target device failed to respond (a collision
 #: with a second master or noise on the RS-485 side).

@@ -252,8 +252,10 @@ class ModbusLink:
         self.stats.failures += 1
         if isinstance(last, ModbusDeviceError):
             raise last
+        hint = "".join(f"; {text}" for name, text in self.attribution.quirks.items()
+                       if name == "fixed_tid")
         raise ModbusLinkError(f"read of {count} register(s) at address {address} from "
-                              f"{self.config.describe()} failed: {last}")
+                              f"{self.config.describe()} failed: {last}{hint}")
 
     async def write(self, address: int, word: int, device_id: int | None = None) -> None:
         """FC 06: write one holding register, sent exactly once (no retry, no resend).
