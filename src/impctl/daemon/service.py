@@ -157,8 +157,11 @@ class Daemon:
                           self.cfg.heatpump.link.describe(), self.client.generation.value,
                           self.client.heat_power_source() or "nowhere (IMP nights refused)")
                 return
-            except ModbusLinkError as exc:
+            except HeatPumpError as exc:
+                # Link failures and device exceptions alike (a gateway's 10/11 during the
+                # generation probe): keep waiting, never exit; systemd restarts fix nothing.
                 self._status(f"waiting for the heat pump: {exc}")
+                await asyncio.sleep(1.0)
 
     async def _shutdown(self) -> None:
         if self._night_task is not None and not self._night_task.done():
