@@ -17,6 +17,8 @@ Syntax: comma-separated items, e.g. ``"delay=2.5,greeting,fixed-tid,missing=2103
 ``duplicates=R@S``      send a share R of answers twice, the copy up to S seconds later
 ``foreign=R``           RTU: before a share R of FC 03 answers, a second master's answer of
                         the same length (other registers) crosses the line
+``write-answer-lost=R``  a share R of FC 06 writes execute, but the gateway answers 11
+``cop-3-decimals``      the controller encodes COP/SCOP (2371/2372) as ×0.001, not ×0.01
 ``tt3000-undocumented`` compact controller answers undocumented registers (2130 low, 2329
                         1234, COP 0) instead of exception 2, like some real TT3000/WPG units
 ``none``                no faults
@@ -70,6 +72,8 @@ class Faults:
     duplicate_delay_s: float = 0.0
     foreign_rate: float = 0.0
     tt3000_undocumented: bool = False
+    cop_3_decimals: bool = False
+    write_answer_lost_rate: float = 0.0
 
     def update(self, other: Faults) -> None:
         """Take over every field of ``other`` (switch faults at run time, in place)."""
@@ -107,6 +111,10 @@ class Faults:
             items.append(f"foreign={self.foreign_rate:g}")
         if self.tt3000_undocumented:
             items.append("tt3000-undocumented")
+        if self.cop_3_decimals:
+            items.append("cop-3-decimals")
+        if self.write_answer_lost_rate:
+            items.append(f"write-answer-lost={self.write_answer_lost_rate:g}")
         return ",".join(items) or "none"
 
 
@@ -163,6 +171,10 @@ def parse_faults(text: str, source: str | None = None) -> Faults:
                 faults.foreign_rate = _rate(value)
             elif key == "tt3000-undocumented":
                 faults.tt3000_undocumented = True
+            elif key == "write-answer-lost":
+                faults.write_answer_lost_rate = _rate(value)
+            elif key == "cop-3-decimals":
+                faults.cop_3_decimals = True
             else:
                 raise ValueError("unknown fault")
         except ValueError as exc:

@@ -47,6 +47,13 @@ class GatewayFaults:
         self.counts["gateway_exceptions"] += 1
         return ExceptionResponse(request.function_code, self.rng.choice(GATEWAY_CODES))
 
+    def lose_write_answer(self, request: ModbusPDU) -> ModbusPDU | None:
+        """After an executed FC 06: gateway exception 11 in place of the echo, or None."""
+        if request.function_code != 6 or not self._hit(self.faults.write_answer_lost_rate):
+            return None
+        self.counts["gateway_exceptions"] += 1
+        return ExceptionResponse(6, ExcCodes.GATEWAY_NO_RESPONSE)
+
     async def deliver(self, handler, request: ModbusPDU, response: ModbusPDU, addr,
                       rtu: bool) -> None:
         """Send ``response`` through the faulty gateway/bus."""

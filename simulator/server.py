@@ -275,6 +275,8 @@ class KronotermSimulator:
         values = kronoterm_values(self.plant, self.rw, room_thermostat=cfg.room_thermostat,
                                   t_air_c=self._sensor(self.plant.t_air_c),
                                   t_out_c=self._sensor(self.plant.t_out_c))
+        if self.faults.cop_3_decimals:  # some controllers: 5413 = 5.413 (issue 15)
+            values.update({ma: values[ma] * 10 for ma in (2371, 2372) if ma in values})
         self._internal = True  # lets the action tell model updates from client writes
         try:
             for address, words in register_words(values, cfg.generation,
@@ -312,7 +314,8 @@ class KronotermSimulator:
                 and self.config.generation is Generation.COMPACT):
             return await tt3000_undocumented(self, pdu)
         try:
-            return await pdu.datastore_update(self._server.context, pdu.dev_id)
+            response = await pdu.datastore_update(self._server.context, pdu.dev_id)
+            return self.gateway.lose_write_answer(pdu) or response
         except Exception:  # a bug in the simulator must not look like silence on the wire
             _LOG.exception("simulator failed on %s", pdu)
             return ExceptionResponse(pdu.function_code, ExcCodes.DEVICE_FAILURE)

@@ -14,9 +14,10 @@ Every write whose answer is lost or is a Modbus exception is followed by the rea
 decides whether it executed (a gateway's exception 10/11 can hide an executed write). The
 budget counts what the read-back shows: a write whose answer was lost or an exception and that
 reads back unchanged did not execute and is given back (a restore is given back whenever it
-reads back unchanged), so retrying a restore through a flaky link never
-uses up the budget and its reserve and keeps the heating off for the rest of the day. Repeated failures of the same register are logged once, at the
-first failure, until a write of it succeeds (one line per incident, not per retry).
+reads back unchanged), so retrying a restore through a flaky link never uses up the budget
+and its reserve and keeps the heating off for the rest of the day. Repeated failures of the
+same register are logged once, at the first failure, until a write of it succeeds (one line
+per incident, not per retry).
 """
 
 from __future__ import annotations
