@@ -315,7 +315,8 @@ class KronotermSimulator:
             return await tt3000_undocumented(self, pdu)
         try:
             response = await pdu.datastore_update(self._server.context, pdu.dev_id)
-            return self.gateway.lose_write_answer(pdu) or response
+            lost = None if response.isError() else self.gateway.lose_write_answer(pdu)
+            return lost or response
         except Exception:  # a bug in the simulator must not look like silence on the wire
             _LOG.exception("simulator failed on %s", pdu)
             return ExceptionResponse(pdu.function_code, ExcCodes.DEVICE_FAILURE)

@@ -8,10 +8,12 @@ master's traffic. This module gives the link the checks that make such a mix-up 
 
 * **Byte accounting** (every transport): the link sees every byte received. While a request is
   pending, exactly one answer frame of the expected length may arrive; anything more, or any
-  byte received while nothing is pending, is *foreign traffic*. On a link without TIDs it makes
-  the current answers unattributable (an impostor frame taken for our answer is always followed
-  by our real answer, which then shows up as extra bytes); on a TCP link with TIDs it is only
-  evidence of a quirk (pymodbus skips frames with the wrong TID).
+  byte received while nothing is pending, is *foreign traffic*. On RTU it makes the current
+  answers unattributable (an impostor frame taken for our answer is followed by our real
+  answer, which then shows up as extra bytes — within ``settle_s`` or in a later window, which
+  is why a whole snapshot is read again when the counter moved); on TCP it is only evidence of
+  a quirk (pymodbus skips frames with the wrong TID, and without TIDs the signature rule below
+  leaves no impostor that could pass the checks).
 * **Answer signatures** (TCP without TIDs): on one connection no two *different* requests may
   expect answers that look alike (same function code and length; an FC 06 echo carries its
   address and value), and no request is sent twice. Before a request that would break the rule
@@ -153,8 +155,10 @@ class Attribution:
             return None
         extra = window.received - expected
         self.foreign_bytes += max(extra, 0)
-        if self.tids_usable:
-            # pymodbus matched the TID; the surplus was a duplicate or late answer it skipped.
+        if self.transport == "tcp":
+            # With TIDs pymodbus skipped the surplus (a duplicate or late answer); without,
+            # the signature rule leaves no other request on this connection whose answer
+            # could pass the length and function-code checks.
             self.note("late_answers", f"{extra} surplus byte(s) around one answer")
             return None
         self._foreign(f"{window.received} byte(s) received for a {expected}-byte answer")
@@ -180,9 +184,10 @@ class Attribution:
             self.note("fixed_tid", f"{tid} in {n} answers in a row")
 
     def _foreign(self, detail: str) -> None:
-        if not self.tids_usable:
-            self.anomalies += 1
         if self.transport == "rtu":
+            # No TIDs, no connection to throw away: whatever was read around this may have
+            # been overtaken by it.
+            self.anomalies += 1
             self.note("second_master", detail)
         else:
             self.note("late_answers", detail)

@@ -218,8 +218,9 @@ class HeatPumpClient:
             if self.link.anomalies == before:
                 break
             # Some answer in this poll may belong to another request: read it all again on
-            # a fresh connection; after the last try nothing of it is used.
-            self.link.close()
+            # a fresh connection (TCP) or a flushed line (RTU); after the last try nothing of
+            # it is used.
+            self.link.reset()
         else:
             why = ("unattributable answers on the link (" + ", ".join(self.link.quirks)
                    + "); sample marked missing")

@@ -196,6 +196,18 @@ class ModbusLink:
             self._client.close()
             self._client = None
 
+    def reset(self, exc: BaseException | None = None) -> None:
+        """After a timeout or an unattributable answer: on TCP a new connection (late answers
+        die with the old one); on RTU the line is the line — reopening the port changes
+        nothing on the bus, so the receive buffer is discarded and the byte accounting
+        reports whatever still arrives."""
+        client = self._client
+        if (self.config.transport == "rtu" and client is not None and client.connected
+                and not isinstance(exc, OSError)):
+            client.ctx.recv_buffer = b""
+            return
+        self.close()
+
     async def settle(self) -> None:
         """On a link without usable transaction ids, wait ``settle_s`` so that a real answer
         that an impostor frame overtook arrives (and is counted) before results are used."""
@@ -246,8 +258,7 @@ class ModbusLink:
                 last = exc
                 self._incident("read %d×%d from unit %d failed (try %d/%d): %s", address,
                                count, unit, attempt + 1, self.config.attempts, exc)
-                self.close()
-                continue
+                continue  # _request has reset the connection (TCP) or flushed the line (RTU)
             return list(rr.registers)
         self.stats.failures += 1
         if isinstance(last, ModbusDeviceError):
@@ -275,7 +286,6 @@ class ModbusLink:
         except ModbusLinkError:
             self.stats.failures += 1
             self._trouble = True
-            self.close()
             raise
 
     async def _request(self, fc: int, address: int, arg: int, unit: int):
@@ -301,7 +311,7 @@ class ModbusLink:
                     rr = await client.write_register(address, arg, device_id=unit)
             except (ModbusException, OSError) as exc:
                 self.attribution.end(fc, arg, None)
-                self.close()  # a late answer must never reach a later request
+                self.reset(exc)  # a late answer must never reach a later request
                 raise ModbusLinkError(str(exc)) from exc
             finally:
                 self._last_request = time.monotonic()
@@ -312,7 +322,7 @@ class ModbusLink:
             problem = problem or _mismatch(rr, fc, address, arg, error)
             if problem:
                 self.stats.unattributable += 1
-                self.close()
+                self.reset(None)
                 raise _Unattributable(f"unattributable answer to FC {fc} at {address}: "
                                       f"{problem}")
             if error:
