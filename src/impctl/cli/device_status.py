@@ -8,6 +8,7 @@ from zoneinfo import ZoneInfo
 def collect_status(cfg) -> dict:
     """Current night with its latest sample, campaign, last fit, link events, write counters."""
     from ..heatpump import WriteBudget
+    from ..heatpump.health import read_health
     from ..store import Store
 
     out: dict = {"state_dir": cfg.state_dir}
@@ -39,6 +40,7 @@ def collect_status(cfg) -> dict:
         out["events"] = [{"ts": t, "level": lvl, "message": m} for t, lvl, m in store.events(8)]
         out["pending_restore"] = [e.register for e in store.journal_pending()]
         out["pending_requests"] = len(store.pending_requests())
+    out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
     if cfg.budget_path.exists():
         from ..daemon.service import clock_from_config
 
@@ -87,4 +89,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
         lines.append("RESTORE PENDING: " + ", ".join(st["pending_restore"]))
     writes = ", ".join(f"{ma}: {v}" for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
+    from ..heatpump.health import health_lines
+
+    lines.extend(health_lines(st.get("heatpump")))  # issue 15
     return "\n".join(lines)

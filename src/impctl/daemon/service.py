@@ -22,6 +22,7 @@ from ..controller import NightController, NightPolicy, NightRequest, restore_all
 from ..controller.restore import restore_entry
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudget
 from ..heatpump.clock import VirtualClock
+from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from .config import Config
 from .schedule import (
@@ -149,9 +150,12 @@ class Daemon:
         self.stop.set()
 
     async def _connect(self) -> None:
+        # Generation evidence and link quirks for `impctl status` (issue 15).
+        self.client.health_path = Path(self.cfg.state_dir) / HEALTH_FILE
         while not self.stop.is_set():
             try:
                 await self.client.connect(max_wait_s=30.0)
+                self.client.write_health()
                 self._connected.set()
                 _LOG.info("heat pump connected: %s, generation %s, Q_HC from %s",
                           self.cfg.heatpump.link.describe(), self.client.generation.value,
@@ -161,6 +165,7 @@ class Daemon:
                 # Link failures and device exceptions alike (a gateway's 10/11 during the
                 # generation probe): keep waiting, never exit; systemd restarts fix nothing.
                 self._status(f"waiting for the heat pump: {exc}")
+                self.client.write_health()
                 await asyncio.sleep(1.0)
 
     async def _shutdown(self) -> None:

@@ -64,6 +64,7 @@ class HeatPumpClient:
                              source="configured"))
         #: Where :meth:`write_health` puts the status file (the daemon sets it).
         self.health_path: Path | None = None
+        self._quirks_written: frozenset[str] = frozenset()
 
     async def __aenter__(self) -> HeatPumpClient:
         await self.connect()
@@ -130,6 +131,7 @@ class HeatPumpClient:
         """Write :meth:`health` to ``health_path`` (if set) for ``impctl status``."""
         if self.health_path is None:
             return
+        self._quirks_written = frozenset(self.link.quirks)
         tmp = self.health_path.with_suffix(".tmp")
         try:
             tmp.write_text(json.dumps(self.health(), indent=1))
@@ -236,6 +238,8 @@ class HeatPumpClient:
             got = [words[ma] for ma in range(reg.ma, reg.ma + reg.words)]
             return decode(reg, [w for w, _ in got], got[0][1])
 
+        if frozenset(self.link.quirks) != self._quirks_written:
+            self.write_health()  # a newly recognised quirk shows in impctl status
         fields = {f: from_register(register(r)) for f, r in SNAPSHOT_REGISTERS.items()}
         if isinstance(room, ExternalRegister):
             fields["t_air_c"] = await self.read_external(room, "t_air", "°C")
