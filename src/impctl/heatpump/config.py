@@ -67,9 +67,8 @@ class LinkConfig:
         that answer with a fixed id); the connection is reset after any timeout then, so a late
         answer can never be taken for the next request's.
     request_gap_s : idle time between requests [s] (serial lines want ≥ 0.035).
-    settle_s : on links without usable transaction ids (RTU, ``tolerate_fixed_tid``), wait
-        this long after each answer before accepting it, so that a real answer overtaken by a
-        foreign or duplicated frame is seen [s] (issue 15).
+    settle_s : RTU only: wait this long after each answer before accepting it, so that a
+        real answer overtaken by a foreign or duplicated frame is seen [s] (issue 15).
     """
 
     transport: Transport = "tcp"

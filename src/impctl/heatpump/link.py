@@ -209,9 +209,10 @@ class ModbusLink:
         self.close()
 
     async def settle(self) -> None:
-        """On a link without usable transaction ids, wait ``settle_s`` so that a real answer
-        that an impostor frame overtook arrives (and is counted) before results are used."""
-        if self.strict and self.config.settle_s:
+        """On RTU, wait ``settle_s`` so that a real answer that an impostor frame overtook
+        arrives (and is counted) before results are used. (TCP needs no wait: transaction ids,
+        or without them one connection per set of distinguishable requests.)"""
+        if self.config.transport == "rtu" and self.config.settle_s:
             await asyncio.sleep(self.config.settle_s)
 
     async def read(self, address: int, count: int, device_id: int | None = None) -> list[int]:
@@ -250,9 +251,11 @@ class ModbusLink:
                     raise
                 self.stats.transient_exceptions += 1
                 last = exc
-                self._incident("read %d×%d from unit %d: transient Modbus exception %d "
-                               "(try %d/%d)", address, count, unit, exc.exception_code,
-                               attempt + 1, self.config.attempts)
+                # Absorbed by the retry in the normal case: not an incident of its own (the
+                # caller reports the read if every try fails).
+                _LOG.debug("read %d×%d from unit %d: transient Modbus exception %d "
+                           "(try %d/%d)", address, count, unit, exc.exception_code,
+                           attempt + 1, self.config.attempts)
                 continue
             except ModbusLinkError as exc:
                 last = exc
@@ -316,7 +319,7 @@ class ModbusLink:
             finally:
                 self._last_request = time.monotonic()
             error = rr.isError()
-            if self.strict and self.config.settle_s:
+            if self.config.transport == "rtu" and self.config.settle_s:
                 await asyncio.sleep(self.config.settle_s)
             problem = self.attribution.end(fc, arg, error)
             problem = problem or _mismatch(rr, fc, address, arg, error)

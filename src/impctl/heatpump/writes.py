@@ -194,30 +194,25 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
                            previous, previous, budget.used(reg.ma, clock.now().date()))
     reserve = policy.restore_reserve if restore else 0
     day = clock.now().date()
-    used = budget.consume(reg.ma, day, reserve=reserve)
     # A register whose last write failed: log its repeated failures at DEBUG only.
     loud = logging.DEBUG if reg.ma in link.failed_writes else logging.WARNING
-    write_error: HeatPumpError | None = None
-    try:
-        await link.write(reg.address, word)
-    except ModbusDeviceError as exc:
-        # An exception answer may come from a gateway whose RS-485 side lost the device's
-        # answer (10, 11) after the write executed: only the read-back can tell.
-        write_error = exc
-        _LOG.info("register %d: write answered with Modbus exception %d; checking by "
-                  "read-back", reg.ma, exc.exception_code)
-    except ModbusLinkError as exc:
-        # The write may have landed even though its answer was lost: let the read-back decide.
-        write_error = exc
-        _LOG.log(loud, "register %d: write not confirmed (%s); checking by read-back", reg.ma,
-                 exc)
-    read_back = await _read_back(link, reg, word, policy, loud)
-    if read_back != word:
+    delay = link.config.retry_delay_s
+    for attempt in range(link.config.attempts):
+        used = budget.consume(reg.ma, day, reserve=reserve)
+        write_error = await _send(link, reg, word, loud)
+        read_back = await _read_back(link, reg, word, policy, loud)
+        if read_back == word:
+            break
         if read_back == current and (restore or write_error is not None):
             # Unchanged after a lost or exception answer: the write never executed. (An
             # acknowledged write that reads back unchanged still counts: it may have reached
             # the EEPROM before the controller overrode it; only a restore is given back.)
             budget.refund(reg.ma, day)
+            if (isinstance(write_error, ModbusDeviceError) and write_error.transient
+                    and attempt + 1 < link.config.attempts):
+                await asyncio.sleep(delay)  # busy / gateway 10, 11: not now, later
+                delay *= 2
+                continue
         link.failed_writes.add(reg.ma)
         if isinstance(write_error, ModbusDeviceError) and read_back in (current, None):
             raise write_error  # the caller reports the device's answer
@@ -234,6 +229,24 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
                  used, budget.limit(reg.ma))
     return WriteResult(reg.name, reg.ma, float(value), target, clamped, True, previous,
                        target, used)
+
+
+async def _send(link: ModbusLink, reg: Register, word: int, loud: int) -> HeatPumpError | None:
+    """FC 06 once; the error if its answer was lost or an exception (the read-back decides)."""
+    try:
+        await link.write(reg.address, word)
+    except ModbusDeviceError as exc:
+        # An exception answer may come from a gateway whose RS-485 side lost the device's
+        # answer (10, 11) after the write executed: only the read-back can tell.
+        _LOG.info("register %d: write answered with Modbus exception %d; checking by "
+                  "read-back", reg.ma, exc.exception_code)
+        return exc
+    except ModbusLinkError as exc:
+        # The write may have landed even though its answer was lost: let the read-back decide.
+        _LOG.log(loud, "register %d: write not confirmed (%s); checking by read-back", reg.ma,
+                 exc)
+        return exc
+    return None
 
 
 async def _read_back(link: ModbusLink, reg: Register, word: int,
