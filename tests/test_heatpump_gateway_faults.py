@@ -193,3 +193,37 @@ def test_generation_detection_cross_checks(case):
                 health = hp.health()
                 assert health["generation"]["evidence"] == report.evidence
     run(body())
+
+
+def test_daemon_waits_through_gateway_exceptions_at_the_generation_probe(tmp_path):
+    """Issue item 2: a ModbusDeviceError in the generation probe used to escape the daemon's
+    connect (systemd restarted it every 10 s). It waits now, and connects when they stop."""
+    from daemon_fixtures import daemon_mapping
+
+    from impctl.daemon.config import config_from_mapping
+    from impctl.daemon.service import Daemon
+    from impctl.heatpump.health import read_health
+
+    async def body():
+        async with started(_frozen()) as sim:
+            sim.faults.gateway_exception_rate = 1.0  # nothing gets through to the controller
+            mapping = daemon_mapping(tmp_path / "state", sim.port, sim.clock,
+                                     heatpump={"generation": "auto"})
+            daemon = Daemon(config_from_mapping(mapping), clock=sim.clock)
+            task = asyncio.create_task(daemon.run())
+            try:
+                await asyncio.sleep(2.5)  # several probe rounds
+                assert not task.done() and not daemon._connected.is_set()
+                health = read_health(tmp_path / "state")
+                assert health is not None and health["generation"] is None
+                sim.faults.gateway_exception_rate = 0.0
+                async with asyncio.timeout(10):
+                    while not daemon._connected.is_set():
+                        await asyncio.sleep(0.05)
+                assert daemon.client.generation is Generation.EXTENDED
+                assert read_health(tmp_path / "state")["generation"]["source"] == "detected"
+            finally:
+                daemon.stop.set()
+                await asyncio.wait_for(task, 20)
+            assert task.result() == 0
+    run(body(), 60)
