@@ -42,7 +42,7 @@ def test_a_believable_night_passes(tmp_path):
     # a COP of 20: the scale of Q_HC (or of P_el) is wrong
     (lambda i: 20000.0 + i, lambda i: 1000.0 + i, "disagrees with electrical power"),
     # stuck register while the compressor modulates
-    (lambda i: 4088.0, lambda i: 900.0 + 9 * (i % 20), "stuck at 4088 W"),
+    (lambda i: 4088.0, lambda i: 600.0 + 40 * (i % 20), "stuck at 4088 W"),
     # far beyond any residential heat pump
     (lambda i: 60000.0, lambda i: 9000.0 + i, "outside 0…25000 W"),
 ])

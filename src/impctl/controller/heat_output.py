@@ -9,8 +9,9 @@ is wrong without any error. Every night's samples are checked (issue 15):
 * **thermal against electrical × COP**: with the compressor running (electrical ≥ 100 W) the
   ratio Q_HC / P_el is a COP of 0.8…8; with it off (electrical ≤ 50 W) Q_HC stays ≤ 500 W
   (only the water's run-on) — more than 20 % of samples outside this fail the night;
-* **stuck**: the same non-zero Q_HC for 2 h or more while electrical power or supply
-  temperature moved.
+* **stuck**: the same non-zero Q_HC for 2 h or more while electrical power moved by more
+  than a quarter of its mean (50 W at least) or the supply temperature by more than 3 K (a
+  compressor held at its cap keeps a steady output with only slowly drifting COP).
 
 Samples without electrical power (a compact controller with a heat meter) skip the ratio check.
 """
@@ -96,4 +97,5 @@ def _moved(run: Sequence[Sample]) -> bool:
 
     p_el = [s.p_el_w for s in run if s.p_el_w is not None]
     supply = [s.t_supply_c for s in run if s.t_supply_c is not None]
-    return spread(p_el) > 50.0 or spread(supply) > 1.0
+    moved_el = bool(p_el) and spread(p_el) > max(50.0, 0.25 * sum(p_el) / len(p_el))
+    return moved_el or spread(supply) > 3.0
