@@ -227,3 +227,14 @@ def test_daemon_waits_through_gateway_exceptions_at_the_generation_probe(tmp_pat
                 await asyncio.wait_for(task, 20)
             assert task.result() == 0
     run(body(), 60)
+
+
+def test_new_fault_switches_round_trip():
+    text = ("gateway-exceptions=0.1,spikes=0.05@1.5,duplicates=0.2@0.3,foreign=0.1,"
+            "tt3000-undocumented,cop-3-decimals,write-answer-lost=0.5")
+    faults = parse_faults(text)
+    assert (faults.spike_rate, faults.spike_s) == (0.05, 1.5) and faults.tt3000_undocumented
+    assert parse_faults(faults.describe()) == faults
+    for bad in ("foreign=2", "spikes=0.1", "duplicates=x@1", "gateway-exceptions=-0.1"):
+        with pytest.raises(Exception, match="bad fault"):
+            parse_faults(bad)
