@@ -209,11 +209,14 @@ class ModbusLink:
         self.close()
 
     async def settle(self) -> None:
-        """On RTU, wait ``settle_s`` so that a real answer that an impostor frame overtook
-        arrives (and is counted) before results are used. (TCP needs no wait: transaction ids,
-        or without them one connection per set of distinguishable requests.)"""
-        if self.config.transport == "rtu" and self.config.settle_s:
-            await asyncio.sleep(self.config.settle_s)
+        """On RTU, before a group of answers is used: wait until the last request is
+        ``timeout_s`` old, so that a real answer that an impostor frame overtook (it comes
+        within the timeout, or the request would have failed) has arrived and been counted.
+        (TCP needs no wait: transaction ids, or without them one connection per set of
+        distinguishable requests.)"""
+        if self.config.transport == "rtu":
+            left = self.config.timeout_s - (time.monotonic() - self._last_request)
+            await asyncio.sleep(max(left, self.config.settle_s))
 
     async def read(self, address: int, count: int, device_id: int | None = None) -> list[int]:
         """FC 03: read ``count`` holding registers from zero-based ``address``.
