@@ -103,11 +103,14 @@ NIGHT_FAULTS = [
     Fault("greeting bytes, drained", _greeting_and_reconnect, _sim(greeting=b""),
           (QUIRK + "the gateway sends unsolicited bytes after each connect",),
           heatpump={"drain_s": 0.1}, blocks_restore=False),
-    # issue 15: gateway exceptions 10/11 on a fifth of the requests are transient: retried.
-    Fault("gateway exceptions 10/11", _sim(gateway_exception_rate=0.2),
-          _sim(gateway_exception_rate=0.0), heatpump={"attempts": 8, "retry_delay_s": 0.002},
-          blocks_restore=False),
 ]
+# issue 15: gateway exceptions 10/11 on a fifth of the requests are transient: retried, the
+# night keeps its data and restores on time. (Its own event loop: one more rig side by side
+# slows the others' sampling on a loaded machine.)
+GATEWAY_EXCEPTIONS = Fault("gateway exceptions 10/11", _sim(gateway_exception_rate=0.2),
+                           _sim(gateway_exception_rate=0.0),
+                           heatpump={"attempts": 8, "retry_delay_s": 0.002},
+                           blocks_restore=False)
 
 
 async def _night_with_fault(tmp_path, fault: Fault) -> None:
@@ -173,6 +176,10 @@ def _run_side_by_side(tmp_path, scenarios: dict[str, Callable], timeout_s: float
 def test_link_faults_and_exception_codes_across_the_end_of_a_night(tmp_path):
     _run_side_by_side(tmp_path, {f.name: (lambda f=f: _night_with_fault(tmp_path, f))
                                  for f in NIGHT_FAULTS}, timeout_s=90)
+
+
+def test_gateway_exceptions_across_the_end_of_a_night(tmp_path):
+    run(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
 
 
 async def _link_down_30_min(tmp_path) -> None:
