@@ -88,7 +88,10 @@ def test_read_back_mismatch_raises(tmp_path, caplog):
             assert info.value.read_back == 210
             assert "read back 21.0" in caplog.text
             assert sim.plant.setpoint_c == 21.0
-            assert wb.used(2187, hp.clock.now().date()) == 1  # the attempt still counts
+            # The echo carried the old value (not an answer to this write) and the read-back
+            # shows the register unchanged: the write did not execute and is not counted.
+            assert wb.used(2187, hp.clock.now().date()) == 0
+            assert hp.link.stats.unattributable == 1
     run(body())
 
 
