@@ -224,11 +224,18 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
             raise ModbusLinkError(msg) from write_error
         raise WriteVerifyError(msg, reg.ma, word, read_back)
     link.failed_writes.discard(reg.ma)
-    _LOG.warning("register %d (%s): %s → %s %s %s and verified (%d/%d today)", reg.ma,
-                 reg.name, previous, target, reg.unit, "restored" if restore else "written",
-                 used, budget.limit(reg.ma))
+    _LOG.warning("register %d (%s): %s → %s %s and verified (%d/%d today)", reg.ma,
+                 reg.name, _shown(reg, previous), _shown(reg, target),
+                 "restored" if restore else "written", used, budget.limit(reg.ma))
     return WriteResult(reg.name, reg.ma, float(value), target, clamped, True, previous,
                        target, used)
+
+
+def _shown(reg: Register, value: float | None) -> str:
+    """A register value as people write it: "22.5 °C" for a setpoint, "1" for a mode code."""
+    if value is None:
+        return "unknown"
+    return f"{value:.1f} {reg.unit}" if reg.unit else f"{value:.0f}"
 
 
 async def _send(link: ModbusLink, reg: Register, word: int, loud: int) -> HeatPumpError | None:
