@@ -23,7 +23,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                       "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
-     "skipped": [{"night_id", "reason"}], "notes": [str]}
+     "skipped": [{"night_id", "reason"}], "notes": [str],
+     "flexibility": {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh", ...}}  # impctl.flex
 """
 
 from __future__ import annotations
@@ -143,7 +144,20 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
         "notes": notes,
     }
+    out["flexibility"] = flexibility_block(out)
     return _f(out)
+
+
+def flexibility_block(summary: dict) -> dict:
+    """The ``"flexibility"`` block of a summary at the default conditions (:mod:`impctl.flex`);
+    all values None when the fitted house cannot be simulated."""
+    from ..errors import InputError
+    from ..flex import BLOCK_KEYS, flexibility_of_fit
+
+    try:
+        return flexibility_of_fit(summary).block()
+    except InputError:
+        return dict.fromkeys(BLOCK_KEYS)
 
 
 def _fmt(v: float | None, digits: int = 3) -> str:
@@ -206,6 +220,14 @@ def format_table(summary: dict) -> str:
                          f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
     for r in val["constrained"]:
         lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
+    flex = summary.get("flexibility") or {}
+    if flex.get("coast_h") is not None:
+        lines.append("")
+        lines.append(f"Flexibility at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
+                     f"outdoors: heating off for {flex['coast_h']:.1f} h "
+                     f"[{flex['coast_h_low']:.1f}–{flex['coast_h_high']:.1f}] until T_air has "
+                     f"fallen {flex['drop_k']:g} K; then {flex['rebound_kwh']:.2f} kWh beyond "
+                     f"steady demand in {flex['rebound_h']:g} h (impctl flex)")
     for note in summary["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)
