@@ -10,6 +10,7 @@ module-level cache; a batch never reloads them. Every household's outcome is a r
 from __future__ import annotations
 
 import os
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -144,9 +145,11 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
                 fitted.append((row, res))
         _flexibility(fitted)
     share = (time.perf_counter() - started) / max(1, len(rows))
+    state = worker_state()
     for row in rows.values():
-        row["batch_size"] = len(sources)
-        row["wall_s_per_household"] = share
+        row.update(batch_size=len(sources), wall_s_per_household=share,
+                   worker=f"{socket.gethostname()}:{state['pid']}",
+                   worker_rss_mb=state["rss_mb"])
     return [rows[s.household] for s in sources]
 
 
