@@ -87,8 +87,11 @@ def run_fleet(data: Path, workers: int | None, batch: int, work: Path) -> tuple[
     run = fit_fleet(data, out, workers=workers, batch_size=batch, progress=True,
                     echo=lambda s: print(s, file=sys.stderr))
     wall = time.perf_counter() - t0
+    cpu = pd.read_parquet(out)["cpu_s_per_household"].sum()
     print(f"  {run.found} households, {run.counts}, {wall:.1f} s wall on {run.workers} "
-          f"workers → {run.fitted / wall:.2f} households/s")
+          f"workers → {run.fitted / wall:.2f} households/s; worker CPU {cpu:.0f} s = "
+          f"{cpu / max(1, run.fitted):.3f} CPU-s per household (load average now "
+          f"{os.getloadavg()[0]:.1f})")
     return wall, out
 
 

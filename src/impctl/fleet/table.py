@@ -18,7 +18,8 @@ rebound_kwh, switch_off_drop_k`` (:mod:`impctl.flex` at 21 °C / 0 °C / 1 K); t
 parameters (``floor_area_m2`` … ``u_windows_w_per_m2k``) and the fixed ``ach_vent_per_h``,
 ``ach_infl_per_h`` (enough to re-simulate the house, e.g. ``impctl flex``);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
-(in-sample heat-demand error); ``batch_size, wall_s_per_household, worker`` (host:pid) and
+(in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
+(the worker process's CPU time), ``worker`` (host:pid) and
 ``worker_rss_mb`` (its resident memory after the batch [MB]); ``impctl_version,
 fitted_at`` (UTC) — so that a fleet can be re-fitted when the model improves.
 """
@@ -58,7 +59,8 @@ _FIELDS += [(c, pa.float64()) for c in PARAM_COLUMNS.values()]
 _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
             ("eps_pct", pa.float64()), ("batch_size", pa.int32()),
-            ("wall_s_per_household", pa.float64()), ("worker", pa.string()),
+            ("wall_s_per_household", pa.float64()), ("cpu_s_per_household", pa.float64()),
+            ("worker", pa.string()),
             ("worker_rss_mb", pa.float64()), ("impctl_version", pa.string()),
             ("fitted_at", pa.timestamp("s", tz="UTC"))]
 SCHEMA = pa.schema(_FIELDS)

@@ -102,7 +102,7 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     from ..fit.data import prepare_nights
     from ..fit.estimator import NightFit
 
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
     _LOADS["batches"] += 1
     params = {"normal_model": settings.normal_model, "timestamps": settings.timestamps,
@@ -145,9 +145,11 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
                 fitted.append((row, res))
         _flexibility(fitted)
     share = (time.perf_counter() - started) / max(1, len(rows))
+    cpu_share = (time.process_time() - cpu) / max(1, len(rows))
     state = worker_state()
     for row in rows.values():
         row.update(batch_size=len(sources), wall_s_per_household=share,
+                   cpu_s_per_household=cpu_share,
                    worker=f"{socket.gethostname()}:{state['pid']}",
                    worker_rss_mb=state["rss_mb"])
     return [rows[s.household] for s in sources]
