@@ -82,14 +82,13 @@ def scheduler(tmp_path_factory):
     address = f"tcp://127.0.0.1:{port}"
     log = tmp_path_factory.mktemp("dask")
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    logs = [open(log / "scheduler.log", "w"), open(log / "worker.log", "w")]  # noqa: SIM115
     procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                               "--no-dashboard"], stdout=subprocess.DEVNULL,
-                              stderr=open(log / "scheduler.log", "w"), env=env,
-                              start_new_session=True)]
+                               "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=logs[0],
+                              env=env, start_new_session=True)]
     procs.append(subprocess.Popen([DASK, "worker", address, "--nworkers", "2", "--nthreads",
                                    "1", "--no-dashboard", "--host", "127.0.0.1"],
-                                  stdout=subprocess.DEVNULL,
-                                  stderr=open(log / "worker.log", "w"), env=env,
+                                  stdout=subprocess.DEVNULL, stderr=logs[1], env=env,
                                   start_new_session=True))
     from distributed import Client
 
@@ -114,6 +113,8 @@ def scheduler(tmp_path_factory):
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
+        for f in logs:
+            f.close()
 
 
 @pytest.fixture(scope="module")
