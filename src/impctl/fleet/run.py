@@ -78,7 +78,7 @@ def _client(scheduler: str | None, workers: int | None):
             raise InputError(f"cannot reach the Dask scheduler ({exc})",
                              place="--scheduler") from None
     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                           processes=True, dashboard_address=None,
+                           processes=True, dashboard_address="127.0.0.1:0",
                            silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
@@ -100,8 +100,12 @@ def fit_fleet(
     batch_size: int = DEFAULT_BATCH,
     progress: bool = True,
     echo: Callable[[str], None] = print,
+    client=None,
 ) -> FleetRun:
     """Fit every household of ``input_path`` into the FLEET dataset ``out`` (module docstring).
+
+    ``client``: an existing ``distributed.Client`` to run on (left open), instead of
+    ``scheduler`` or a local cluster.
 
     Raises
     ------
@@ -132,7 +136,9 @@ def fit_fleet(
         run.wall_s = time.perf_counter() - started
         return run
     settings = Settings(model_dir=resolved, tz=tz, timestamps=timestamps)
-    client, cluster = _client(scheduler, workers)
+    own = client is None
+    if own:
+        client, cluster = _client(scheduler, workers)
     futures = []
     try:
         client.register_plugin(Preload(settings.model_dir))
@@ -149,9 +155,10 @@ def fit_fleet(
             f.cancel()
         raise
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
     run.wall_s = time.perf_counter() - started
     return run
 
