@@ -4,6 +4,9 @@ memory per worker.
 Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
           [--alone 16] [--batch-size 32] [--skip-full]
 
+(``--throughput`` households are cut into batches of at most ``--batch-size``, at least two per
+worker.)
+
 Fleet input: the fit bench's synthetic IMP nights (``impctl.population.synth_nights``: two
 spin-up days, 2 constrained + 6 normal nights, Annex C at 60 s, 5-minute samples, T quantised to
 0.1 °C, 5 % power noise) for ``sample_households(seed=20260)``, written once as one Parquet
@@ -133,7 +136,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=1000)
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
-    ap.add_argument("--throughput", type=int, default=128)
+    ap.add_argument("--throughput", type=int, default=256)
     ap.add_argument("--alone", type=int, default=16)
     ap.add_argument("--batch-size", type=int, default=32)
     ap.add_argument("--skip-full", action="store_true")

@@ -40,7 +40,8 @@ def fleet() -> None:
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               default=None, help="Also write the fleet report (HTML + PNG) into this folder.")
 @click.option("--batch-size", type=click.IntRange(min=1), default=32, show_default=True,
-              help="Households fitted together in one batched optimiser call (one Dask task).")
+              help="Households fitted together in one batched optimiser call (one Dask "
+                   "task); a fleet smaller than two batches per worker is cut finer.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
               workers: int | None, tz: str, timestamps: str, resume: bool,

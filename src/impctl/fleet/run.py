@@ -144,7 +144,9 @@ def fit_fleet(
         client.register_plugin(Preload(settings.model_dir))
         run.workers = len(client.scheduler_info().get("workers", {}))
         run_id = new_run_id()
-        batches = _chunks(todo, batch_size)
+        # A small fleet is cut finer, so that every worker gets about two batches.
+        size = max(1, min(batch_size, -(-len(todo) // (2 * max(1, run.workers)))))
+        batches = _chunks(todo, size)
         futures = [client.submit(fit_batch, b, settings, pure=False,
                                  key=f"impctl-fleet-{run_id}-{i}", priority=-i)
                    for i, b in enumerate(batches)]
