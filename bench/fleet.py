@@ -14,11 +14,11 @@ dataset with a ``household`` column (reused from ``--data`` when it is there). T
 **ideal 5R1C**: the realistic plant (``impctl.plant``) is not on main yet.
 
 Measured:
-1. the whole fleet with the default local cluster (one worker process per core), wall clock
-   from the command's start (cluster start-up and worker preload included) to the last row;
-2. throughput [households/s] on 1 and 2 worker processes (``--throughput`` households);
-3. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
+1. throughput [households/s] on 1 and 2 worker processes (``--throughput`` households);
+2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
    (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
+3. the whole fleet with the default local cluster (one worker process per core), wall clock
+   from the command's start (cluster start-up and worker preload included) to the last row;
 4. resident memory of each worker after each batch (the FLEET ``worker_rss_mb`` column): first,
    median and last batch — flat means no growth over the run.
 No classifiers are used (the whole prior ranges, as without ``impctl train``), so the figures
@@ -149,17 +149,17 @@ def main() -> None:
     data = make_fleet(args.households, args.data)
     work = Path(tempfile.mkdtemp(prefix="impctl-fleet-bench-"))
     try:
-        print(f"\n1. {args.households} households, default local cluster, batch "
+        print(f"\n1. throughput on {args.throughput} households")
+        small = subset(data, args.throughput, work)
+        for w in (1, 2):
+            run_fleet(small, w, args.batch_size, work)
+        print(f"\n2. per household alone vs in a batch ({args.alone} households, one thread)")
+        batch_vs_alone(small, args.alone)
+        print(f"\n3. {args.households} households, default local cluster, batch "
               f"{args.batch_size} (target ≤ 120 s)")
         if not args.skip_full:
             wall, out = run_fleet(data, None, args.batch_size, work)
             memory(out)
-        print(f"\n2. throughput on {args.throughput} households")
-        small = subset(data, args.throughput, work)
-        for w in (1, 2):
-            run_fleet(small, w, args.batch_size, work)
-        print(f"\n3. per household alone vs in a batch ({args.alone} households, one thread)")
-        batch_vs_alone(small, args.alone)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
