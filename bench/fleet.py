@@ -2,7 +2,7 @@
 memory per worker.
 
 Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
-          [--alone 16] [--batch-size 32] [--skip-full]
+          [--alone 16] [--batch-size 16] [--skip-full | --full-only]
 
 (``--throughput`` households are cut into batches of at most ``--batch-size``, at least two per
 worker.)
@@ -138,8 +138,9 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
     ap.add_argument("--throughput", type=int, default=256)
     ap.add_argument("--alone", type=int, default=16)
-    ap.add_argument("--batch-size", type=int, default=32)
+    ap.add_argument("--batch-size", type=int, default=16)
     ap.add_argument("--skip-full", action="store_true")
+    ap.add_argument("--full-only", action="store_true")
     args = ap.parse_args()
     os.environ.setdefault("IMPCTL_MODEL_DIR", str(args.data / "no-models"))
     print(f"bench/fleet.py on {platform.node()}: {os.cpu_count()} cores, load average "
@@ -149,12 +150,14 @@ def main() -> None:
     data = make_fleet(args.households, args.data)
     work = Path(tempfile.mkdtemp(prefix="impctl-fleet-bench-"))
     try:
-        print(f"\n1. throughput on {args.throughput} households")
-        small = subset(data, args.throughput, work)
-        for w in (1, 2):
-            run_fleet(small, w, args.batch_size, work)
-        print(f"\n2. per household alone vs in a batch ({args.alone} households, one thread)")
-        batch_vs_alone(small, args.alone)
+        if not args.full_only:
+            print(f"\n1. throughput on {args.throughput} households")
+            small = subset(data, args.throughput, work)
+            for w in (1, 2):
+                run_fleet(small, w, args.batch_size, work)
+            print(f"\n2. per household alone vs in a batch ({args.alone} households, one "
+                  "thread)")
+            batch_vs_alone(small, args.alone)
         print(f"\n3. {args.households} households, default local cluster, batch "
               f"{args.batch_size} (target ≤ 120 s)")
         if not args.skip_full:

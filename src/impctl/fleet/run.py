@@ -29,7 +29,7 @@ from .inputs import Source, discover
 from .table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
 
-DEFAULT_BATCH = 32
+DEFAULT_BATCH = 16
 
 
 @dataclass
