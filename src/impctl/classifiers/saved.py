@@ -201,7 +201,13 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
     InputError
         No nights, or no usable trained models (telling the user to run ``impctl train``).
     """
-    models, meta = load_models(model_dir)
+    return classify_with(nights, *load_models(model_dir))
+
+
+def classify_with(nights: list[NightSamples], models: dict, meta: dict
+                  ) -> dict[str, ClassResult]:
+    """:func:`classify_nights` with models already loaded by :func:`load_models` (a fleet
+    worker loads them once)."""
     if not nights:
         raise InputError("no nights to classify")
     lag = float(meta.get("emission_lag_h", 1.0))

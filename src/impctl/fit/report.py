@@ -32,7 +32,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                   {"value", "low", "high", "bounds"} | null},
      "adequacy": {"adequate": bool, "statement": str,
                   "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
-                             "rmse_over_noise", "lag1_autocorrelation"}}}}
+                             "rmse_over_noise", "lag1_autocorrelation"}}},
+     "flexibility": {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh", ...}}  # impctl.flex
 """
 
 from __future__ import annotations
@@ -178,7 +179,20 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         out["adequacy"] = fit.adequacy_
         if not fit.adequacy_["adequate"]:
             notes.append(fit.adequacy_["statement"])
+    out["flexibility"] = flexibility_block(out)
     return _f(out)
+
+
+def flexibility_block(summary: dict) -> dict:
+    """The ``"flexibility"`` block of a summary at the default conditions (:mod:`impctl.flex`);
+    all values None when the fitted house cannot be simulated."""
+    from ..errors import InputError
+    from ..flex import BLOCK_KEYS, flexibility_of_fit
+
+    try:
+        return flexibility_of_fit(summary).block()
+    except InputError:
+        return dict.fromkeys(BLOCK_KEYS)
 
 
 def _fmt(v: float | None, digits: int = 3) -> str:
@@ -253,6 +267,14 @@ def format_table(summary: dict) -> str:
                 lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
                              f"   (bounds {v['bounds'][0]:g}–{v['bounds'][1]:g})")
     lines += _quality_lines(summary)
+    flex = summary.get("flexibility") or {}
+    if flex.get("coast_h") is not None:
+        lines.append("")
+        lines.append(f"Flexibility at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
+                     f"outdoors: heating off for {flex['coast_h']:.1f} h "
+                     f"[{flex['coast_h_low']:.1f}–{flex['coast_h_high']:.1f}] until T_air has "
+                     f"fallen {flex['drop_k']:g} K; then {flex['rebound_kwh']:.2f} kWh beyond "
+                     f"steady demand in {flex['rebound_h']:g} h (impctl flex)")
     for note in summary["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)
