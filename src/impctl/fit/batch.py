@@ -15,9 +15,8 @@ concatenated (grids padded to the longest), problem, night and group indices off
 them together and hands each household its slice back. Problems stay independent in the merged
 call (per-problem damping, per-problem convergence), so each household's numbers equal its
 single fit to the optimiser's own tolerance: only the shared stopping rule may let a household's
-non-best starts iterate a little longer. Households whose time grids are not nested (other sample
-steps, irregular stamps) are solved in separate merged calls, so no household is integrated on a
-finer grid than when alone.
+non-best starts iterate a little longer. Every night keeps its own sample times, so households
+of any sampling share a call; shorter nights are padded with zero-length steps.
 """
 
 from __future__ import annotations
@@ -100,23 +99,19 @@ class _Rendezvous:
 
 
 def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
-    """Problems that can share one call: same settings, and each grid a prefix of the longest."""
-    groups: list[list[_Problem]] = []
-    for p in sorted(problems, key=lambda q: -len(q.ctx.packed.grid_s)):
-        key = _settings(p)
-        for g in groups:
-            head = g[0].ctx.packed.grid_s
-            grid = p.ctx.packed.grid_s
-            if _settings(g[0]) == key and torch.equal(head[:len(grid)], grid):
-                g.append(p)
-                break
-        else:
-            groups.append([p])
-    return groups
+    """Problems that can share one call: the same settings and parameter layout. Each night
+    keeps its own sample times (``PackedNights.grid_s`` is per night), so nights of any
+    sampling merge; a shorter night is padded the way :func:`~.node.pack_nights` pads it."""
+    groups: dict[tuple, list[_Problem]] = {}
+    for p in problems:
+        groups.setdefault(_settings(p), []).append(p)
+    return list(groups.values())
 
 
 def _settings(p: _Problem) -> tuple:
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.max_iter, p.ctx.packed.timestamps)
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.max_iter, p.ctx.packed.timestamps,
+            tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
+            p.ctx.packed.power_ok is None)
 
 
 def _pad(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -127,29 +122,31 @@ def _pad(x: torch.Tensor, k: int) -> torch.Tensor:
 
 
 def _merge_packed(parts: Sequence[PackedNights]) -> PackedNights:
-    grid = max((p.grid_s for p in parts), key=len)
-    k = len(grid)
+    k = max(p.grid_s.shape[1] for p in parts)
     cols = {}
     for f in fields(PackedNights):
         name = f.name
         if name in ("night_ids", "kinds"):
             cols[name] = [x for p in parts for x in getattr(p, name)]
-        elif name in ("timestamps",):
+        elif name == "timestamps":
             cols[name] = parts[0].timestamps
-        elif name == "grid_s":
-            cols[name] = grid
         elif name == "q_mean_w":
             cols[name] = torch.cat([p.q_mean_w for p in parts])
-        elif name.endswith("_slope"):
+        elif name.endswith("_slope"):  # zero-length padded intervals have no slope
             cols[name] = torch.cat([torch.cat([getattr(p, name), torch.zeros(
-                p.n_nights, k - len(p.grid_s), dtype=getattr(p, name).dtype)], 1) for p in parts])
+                p.n_nights, k - p.grid_s.shape[1], dtype=getattr(p, name).dtype)], 1)
+                for p in parts])
         elif name in ("mask", "last"):
             cols[name] = torch.cat([torch.cat([getattr(p, name), torch.zeros(
-                p.n_nights, k - len(p.grid_s), dtype=torch.bool)], 1) for p in parts])
+                p.n_nights, k - p.grid_s.shape[1], dtype=torch.bool)], 1) for p in parts])
         elif name == "next_node":
-            cols[name] = torch.cat([torch.cat([p.next_node, torch.arange(len(p.grid_s), k)
+            cols[name] = torch.cat([torch.cat([p.next_node, torch.arange(p.grid_s.shape[1], k)
                                                .expand(p.n_nights, -1)], 1) for p in parts])
-        else:
+        elif name == "power_ok":
+            cols[name] = None if parts[0].power_ok is None else torch.cat([torch.cat(
+                [p.power_ok, torch.ones(p.n_nights, k - p.grid_s.shape[1], dtype=torch.bool)],
+                1) for p in parts])
+        else:  # grid_s and the values: hold the last node, as pack_nights does
             cols[name] = torch.cat([_pad(getattr(p, name), k) for p in parts])
     return PackedNights(**cols)
 
@@ -159,7 +156,7 @@ def _solve_group(group: list[_Problem]) -> None:
         _solve_alone(group[0])
         return
     packed = _merge_packed([p.ctx.packed for p in group])
-    k = len(packed.grid_s)
+    k = packed.grid_s.shape[1]
     first = group[0].ctx
     ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge)
     problem, night, groups = [], [], []
