@@ -16,28 +16,12 @@ fit is compared with).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from .._lazy import attach
 
-_LAZY = {
-    "NightFit": "estimator",
-    "prepare_nights": "data",
-    "fit_to_dict": "report",
-    "format_table": "report",
-    "plot_fit": "report",
-}
-
-__all__ = [*_LAZY]
-
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+# Resolved on first use (impctl._lazy), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+    "estimator": ["NightFit"],
+    "data": ["prepare_nights"],
+    "report": ["fit_to_dict", "format_table", "plot_fit"],
+})
+__all__ = [*_LAZY_NAMES]
