@@ -34,6 +34,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--plant", choices=("iso", "realistic"), default="iso")
+    parser.add_argument("--figure", default=None,
+                        help="write the reliability diagram (calibrated vs vote shares) here")
     args = parser.parse_args()
     print(f"python {platform.python_version()}, numpy {np.__version__}, "
           f"{os.cpu_count()} CPUs, {platform.machine()}")
@@ -62,6 +64,11 @@ def main() -> None:
     _, reports = train_classifiers(dataset, cfg, args.seed, with_baselines=True)
     print(f"train + shuffled-label baselines (6 forests): {time.perf_counter() - t0:.2f} s\n")
     print(format_report(reports, small=cfg.small_campaign))
+    if args.figure:
+        from impctl.classifiers.report import reliability_figure
+
+        reliability_figure(reports, args.figure)
+        print(f"reliability figure: {args.figure}")
 
 
 if __name__ == "__main__":

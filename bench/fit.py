@@ -3,6 +3,7 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic]
+      .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
 (:mod:`impctl.plant`; realism options drawn by ``impctl.population.realism.sample_params`` with the
@@ -161,6 +162,15 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
                            "eps_in", "per_night_mean")}
+    if args.plant == "realistic":
+        params = sample_params(n, VAL_SEED)
+        kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
+        onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (n,)) >= 0.999
+        control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
+        res["types"] = {
+            "radiators": kind == 0, "underfloor": kind == 1,
+            "modulating": ~onoff, "on/off": onoff,
+            "weather curve": control == 0, "room thermostat": control == 1}
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
@@ -173,7 +183,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             ranges = None
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
-                       ach_vent=ACH[0], ach_infl=ACH[1]).fit(nights, ranges)
+                       ach_vent=ACH[0], ach_infl=ACH[1],
+                       emitter_state=args.nuisance).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -290,6 +301,23 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                        for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
                                     ("C_m", e_fit["c_m"])))
     print(f"NODE joint, signed median error: {signed}")
+    if "types" in res:
+        print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
+              "| coverage HLC/τ/C_m % |")
+        print("|---|---|---|---|---|---|")
+        truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
+        for label, sel in res["types"].items():
+            if not sel.any():
+                continue
+            cells, covs = [], []
+            for k in ("hlc", "tau", "c_m"):
+                cells.append("{:.1f} / {:.1f}".format(*stats(e_fit[k][sel])))
+                ests = [e for e, m in zip(lumped(k), sel, strict=True) if m]
+                tv = np.asarray(truths[k])[sel]
+                covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
+                                                                                  strict=True)]))
+            print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
+                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " |")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
@@ -396,6 +424,67 @@ def virtual_imp_check(n: int, args) -> None:
           f"{np.max(times):.2f} |")
 
 
+def speed(args) -> None:
+    """The issue's three speed figures: ``impctl fit`` wall time on the demo's export and on 8
+    nights of 1-minute rows (subprocess, imports and classification included), and the
+    in-process fit per household at 5-minute rows (one core)."""
+    import os
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    from impctl.imp.nights_csv import write_nights
+
+    houses = sample_households(4, seed=VAL_SEED)
+    sched = imp_schedule(4, seed=VAL_SEED)
+    sim, sp = run_schedule(houses, sched)
+    tmp = Path(tempfile.mkdtemp(prefix="impctl-bench-fit-"))
+    files = []
+    if args.demo_csv:
+        files.append(("demo export (" + Path(args.demo_csv).name + ")", Path(args.demo_csv)))
+    minute = sample_nights(sim, sp, sched, 0, sample_step_s=60.0, quantise_k=0.1,
+                           power_noise=0.05, seed=VAL_SEED)
+    files.append(("8 nights of 1-minute rows", write_nights(minute, tmp / "minute.csv")))
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    print("\n### speed (target: impctl fit ≤ 5 s wall per file, in-process ≤ 1 s per household "
+          "at 5-minute rows, one core)")
+    print("| what | rows | wall s | CPU s (user+sys) | fit s (in JSON) |")
+    print("|---|---|---|---|---|")
+    for label, path in files:
+        out = tmp / "fit.json"
+        cmd = [str(Path(sys.executable).parent / "impctl"), "fit", "--nights", str(path),
+               "--json", str(out)]
+        if args.model_dir:
+            cmd += ["--model-dir", str(args.model_dir)]
+        before = os.times()
+        t0 = time.perf_counter()
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        after = os.times()
+        cpu = (after.children_user - before.children_user
+               + after.children_system - before.children_system)
+        if done.returncode != 0:
+            print(f"| {label} | – | failed: {done.stderr.strip().splitlines()[-1]} | | |")
+            continue
+        import json
+
+        fit_s = json.loads(out.read_text())["fit"]["time_s"]
+        rows = sum(1 for _ in open(path)) - 1
+        print(f"| {label} | {rows} | {wall:.1f} | {cpu:.1f} | {fit_s:.2f} |", flush=True)
+    times, cpu = [], []
+    for i in range(houses.n_houses):
+        nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
+                               power_noise=0.05, seed=VAL_SEED + i)
+        c0 = time.process_time()
+        times.append(NightFit().fit(nights, true_ranges(houses.take(i))).fit_time_s_)
+        cpu.append(time.process_time() - c0)
+    print(f"| in-process NightFit.fit, 5-minute rows, {len(times)} households | 8 nights "
+          f"| median {np.median(times):.2f}, max {np.max(times):.2f} "
+          f"| median {np.median(cpu):.2f}, max {np.max(cpu):.2f} | – |")
+    print(f"load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores "
+          "(other work slows every figure)")
+
+
 def _verdict(name, value, target):
     return f"{name} {value:.1f} % {'met' if value <= target else 'NOT met'} (≤ {target:g} %)"
 
@@ -416,6 +505,12 @@ def main() -> None:
                     help="also compare normal-night models and optimisers on N households")
     ap.add_argument("--adam", type=int, default=0, metavar="N",
                     help="include Adam (backprop through odeint) on N of those households")
+    ap.add_argument("--no-nuisance", dest="nuisance", action="store_false",
+                    help="fit without the emitter-release term (the issue-4 model)")
+    ap.add_argument("--speed", action="store_true",
+                    help="only the speed figures (impctl fit wall time, in-process time)")
+    ap.add_argument("--demo-csv", default=None,
+                    help="the demo's export (impctl demo --out D writes D/nights.csv) for --speed")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
                     help="also fit N households simulated by impctl.population.virtual_imp")
     ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
@@ -429,6 +524,9 @@ def main() -> None:
     print(f"plant: {args.plant}")
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
+    if args.speed:
+        speed(args)
+        return
     houses = sample_households(args.households, seed=VAL_SEED)
     source = args.ranges
     if source == "classifier":

@@ -12,6 +12,15 @@ Syntax: comma-separated items, e.g. ``"delay=2.5,greeting,fixed-tid,missing=2103
 ``freeze``              stop updating the registers (stale values; the model runs on)
 ``missing=MA:MA``       these documented registers read −600 (sensor not connected)
 ``ignore-writes``       acknowledge FC 06 writes but keep the old value
+``gateway-exceptions=R``  answer a share R of requests with gateway exception 10 or 11
+``spikes=R@S``          delay a share R of answers by S wall-clock seconds (past a timeout)
+``duplicates=R@S``      send a share R of answers twice, the copy up to S seconds later
+``foreign=R``           RTU: before a share R of FC 03 answers, a second master's answer of
+                        the same length (other registers) crosses the line
+``write-answer-lost=R``  a share R of FC 06 writes execute, but the gateway answers 11
+``cop-3-decimals``      the controller encodes COP/SCOP (2371/2372) as ×0.001, not ×0.01
+``tt3000-undocumented`` compact controller answers undocumented registers (2130 low, 2329
+                        1234, COP 0) instead of exception 2, like some real TT3000/WPG units
 ``none``                no faults
 ======================  ===========================================================
 """
@@ -55,6 +64,16 @@ class Faults:
     freeze: bool = False
     missing_sensors: set[int] = field(default_factory=set)
     ignore_writes: bool = False
+    # -- issue 15: a faulty gateway / shared bus --
+    gateway_exception_rate: float = 0.0
+    spike_rate: float = 0.0
+    spike_s: float = 0.0
+    duplicate_rate: float = 0.0
+    duplicate_delay_s: float = 0.0
+    foreign_rate: float = 0.0
+    tt3000_undocumented: bool = False
+    cop_3_decimals: bool = False
+    write_answer_lost_rate: float = 0.0
 
     def update(self, other: Faults) -> None:
         """Take over every field of ``other`` (switch faults at run time, in place)."""
@@ -82,6 +101,20 @@ class Faults:
             items.append("missing=" + ":".join(str(m) for m in sorted(self.missing_sensors)))
         if self.ignore_writes:
             items.append("ignore-writes")
+        if self.gateway_exception_rate:
+            items.append(f"gateway-exceptions={self.gateway_exception_rate:g}")
+        if self.spike_rate:
+            items.append(f"spikes={self.spike_rate:g}@{self.spike_s:g}")
+        if self.duplicate_rate:
+            items.append(f"duplicates={self.duplicate_rate:g}@{self.duplicate_delay_s:g}")
+        if self.foreign_rate:
+            items.append(f"foreign={self.foreign_rate:g}")
+        if self.tt3000_undocumented:
+            items.append("tt3000-undocumented")
+        if self.cop_3_decimals:
+            items.append("cop-3-decimals")
+        if self.write_answer_lost_rate:
+            items.append(f"write-answer-lost={self.write_answer_lost_rate:g}")
         return ",".join(items) or "none"
 
 
@@ -123,8 +156,34 @@ def parse_faults(text: str, source: str | None = None) -> Faults:
                 faults.missing_sensors = {int(m) for m in value.split(":") if m}
             elif key == "ignore-writes":
                 faults.ignore_writes = True
+            elif key == "gateway-exceptions":
+                faults.gateway_exception_rate = _rate(value)
+            elif key in ("spikes", "duplicates"):
+                rate, _, seconds = value.partition("@")
+                pair = (_rate(rate), float(seconds))
+                if pair[1] < 0:
+                    raise ValueError("seconds must be >= 0")
+                if key == "spikes":
+                    faults.spike_rate, faults.spike_s = pair
+                else:
+                    faults.duplicate_rate, faults.duplicate_delay_s = pair
+            elif key == "foreign":
+                faults.foreign_rate = _rate(value)
+            elif key == "tt3000-undocumented":
+                faults.tt3000_undocumented = True
+            elif key == "write-answer-lost":
+                faults.write_answer_lost_rate = _rate(value)
+            elif key == "cop-3-decimals":
+                faults.cop_3_decimals = True
             else:
                 raise ValueError("unknown fault")
         except ValueError as exc:
             raise InputError(f"bad fault {item!r}: {exc}", source, "faults") from None
     return faults
+
+
+def _rate(text: str) -> float:
+    rate = float(text)
+    if not 0.0 <= rate <= 1.0:
+        raise ValueError("rate must be 0–1")
+    return rate

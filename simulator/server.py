@@ -8,7 +8,9 @@ Usage from a test::
 
 Only FC 03 and FC 06 are served; every other function code gets exception 1 (illegal
 function). Writes to read-only or undocumented registers get exception 2, out-of-range values
-exception 3. Requests for other unit ids are not answered (as on an RS-485 line).
+exception 3; an FC 03 asking for 0 or more than 125 registers gets FC 0x83 exception 3, as the
+Modbus specification says. Requests for other unit ids are not answered (as on an RS-485
+line). Gateway and bus faults (issue 15) are applied by :mod:`.gateway`.
 """
 
 from __future__ import annotations
@@ -34,9 +36,11 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from impctl.errors import InputError
 from impctl.heatpump.clock import VirtualClock
 from impctl.heatpump.decode import to_int16
+from impctl.heatpump.registers import Generation
 
 from .config import SimConfig
 from .faults import parse_faults
+from .gateway import GatewayFaults
 from .image import (
     LAYOUT,
     PLANT_INPUTS,
@@ -47,6 +51,7 @@ from .image import (
     register_words,
     writable,
 )
+from .profiles import tt3000_undocumented
 
 _LOG = logging.getLogger(__name__)
 _MAX_STEPS_PER_TICK = 2000
@@ -77,8 +82,15 @@ class _Unsupported(ModbusPDU):
         """Nothing to decode; the request is refused whatever it holds."""
 
 
+class _BadCount(_Unsupported):
+    """FC 03 with a register count outside 1–125: answered with exception 3."""
+
+
 class _Fc3Fc6Decoder(DecodePDU):
     def decode(self, frame: bytes) -> ModbusPDU | None:
+        if frame and frame[0] == 3 and len(frame) >= 5:
+            if not 1 <= int.from_bytes(frame[3:5], "big") <= 125:
+                return _BadCount(3)
         if frame and frame[0] in (3, 6):
             return super().decode(frame)
         return _Unsupported(frame[0] & 0x7F) if frame else None
@@ -105,7 +117,7 @@ def _make_handler(sim: KronotermSimulator) -> type[ServerRequestHandler]:
             if response is not None and self.transport:
                 response.transaction_id = pdu.transaction_id
                 response.dev_id = pdu.dev_id
-                self.server_send(response, addr)
+                await sim.gateway.deliver(self, pdu, response, addr, not sim._framer_socket)
 
     return _Handler
 
@@ -133,6 +145,7 @@ class KronotermSimulator:
         self._rng = np.random.default_rng(config.seed)
         self._faults_file = faults_file
         self._faults_mtime: float | None = None
+        self.gateway = GatewayFaults(self.faults, config.seed)
         self._server: ModbusTcpServer | ModbusSerialServer | None = None
         self._task: asyncio.Task | None = None
         self._internal = False
@@ -269,6 +282,8 @@ class KronotermSimulator:
         values = kronoterm_values(self.plant, self.rw, room_thermostat=cfg.room_thermostat,
                                   t_air_c=self._sensor(self.plant.t_air_sensor_c),
                                   t_out_c=self._sensor(self.plant.t_out_sensor_c))
+        if self.faults.cop_3_decimals:  # some controllers: 5413 = 5.413 (issue 15)
+            values.update({ma: values[ma] * 10 for ma in (2371, 2372) if ma in values})
         self._internal = True  # lets the action tell model updates from client writes
         try:
             for address, words in register_words(values, cfg.generation,
@@ -293,13 +308,22 @@ class KronotermSimulator:
             return None
         if faults.delay_s:
             await asyncio.sleep(faults.delay_s)
+        if isinstance(pdu, _BadCount):
+            return ExceptionResponse(3, ExcCodes.ILLEGAL_VALUE)
         if pdu.function_code not in (3, 6):
             return ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_FUNCTION)
         if faults.exception_code:
             return ExceptionResponse(pdu.function_code, faults.exception_code)
+        if (gateway_exc := self.gateway.exception_instead(pdu)) is not None:
+            return gateway_exc
         assert self._server is not None
+        if (faults.tt3000_undocumented and pdu.function_code == 3
+                and self.config.generation is Generation.COMPACT):
+            return await tt3000_undocumented(self, pdu)
         try:
-            return await pdu.datastore_update(self._server.context, pdu.dev_id)
+            response = await pdu.datastore_update(self._server.context, pdu.dev_id)
+            lost = None if response.isError() else self.gateway.lose_write_answer(pdu)
+            return lost or response
         except Exception:  # a bug in the simulator must not look like silence on the wire
             _LOG.exception("simulator failed on %s", pdu)
             return ExceptionResponse(pdu.function_code, ExcCodes.DEVICE_FAILURE)

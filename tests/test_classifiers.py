@@ -129,6 +129,37 @@ def test_training_learns_an_identifiable_parameter_and_reports_baselines(trained
     assert r.test_accuracy > r.majority_accuracy
     assert 0.0 <= r.shuffled_accuracy <= 1.0
     assert r.paper_test_accuracy == 0.84 and len(r.test_households) == 12
+    # probabilities: 48 training households are too few to hold 20 % out for calibration, so
+    # the vote shares are kept (and said so); they still beat the prior
+    assert not r.calibrated and not models["u_walls"].calibrated_
+    assert r.brier == r.brier_votes and r.brier < r.brier_prior
+    assert sum(b[2] for b in r.reliability) == 12 * len(r.labels)
+    m = models["u_walls"]
+    p = m.predict_proba(pd.DataFrame(np.zeros((1, m.n_features_in_)), columns=m.feature_names_in_))
+    assert p.sum() == pytest.approx(1.0)
+
+
+def test_calibration_turns_crowded_vote_shares_into_probabilities():
+    """Noisy labels: vote shares are overconfident on the training houses' look-alikes; the
+    calibrated probabilities, fitted on held-out households, score a better Brier on new ones."""
+    from impctl.classifiers.estimator import RangeClassifier
+    from impctl.classifiers.training import brier_score
+
+    rng = np.random.default_rng(4)
+
+    def data(n):
+        x = rng.normal(size=(n, 4))
+        value = 0.5 + 0.5 / (1 + np.exp(-1.5 * x[:, 0])) + rng.normal(0, 0.25, n)
+        return x, np.clip(value, 0.21, 1.99), np.repeat(np.arange(n // 4), 4)[:n]
+
+    x, y, groups = data(1600)
+    clf = RangeClassifier(U_RANGES["u_walls"], n_estimators=60, min_samples_leaf=1,
+                          random_state=0).fit(x, y, groups=groups)
+    assert clf.calibrated_
+    xt, yt, _ = data(800)
+    idx = np.searchsorted([r[1] for r in U_RANGES["u_walls"]], yt, side="right")
+    idx = np.minimum(idx, len(U_RANGES["u_walls"]) - 1)
+    assert brier_score(clf.predict_proba(xt), idx) < brier_score(clf.predict_votes(xt), idx)
 
 
 def test_saved_models_round_trip_and_classify_measured_nights(trained, envelope_dataset,

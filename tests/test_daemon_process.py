@@ -158,11 +158,14 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             live = run_cli("status", "--config", str(config))
             assert live.returncode == 0, live.stderr
             assert "night:     1 normal T_set 22 °C, active" in live.stdout
+            # issue 15: the generation and where it comes from (set in this config)
+            assert "generation: extended (configured)" in live.stdout
             wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, 30,
                        "the night to finish and be assessed", proc=d.proc)
             assert owner_state(sim.port) == OWNER
             night = store_query(db, lambda s: s.night(1))
-            assert (night.state, night.valid, night.source) == ("done", True, "trigger"), night
+            assert (night.state, night.valid, night.source) == ("done", True, "trigger"), \
+                night.reasons
             assert night.reasons == ("window ended",)
             n_samples = store_query(db, lambda s: s.sample_count(1))
             in_window = [x.ts for x in store_query(db, lambda s: s.samples(1))
@@ -179,6 +182,8 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             status = json.loads(st.stdout)
             assert status["current_night"] is None and status["pending_restore"] == []
             assert status["pending_requests"] == 0
+            assert status["heatpump"]["generation"]["doubt"] is None
+            assert status["heatpump"]["quirks"] == {}
             # Writes are counted per day of the heat pump's (simulated) clock: the set and
             # the restore of 2187 on the night's day, none on a later day.
             assert night.started.date() == night.ended.date()

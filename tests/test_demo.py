@@ -79,7 +79,7 @@ def test_demo_report_is_self_contained(demo):
     page = (out / "report.html").read_text()
     assert page.count("data:image/png;base64,") == 4
     for section in ("What the nights determine", "Identifiability", "data quality",
-                    "Demo: truth vs estimate"):
+                    "Demo: truth vs estimate", "Flexibility (at 21 °C"):
         assert section in page
     for fig in ("fig_nights.png", "fig_heat_demand.png", "fig_classes.png",
                 "fig_parameters.png"):

@@ -32,7 +32,9 @@ def nights_15min():
 
 @pytest.fixture(scope="module")
 def fitted(nights_15min):
-    return NightFit(normal_model="demand", n_starts=3).fit(nights_15min, RANGES)
+    # simulated sensors have no offsets: the statistical intervals alone
+    return NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0)).fit(
+        nights_15min, RANGES)
 
 
 def rel(a, b):
@@ -231,3 +233,86 @@ def test_a_class_range_the_data_contradict_is_rejected():
     ok = NightFit(n_starts=2, per_night=False).fit(nights, right)
     assert not ok.class_check_["rejected"]
     assert ok.bounds_["floor_area"] == (200.0, 300.0)
+
+
+def _with_emitter_release(nights, house):
+    """Constrained nights of the same house with an underfloor floor still releasing heat
+    after switch-off (3 kW decaying over 2.5 h, invisible to the heat meter)."""
+    from impctl.model import simulate
+
+    dt = 60.0
+    t = np.arange(0, 7 * 3600, dt)
+    out = []
+    for n in nights:
+        if n.kind != "constrained":
+            out.append(n)
+            continue
+        t_out = np.interp(t, n.time_s, n.t_out_c)
+        sim = simulate(house, t_out, dt, phi_hc_w=3000.0 * np.exp(-t / 9000.0),
+                       t_m_init_c=21.5)
+        idx = np.arange(0, len(t), 15)
+        out.append(dataclasses.replace(n, time_s=t[idx], t_air_c=np.round(sim.t_air_c[idx], 1),
+                                       t_out_c=t_out[idx], q_hc_w=np.zeros(len(idx))))
+    return out
+
+
+def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, nights_15min):
+    # the ideal 5R1C: the likelihood-ratio test keeps the plain model
+    assert fitted.nuisance_check_["applied"] and not fitted.nuisance_check_["selected"]
+    assert fitted.nuisance_["emitter_w"] is None
+    # heat still released after switch-off: without the term τ is biased and its interval
+    # misses; with it τ is right and the interval holds
+    nights = _with_emitter_release(nights_15min, HOUSE)
+    plain = NightFit(n_starts=3, emitter_state=False, sensor_offsets_k=(0, 0)).fit(nights,
+                                                                                  RANGES)
+    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0)).fit(nights, RANGES)
+    assert rel(plain.lumped_["tau"].value, HOUSE.tau_h) > 0.08
+    assert not plain.lumped_["tau"].low <= HOUSE.tau_h <= plain.lumped_["tau"].high
+    assert fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] > 20
+    assert rel(fit.lumped_["tau"].value, HOUSE.tau_h) < 0.05
+    assert fit.lumped_["tau"].low <= HOUSE.tau_h <= fit.lumped_["tau"].high
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    em = fit.nuisance_["emitter_tau_h"]
+    assert em["low"] <= 2.5 <= em["high"]
+    summary = fit_to_dict(fit)
+    assert summary["fit"]["nuisance_check"]["selected"] and summary["nuisance"]["emitter_w"]
+    assert "Nuisance terms" in format_table(summary)
+
+
+def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
+        nights_15min, monkeypatch):
+    """An hour without space heat (DHW recharge) on every normal night: the nights are kept,
+    their power during the interruption and recovery is not compared, the HLC stays right."""
+    nights = []
+    for n in nights_15min:
+        if n.kind == "normal":
+            q = n.q_hc_w.copy()
+            q[(n.time_s >= 3 * 3600) & (n.time_s < 4 * 3600)] = 0.0
+            n = dataclasses.replace(n, q_hc_w=q)
+        nights.append(n)
+    fit = NightFit(n_starts=3).fit(nights, RANGES)
+    assert len(fit.nights_) == len(nights)
+    normal = [q for q in fit.night_quality_ if q["kind"] == "normal"]
+    assert all(q["interruptions"][0]["kind"] == "dhw_or_stop" for q in normal)
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    # compared anyway, the missing hour drags the HLC far down
+    from impctl.fit import estimator
+
+    monkeypatch.setattr(estimator, "power_usable", lambda n, thr: np.ones(len(n.time_s), bool))
+    blind = NightFit(n_starts=3).fit(nights, RANGES)
+    assert blind.lumped_["hlc"].value < 0.9 * HOUSE.hlc_w_per_k
+
+
+def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitted):
+    from impctl.fit.uncertainty import offset_allowance
+
+    wide, info = offset_allowance(fitted.lumped_, fitted.nights_, (0.5, 1.0))
+    share = info["relative_sd"]
+    assert share == pytest.approx(np.hypot(0.5, 1.0) / info["mean_delta_t_k"])
+    assert fitted.offset_allowance_["relative_sd"] == 0.0   # the fixture's calibrated sensors
+    for name, e in fitted.lumped_.items():
+        w = wide[name]
+        assert w.value == e.value and w.low < e.low and w.high > e.high
+        sd_stat = np.log(e.high / e.low) / (2 * 1.959964)
+        sd_wide = np.log(w.high / w.low) / (2 * 1.959964)
+        assert sd_wide == pytest.approx(np.hypot(sd_stat, share), rel=1e-6)

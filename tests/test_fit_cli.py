@@ -72,6 +72,11 @@ def test_fit_prints_table_writes_json_and_plot(tmp_path, nights):
     pred = data["predictions"][0]
     assert len(pred["time_s"]) == len(pred["t_air_measured_c"]) == len(pred["q_measured_w"])
     assert png.stat().st_size > 10_000
+    # night quality per given night and the model's adequacy, in the JSON and the table
+    assert [q["night_id"] for q in data["night_quality"]] == [n.night_id for n in nights]
+    assert all(q["used"] and q["usable_h"] > 3 for q in data["night_quality"])
+    assert data["adequacy"]["adequate"] in (True, False) and data["adequacy"]["statement"]
+    assert "Night quality" in res.stdout and "Model adequacy" in res.stdout
 
 
 def test_fit_refuses_nights_without_a_constrained_one(tmp_path, nights):

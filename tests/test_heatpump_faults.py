@@ -79,7 +79,13 @@ def test_exception_code_fault():
             snap = await hp.snapshot()  # exception blocks become missing, not an exception
             assert set(snap.missing().values()) == {"Modbus exception 6"}
             assert snap.t_air_c.value is None and snap.q_hc_w.value is None
-            assert hp.link.stats.retries == 0  # exception responses are never retried
+            # busy is transient: every block was tried `attempts` (2) times
+            assert hp.link.stats.transient_exceptions == 2 * hp.link.stats.failures
+            sim.faults.exception_code = 2  # illegal address is final: never retried
+            retries = hp.link.stats.retries
+            with pytest.raises(ModbusDeviceError) as info:
+                await hp.read("t_outdoor")
+            assert info.value.exception_code == 2 and hp.link.stats.retries == retries
     run(body())
 
 

@@ -174,14 +174,24 @@ def test_unknown_register_is_input_error():
 
 
 def test_block_plan_spans_only_documented_registers():
-    regs = [register(m) for m in (2101, 2104, 2000, 2006, 2363)]
-    ext = plan_blocks(regs, Generation.EXTENDED)
-    # 2005 is documented only for the compact set, so the extended plan splits there.
-    assert (2101, 4) in ext and (2000, 1) in ext and (2006, 1) in ext and (2363, 2) in ext
-    compact = plan_blocks([register(m) for m in (2000, 2006, 2101, 2104)], Generation.COMPACT)
-    assert compact == [(2000, 7), (2101, 4)]
-    assert plan_blocks([register(2160), register(2187)], Generation.COMPACT) == [(2160, 1),
-                                                                                 (2187, 1)]
+    def documented(ma, gen):
+        reg = REGISTERS.get(ma) or REGISTERS.get(ma - 1)
+        return reg is not None and reg.in_generation(gen)
+
+    for gen, wanted in ((Generation.EXTENDED, (2101, 2104, 2000, 2006, 2363)),
+                        (Generation.COMPACT, (2000, 2006, 2101, 2104, 2160, 2187))):
+        plan = plan_blocks([register(m) for m in wanted], gen)
+        covered = {ma for first, n in plan for ma in range(first, first + n)}
+        assert set(wanted) <= covered
+        assert all(documented(ma, gen) for ma in covered), plan
+        # 2005 is documented only for the compact set, so no extended block spans it.
+        assert gen is Generation.COMPACT or 2005 not in covered
+        # Without transaction ids an answer is told from another block's by its length.
+        lengths = [n for _, n in plan]
+        assert len(set(lengths)) == len(lengths), plan
+    # Widened only where needed: two 1-register blocks become lengths 1 and 2 or more.
+    single = plan_blocks([register(2160), register(2187)], Generation.COMPACT)
+    assert sorted(n for _, n in single)[0] == 1 and len({n for _, n in single}) == 2
 
 
 def test_config_from_mapping():

@@ -66,15 +66,20 @@ def test_unchanged_value_is_not_written(tmp_path):
     run(body())
 
 
-def test_mode_write_switches_heating_off(tmp_path):
+def test_mode_write_switches_heating_off(tmp_path, caplog):
     async def body():
         async with simulator(sim_config()) as sim, \
                 client(sim, budget=budget(tmp_path), writes=POLICY) as hp:
             assert sim.plant.heating_enabled
-            result = await hp.set_loop1_mode(0)
+            with caplog.at_level(logging.WARNING, logger="impctl.heatpump.writes"):
+                result = await hp.set_loop1_mode(0)
+                await hp.set_loop1_setpoint(22.5)
             assert result.written and result.previous == 1 and result.read_back == 0
             assert not sim.plant.heating_enabled and sim.stats.writes[2042] == 1
     run(body())
+    # Modes are codes, logged as people write them; setpoints keep their unit.
+    assert "(loop1_mode): 1 → 0 written and verified" in caplog.text
+    assert "(loop1_setpoint): 21.0 °C → 22.5 °C written and verified" in caplog.text
 
 
 def test_read_back_mismatch_raises(tmp_path, caplog):
@@ -88,7 +93,10 @@ def test_read_back_mismatch_raises(tmp_path, caplog):
             assert info.value.read_back == 210
             assert "read back 21.0" in caplog.text
             assert sim.plant.setpoint_c == 21.0
-            assert wb.used(2187, hp.clock.now().date()) == 1  # the attempt still counts
+            # The echo carried the old value (not an answer to this write) and the read-back
+            # shows the register unchanged: the write did not execute and is not counted.
+            assert wb.used(2187, hp.clock.now().date()) == 0
+            assert hp.link.stats.unattributable == 1
     run(body())
 
 

@@ -125,24 +125,47 @@ def test_demand_and_air_rows_reproduce_the_annex_c_simulator():
     assert np.max(np.abs(err)) < 5e-3
 
 
-def test_pack_nights_shares_one_grid_and_keeps_each_nights_samples():
+def test_pack_nights_puts_each_night_on_its_own_samples():
     a = _night("constrained", [0, 300, 600, 900], [20, 19.9, 19.8, 19.7], [1, 1, 1, 1],
                [0, 0, 0, 0])
     b = _night("normal", [0, 600, 1200], [22, 22, 22], [0, 0.5, 1.0], [1000, 2000, 3000])
     packed = pack_nights([a, b], [0.0, 0.0])
-    assert packed.grid_s.tolist() == [0, 300, 600, 900, 1200]
-    assert packed.mask.tolist() == [[1, 1, 1, 1, 0], [1, 0, 1, 0, 1]]
-    # power holds until the next sample; T_out is interpolated linearly
-    assert packed.q_w[1].tolist() == [1000, 1000, 2000, 2000, 3000]
-    assert packed.t_out_c[1, 1] == pytest.approx(0.25)
-    assert packed.next_node[1, 0] == 2 and bool(packed.last[1, 4])
+    # the shorter night is padded with its last sample: zero-length intervals
+    assert packed.grid_s.tolist() == [[0, 300, 600, 900], [0, 600, 1200, 1200]]
+    assert packed.mask.tolist() == [[1, 1, 1, 1], [1, 1, 1, 0]]
+    # power holds until the next sample; T_out slopes are the night's own
+    assert packed.q_w[1].tolist() == [1000, 2000, 3000, 3000]
+    assert packed.t_out_slope[1, 0] == pytest.approx(0.5 / 600)
+    assert packed.t_out_slope[1, 2] == 0.0
+    assert packed.next_node[1, 0] == 1 and packed.next_node[1, 2] == 2 and bool(packed.last[1, 2])
     # mean power weighs each sample by its interval (the last one covers nothing)
     assert float(packed.q_mean_w[1]) == pytest.approx(1500.0)
     # "interval" stamps: nodes move to the interval middles, power on a node-to-node
     # interval is the mean of the two samples it straddles
     mid = pack_nights([b], [0.0], timestamps="interval")
-    assert mid.grid_s.tolist() == [300, 900, 1500]
+    assert mid.grid_s.tolist() == [[300, 900, 1500]]
     assert mid.q_in_w[0].tolist() == [1500, 2500, 3000]
+
+
+def test_padding_and_sub_steps_do_not_change_the_solution():
+    """A padded row equals the same row alone; a fast mode gets rk4 sub-steps and stays exact."""
+    rng = np.random.default_rng(5)
+    grid = np.cumsum(np.r_[0.0, rng.uniform(200, 400, 30)])
+    u0 = rng.normal(0, 2e-3, len(grid))
+    u1 = rng.normal(0, 1e-6, len(grid))
+    for a in (-1.0 / (30 * 3600.0), -1.0 / 180.0):   # slow mass, fast air node
+        padded = np.r_[grid, [grid[-1]] * 5]
+        ode = NightODE(torch.tensor(np.stack([padded, padded]), dtype=DTYPE),
+                       torch.tensor([a, a], dtype=DTYPE),
+                       torch.tensor(np.stack([np.r_[u0, [0.0] * 5]] * 2), dtype=DTYPE),
+                       torch.tensor(np.stack([np.r_[u1, [0.0] * 5]] * 2), dtype=DTYPE))
+        got = ode.integrate(torch.tensor([21.0, 21.0], dtype=DTYPE)).numpy()
+        want = exact_linear(a, 21.0, grid, u0, u1)
+        # a 21 K jump relaxing in one interval: the sub-steps keep it to micro-kelvins
+        assert np.max(np.abs(got[0, :len(grid)] - want)) < 2e-5
+        assert np.all(got[0, len(grid):] == got[0, len(grid) - 1])
+        if a < -1e-3:
+            assert ode.n_sub > 1
 
 
 def test_smoothing_removes_quantisation_flicker_but_keeps_the_level():

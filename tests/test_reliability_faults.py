@@ -35,6 +35,7 @@ SPEED = 600.0
 #: Test-sized link timings (wall clock): a failed try costs 2 simulated minutes at 600×.
 LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02, "connect_backoff_s": [0.05, 0.2]}
 OWNER = (21.0, 1)
+QUIRK = r"^WARNING impctl\.heatpump\.link: Modbus quirk recognised: "
 LINK_LOST = r"^WARNING impctl\.controller\.night\.night1: heat-pump link lost: "
 RESTORE_WAITS = r"^WARNING impctl\.controller\.restore: restore of loop1_setpoint waits for"
 
@@ -88,16 +89,28 @@ NIGHT_FAULTS = [
     Fault("5 s stall", _proxy("stall", stall_s=5.0), _PASS, (LINK_LOST, RESTORE_WAITS),
           "link lost", minutes=70.0, blocks_restore=False),
     Fault("garbage bytes", _proxy("garbage"), _PASS, (LINK_LOST, RESTORE_WAITS), "link lost"),
+    # Named once, with the fix (issue 15), then handled as a lost link.
     Fault("fixed transaction id", _sim(fixed_tid=20), _sim(fixed_tid=None),
-          (LINK_LOST, RESTORE_WAITS), "link lost"),
+          (QUIRK + "the gateway answers every request with the same Modbus TCP transaction "
+           "id .*set tolerate_fixed_tid = true", LINK_LOST, RESTORE_WAITS), "link lost"),
     *[Fault(f"exception {code}", _sim(exception_code=code), _sim(exception_code=0),
             _exception(code), f"Modbus exception {code}") for code in (1, 2, 3, 4, 6)],
     # Absorbed by configuration: no incident, no lost sample, no line.
+    # Tolerated, answers are attributed by length and connection: a few reconnects per poll
+    # (no greeting to drain on this gateway, so they are quick enough for 600× time).
     Fault("fixed transaction id, tolerated", _sim(fixed_tid=20), _sim(fixed_tid=None),
-          heatpump={"tolerate_fixed_tid": True}, blocks_restore=False),
+          heatpump={"tolerate_fixed_tid": True, "drain_s": 0.0}, blocks_restore=False),
     Fault("greeting bytes, drained", _greeting_and_reconnect, _sim(greeting=b""),
+          (QUIRK + "the gateway sends unsolicited bytes after each connect",),
           heatpump={"drain_s": 0.1}, blocks_restore=False),
 ]
+# issue 15: gateway exceptions 10/11 on a fifth of the requests are transient: retried, the
+# night keeps its data and restores on time. (Its own event loop: one more rig side by side
+# slows the others' sampling on a loaded machine.)
+GATEWAY_EXCEPTIONS = Fault("gateway exceptions 10/11", _sim(gateway_exception_rate=0.2),
+                           _sim(gateway_exception_rate=0.0),
+                           heatpump={"attempts": 8, "retry_delay_s": 0.002},
+                           blocks_restore=False)
 
 
 async def _night_with_fault(tmp_path, fault: Fault) -> None:
@@ -165,6 +178,10 @@ def _run_side_by_side(tmp_path, scenarios: dict[str, Callable], timeout_s: float
 def test_link_faults_and_exception_codes_across_the_end_of_a_night(tmp_path):
     _run_side_by_side(tmp_path, {f.name: (lambda f=f: _night_with_fault(tmp_path, f))
                                  for f in NIGHT_FAULTS}, timeout_s=90)
+
+
+def test_gateway_exceptions_across_the_end_of_a_night(tmp_path):
+    run(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
 
 
 async def _link_down_30_min(tmp_path) -> None:
@@ -251,7 +268,8 @@ async def _write_fault(tmp_path, name: str) -> None:
                 == [3, 3], warnings
             assert re.search(r"night aborted by a heat-pump error: register 2042", warnings[2])
             assert re.search(r"restore of loop1_setpoint failed \(retrying\)", warnings[5])
-            assert used == {2187: 2, 2042: 1}  # preheat + restore; the lost switch-off
+            # preheat + restore; the lost switch-off read back unchanged: not counted
+            assert used == {2187: 2, 2042: 0}
         else:  # "busy during restore": exception 6 to every write; reads answer
             assert night.state == "done"
             assert rig.proxy.stats.requests[6] >= 10

@@ -139,6 +139,57 @@ def read_table(
     return out
 
 
+def frame_table(
+    frame: pd.DataFrame,
+    source: str | Path,
+    *,
+    required: Iterable[str],
+    numeric: Iterable[str] = (),
+    optional: Iterable[str] = (),
+    may_be_empty: Iterable[str] = (),
+    tz: str = "UTC",
+) -> pd.DataFrame:
+    """:func:`read_table`'s checks for a DataFrame already read (Parquet): the same output.
+
+    ``timestamp`` may hold datetimes (naive ones are local time in ``tz``) or ISO 8601 strings.
+    Row numbers in errors count as in the CSV form (first data row = row 2).
+    """
+    cols = [str(c) for c in frame.columns]
+    for col in required:
+        if col not in cols:
+            raise InputError(f"missing column '{col}' (columns: {','.join(cols)})", source)
+    if frame.empty:
+        raise InputError("no data rows", source)
+    out = pd.DataFrame(index=range(len(frame)))
+    stamps = frame["timestamp"].reset_index(drop=True)
+    if pd.api.types.is_datetime64_any_dtype(stamps):
+        idx = pd.DatetimeIndex(stamps)
+        if idx.isna().any():
+            raise InputError("empty timestamp", source, f"row {_first_bad(idx.isna())}")
+        out["timestamp"] = (idx.tz_convert(tz) if idx.tz is not None else
+                            parse_timestamps(pd.Series(idx.strftime("%Y-%m-%dT%H:%M:%S.%f")),
+                                             source, tz))
+    else:
+        out["timestamp"] = parse_timestamps(stamps.astype(object), source, tz)
+    may_be_empty = set(may_be_empty)
+    for col in numeric:
+        if col not in cols:
+            continue
+        values = pd.to_numeric(frame[col].reset_index(drop=True), errors="coerce")
+        values = values.to_numpy(dtype=float, na_value=np.nan)
+        bad = ~np.isfinite(values)
+        if col in may_be_empty:
+            bad &= ~np.isnan(values)
+        if bad.any():
+            raise InputError(f"column '{col}': missing or not a finite number", source,
+                             f"row {_first_bad(bad)}")
+        out[col] = values
+    for col in optional:
+        if col in cols and col not in out.columns:
+            out[col] = frame[col].reset_index(drop=True).astype(str).str.strip()
+    return out
+
+
 def _refuse_ragged_rows(path: Path, n_columns: int) -> None:
     """A row with fewer cells than the header (pandas would fill them in as empty — e.g. a
     last line cut off when the logger lost power) is refused; too many cells pandas refuses

@@ -15,35 +15,15 @@ so ``import impctl.classifiers`` stays light (the CLI imports it).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from .._lazy import attach
 from ..population.ranges import DEFAULT_RANGES
 
-_LAZY = {
-    "ClassResult": "saved",
-    "classify_nights": "saved",
-    "default_model_dir": "saved",
-    "load_models": "saved",
-    "save_models": "saved",
-    "TrainConfig": "training",
-    "train_classifiers": "training",
-    "format_report": "report",
-    "RangeClassifier": "estimator",
-    "campaign_features": "campaign",
-}
-
-__all__ = ["DEFAULT_RANGES", *_LAZY]
-
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+# Resolved on first use (impctl._lazy), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+    "saved": ["ClassResult", "classify_nights", "default_model_dir", "load_models", "save_models"],
+    "training": ["TrainConfig", "train_classifiers"],
+    "report": ["format_report"],
+    "estimator": ["RangeClassifier"],
+    "campaign": ["campaign_features"],
+})
+__all__ = ["DEFAULT_RANGES", *_LAZY_NAMES]

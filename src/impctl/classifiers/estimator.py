@@ -12,6 +12,11 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 
 from ..population.ranges import DEFAULT_RANGES, bin_values, labels_of
 
+#: Fewest held-out households worth calibrating on; below that the forest keeps every training
+#: household and its vote shares (a sigmoid fitted to a handful of houses is noise, and the
+#: households it takes away can flip a borderline class).
+MIN_CALIBRATION_GROUPS = 40
+
 
 class RangeClassifier(ClassifierMixin, BaseEstimator):
     """Random forest whose classes are the ranges of one house parameter.
@@ -31,12 +36,24 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     random_state : int or None
     n_jobs : int or None
         Trees built in parallel (``-1``: all cores).
+    calibration : {"sigmoid", "isotonic"} or None, default "sigmoid"
+        A forest's vote shares are not probabilities (they crowd towards the middle). With
+        ``groups`` given to :meth:`fit`, ``calibration_fraction`` of the groups (households) is
+        held out, the forest is trained on the rest, and scikit-learn's
+        ``CalibratedClassifierCV`` maps its votes to calibrated probabilities on the held-out
+        households (whole households, so no campaign of a calibration house was seen by the
+        forest). Without groups, with fewer than :data:`MIN_CALIBRATION_GROUPS` held-out
+        households, or when they miss a class, the forest keeps all rows and its vote shares
+        (``calibrated_`` False).
+    calibration_fraction : float, default 0.2
 
     Attributes
     ----------
     classes_ : ndarray of str
         Range labels, in range order.
     forest_ : sklearn.ensemble.RandomForestClassifier
+    calibrator_ : sklearn.calibration.CalibratedClassifierCV or None
+    calibrated_ : bool
     n_features_in_ : int
     feature_names_in_ : ndarray of str (when fitted on a DataFrame)
     """
@@ -49,6 +66,8 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         max_features: str | int | float | None = "sqrt",
         random_state: int | None = None,
         n_jobs: int | None = None,
+        calibration: str | None = "sigmoid",
+        calibration_fraction: float = 0.2,
     ):
         self.ranges = ranges
         self.n_estimators = n_estimators
@@ -56,30 +75,60 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         self.max_features = max_features
         self.random_state = random_state
         self.n_jobs = n_jobs
+        self.calibration = calibration
+        self.calibration_fraction = calibration_fraction
 
-    def fit(self, X: ArrayLike, y: ArrayLike) -> RangeClassifier:
-        """Fit on features ``X`` (n_samples, n_features; NaN allowed) and parameter values ``y``."""
+    def fit(self, X: ArrayLike, y: ArrayLike, groups: ArrayLike | None = None
+            ) -> RangeClassifier:
+        """Fit on features ``X`` (n_samples, n_features; NaN allowed) and parameter values ``y``;
+        ``groups`` (e.g. the household of each row) enables the calibration."""
         from sklearn.ensemble import RandomForestClassifier
+        from sklearn.utils import _safe_indexing
 
         self.classes_ = np.array(labels_of(tuple(self.ranges)))
         index = bin_values(y, tuple(self.ranges))
+        fit_rows, cal_rows = np.arange(len(index)), None
+        n_cal = 0 if groups is None else len(np.unique(groups)) * self.calibration_fraction
+        if self.calibration is not None and n_cal >= MIN_CALIBRATION_GROUPS:
+            from sklearn.model_selection import StratifiedGroupKFold
+
+            folds = max(2, int(round(1.0 / self.calibration_fraction)))
+            split = StratifiedGroupKFold(folds, shuffle=True, random_state=self.random_state)
+            fit_rows, cal_rows = next(split.split(np.zeros(len(index)), index, groups))
         self.forest_ = RandomForestClassifier(
             n_estimators=self.n_estimators,
             min_samples_leaf=self.min_samples_leaf,
             max_features=self.max_features,
             random_state=self.random_state,
             n_jobs=self.n_jobs,
-        ).fit(X, index)
+        ).fit(_safe_indexing(X, fit_rows), index[fit_rows])
+        self.calibrator_ = None
+        if cal_rows is not None and set(index[cal_rows]) == set(self.forest_.classes_):
+            from sklearn.calibration import CalibratedClassifierCV
+            from sklearn.frozen import FrozenEstimator
+
+            self.calibrator_ = CalibratedClassifierCV(
+                FrozenEstimator(self.forest_), method=self.calibration).fit(
+                _safe_indexing(X, cal_rows), index[cal_rows])
+        self.calibrated_ = self.calibrator_ is not None
         self.n_features_in_ = self.forest_.n_features_in_
         if hasattr(self.forest_, "feature_names_in_"):
             self.feature_names_in_ = self.forest_.feature_names_in_
         return self
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of each range, shape (n_samples, n_ranges)."""
-        proba = self.forest_.predict_proba(X)
+        """Probability of each range, shape (n_samples, n_ranges): calibrated when the fit
+        could calibrate (``calibrated_``), else the forest's vote shares."""
+        model = getattr(self, "calibrator_", None) or self.forest_
+        return self._expand(model.predict_proba(X), model.classes_)
+
+    def predict_votes(self, X: ArrayLike) -> NDArray[np.float64]:
+        """The forest's vote shares per range (not calibrated), shape (n_samples, n_ranges)."""
+        return self._expand(self.forest_.predict_proba(X), self.forest_.classes_)
+
+    def _expand(self, proba, classes) -> NDArray[np.float64]:
         out = np.zeros((proba.shape[0], len(self.classes_)))
-        out[:, self.forest_.classes_] = proba
+        out[:, np.asarray(classes, int)] = proba
         return out
 
     def predict(self, X: ArrayLike) -> NDArray[np.str_]:

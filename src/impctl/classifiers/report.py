@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+import numpy as np
+
 from ..population.ranges import CF_NAMES, UNITS
 from .training import ParameterReport
 
@@ -54,6 +56,17 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
         "majority: always the training set's most frequent range; shuffled: the same forest",
         "trained on labels shuffled across households (what the features add beyond the prior).",
     ]
+    if any(r.brier is not None for r in reports.values()):
+        notes += ["", f"Probabilities ({small[0]}+{small[1]} campaigns of the test households; "
+                  "Brier score, lower is better, 0 perfect):",
+                  f"{'parameter':<12}{'calibrated':>12}{'vote shares':>13}{'prior':>8}"]
+        for name, r in reports.items():
+            if r.brier is not None:
+                flag = "" if r.calibrated else "  (not calibrated: a class missing)"
+                notes.append(f"{name:<12}{r.brier:>12.3f}{r.brier_votes:>13.3f}"
+                             f"{r.brier_prior:>8.3f}{flag}")
+        notes.append("calibrated: the forest's votes mapped to probabilities on held-out "
+                     "training households (sigmoid); prior: the training class frequencies.")
     missed = [n for n, r in reports.items() if n in GOALS and r.test_accuracy < GOALS[n]]
     if missed:
         notes += [f"Goal not reached for: {', '.join(missed)}. Night data fix HLC, τ and C_m;",
@@ -69,3 +82,34 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
             rows.append(f"{lab:<{width}}" + "".join(f"{c:>{width}d}" for c in counts))
         blocks.append("\n".join(rows))
     return head + "\n".join(lines + notes) + "\n" + "\n".join(blocks) + "\n"
+
+
+def reliability_figure(reports: Mapping[str, ParameterReport], path) -> None:
+    """Reliability diagram per parameter: predicted probability vs observed frequency (every
+    class one-vs-rest), calibrated probabilities and vote shares, the diagonal = perfect."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = [r for r in reports.values() if r.reliability]
+    fig, axes = plt.subplots(1, max(1, len(shown)), figsize=(3.6 * max(1, len(shown)), 3.6),
+                             squeeze=False)
+    for ax, r in zip(axes[0], shown, strict=False):
+        ax.plot([0, 1], [0, 1], ":", color="grey", lw=1)
+        for bins, label, style in ((r.reliability_votes, f"vote shares (Brier "
+                                    f"{r.brier_votes:.3f})", "s--"),
+                                   (r.reliability, f"calibrated (Brier {r.brier:.3f})", "o-")):
+            if bins:
+                b = np.asarray(bins)
+                ax.plot(b[:, 0], b[:, 1], style, ms=4, lw=1.2, label=label)
+        ax.set_title(r.parameter, fontsize=9)
+        ax.set_xlabel("predicted probability", fontsize=8)
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1)
+        ax.legend(fontsize=7, loc="upper left")
+        ax.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("observed frequency", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

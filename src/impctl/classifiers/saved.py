@@ -57,7 +57,8 @@ class ClassResult:
     range : (float, float)
         That range, in the parameter's unit.
     probability : float
-        Its probability (0–1), the share of the forest's votes.
+        Its probability (0–1): calibrated on households the forest never saw when
+        ``calibrated`` (models from ``impctl train`` since issue 14), else the share of votes.
     probabilities : dict
         Every range label → probability.
     """
@@ -67,11 +68,13 @@ class ClassResult:
     range: tuple[float, float]
     probability: float
     probabilities: dict[str, float] = field(default_factory=dict)
+    calibrated: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …}``."""
         return {"range": list(self.range), "label": self.label,
-                "probability": self.probability, "probabilities": dict(self.probabilities)}
+                "probability": self.probability, "probabilities": dict(self.probabilities),
+                "calibrated": self.calibrated}
 
 
 def save_models(models: dict, directory: str | Path, *, seed: int, n_households: int,
@@ -198,7 +201,13 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
     InputError
         No nights, or no usable trained models (telling the user to run ``impctl train``).
     """
-    models, meta = load_models(model_dir)
+    return classify_with(nights, *load_models(model_dir))
+
+
+def classify_with(nights: list[NightSamples], models: dict, meta: dict
+                  ) -> dict[str, ClassResult]:
+    """:func:`classify_nights` with models already loaded by :func:`load_models` (a fleet
+    worker loads them once)."""
     if not nights:
         raise InputError("no nights to classify")
     lag = float(meta.get("emission_lag_h", 1.0))
@@ -214,5 +223,6 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
             range=tuple(float(v) for v in model.ranges[best]),  # type: ignore[arg-type]
             probability=float(proba[best]),
             probabilities={str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)},
+            calibrated=bool(getattr(model, "calibrated_", False)),
         )
     return out

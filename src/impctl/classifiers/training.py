@@ -10,6 +10,9 @@
   realistic campaign of ``small_campaign`` = (2 constrained, 6 normal) nights.
 * Baselines: the training majority class, and the same forest trained on labels shuffled across
   training households (what the features add beyond the class priors).
+* Probabilities: calibrated on held-out training households (:class:`RangeClassifier`); the
+  Brier score of the small-campaign test rows for the calibrated probabilities, the raw vote
+  shares and the training prior, and their reliability bins.
 """
 
 from __future__ import annotations
@@ -61,6 +64,16 @@ class ParameterReport:
     n_train_households: int
     n_test_households: int
     test_households: list[int]
+    #: multi-class Brier score Σ_k (p_k − [y = k])², mean over test households with the
+    #: small campaign: calibrated probabilities, the forest's vote shares, the training prior
+    brier: float | None = None
+    brier_votes: float | None = None
+    brier_prior: float | None = None
+    calibrated: bool = False
+    #: reliability of the small-campaign probabilities, every class one-vs-rest in 10 bins:
+    #: [[mean predicted, observed frequency, count], ...] for calibrated and vote shares
+    reliability: list[list[float]] | None = None
+    reliability_votes: list[list[float]] | None = None
 
     def as_dict(self) -> dict:
         """Plain-JSON form."""
@@ -78,6 +91,26 @@ def household_split(n: int, test_fraction: float, rng: np.random.Generator
         raise ValueError(f"{n} households are too few to split")
     order = rng.permutation(n)
     return np.sort(order[n_test:]), np.sort(order[:n_test])
+
+
+def brier_score(proba: np.ndarray, y: np.ndarray) -> float:
+    """Multi-class Brier score: mean over rows of Σ_k (p_k − [y = k])² (0 best, 2 worst)."""
+    onehot = np.eye(proba.shape[1])[y]
+    return float(np.mean(np.sum((proba - onehot) ** 2, axis=1)))
+
+
+def reliability_bins(proba: np.ndarray, y: np.ndarray, n_bins: int = 10) -> list[list[float]]:
+    """Every class one-vs-rest: [[mean predicted, observed frequency, count]] per non-empty
+    probability bin."""
+    p = proba.ravel()
+    hit = (np.eye(proba.shape[1])[y]).ravel()
+    idx = np.minimum((p * n_bins).astype(int), n_bins - 1)
+    out = []
+    for b in range(n_bins):
+        m = idx == b
+        if m.any():
+            out.append([float(p[m].mean()), float(hit[m].mean()), int(m.sum())])
+    return out
 
 
 def _forest(cfg: TrainConfig, ranges, seed: int) -> RangeClassifier:
@@ -144,7 +177,7 @@ def train_classifiers(
     reports: dict[str, ParameterReport] = {}
     for name, rs in ranges.items():
         truth = households[name].to_numpy(dtype=float)
-        model = _forest(cfg, rs, seed).fit(frame(x_train), truth[rows])
+        model = _forest(cfg, rs, seed).fit(frame(x_train), truth[rows], groups=rows)
         if progress is not None:
             progress(1)
         labels = labels_of(rs)
@@ -158,10 +191,14 @@ def train_classifiers(
         if with_baselines:
             perm = np.empty(n, int)
             perm[train] = rng.permutation(train)
-            sham = _forest(cfg, rs, seed).fit(frame(x_train), truth[perm[rows]])
+            sham = _forest(cfg, rs, seed).fit(frame(x_train), truth[perm[rows]], groups=rows)
             shuffled = sham.score(frame(x_test), truth[test])
             if progress is not None:
                 progress(1)
+        y_small = bin_values(truth[test], rs)
+        p_cal = model.predict_proba(frame(x_small))
+        p_votes = model.predict_votes(frame(x_small))
+        prior = np.bincount(train_classes, minlength=len(rs)) / len(train_classes)
         paper = PAPER_TABLE_III.get(name, (None, None))
         reports[name] = ParameterReport(
             parameter=name,
@@ -178,6 +215,12 @@ def train_classifiers(
             n_train_households=int(len(train)),
             n_test_households=int(len(test)),
             test_households=ids[test].tolist(),
+            brier=brier_score(p_cal, y_small),
+            brier_votes=brier_score(p_votes, y_small),
+            brier_prior=brier_score(np.tile(prior, (len(y_small), 1)), y_small),
+            calibrated=bool(model.calibrated_),
+            reliability=reliability_bins(p_cal, y_small),
+            reliability_votes=reliability_bins(p_votes, y_small),
         )
         models[name] = model
     return models, reports

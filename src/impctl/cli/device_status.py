@@ -10,6 +10,7 @@ def collect_status(cfg) -> dict:
     fit, link events, write counters."""
     from ..daemon.lock import probe
     from ..heatpump import WriteBudget
+    from ..heatpump.health import read_health
     from ..store import Store
 
     info = probe(cfg.state_dir)
@@ -50,6 +51,7 @@ def collect_status(cfg) -> dict:
         out["pending_restore"] = [e.register for e in store.journal_pending()]
         out["pending_requests"] = len(store.pending_requests())
         out["next_night"] = _next_night(store, cfg)
+    out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
     if cfg.budget_path.exists():
         from ..daemon.service import clock_from_config
 
@@ -138,4 +140,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
                        for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
+    from ..heatpump.health import health_lines
+
+    lines.extend(health_lines(st.get("heatpump")))  # issue 15
     return "\n".join(lines)

@@ -81,6 +81,9 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     text = format_report(reports, small=cfg.small_campaign)
     (out / "report.txt").write_text(text)
     (out / "report.json").write_text(json.dumps(report_json, indent=2) + "\n")
+    from ..classifiers.report import reliability_figure
+
+    reliability_figure(reports, out / "reliability.png")
     click.echo(text)
     click.echo(f"models, dataset and report written to {out}")
 

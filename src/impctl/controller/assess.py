@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..store import Store
+from .heat_output import heat_output_problems
 from .plan import NightPolicy
 
 #: Working function code of domestic hot water (2001 = 1): heating is interrupted meanwhile.
@@ -18,7 +19,9 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     valid one. Thresholds: coverage ≥ ``policy.min_coverage`` of the expected samples up to the
     night's end; at least 3 h of data (for constrained nights: after switch-off plus the
     emission lag, which is what the fit uses); defrost and DHW each ≤ 10 % of the samples;
-    no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples.
+    no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples; Q_HC
+    believable against electrical power, COP and compressor state, not stuck, within capacity
+    (:mod:`.heat_output`).
     """
     night = store.night(night_id)
     samples = [s for s in store.samples(night_id)
@@ -58,4 +61,5 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
         frac = share(lambda s, a=attr: getattr(s, a) is None)
         if frac > 0.10:
             reasons.append(f"{label} missing in {frac:.0%} of samples")
+    reasons.extend(heat_output_problems(samples))
     return not reasons, reasons

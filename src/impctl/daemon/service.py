@@ -22,6 +22,7 @@ from ..controller import NightController, NightPolicy, NightRequest, restore_all
 from ..controller.restore import restore_entry
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudget
 from ..heatpump.clock import VirtualClock
+from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from .config import Config
 from .lock import HEARTBEAT_S, DaemonLock
@@ -166,6 +167,8 @@ class Daemon:
         self.stop.set()
 
     async def _connect(self) -> None:
+        # Generation evidence and link quirks for `impctl status` (issue 15).
+        self.client.health_path = Path(self.cfg.state_dir) / HEALTH_FILE
         failed = False
         # The first try is short, so an unreachable heat pump is reported within seconds.
         wait_s = max(5.0, 3 * self.cfg.heatpump.link.timeout_s)
@@ -174,16 +177,21 @@ class Daemon:
                 if not await self._until_stop(self.client.connect(
                         max_wait_s=wait_s if not failed else 30.0)):
                     return  # stop requested while connecting
+                self.client.write_health()
                 self._connected.set()
                 _LOG.info("heat pump connected: %s, generation %s, Q_HC from %s",
                           self.cfg.heatpump.link.describe(), self.client.generation.value,
                           self.client.heat_power_source() or "nowhere (IMP nights refused)")
                 return
-            except ModbusLinkError as exc:
+            except HeatPumpError as exc:
+                # Link failures and device exceptions alike (a gateway's 10/11 during the
+                # generation probe): keep waiting, never exit; systemd restarts fix nothing.
                 if not failed:  # WARNING, so log_level = "warning" shows it; once per outage
                     _LOG.warning("heat pump not reachable: %s; retrying", exc)
                     failed = True
                 self._status(f"waiting for the heat pump: {exc}")
+                self.client.write_health()
+                await asyncio.sleep(1.0)
 
     async def _until_stop(self, coro) -> bool:
         """Run ``coro`` unless a stop is requested first (then cancel it); True when it ran."""

@@ -8,34 +8,20 @@ reading a result (:mod:`.report`) needs no torch.
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
 * :func:`fit_to_dict`, :func:`format_table`, :func:`plot_fit` (:mod:`.report`, no torch)
 
-Inside: :mod:`.node` (the ODE), :mod:`.lm` (the optimiser), :mod:`.uncertainty` (intervals),
-:mod:`.baselines` (the methods the fit is compared with).
+Inside: :mod:`.node` (the ODE), :mod:`.solver` (its torchdiffeq integration), :mod:`.lm` (the
+optimiser), :mod:`.uncertainty` (intervals), :mod:`.resample` (fine rows into blocks),
+:mod:`.quality` (night quality, model adequacy; no torch), :mod:`.baselines` (the methods the
+fit is compared with).
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from .._lazy import attach
 
-_LAZY = {
-    "NightFit": "estimator",
-    "prepare_nights": "data",
-    "fit_to_dict": "report",
-    "format_table": "report",
-    "plot_fit": "report",
-}
-
-__all__ = [*_LAZY]
-
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+# Resolved on first use (impctl._lazy), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+    "estimator": ["NightFit"],
+    "data": ["prepare_nights"],
+    "report": ["fit_to_dict", "format_table", "plot_fit"],
+})
+__all__ = [*_LAZY_NAMES]

@@ -147,16 +147,17 @@ def validation_table(night_ids: Sequence[str], kinds: Sequence[str], grid_s: np.
                      t_air_model_c: np.ndarray, q_model_w: np.ndarray) -> dict:
     """Per-night and mean ΔQ_total [kWh], ΔQ_power [kW], ε [%] and T_air RMSE [K].
 
-    Arrays are (nights, K) on the shared grid. ΔQ_total = |E_model − E_measured| over the
-    night (energy = power on each sample interval × its length), ΔQ_power = ΔQ_total / night
-    length = |mean P_model − mean P_measured|, ε = ΔQ_total / E_measured: the paper's Tables II
-    and V, per night instead of per month. T_air RMSE on the constrained nights.
+    Arrays are (nights, K); ``grid_s`` is (K,) or per night (nights, K).
+    ΔQ_total = |E_model − E_measured| over the night (energy = power on each sample interval ×
+    its length), ΔQ_power = ΔQ_total / night length = |mean P_model − mean P_measured|,
+    ε = ΔQ_total / E_measured: the paper's Tables II and V, per night instead of per month.
+    T_air RMSE on the constrained nights.
     """
     normal, constrained = [], []
     for i, nid in enumerate(night_ids):
         m = mask[i]
         if kinds[i] == "normal":
-            span = np.diff(grid_s[m])
+            span = np.diff((grid_s if grid_s.ndim == 1 else grid_s[i])[m])
             hours = float(span.sum()) / 3600.0
             e_meas = float((q_w[i][m][:-1] * span).sum()) / 3.6e6
             e_mod = float((q_model_w[i][m][:-1] * span).sum()) / 3.6e6

@@ -35,6 +35,8 @@ from . import lm
 from .data import noise_levels, prepare_nights, search_bounds, validation_table
 from .node import (
     DTYPE,
+    NUISANCE_BOUNDS,
+    NUISANCE_NAMES,
     PARAM_NAMES,
     ROW_AIR,
     ROW_DEMAND,
@@ -45,7 +47,9 @@ from .node import (
     pack_nights,
     to_physical,
 )
-from .uncertainty import laplace
+from .quality import adequacy, night_quality, power_usable
+from .resample import coarsen
+from .uncertainty import laplace, nuisance_intervals, offset_allowance
 
 NORMAL_MODELS = ("demand", "series", "mean")
 LUMPED_NAMES = ("hlc", "c_m", "tau")
@@ -54,6 +58,9 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 #: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
 #: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
 CLASS_REJECT_CHI2 = 3.84
+#: χ² with 3 degrees of freedom at 95 %: the nuisance terms (night gain, emitter amplitude and
+#: time constant) are kept when they lower the inflation-scaled loss by more than this.
+NUISANCE_CHI2 = 7.81   # 3 dof; with the gain off, 2 free terms make this conservative
 
 
 class NightFit:
@@ -99,6 +106,10 @@ class NightFit:
         Heat power [W] that marks resumed heating on a constrained night.
     seed : int
         Seed of the random starts.
+    fit_step_s : float
+        Rows finer than this [s] are combined into blocks of this length before the fit
+        (temperatures by a centred mean, power by the block's mean; :mod:`.resample`); 0 keeps
+        every row. Only with "instant" stamps.
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -116,6 +127,11 @@ class NightFit:
     skipped_ : list[(night_id, reason)]
     gaps_ : list[impctl.imp.gaps.Gap]  gaps inside nights; each night was cut to one gap-free
                                        piece first (rule in :mod:`impctl.imp.gaps`)
+    night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
+                                    discharge, T_air resolution, used/usable_h/reason
+                                    (:mod:`.quality`)
+    adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
+                                    the model describes the data well enough for its intervals
     loss_, n_iter_, fit_time_s_ : float, int, float
     """
 
@@ -125,7 +141,9 @@ class NightFit:
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
-                 resume_threshold_w: float = Q_ON_W, seed: int = 0):
+                 resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
+                 night_gain: bool = False, emitter_state: bool = True,
+                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0)):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -141,6 +159,10 @@ class NightFit:
         self.ridge = ridge
         self.resume_threshold_w = resume_threshold_w
         self.seed = seed
+        self.fit_step_s = fit_step_s
+        self.night_gain = night_gain
+        self.emitter_state = emitter_state
+        self.sensor_offsets_k = sensor_offsets_k
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -175,13 +197,19 @@ class NightFit:
         if not kept:
             why = "; ".join(f"{i}: {r}" for i, r in self.skipped_) or "no nights given"
             raise InputError(f"no usable night to fit ({why})")
+        if self.timestamps == "instant":
+            kept = [coarsen(n, self.fit_step_s) for n in kept]
         class_box = search_bounds(ranges, self.physical_bounds)
         prior_box = search_bounds(None, self.physical_bounds)
         with_prior = class_box != prior_box
         self.classified_ = sorted(ranges or {})
         self.nights_ = kept
+        # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
+        # only the power during the interruption and its recovery is not compared.
+        power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
-                                            smooth_air_s=3600.0 * self.smooth_air_h)
+                                            smooth_air_s=3600.0 * self.smooth_air_h,
+                                            power_ok=power_ok)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
         cons = packed.constrained
         demand = ~cons & torch.tensor(self.normal_model == "demand")
@@ -190,8 +218,12 @@ class NightFit:
         self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
         self.sigma_ = noise_levels(kept)
 
-        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box),
-                           bounds_tensor(prior_box))
+        nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
+            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state),
+            strict=True)}
+        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
+        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
+                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, plain))
         rows = self._rows(lay)
         t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
                                   lay["box"][lay["row_problem"]])
@@ -200,18 +232,21 @@ class NightFit:
         # The residual σ per group, now from the fit itself, scales the intervals. When it is
         # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
         # the joint problems are refitted with the new weights.
-        guess = dict(self.sigma_)
+        guess = self.noise_ = dict(self.sigma_)
         self._update_sigma(rows, result, self._best(result, lay, 0))
         ratio = [self.sigma_[k] / guess[k] for k in guess]
         if max(ratio) > 1.4 or min(ratio) < 0.7:
             self._refit_joint(lay, result)
         rows = self._rows(lay)
 
-        best = self._best(result, lay, 0)
+        best = self._best(result, lay, 2 if lay["simple"] else 0)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
             best = self._class_check(rows, result, lay, best, ranges)
-        self.bounds_ = class_box if best in lay["class"] else prior_box
+        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
+        if lay["simple"] and best in lay["simple"]:
+            best = self._nuisance_check(rows, result, lay, best)
+        self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
         self._u = result.u[best]
@@ -221,39 +256,71 @@ class NightFit:
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
-        self.lumped_ = est["lumped"]
+        self.lumped_, self.offset_allowance_ = offset_allowance(est["lumped"], kept,
+                                                                self.sensor_offsets_k)
+        self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
+        self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
         self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
         self._validate()
+        self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
+        self.night_quality_ = self._night_quality(nights)
 
-    def _layout(self, n: int, with_prior: bool, class_box, prior_box) -> dict:
-        """Problems: joint starts in the class box, [joint starts in the prior box], per night.
+    def _night_quality(self, nights) -> list[dict]:
+        used = {n.night_id: n for n in self.nights_}
+        why = dict(self.skipped_)
+        out = []
+        for night in nights:
+            q = night_quality(night, self.resume_threshold_w)
+            kept = used.get(night.night_id)
+            q["used"] = kept is not None
+            q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
+                             if kept is not None else 0.0)
+            q["reason"] = why.get(night.night_id)
+            gain = (self.nuisance_ or {}).get("night_gain_w")
+            if gain is not None and kept is not None:
+                q["night_gain_w"] = gain["value"]   # one value per campaign
+            out.append(q)
+        return out
 
-        Groups (for "keep the best" and early stopping): 0 class joint, 1 prior joint,
-        2 + i night i.
+    def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
+        """Problems: joint starts in the class box with the nuisance terms ("class"), the same
+        without them ("simple"), [joint starts in the prior box, without], per night (without).
+
+        Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
+        night i. Without nuisance terms to test, "class" is the plain class box and there is
+        no "simple" group.
         """
         s = max(1, self.n_starts)
         starts = self._starts(s)
+        with_nuisance = bool((nuisance_box[len(PARAM_NAMES):, 1]
+                              > nuisance_box[len(PARAM_NAMES):, 0]).any())
         kinds = [("class", j, -1) for j in range(s)]
+        if with_nuisance:
+            kinds += [("simple", j, -1) for j in range(s)]
         if with_prior:
             kinds += [("prior", j, -1) for j in range(s)]
         if self.per_night:
-            kinds += [("night", j, i) for j in range(s) for i in range(n)]
+            # the paper's per-night mode is a comparison, not the result: two starts suffice
+            kinds += [("night", j, i) for j in range(min(s, 2)) for i in range(n)]
+        boxes = {"class": nuisance_box, "simple": class_box, "prior": prior_box,
+                 "night": class_box}
         row_problem, row_night, group, box, u0 = [], [], [], [], []
         for p, (kind, j, i) in enumerate(kinds):
             nights = range(n) if i < 0 else [i]
             row_problem += [p] * len(nights)
             row_night += list(nights)
-            group.append({"class": 0, "prior": 1}.get(kind, 2 + i))
-            box.append(prior_box if kind == "prior" else class_box)
+            group.append({"class": 0, "prior": 1, "simple": 2}.get(kind, 3 + i))
+            box.append(boxes[kind])
             u0.append(starts[j])
         def idx(k):
             return [p for p, x in enumerate(kinds) if x[0] == k]
         return {"kinds": kinds, "class": idx("class"), "prior": idx("prior"),
-                "night": idx("night"), "row_problem": torch.tensor(row_problem),
+                "simple": idx("simple"), "night": idx("night"),
+                "row_problem": torch.tensor(row_problem),
                 "row_night": torch.tensor(row_night), "group": torch.tensor(group),
                 "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
 
@@ -272,7 +339,7 @@ class NightFit:
                            self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
 
     def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
-        joint = lay["class"] + lay["prior"]
+        joint = lay["class"] + lay["simple"] + lay["prior"]
         rows = self._rows(lay, joint)
         sel = torch.isin(lay["row_problem"], torch.tensor(joint))
         second = self._optimise(rows, result.u[joint], result.t_m0[sel], lay["group"][joint])
@@ -296,6 +363,19 @@ class NightFit:
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
 
+    def _nuisance_check(self, rows, result, lay, best_simple) -> int:
+        """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
+        likelihood-ratio test says the data need them: the loss drop (in units of the fitted
+        residual σ) over the 3 extra parameters against χ²₃. Not deflated for residual
+        autocorrelation: on a house the model fits (the ideal 5R1C) the drop stays ≈ 1, while
+        emitter and furniture heat after switch-off give drops in the hundreds."""
+        best_nuis = self._best(result, lay, 0)
+        drop = float(result.loss[best_simple] - result.loss[best_nuis])
+        selected = drop > NUISANCE_CHI2
+        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": NUISANCE_CHI2,
+                                "selected": selected}
+        return best_nuis if selected else best_simple
+
     def _best(self, result, lay, group: int) -> int:
         members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
         return members[int(torch.argmin(result.loss[members]))]
@@ -313,7 +393,7 @@ class NightFit:
 
     def _starts(self, s: int) -> torch.Tensor:
         rng = np.random.default_rng(self.seed)
-        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES)))
+        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES)))
         u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
         u[0] = 0.0
         return u
@@ -351,7 +431,8 @@ class NightFit:
                 self.sigma_[key] = max(floors[g], rms)
 
     def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
-        return dict(zip(PARAM_NAMES, to_physical(u, box).tolist(), strict=True))
+        return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
+                        strict=True))
 
     def _per_night(self, result, lay):
         if not lay["night"]:
@@ -359,7 +440,7 @@ class NightFit:
         n = self._packed.n_nights
         members = torch.tensor(lay["night"]).view(-1, n)      # (starts, nights)
         best = members[result.loss[members].argmin(0), torch.arange(n)]
-        params = to_physical(result.u[best], lay["box"][best])
+        params = to_physical(result.u[best], lay["box"][best])[:, :len(PARAM_NAMES)]
         q = lumped(params, self.ach_vent, self.ach_infl)
         entries = []
         for i, nid in enumerate(self._packed.night_ids):

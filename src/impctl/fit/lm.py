@@ -102,10 +102,12 @@ class _Normal:
     c: torch.Tensor      # (R, 7)     Jθᵀ Jm
     d: torch.Tensor      # (R,)       Jmᵀ Jm
     gm: torch.Tensor     # (R,)       Jmᵀ r
+    g_rows: torch.Tensor | None = None  # (R, 7) Jθᵀ r per row (for the sandwich covariance)
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
     n_rows = len(t_m0)
+    N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
     u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
     m_all = torch.cat([t_m0] * (N_PARAMS + 1) + [t_m0 + _H_M])
@@ -118,9 +120,10 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
     loss = _sum_rows((r0 ** 2).sum(1), rows) + ridge * (u ** 2).sum(1)
     h = _sum_rows(torch.einsum("rki,rkj->rij", j_theta, j_theta), rows)
     h = h + ridge * torch.eye(N_PARAMS, dtype=DTYPE)
-    g = _sum_rows(torch.einsum("rki,rk->ri", j_theta, r0), rows) + ridge * u
+    g_rows = torch.einsum("rki,rk->ri", j_theta, r0)
+    g = _sum_rows(g_rows, rows) + ridge * u
     return _Normal(loss, h, g, torch.einsum("rki,rk->ri", j_theta, j_m), (j_m ** 2).sum(1),
-                   (j_m * r0).sum(1))
+                   (j_m * r0).sum(1), g_rows)
 
 
 def schur(ne: _Normal, rows: Rows, lam: torch.Tensor | None = None):
@@ -230,7 +233,7 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
                 break
         s, _, _ = schur(ne, rows)
         cov = torch.linalg.pinv(s, hermitian=True)
-        fisher = s - ctx.ridge * torch.eye(N_PARAMS, dtype=DTYPE)
+        fisher = s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE)
     return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history)
 
 
@@ -257,7 +260,7 @@ def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_ite
         ne = _normal_equations(ctx, rows, u.detach(), m.detach())
         s, _, _ = schur(ne, rows)
     return LMResult(u.detach(), m.detach(), ne.loss, torch.linalg.pinv(s, hermitian=True),
-                    s - ctx.ridge * torch.eye(N_PARAMS, dtype=DTYPE), n_iter,
+                    s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE), n_iter,
                     torch.zeros(rows.n_problems, dtype=torch.bool), history)
 
 

@@ -1,15 +1,15 @@
 """The night-time 5R1C dynamics as a torch module (the paper's eq. 5 and 6), batched over nights.
 
-One *row* is one night under one parameter set. All rows share one time grid (the union of the
-nights' sample times, measured from each night's fit start), so a whole fit — every start, every
-night, both modes, the finite-difference copies of the Jacobian — is one ``torchdiffeq.odeint``
-call with ``rk4`` stepping exactly on that grid. Each step must see the inputs of its own
-interval only (the last rk4 stage sits at the step's end, where a plain lookup would already
-return the next interval): torchdiffeq announces every step through ``callback_step``, and the
-module looks the interval up there, once per step. That is the "left-closed lookup per step" of
-identifiability.md §7; torchdiffeq's ``perturb=True`` would do the same with four ``nextafter``
-calls per step and costs ~20 % of the run time. float64 throughout, direct backprop through the
-steps when gradients are wanted (no adjoint).
+One *row* is one night under one parameter set; each row keeps its night's own sample times
+(nights padded to the longest one). A whole fit — every start, every night, both modes, the
+finite-difference copies of the Jacobian — is integrated by one ``torchdiffeq.odeint`` call with
+``rk4``: the dynamics are linear, so every sample interval of every row is integrated at once in
+its own normalised time (its response to the state it starts from and to its own inputs), and the
+intervals are chained by the exact linear recurrence (:class:`NightODE`). The Python cost is a
+few solver steps per call instead of one step per sample (21 s → about 2 s for the demo's
+export), and each interval sees only its own inputs by construction (the "left-closed lookup per
+step" of identifiability.md §7). float64 throughout, direct backprop through the solver when
+gradients are wanted (no adjoint).
 
 Row types
 ---------
@@ -41,13 +41,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torchdiffeq import odeint
 
 from ..imp.night import NightSamples
 from ..model.continuous import air_derivative, air_temperature
 from ..model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
+from .solver import NightODE  # the integrator (re-exported: tests and readers find it here)
 
 DTYPE = torch.float64
+
 
 #: The seven fitted parameters (the paper's Table IV), in this order everywhere.
 PARAM_NAMES = TABLE_IV
@@ -69,10 +70,27 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
 ROW_AIR = 0
 ROW_DEMAND = 1
 
+#: Nuisance terms of the night model a real house needs (real-houses.md §2, §4, §7), fitted
+#: after the seven (a row of parameters then has 10 entries): a constant heat input to the air
+#: node over the campaign (sleepers, base load; negative = extra loss) [W], and on constrained
+#: nights the heat the emitter (and the air/furniture) still releases after the fit start,
+#: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
+NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h")
+NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
+    "night_gain_w": (-200.0, 800.0),
+    "emitter_w": (0.0, 4000.0),
+    "emitter_tau_h": (0.2, 8.0),
+}
 
-def bounds_tensor(bounds: dict[str, tuple[float, float]]) -> torch.Tensor:
-    """Bounds as a (7, 2) tensor in :data:`PARAM_NAMES` order."""
-    return torch.tensor([bounds[n] for n in PARAM_NAMES], dtype=DTYPE)
+
+def bounds_tensor(bounds: dict[str, tuple[float, float]],
+                  nuisance: dict[str, tuple[float, float]] | None = None) -> torch.Tensor:
+    """Bounds as a (7, 2) tensor in :data:`PARAM_NAMES` order; (10, 2) with ``nuisance``
+    bounds appended in :data:`NUISANCE_NAMES` order (``(0, 0)`` switches a term off)."""
+    names = [bounds[n] for n in PARAM_NAMES]
+    if nuisance is not None:
+        names += [nuisance[n] for n in NUISANCE_NAMES]
+    return torch.tensor(names, dtype=DTYPE)
 
 
 def to_physical(u: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
@@ -113,13 +131,14 @@ TIMESTAMPS = ("instant", "interval")
 
 @dataclass
 class PackedNights:
-    """Nights on one shared grid (tensors float64; N nights, K grid nodes).
+    """Nights side by side (tensors float64; N nights, K nodes = the longest night's samples).
 
     Attributes
     ----------
     night_ids, kinds : per night
     timestamps : "instant" or "interval" (see :func:`pack_nights`)
-    grid_s : (K,) node times [s] from each night's fit start
+    grid_s : (N, K) node times [s] from each night's fit start: the night's own samples,
+        the last one repeated after its end
     t_out_c, t_air_c : (N, K) values at the nodes [°C] (held after a night's last sample)
     t_out_slope, t_air_slope : (N, K) slope on the interval that starts at node k [K/s]
     t_air_in_c, t_air_in_slope : (N, K) the smoothed T_air that drives DEMAND rows, and its slope
@@ -147,6 +166,7 @@ class PackedNights:
     mask: torch.Tensor
     next_node: torch.Tensor
     last: torch.Tensor
+    power_ok: torch.Tensor | None = None  # (N, K) bool: the power sample can be compared
 
     @property
     def n_nights(self) -> int:
@@ -155,13 +175,6 @@ class PackedNights:
     @property
     def constrained(self) -> torch.Tensor:
         return torch.tensor([k == "constrained" for k in self.kinds])
-
-
-def _slopes(t: np.ndarray, y: np.ndarray, t_end: float) -> np.ndarray:
-    out = np.zeros_like(y)
-    out[:-1] = np.diff(y) / np.diff(t)
-    out[t >= t_end] = 0.0
-    return out
 
 
 def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
@@ -175,8 +188,11 @@ def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
 
 
 def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
-                timestamps: str = "instant", smooth_air_s: float = 0.0) -> PackedNights:
-    """Put prepared nights (already cut to their fit windows) on one grid.
+                timestamps: str = "instant", smooth_air_s: float = 0.0,
+                power_ok: Sequence[np.ndarray] | None = None) -> PackedNights:
+    """Put prepared nights (already cut to their fit windows) side by side, each on its own
+    sample times (padded to the longest night by repeating its last sample: zero-length
+    intervals that change nothing).
 
     Parameters
     ----------
@@ -188,6 +204,9 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         stamp (hourly logs, the virtual IMP): temperatures then belong to the interval's middle,
         so the nodes move there, and the power on [middle_k, middle_k+1) is (q_k + q_k+1)/2.
     smooth_air_s : width of the moving average applied to the T_air that drives DEMAND rows [s]
+    power_ok : per night, bool per sample: False where the measured power is not the space
+        heating the model describes (a DHW recharge, a defrost and the recovery after them);
+        those samples still drive the model (T_air), their power is not compared
     """
     if timestamps not in TIMESTAMPS:
         raise ValueError(f"timestamps must be one of {TIMESTAMPS}")
@@ -198,29 +217,33 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
             span = np.diff(t)
             t = t + 0.5 * np.append(span, span[-1])
         rel.append(np.round(t, 3))
-    grid = np.unique(np.concatenate(rel))
-    n, k = len(nights), len(grid)
-    te, te_s, ta, ta_s, tai, tai_s, q, q_in = (np.zeros((n, k)) for _ in range(8))
+    n, k = len(nights), max(len(t) for t in rel)
+    grid, te, te_s, ta, ta_s, tai, tai_s, q, q_in = (np.zeros((n, k)) for _ in range(9))
     mask = np.zeros((n, k), dtype=bool)
     next_node = np.tile(np.arange(k), (n, 1))
     last = np.zeros((n, k), dtype=bool)
     q_mean = np.zeros(n)
+
+    def padded(y, m):
+        y = np.asarray(y, float)
+        return np.concatenate([y, np.full(k - m, y[-1])])
+
     for i, (night, t) in enumerate(zip(nights, rel, strict=True)):
+        m = len(t)
+        grid[i] = padded(t, m)
         t_air = np.asarray(night.t_air_c, float)
         for dst, dst_s, y in ((te, te_s, night.t_out_c), (ta, ta_s, t_air),
                               (tai, tai_s, smooth(t, t_air, smooth_air_s))):
-            dst[i] = np.interp(grid, t, np.asarray(y, float))
-            dst_s[i] = _slopes(grid, dst[i], t[-1])
+            dst[i] = padded(y, m)
+            dst_s[i, :m - 1] = np.diff(np.asarray(y, float)) / np.diff(t)
         qi = np.asarray(night.q_hc_w, float)
-        idx = np.clip(np.searchsorted(t, grid, side="right") - 1, 0, len(t) - 1)
-        q[i] = qi[idx]
+        q[i] = padded(qi, m)
         q_in[i] = q[i]
         if timestamps == "interval":
-            q_in[i] = 0.5 * (qi[idx] + qi[np.minimum(idx + 1, len(t) - 1)])
-        nodes = np.searchsorted(grid, t)
-        mask[i, nodes] = True
-        next_node[i, nodes] = np.append(nodes[1:], nodes[-1])
-        last[i, nodes[-1]] = True
+            q_in[i, :m - 1] = 0.5 * (qi[:-1] + qi[1:])
+        mask[i, :m] = True
+        next_node[i, :m - 1] += 1
+        last[i, m - 1] = True
         span = np.diff(t)
         q_mean[i] = float(np.sum(qi[:-1] * span) / np.sum(span))
 
@@ -234,57 +257,9 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         t_air_in_c=tt(tai), t_air_in_slope=tt(tai_s), q_w=tt(q), q_in_w=tt(q_in),
         q_mean_w=tt(q_mean), mask=torch.as_tensor(mask), next_node=torch.as_tensor(next_node),
         last=torch.as_tensor(last),
+        power_ok=None if power_ok is None else torch.as_tensor(np.stack([
+            np.concatenate([np.asarray(p, bool), np.ones(k - len(p), bool)]) for p in power_ok])),
     )
-
-
-class NightODE(torch.nn.Module):
-    """dz/dt = A·z + u(t) for R independent rows, u linear within each grid interval.
-
-    The interval of ``t`` is looked up once per solver step: torchdiffeq calls
-    :meth:`callback_step` with the step's start t0 (a grid node), and with ``rk4`` on the grid
-    all four stages of that step belong to [t0, t1] — the last one at t1 evaluated with the
-    interval's own (left-closed) inputs. Outside ``odeint`` (no step announced) :meth:`forward`
-    falls back to a ``searchsorted`` lookup, right-continuous like the data.
-
-    Parameters
-    ----------
-    grid_s : (K,) node times [s]
-    a_per_s : (R,) the rate A [1/s]
-    u0 : (R, K) forcing at the start of each interval [K/s]
-    u1 : (R, K) slope of the forcing within the interval [K/s²]
-    """
-
-    def __init__(self, grid_s: torch.Tensor, a_per_s: torch.Tensor, u0: torch.Tensor,
-                 u1: torch.Tensor):
-        super().__init__()
-        self.grid_s = grid_s
-        self.a_per_s = a_per_s
-        # Node-major copies, so one interval's forcing is a contiguous row.
-        self.u0_k = u0.t().contiguous()
-        self.u1_k = u1.t().contiguous()
-        self._last = len(grid_s) - 2
-        self._k: int | None = None
-
-    def _interval(self, t: torch.Tensor) -> int:
-        k = int(torch.searchsorted(self.grid_s, t.reshape(1), right=True)) - 1
-        return min(max(k, 0), self._last)
-
-    def callback_step(self, t0: torch.Tensor, y0: torch.Tensor, dt: torch.Tensor) -> None:
-        self._k = self._interval(t0)
-
-    def forward(self, t: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-        k = self._interval(t) if self._k is None else self._k
-        return self.a_per_s * z + self.u0_k[k] + self.u1_k[k] * (t - self.grid_s[k])
-
-    def integrate(self, z0: torch.Tensor) -> torch.Tensor:
-        """States at the grid nodes, shape (R, K)."""
-        if len(self.grid_s) == 1:
-            return z0[:, None]
-        try:
-            z = odeint(self, z0, self.grid_s, method="rk4")
-        finally:
-            self._k = None
-        return z.transpose(0, 1)
 
 
 @dataclass
@@ -330,7 +305,8 @@ def build_rows(
     Parameters
     ----------
     packed : the nights
-    params : (R, 7) physical parameters per row (:data:`PARAM_NAMES` order)
+    params : (R, 7) physical parameters per row (:data:`PARAM_NAMES` order), or (R, 10) with
+        the :data:`NUISANCE_NAMES` terms appended
     t_m0_c : (R,) mass temperature at grid time 0 [°C]
     night_index : (R,) which packed night each row models
     row_type : (R,) :data:`ROW_AIR` or :data:`ROW_DEMAND`
@@ -344,7 +320,7 @@ def build_rows(
     te_s = packed.t_out_slope[night_index]
     ta = packed.t_air_in_c[night_index]
     ta_s = packed.t_air_in_slope[night_index]
-    grid = packed.grid_s
+    grid = packed.grid_s[night_index]
     demand = (row_type == ROW_DEMAND)
 
     # AIR rows: eq. 5/6 in the shifted state z = T_air − k_Φ·Φ_HC.
@@ -354,6 +330,22 @@ def build_rows(
     u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
     u1_air = b[:, None] * te_s
     z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
+    gain = torch.zeros_like(a_air)
+    if params.shape[-1] > len(PARAM_NAMES):
+        # Extra heat to the air node, x(t) = gain (+ the emitter's release on constrained
+        # nights), linear between the nodes: it enters like Φ_HC (z stays continuous).
+        gain, em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in range(3))
+        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
+        cons = packed.constrained[night_index][:, None]
+        x = gain[:, None] + torch.where(cons, em_w[:, None] * torch.exp(
+            -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0)
+        h = torch.diff(grid, dim=1)
+        x_slope = torch.zeros_like(x)
+        x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
+        coef = (a_air * k_phi + d)[:, None]
+        u0_air = u0_air + coef * x
+        u1_air = u1_air + coef * x_slope
+        phi_w = phi_w + x
 
     # DEMAND rows: θ_m driven by measured T_air, T_out; surface node balance without Φ_st.
     s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
@@ -373,8 +365,10 @@ def build_rows(
         # A power sample is the mean until the next sample: compare the model's interval mean
         # (trapezoid), and drop the last sample, whose interval lies outside the night.
         nxt = packed.next_node[night_index]
-        mean_next = torch.where(dm, nxt, torch.arange(len(grid)).expand_as(nxt))
+        mean_next = torch.where(dm, nxt, torch.arange(grid.shape[1]).expand_as(nxt))
         mask = mask & ~(dm & packed.last[night_index])
+    if packed.power_ok is not None:
+        mask = mask & ~(dm & ~packed.power_ok[night_index])
     ode = NightODE(
         grid,
         torch.where(demand, a_dem, a_air),
@@ -385,7 +379,8 @@ def build_rows(
         ode=ode,
         z0=torch.where(demand, t_m0_c, z0_air),
         out_c=torch.where(demand, c_m, torch.ones_like(c_m)),
-        out_v=torch.where(dm, c_air[:, None] * ta + c_e[:, None] * te, k_phi[:, None] * phi_w),
+        out_v=torch.where(dm, c_air[:, None] * ta + c_e[:, None] * te - gain[:, None],
+                          k_phi[:, None] * phi_w),
         measured=torch.where(dm, packed.q_w[night_index], packed.t_air_c[night_index]),
         mask=mask,
         mean_next=mean_next,

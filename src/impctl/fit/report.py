@@ -23,9 +23,17 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                       "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
-     "skipped": [{"night_id", "reason"}],
+     "skipped": [{"night_id", "reason"}], "notes": [str],
      "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
-     "notes": [str]}
+     "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
+                        "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
+                        "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
+     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h":
+                  {"value", "low", "high", "bounds"} | null},
+     "adequacy": {"adequate": bool, "statement": str,
+                  "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
+                             "rmse_over_noise", "lag1_autocorrelation"}}},
+     "flexibility": {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh", ...}}  # impctl.flex
 """
 
 from __future__ import annotations
@@ -42,9 +50,11 @@ PARAM_NAMES = TABLE_IV
 PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
 CLASSIFIED = ("floor_area", "c_f", "u_walls")
 INTERVAL_METHOD = (
-    "Laplace: Gauss-Newton curvature of the joint loss at the optimum, per-night initial mass "
-    "temperatures marginalised, residual sigma per group from the fit inflated for lag-1 "
-    "autocorrelation; delta method in log space")
+    "the wider of (a) Laplace: Gauss-Newton curvature of the joint loss at the optimum, "
+    "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
+    "inflated for lag-1 autocorrelation, and (b) a night-clustered sandwich covariance (robust "
+    "to model error: widens when the nights disagree); delta method in log space; plus, in "
+    "quadrature, the share of uncalibrated sensor offsets (fit.offset_allowance)")
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
     "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
@@ -64,6 +74,8 @@ _CAVEAT = {
 
 
 def _f(x: Any) -> Any:
+    if isinstance(x, np.integer):
+        return int(x)
     if isinstance(x, (np.floating, float)):
         return None if not np.isfinite(x) else float(x)
     if isinstance(x, dict):
@@ -138,7 +150,8 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                              if isinstance(v, np.ndarray) else v) for k, v in p.items()}
                         for p in fit.predictions_],
         "fit": {"mode": "joint", "normal_model": fit.normal_model, "optimizer": fit.optimizer,
-                "solver": "torchdiffeq.odeint rk4 on the sample grid, float64",
+                "solver": "torchdiffeq.odeint rk4, every sample interval batched in its normalised "
+                          "time, chained by the exact linear recurrence; float64",
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
                 "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
                 "sigma": fit.sigma_, "time_s": fit.fit_time_s_},
@@ -146,7 +159,40 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "gaps": [g.as_dict() for g in getattr(fit, "gaps_", [])],
         "notes": notes,
     }
+    # added keys (schema stays impctl-fit/1: readers of the old keys are unaffected)
+    if getattr(fit, "offset_allowance_", None) is not None:
+        out["fit"]["offset_allowance"] = fit.offset_allowance_
+    if getattr(fit, "interval_source_", None) is not None:
+        out["fit"]["interval_source"] = fit.interval_source_
+    if getattr(fit, "nuisance_check_", None) is not None:
+        out["fit"]["nuisance_check"] = fit.nuisance_check_
+    if getattr(fit, "nuisance_", None) is not None:
+        out["nuisance"] = fit.nuisance_
+        out["fit"]["nuisance_terms"] = (
+            "night_gain_w: constant heat to the air node over the campaign; emitter_w, "
+            "emitter_tau_h: heat still released after the fit start on constrained nights, "
+            "emitter_w·exp(−t/emitter_tau_h); bounded, fitted with the seven, not measured "
+            "quantities of the product")
+    if getattr(fit, "night_quality_", None) is not None:
+        out["night_quality"] = fit.night_quality_
+    if getattr(fit, "adequacy_", None) is not None:
+        out["adequacy"] = fit.adequacy_
+        if not fit.adequacy_["adequate"]:
+            notes.append(fit.adequacy_["statement"])
+    out["flexibility"] = flexibility_block(out)
     return _f(out)
+
+
+def flexibility_block(summary: dict) -> dict:
+    """The ``"flexibility"`` block of a summary at the default conditions (:mod:`impctl.flex`);
+    all values None when the fitted house cannot be simulated."""
+    from ..errors import InputError
+    from ..flex import BLOCK_KEYS, flexibility_of_fit
+
+    try:
+        return flexibility_of_fit(summary).block()
+    except InputError:
+        return dict.fromkeys(BLOCK_KEYS)
 
 
 def _fmt(v: float | None, digits: int = 3) -> str:
@@ -213,9 +259,64 @@ def format_table(summary: dict) -> str:
                          f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
     for r in val["constrained"]:
         lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
+    nuis = summary.get("nuisance") or {}
+    if any(nuis.values()):
+        lines += ["", "Nuisance terms (fitted so that the numbers above stay right; not products)"]
+        for name, v in nuis.items():
+            if v:
+                lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
+                             f"   (bounds {v['bounds'][0]:g}–{v['bounds'][1]:g})")
+    lines += _quality_lines(summary)
+    flex = summary.get("flexibility") or {}
+    if flex.get("coast_h") is not None:
+        lines.append("")
+        lines.append(f"Flexibility at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
+                     f"outdoors: heating off for {flex['coast_h']:.1f} h "
+                     f"[{flex['coast_h_low']:.1f}–{flex['coast_h_high']:.1f}] until T_air has "
+                     f"fallen {flex['drop_k']:g} K; then {flex['rebound_kwh']:.2f} kWh beyond "
+                     f"steady demand in {flex['rebound_h']:g} h (impctl flex)")
     for note in summary["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)
+
+
+def quality_rows(summary: dict) -> list[list[str]]:
+    """Night-quality rows (also the HTML report's table): one per given night."""
+    def num(v, spec):
+        return "–" if v is None else format(v, spec)
+
+    rows = []
+    for q in summary.get("night_quality", []):
+        stops = ", ".join(f"{i['kind']} {i['minutes']:.0f} min at {i['start_h']:.1f} h"
+                          for i in q["interruptions"]) or "none"
+        rows.append([str(q["night_id"]), q["kind"], num(q["usable_h"], ".1f"),
+                     num(q["cycles_per_h"], ".1f"), num(q["emitter_discharge_h"], ".1f"),
+                     num(q.get("night_gain_w"), ".0f"), num(q["t_air_resolution_k"], ".3g"),
+                     stops, "used" if q["used"] else f"not used: {q['reason']}"])
+    return rows
+
+
+QUALITY_HEADERS = ["night", "kind", "usable h", "cycles/h", "emitter discharge h",
+                   "night gain W", "T_air resolution K", "DHW/defrost interruptions", "use"]
+
+
+def _quality_lines(summary: dict) -> list[str]:
+    lines = []
+    rows = quality_rows(summary)
+    if rows:
+        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(QUALITY_HEADERS)]
+        lines += ["", "Night quality"]
+        for r in [QUALITY_HEADERS, *rows]:
+            lines.append("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
+    adequacy = summary.get("adequacy")
+    if adequacy:
+        lines += ["", "Model adequacy (residuals of the joint fit)"]
+        for group, g in adequacy["groups"].items():
+            lines.append(f"  {group:<13} RMSE {g['rmse']:.3g} {g['unit']} "
+                         f"({g['rmse_over_noise']:.1f}× the reading noise), lag-1 "
+                         f"autocorrelation {g['lag1_autocorrelation']:.2f}")
+        lines.append(f"  {adequacy['statement']}")
+    return lines
 
 
 def plot_fit(fit, path: str | Path) -> None:

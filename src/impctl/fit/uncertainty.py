@@ -7,8 +7,11 @@ normal T_air, normal heat power) — is inverted into a covariance. Each group's
 inflated by sqrt((1 + ρ)/(1 − ρ)), ρ its lag-1 residual autocorrelation, because quantised,
 slowly varying temperatures give correlated residuals (an effective-sample-size correction).
 The lumped HLC, C_m and τ get 95 % intervals by the delta method in log space (so they stay
-positive). A bootstrap over nights was not chosen: with two constrained nights it cannot
-resample the τ information meaningfully.
+positive). Under model error the curvature alone is too confident, so each lumped quantity's
+interval is the wider of that Laplace interval and a night-clustered sandwich (robust)
+interval, S⁻¹·(Σ_nights g̃·g̃ᵀ)·S⁻¹ with g̃ a night's score: it widens when the nights pull the
+parameters apart more than their noise explains. A bootstrap over nights was not chosen: with
+two constrained nights it cannot resample the τ information meaningfully.
 
 "Determined": the Fisher information of the data alone (no ridge, no bounds), expressed in the
 fraction x = (θ − lo)/(hi − lo) of each parameter's search range, regularised by a N(0, 100²)
@@ -26,7 +29,7 @@ import torch
 
 from . import lm
 from .data import Estimate, lag1_autocorrelation
-from .node import DTYPE, PARAM_NAMES, lumped, to_physical
+from .node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 
 Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)
@@ -64,14 +67,23 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
         ne = lm._normal_equations(ctx, scaled, u[None], t_m0)
         s_mat, _, _ = lm.schur(ne, scaled)
     cov = torch.linalg.pinv(s_mat[0], hermitian=True)
-    fisher = s_mat[0] - ctx.ridge * torch.eye(len(PARAM_NAMES), dtype=DTYPE)
+    fisher = s_mat[0] - ctx.ridge * torch.eye(len(u), dtype=DTYPE)
     box = sub.box[0]
+    # Night-clustered sandwich: S⁻¹·(Σ_nights g̃ g̃ᵀ)·S⁻¹ with g̃ each night's score after its
+    # θ_m,0 is eliminated. It grows when the nights disagree in a way the model cannot
+    # reconcile (model error), which the Laplace curvature cannot see.
+    n_rows = len(t_m0)
+    score = ne.g_rows - ne.c * (ne.gm / (ne.d + 1e-12))[:, None]
+    meat = score.T @ score * (n_rows / max(n_rows - 1, 1))
+    cov_sandwich = cov @ meat @ cov
 
     uu = u.clone().requires_grad_(True)
     q = lumped(to_physical(uu, box), ctx.ach_vent, ctx.ach_infl)
     jac = torch.stack([torch.autograd.grad(q[i], uu, retain_graph=True)[0] for i in range(3)])
     q = q.detach()
-    sd_log = torch.einsum("ij,jk,ik->i", jac, cov, jac).clamp_min(0).sqrt() / q
+    sd_laplace = torch.einsum("ij,jk,ik->i", jac, cov, jac).clamp_min(0).sqrt() / q
+    sd_sandwich = torch.einsum("ij,jk,ik->i", jac, cov_sandwich, jac).clamp_min(0).sqrt() / q
+    sd_log = torch.maximum(sd_laplace, sd_sandwich)
     estimates = {}
     for i, name in enumerate(LUMPED_NAMES):
         determined = bool(Z95 * sd_log[i] < np.log(1.5))
@@ -88,7 +100,56 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     val, vec = torch.linalg.eigh(0.5 * (fisher_x + fisher_x.T))
     cov_x = vec @ torch.diag(1.0 / (val.clamp_min(0) + _X_PRIOR)) @ vec.T
     sd_x = cov_x.diagonal().clamp_min(0).sqrt()
-    sd = dict(zip(PARAM_NAMES, sd_x.tolist(), strict=True))
-    out.update(lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
+    sd = dict(zip(PARAM_NAMES, sd_x[:len(PARAM_NAMES)].tolist(), strict=True))
+    out.update(interval_source={n: ("sandwich" if float(sd_sandwich[i]) > float(sd_laplace[i])
+                                    else "laplace") for i, n in enumerate(LUMPED_NAMES)},
+               lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
                range_fraction_sd=sd, cov_u=cov)
+    return out
+
+
+def offset_allowance(lumped_in: dict, nights, sensor_offsets_k) -> tuple[dict, dict]:
+    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets.
+
+    An offset of the indoor or the outdoor sensor shifts every T_air − T_out alike; the nights
+    cannot reveal it, but it moves HLC, τ and C_m by about offset/ΔT. The share
+    √(σ_in² + σ_out²)/mean ΔT [K/K] is added in quadrature (a type-B component, GUM).
+
+    Returns
+    -------
+    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd"})
+    """
+    dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
+    mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
+    s_in, s_out = (float(v) for v in sensor_offsets_k)
+    share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
+    out = {}
+    for name, e in lumped_in.items():
+        lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
+        sd = np.hypot(0.5 * (lo + hi) / Z95, share)
+        out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
+                             float(e.value * np.exp(Z95 * sd)), e.determined)
+    return out, {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
+                 "relative_sd": share}
+
+
+def nuisance_intervals(u: torch.Tensor, box: torch.Tensor, cov_u: torch.Tensor
+                       ) -> dict[str, dict | None]:
+    """The nuisance terms (:data:`~.node.NUISANCE_NAMES`) with 95 % intervals (Gauss–Newton
+    covariance through the sigmoid map, clipped to the bounds); None for a term switched off."""
+    out: dict[str, dict | None] = {}
+    if len(u) <= len(PARAM_NAMES):
+        return {name: None for name in NUISANCE_NAMES}
+    x = to_physical(u, box)
+    for j, name in enumerate(NUISANCE_NAMES):
+        i = len(PARAM_NAMES) + j
+        lo, hi = (float(v) for v in box[i])
+        if hi <= lo:
+            out[name] = None
+            continue
+        sig = torch.sigmoid(u[i])
+        sd = float((hi - lo) * sig * (1 - sig) * cov_u[i, i].clamp_min(0).sqrt())
+        v = float(x[i])
+        out[name] = {"value": v, "low": max(lo, v - Z95 * sd), "high": min(hi, v + Z95 * sd),
+                     "bounds": [lo, hi]}
     return out

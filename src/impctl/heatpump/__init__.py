@@ -13,11 +13,12 @@ Public surface::
 """
 
 from .budget import WriteBudget
-from .client import GenerationReport, HeatPumpClient
+from .client import HeatPumpClient
 from .clock import VirtualClock
 from .config import ExternalRegister, HeatPumpConfig, LinkConfig, WritePolicy, config_from_mapping
 from .decode import Reading, decode, encode
 from .errors import (
+    TRANSIENT_EXCEPTIONS,
     HeatPumpError,
     ModbusDeviceError,
     ModbusLinkError,
@@ -26,6 +27,7 @@ from .errors import (
     WriteRefused,
     WriteVerifyError,
 )
+from .generation import GenerationReport
 from .link import LinkStats, ModbusLink
 from .registers import (
     FORBIDDEN_WRITES,
@@ -42,6 +44,7 @@ from .writes import WriteResult, write_rules
 
 __all__ = [
     "FORBIDDEN_WRITES",
+    "TRANSIENT_EXCEPTIONS",
     "REGISTERS",
     "Access",
     "ExternalRegister",

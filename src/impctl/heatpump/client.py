@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import logging
-from dataclasses import dataclass
 from datetime import datetime
+from pathlib import Path
 
 from .budget import WriteBudget
 from .clock import VirtualClock
 from .config import ExternalRegister, HeatPumpConfig, LinkConfig
 from .decode import Reading, decode, to_int16, uint32
 from .errors import HeatPumpError, ModbusDeviceError, UnsupportedFeature, WriteRefused
+from .generation import GenerationReport, detect
 from .link import ModbusLink
 from .registers import Generation, Register, register
 from .snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
@@ -18,25 +20,10 @@ from .writes import WriteResult, safe_write
 
 _LOG = logging.getLogger(__name__)
 
-#: Registers probed to tell the extended set from the compact one (reference §1.6).
-PROBES = (2371, 2372, 2130, 2327)
+#: Reads of one snapshot before it is given up as unattributable (issue 15).
+_SNAPSHOT_TRIES = 3
 _NO_Q_HC = ("compact (TT3000) controller has no heat-power register (2329) and no heat meter "
             "is configured")
-
-
-@dataclass(frozen=True)
-class GenerationReport:
-    """Result of :meth:`HeatPumpClient.detect_generation`.
-
-    Attributes
-    ----------
-    generation : Generation
-    evidence : dict
-        Probed register number → what it returned ("plausible 3.2", "exception 2", …).
-    """
-
-    generation: Generation
-    evidence: dict[int, str]
 
 
 class HeatPumpClient:
@@ -70,6 +57,14 @@ class HeatPumpClient:
         self._ext_links: dict[LinkConfig, ModbusLink] = {}
         self._generation = (None if config.generation == "auto"
                             else Generation(config.generation))
+        #: Evidence of the last detection (a configured generation needs none).
+        self.generation_report: GenerationReport | None = (
+            None if self._generation is None else
+            GenerationReport(self._generation, {"config": "generation set in [heatpump]"},
+                             source="configured"))
+        #: Where :meth:`write_health` puts the status file (the daemon sets it).
+        self.health_path: Path | None = None
+        self._quirks_written: frozenset[str] = frozenset()
 
     async def __aenter__(self) -> HeatPumpClient:
         await self.connect()
@@ -100,49 +95,64 @@ class HeatPumpClient:
         return self._generation
 
     async def detect_generation(self) -> GenerationReport:
-        """Probe 2371 (COP), 2372 (SCOP), 2130 (loop-1 water) and 2327 (load).
+        """Probe the extended registers and cross-check them (:mod:`.generation`).
 
-        Any plausible value means the extended set; answers of "illegal address" (exception 2)
-        or implausible values on all four mean compact.
+        In doubt the client uses the compact set and :meth:`require_heat_power` refuses
+        2329 with one line naming the evidence.
 
         Raises
         ------
         ModbusDeviceError
-            Any other exception response (e.g. 6, busy): nothing can be concluded.
+            Any exception other than 2 on every try (e.g. busy): nothing can be concluded.
         ModbusLinkError
             No answer.
         """
-        evidence: dict[int, str] = {}
-        extended = False
-        for ma in PROBES:
-            reg = register(ma)
-            try:
-                words = await self.link.read(reg.address, 1)
-            except ModbusDeviceError as exc:
-                if exc.exception_code != 2:  # busy/failing is no evidence of a missing register
-                    raise
-                evidence[ma] = "exception 2 (illegal address)"
-                continue
-            reading = decode(reg, words, self.clock.now())
-            plausible = _plausible(ma, reading)
-            evidence[ma] = f"{'plausible' if plausible else 'implausible'} {reading.raw}"
-            extended = extended or plausible
-        self._generation = Generation.EXTENDED if extended else Generation.COMPACT
-        _LOG.info("controller generation: %s (%s)", self._generation.value, evidence)
-        if not extended and self.config.heat_meter is None:
+        report = await detect(self.link)
+        self._generation = report.generation
+        self.generation_report = report
+        _LOG.info("controller generation: %s (%s)", report.generation.value, report.evidence)
+        if report.doubt:
+            _LOG.warning("%s", report.doubt)
+        elif report.generation is Generation.COMPACT and self.config.heat_meter is None:
             _LOG.warning("%s: Q_HC cannot be read; experiments that need it will refuse to run",
                          _NO_Q_HC)
-        return GenerationReport(self._generation, evidence)
+        self.write_health()
+        return report
+
+    def health(self) -> dict:
+        """Generation evidence and recognised link quirks (shown by ``impctl status``)."""
+        report = self.generation_report
+        return {"link": self.config.link.describe(),
+                "generation": None if report is None else report.as_dict(),
+                "quirks": self.link.quirks,
+                "unattributable_answers": self.link.stats.unattributable}
+
+    def write_health(self) -> None:
+        """Write :meth:`health` to ``health_path`` (if set) for ``impctl status``."""
+        if self.health_path is None:
+            return
+        self._quirks_written = frozenset(self.link.quirks)
+        tmp = self.health_path.with_suffix(".tmp")
+        try:
+            tmp.write_text(json.dumps(self.health(), indent=1))
+            tmp.replace(self.health_path)
+        except OSError as exc:  # status is a convenience: never fail a read over it
+            _LOG.debug("cannot write %s: %s", self.health_path, exc)
 
     def heat_power_source(self) -> str | None:
         """Where Q_HC comes from (``"heat meter …"``, ``"register 2329"``) or ``None``."""
         if self.config.heat_meter is not None:
             return f"heat meter {self.config.heat_meter.describe()}"
+        if self.generation_report is not None and self.generation_report.doubt:
+            return None
         return "register 2329" if self.generation is Generation.EXTENDED else None
 
     def require_heat_power(self) -> str:
         """The Q_HC source, or :class:`UnsupportedFeature` for an IMP that needs it."""
         source = self.heat_power_source()
+        report = self.generation_report
+        if source is None and report is not None and report.doubt:
+            raise UnsupportedFeature(report.doubt)
         if source is None:
             raise UnsupportedFeature(f"{_NO_Q_HC}; configure [heatpump.heat_meter] or run only "
                                      "experiments that do not need the heat output")
@@ -202,19 +212,22 @@ class HeatPumpClient:
             regs.append(register("room_" + room))
         if self.config.heat_meter is None:
             regs.append(register("power_thermal"))
-        words: dict[int, tuple[int, datetime]] = {}
-        failed: dict[int, str] = {}
-        for first, count in plan_blocks([r for r in regs if r.in_generation(gen)], gen):
-            try:
-                block = await self.link.read(first - 1, count)
-            except ModbusDeviceError as exc:
-                for ma in range(first, first + count):
-                    failed[ma] = f"Modbus exception {exc.exception_code}"
-                continue
-            stamp = self.clock.now()
-            for i, word in enumerate(block):
-                words[first + i] = (word, stamp)
-
+        blocks = plan_blocks([r for r in regs if r.in_generation(gen)], gen)
+        for _ in range(_SNAPSHOT_TRIES):
+            before = self.link.anomalies
+            words, failed = await self._read_blocks(blocks)
+            await self.link.settle()
+            if self.link.anomalies == before:
+                break
+            # Some answer in this poll may belong to another request: read it all again on
+            # a fresh connection (TCP) or a flushed line (RTU); after the last try nothing of
+            # it is used.
+            self.link.reset()
+        else:
+            why = ("unattributable answers on the link (" + ", ".join(self.link.quirks)
+                   + "); sample marked missing")
+            words, failed = {}, {ma: why for first, count in blocks
+                                 for ma in range(first, first + count)}
         def from_register(reg: Register) -> Reading:
             source = f"register {reg.ma}"
             if not reg.in_generation(gen):
@@ -225,6 +238,8 @@ class HeatPumpClient:
             got = [words[ma] for ma in range(reg.ma, reg.ma + reg.words)]
             return decode(reg, [w for w, _ in got], got[0][1])
 
+        if frozenset(self.link.quirks) != self._quirks_written:
+            self.write_health()  # a newly recognised quirk shows in impctl status
         fields = {f: from_register(register(r)) for f, r in SNAPSHOT_REGISTERS.items()}
         if isinstance(room, ExternalRegister):
             fields["t_air_c"] = await self.read_external(room, "t_air", "°C")
@@ -237,6 +252,22 @@ class HeatPumpClient:
         else:
             fields["q_hc_w"] = Reading.unavailable("q_hc", "W", start, _NO_Q_HC)
         return Snapshot(timestamp=start, generation=gen, **fields)
+
+    async def _read_blocks(self, blocks: list[tuple[int, int]]
+                           ) -> tuple[dict[int, tuple[int, datetime]], dict[int, str]]:
+        words: dict[int, tuple[int, datetime]] = {}
+        failed: dict[int, str] = {}
+        for first, count in blocks:
+            try:
+                block = await self.link.read(first - 1, count)
+            except ModbusDeviceError as exc:
+                for ma in range(first, first + count):
+                    failed[ma] = f"Modbus exception {exc.exception_code}"
+                continue
+            stamp = self.clock.now()
+            for i, word in enumerate(block):
+                words[first + i] = (word, stamp)
+        return words, failed
 
     async def write(self, key: str | int, value: float) -> WriteResult:
         """Safely write one whitelisted register (see :mod:`impctl.heatpump.writes`)."""
@@ -269,15 +300,4 @@ class HeatPumpClient:
     async def set_loop1_mode(self, mode: int) -> WriteResult:
         """Write the loop-1 mode (2042): 0 off, 1 on, 2 by schedule."""
         return await self.write(2042, mode)
-
-
-def _plausible(ma: int, reading: Reading) -> bool:
-    if reading.missing or reading.value is None:
-        return False
-    value = reading.value
-    if ma in (2371, 2372):
-        return 0.0 < value <= 10.0
-    if ma == 2327:
-        return 0.0 < value <= 100.0
-    return value != 0.0  # 2130: a real loop-water temperature (0 is what absent ones read)
 

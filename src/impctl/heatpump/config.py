@@ -55,9 +55,11 @@ class LinkConfig:
     baudrate : RTU baud rate (8 data bits, no parity, 1 stop bit).
     device_id : Modbus unit id (Kronoterm default 20).
     timeout_s : per-request response timeout and connect timeout [s].
-    retries : pymodbus resends after a timeout, within one request.
-    attempts : tries of one read, with a reconnect between tries (exception responses are
-        never retried).
+    retries : accepted for old configurations and ignored: pymodbus' own resends are off,
+        because a resend under the same transaction id lets a late answer complete a later
+        request (issue 15); ``attempts`` does the retrying.
+    attempts : tries of one read, with doubling back-off and a reconnect after a timeout
+        (transient exceptions 5, 6, 10, 11 are retried; other exceptions are final).
     retry_delay_s : pause between tries [s].
     connect_backoff_s : first and maximum pause of the connect loop [s] (doubling).
     drain_s : wait after each connect before discarding unsolicited bytes (gateway greeting)
@@ -66,6 +68,8 @@ class LinkConfig:
         that answer with a fixed id); the connection is reset after any timeout then, so a late
         answer can never be taken for the next request's.
     request_gap_s : idle time between requests [s] (serial lines want ≥ 0.035).
+    settle_s : RTU only: wait this long after each answer before accepting it, so that a
+        real answer overtaken by a foreign or duplicated frame is seen [s] (issue 15).
     """
 
     transport: Transport = "tcp"
@@ -82,6 +86,8 @@ class LinkConfig:
     drain_s: float = 0.2
     tolerate_fixed_tid: bool = False
     request_gap_s: float = 0.0
+    # -- issue 15: answer attribution (kept apart from the keys above) --
+    settle_s: float = 0.05
 
     def __post_init__(self) -> None:
         _raise_first(_link_problems(self))
@@ -223,6 +229,8 @@ def _link_problems(c: Any) -> list[Problem]:
     for key in ("drain_s", "request_gap_s", "retry_delay_s"):
         if getattr(c, key) < 0:
             out.append((key, "must be >= 0"))
+    if not 0 <= c.settle_s <= 10:
+        out.append(("settle_s", "must be 0–10 s"))
     return out
 
 
@@ -271,6 +279,7 @@ _INTS = frozenset({"port", "baudrate", "device_id", "retries", "attempts", "dail
                    "verify_attempts", "restore_reserve", "address"})
 _FLOATS = frozenset({"timeout_s", "retry_delay_s", "drain_s", "request_gap_s", "verify_delay_s",
                      "scale"})
+_FLOATS = _FLOATS | {"settle_s"}  # issue 15 (answer attribution)
 _STRINGS = frozenset({"transport", "host", "serial_port", "datatype", "generation",
                       "room_sensor"})
 _PAIRS = frozenset({"connect_backoff_s", "loop1_setpoint_c", "loop2_setpoint_c", "correction_k",

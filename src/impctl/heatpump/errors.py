@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+#: Modbus exception codes that say "not now" rather than "never": 5 acknowledge, 6 device
+#: busy, 10 gateway path unavailable, 11 gateway target device failed to respond (a collision
+#: with a second master or noise on the RS-485 side).
+TRANSIENT_EXCEPTIONS = frozenset({5, 6, 10, 11})
+
 
 class HeatPumpError(Exception):
     """Base class of every heat-pump failure that is not bad input."""
@@ -27,6 +32,11 @@ class ModbusDeviceError(HeatPumpError):
         super().__init__(message)
         self.exception_code = exception_code
         self.address = address
+
+    @property
+    def transient(self) -> bool:
+        """Whether the code means "try again later" (5, 6, 10, 11)."""
+        return self.exception_code in TRANSIENT_EXCEPTIONS
 
 
 class UnsupportedFeature(HeatPumpError):

@@ -89,23 +89,30 @@ class Snapshot:
         return {name: r.reason for name, r in self.readings().items() if r.missing}
 
 
+def _documented(ma: int, generation: Generation) -> bool:
+    reg = REGISTERS.get(ma)
+    if reg is None:  # the low word of a uint32 counter
+        prev = REGISTERS.get(ma - 1)
+        return prev is not None and prev.words == 2 and prev.in_generation(generation)
+    return reg.in_generation(generation)
+
+
 def plan_blocks(regs: Iterable[Register], generation: Generation,
                 max_count: int = 60) -> list[tuple[int, int]]:
-    """Group registers into contiguous FC 03 reads.
+    """Group registers into contiguous FC 03 reads with pairwise different lengths.
 
     A block spans only documented registers of ``generation`` (no undocumented gaps: some
-    controllers answer those with an exception), at most ``max_count`` words.
+    controllers answer those with an exception), at most ``max_count`` words. Blocks that would
+    have the same length are widened over documented neighbours where possible: without
+    transaction ids an answer is told from the answer to another block by its length (see
+    :mod:`impctl.heatpump.attribution`).
 
     Returns
     -------
     list of (first MA, number of words)
     """
     def documented(ma: int) -> bool:
-        reg = REGISTERS.get(ma)
-        if reg is None:  # the low word of a uint32 counter
-            prev = REGISTERS.get(ma - 1)
-            return prev is not None and prev.words == 2 and prev.in_generation(generation)
-        return reg.in_generation(generation)
+        return _documented(ma, generation)
 
     wanted = sorted({ma for r in regs for ma in range(r.ma, r.ma + r.words)})
     blocks: list[tuple[int, int]] = []
@@ -117,5 +124,27 @@ def plan_blocks(regs: Iterable[Register], generation: Generation,
                 blocks[-1] = (start, ma - start + 1)
                 continue
         blocks.append((ma, 1))
-    return blocks
+    return _distinct_lengths(blocks, generation, max_count)
 
+
+def _distinct_lengths(blocks: list[tuple[int, int]], generation: Generation,
+                      max_count: int) -> list[tuple[int, int]]:
+    # The blocks with the least room to grow choose first; the others widen around them.
+    def room(block: tuple[int, int]) -> tuple[int, int]:
+        lo, hi = block[0], block[0] + block[1]
+        while hi - lo < max_count and _documented(hi, generation):
+            hi += 1
+        while hi - lo < max_count and _documented(lo - 1, generation):
+            lo -= 1
+        return lo, hi
+
+    used: set[int] = set()
+    chosen: dict[int, tuple[int, int]] = {}
+    for i in sorted(range(len(blocks)), key=lambda i: (lambda r: r[1] - r[0])(room(blocks[i]))):
+        start, count = blocks[i]
+        lo, hi = room(blocks[i])
+        size = next((n for n in range(count, hi - lo + 1) if n not in used), count)
+        end = min(start + size, hi)
+        chosen[i] = (end - size, size)
+        used.add(size)
+    return [chosen[i] for i in range(len(blocks))]

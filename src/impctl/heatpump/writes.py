@@ -10,11 +10,14 @@ The order matters and is the safety argument:
 5. FC 06, then read back (after a pause; the first answer may still be the old value) until
    it matches, else :class:`WriteVerifyError`.
 
-A *restore* that provably did not take effect (the device answered with an exception, or the
-read-back shows the register unchanged) is given back to the budget: retrying a restore
-through a flaky link must never use up the budget and its reserve and so keep the heating
-off for the rest of the day. Repeated failures of the same register are logged once, at the
-first failure, until a write of it succeeds (one line per incident, not per retry).
+Every write whose answer is lost or is a Modbus exception is followed by the read-back, which
+decides whether it executed (a gateway's exception 10/11 can hide an executed write). The
+budget counts what the read-back shows: a write whose answer was lost or an exception and that
+reads back unchanged did not execute and is given back (a restore is given back whenever it
+reads back unchanged), so retrying a restore through a flaky link never uses up the budget
+and its reserve and keeps the heating off for the rest of the day. Repeated failures of the
+same register are logged once, at the first failure, until a write of it succeeds (one line
+per incident, not per retry).
 """
 
 from __future__ import annotations
@@ -32,7 +35,13 @@ from .budget import WriteBudget
 from .clock import VirtualClock
 from .config import WritePolicy
 from .decode import decode, encode, raw_value
-from .errors import ModbusDeviceError, ModbusLinkError, WriteRefused, WriteVerifyError
+from .errors import (
+    HeatPumpError,
+    ModbusDeviceError,
+    ModbusLinkError,
+    WriteRefused,
+    WriteVerifyError,
+)
 from .link import ModbusLink
 from .registers import FORBIDDEN_WRITES, Kind, Register
 
@@ -185,40 +194,66 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
                            previous, previous, budget.used(reg.ma, clock.now().date()))
     reserve = policy.restore_reserve if restore else 0
     day = clock.now().date()
-    used = budget.consume(reg.ma, day, reserve=reserve)
     # A register whose last write failed: log its repeated failures at DEBUG only.
     loud = logging.DEBUG if reg.ma in link.failed_writes else logging.WARNING
-    write_error: ModbusLinkError | None = None
-    try:
-        await link.write(reg.address, word)
-    except ModbusDeviceError:
-        if restore:  # an exception response: the device did not execute the write
+    delay = link.config.retry_delay_s
+    for attempt in range(link.config.attempts):
+        used = budget.consume(reg.ma, day, reserve=reserve)
+        write_error = await _send(link, reg, word, loud)
+        read_back = await _read_back(link, reg, word, policy, loud)
+        if read_back == word:
+            break
+        if read_back == current and (restore or write_error is not None):
+            # Unchanged after a lost or exception answer: the write never executed. (An
+            # acknowledged write that reads back unchanged still counts: it may have reached
+            # the EEPROM before the controller overrode it; only a restore is given back.)
             budget.refund(reg.ma, day)
+            if (isinstance(write_error, ModbusDeviceError) and write_error.transient
+                    and attempt + 1 < link.config.attempts):
+                await asyncio.sleep(delay)  # busy / gateway 10, 11: not now, later
+                delay *= 2
+                continue
         link.failed_writes.add(reg.ma)
-        raise
-    except ModbusLinkError as exc:
-        # The write may have landed even though its answer was lost: let the read-back decide.
-        write_error = exc
-        _LOG.log(loud, "register %d: write not confirmed (%s); checking by read-back", reg.ma,
-                 exc)
-    read_back = await _read_back(link, reg, word, policy, loud)
-    if read_back != word:
+        if isinstance(write_error, ModbusDeviceError) and read_back in (current, None):
+            raise write_error  # the caller reports the device's answer
         shown = "nothing" if read_back is None else f"{raw_value(reg, read_back)} {reg.unit}"
         msg = (f"register {reg.ma} ({reg.name}): wrote {target} {reg.unit}, read back {shown} "
                f"after {policy.verify_attempts} attempt(s)")
         _LOG.log(logging.ERROR if loud == logging.WARNING else loud, msg)
-        if restore and read_back == current:  # unchanged: the restore never took effect
-            budget.refund(reg.ma, day)
-        link.failed_writes.add(reg.ma)
         if read_back is None and write_error is not None:
             raise ModbusLinkError(msg) from write_error
         raise WriteVerifyError(msg, reg.ma, word, read_back)
     link.failed_writes.discard(reg.ma)
-    _LOG.warning("register %d (%s): %s → %s %s %s and verified (%d/%d today)", reg.ma,
-                 reg.name, previous, target, reg.unit, "restored" if restore else "written",
-                 used, budget.limit(reg.ma))
+    _LOG.warning("register %d (%s): %s → %s %s and verified (%d/%d today)", reg.ma,
+                 reg.name, _shown(reg, previous), _shown(reg, target),
+                 "restored" if restore else "written", used, budget.limit(reg.ma))
     return WriteResult(reg.name, reg.ma, float(value), target, clamped, True, previous,
                        target, used)
+
+
+def _shown(reg: Register, value: float | None) -> str:
+    """A register value as people write it: "22.5 °C" for a setpoint, "1" for a mode code."""
+    if value is None:
+        return "unknown"
+    return f"{value:.1f} {reg.unit}" if reg.unit else f"{value:.0f}"
+
+
+async def _send(link: ModbusLink, reg: Register, word: int, loud: int) -> HeatPumpError | None:
+    """FC 06 once; the error if its answer was lost or an exception (the read-back decides)."""
+    try:
+        await link.write(reg.address, word)
+    except ModbusDeviceError as exc:
+        # An exception answer may come from a gateway whose RS-485 side lost the device's
+        # answer (10, 11) after the write executed: only the read-back can tell.
+        _LOG.info("register %d: write answered with Modbus exception %d; checking by "
+                  "read-back", reg.ma, exc.exception_code)
+        return exc
+    except ModbusLinkError as exc:
+        # The write may have landed even though its answer was lost: let the read-back decide.
+        _LOG.log(loud, "register %d: write not confirmed (%s); checking by read-back", reg.ma,
+                 exc)
+        return exc
+    return None
 
 
 async def _read_back(link: ModbusLink, reg: Register, word: int,
@@ -228,7 +263,7 @@ async def _read_back(link: ModbusLink, reg: Register, word: int,
         await asyncio.sleep(policy.verify_delay_s)
         try:
             seen = (await link.read(reg.address, 1))[0]
-        except ModbusLinkError as exc:
+        except HeatPumpError as exc:
             _LOG.log(level, "register %d read-back failed: %s", reg.ma, exc)
             continue
         if seen == word:

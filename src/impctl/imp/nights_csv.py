@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..tables import read_table
+from ..tables import frame_table, read_table
 from .features import Q_ON_W
 from .night import NightSamples
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
@@ -143,14 +143,40 @@ def read_nights(
         ``kind``, a labelled night with fewer than two samples, no night at all.
     """
     path = Path(path)
-    table = read_table(
-        path,
-        required=REQUIRED_COLUMNS,
-        numeric=("t_air", "t_out", "q_hc", "setpoint", "heating"),
-        optional=("night", "kind"),
-        may_be_empty=("setpoint",),
-        tz=tz,
-    )
+    table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_TEXT,
+                       may_be_empty=("setpoint",), tz=tz)
+    return nights_from_table(table, path, tz, window=window)
+
+
+_NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating")
+_TEXT = ("night", "kind")
+
+
+def read_nights_frame(
+    frame: pd.DataFrame,
+    source: str | Path,
+    tz: str = "Europe/Ljubljana",
+    *,
+    window: tuple[dt.time, dt.time] = DEFAULT_WINDOW,
+) -> list[NightSamples]:
+    """:func:`read_nights` for a DataFrame in the same format (e.g. read from Parquet).
+
+    ``timestamp`` may be datetimes (naive = local time in ``tz``) or ISO 8601 strings; errors
+    name ``source`` and the row (counted as in the CSV form: the first data row is row 2).
+    """
+    table = frame_table(frame.reset_index(drop=True), source, required=REQUIRED_COLUMNS,
+                        numeric=_NUMERIC, optional=_TEXT, may_be_empty=("setpoint",), tz=tz)
+    return nights_from_table(table, Path(source), tz, window=window)
+
+
+def nights_from_table(
+    table: pd.DataFrame,
+    path: Path,
+    tz: str,
+    *,
+    window: tuple[dt.time, dt.time] = DEFAULT_WINDOW,
+) -> list[NightSamples]:
+    """Checked table (``timestamp`` tz-aware, numbers float) → nights; see :func:`read_nights`."""
     _check_values(table, path)
     explicit = "night" in table
     if explicit:

@@ -19,36 +19,16 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from .._lazy import attach
 from .ranges import DEFAULT_RANGES
 
-_LAZY = {
-    "PopulationConfig": "households",
-    "sample_households": "households",
-    "sample_population": "households",
-    "ImpResult": "virtual_imp",
-    "ImpSimConfig": "virtual_imp",
-    "simulate_imp": "virtual_imp",
-    "simulate_imp_plant": "virtual_imp_plant",
-    "sample_params": "realism",
-    "Dataset": "dataset",
-    "generate_dataset": "dataset",
-    "synth_nights": "synth_nights",
-}
-
-__all__ = ["DEFAULT_RANGES", *_LAZY]
-
-
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+# Resolved on first use (impctl._lazy), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+    "households": ["PopulationConfig", "sample_households", "sample_population"],
+    "virtual_imp": ["ImpResult", "ImpSimConfig", "simulate_imp"],
+    "virtual_imp_plant": ["simulate_imp_plant"],
+    "realism": ["sample_params"],
+    "dataset": ["Dataset", "generate_dataset"],
+    "synth_nights": ["synth_nights"],
+})
+__all__ = ["DEFAULT_RANGES", *_LAZY_NAMES]

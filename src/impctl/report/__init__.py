@@ -83,6 +83,28 @@ def _param_table(fit: dict, truth: HouseParameters | None) -> str:
     return _table(headers, rows)
 
 
+def _flexibility_section(fit: dict) -> list[str]:
+    """What the house offers an aggregator (:mod:`impctl.flex`), from the fit's block."""
+    from ..fit.report import flexibility_block
+
+    flex = fit.get("flexibility") or flexibility_block(fit)
+    if flex.get("coast_h") is None:
+        return []
+    rows = [["coast: heating off until T_air has fallen "
+             f"{flex['drop_k']:g} K", "h", _fmt(flex["coast_h"], ".2f"),
+             f"{_fmt(flex['coast_h_low'], '.2f')} … {_fmt(flex['coast_h_high'], '.2f')}"],
+            [f"rebound: heat beyond steady demand in the {flex['rebound_h']:g} h after",
+             "kWh", _fmt(flex["rebound_kwh"], ".2f"), "—"],
+            ["steady-state heat demand", "W", _fmt(flex["steady_state_w"], ".0f"), "—"]]
+    return [f"<h2>Flexibility (at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
+            "outdoors)</h2>",
+            _table(["quantity", "unit", "estimate", "from τ's 95 % interval"], rows),
+            "<p>The 5R1C model's instantaneous air-temperature drop at switch-off "
+            f"({_fmt(flex.get('switch_off_drop_k'), '.1f')} K here) is a model artefact (a "
+            "massless air node) and is not counted in the coast; see <code>impctl flex</code>."
+            "</p>"]
+
+
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:14px}td,th{border:1px solid #ccc;
 padding:3px 8px;text-align:left}th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}
@@ -161,6 +183,7 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         "<h1>impctl: house identification report</h1>",
         "<h2>What the nights determine</h2>", _lumped_table(fit),
         f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",
+        *_flexibility_section(fit),
         "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),
         f"<p>ε = {_fmt(val.get('eps_pct'), '.1f')} %, ΔQ_total = "
@@ -178,6 +201,12 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         + "".join(f"<p>{html.escape(n)}</p>" for n in notes) + "</div>",
         "<h2>Nights and their data quality</h2>", nights_html,
     ]
+    if fit.get("night_quality"):
+        from ..fit.report import QUALITY_HEADERS, quality_rows
+
+        parts += ["<h2>Night quality and model adequacy</h2>",
+                  _table(QUALITY_HEADERS, quality_rows(fit)),
+                  f"<p>{html.escape((fit.get('adequacy') or {}).get('statement', ''))}</p>"]
     if summary is not None:
         parts += ["<h2>Demo: truth vs estimate</h2>",
                   f"<pre>{html.escape(format_summary(summary))}</pre>"]

@@ -1,0 +1,171 @@
+"""Benchmark of ``impctl fleet fit``: wall time, throughput per worker count, batch vs alone,
+memory per worker.
+
+Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
+          [--alone 16] [--batch-size 16] [--skip-full | --full-only]
+
+(``--throughput`` households are cut into batches of at most ``--batch-size``, at least two per
+worker.)
+
+Fleet input: the fit bench's synthetic IMP nights (``impctl.population.synth_nights``: two
+spin-up days, 2 constrained + 6 normal nights, Annex C at 60 s, 5-minute samples, T quantised to
+0.1 °C, 5 % power noise) for ``sample_households(seed=20260)``, written once as one Parquet
+dataset with a ``household`` column (reused from ``--data`` when it is there). The plant is the
+**ideal 5R1C**: the realistic plant (``impctl.plant``) is not on main yet.
+
+Measured:
+1. throughput [households/s] on 1 and 2 worker processes (``--throughput`` households);
+2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
+   (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
+3. the whole fleet with the default local cluster (one worker process per core), wall clock
+   from the command's start (cluster start-up and worker preload included) to the last row;
+4. resident memory of each worker after each batch (the FLEET ``worker_rss_mb`` column): first,
+   median and last batch — flat means no growth over the run.
+No classifiers are used (the whole prior ranges, as without ``impctl train``), so the figures
+are the fit's; classification adds ~1 ms per household.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+SEED = 20260
+
+
+def make_fleet(n: int, path: Path) -> Path:
+    """n households' nights as one Parquet dataset (cached)."""
+    from impctl.population.households import sample_households
+    from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+
+    target = path / f"fleet-{n}.parquet"
+    if target.exists():
+        return target
+    t0 = time.perf_counter()
+    frames = []
+    houses = sample_households(n, seed=SEED)
+    for lo in range(0, n, 250):  # simulate in slices to bound memory
+        k = min(250, n - lo)
+        sub = type(houses)(**{f: np.broadcast_to(np.asarray(v, float), (n,))[lo:lo + k]
+                              for f, v in houses.as_dict().items()})
+        sched = imp_schedule(k, seed=SEED + lo)
+        sim, sp = run_schedule(sub, sched)
+        for i in range(k):
+            for night in sample_nights(sim, sp, sched, i, sample_step_s=300.0, seed=lo + i):
+                stamps = night.start + pd.to_timedelta(night.time_s, unit="s")
+                frames.append(pd.DataFrame({
+                    "household": f"h{lo + i:05d}", "timestamp": stamps.tz_convert("UTC"),
+                    "t_air": night.t_air_c, "t_out": night.t_out_c, "q_hc": night.q_hc_w,
+                    "night": night.night_id, "kind": night.kind}))
+    path.mkdir(parents=True, exist_ok=True)
+    tmp = path / f".fleet-{n}.parquet.tmp"
+    pd.concat(frames, ignore_index=True).to_parquet(tmp, index=False)
+    os.replace(tmp, target)
+    print(f"generated {n} households in {time.perf_counter() - t0:.0f} s → {target}")
+    return target
+
+
+def subset(data: Path, n: int, out: Path) -> Path:
+    df = pd.read_parquet(data)
+    keep = sorted(df["household"].unique())[:n]
+    target = out / f"subset-{n}.parquet"
+    df[df["household"].isin(keep)].to_parquet(target, index=False)
+    return target
+
+
+def run_fleet(data: Path, workers: int | None, batch: int, work: Path) -> tuple[float, Path]:
+    from impctl.fleet import fit_fleet
+
+    out = work / f"FLEET-{workers or 'default'}-{time.time_ns()}.parquet"
+    t0 = time.perf_counter()
+    run = fit_fleet(data, out, workers=workers, batch_size=batch, progress=True,
+                    echo=lambda s: print(s, file=sys.stderr))
+    wall = time.perf_counter() - t0
+    cpu = pd.read_parquet(out)["cpu_s_per_household"].sum()
+    print(f"  {run.found} households, {run.counts}, {wall:.1f} s wall on {run.workers} "
+          f"workers → {run.fitted / wall:.2f} households/s; worker CPU {cpu:.0f} s = "
+          f"{cpu / max(1, run.fitted):.3f} CPU-s per household (load average now "
+          f"{os.getloadavg()[0]:.1f})")
+    return wall, out
+
+
+def memory(out: Path) -> None:
+    fleet = pd.read_parquet(out)
+    print("  resident memory per worker after its batches [MB] (first / median / last, "
+          "batches):")
+    for worker, rows in fleet.groupby("worker"):
+        per_batch = rows.drop_duplicates("worker_rss_mb")["worker_rss_mb"].to_numpy()
+        print(f"    {worker}: {per_batch[0]:.0f} / {np.median(per_batch):.0f} / "
+              f"{per_batch[-1]:.0f} ({len(per_batch)} batches)")
+
+
+def batch_vs_alone(data: Path, n: int) -> None:
+    import torch
+
+    from impctl.fit.batch import fit_households
+    from impctl.fit.estimator import NightFit
+    from impctl.fleet.inputs import discover, read_sources
+
+    torch.set_num_threads(1)
+    sources = discover(data)[:n]
+    nights = list(read_sources(sources, "Europe/Ljubljana").values())
+    t0, c0 = time.perf_counter(), time.process_time()
+    alone = [NightFit().fit(x, None) for x in nights]
+    t_alone, c_alone = (time.perf_counter() - t0) / n, (time.process_time() - c0) / n
+    t0, c0 = time.perf_counter(), time.process_time()
+    batched, stats = fit_households(nights, [None] * n)
+    t_batch, c_batch = (time.perf_counter() - t0) / n, (time.process_time() - c0) / n
+    diff = max(abs(b.lumped_[k].value / a.lumped_[k].value - 1) for a, b in
+               zip(alone, batched, strict=True) for k in ("hlc", "c_m", "tau"))
+    print(f"  alone {t_alone:.3f} s wall / {c_alone:.3f} CPU-s per household; in a batch of "
+          f"{n} {t_batch:.3f} s wall / {c_batch:.3f} CPU-s per household ({c_alone / c_batch:.1f}× "
+          f"less CPU; {stats.merged_calls} merged optimiser calls); largest relative "
+          f"difference of HLC/C_m/τ {diff:.1e}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=1000)
+    ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
+    ap.add_argument("--throughput", type=int, default=256)
+    ap.add_argument("--alone", type=int, default=16)
+    ap.add_argument("--batch-size", type=int, default=16)
+    ap.add_argument("--skip-full", action="store_true")
+    ap.add_argument("--full-only", action="store_true")
+    args = ap.parse_args()
+    os.environ.setdefault("IMPCTL_MODEL_DIR", str(args.data / "no-models"))
+    print(f"bench/fleet.py on {platform.node()}: {os.cpu_count()} cores, load average "
+          f"{os.getloadavg()[0]:.1f}; command: {' '.join(sys.argv)}")
+    print("plant: ideal 5R1C (impctl.plant not on main yet); 8 nights (2 constrained + 6 "
+          "normal) of 5-minute rows per household; no classifiers (prior ranges)")
+    data = make_fleet(args.households, args.data)
+    work = Path(tempfile.mkdtemp(prefix="impctl-fleet-bench-"))
+    try:
+        if not args.full_only:
+            print(f"\n1. throughput on {args.throughput} households")
+            small = subset(data, args.throughput, work)
+            for w in (1, 2):
+                run_fleet(small, w, args.batch_size, work)
+            print(f"\n2. per household alone vs in a batch ({args.alone} households, one "
+                  "thread)")
+            batch_vs_alone(small, args.alone)
+        print(f"\n3. {args.households} households, default local cluster, batch "
+              f"{args.batch_size} (target ≤ 120 s)")
+        if not args.skip_full:
+            wall, out = run_fleet(data, None, args.batch_size, work)
+            memory(out)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

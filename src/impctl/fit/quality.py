@@ -1,0 +1,180 @@
+"""Night quality and model adequacy: what each night holds, and whether the fit describes it.
+
+Numbers only from the measured series (numpy, no torch), so that a reader sees *why* a night
+helps or not before trusting a fitted value:
+
+* :func:`night_quality` — per night: rows, hours, T_air resolution, heat-pump cycling (cycles/h),
+  DHW/defrost interruptions, emitter discharge time after switch-off;
+* :func:`adequacy` — per fit: residual RMSE and lag-1 autocorrelation per residual group, and a
+  plain statement when the residuals say the model misses structure in the data (then its
+  intervals, which assume it does not, are too narrow).
+
+Thresholds (documented choices, real-houses.md §3, §6, §7):
+
+* a *cycle* is an off→on transition of the heat output across :data:`~impctl.imp.features.Q_ON_W`;
+* an *interruption* on a held night is a run of no space heat longer than :data:`STOP_MIN_MIN`
+  minutes and than 1.5× the night's median off phase (a DHW recharge takes 20–60 min, longer
+  than the heat pump's own cycling), or any negative heat (a defrost draws heat from the water);
+* the *emitter discharge time* is how long after switch-off T_air stays off the night's later
+  exponential cooling (fitted to the second half of the night, back-extrapolated) by more than
+  max(0.1 K, 3·reading noise): the hours the emitter and the air/furniture still discharge;
+* *inadequate*: lag-1 residual autocorrelation above :data:`RHO_INADEQUATE` (Annex 58: residuals
+  of an adequate model are close to white), or a residual RMSE more than
+  :data:`SIGMA_RATIO_INADEQUATE` times the reading noise estimated from the data alone.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..imp.features import Q_ON_W
+from ..imp.night import NightSamples
+
+STOP_MIN_MIN = 20.0
+RHO_INADEQUATE = 0.8
+SIGMA_RATIO_INADEQUATE = 3.0
+
+
+def t_air_resolution_k(t_air_c: np.ndarray) -> float | None:
+    """Smallest step between successive distinct T_air readings [K] (the sensor's or the
+    logger's quantum when readings are rounded), None if T_air never changes."""
+    d = np.abs(np.diff(np.asarray(t_air_c, float)))
+    d = d[d > 1e-6]
+    return float(np.round(d.min(), 4)) if len(d) else None
+
+
+def cycles_per_h(time_s: np.ndarray, q_w: np.ndarray, threshold_w: float = Q_ON_W) -> float:
+    """Off→on transitions of the heat output per hour."""
+    t = np.asarray(time_s, float)
+    on = np.asarray(q_w, float) > threshold_w
+    hours = (t[-1] - t[0]) / 3600.0 if len(t) > 1 else 0.0
+    starts = int(np.sum(on[1:] & ~on[:-1]))
+    return float(starts / hours) if hours > 0 else float("nan")
+
+
+def interruptions(time_s: np.ndarray, q_w: np.ndarray, threshold_w: float = Q_ON_W,
+                  min_minutes: float = STOP_MIN_MIN) -> list[dict]:
+    """Runs of negative heat ("defrost") and runs of no space heat longer than both
+    ``min_minutes`` and 1.5× the night's median off phase ("dhw_or_stop": longer than the heat
+    pump's own cycling) on a held night: [{"kind", "start_h", "minutes"}]."""
+    t = np.asarray(time_s, float)
+    q = np.asarray(q_w, float)
+
+    def runs(flag):
+        edges = np.flatnonzero(np.diff(np.r_[0, flag.astype(int), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            yield a, b, (t[b] if b < len(t) else t[-1]) - t[a]
+
+    out = [{"kind": "defrost", "start_h": float(t[a] / 3600.0), "minutes": float(d / 60.0)}
+           for a, b, d in runs(q < -threshold_w)]
+    off = list(runs(q <= threshold_w))
+    # the heat pump's own off phases: only a night that cycles (≥ 3 off runs) has them
+    typical = float(np.median([d for _, _, d in off])) if len(off) >= 3 else 0.0
+    limit = max(60.0 * min_minutes, 1.5 * typical)
+    out += [{"kind": "dhw_or_stop", "start_h": float(t[a] / 3600.0), "minutes": float(d / 60.0)}
+            for a, b, d in off if d > limit and not (q[a:b] < -threshold_w).all()]
+    return sorted(out, key=lambda x: x["start_h"])
+
+
+def emitter_discharge_h(time_s: np.ndarray, t_air_c: np.ndarray, t_out_c: np.ndarray
+                        ) -> float | None:
+    """Hours after switch-off (time 0) during which T_air departs from the night's later
+    exponential cooling (module docstring); None when the night is too short or not cooling."""
+    t = np.asarray(time_s, float)
+    ta = np.asarray(t_air_c, float)
+    te = float(np.mean(t_out_c))
+    late = t >= 0.5 * t[-1]
+    dt = ta - te
+    if late.sum() < 4 or np.any(dt[late] <= 0.0):
+        return None
+    slope, icpt = np.polyfit(t[late], np.log(dt[late]), 1)
+    if slope >= 0:
+        return None
+    curve = te + np.exp(icpt + slope * t)
+    noise = float(np.std(np.diff(ta[late], 2)) / np.sqrt(6.0)) if late.sum() > 3 else 0.0
+    threshold = max(0.1, 3.0 * noise)
+    off = np.abs(ta - curve) > threshold
+    early = t < 0.5 * t[-1]
+    idx = np.flatnonzero(off & early)
+    return float(t[idx[-1] + 1] / 3600.0) if len(idx) else 0.0
+
+
+def night_quality(night: NightSamples, threshold_w: float = Q_ON_W) -> dict:
+    """What one measured night holds (module docstring); JSON-ready."""
+    t = np.asarray(night.time_s, float)
+    q = np.asarray(night.q_hc_w, float)
+    ok = np.isfinite(t) & np.isfinite(q) & np.isfinite(night.t_air_c) & np.isfinite(
+        night.t_out_c)
+    t, q = t[ok], q[ok]
+    ta = np.asarray(night.t_air_c, float)[ok]
+    te = np.asarray(night.t_out_c, float)[ok]
+    out = {"night_id": night.night_id, "kind": night.kind, "rows": int(ok.sum()),
+           "hours": float((t[-1] - t[0]) / 3600.0) if len(t) > 1 else 0.0,
+           "t_air_resolution_k": t_air_resolution_k(ta) if len(ta) > 1 else None,
+           "cycles_per_h": None, "interruptions": [], "emitter_discharge_h": None,
+           "night_gain_w": None}
+    if len(t) < 3:
+        return out
+    if night.kind == "normal":
+        out["cycles_per_h"] = cycles_per_h(t, q, threshold_w)
+        out["interruptions"] = interruptions(t, q, threshold_w)
+    else:
+        # from switch-off (time 0) until heating resumes
+        on = q > threshold_w
+        after = t > 0
+        end = np.flatnonzero(on & after)
+        stop = end[0] if len(end) else len(t)
+        cooling = after.copy()
+        cooling[stop:] = False
+        if cooling.sum() >= 8:
+            out["emitter_discharge_h"] = emitter_discharge_h(t[cooling], ta[cooling],
+                                                             te[cooling])
+    return out
+
+
+def adequacy(sigma_fit: dict[str, float], sigma_data: dict[str, float],
+             autocorrelation: dict[str, float]) -> dict:
+    """Residual RMSE and lag-1 autocorrelation per group, and the statement (module docstring).
+
+    ``sigma_fit``/``sigma_data`` use the keys of :func:`~impctl.fit.data.noise_levels`;
+    ``autocorrelation`` those of :mod:`.uncertainty` (constrained, normal_t_air, normal_power).
+    """
+    keys = {"constrained": "constrained_t_air_k", "normal_power": "normal_power_w"}
+    groups, problems = {}, []
+    for group, key in keys.items():
+        if group not in autocorrelation:
+            continue
+        rho = float(autocorrelation[group])
+        ratio = sigma_fit[key] / max(sigma_data.get(key, 0.0), 1e-12)
+        unit = "K" if key.endswith("_k") else "W"
+        groups[group] = {"rmse": sigma_fit[key], "unit": unit, "noise_from_data": sigma_data[key],
+                         "rmse_over_noise": ratio, "lag1_autocorrelation": rho}
+        what = "constrained-night T_air" if group == "constrained" else "normal-night heat power"
+        if rho > RHO_INADEQUATE:
+            problems.append(f"{what} residuals are strongly autocorrelated (lag-1 ρ = "
+                            f"{rho:.2f} > {RHO_INADEQUATE})")
+        if ratio > SIGMA_RATIO_INADEQUATE:
+            problems.append(f"{what} residual RMSE is {ratio:.1f}× the reading noise "
+                            f"(> {SIGMA_RATIO_INADEQUATE:g}×)")
+    adequate = not problems
+    statement = ("the model describes the nights to within their reading noise; the intervals "
+                 "assume that" if adequate else
+                 "the model does NOT describe these nights well enough for its intervals to "
+                 "hold at their stated 95 %: " + "; ".join(problems)
+                 + ". Treat the values as approximate and the intervals as too narrow.")
+    return {"adequate": adequate, "groups": groups, "statement": statement}
+
+
+def power_usable(night: NightSamples, threshold_w: float = Q_ON_W) -> np.ndarray:
+    """Per sample of a held night: False inside a DHW/defrost interruption and during the
+    recovery after it (as long again as the interruption, the heat debt being repaid), where
+    the measured power is not the house's space-heating demand. True everywhere on a
+    constrained night."""
+    t = np.asarray(night.time_s, float)
+    ok = np.ones(len(t), bool)
+    if night.kind != "normal" or len(t) < 3:
+        return ok
+    for stop in interruptions(t, night.q_hc_w, threshold_w):
+        a = stop["start_h"] * 3600.0
+        ok &= ~((t >= a) & (t < a + 2 * 60.0 * stop["minutes"]))
+    return ok

@@ -1,0 +1,142 @@
+"""FLEET.parquet: its columns, and writing it batch by batch so that an interrupted run loses
+at most one batch.
+
+``FLEET.parquet`` is a Parquet *dataset* folder (what Dask, Spark and pyarrow write and read):
+one ``part-<run>-<batch>.parquet`` per finished batch, each written under a hidden temporary
+name and renamed into place, so a reader — ``pandas.read_parquet("FLEET.parquet")``,
+``dask.dataframe.read_parquet`` — sees whole batches only. ``--resume`` reads the ``household``
+column and skips those households.
+
+Columns (units in the names; one row per household):
+
+``household, status`` (ok | insufficient | error), ``reason`` (short, for grouping), ``error``
+(the whole message), ``nights_used, nights_constrained, nights_normal, nights_skipped``;
+``hlc_w_per_k, c_m_j_per_k, tau_h`` each with ``_low``, ``_high`` (95 % interval) and
+``_determined``; ``floor_area_class, c_f_class, u_walls_class`` (the classifiers' range labels,
+empty without classifiers), ``class_contradicted``; ``coast_h, coast_h_low, coast_h_high,
+rebound_kwh, switch_off_drop_k`` (:mod:`impctl.flex` at 21 °C / 0 °C / 1 K); the seven fitted
+parameters (``floor_area_m2`` … ``u_windows_w_per_m2k``) and the fixed ``ach_vent_per_h``,
+``ach_infl_per_h`` (enough to re-simulate the house, e.g. ``impctl flex``);
+``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
+(in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
+(the worker process's CPU time), ``worker`` (host:pid) and
+``worker_rss_mb`` (its resident memory after the batch [MB]); ``impctl_version,
+fitted_at`` (UTC) — so that a fleet can be re-fitted when the model improves.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from pathlib import Path
+
+import pyarrow as pa
+
+LUMPED_COLUMNS = {"hlc": "hlc_w_per_k", "c_m": "c_m_j_per_k", "tau": "tau_h"}
+PARAM_COLUMNS = {
+    "floor_area": "floor_area_m2", "wall_height": "wall_height_m",
+    "walls_area": "walls_area_m2", "windows_area": "windows_area_m2",
+    "c_f": "c_f_1e5_j_per_m2k", "u_walls": "u_walls_w_per_m2k",
+    "u_windows": "u_windows_w_per_m2k",
+}
+CLASS_COLUMNS = ("floor_area_class", "c_f_class", "u_walls_class")
+STATUSES = ("ok", "insufficient", "error")
+
+_FIELDS: list[tuple[str, pa.DataType]] = [
+    ("household", pa.string()), ("status", pa.string()), ("reason", pa.string()),
+    ("error", pa.string()),
+    ("nights_used", pa.int32()), ("nights_constrained", pa.int32()),
+    ("nights_normal", pa.int32()), ("nights_skipped", pa.int32()),
+]
+for _col in LUMPED_COLUMNS.values():
+    _FIELDS += [(_col, pa.float64()), (f"{_col}_low", pa.float64()),
+                (f"{_col}_high", pa.float64()), (f"{_col}_determined", pa.bool_())]
+_FIELDS += [(c, pa.string()) for c in CLASS_COLUMNS]
+_FIELDS += [("class_contradicted", pa.bool_())]
+_FIELDS += [(c, pa.float64()) for c in ("coast_h", "coast_h_low", "coast_h_high",
+                                        "rebound_kwh", "switch_off_drop_k")]
+_FIELDS += [(c, pa.float64()) for c in PARAM_COLUMNS.values()]
+_FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
+            ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
+            ("eps_pct", pa.float64()), ("batch_size", pa.int32()),
+            ("wall_s_per_household", pa.float64()), ("cpu_s_per_household", pa.float64()),
+            ("worker", pa.string()),
+            ("worker_rss_mb", pa.float64()), ("impctl_version", pa.string()),
+            ("fitted_at", pa.timestamp("s", tz="UTC"))]
+SCHEMA = pa.schema(_FIELDS)
+COLUMNS = tuple(SCHEMA.names)
+
+
+def empty_row(household: str) -> dict:
+    """A row with every column None (status error until something better is known)."""
+    row = dict.fromkeys(COLUMNS)
+    row.update(household=household, status="error", reason="not fitted", error="")
+    return row
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("impctl")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def to_table(rows: list[dict]) -> pa.Table:
+    """Rows (dicts) → an Arrow table with :data:`SCHEMA` (versions and time filled in)."""
+    import datetime as dt
+
+    now = dt.datetime.now(dt.UTC).replace(microsecond=0)
+    version = _version()
+    cols = {name: [] for name in COLUMNS}
+    for row in rows:
+        for name in COLUMNS:
+            v = row.get(name)
+            if isinstance(v, float) and v != v:  # NaN → null
+                v = None
+            cols[name].append(v)
+        cols["impctl_version"][-1] = cols["impctl_version"][-1] or version
+        cols["fitted_at"][-1] = cols["fitted_at"][-1] or now
+    return pa.table({n: pa.array(cols[n], type=SCHEMA.field(n).type) for n in COLUMNS},
+                    schema=SCHEMA)
+
+
+def new_run_id() -> str:
+    """A short id that keeps the part files of different runs (``--resume``) apart."""
+    return uuid.uuid4().hex[:8]
+
+
+def write_part(out: Path, run_id: str, index: int, rows: list[dict]) -> Path:
+    """Write one batch as ``out/part-<run>-<index>.parquet``, atomically (hidden temp + rename)."""
+    import pyarrow.parquet as pq
+
+    out.mkdir(parents=True, exist_ok=True)
+    target = out / f"part-{run_id}-{index:06d}.parquet"
+    tmp = out / f".{target.name}.tmp"
+    try:
+        pq.write_table(to_table(rows), tmp)
+        with open(tmp, "rb") as fh:  # on disk before it becomes visible
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return target
+
+
+def done_households(out: Path) -> set[str]:
+    """Households that already have a row in the FLEET dataset ``out`` (empty if none)."""
+    import pyarrow.dataset as ds
+
+    if not out.exists() or not any(out.glob("part-*.parquet")):
+        return set()
+    table = ds.dataset(out, format="parquet").to_table(columns=["household"])
+    return {str(x) for x in table.column("household").to_pylist()}
+
+
+def read_fleet(out: str | Path):
+    """The FLEET dataset as a pandas DataFrame (all parts)."""
+    import pandas as pd
+
+    return pd.read_parquet(out)

@@ -1,0 +1,204 @@
+"""What a Dask worker runs: one batch of households → one block of FLEET rows.
+
+The classifiers (scikit-learn) and torch are loaded once per worker process — by the
+:class:`Preload` worker plugin when the worker joins, else at the first batch — and kept in a
+module-level cache; a batch never reloads them. Every household's outcome is a row: ``ok``,
+``insufficient`` (too few usable nights: the row says which kind is missing) or ``error``
+(unreadable file, failed fit: the row says why); nothing a household does stops the batch.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .inputs import Source, read_sources
+from .table import empty_row
+
+#: Worker-process cache: model directory → (models, metadata), and how often it was filled.
+_MODELS: dict[str, tuple[dict, dict]] = {}
+_LOADS = {"models": 0, "batches": 0}
+_LOCK = threading.Lock()
+PRIOR = "prior"
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every batch of one run shares (sent to the workers with each task).
+
+    ``model_dir`` is the classifiers' directory, or :data:`PRIOR` to search the whole prior
+    ranges (no classifiers, as ``impctl fit`` does without them).
+    """
+
+    model_dir: str
+    tz: str = "Europe/Ljubljana"
+    timestamps: str = "instant"
+    normal_model: str = "demand"
+    ach_vent: float = 0.0
+    ach_infl: float = 0.01
+
+
+def models(model_dir: str) -> tuple[dict, dict]:
+    """The classifiers of ``model_dir``, loaded once per process (thread-safe)."""
+    with _LOCK:
+        if model_dir not in _MODELS:
+            from ..classifiers.saved import load_models
+
+            _MODELS[model_dir] = load_models(model_dir)
+            _LOADS["models"] += 1
+        return _MODELS[model_dir]
+
+
+def preload(model_dir: str) -> None:
+    """Import torch and the fit, pin torch to one thread, load the classifiers."""
+    import torch
+
+    from ..fit import batch  # noqa: F401  (imports the fit and torchdiffeq)
+
+    torch.set_num_threads(1)
+    if model_dir != PRIOR:
+        models(model_dir)
+
+
+def worker_state() -> dict:
+    """This process's counters (for tests and the bench): pid, model loads, batches, RSS [MB]."""
+    import psutil
+
+    rss = psutil.Process().memory_info().rss / 2**20
+    return {"pid": os.getpid(), "model_loads": _LOADS["models"], "batches": _LOADS["batches"],
+            "rss_mb": rss}
+
+
+try:
+    from distributed.diagnostics.plugin import WorkerPlugin
+except ImportError:  # pragma: no cover — distributed is a dependency
+    WorkerPlugin = object  # type: ignore[misc,assignment]
+
+
+class Preload(WorkerPlugin):  # type: ignore[misc,valid-type]
+    """Dask worker plugin: :func:`preload` when a worker starts (or joins later)."""
+
+    def __init__(self, model_dir: str):
+        self.model_dir = model_dir
+        self.name = f"impctl-fleet-preload-{model_dir}"
+
+    def setup(self, worker) -> None:  # noqa: D401 — Dask's hook
+        preload(self.model_dir)
+
+
+_NEEDS = {"constrained": "no usable constrained night (it carries τ)",
+          "normal": "no usable normal night with heat power (it carries HLC and C_m)"}
+
+
+def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
+    """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household."""
+    from ..fit.batch import fit_households
+    from ..fit.data import prepare_nights
+    from ..fit.estimator import NightFit
+
+    started, cpu = time.perf_counter(), time.process_time()
+    preload(settings.model_dir)
+    _LOADS["batches"] += 1
+    params = {"normal_model": settings.normal_model, "timestamps": settings.timestamps,
+              "ach_vent": settings.ach_vent, "ach_infl": settings.ach_infl}
+    probe = NightFit(**params)
+    rows: dict[str, dict] = {}
+    todo: list[tuple[str, list, dict | None, dict]] = []
+    for household, nights in read_sources(sources, settings.tz).items():
+        row = rows[household] = empty_row(household)
+        if isinstance(nights, InputError):
+            row.update(status="error", reason="unreadable input", error=str(nights))
+            continue
+        kept, _, skipped = prepare_nights(nights, probe.emission_lag_h, probe.min_night_h,
+                                          probe.resume_threshold_w)
+        row.update(nights_used=len(kept),
+                   nights_constrained=sum(n.kind == "constrained" for n in kept),
+                   nights_normal=sum(n.kind == "normal" for n in kept),
+                   nights_skipped=len(skipped))
+        missing = [k for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
+        if missing:
+            why = "; ".join(f"{i}: {r}" for i, r in skipped)
+            row.update(status="insufficient", reason=" and ".join(_NEEDS[k] for k in missing),
+                       error=" and ".join(_NEEDS[k] for k in missing)
+                       + (f" (skipped {why})" if why else ""))
+            continue
+        classes, ranges = _classify(nights, settings)
+        row.update({f"{k}_class": v for k, v in classes.items()})
+        todo.append((household, nights, ranges, row))
+    if todo:
+        results, stats = fit_households([t[1] for t in todo], [t[2] for t in todo], **params)
+        fitted = []
+        for (_, _, _, row), res in zip(todo, results, strict=True):
+            if isinstance(res, InputError):
+                row.update(status="insufficient", reason="no usable night", error=str(res))
+            elif isinstance(res, BaseException):
+                row.update(status="error", reason=f"fit failed ({type(res).__name__})",
+                           error=f"{type(res).__name__}: {res}")
+            else:
+                _fill(row, res)
+                fitted.append((row, res))
+        _flexibility(fitted)
+    share = (time.perf_counter() - started) / max(1, len(rows))
+    cpu_share = (time.process_time() - cpu) / max(1, len(rows))
+    state = worker_state()
+    for row in rows.values():
+        row.update(batch_size=len(sources), wall_s_per_household=share,
+                   cpu_s_per_household=cpu_share,
+                   worker=f"{socket.gethostname()}:{state['pid']}",
+                   worker_rss_mb=state["rss_mb"])
+    return [rows[s.household] for s in sources]
+
+
+def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None]:
+    """Class labels and ranges (None: whole prior ranges, as ``impctl fit`` without models)."""
+    if settings.model_dir == PRIOR:
+        return {}, None
+    from ..classifiers.saved import classify_with
+
+    result = classify_with(nights, *models(settings.model_dir))
+    return ({k: r.label for k, r in result.items()},
+            {k: tuple(r.range) for k, r in result.items()})
+
+
+def _fill(row: dict, fit) -> None:
+    from .table import LUMPED_COLUMNS, PARAM_COLUMNS
+
+    row.update(status="ok", reason=None, error=None)
+    for key, col in LUMPED_COLUMNS.items():
+        est = fit.lumped_[key]
+        row[col], row[f"{col}_low"], row[f"{col}_high"] = est.value, est.low, est.high
+        row[f"{col}_determined"] = bool(est.determined)
+    for name, value in fit.parameters_.items():
+        row[PARAM_COLUMNS[name]] = float(value)
+    row["ach_vent_per_h"], row["ach_infl_per_h"] = fit.ach_vent, fit.ach_infl
+    row["class_contradicted"] = bool(fit.class_check_.get("rejected", False))
+    row["needs_more_nights"] = not all(e.determined for e in fit.lumped_.values())
+    row["loss"] = float(fit.loss_)
+    val = (fit.validation_ or {}).get("mean") or {}
+    row["eps_pct"] = val.get("eps_pct")
+
+
+def _flexibility(fitted: list[tuple[dict, object]]) -> None:
+    """coast_h, rebound_kwh for all fitted households of the batch in one vectorised run."""
+    if not fitted:
+        return
+    from ..flex import flexibility_many
+    from ..model import HouseParameters
+
+    try:
+        houses = HouseParameters.stack([HouseParameters(
+            **fit.parameters_, ach_vent=fit.ach_vent, ach_infl=fit.ach_infl)
+            for _, fit in fitted])
+        tau = np.array([[f.lumped_["tau"].low, f.lumped_["tau"].high] for _, f in fitted])
+        flex = flexibility_many(houses, tau[:, 0], tau[:, 1])
+    except InputError:
+        return  # a fitted house the model refuses: the flexibility columns stay empty
+    for (row, _), f in zip(fitted, flex, strict=True):
+        row.update(coast_h=f.coast_h, coast_h_low=f.coast_h_low, coast_h_high=f.coast_h_high,
+                   rebound_kwh=f.rebound_kwh, switch_off_drop_k=f.switch_off_drop_k)

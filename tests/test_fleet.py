@@ -1,0 +1,252 @@
+"""``impctl fleet fit`` against a separately started Dask scheduler and worker processes on
+loopback, ``impctl flex``, --resume, bad households, the report; and the default local cluster
+on a Parquet dataset with a ``household`` column."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from impctl.imp import write_nights
+from impctl.model import HouseParameters
+from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+
+HOUSES = HouseParameters(
+    floor_area=np.array([120.0, 170.0]), wall_height=np.array([2.6, 2.7]),
+    walls_area=np.array([160.0, 200.0]), windows_area=np.array([25.0, 30.0]),
+    c_f=np.array([2.2, 1.2]), u_walls=np.array([0.5, 0.9]), u_windows=np.array([1.3, 1.8]),
+    ach_vent=np.zeros(2), ach_infl=np.full(2, 0.01))
+DASK = str(Path(sys.executable).with_name("dask"))
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("models")
+    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def nights():
+    sched = imp_schedule(2, n_constrained=2, n_normal=3, seed=5)
+    sim, sp = run_schedule(HOUSES, sched)
+    return [sample_nights(sim, sp, sched, i, sample_step_s=900.0, seed=i) for i in range(2)]
+
+
+def _frame(nights) -> pd.DataFrame:
+    rows = []
+    for n in nights:
+        stamps = n.start + pd.to_timedelta(n.time_s, unit="s")
+        rows.append(pd.DataFrame({"timestamp": stamps.tz_convert("UTC"), "t_air": n.t_air_c,
+                                  "t_out": n.t_out_c, "q_hc": n.q_hc_w, "night": n.night_id,
+                                  "kind": n.kind}))
+    return pd.concat(rows, ignore_index=True)
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(tmp_path_factory, nights) -> Path:
+    d = tmp_path_factory.mktemp("fleet")
+    write_nights(nights[0], d / "house-a.csv")
+    _frame(nights[1]).to_parquet(d / "house-b.parquet")         # a Parquet NIGHTS file
+    (d / "broken.csv").write_text("timestamp,t_air\n2026-01-01T00:00:00Z,oops\n")
+    write_nights([n for n in nights[0] if n.kind == "normal"], d / "no-cooling.csv")
+    return d
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory):
+    """A Dask scheduler and a worker with two processes, started as separate programs."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    log = tmp_path_factory.mktemp("dask")
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    logs = [open(log / "scheduler.log", "w"), open(log / "worker.log", "w")]  # noqa: SIM115
+    procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=logs[0],
+                              env=env, start_new_session=True)]
+    procs.append(subprocess.Popen([DASK, "worker", address, "--nworkers", "2", "--nthreads",
+                                   "1", "--no-dashboard", "--host", "127.0.0.1"],
+                                  stdout=subprocess.DEVNULL, stderr=logs[1], env=env,
+                                  start_new_session=True))
+    from distributed import Client
+
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with Client(address, timeout="5s") as client:
+                    client.wait_for_workers(2, timeout=120)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(1)
+        yield address
+    finally:
+        for p in reversed(procs):
+            os.killpg(p.pid, signal.SIGTERM)
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+        for f in logs:
+            f.close()
+
+
+@pytest.fixture(scope="module")
+def fleet_run(tmp_path_factory, fleet_dir, models, scheduler):
+    out = tmp_path_factory.mktemp("out")
+    done = run_cli("fleet", "fit", str(fleet_dir), "--out", str(out / "FLEET.parquet"),
+                   "--scheduler", scheduler, "--model-dir", str(models), "--batch-size", "2",
+                   "--report", str(out / "report"))
+    assert done.returncode == 0, done.stderr
+    return out, done
+
+
+def test_every_household_gets_a_row_saying_what_happened(fleet_run):
+    out, done = fleet_run
+    assert "4 households: 4 fitted now (2 ok, 1 insufficient, 1 error)" in done.stdout
+    assert "on 2 workers" in done.stdout
+    # the progress bar: households done, failed, and the rate
+    assert "4/4" in done.stderr and "failed=1" in done.stderr
+    assert "household/s" in done.stderr or "s/household" in done.stderr
+    fleet = pd.read_parquet(out / "FLEET.parquet").set_index("household")
+    assert sorted(fleet.index) == ["broken", "house-a", "house-b", "no-cooling"]
+    assert fleet.loc["broken", "status"] == "error"
+    assert "broken.csv" in fleet.loc["broken", "error"]
+    assert fleet.loc["no-cooling", "status"] == "insufficient"
+    assert "no usable constrained night" in fleet.loc["no-cooling", "error"]
+    for h in ("house-a", "house-b"):
+        row = fleet.loc[h]
+        assert row["status"] == "ok" and row["nights_used"] == 5
+        assert row["hlc_w_per_k_low"] < row["hlc_w_per_k"] < row["hlc_w_per_k_high"]
+        assert row["coast_h_low"] <= row["coast_h"] <= row["coast_h_high"]
+        assert row["rebound_kwh"] > 0
+        assert row["floor_area_class"] and row["c_f_class"] and row["u_walls_class"]
+    truth = dict(zip(["house-a", "house-b"], np.asarray(HOUSES.hlc_w_per_k), strict=True))
+    for h, hlc in truth.items():
+        assert fleet.loc[h, "hlc_w_per_k"] == pytest.approx(hlc, rel=0.1)
+
+
+def test_workers_load_the_classifiers_once(fleet_run, scheduler):
+    from distributed import Client
+
+    from impctl.fleet.worker import worker_state
+
+    with Client(scheduler, timeout="10s") as client:
+        states = client.run(worker_state)
+    assert len(states) == 2
+    # four households on two workers are cut into four batches (at least two per worker);
+    # every household classified, models loaded once per worker process (by the plugin),
+    # never per batch or household
+    assert sum(s["batches"] for s in states.values()) == 4
+    assert all(s["model_loads"] == 1 for s in states.values())
+
+
+def test_a_household_matches_impctl_fit_on_the_same_file(fleet_run, fleet_dir, models,
+                                                         tmp_path):
+    out, _ = fleet_run
+    done = run_cli("fit", "--nights", str(fleet_dir / "house-a.csv"), "--model-dir",
+                   str(models), "--json", str(tmp_path / "fit.json"))
+    assert done.returncode == 0, done.stderr
+    fit = json.loads((tmp_path / "fit.json").read_text())
+    row = pd.read_parquet(out / "FLEET.parquet").set_index("household").loc["house-a"]
+    for key, col in (("hlc", "hlc_w_per_k"), ("c_m", "c_m_j_per_k"), ("tau", "tau_h")):
+        assert row[col] == pytest.approx(fit["lumped"][key]["value"], rel=1e-4)
+        assert row[f"{col}_low"] == pytest.approx(fit["lumped"][key]["low"], rel=1e-3)
+        assert row[f"{col}_high"] == pytest.approx(fit["lumped"][key]["high"], rel=1e-3)
+    flex = fit["flexibility"]
+    assert {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh"} <= set(flex)
+    assert row["coast_h"] == pytest.approx(flex["coast_h"], rel=1e-3)
+    assert row["rebound_kwh"] == pytest.approx(flex["rebound_kwh"], rel=1e-3)
+    # impctl flex reads both the fit JSON and the fleet row, and agrees with them
+    by_json = run_cli("flex", str(tmp_path / "fit.json"), "--json")
+    by_row = run_cli("flex", str(out / "FLEET.parquet"), "--household", "house-a", "--json")
+    assert by_json.returncode == 0 and by_row.returncode == 0, by_json.stderr + by_row.stderr
+    a = json.loads(by_json.stdout)["fit"]
+    b = json.loads(by_row.stdout)["house-a"]
+    assert a["coast_h"] == pytest.approx(b["coast_h"], rel=1e-3) and a["coast_h"] > 0
+    colder = json.loads(run_cli("flex", str(tmp_path / "fit.json"), "--json", "--t-out",
+                                "-10").stdout)["fit"]
+    assert colder["coast_h"] < a["coast_h"]
+    bad = run_cli("flex", str(out / "FLEET.parquet"), "--household", "no-cooling")
+    assert bad.returncode == 2 and "has no fit" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_report_shows_distributions_and_failures(fleet_run):
+    out, _ = fleet_run
+    page = (out / "report" / "fleet_report.html").read_text()
+    assert "Failures by reason" in page and "broken" in page and "unreadable input" in page
+    assert "needing more nights" in page and "no-cooling" in page
+    assert page.count("<img") == 2
+    for png in ("fig_fleet_distributions.png", "fig_fleet_intervals.png"):
+        assert (out / "report" / png).stat().st_size > 5000
+
+
+def test_resume_refits_only_what_is_missing(fleet_run, fleet_dir, models, scheduler):
+    out, _ = fleet_run
+    target = out / "FLEET.parquet"
+    again = run_cli("fleet", "fit", str(fleet_dir), "--out", str(target), "--scheduler",
+                    scheduler, "--model-dir", str(models))
+    assert again.returncode == 2 and "--resume" in again.stderr  # nothing overwritten
+    parts = sorted(target.glob("part-*.parquet"))
+    assert len(parts) == 4
+    holding_a = next(p for p in parts if "house-a" in set(pd.read_parquet(p)["household"]))
+    holding_a.unlink()  # as if the run had been interrupted before this batch
+    resumed = run_cli("fleet", "fit", str(fleet_dir), "--out", str(target), "--scheduler",
+                      scheduler, "--model-dir", str(models), "--resume", "--batch-size", "2")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "1 fitted now (1 ok" in resumed.stdout and "3 already in" in resumed.stdout
+    fleet = pd.read_parquet(target)
+    assert sorted(fleet["household"]) == ["broken", "house-a", "house-b", "no-cooling"]
+    nothing = run_cli("fleet", "fit", str(fleet_dir), "--out", str(target), "--scheduler",
+                      scheduler, "--model-dir", str(models), "--resume")
+    assert nothing.returncode == 0 and "0 fitted now" in nothing.stdout
+
+
+def test_local_cluster_on_a_parquet_dataset(tmp_path, nights, monkeypatch):
+    from impctl.fleet import fit_fleet, read_fleet
+
+    monkeypatch.setenv("IMPCTL_MODEL_DIR", str(tmp_path / "no-models"))  # → prior ranges
+    frame = _frame(nights[1])
+    frame["household"] = "only"
+    frame.to_parquet(tmp_path / "all.parquet")
+    run = fit_fleet(tmp_path / "all.parquet", tmp_path / "F.parquet", workers=1,
+                    model_dir=None, progress=False, echo=lambda _: None)
+    assert run.counts == {"ok": 1, "insufficient": 0, "error": 0} and run.workers == 1
+    row = read_fleet(tmp_path / "F.parquet").iloc[0]
+    assert row["household"] == "only" and row["status"] == "ok"
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path, fleet_dir):
+    missing = run_cli("fleet", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "F"))
+    assert missing.returncode == 2 and "no such file" in missing.stderr
+    bad_models = run_cli("fleet", "fit", str(fleet_dir), "--out", str(tmp_path / "F"),
+                         "--model-dir", str(tmp_path))
+    assert bad_models.returncode == 2 and "no trained models" in bad_models.stderr
+    assert not (tmp_path / "F").exists()
