@@ -44,7 +44,7 @@ class ScreenResult:
     owner_low_c: np.ndarray        # lowest T_air over 12 h of the owner's own heating [°C]
     undershoot_k: np.ndarray       # min(T_min, owner_low) − lowest (≤ 0: never below) [K]
     drop_after_restore_k: np.ndarray  # air at the restore − lowest after it [K]
-    early_defrost: np.ndarray      # a defrost within 35 min of the restart (a real unit first defrosts after ≥ 35 min of run)
+    early_defrost: np.ndarray      # a defrost within 35 min of the restart
 
 
 def night_realism(realism: PlantParams) -> PlantParams:

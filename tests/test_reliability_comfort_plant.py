@@ -6,7 +6,8 @@ underfloor, weather curve and room thermostat, inverter and on/off units, anti-s
 timers, defrost, furniture, a room sensor with a lag of up to 15 min, 0.1 or 0.5 K resolution,
 noise and a placement offset), night gains, and a constant cold night between +5 °C and the
 coldest the house's own heat pump can hold T_max at (≥ −15 °C): colder than that the owner's
-heating falls behind by itself (sizing below the design load). The owner's 21 °C, ΔT 1.5 K, 60 s sampling.
+heating falls behind by itself (sizing below the design load). The owner's 21 °C, ΔT 1.5 K,
+60 s sampling.
 
 The promise (see ``comfort_screen``): T_air stays above the floor, T_min − 0.3 K, or 0.3 K
 below the lowest the owner's own heating lets the room go if that is lower (an on/off unit with
