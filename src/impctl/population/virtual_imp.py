@@ -343,6 +343,17 @@ def simulate_imp(
     feats = features_from_arrays(time_s, t_air, te, q_obs, constrained=cons, setpoint_c=sp_night,
                                  valid=valid, emission_lag_h=cfg.emitter_lag_h)
 
+    return night_result(pick, cand, plans, n, days, sp_night, duration_s, feats,
+                        (time_s, t_air, te, q_obs, valid) if keep_samples else None)
+
+
+def night_result(pick: np.ndarray, cand: pd.DataFrame, plans, n: int, days: int,
+                 sp_night: np.ndarray, duration_s: np.ndarray, feats: dict,
+                 samples: tuple | None) -> ImpResult:
+    """One table row per household, day and planned night (the features next to where and
+    when each night ran: ``setpoint_c`` [°C], ``duration_h`` [h]); ``samples`` = (time_s,
+    t_air, t_out, q_obs, valid) to keep the series, or None. Shared by both plants."""
+    n_p = len(plans)
     night_rows = pick.reshape(-1).repeat(n_p)
     table = pd.DataFrame({
         "household": np.repeat(np.arange(n), days * n_p),
@@ -354,6 +365,4 @@ def simulate_imp(
         "duration_h": np.repeat(duration_s, n_p) / 3600.0,
         **feats,
     })
-    if not keep_samples:
-        return ImpResult(table)
-    return ImpResult(table, time_s, t_air, te, q_obs, valid)
+    return ImpResult(table) if samples is None else ImpResult(table, *samples)

@@ -42,6 +42,7 @@ from .virtual_imp import (
     _epoch_s,
     _repeat,
     default_weather,
+    night_result,
     usable_nights,
 )
 
@@ -188,17 +189,5 @@ def simulate_imp_plant(
     feats = features_from_arrays(time_s, t_air, t_out, q_obs, constrained=cons,
                                  setpoint_c=sp_night, valid=valid,
                                  emission_lag_h=cfg.emitter_lag_h)
-    night_rows = pick.reshape(-1).repeat(n_p)
-    table = pd.DataFrame({
-        "household": np.repeat(np.arange(n), days * n_p),
-        "day": np.tile(np.repeat(np.arange(days), n_p), n),
-        "date": cand["date"].to_numpy()[night_rows],
-        "kind": np.tile([p.kind for p in plans], n * days),
-        "setpoint_c": sp_night,
-        "start": pd.DatetimeIndex(cand["start"])[night_rows],
-        "duration_h": np.repeat(duration_s, n_p) / 3600.0,
-        **feats,
-    })
-    if not keep_samples:
-        return ImpResult(table)
-    return ImpResult(table, time_s, t_air, t_out, q_obs, valid)
+    return night_result(pick, cand, plans, n, days, sp_night, duration_s, feats,
+                        (time_s, t_air, t_out, q_obs, valid) if keep_samples else None)
