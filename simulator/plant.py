@@ -90,7 +90,27 @@ class WeatherFeed:
         return float(np.interp(self._t[0] + offset, self._t, self._v))
 
 
-class Plant:
+class ControllerInputs:
+    """What the controller's registers set, read the same way by both plants: loop-1 mode
+    (2042), system on (2012), setpoint (2187) and its correction (2014)."""
+
+    system_on: bool
+    loop_mode: int
+    setpoint_c: float
+    correction_k: float
+
+    @property
+    def heating_enabled(self) -> bool:
+        """Loop 1 on (mode 1 or 2) and the system on."""
+        return bool(self.system_on) and self.loop_mode != 0
+
+    @property
+    def room_setpoint_c(self) -> float:
+        """Effective room setpoint: 2187 plus the 2014 correction [°C]."""
+        return self.setpoint_c + self.correction_k
+
+
+class Plant(ControllerInputs):
     """State and step of the simulated house + heat pump.
 
     Parameters
@@ -141,16 +161,6 @@ class Plant:
         self.e_el_kwh = 0.0
         self.hours_heating = 0.0
         self.hours_dhw = 0.0
-
-    @property
-    def heating_enabled(self) -> bool:
-        """Loop 1 on (mode 1 or 2) and the system on."""
-        return bool(self.system_on) and self.loop_mode != 0
-
-    @property
-    def room_setpoint_c(self) -> float:
-        """Effective room setpoint: 2187 plus the 2014 correction [°C]."""
-        return self.setpoint_c + self.correction_k
 
     @property
     def t_supply_c(self) -> float:

@@ -15,10 +15,10 @@ from impctl.model import HouseParameters
 from impctl.plant import OUTPUTS, periodic
 from impctl.plant import Plant as _Core
 
-from .plant import Plant, PlantParams, dhw_tank_c
+from .plant import ControllerInputs, Plant, PlantParams, dhw_tank_c
 
 
-class RealisticPlant:
+class RealisticPlant(ControllerInputs):
     """The realistic plant of :mod:`impctl.plant` behind the simulator's registers.
 
     Air and furniture capacity, a hydronic emitter (radiators or underfloor), a heat pump with a
@@ -77,16 +77,6 @@ class RealisticPlant:
         self._out = {name: getattr(self.core, name) for name in OUTPUTS}
 
     # -- inputs ----------------------------------------------------------------------------
-    @property
-    def heating_enabled(self) -> bool:
-        """Loop 1 on (mode 1 or 2) and the system on."""
-        return bool(self.system_on) and self.loop_mode != 0
-
-    @property
-    def room_setpoint_c(self) -> float:
-        """Effective room setpoint: 2187 plus the 2014 correction [°C]."""
-        return self.setpoint_c + self.correction_k
-
     @property
     def max_power_w(self) -> float:
         """Nominal thermal output of the heat pump [W]; setting it ≤ 1 W fails the
