@@ -188,3 +188,35 @@ def test_stop_signal_aborts_and_restores(tmp_path, how):
         assert night.ended < req.window_start + timedelta(hours=1)
         await rig.owner_state_back()
     _rig(tmp_path, body)
+
+
+def test_a_cancellation_swallowed_by_a_library_still_ends_the_night(tmp_path):
+    """Python 3.11's ``wait_for`` (used inside pymodbus) can swallow a cancellation that lands
+    as its response arrives (CPython gh-86296). Reproduced by a poll that, once the heating is
+    off, is cancelled and swallows it: the controller still sees the request counted on its
+    task, aborts and restores."""
+    async def body(rig: Rig):
+        req = rig.request("constrained")
+        real_snapshot = rig.ctl.client.snapshot
+        swallowed = []
+
+        async def swallowing_snapshot():
+            if not swallowed and rig.sim.plant.loop_mode == 0:
+                asyncio.current_task().cancel()
+                try:
+                    await asyncio.sleep(0)
+                except asyncio.CancelledError:
+                    swallowed.append(True)  # the library's bug: carries on as if answered
+            return await real_snapshot()
+
+        rig.ctl.client.snapshot = swallowing_snapshot
+        task = asyncio.create_task(rig.ctl.run(req))
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        assert swallowed
+        night = rig.store.nights()[-1]
+        assert night.reasons[0] == "stopped (cancelled)"
+        assert night.state == "aborted" and night.valid is False
+        assert night.ended < req.window_start + timedelta(hours=1)
+        await rig.owner_state_back()
+    _rig(tmp_path, body)

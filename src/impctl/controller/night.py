@@ -166,6 +166,12 @@ class NightController:
             finally:
                 for w in waits:
                     w.cancel()
+        # Python 3.11's wait_for (here and inside pymodbus) can swallow a cancellation that
+        # arrives as its inner future completes (CPython gh-86296); the request is still
+        # counted on the task, so honour it here, where every loop of the night passes.
+        task = asyncio.current_task()
+        if task is not None and task.cancelling():
+            raise asyncio.CancelledError("night cancelled")
 
     # -- the night ---------------------------------------------------------------------------
     async def run(self, req: NightRequest) -> Night:
