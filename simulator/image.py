@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from impctl.heatpump.decode import to_word
 from impctl.heatpump.registers import REGISTERS, Access, Generation, Kind
+from impctl.modbus import to_word
 
 from .realistic import PlantLike
 

@@ -301,7 +301,7 @@ def test_fuzzed_configs_are_refused_cleanly_or_usable(values):
     from impctl.daemon.schedule import act_trigger, campaign_plan, next_act_time
     from impctl.daemon.service import clock_from_config, policy_from_config
     from impctl.heatpump import WriteBudget
-    from impctl.heatpump.link import ModbusLink
+    from impctl.modbus import ModbusLink
 
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -612,8 +612,8 @@ def test_sentinel_and_out_of_range_words_never_reach_the_store_as_temperatures(l
     stored as a sample: the stored value is missing (None) or a plausible temperature
     (−60…150 °C) that the word really encodes — never −60.0 from −600, −40.0 from −400, 0.0
     from an absent thermostat, or 3276.7 from a garbage word."""
-    from impctl.controller.night import sample_from_snapshot
-    from impctl.heatpump.decode import to_int16
+    from impctl.controller import sample_from_snapshot
+    from impctl.modbus import to_int16
     from impctl.store import Sample
 
 
