@@ -378,14 +378,3 @@ class NightController:
             self._trend.append((now.timestamp(), t_air))
             return anticipated_end(self._trend, self.policy, req.t_min_c)
         return None
-
-    @staticmethod
-    def _status_line(night_id: int, req: NightRequest, snap: Snapshot | None) -> str:
-        if snap is None:
-            return f"night {night_id} ({req.kind}): link lost"
-        t_air = snap.t_air_c.value
-        q = snap.q_hc_w.value
-        return (f"night {night_id} ({req.kind} {req.setpoint_c:g} °C) "
-                f"{snap.timestamp:%Y-%m-%d %H:%M}Z T_air "
-                f"{'—' if t_air is None else f'{t_air:.1f}'} °C, Q_HC "
-                f"{'—' if q is None else f'{q:.0f}'} W")
