@@ -8,14 +8,14 @@ Public surface::
     ModbusLink(config)        connect / read / write / settle / reset, with reconnects
     LinkConfig                TCP gateway or RTU line, timeouts, retries, attribution knobs
     LinkStats                 counters of one link
-    to_int16, to_word, uint32 register-word encodings
+    to_int16, to_word, uint32, uint32_words   register-word encodings
     errors: ModbusError, ModbusLinkError, ModbusDeviceError, TRANSIENT_EXCEPTIONS
 """
 
 from .config import LinkConfig
 from .errors import TRANSIENT_EXCEPTIONS, ModbusDeviceError, ModbusError, ModbusLinkError
 from .link import LinkStats, ModbusLink
-from .words import to_int16, to_word, uint32
+from .words import to_int16, to_word, uint32, uint32_words
 
 __all__ = [
     "TRANSIENT_EXCEPTIONS",
@@ -28,4 +28,5 @@ __all__ = [
     "to_int16",
     "to_word",
     "uint32",
+    "uint32_words",
 ]

@@ -23,3 +23,11 @@ def uint32(words: Sequence[int]) -> int:
     """Two register words, high word first (lower address), as an unsigned 32-bit integer."""
     high, low = words
     return (high << 16) | low
+
+
+def uint32_words(value: int) -> list[int]:
+    """An unsigned 32-bit integer as two register words, high word first (inverse of
+    :func:`uint32`)."""
+    if not 0 <= value <= 0xFFFFFFFF:
+        raise ValueError(f"{value} does not fit an unsigned 32-bit register pair")
+    return [value >> 16, value & 0xFFFF]
