@@ -12,7 +12,7 @@ from typing import Any, Literal
 from ..errors import InputError
 
 Transport = Literal["tcp", "rtu"]
-#: Baud rates accepted for RTU (heat-pump controllers use 19200 or 115200).
+#: Baud rates accepted for RTU; Kronoterm controllers use 19200 (TT3000, WPG) or 115200 (KSM).
 BAUD_RATES = (9600, 19200, 38400, 57600, 115200)
 Problem = tuple[str, str]  # (key, what is wrong)
 
