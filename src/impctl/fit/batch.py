@@ -109,7 +109,8 @@ def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
 
 
 def _settings(p: _Problem) -> tuple:
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.max_iter, p.ctx.packed.timestamps,
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
+            p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
             p.ctx.packed.power_ok is None)
 
@@ -158,7 +159,7 @@ def _solve_group(group: list[_Problem]) -> None:
     packed = _merge_packed([p.ctx.packed for p in group])
     k = packed.grid_s.shape[1]
     first = group[0].ctx
-    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge)
+    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver)
     problem, night, groups = [], [], []
     p_off = n_off = g_off = 0
     for p in group:

@@ -72,13 +72,14 @@ class Context:
     ach_vent: float
     ach_infl: float
     ridge: float = 1e-2
+    solver: str = "exact"   # NightODE method: "exact" or "rk4" (torchdiffeq)
 
 
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
     """(model − measured) at the nodes, zero off the sample mask, (R, K), in data units."""
     params = to_physical(u, rows.box)[rows.problem]
     model = build_rows(ctx.packed, params, t_m0, rows.night, rows.row_type, rows.phi_w,
-                       rows.phi_in_w, ctx.ach_vent, ctx.ach_infl)
+                       rows.phi_in_w, ctx.ach_vent, ctx.ach_infl, ctx.solver)
     return torch.where(model.mask, model.predict() - model.measured, 0.0)
 
 

@@ -299,6 +299,7 @@ def build_rows(
     phi_in_w: torch.Tensor,
     ach_vent: float,
     ach_infl: float,
+    method: str = "exact",
 ) -> RowModel:
     """Rows for parameter sets ``params`` (R, 7) with initial mass temperatures ``t_m0_c`` (R,).
 
@@ -314,6 +315,7 @@ def build_rows(
         on the intervals (for the dynamics): zeros for eq. 6, the night mean for eq. 5 with the
         mean power, or the measured series (``q_w`` and ``q_in_w``); ignored for DEMAND rows
     ach_vent, ach_infl : fixed air changes [1/h]
+    method : the integration method of :class:`NightODE` ("exact" or "rk4")
     """
     net = network(params, ach_vent, ach_infl)
     te = packed.t_out_c[night_index]
@@ -374,6 +376,7 @@ def build_rows(
         torch.where(demand, a_dem, a_air),
         torch.where(dm, u0_dem, u0_air),
         torch.where(dm, u1_dem, u1_air),
+        method=method,
     )
     return RowModel(
         ode=ode,
