@@ -127,6 +127,34 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
                    (j_m * r0).sum(1), g_rows)
 
 
+def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
+    """The problems ``keep`` (bool, P) renumbered 0…: (rows, their problem ids, row ids)."""
+    pk = keep.nonzero()[:, 0]
+    rk = keep[rows.problem].nonzero()[:, 0]
+    remap = torch.full((rows.n_problems,), -1, dtype=torch.long)
+    remap[pk] = torch.arange(len(pk))
+    return (Rows(remap[rows.problem[rk]], rows.night[rk], rows.row_type[rk], rows.phi_w[rk],
+                 rows.phi_in_w[rk], rows.scale[rk], rows.box[pk], len(pk)), pk, rk)
+
+
+def _evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+              active: torch.Tensor, current: _Normal) -> _Normal:
+    """Normal equations at (u, t_m0) for the ``active`` problems; the others keep ``current``
+    (their step is never taken). Converged problems cost nothing any more: in a merged fleet
+    batch most problems are done long before the slowest one."""
+    if bool(active.all()):
+        return _normal_equations(ctx, rows, u, t_m0)
+    out = _Normal(current.loss.clone(), current.h.clone(), current.g.clone(), current.c.clone(),
+                  current.d.clone(), current.gm.clone())
+    if not bool(active.any()):
+        return out
+    sub, pk, rk = _take(rows, active)
+    new = _normal_equations(ctx, sub, u[pk], t_m0[rk])
+    out.loss[pk], out.h[pk], out.g[pk] = new.loss, new.h, new.g
+    out.c[rk], out.d[rk], out.gm[rk] = new.c, new.d, new.gm
+    return out
+
+
 def schur(ne: _Normal, rows: Rows, lam: torch.Tensor | None = None):
     """The θ system with θ_m,0 eliminated: (S, b, d̃); undamped when ``lam`` is None."""
     h, d = ne.h, ne.d
@@ -149,15 +177,21 @@ def _predicted_decrease(ne: _Normal, rows: Rows, step: torch.Tensor, step_m: tor
     return -(2.0 * lin + quad)
 
 
-def _best_done(loss: torch.Tensor, done: torch.Tensor, groups: torch.Tensor) -> bool:
+def _best_done(loss: torch.Tensor, done: torch.Tensor, groups: torch.Tensor) -> torch.Tensor:
+    """(G,) bool: the group has a done problem among its lowest-loss ones."""
     n_groups = int(groups.max()) + 1
     best = torch.full((n_groups,), float("inf"), dtype=loss.dtype).scatter_reduce(
         0, groups, loss, reduce="amin")
     is_best = loss == best[groups]
-    # every group has a done problem among its lowest-loss ones
-    ok = torch.zeros(n_groups, dtype=torch.bool).index_put_((groups[is_best & done],),
-                                                            torch.tensor(True))
-    return bool(ok.all())
+    return torch.zeros(n_groups, dtype=torch.bool).index_put_((groups[is_best & done],),
+                                                              torch.tensor(True))
+
+
+def _units_done(group_done: torch.Tensor, units: torch.Tensor) -> torch.Tensor:
+    """(U,) bool: every group of the unit is done (``units`` (G,) labels each group)."""
+    n_units = int(units.max()) + 1
+    return torch.ones(n_units, dtype=torch.bool).index_put_((units[~group_done],),
+                                                            torch.tensor(False))
 
 
 @dataclass
@@ -170,11 +204,12 @@ class LMResult:
     n_iter: int
     converged: torch.Tensor    # (P,) bool
     history: list[float] = field(default_factory=list)
+    iterations: torch.Tensor | None = None  # (P,) iterations each problem took part in
 
 
 def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *,
-                        groups: torch.Tensor | None = None, max_iter: int = 60,
-                        atol: float = 1e-2) -> LMResult:
+                        groups: torch.Tensor | None = None, units: torch.Tensor | None = None,
+                        max_iter: int = 60, atol: float = 1e-2) -> LMResult:
     """Minimise every problem's loss at once (see the module docstring).
 
     A problem is done when an accepted step lowers its loss by less than ``atol``, or when a
@@ -185,6 +220,10 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
     ``groups`` (P,) labels problems that are starts of the same fit: the iterations stop once, in
     every group, the start with the lowest loss is done (the others could only tie or lose
     unless they overtake it later, which is rare: then "keep the best" keeps this one).
+
+    ``units`` (G,) labels groups that belong to one independent fit (a household of a merged
+    fleet batch): a unit whose groups are all done stops there, exactly where it would stop
+    alone, while the others go on. Done and stopped problems are not evaluated any more.
     """
     with torch.no_grad():
         u, t_m0 = u.clone(), t_m0.clone()
@@ -196,6 +235,8 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
         lam = torch.full((n_prob,), 1e-3, dtype=DTYPE)
         nu = torch.full((n_prob,), 2.0, dtype=DTYPE)
         done = torch.zeros(n_prob, dtype=torch.bool)
+        stopped = torch.zeros(n_prob, dtype=torch.bool)
+        iterations = torch.zeros(n_prob, dtype=torch.long)
         history = [float(ne.loss.sum())]
         n_iter = 0
         for n_iter in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
@@ -207,12 +248,13 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
             step = (u + step).clamp(-_U_LIMIT, _U_LIMIT) - u
             step_m = -(ne.gm + (ne.c * step[rows.problem]).sum(1)) / d
             pred = _predicted_decrease(ne, rows, step, step_m)
-            trial = _normal_equations(ctx, rows, u + step, t_m0 + step_m)
+            trial = _evaluate(ctx, rows, u + step, t_m0 + step_m, ~done & ~stopped, ne)
             actual = ne.loss - trial.loss
-            ok = torch.isfinite(trial.loss) & (actual > 0) & ~done
+            ok = torch.isfinite(trial.loss) & (actual > 0) & ~done & ~stopped
             # Converged: an accepted step gained < atol, or a nearly undamped Gauss–Newton step
             # predicts < atol (then a "rejection" is only rounding), or nothing helps any more.
-            done = done | (ok & (actual < atol)) | ((pred < atol) & (lam < 1.0)) | (lam > 1e8)
+            done = done | (~stopped & ((ok & (actual < atol)) | ((pred < atol) & (lam < 1.0))
+                                       | (lam > 1e8)))
             row_ok = ok[rows.problem]
             u = torch.where(ok[:, None], u + step, u)
             t_m0 = torch.where(row_ok, t_m0 + step_m, t_m0)
@@ -227,15 +269,23 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
             # Nielsen's damping update from the gain ratio actual/predicted decrease.
             rho = (actual / pred.clamp_min(1e-300)).clamp(0.0, 1.0)
             shrink = torch.clamp(1.0 - (2.0 * rho - 1.0) ** 3, min=1.0 / 3.0)
-            lam = torch.where(ok, (lam * shrink).clamp_min(1e-9), lam * nu)
-            nu = torch.where(ok, torch.full_like(nu, 2.0), nu * 2.0)
+            lam = torch.where(ok, (lam * shrink).clamp_min(1e-9), torch.where(stopped, lam,
+                                                                              lam * nu))
+            nu = torch.where(ok, torch.full_like(nu, 2.0), torch.where(stopped, nu, nu * 2.0))
+            iterations = torch.where(stopped, iterations, n_iter)
             history.append(float(ne.loss.sum()))
-            if bool(done.all()) or (groups is not None and _best_done(ne.loss, done, groups)):
+            if bool(done.all()):
                 break
+            if groups is not None:
+                group_done = _best_done(ne.loss, done, groups)
+                if bool(group_done.all()):
+                    break
+                if units is not None:
+                    stopped = _units_done(group_done, units)[units[groups]]
         s, _, _ = schur(ne, rows)
         cov = torch.linalg.pinv(s, hermitian=True)
         fisher = s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE)
-    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history)
+    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history, iterations)
 
 
 def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_iter: int = 300,
