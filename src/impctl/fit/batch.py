@@ -31,6 +31,7 @@ import torch
 
 from ..imp.night import NightSamples
 from . import lm
+from ._alloc import retain_freed_memory
 from .estimator import NightFit
 from .node import PackedNights
 
@@ -252,6 +253,7 @@ def fit_households(
             est._rendezvous = None
             rendezvous.finished()
 
+    retain_freed_memory()
     threads_before = torch.get_num_threads()
     torch.set_num_threads(1)  # NightFit.fit saves and restores this per thread; keep it fixed
     workers = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(nights))]
