@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .node import DTYPE, PackedNights, build_rows, to_physical
+from .node import DTYPE, ROW_DEMAND, PackedNights, build_rows, to_physical
 
 N_PARAMS = 7
 _H_U = 1e-6     # forward-difference step in u
@@ -78,8 +78,18 @@ class Context:
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
     """(model − measured) at the nodes, zero off the sample mask, (R, K), in data units."""
     params = to_physical(u, rows.box)[rows.problem]
-    model = build_rows(ctx.packed, params, t_m0, rows.night, rows.row_type, rows.phi_w,
-                       rows.phi_in_w, ctx.ach_vent, ctx.ach_infl, ctx.solver)
+    demand = rows.row_type == ROW_DEMAND
+    if bool(demand.all()) or not bool(demand.any()):
+        return _raw(ctx, rows, params, t_m0, slice(None))
+    # Each row type on its own rows: build_rows then skips the other type's arithmetic.
+    idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
+    out = torch.cat([_raw(ctx, rows, params, t_m0, i) for i in idx])
+    return out[torch.argsort(torch.cat(idx))]
+
+
+def _raw(ctx: Context, rows: Rows, params: torch.Tensor, t_m0: torch.Tensor, i) -> torch.Tensor:
+    model = build_rows(ctx.packed, params[i], t_m0[i], rows.night[i], rows.row_type[i],
+                       rows.phi_w[i], rows.phi_in_w[i], ctx.ach_vent, ctx.ach_infl, ctx.solver)
     return torch.where(model.mask, model.predict() - model.measured, 0.0)
 
 
