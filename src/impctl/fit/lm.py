@@ -188,13 +188,15 @@ def _predicted_decrease(ne: _Normal, rows: Rows, step: torch.Tensor, step_m: tor
 
 
 def _best_done(loss: torch.Tensor, done: torch.Tensor, groups: torch.Tensor) -> torch.Tensor:
-    """(G,) bool: the group has a done problem among its lowest-loss ones."""
+    """(G,) bool: the group has a done problem among its lowest-loss ones, or no problem (a
+    label left unused, e.g. the prior-box group of a fit without class ranges: it must not keep
+    the others iterating to ``max_iter``)."""
     n_groups = int(groups.max()) + 1
     best = torch.full((n_groups,), float("inf"), dtype=loss.dtype).scatter_reduce(
         0, groups, loss, reduce="amin")
     is_best = loss == best[groups]
-    return torch.zeros(n_groups, dtype=torch.bool).index_put_((groups[is_best & done],),
-                                                              torch.tensor(True))
+    empty = torch.bincount(groups, minlength=n_groups) == 0
+    return empty.index_put_((groups[is_best & done],), torch.tensor(True))
 
 
 def _units_done(group_done: torch.Tensor, units: torch.Tensor) -> torch.Tensor:
