@@ -50,13 +50,27 @@ class Rows:
 
     def repeat(self, copies: int) -> Rows:
         p = self.n_problems
+
+        def rep(x):  # an expanded (zero-stride) input stays one row in memory
+            return (x[:1].expand(copies * len(x), -1) if x.stride(0) == 0 and len(x)
+                    else x.repeat(copies, 1))
+
         return Rows(
             problem=torch.cat([self.problem + c * p for c in range(copies)]),
             night=self.night.repeat(copies), row_type=self.row_type.repeat(copies),
-            phi_w=self.phi_w.repeat(copies, 1), phi_in_w=self.phi_in_w.repeat(copies, 1),
+            phi_w=rep(self.phi_w), phi_in_w=rep(self.phi_in_w),
             scale=self.scale.repeat(copies), box=self.box.repeat(copies, 1, 1),
             n_problems=p * copies,
         )
+
+    def at(self, idx: torch.Tensor, phi: bool = True) -> Rows:
+        """The rows ``idx`` (problems keep their numbers); ``phi=False`` for rows that do not
+        read Φ_HC (DEMAND rows): their heat-input columns become one expanded zero row."""
+        def take(x):
+            return x[idx] if phi else x.new_zeros(1, x.shape[1]).expand(len(idx), -1)
+
+        return Rows(self.problem[idx], self.night[idx], self.row_type[idx], take(self.phi_w),
+                    take(self.phi_in_w), self.scale[idx], self.box, self.n_problems)
 
     def subset(self, sel: torch.Tensor) -> Rows:
         """The rows ``sel`` (bool, R) of one problem, renumbered as problem 0."""
@@ -117,6 +131,27 @@ class _Normal:
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
+    demand = rows.row_type == ROW_DEMAND
+    if bool(demand.all()) or not bool(demand.any()):
+        terms = _row_terms(ctx, rows, u, t_m0)
+    else:
+        # Each row type on its own (build_rows skips the other type's arithmetic), split
+        # once here rather than in every one of the Jacobian's copies.
+        idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
+        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i])
+                 for j, i in enumerate(idx)]
+        order = torch.argsort(torch.cat(idx))
+        terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
+    loss_rows, jtj, g_rows, c, d, gm = terms
+    ridge = ctx.ridge
+    loss = _sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
+    h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
+    g = _sum_rows(g_rows, rows) + ridge * u
+    return _Normal(loss, h, g, c, d, gm, g_rows)
+
+
+def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
+    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call)."""
     n_rows = len(t_m0)
     N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
@@ -127,14 +162,9 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
     j_theta = ((r_all[n_rows:(N_PARAMS + 1) * n_rows].view(N_PARAMS, n_rows, -1) - r0) / _H_U
                ).permute(1, 2, 0)                                   # (R, K, 7)
     j_m = (r_all[(N_PARAMS + 1) * n_rows:] - r0) / _H_M             # (R, K)
-    ridge = ctx.ridge
-    loss = _sum_rows((r0 ** 2).sum(1), rows) + ridge * (u ** 2).sum(1)
-    h = _sum_rows(torch.einsum("rki,rkj->rij", j_theta, j_theta), rows)
-    h = h + ridge * torch.eye(N_PARAMS, dtype=DTYPE)
-    g_rows = torch.einsum("rki,rk->ri", j_theta, r0)
-    g = _sum_rows(g_rows, rows) + ridge * u
-    return _Normal(loss, h, g, torch.einsum("rki,rk->ri", j_theta, j_m), (j_m ** 2).sum(1),
-                   (j_m * r0).sum(1), g_rows)
+    return ((r0 ** 2).sum(1), torch.einsum("rki,rkj->rij", j_theta, j_theta),
+            torch.einsum("rki,rk->ri", j_theta, r0), torch.einsum("rki,rk->ri", j_theta, j_m),
+            (j_m ** 2).sum(1), (j_m * r0).sum(1))
 
 
 def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
