@@ -63,6 +63,21 @@ class Rows:
             n_problems=p * copies,
         )
 
+    def copies(self, sel: list[torch.Tensor]) -> Rows:
+        """Copy c of the problems holds the rows ``sel[c]``, as problems c·P…c·P + P − 1
+        (:meth:`repeat` when every ``sel[c]`` is all rows)."""
+        p = self.n_problems
+
+        def cat(x):  # an expanded (zero-stride) input stays one row in memory
+            if x.stride(0) == 0 and len(x):
+                return x[:1].expand(sum(len(s) for s in sel), -1)
+            return torch.cat([x[s] for s in sel])
+
+        return Rows(torch.cat([self.problem[s] + c * p for c, s in enumerate(sel)]),
+                    cat(self.night[:, None])[:, 0], cat(self.row_type[:, None])[:, 0],
+                    cat(self.phi_w), cat(self.phi_in_w), cat(self.scale[:, None])[:, 0],
+                    self.box.repeat(len(sel), 1, 1), p * len(sel))
+
     def at(self, idx: torch.Tensor, phi: bool = True) -> Rows:
         """The rows ``idx`` (problems keep their numbers); ``phi=False`` for rows that do not
         read Φ_HC (DEMAND rows): their heat-input columns become one expanded zero row."""
@@ -156,12 +171,21 @@ def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
     N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
     u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
-    m_all = torch.cat([t_m0] * (N_PARAMS + 1) + [t_m0 + _H_M])
-    r_all = residuals(ctx, rows.repeat(N_PARAMS + 2), u_all, m_all)
+    # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
+    # column: its copy is left out for those rows (the simple and per-night problems).
+    live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
+    everyone = torch.arange(n_rows)
+    sel = ([everyone] + [everyone if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
+                         for j in range(N_PARAMS)] + [everyone])
+    m_all = torch.cat([t_m0[s] for s in sel[:-1]] + [t_m0 + _H_M])
+    r_all = residuals(ctx, rows.copies(sel), u_all, m_all)
     r0 = r_all[:n_rows]
-    j_theta = ((r_all[n_rows:(N_PARAMS + 1) * n_rows].view(N_PARAMS, n_rows, -1) - r0) / _H_U
-               ).permute(1, 2, 0)                                   # (R, K, 7)
-    j_m = (r_all[(N_PARAMS + 1) * n_rows:] - r0) / _H_M             # (R, K)
+    ends = torch.tensor([len(s) for s in sel]).cumsum(0).tolist()
+    j_theta = torch.zeros(n_rows, r0.shape[1], N_PARAMS, dtype=DTYPE)  # (R, K, 7)
+    for j in range(N_PARAMS):
+        s, part = sel[j + 1], r_all[ends[j]:ends[j + 1]]
+        j_theta[s, :, j] = (part - r0[s]) / _H_U
+    j_m = (r_all[ends[-2]:] - r0) / _H_M                                 # (R, K)
     return ((r0 ** 2).sum(1), torch.einsum("rki,rkj->rij", j_theta, j_theta),
             torch.einsum("rki,rk->ri", j_theta, r0), torch.einsum("rki,rk->ri", j_theta, j_m),
             (j_m ** 2).sum(1), (j_m * r0).sum(1))
