@@ -78,7 +78,7 @@ def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progr
     params = sample_params(n, SEED) if plant == "realistic" else None
     nights, first_t_out = [], []
     forecast = None
-    for v, (kind, sp) in enumerate(VARIANTS):
+    for kind, sp in VARIANTS:
         sched = imp_schedule(n, n_constrained=k if kind == "constrained" else 0,
                              n_normal=0 if kind == "constrained" else k, setpoints_c=(sp,),
                              seed=SEED)
