@@ -43,7 +43,7 @@ def state_dir_problem(state_dir: str | Path) -> str | None:
 
 def _tonight(cfg, store) -> list[str]:
     """What the next night would do, as lines for people."""
-    from ..daemon.schedule import next_act_time, peek_next_night
+    from ..daemon.schedule import next_act_time, peek_next_night, why_no_night
     from ..daemon.service import clock_from_config
 
     tz = ZoneInfo(cfg.timezone)
@@ -51,8 +51,7 @@ def _tonight(cfg, store) -> list[str]:
     req, request_id = peek_next_night(store, cfg, act)
     if req is None:
         return [f"nothing at the next night ({act.astimezone(tz):%Y-%m-%d}): "
-                + ("campaign complete" if cfg.campaign.enabled else "campaign disabled and "
-                   "no manual request")]
+                + why_no_night(store, cfg)]
     n = cfg.night
     origin = f"manual request {request_id}" if request_id is not None else "the campaign"
     start, end = req.window_start.astimezone(tz), req.window_end.astimezone(tz)
@@ -145,3 +144,12 @@ class _NoStore:
 
     def campaign(self) -> list:
         return []
+
+    def nights(self, **_filters) -> list:  # the adaptive campaign's history: none yet
+        return []
+
+    def fits(self) -> list:
+        return []
+
+    def night_t_out_means(self) -> dict:
+        return {}
