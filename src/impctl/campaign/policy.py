@@ -224,7 +224,8 @@ def parse_candidates(block: dict) -> list[Candidate]:
     """The candidates of the JSON written by ``impctl campaign next``.
 
     ``{"forecast_t_out_c": x, "candidates": [{"kind", "setpoint_c", "hlc_rel_pred",
-    "tau_rel_pred"}, ...]}``; raises ValueError naming the entry and the problem.
+    "tau_rel_pred"}, ...]}``; a null prediction becomes inf (never chosen); raises ValueError
+    naming the entry and the problem.
     """
     if not isinstance(block, dict) or not isinstance(block.get("candidates"), list):
         raise ValueError("campaign JSON has no 'candidates' list")
@@ -239,6 +240,8 @@ def parse_candidates(block: dict) -> list[Candidate]:
         values = []
         for key in ("setpoint_c", "hlc_rel_pred", "tau_rel_pred"):
             value = entry.get(key)
+            if value is None and key != "setpoint_c":
+                value = math.inf   # written as null: the prediction failed (never chosen)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"candidates[{i}].{key} must be a number, got {value!r}")
             values.append(float(value))
