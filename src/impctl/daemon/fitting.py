@@ -93,11 +93,15 @@ async def _predict(store: Store, cfg: Config, fit_id: int, base: list[str], fit_
         _LOG.warning("no outdoor reading: no prediction for the next night")
         return
     camp = cfg.campaign
+    start, end = cfg.window_minutes
+    window_h = ((end - start) % (24 * 60)) / 60
     cmd = [*base, "campaign", "next", "--fit", str(fit_json), "--nights", str(nights_csv),
            "--forecast-t-out-c", f"{fc.t_out_c:g}",
            "--constrained-setpoint-c", f"{camp.constrained_setpoint_c:g}",
            "--normal-setpoints-c", ",".join(f"{sp:g}" for sp in camp.normal_setpoints_c),
-           "--json", str(next_json)]
+           "--comfort-band-k", f"{cfg.night.comfort_band_k:g}",
+           "--preheat-h", f"{cfg.night.preheat_h:g}", "--window-h", f"{window_h:g}",
+           "--tz", cfg.timezone, "--json", str(next_json)]
     code, last = await _step(cmd)
     if code != 0:
         _LOG.error("campaign next failed (%d): %s; the next night follows the default order",

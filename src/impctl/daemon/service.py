@@ -219,8 +219,9 @@ class Daemon:
                               retry_s=1.0)
         if self.scheduler is not None and self.scheduler.running:
             self.scheduler.shutdown(wait=False)
-        if self._fit_task is not None:
+        if self._fit_task is not None:  # kill the fit subprocess and reap it
             self._fit_task.cancel()
+            await asyncio.gather(self._fit_task, return_exceptions=True)
         if self.mqtt is not None:  # MQTT hook: "offline" after the restore, before closing
             await self.mqtt.stop()
         if self.client is not None:
