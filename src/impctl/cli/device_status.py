@@ -83,7 +83,10 @@ def _campaign(store, cfg) -> dict:
            "target_rel_pct": {"hlc": 100 * camp.target_rel_halfwidth.hlc,
                               "tau": 100 * camp.target_rel_halfwidth.tau},
            "max_nights": camp.max_nights if st.mode == "adaptive" else None,
-           "last_decision": None}
+           "last_decision": None,
+           "decisions": [{"act": d.act, "action": d.action, "kind": d.kind,
+                          "setpoint_c": d.setpoint_c, "reason": d.reason}
+                         for d in reversed(store.decisions(50))]}
     d = st.decision
     if d is not None:
         out["last_decision"] = {"act": d.act, "action": d.action, "kind": d.kind,
