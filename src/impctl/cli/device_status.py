@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from zoneinfo import ZoneInfo
 
 
@@ -74,8 +75,8 @@ def _campaign(store, cfg) -> dict:
 
     st = campaign_state(store, cfg)
     camp = cfg.campaign
-    history = [{"valid_nights": f.nights, "hlc_w_per_k": f.hlc_w_per_k,
-                "hlc_rel_pct": rel_pct(f.hlc_rel), "tau_h": f.tau_h,
+    history = [{"valid_nights": f.nights, "hlc_w_per_k": _finite(f.hlc_w_per_k),
+                "hlc_rel_pct": rel_pct(f.hlc_rel), "tau_h": _finite(f.tau_h),
                 "tau_rel_pct": rel_pct(f.tau_rel)}
                for f in fit_history(store)]
     out = {"mode": st.mode, "nights_run": st.nights_run, "nights_valid": st.nights_valid,
@@ -98,6 +99,10 @@ def _campaign(store, cfg) -> dict:
         out["next_decision"] = {"action": decision.action, "reason": decision.reason,
                                 "forecast_t_out_c": fc.t_out_c, "forecast_source": fc.source}
     return out
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None  # JSON has no NaN: a missing value is null
 
 
 def _next_night(store, cfg) -> dict | None:
@@ -128,9 +133,13 @@ def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     for f in camp["intervals"]:
         def pct(v):
             return "undetermined" if v is None else f"±{v:.1f} %"
-        lines.append(f"  after {f['valid_nights']} valid nights: HLC {f['hlc_w_per_k']:.0f} W/K "
-                     f"{pct(f['hlc_rel_pct'])}, τ {f['tau_h']:.0f} h {pct(f['tau_rel_pct'])} "
-                     f"(target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)")
+
+        def val(v, unit):
+            return "—" if v is None else f"{v:.0f} {unit}"
+        lines.append(f"  after {f['valid_nights']} valid nights: "
+                     f"HLC {val(f['hlc_w_per_k'], 'W/K')} "
+                     f"{pct(f['hlc_rel_pct'])}, τ {val(f['tau_h'], 'h')} "
+                     f"{pct(f['tau_rel_pct'])} (target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)")
     d = camp.get("last_decision")
     if d is not None:
         when = "" if d["act"] is None else f" ({d['act'].astimezone(zone):%Y-%m-%d %H:%M})"
