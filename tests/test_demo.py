@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import subprocess
 import sys
@@ -98,6 +99,10 @@ def test_demo_adaptive_campaign(demo, tmp_path):
     assert camp["intervals"][-1]["valid_nights"] == summary["nights_valid"]
     assert camp["line"].startswith("Campaign: adaptive") and camp["line"] in proc.stdout
     assert "simulator loop-1 setpoint back at 21.0 °C, mode 1" in proc.stdout
+    # The report shows the campaign: the interval after each fit, every decision and why.
+    page = (out / "report.html").read_text()
+    assert "Campaign: how the intervals shrank" in page
+    assert html.escape(camp["decisions"][-1]["reason"]) in page
     # The result is the daemon's last fit, on every valid night.
     fit = json.loads((out / "fit.json").read_text())
     assert fit["lumped"]["hlc"]["value"] == pytest.approx(camp["intervals"][-1]["hlc_w_per_k"])
