@@ -10,10 +10,10 @@ Criterion (documented choice; README "Adaptive campaign"):
 * **What a night shows.** A constrained night (heating off after a pre-heat to T_set + ΔT)
   shows T_air from the end of the emission lag until it fell by the band 2ΔT or the window
   ends (counted from the end of the lag: the 5R1C air node drops at once at switch-off, a
-  real room does not); a normal night (T_set held) shows the heat power. Both are simulated with the fitted
-  5R1C (Annex C) at the nights' sample step: past nights on their measured T_out and T_air
-  (the fit JSON's ``predictions``, from the fitted θ_m,0), the candidate night on a constant
-  forecast T_out, after the house settled at the day setpoint.
+  real room does not); a normal night (T_set held) shows the heat power. Both are simulated
+  with the fitted 5R1C (Annex C) at the nights' sample step: past nights on their measured
+  T_out and T_air (the fit JSON's ``predictions``, from the fitted θ_m,0), the candidate on
+  a constant forecast T_out, after the house settled at the day setpoint.
 * **Information.** Finite-difference sensitivities J (one-sided, 1 %, 0.05 K) per sample,
   divided by the fit's residual σ of that group, inflated by (1 + ρ)/(1 − ρ) for the
   residuals' lag-1 autocorrelation ρ (an effective-sample-size correction, as in
