@@ -189,3 +189,13 @@ def test_mqtt_state_and_discovery_carry_the_campaign():
                        ("campaign_status", "campaign_status")):
         assert ents[key]["value_template"] == "{{ value_json." + field + " }}"
     assert ents["hlc_halfwidth"]["unit_of_measurement"] == "%"
+
+
+def test_report_figure_of_the_shrinking_intervals(tmp_path):
+    from impctl.report.figures import campaign_intervals
+
+    rows = [{"valid_nights": 2, "hlc_rel_pct": 12.0, "tau_rel_pct": None},
+            {"valid_nights": 3, "hlc_rel_pct": 6.5, "tau_rel_pct": 30.0},
+            {"valid_nights": 4, "hlc_rel_pct": 4.1, "tau_rel_pct": 7.2}]
+    path = campaign_intervals(rows, tmp_path / "fig_campaign.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
