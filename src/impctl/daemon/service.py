@@ -150,6 +150,8 @@ class Daemon:
                                       retry_s=2.0)
             if not self.stop.is_set():
                 self._start_scheduler()
+                if self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete:
+                    self._want_fit()  # a fit the last run did not finish (stopped mid-fit)
                 self._status(self._idle_status())
                 await self.stop.wait()
         finally:
