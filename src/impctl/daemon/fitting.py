@@ -20,6 +20,8 @@ from .config import Config
 
 _LOG = logging.getLogger("impctl.daemon")
 _KINDS = ("constrained", "normal")
+#: Niceness added to the fit's subprocesses.
+FIT_NICE = 10
 
 
 def fit_ready(store: Store) -> str | None:
@@ -61,7 +63,9 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
     work.mkdir(parents=True, exist_ok=True)
     nights_csv, out_json, next_json = work / "nights.csv", work / "fit.json", work / "next.json"
     ids = [n.id for n in store.nights(valid=True)]
-    base = [sys.executable, "-c", "from impctl.cli import main; main()"]
+    # Niced: the fit (torch, a core for seconds to minutes) never slows tonight's sampling.
+    base = [sys.executable, "-c", f"import os; os.nice({FIT_NICE}); "
+            "from impctl.cli import main; main()"]
     model_dir = cfg.model_dir or str(Path(cfg.state_dir) / "models")
     steps = [
         [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
