@@ -30,24 +30,26 @@ def _fit(hlc: tuple[float, float, float], tau: tuple[float, float, float]) -> di
 
 
 # -- configuration -------------------------------------------------------------------------------
-def test_adaptive_is_the_default_and_old_fixed_configs_keep_their_plan():
+def test_fixed_is_the_default_and_adaptive_is_opted_into():
     cfg = config_from_mapping(BASE)
     camp = cfg.campaign
+    # Fixed by default: on realistic houses the adaptive campaign did not beat it.
+    assert camp.mode == "fixed" and not camp.adaptive
+    assert campaign_plan(cfg) == [("constrained", 21.0)] * 2 + [
+        ("normal", 21.0), ("normal", 22.0), ("normal", 23.0)]
+    adaptive_cfg = config_from_mapping({**BASE, "campaign": {"mode": "adaptive"}})
+    camp = adaptive_cfg.campaign
     assert camp.adaptive and (camp.target_rel_halfwidth.hlc, camp.target_rel_halfwidth.tau) == (
         0.05, 0.08)
-    assert (camp.max_nights, camp.min_each_kind, camp.stall_nights) == (8, 1, 3)
-    assert campaign_plan(cfg) == []  # no fixed plan: the policy chooses night by night
-    # A config written before the adaptive campaign (a night count, no mode) stays fixed.
-    old = config_from_mapping({**BASE, "campaign": {"constrained_nights": 1,
-                                                    "normal_setpoints_c": [22.0]}})
-    assert old.campaign.mode == "fixed"
-    assert campaign_plan(old) == [("constrained", 21.0), ("normal", 22.0)]
-    # With the mode set, the counts only matter in "fixed".
+    # At most the fixed plan's five nights unless raised.
+    assert (camp.max_nights, camp.min_each_kind, camp.stall_nights) == (5, 1, 3)
+    assert campaign_plan(adaptive_cfg) == []  # no plan: the policy chooses night by night
+    # With mode = "adaptive" the fixed counts are not used.
     explicit = config_from_mapping({**BASE, "campaign": {
         "mode": "adaptive", "constrained_nights": 3,
-        "target_rel_halfwidth": {"hlc": 0.1, "tau": 0.2}, "max_nights": 5}})
+        "target_rel_halfwidth": {"hlc": 0.1, "tau": 0.2}, "max_nights": 7}})
     assert explicit.campaign.adaptive and campaign_plan(explicit) == []
-    assert adaptive.target(explicit).hlc_rel == 0.1 and adaptive.target(explicit).max_nights == 5
+    assert adaptive.target(explicit).hlc_rel == 0.1 and adaptive.target(explicit).max_nights == 7
 
 
 @pytest.mark.parametrize(("campaign", "line"), [
@@ -66,8 +68,9 @@ def test_adaptive_is_the_default_and_old_fixed_configs_keep_their_plan():
     ({"min_each_kind": 0}, "key 'campaign.min_each_kind': must be >= 1: a fit needs a night "
                            "of each kind"),
     ({"stall_nights": 0}, "key 'campaign.stall_nights': must be >= 1"),
-    ({"normal_setpoints_c": []}, "key 'campaign.normal_setpoints_c': the adaptive campaign "
-                                 "needs at least one normal setpoint to choose from"),
+    ({"mode": "adaptive", "normal_setpoints_c": []},
+     "key 'campaign.normal_setpoints_c': the adaptive campaign needs at least one normal "
+     "setpoint to choose from"),
 ])
 def test_bad_adaptive_keys_are_one_line_each(campaign, line):
     with pytest.raises(InputError) as info:
@@ -134,7 +137,8 @@ def _night(store: Store, kind: str, day: int, t_out_c: float | None, *, valid: b
 
 def test_forecast_history_and_the_recorded_decisions(tmp_path):
     cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
-        "target_rel_halfwidth": {"hlc": 0.05, "tau": 0.08}, "max_nights": 4}})
+        "mode": "adaptive", "target_rel_halfwidth": {"hlc": 0.05, "tau": 0.08},
+        "max_nights": 4}})
     with Store(cfg.db_path) as store:
         assert adaptive.forecast(store, cfg) == adaptive.Forecast(None, "no outdoor reading yet")
         # No night yet: the policy starts with a constrained night, and says so.

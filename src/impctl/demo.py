@@ -58,7 +58,7 @@ class DemoOptions:
     sample_interval_s: float = 300.0
     plant: str = "realistic"
     adaptive: bool = False  # the adaptive campaign (issue 18) instead of the fixed counts
-    max_nights: int = 8  # adaptive: nights run at most
+    max_nights: int = 5  # adaptive: nights run at most
     target_rel: tuple[float, float] = (0.05, 0.08)  # adaptive: HLC, τ 95 % half-width / estimate
 
 

@@ -30,7 +30,7 @@ def _nights(text: str) -> tuple[int, int]:
               help="The adaptive campaign instead: a fit after every night, the next night "
                    "chosen by expected information, a stop at the target (--target) or at "
                    "--max-nights.")
-@click.option("--max-nights", type=click.IntRange(2, 30), default=8, show_default=True,
+@click.option("--max-nights", type=click.IntRange(2, 30), default=5, show_default=True,
               help="--adaptive: nights run at most.")
 @click.option("--target", default="0.05,0.08", show_default=True,
               help="--adaptive: HLC,τ 95 % interval half-widths relative to the estimates.")
