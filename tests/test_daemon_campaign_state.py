@@ -203,3 +203,17 @@ def test_report_figure_of_the_shrinking_intervals(tmp_path):
             {"valid_nights": 4, "hlc_rel_pct": 4.1, "tau_rel_pct": 7.2}]
     path = campaign_intervals(rows, tmp_path / "fig_campaign.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+
+
+def test_a_forecast_outside_the_band_skips_tonight_and_says_why(tmp_path):
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path),
+                               "night": {"t_out_max_c": 2.0},
+                               "campaign": {"mode": "adaptive"}})
+    with Store(cfg.db_path) as store:
+        _night(store, "constrained", 0, 3.0)  # mean T_out 4 °C, above the band's 2 °C
+        decision, fc = adaptive.decide_now(store, cfg)
+        assert (decision.action, fc.t_out_c) == ("skip", 4.0)
+        assert "4.0 °C" in decision.reason and "outside the band" in decision.reason
+        adaptive.record(store, decision, fc, T0 + timedelta(days=1))
+        assert store.events(1)[0][2] == f"campaign skip: {decision.reason}"
+        assert adaptive.campaign_state(store, cfg).status == "running: last night skipped"
