@@ -91,7 +91,20 @@ def _describe(cfg) -> list[str]:
             f"{hp.writes.daily_budget} writes/register/day (+{hp.writes.restore_reserve} "
             "for restores only)",
             f"nights:    {cfg.night.window} {cfg.timezone}, ΔT {cfg.night.comfort_band_k:g} K, "
-            f"a sample every {cfg.night.sample_interval_s:g} s"]
+            f"a sample every {cfg.night.sample_interval_s:g} s",
+            "campaign:  " + _campaign_line(cfg.campaign)]
+
+
+def _campaign_line(camp) -> str:
+    if not camp.enabled:
+        return "disabled (manual nights only)"
+    if camp.adaptive:
+        t = camp.target_rel_halfwidth
+        return (f"adaptive: until HLC ±{t.hlc:.0%} and τ ±{t.tau:.0%}, at most "
+                f"{camp.max_nights} nights, a fit after every valid night")
+    normal = len(camp.normal_setpoints_c) * camp.normal_nights_per_setpoint
+    return (f"fixed: {camp.constrained_nights} constrained + {normal} normal valid nights, "
+            f"{'a fit after every valid night' if camp.fit_when_complete else 'no fit'}")
 
 
 @cli.command("check-config")
