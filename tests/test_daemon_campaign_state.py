@@ -217,3 +217,18 @@ def test_a_forecast_outside_the_band_skips_tonight_and_says_why(tmp_path):
         adaptive.record(store, decision, fc, T0 + timedelta(days=1))
         assert store.events(1)[0][2] == f"campaign skip: {decision.reason}"
         assert adaptive.campaign_state(store, cfg).status == "running: last night skipped"
+
+
+def test_check_config_names_the_campaign_and_its_first_night(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('state_dir = "%s"\n[heatpump]\nhost = "192.168.1.50"\n[campaign]\n'
+                   'mode = "adaptive"\ntarget_rel_halfwidth = {hlc = 0.1, tau = 0.2}\n'
+                   % (tmp_path / "state"))
+    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert ("campaign:  adaptive: until HLC ±10% and τ ±20%, at most 5 nights, a fit after "
+            "every valid night") in lines
+    assert any(line.startswith("next:      constrained night from the campaign")
+               for line in lines)
+    assert not (tmp_path / "state").exists()
