@@ -64,13 +64,14 @@ class Rows:
         )
 
     def copies(self, sel: list[torch.Tensor]) -> Rows:
-        """Copy c of the problems holds the rows ``sel[c]``, as problems c·P…c·P + P − 1
-        (:meth:`repeat` when every ``sel[c]`` is all rows)."""
+        """Copy c of the problems holds the rows ``sel[c]`` (indices, or ``slice(None)`` for
+        all), as problems c·P…c·P + P − 1 (:meth:`repeat` when every one is all rows)."""
         p = self.n_problems
+        n = [len(self.problem[s]) for s in sel]
 
         def cat(x):  # an expanded (zero-stride) input stays one row in memory
             if x.stride(0) == 0 and len(x):
-                return x[:1].expand(sum(len(s) for s in sel), -1)
+                return x[:1].expand(sum(n), -1)
             return torch.cat([x[s] for s in sel])
 
         return Rows(torch.cat([self.problem[s] + c * p for c, s in enumerate(sel)]),
@@ -174,20 +175,22 @@ def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
     # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
     # column: its copy is left out for those rows (the simple and per-night problems).
     live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
-    everyone = torch.arange(n_rows)
-    sel = ([everyone] + [everyone if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
-                         for j in range(N_PARAMS)] + [everyone])
+    every = slice(None)
+    sel = ([every] + [every if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
+                      for j in range(N_PARAMS)] + [every])
     m_all = torch.cat([t_m0[s] for s in sel[:-1]] + [t_m0 + _H_M])
     r_all = residuals(ctx, rows.copies(sel), u_all, m_all)
     r0 = r_all[:n_rows]
-    ends = torch.tensor([len(s) for s in sel]).cumsum(0).tolist()
-    j_theta = torch.zeros(n_rows, r0.shape[1], N_PARAMS, dtype=DTYPE)  # (R, K, 7)
+    ends = torch.tensor([n_rows if s is every else len(s) for s in sel]).cumsum(0).tolist()
+    # (R, 7, K): each row's Jacobian transposed, contiguous for the batched products below
+    jt = torch.zeros(n_rows, N_PARAMS, r0.shape[1], dtype=DTYPE)
     for j in range(N_PARAMS):
         s, part = sel[j + 1], r_all[ends[j]:ends[j + 1]]
-        j_theta[s, :, j] = (part - r0[s]) / _H_U
+        jt[s, j] = (part - r0[s]) / _H_U
     j_m = (r_all[ends[-2]:] - r0) / _H_M                                 # (R, K)
-    return ((r0 ** 2).sum(1), torch.einsum("rki,rkj->rij", j_theta, j_theta),
-            torch.einsum("rki,rk->ri", j_theta, r0), torch.einsum("rki,rk->ri", j_theta, j_m),
+    both = torch.stack([r0, j_m], dim=2)                                 # (R, K, 2)
+    jt_rm = torch.bmm(jt, both)                                          # (R, 7, 2)
+    return ((r0 ** 2).sum(1), torch.bmm(jt, jt.transpose(1, 2)), jt_rm[..., 0], jt_rm[..., 1],
             (j_m ** 2).sum(1), (j_m * r0).sum(1))
 
 
