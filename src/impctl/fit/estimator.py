@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
+from scipy.stats import chi2
 
 from ..errors import InputError
 from ..imp.features import Q_ON_W
@@ -58,9 +59,9 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 #: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
 #: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
 CLASS_REJECT_CHI2 = 3.84
-#: χ² with 3 degrees of freedom at 95 %: the nuisance terms (night gain, emitter amplitude and
-#: time constant) are kept when they lower the inflation-scaled loss by more than this.
-NUISANCE_CHI2 = 7.81   # 3 dof; with the gain off, 2 free terms make this conservative
+#: The nuisance terms (night gain, emitter amplitude and time constant, air/furniture
+#: capacity) are kept when they lower the loss by more than χ² at 95 % with as many degrees of
+#: freedom as terms switched on (3 by default: 7.81).
 
 
 class NightFit:
@@ -85,6 +86,9 @@ class NightFit:
     smooth_air_h : float
         Width [h] of the moving average of the held T_air that drives "demand" rows, so that
         quantisation flicker does not reach the predicted power through the massless air node.
+    smooth_out_h : float
+        Width [h] of the moving average of T_out in every row (outdoor-sensor noise would
+        otherwise enter as errors in the variables).
     physical_bounds : dict, optional
         Search bounds of the non-classified parameters (default :data:`PHYSICAL_BOUNDS`), and the
         prior ranges of the classified ones.
@@ -110,6 +114,16 @@ class NightFit:
         Rows finer than this [s] are combined into blocks of this length before the fit
         (temperatures by a centred mean, power by the block's mean; :mod:`.resample`); 0 keeps
         every row. Only with "instant" stamps.
+    night_gain, emitter_state, furniture_state : bool
+        Nuisance terms of the night model (:data:`~impctl.fit.node.NUISANCE_NAMES`): a constant
+        heat input per campaign; the emitter's release after switch-off (amplitude and time
+        constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
+        Kept only when a likelihood-ratio test says the data need them.
+    sensor_offsets_k : (float, float)
+        Assumed SD of uncalibrated T_air and T_out offsets [K] (type-B interval share).
+    meter_error : float
+        Half-width of the heat meter's systematic relative error (0.05: class 3), added to the
+        HLC and C_m intervals as a uniform type-B share.
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -137,19 +151,22 @@ class NightFit:
 
     def __init__(self, *, normal_model: str = "demand", emission_lag_h: float = EMISSION_LAG_H,
                  ach_vent: float = 0.0, ach_infl: float = 0.01, timestamps: str = "instant",
-                 smooth_air_h: float = 1.0,
+                 smooth_air_h: float = 1.0, smooth_out_h: float = 0.0,
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
                  night_gain: bool = False, emitter_state: bool = True,
-                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0)):
+                 furniture_state: bool = True,
+                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
+                 meter_error: float = 0.05):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
         self.ach_infl = ach_infl
         self.timestamps = timestamps
         self.smooth_air_h = smooth_air_h
+        self.smooth_out_h = smooth_out_h
         self.physical_bounds = physical_bounds
         self.n_starts = n_starts
         self.max_iter = max_iter
@@ -162,7 +179,9 @@ class NightFit:
         self.fit_step_s = fit_step_s
         self.night_gain = night_gain
         self.emitter_state = emitter_state
+        self.furniture_state = furniture_state
         self.sensor_offsets_k = sensor_offsets_k
+        self.meter_error = meter_error
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -209,6 +228,7 @@ class NightFit:
         power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
+                                            smooth_out_s=3600.0 * self.smooth_out_h,
                                             power_ok=power_ok)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge)
         cons = packed.constrained
@@ -219,11 +239,12 @@ class NightFit:
         self.sigma_ = noise_levels(kept)
 
         nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
-            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state),
-            strict=True)}
+            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
+                             self.furniture_state), strict=True)}
+        self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
         plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
         lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
-                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, plain))
+                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance))
         rows = self._rows(lay)
         t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
                                   lay["box"][lay["row_problem"]])
@@ -239,13 +260,16 @@ class NightFit:
             self._refit_joint(lay, result)
         rows = self._rows(lay)
 
+        # First whether the data need the nuisance terms (inside the class box), then whether
+        # they contradict the class box: testing the classes with a model that lacks terms
+        # the data need rejects right classes (the prior box then absorbs the misfit).
         best = self._best(result, lay, 2 if lay["simple"] else 0)
+        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
+        if lay["simple"]:
+            best = self._nuisance_check(rows, result, lay, best)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
             best = self._class_check(rows, result, lay, best, ranges)
-        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
-        if lay["simple"] and best in lay["simple"]:
-            best = self._nuisance_check(rows, result, lay, best)
         self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
@@ -256,8 +280,8 @@ class NightFit:
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
-        self.lumped_, self.offset_allowance_ = offset_allowance(est["lumped"], kept,
-                                                                self.sensor_offsets_k)
+        self.lumped_, self.offset_allowance_ = offset_allowance(
+            est["lumped"], kept, self.sensor_offsets_k, self.meter_error)
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
@@ -288,7 +312,7 @@ class NightFit:
 
     def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
         """Problems: joint starts in the class box with the nuisance terms ("class"), the same
-        without them ("simple"), [joint starts in the prior box, without], per night (without).
+        without them ("simple"), [joint starts in the prior box, with], per night (without).
 
         Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
         night i. Without nuisance terms to test, "class" is the plain class box and there is
@@ -358,8 +382,12 @@ class NightFit:
         x = to_physical(result.u[best_prior], lay["box"][best_prior])
         outside = [n for n, (lo, hi) in (ranges or {}).items()
                    if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
-        rejected = drop > CLASS_REJECT_CHI2
-        self.class_check_ = {"applied": True, "chi2": drop, "threshold": CLASS_REJECT_CHI2,
+        # The prior problems carry the nuisance terms; against a class fit without them the
+        # test has those extra degrees of freedom too.
+        threshold = (float(chi2.ppf(0.95, 1 + self._n_nuisance)) if best_class in lay["simple"]
+                     else CLASS_REJECT_CHI2)
+        rejected = drop > threshold
+        self.class_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
 
@@ -371,8 +399,9 @@ class NightFit:
         emitter and furniture heat after switch-off give drops in the hundreds."""
         best_nuis = self._best(result, lay, 0)
         drop = float(result.loss[best_simple] - result.loss[best_nuis])
-        selected = drop > NUISANCE_CHI2
-        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": NUISANCE_CHI2,
+        threshold = float(chi2.ppf(0.95, self._n_nuisance))
+        selected = drop > threshold
+        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
                                 "selected": selected}
         return best_nuis if selected else best_simple
 

@@ -108,29 +108,39 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     return out
 
 
-def offset_allowance(lumped_in: dict, nights, sensor_offsets_k) -> tuple[dict, dict]:
-    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets.
+def offset_allowance(lumped_in: dict, nights, sensor_offsets_k,
+                     meter_error: float = 0.0) -> tuple[dict, dict]:
+    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets and of
+    the heat meter's systematic error.
 
     An offset of the indoor or the outdoor sensor shifts every T_air − T_out alike; the nights
     cannot reveal it, but it moves HLC, τ and C_m by about offset/ΔT. The share
     √(σ_in² + σ_out²)/mean ΔT [K/K] is added in quadrature (a type-B component, GUM).
+    A heat meter's gain error (``meter_error``, the half-width of a uniform error, e.g. 0.05
+    for a class-3 meter, real-houses.md §5) scales every measured power and so HLC and C_m
+    one to one (not τ), equally invisible: meter_error/√3 is added to those two.
 
     Returns
     -------
-    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd"})
+    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd",
+    "meter_error", "meter_relative_sd"})
     """
     dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
     mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
     s_in, s_out = (float(v) for v in sensor_offsets_k)
     share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
+    meter = float(meter_error) / np.sqrt(3.0)
     out = {}
     for name, e in lumped_in.items():
         lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
         sd = np.hypot(0.5 * (lo + hi) / Z95, share)
+        if name in ("hlc", "c_m"):
+            sd = np.hypot(sd, meter)
         out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
                              float(e.value * np.exp(Z95 * sd)), e.determined)
     return out, {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
-                 "relative_sd": share}
+                 "relative_sd": share, "meter_error": float(meter_error),
+                 "meter_relative_sd": meter}
 
 
 def nuisance_intervals(u: torch.Tensor, box: torch.Tensor, cov_u: torch.Tensor
