@@ -124,6 +124,10 @@ class NightFit:
     meter_error : float
         Half-width of the heat meter's systematic relative error (0.05: class 3), added to the
         HLC and C_m intervals as a uniform type-B share.
+    night_gain_sd_w : float
+        SD [W] of the unmetered night gains when no gain term is fitted, added to the
+        intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
+        :func:`.uncertainty.offset_allowance`).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -159,7 +163,7 @@ class NightFit:
                  night_gain: bool = False, emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
-                 meter_error: float = 0.05):
+                 meter_error: float = 0.05, night_gain_sd_w: float = 100.0):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -182,6 +186,7 @@ class NightFit:
         self.furniture_state = furniture_state
         self.sensor_offsets_k = sensor_offsets_k
         self.meter_error = meter_error
+        self.night_gain_sd_w = night_gain_sd_w
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -281,7 +286,9 @@ class NightFit:
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
         self.lumped_, self.offset_allowance_ = offset_allowance(
-            est["lumped"], kept, self.sensor_offsets_k, self.meter_error)
+            est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
+            0.0 if self.nuisance_check_.get("selected") and self.night_gain
+            else self.night_gain_sd_w)
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]

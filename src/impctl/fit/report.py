@@ -54,8 +54,8 @@ INTERVAL_METHOD = (
     "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
     "inflated for lag-1 autocorrelation, and (b) a night-clustered sandwich covariance (robust "
     "to model error: widens when the nights disagree); delta method in log space; plus, in "
-    "quadrature, the share of uncalibrated sensor offsets and, on HLC and C_m, of the heat "
-    "meter's gain error (fit.offset_allowance)")
+    "quadrature, the shares of uncalibrated sensor offsets, of unmetered night gains and, on "
+    "HLC and C_m, of the heat meter's gain error (fit.offset_allowance)")
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
     "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
