@@ -271,7 +271,9 @@ def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, 
     assert fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] > 20
     assert rel(fit.lumped_["tau"].value, HOUSE.tau_h) < 0.05
     assert fit.lumped_["tau"].low <= HOUSE.tau_h <= fit.lumped_["tau"].high
-    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    # (the first hour of each held night's power is not compared: 4 of 28 samples fewer)
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.04
+    assert fit.lumped_["hlc"].low <= HOUSE.hlc_w_per_k <= fit.lumped_["hlc"].high
     em = fit.nuisance_["emitter_tau_h"]
     assert em["low"] <= 2.5 <= em["high"]
     summary = fit_to_dict(fit)
@@ -294,7 +296,7 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
     assert len(fit.nights_) == len(nights)
     normal = [q for q in fit.night_quality_ if q["kind"] == "normal"]
     assert all(q["interruptions"][0]["kind"] == "dhw_or_stop" for q in normal)
-    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.03
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.04  # first hour not compared
     # compared anyway, the missing hour drags the HLC far down
     from impctl.fit import estimator
 
@@ -334,10 +336,10 @@ def test_a_constant_night_gain_is_not_claimed_and_the_hlc_interval_still_holds()
     fit = NightFit(n_starts=3, night_gain=True, sensor_offsets_k=(0, 0),
                    meter_error=0.0).fit(nights, RANGES)
     e = fit.lumped_["hlc"]
-    assert e.value < 0.95 * HOUSE.hlc_w_per_k
+    assert e.value < 0.98 * HOUSE.hlc_w_per_k
     assert not fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] < 9.49
     assert e.low <= HOUSE.hlc_w_per_k <= e.high
     assert fit.offset_allowance_["night_gain_relative_sd"] > 0
     stat = NightFit(n_starts=3, night_gain=True, sensor_offsets_k=(0, 0), meter_error=0.0,
                     night_gain_sd_w=0.0).fit(nights, RANGES).lumped_["hlc"]
-    assert stat.high < HOUSE.hlc_w_per_k   # the statistics alone miss it
+    assert e.high / e.low > 1.05 * stat.high / stat.low   # the gain share widens it

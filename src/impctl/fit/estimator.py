@@ -124,6 +124,9 @@ class NightFit:
     meter_error : float
         Half-width of the heat meter's systematic relative error (0.05: class 3), added to the
         HLC and C_m intervals as a uniform type-B share.
+    settle_h : float
+        Hours after the start of a held night whose heat power is not compared (the setpoint
+        step charges emitter, air and furniture); T_air still drives the model.
     night_gain_sd_w : float
         SD [W] of the unmetered night gains when no gain term is fitted, added to the
         intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
@@ -163,7 +166,8 @@ class NightFit:
                  night_gain: bool = False, emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
-                 meter_error: float = 0.05, night_gain_sd_w: float = 100.0):
+                 meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
+                 settle_h: float = 1.0):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -187,6 +191,7 @@ class NightFit:
         self.sensor_offsets_k = sensor_offsets_k
         self.meter_error = meter_error
         self.night_gain_sd_w = night_gain_sd_w
+        self.settle_h = settle_h
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -231,6 +236,11 @@ class NightFit:
         # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
         # only the power during the interruption and its recovery is not compared.
         power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
+        # The first hour after the setpoint step of a held night is emitter, air and furniture
+        # charging and the sensor's lag (README "Accuracy", error budget): that power drives
+        # nothing the 5R1C has, so it is not compared (T_air still drives the model).
+        power_ok = [ok & ((n.time_s - n.time_s[0]) >= 3600.0 * self.settle_h)
+                    if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
                                             smooth_out_s=3600.0 * self.smooth_out_h,
