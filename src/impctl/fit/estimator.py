@@ -127,6 +127,9 @@ class NightFit:
     settle_h : float
         Hours after the start of a held night whose heat power is not compared (the setpoint
         step charges emitter, air and furniture); T_air still drives the model.
+    structure_share : bool
+        Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
+        without the nuisance terms (a structural-sensitivity share).
     night_gain_sd_w : float
         SD [W] of the unmetered night gains when no gain term is fitted, added to the
         intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
@@ -167,7 +170,7 @@ class NightFit:
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
                  meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
-                 settle_h: float = 1.0):
+                 settle_h: float = 1.0, structure_share: bool = True):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -192,6 +195,7 @@ class NightFit:
         self.meter_error = meter_error
         self.night_gain_sd_w = night_gain_sd_w
         self.settle_h = settle_h
+        self.structure_share = structure_share
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -299,6 +303,10 @@ class NightFit:
             est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
             0.0 if self.nuisance_check_.get("selected") and self.night_gain
             else self.night_gain_sd_w)
+        self.structure_share_ = None
+        if self.structure_share and lay["simple"]:
+            self.lumped_, self.structure_share_ = self._structure_share(result, lay)
+            self.offset_allowance_["structure_relative_sd"] = self.structure_share_
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
@@ -421,6 +429,28 @@ class NightFit:
         self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
                                 "selected": selected}
         return best_nuis if selected else best_simple
+
+    def _structure_share(self, result, lay) -> tuple[dict, dict]:
+        """Widen the intervals by the structural sensitivity: half the log-difference of each
+        lumped quantity between the fits with and without the nuisance terms, added in
+        quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
+        them is a measure of how much the remaining model error may move it (type B)."""
+        from .uncertainty import Z95
+
+        q = {}
+        for group in (0, 2):
+            p = self._best(result, lay, group)
+            x = to_physical(result.u[p], lay["box"][p])
+            q[group] = lumped(x, self.ach_vent, self.ach_infl).tolist()
+        out, shares = {}, {}
+        for i, name in enumerate(LUMPED_NAMES):
+            e = self.lumped_[name]
+            share = 0.5 * abs(float(np.log(q[0][i] / q[2][i])))
+            sd = np.hypot(np.log(e.high / e.low) / (2 * Z95), share)
+            out[name] = type(e)(e.value, float(e.value * np.exp(-Z95 * sd)),
+                                float(e.value * np.exp(Z95 * sd)), e.determined)
+            shares[name] = share
+        return out, shares
 
     def _best(self, result, lay, group: int) -> int:
         members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
