@@ -28,6 +28,8 @@ Reported per sample step:
   true value lies in the fit's 95 % interval (coverage);
 * heat demand ε: each method's house replayed (Annex C, noise-free) through the same weather
   and setpoints as the truth, |E_model − E_true|/E_true per normal night, mean per household —
+  on the realistic plant E_true is the true house replayed the same way (``--eps-truth house``,
+  default; ``plant``: the plant's own heat output, which no parameter set reaches) —
   an out-of-sample prediction (the fit's own in-sample ε uses fitted initial mass temperatures
   and is near zero by construction);
 * Table IV-style errors of the seven parameters next to the prior-midpoint baseline and the share
@@ -158,6 +160,15 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     sched = imp_schedule(n, seed=VAL_SEED)
     sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
     truth_e = window_energy(heat, sched)
+    floor = None
+    if args.plant != "iso" and args.eps_truth == "house":
+        # The plant's heat output also carries its gains, control and emitter, which no 5R1C
+        # parameter set can know (true parameters alone miss it by ~11 %): ε compares with
+        # the true house replayed the same way as the estimate.
+        house_sim, _ = run_schedule(houses_arr, sched)
+        house_e = window_energy(house_sim, sched)
+        floor = 100.0 * np.mean(np.abs(house_e - truth_e) / truth_e, axis=0)
+        truth_e = house_e
     noise = 0.05 if args.plant == "iso" else 0.0   # the realistic plant's meter has its own
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
@@ -218,6 +229,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
                                sched, truth_e)
     # Steady-state demand from the coheating HLC: E = HLC·∫(T_air − T_out)dt per window.
     res["eps_coh"] = coheating_eps(res["coh_hlc"], sched, sim, truth_e)
+    res["eps_floor"] = floor
     return res
 
 
@@ -318,6 +330,10 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                                                                                   strict=True)]))
             print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
                   + " | " + " / ".join(f"{c:.0f}" for c in covs) + " |")
+    if res.get("eps_floor") is not None:
+        print("ε against the true house replayed on the 5R1C (--eps-truth house); the true "
+              "parameters against the plant's own heat output: ε median / P90 "
+              "{:.1f} / {:.1f} %".format(*stats(res["eps_floor"])))
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
@@ -516,6 +532,9 @@ def main() -> None:
     ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
                     help="validation houses on the ideal 5R1C (iso) or on the realistic plant "
                          "(impctl.plant, realism drawn with seed 20260)")
+    ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
+                    help="realistic plant: heat-demand truth from the true house replayed like "
+                         "the estimate (house) or the plant's heat-pump output (plant)")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"

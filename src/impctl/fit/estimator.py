@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
+from scipy.stats import chi2
 
 from ..errors import InputError
 from ..imp.features import Q_ON_W
@@ -59,9 +60,9 @@ LUMPED_NAMES = ("hlc", "c_m", "tau")
 #: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
 #: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
 CLASS_REJECT_CHI2 = 3.84
-#: χ² with 3 degrees of freedom at 95 %: the nuisance terms (night gain, emitter amplitude and
-#: time constant) are kept when they lower the inflation-scaled loss by more than this.
-NUISANCE_CHI2 = 7.81   # 3 dof; with the gain off, 2 free terms make this conservative
+#: The nuisance terms (night gain, emitter amplitude and time constant, air/furniture
+#: capacity) are kept when they lower the loss by more than χ² at 95 % with as many degrees of
+#: freedom as terms switched on (3 by default: 7.81).
 
 
 class NightFit:
@@ -86,6 +87,9 @@ class NightFit:
     smooth_air_h : float
         Width [h] of the moving average of the held T_air that drives "demand" rows, so that
         quantisation flicker does not reach the predicted power through the massless air node.
+    smooth_out_h : float
+        Width [h] of the moving average of T_out in every row (outdoor-sensor noise would
+        otherwise enter as errors in the variables).
     physical_bounds : dict, optional
         Search bounds of the non-classified parameters (default :data:`PHYSICAL_BOUNDS`), and the
         prior ranges of the classified ones.
@@ -115,6 +119,26 @@ class NightFit:
         How the night ODE is integrated (:class:`~impctl.fit.solver.NightODE`): "exact" (the
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
         they agree to rk4's error, "exact" is several times cheaper.
+    night_gain, emitter_state, furniture_state : bool
+        Nuisance terms of the night model (:data:`~impctl.fit.node.NUISANCE_NAMES`): a constant
+        heat input per campaign; the emitter's release after switch-off (amplitude and time
+        constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
+        Kept only when a likelihood-ratio test says the data need them.
+    sensor_offsets_k : (float, float)
+        Assumed SD of uncalibrated T_air and T_out offsets [K] (type-B interval share).
+    meter_error : float
+        Half-width of the heat meter's systematic relative error (0.05: class 3), added to the
+        HLC and C_m intervals as a uniform type-B share.
+    settle_h : float
+        Hours after the start of a held night whose heat power is not compared (the setpoint
+        step charges emitter, air and furniture); T_air still drives the model.
+    structure_share : bool
+        Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
+        without the nuisance terms (a structural-sensitivity share).
+    night_gain_sd_w : float
+        SD [W] of the unmetered night gains when no gain term is fitted, added to the
+        intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
+        :func:`.uncertainty.offset_allowance`).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -142,19 +166,23 @@ class NightFit:
 
     def __init__(self, *, normal_model: str = "demand", emission_lag_h: float = EMISSION_LAG_H,
                  ach_vent: float = 0.0, ach_infl: float = 0.01, timestamps: str = "instant",
-                 smooth_air_h: float = 1.0,
+                 smooth_air_h: float = 1.0, smooth_out_h: float = 0.0,
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
                  night_gain: bool = False, emitter_state: bool = True,
-                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0), solver: str = "exact"):
+                 furniture_state: bool = True,
+                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
+                 meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
+                 settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact"):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
         self.ach_infl = ach_infl
         self.timestamps = timestamps
         self.smooth_air_h = smooth_air_h
+        self.smooth_out_h = smooth_out_h
         self.physical_bounds = physical_bounds
         self.n_starts = n_starts
         self.max_iter = max_iter
@@ -167,8 +195,13 @@ class NightFit:
         self.fit_step_s = fit_step_s
         self.night_gain = night_gain
         self.emitter_state = emitter_state
+        self.furniture_state = furniture_state
         self.sensor_offsets_k = sensor_offsets_k
         self.solver = solver
+        self.meter_error = meter_error
+        self.night_gain_sd_w = night_gain_sd_w
+        self.settle_h = settle_h
+        self.structure_share = structure_share
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -215,8 +248,14 @@ class NightFit:
         # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
         # only the power during the interruption and its recovery is not compared.
         power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
+        # The first hour after the setpoint step of a held night is emitter, air and furniture
+        # charging and the sensor's lag (README "Accuracy", error budget): that power drives
+        # nothing the 5R1C has, so it is not compared (T_air still drives the model).
+        power_ok = [ok & ((n.time_s - n.time_s[0]) >= 3600.0 * self.settle_h)
+                    if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
+                                            smooth_out_s=3600.0 * self.smooth_out_h,
                                             power_ok=power_ok)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver)
         cons = packed.constrained
@@ -227,11 +266,12 @@ class NightFit:
         self.sigma_ = noise_levels(kept)
 
         nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
-            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state),
-            strict=True)}
+            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
+                             self.furniture_state), strict=True)}
+        self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
         plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
         lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
-                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, plain))
+                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance))
         rows = self._rows(lay)
         t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
                                   lay["box"][lay["row_problem"]])
@@ -247,13 +287,16 @@ class NightFit:
             self._refit_joint(lay, result)
         rows = self._rows(lay)
 
+        # First whether the data need the nuisance terms (inside the class box), then whether
+        # they contradict the class box: testing the classes with a model that lacks terms
+        # the data need rejects right classes (the prior box then absorbs the misfit).
         best = self._best(result, lay, 2 if lay["simple"] else 0)
+        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
+        if lay["simple"]:
+            best = self._nuisance_check(rows, result, lay, best)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
             best = self._class_check(rows, result, lay, best, ranges)
-        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
-        if lay["simple"] and best in lay["simple"]:
-            best = self._nuisance_check(rows, result, lay, best)
         self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
@@ -264,8 +307,14 @@ class NightFit:
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~cons).any()))
-        self.lumped_, self.offset_allowance_ = offset_allowance(est["lumped"], kept,
-                                                                self.sensor_offsets_k)
+        self.lumped_, self.offset_allowance_ = offset_allowance(
+            est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
+            0.0 if self.nuisance_check_.get("selected") and self.night_gain
+            else self.night_gain_sd_w)
+        self.structure_share_ = None
+        if self.structure_share and lay["simple"]:
+            self.lumped_, self.structure_share_ = self._structure_share(result, lay)
+            self.offset_allowance_["structure_relative_sd"] = self.structure_share_
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
         self.range_fraction_sd_ = est["range_fraction_sd"]
@@ -296,7 +345,7 @@ class NightFit:
 
     def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
         """Problems: joint starts in the class box with the nuisance terms ("class"), the same
-        without them ("simple"), [joint starts in the prior box, without], per night (without).
+        without them ("simple"), [joint starts in the prior box, with], per night (without).
 
         Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
         night i. Without nuisance terms to test, "class" is the plain class box and there is
@@ -366,8 +415,12 @@ class NightFit:
         x = to_physical(result.u[best_prior], lay["box"][best_prior])
         outside = [n for n, (lo, hi) in (ranges or {}).items()
                    if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
-        rejected = drop > CLASS_REJECT_CHI2
-        self.class_check_ = {"applied": True, "chi2": drop, "threshold": CLASS_REJECT_CHI2,
+        # The prior problems carry the nuisance terms; against a class fit without them the
+        # test has those extra degrees of freedom too.
+        threshold = (float(chi2.ppf(0.95, 1 + self._n_nuisance)) if best_class in lay["simple"]
+                     else CLASS_REJECT_CHI2)
+        rejected = drop > threshold
+        self.class_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
                              "rejected": rejected, "outside": outside if rejected else []}
         return best_prior if rejected else best_class
 
@@ -379,10 +432,33 @@ class NightFit:
         emitter and furniture heat after switch-off give drops in the hundreds."""
         best_nuis = self._best(result, lay, 0)
         drop = float(result.loss[best_simple] - result.loss[best_nuis])
-        selected = drop > NUISANCE_CHI2
-        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": NUISANCE_CHI2,
+        threshold = float(chi2.ppf(0.95, self._n_nuisance))
+        selected = drop > threshold
+        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
                                 "selected": selected}
         return best_nuis if selected else best_simple
+
+    def _structure_share(self, result, lay) -> tuple[dict, dict]:
+        """Widen the intervals by the structural sensitivity: half the log-difference of each
+        lumped quantity between the fits with and without the nuisance terms, added in
+        quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
+        them is a measure of how much the remaining model error may move it (type B)."""
+        from .uncertainty import Z95
+
+        q = {}
+        for group in (0, 2):
+            p = self._best(result, lay, group)
+            x = to_physical(result.u[p], lay["box"][p])
+            q[group] = lumped(x, self.ach_vent, self.ach_infl).tolist()
+        out, shares = {}, {}
+        for i, name in enumerate(LUMPED_NAMES):
+            e = self.lumped_[name]
+            share = 0.5 * abs(float(np.log(q[0][i] / q[2][i])))
+            sd = np.hypot(np.log(e.high / e.low) / (2 * Z95), share)
+            out[name] = type(e)(e.value, float(e.value * np.exp(-Z95 * sd)),
+                                float(e.value * np.exp(Z95 * sd)), e.determined)
+            shares[name] = share
+        return out, shares
 
     def _best(self, result, lay, group: int) -> int:
         members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]

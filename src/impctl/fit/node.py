@@ -75,12 +75,26 @@ ROW_DEMAND = 1
 #: node over the campaign (sleepers, base load; negative = extra loss) [W], and on constrained
 #: nights the heat the emitter (and the air/furniture) still releases after the fit start,
 #: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
-NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h")
+#: The last, furniture_j_per_m2k, is heat capacity at the air node (air and furniture, per m²
+#: of floor, real-houses.md §1: 3 + 10–31 kJ/(m²K)), charged through the furniture's coupling
+#: time constant :data:`FURNITURE_TAU_S`: its heat flow C_fur·dT_fur/dt is computed from the
+#: measured T_air (the data, not the state, drive it: a second state is not needed for a node
+#: that follows T_air within an hour). It is part of the house's capacity: the reported C_m and
+#: τ include it (:func:`lumped`).
+NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k")
 NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
-    "night_gain_w": (-200.0, 800.0),
+    # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
+    # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the
+    # gain trades against the emitter's release and the HLC (README "Accuracy")
+    "night_gain_w": (0.0, 500.0),
     "emitter_w": (0.0, 4000.0),
     "emitter_tau_h": (0.2, 8.0),
+    "furniture_j_per_m2k": (0.0, 40000.0),
 }
+#: Furniture–air time constant [s]: 1/0.00022 s ≈ 76 min (real-houses.md §1, the Japanese
+#: residential code's G_fur = 0.00022·C_fur).
+FURNITURE_TAU_S = 1.0 / 0.00022
+_FUR = len(PARAM_NAMES) + 3   # column of furniture_j_per_m2k in a parameter row
 
 
 def bounds_tensor(bounds: dict[str, tuple[float, float]],
@@ -114,9 +128,17 @@ def network(params: torch.Tensor, ach_vent: float, ach_infl: float):
 
 
 def lumped(params: torch.Tensor, ach_vent: float, ach_infl: float) -> torch.Tensor:
-    """(HLC [W/K], C_m [J/K], τ [h]) of parameter rows (…, 7) → (…, 3), differentiable."""
+    """(HLC [W/K], C_m [J/K], τ [h]) of parameter rows (…, 7) → (…, 3), differentiable.
+
+    With the nuisance terms appended, the air/furniture capacity is added to C_m and τ grows
+    in proportion (τ = C_m/(H_tr,em + H_tr,3), the house's definition)."""
     net = network(params, ach_vent, ach_infl)
-    return torch.stack([net.hlc_w_per_k, net.c_m_j_per_k, net.tau_h], dim=-1)
+    c_m, tau = net.c_m_j_per_k, net.tau_h
+    if params.shape[-1] > _FUR:
+        c_fur = params[..., _FUR] * params[..., 0]
+        tau = tau * (c_m + c_fur) / c_m
+        c_m = c_m + c_fur
+    return torch.stack([net.hlc_w_per_k, c_m, tau], dim=-1)
 
 
 def eq63_margin(bounds: dict[str, tuple[float, float]]) -> float:
@@ -145,6 +167,8 @@ class PackedNights:
     q_w : (N, K) heat power belonging to node k [W] (the value a sample reports)
     q_in_w : (N, K) mean heat power over the interval that starts at node k [W]
     q_mean_w : (N,) mean power over the night [W] (time-weighted)
+    t_fur_slope : (N, K) dT_fur/dt [K/s] of a node that follows the (30-min smoothed) measured
+        T_air with the time constant :data:`FURNITURE_TAU_S`
     mask : (N, K) bool, node k is one of the night's samples
     next_node : (N, K) long, index of the night's next sample (itself for the last one)
     last : (N, K) bool, node k is the night's last sample
@@ -163,6 +187,7 @@ class PackedNights:
     q_w: torch.Tensor
     q_in_w: torch.Tensor
     q_mean_w: torch.Tensor
+    t_fur_slope: torch.Tensor
     mask: torch.Tensor
     next_node: torch.Tensor
     last: torch.Tensor
@@ -187,8 +212,25 @@ def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
+def furniture_rate(t: np.ndarray, t_air: np.ndarray, tau_s: float, steady: bool) -> np.ndarray:
+    """dT_fur/dt [K/s] at the samples of a node following ``t_air`` (piecewise linear) with
+    time constant ``tau_s`` (exact per interval). It starts in step with T_air (``steady``:
+    at rest, a held night from its day) or lagging a steady slope (a cooling night)."""
+    t_air = smooth(t, np.asarray(t_air, float), 1800.0)
+    h = np.diff(t)
+    slope = np.diff(t_air) / np.where(h > 0, h, 1.0)
+    e = np.zeros(len(t))           # T_fur − T_air
+    if not steady and len(slope):
+        e[0] = -tau_s * slope[0]
+    alpha = np.exp(-h / tau_s)
+    for k in range(len(h)):
+        e[k + 1] = e[k] * alpha[k] - slope[k] * tau_s * (1.0 - alpha[k])
+    return -e / tau_s
+
+
 def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
                 timestamps: str = "instant", smooth_air_s: float = 0.0,
+                smooth_out_s: float = 0.0,
                 power_ok: Sequence[np.ndarray] | None = None) -> PackedNights:
     """Put prepared nights (already cut to their fit windows) side by side, each on its own
     sample times (padded to the longest night by repeating its last sample: zero-length
@@ -204,6 +246,9 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         stamp (hourly logs, the virtual IMP): temperatures then belong to the interval's middle,
         so the nodes move there, and the power on [middle_k, middle_k+1) is (q_k + q_k+1)/2.
     smooth_air_s : width of the moving average applied to the T_air that drives DEMAND rows [s]
+    smooth_out_s : width of the moving average applied to T_out [s]: the outdoor temperature
+        is an input of every row, and its sensor noise (0.2–0.5 K per reading, real-houses.md
+        §5) would otherwise enter as errors in the variables and bias the fit
     power_ok : per night, bool per sample: False where the measured power is not the space
         heating the model describes (a DHW recharge, a defrost and the recovery after them);
         those samples still drive the model (T_air), their power is not compared
@@ -218,7 +263,7 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
             t = t + 0.5 * np.append(span, span[-1])
         rel.append(np.round(t, 3))
     n, k = len(nights), max(len(t) for t in rel)
-    grid, te, te_s, ta, ta_s, tai, tai_s, q, q_in = (np.zeros((n, k)) for _ in range(9))
+    grid, te, te_s, ta, ta_s, tai, tai_s, q, q_in, fur = (np.zeros((n, k)) for _ in range(10))
     mask = np.zeros((n, k), dtype=bool)
     next_node = np.tile(np.arange(k), (n, 1))
     last = np.zeros((n, k), dtype=bool)
@@ -232,10 +277,12 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         m = len(t)
         grid[i] = padded(t, m)
         t_air = np.asarray(night.t_air_c, float)
-        for dst, dst_s, y in ((te, te_s, night.t_out_c), (ta, ta_s, t_air),
+        t_out = smooth(t, np.asarray(night.t_out_c, float), smooth_out_s)
+        for dst, dst_s, y in ((te, te_s, t_out), (ta, ta_s, t_air),
                               (tai, tai_s, smooth(t, t_air, smooth_air_s))):
             dst[i] = padded(y, m)
             dst_s[i, :m - 1] = np.diff(np.asarray(y, float)) / np.diff(t)
+        fur[i, :m] = furniture_rate(t, t_air, FURNITURE_TAU_S, night.kind != "constrained")
         qi = np.asarray(night.q_hc_w, float)
         q[i] = padded(qi, m)
         q_in[i] = q[i]
@@ -255,8 +302,8 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         timestamps=timestamps, grid_s=tt(grid),
         t_out_c=tt(te), t_out_slope=tt(te_s), t_air_c=tt(ta), t_air_slope=tt(ta_s),
         t_air_in_c=tt(tai), t_air_in_slope=tt(tai_s), q_w=tt(q), q_in_w=tt(q_in),
-        q_mean_w=tt(q_mean), mask=torch.as_tensor(mask), next_node=torch.as_tensor(next_node),
-        last=torch.as_tensor(last),
+        q_mean_w=tt(q_mean), t_fur_slope=tt(fur), mask=torch.as_tensor(mask),
+        next_node=torch.as_tensor(next_node), last=torch.as_tensor(last),
         power_ok=None if power_ok is None else torch.as_tensor(np.stack([
             np.concatenate([np.asarray(p, bool), np.ones(k - len(p), bool)]) for p in power_ok])),
     )
@@ -343,6 +390,10 @@ def build_rows(
         u1_air = b[:, None] * te_s
         z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
     gain = torch.zeros_like(a_air)
+    q_fur = torch.zeros_like(te)
+    if params.shape[-1] > _FUR:
+        # heat the air/furniture capacity takes from the air node [W]
+        q_fur = (params[:, _FUR] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
     if params.shape[-1] > len(PARAM_NAMES) and not any_air:
         gain = params[:, len(PARAM_NAMES)]
     elif params.shape[-1] > len(PARAM_NAMES):
@@ -352,7 +403,7 @@ def build_rows(
         em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
         cons = packed.constrained[night_index][:, None]
         x = gain[:, None] + torch.where(cons, em_w[:, None] * torch.exp(
-            -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0)
+            -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
         h = torch.diff(grid, dim=1)
         x_slope = torch.zeros_like(x)
         x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
@@ -373,7 +424,7 @@ def build_rows(
     if any_dem:
         u0_dem = b_air[:, None] * ta + b_e[:, None] * te
         u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
-        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain[:, None]
+        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain[:, None] + q_fur
 
     mask = packed.mask[night_index]
     mean_next = None

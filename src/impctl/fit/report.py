@@ -22,7 +22,7 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "predictions": [{"night_id", "kind", "time_s", "t_air_measured_c", "t_air_model_c" | null,
                       "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
-             "emission_lag_h", "starts", "iterations", "loss", "sigma", "time_s"},
+             "emission_lag_h", "settle_h", "starts", "iterations", "loss", "sigma", "time_s"},
      "skipped": [{"night_id", "reason"}], "notes": [str],
      "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
@@ -62,7 +62,8 @@ INTERVAL_METHOD = (
     "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
     "inflated for lag-1 autocorrelation, and (b) a night-clustered sandwich covariance (robust "
     "to model error: widens when the nights disagree); delta method in log space; plus, in "
-    "quadrature, the share of uncalibrated sensor offsets (fit.offset_allowance)")
+    "quadrature, the shares of uncalibrated sensor offsets, of unmetered night gains and, on "
+    "HLC and C_m, of the heat meter's gain error (fit.offset_allowance)")
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
     "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
@@ -160,8 +161,9 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "fit": {"mode": "joint", "normal_model": fit.normal_model, "optimizer": fit.optimizer,
                 "solver": SOLVERS.get(getattr(fit, "solver", "rk4")),
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
-                "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
-                "sigma": fit.sigma_, "time_s": fit.fit_time_s_},
+                "settle_h": getattr(fit, "settle_h", 0.0), "starts": fit.n_starts,
+                "iterations": fit.n_iter_, "loss": fit.loss_, "sigma": fit.sigma_,
+                "time_s": fit.fit_time_s_},
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
         "gaps": [g.as_dict() for g in getattr(fit, "gaps_", [])],
         "notes": notes,

@@ -10,7 +10,8 @@ The lumped HLC, C_m and τ get 95 % intervals by the delta method in log space (
 positive). Under model error the curvature alone is too confident, so each lumped quantity's
 interval is the wider of that Laplace interval and a night-clustered sandwich (robust)
 interval, S⁻¹·(Σ_nights g̃·g̃ᵀ)·S⁻¹ with g̃ a night's score: it widens when the nights pull the
-parameters apart more than their noise explains. A bootstrap over nights was not chosen: with
+parameters apart more than their noise explains; with G nights it takes the Student-t quantile
+with G − 1 degrees of freedom. A bootstrap over nights was not chosen: with
 two constrained nights it cannot resample the τ information meaningfully.
 
 "Determined": the Fisher information of the data alone (no ridge, no bounds), expressed in the
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from scipy.stats import t as student_t
 
 from . import lm
 from .data import Estimate, lag1_autocorrelation
@@ -83,6 +85,10 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     q = q.detach()
     sd_laplace = torch.einsum("ij,jk,ik->i", jac, cov, jac).clamp_min(0).sqrt() / q
     sd_sandwich = torch.einsum("ij,jk,ik->i", jac, cov_sandwich, jac).clamp_min(0).sqrt() / q
+    # A cluster-robust covariance from G nights is itself uncertain: its interval takes the
+    # Student-t quantile with G − 1 degrees of freedom (the usual small-G correction) instead
+    # of the normal one — about 20 % wider with 8 nights.
+    sd_sandwich = sd_sandwich * float(student_t.ppf(0.975, max(n_rows - 1, 1))) / Z95
     sd_log = torch.maximum(sd_laplace, sd_sandwich)
     estimates = {}
     for i, name in enumerate(LUMPED_NAMES):
@@ -108,29 +114,45 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     return out
 
 
-def offset_allowance(lumped_in: dict, nights, sensor_offsets_k) -> tuple[dict, dict]:
-    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets.
+def offset_allowance(lumped_in: dict, nights, sensor_offsets_k,
+                     meter_error: float = 0.0, gain_sd_w: float = 0.0) -> tuple[dict, dict]:
+    """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets and of
+    the heat meter's systematic error.
 
     An offset of the indoor or the outdoor sensor shifts every T_air − T_out alike; the nights
     cannot reveal it, but it moves HLC, τ and C_m by about offset/ΔT. The share
     √(σ_in² + σ_out²)/mean ΔT [K/K] is added in quadrature (a type-B component, GUM).
+    A heat meter's gain error (``meter_error``, the half-width of a uniform error, e.g. 0.05
+    for a class-3 meter, real-houses.md §5) scales every measured power and so HLC and C_m
+    one to one (not τ), equally invisible: meter_error/√3 is added to those two.
+    Unmetered night gains (sleepers, base load: 150–400 W, real-houses.md §4) are another
+    intercept in Q = HLC·ΔT − G that IMP nights do not separate from the HLC (a likelihood-ratio
+    test rarely keeps a gain term): ``gain_sd_w``/(HLC·mean ΔT) is added to all three.
 
     Returns
     -------
-    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd"})
+    (lumped with widened intervals, {"sensor_offsets_k", "mean_delta_t_k", "relative_sd",
+    "meter_error", "meter_relative_sd"})
     """
     dt = np.concatenate([np.asarray(n.t_air_c) - np.asarray(n.t_out_c) for n in nights])
     mean_dt = float(np.mean(dt)) if len(dt) else float("nan")
     s_in, s_out = (float(v) for v in sensor_offsets_k)
     share = float(np.hypot(s_in, s_out) / mean_dt) if mean_dt > 1.0 else 0.0
+    meter = float(meter_error) / np.sqrt(3.0)
+    hlc = lumped_in["hlc"].value if "hlc" in lumped_in else float("nan")
+    gain = float(gain_sd_w / (hlc * mean_dt)) if gain_sd_w > 0 and mean_dt > 1.0 else 0.0
     out = {}
     for name, e in lumped_in.items():
         lo, hi = np.log(e.value / e.low), np.log(e.high / e.value)
-        sd = np.hypot(0.5 * (lo + hi) / Z95, share)
+        sd = np.hypot(np.hypot(0.5 * (lo + hi) / Z95, share), gain)
+        if name in ("hlc", "c_m"):
+            sd = np.hypot(sd, meter)
         out[name] = Estimate(e.value, float(e.value * np.exp(-Z95 * sd)),
                              float(e.value * np.exp(Z95 * sd)), e.determined)
     return out, {"sensor_offsets_k": [s_in, s_out], "mean_delta_t_k": mean_dt,
-                 "relative_sd": share}
+                 "relative_sd": share, "meter_error": float(meter_error),
+                 "meter_relative_sd": meter, "night_gain_sd_w": float(gain_sd_w),
+                 "night_gain_relative_sd": gain}
 
 
 def nuisance_intervals(u: torch.Tensor, box: torch.Tensor, cov_u: torch.Tensor
