@@ -500,30 +500,46 @@ def speed(args) -> None:
     files.append(("8 nights of 1-minute rows", write_nights(minute, tmp / "minute.csv")))
     env = dict(os.environ, OMP_NUM_THREADS="1")
     print("\n### speed (target: impctl fit ≤ 5 s wall per file, in-process ≤ 1 s per household "
-          "at 5-minute rows, one core)")
-    print("| what | rows | wall s | CPU s (user+sys) | fit s (in JSON) |")
-    print("|---|---|---|---|---|")
+          f"at 5-minute rows, one core); each command run {args.repeat} times, min / median")
+    if args.model_dir:
+        from impctl.classifiers.compact import COMPACT_FILE
+
+        have = (Path(args.model_dir) / COMPACT_FILE).is_file()
+        what = "compact forests" if have else "pickled forests only: retrain for the fast path"
+        print(f"classifiers: {args.model_dir} ({what})")
+    out = tmp / "fit.json"
+    cmds = []
     for label, path in files:
-        out = tmp / "fit.json"
         cmd = [str(Path(sys.executable).parent / "impctl"), "fit", "--nights", str(path),
                "--json", str(out)]
-        if args.model_dir:
-            cmd += ["--model-dir", str(args.model_dir)]
-        before = os.times()
-        t0 = time.perf_counter()
-        done = subprocess.run(cmd, env=env, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
-        after = os.times()
-        cpu = (after.children_user - before.children_user
-               + after.children_system - before.children_system)
-        if done.returncode != 0:
-            print(f"| {label} | – | failed: {done.stderr.strip().splitlines()[-1]} | | |")
-            continue
-        import json
+        cmds.append(cmd + (["--model-dir", str(args.model_dir)] if args.model_dir else []))
+        print(f"{label}: OMP_NUM_THREADS=1 {' '.join(cmds[-1])}")
+    print("| what | rows | wall s | CPU s (user+sys) | fit s (in JSON) "
+          "| load average before / after |")
+    print("|---|---|---|---|---|---|")
+    for (label, path), cmd in zip(files, cmds, strict=True):
+        walls, cpus, fits = [], [], []
+        load0 = os.getloadavg()[0]
+        for _ in range(args.repeat):
+            before = os.times()
+            t0 = time.perf_counter()
+            done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            walls.append(time.perf_counter() - t0)
+            after = os.times()
+            cpus.append(after.children_user - before.children_user
+                        + after.children_system - before.children_system)
+            if done.returncode != 0:
+                break
+            import json
 
-        fit_s = json.loads(out.read_text())["fit"]["time_s"]
+            fits.append(json.loads(out.read_text())["fit"]["time_s"])
+        if done.returncode != 0:
+            print(f"| {label} | – | failed: {done.stderr.strip().splitlines()[-1]} | | | |")
+            continue
         rows = sum(1 for _ in open(path)) - 1
-        print(f"| {label} | {rows} | {wall:.1f} | {cpu:.1f} | {fit_s:.2f} |", flush=True)
+        print(f"| {label} | {rows} | {min(walls):.1f} / {np.median(walls):.1f} "
+              f"| {min(cpus):.1f} / {np.median(cpus):.1f} | {min(fits):.2f} / "
+              f"{np.median(fits):.2f} | {load0:.1f} / {os.getloadavg()[0]:.1f} |", flush=True)
     times, cpu = [], []
     for i in range(houses.n_houses):
         nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
@@ -569,6 +585,8 @@ def main() -> None:
                     help="fit without the emitter-release term (the issue-4 model)")
     ap.add_argument("--speed", action="store_true",
                     help="only the speed figures (impctl fit wall time, in-process time)")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="--speed: run each impctl fit command this many times")
     ap.add_argument("--demo-csv", default=None,
                     help="the demo's export (impctl demo --out D writes D/nights.csv) for --speed")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
