@@ -5,6 +5,8 @@ A model directory holds one ``<parameter>.joblib`` per classified parameter (a f
 labels, campaign and night feature names, the emitter lag, the training seed and size, package
 versions and the evaluation report. :func:`load_models` refuses, with one line saying what to do,
 a directory without models, another format, other features, or another scikit-learn version.
+``forests.npz`` (:mod:`.compact`, when the export reproduced scikit-learn) holds the same forests
+as arrays: :func:`classify_nights` uses it when present, so classifying needs no scikit-learn.
 """
 
 from __future__ import annotations
