@@ -172,8 +172,20 @@ class _TrueHeat:
         self.phi_hc_w = logged.run["heat_pump_w"]
 
 
+_SIMULATED: dict = {}
+
+
 def simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
-    """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output)."""
+    """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
+    simulated once per population size and plant, so every sample step and range source
+    reads the same nights."""
+    key = (houses_arr.n_houses, plant)
+    if key not in _SIMULATED:
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant)
+    return _SIMULATED[key]
+
+
+def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
     if plant == "iso":
         sim, sp = run_schedule(houses_arr, sched)
         return sim, sp, sim
@@ -182,29 +194,17 @@ def simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
     return logged, sp, _TrueHeat(logged)
 
 
-_SIMULATED: dict = {}
-
-
-def simulated(houses_arr: HouseParameters, plant: str):
-    """(schedule, logged, setpoints, true heat, true normal-night energy), simulated once per
-    population and plant: every sample step and range source reads the same nights."""
-    key = (houses_arr.n_houses, plant)
-    if key not in _SIMULATED:
-        sched = imp_schedule(houses_arr.n_houses, seed=VAL_SEED)
-        sim, sp, heat = simulate_schedule(houses_arr, sched, plant)
-        _SIMULATED[key] = (sched, sim, sp, heat, window_energy(heat, sched))
-    return _SIMULATED[key]
-
-
 def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args,
              limit: int | None = None) -> dict:
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
     n = houses_arr.n_houses
-    sched, sim, sp, heat, truth_e = simulated(houses_arr, args.plant)
+    sched = imp_schedule(n, seed=VAL_SEED)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    truth_e = window_energy(heat, sched)
+    noise = 0.05 if args.plant == "iso" else 0.0   # the realistic plant's meter has its own
     if limit is not None and limit < n:
         n = limit
         sched, truth_e = _sub_schedule(sched, np.arange(n)), truth_e[:, :n]
-    noise = 0.05 if args.plant == "iso" else 0.0   # the realistic plant's meter has its own
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
                            "eps_in", "per_night_mean")}
@@ -351,8 +351,8 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
     print(f"NODE joint, signed median error: {signed}")
     if "types" in res:
         print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
-              "| coverage HLC/τ/C_m % | ε med / P90 % |")
-        print("|---|---|---|---|---|---|---|")
+              "| coverage HLC/τ/C_m % |")
+        print("|---|---|---|---|---|---|")
         truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
         for label, sel in res["types"].items():
             if not sel.any():
@@ -365,12 +365,15 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                 covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
                                                                                   strict=True)]))
             print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
-                  + " | " + " / ".join(f"{c:.0f}" for c in covs)
-                  + " | {:.1f} / {:.1f} |".format(*stats(res["eps_fit"][sel])))
+                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " |")
     t = np.asarray(res["time"])
     print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
           "in-sample ε (fitted initial mass temperatures) median "
           f"{np.nanmedian(res['eps_in']):.2f} %")
+    if "types" in res:
+        print("heat demand ε by type (NODE joint, median / P90 %): " + ", ".join(
+            "{} {:.1f} / {:.1f}".format(label, *stats(res["eps_fit"][sel]))
+            for label, sel in res["types"].items() if sel.any()))
 
     print("\n| parameter | true range in population | NODE med / P90 % "
           "| prior midpoint med / P90 % | flagged determined % |")
