@@ -123,3 +123,20 @@ def test_load_models_still_checks_the_pickles(models, tmp_path):
     save_models(models, tmp_path, seed=0, n_households=300, emission_lag_h=1.0)
     loaded, meta = load_models(tmp_path)
     assert set(loaded) == set(RANGES) and meta["compact"] == COMPACT_FILE
+
+
+def test_a_model_the_arrays_cannot_express_gets_no_compact_file(tmp_path):
+    x, y = _data(1200, 4)
+    groups = np.repeat(np.arange(300), 4)
+    isotonic = {"u_walls": RangeClassifier(RANGES["u_walls"], n_estimators=20, random_state=0,
+                                           calibration="isotonic").fit(x, y["u_walls"],
+                                                                       groups=groups)}
+    assert isotonic["u_walls"].calibrated_
+    (tmp_path / COMPACT_FILE).write_bytes(b"stale")
+    save_models(isotonic, tmp_path, seed=0, n_households=300, emission_lag_h=1.0)
+    assert not (tmp_path / COMPACT_FILE).exists()
+    assert "compact" not in json.loads((tmp_path / "models.json").read_text())
+    houses = sample_households(1, seed=8)
+    nights = simulate_imp(houses, config=ImpSimConfig(days=3), seed=8).nights_of(0)
+    result = classify_nights(nights, tmp_path)["u_walls"]   # from the pickle
+    assert result.calibrated and sum(result.probabilities.values()) == pytest.approx(1.0)
