@@ -1,26 +1,35 @@
-"""Benchmark of ``impctl fleet fit``: wall time, throughput per worker count, batch vs alone,
-memory per worker.
+"""Benchmark of ``impctl fleet fit``: wall time, CPU per household, throughput per worker count,
+batch vs alone, memory per worker, and where a batch's CPU goes.
 
 Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
-          [--alone 16] [--batch-size 16] [--skip-full | --full-only]
+          [--alone 16] [--batch-size 16] [--plant realistic|iso] [--profile 16]
+          [--skip-full | --full-only]
 
 (``--throughput`` households are cut into batches of at most ``--batch-size``, at least two per
 worker.)
 
-Fleet input: the fit bench's synthetic IMP nights (``impctl.population.synth_nights``: two
-spin-up days, 2 constrained + 6 normal nights, Annex C at 60 s, 5-minute samples, T quantised to
-0.1 °C, 5 % power noise) for ``sample_households(seed=20260)``, written once as one Parquet
-dataset with a ``household`` column (reused from ``--data`` when it is there). The plant is the
-**ideal 5R1C**: the realistic plant (``impctl.plant``) is not on main yet.
+Fleet input (``--plant realistic``, the default): every household on the **realistic plant**
+(:mod:`impctl.plant`, as ``bench/fit.py --plant realistic``): ``sample_households(seed=20260)``
+with realism options from ``impctl.population.realism.sample_params``, the IMP schedule of
+``impctl.population.synth_nights`` (two spin-up days, 2 constrained + 6 normal nights,
+simulated at 60 s), logged as the gateway logs it — room and outdoor sensors (lag, noise,
+offsets, quantisation), the heat meter's interval means — cut into 5-minute rows, T quantised
+to 0.1 °C. ``--plant iso`` uses the ideal 5R1C with 5 % power noise instead (the bench before
+issue 16). Written once as one Parquet dataset with a ``household`` column (reused from
+``--data`` when it is there).
 
 Measured:
-1. throughput [households/s] on 1 and 2 worker processes (``--throughput`` households);
+1. throughput [households/s] and CPU-s per household on 1 and 2 worker processes
+   (``--throughput`` households);
 2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
    (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
 3. the whole fleet with the default local cluster (one worker process per core), wall clock
    from the command's start (cluster start-up and worker preload included) to the last row;
 4. resident memory of each worker after each batch (the FLEET ``worker_rss_mb`` column): first,
-   median and last batch — flat means no growth over the run.
+   median and last batch — flat means no growth over the run;
+5. ``--profile N``: one worker's batch of N households run in this process
+   (:func:`impctl.fleet.worker.fit_batch`), its CPU split by phase (thread CPU time of each
+   phase, nested phases inside their parents).
 No classifiers are used (the whole prior ranges, as without ``impctl train``), so the figures
 are the fit's; classification adds ~1 ms per household.
 """
@@ -42,12 +51,18 @@ import pandas as pd
 SEED = 20260
 
 
-def make_fleet(n: int, path: Path) -> Path:
+def make_fleet(n: int, path: Path, plant: str = "realistic") -> Path:
     """n households' nights as one Parquet dataset (cached)."""
     from impctl.population.households import sample_households
-    from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+    from impctl.population.realism import sample_params
+    from impctl.population.synth_nights import (
+        imp_schedule,
+        run_schedule,
+        run_schedule_plant,
+        sample_nights,
+    )
 
-    target = path / f"fleet-{n}.parquet"
+    target = path / f"fleet-{plant}-{n}.parquet"
     if target.exists():
         return target
     t0 = time.perf_counter()
@@ -58,19 +73,27 @@ def make_fleet(n: int, path: Path) -> Path:
         sub = type(houses)(**{f: np.broadcast_to(np.asarray(v, float), (n,))[lo:lo + k]
                               for f, v in houses.as_dict().items()})
         sched = imp_schedule(k, seed=SEED + lo)
-        sim, sp = run_schedule(sub, sched)
+        if plant == "realistic":
+            # the meter has its own noise and gain error: no extra power noise
+            sim, sp = run_schedule_plant(sub, sched, sample_params(k, SEED + lo), seed=SEED + lo)
+            noise = 0.0
+        else:
+            sim, sp = run_schedule(sub, sched)
+            noise = 0.05
         for i in range(k):
-            for night in sample_nights(sim, sp, sched, i, sample_step_s=300.0, seed=lo + i):
+            for night in sample_nights(sim, sp, sched, i, sample_step_s=300.0,
+                                       power_noise=noise, seed=lo + i):
                 stamps = night.start + pd.to_timedelta(night.time_s, unit="s")
                 frames.append(pd.DataFrame({
                     "household": f"h{lo + i:05d}", "timestamp": stamps.tz_convert("UTC"),
                     "t_air": night.t_air_c, "t_out": night.t_out_c, "q_hc": night.q_hc_w,
                     "night": night.night_id, "kind": night.kind}))
     path.mkdir(parents=True, exist_ok=True)
-    tmp = path / f".fleet-{n}.parquet.tmp"
+    tmp = path / f".{target.name}.tmp"
     pd.concat(frames, ignore_index=True).to_parquet(tmp, index=False)
     os.replace(tmp, target)
-    print(f"generated {n} households in {time.perf_counter() - t0:.0f} s → {target}")
+    print(f"generated {n} households ({plant} plant) in {time.perf_counter() - t0:.0f} s "
+          f"→ {target}")
     return target
 
 
@@ -93,8 +116,9 @@ def run_fleet(data: Path, workers: int | None, batch: int, work: Path) -> tuple[
     cpu = pd.read_parquet(out)["cpu_s_per_household"].sum()
     print(f"  {run.found} households, {run.counts}, {wall:.1f} s wall on {run.workers} "
           f"workers → {run.fitted / wall:.2f} households/s; worker CPU {cpu:.0f} s = "
-          f"{cpu / max(1, run.fitted):.3f} CPU-s per household (load average now "
-          f"{os.getloadavg()[0]:.1f})")
+          f"{cpu / max(1, run.fitted):.3f} CPU-s per household; worker time outside the "
+          f"batches (cluster start, preload, Dask, idle) {wall * run.workers - cpu:.0f} s "
+          f"(load average now {os.getloadavg()[0]:.1f})")
     return wall, out
 
 
@@ -132,6 +156,75 @@ def batch_vs_alone(data: Path, n: int) -> None:
           f"difference of HLC/C_m/τ {diff:.1e}")
 
 
+def profile(data: Path, n: int) -> None:
+    """One worker's batch of ``n`` households in this process, its CPU split by phase."""
+    import threading
+
+    import torch
+
+    from impctl.fit import batch, estimator, lm, solver
+    from impctl.fit import data as fit_data
+    from impctl.fleet import worker
+    from impctl.fleet.inputs import discover
+
+    torch.set_num_threads(1)
+    phases: dict[str, float] = {}
+    lock = threading.Lock()
+    calls = {"lm": 0}
+
+    def timed(owner, attr: str, name) -> None:
+        real = getattr(owner, attr)
+
+        def wrapper(*a, **kw):
+            label = name() if callable(name) else name
+            t = time.thread_time()
+            try:
+                return real(*a, **kw)
+            finally:
+                with lock:
+                    phases[label] = phases.get(label, 0.0) + time.thread_time() - t
+        setattr(owner, attr, wrapper)
+
+    def lm_call() -> str:
+        calls["lm"] += 1
+        return ("merged LM: 1st call (all starts: with/without emitter term, per night)"
+                if calls["lm"] % 2 else "merged LM: 2nd call (joint refit with fitted σ)")
+
+    timed(worker, "read_sources", "read the households' rows (pyarrow/pandas → nights)")
+    timed(worker, "_classify", "classifiers")
+    timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
+    timed(batch, "_solve_group", lm_call)
+    timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
+    timed(lm, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
+    timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
+    timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
+    timed(estimator.NightFit, "_validate", "validation / predictions (two row sets)")
+    timed(estimator.NightFit, "_night_quality", "night quality")
+    timed(estimator.NightFit, "_update_sigma", "residual σ update")
+    timed(estimator, "pack_nights", "pack nights into tensors")
+    timed(estimator, "coarsen", "coarsen to 5-min blocks")
+    timed(worker, "_flexibility", "flexibility (coast_h, rebound_kwh)")
+    sources = discover(data)[:n]
+    settings = worker.Settings(model_dir=worker.PRIOR)
+    worker.fit_batch(sources[:2], settings)   # imports, first-call costs
+    phases.clear()
+    calls["lm"] = 0
+    t0, c0 = time.perf_counter(), time.process_time()
+    rows = worker.fit_batch(sources, settings)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    ok = sum(r["status"] == "ok" for r in rows)
+    print(f"  batch of {n} ({ok} ok): {wall:.1f} s wall, {cpu:.2f} CPU-s = {cpu / n:.3f} "
+          "CPU-s per household")
+    print(f"  {'phase':<76} {'CPU-s':>7} {'share':>6}")
+    top = 0.0
+    for name, sec in phases.items():
+        if not name.startswith(" "):
+            top += sec
+        print(f"  {name:<76} {sec:7.2f} {100 * sec / cpu:5.1f}%")
+    print(f"  {'other (threads, Python glue, tensors outside the phases)':<76} "
+          f"{cpu - top:7.2f} {100 * (cpu - top) / cpu:5.1f}%")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=1000)
@@ -139,15 +232,22 @@ def main() -> None:
     ap.add_argument("--throughput", type=int, default=256)
     ap.add_argument("--alone", type=int, default=16)
     ap.add_argument("--batch-size", type=int, default=16)
+    ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
+    ap.add_argument("--profile", type=int, default=0, metavar="N",
+                    help="split one batch of N households' CPU by phase, then stop")
     ap.add_argument("--skip-full", action="store_true")
     ap.add_argument("--full-only", action="store_true")
     args = ap.parse_args()
     os.environ.setdefault("IMPCTL_MODEL_DIR", str(args.data / "no-models"))
     print(f"bench/fleet.py on {platform.node()}: {os.cpu_count()} cores, load average "
           f"{os.getloadavg()[0]:.1f}; command: {' '.join(sys.argv)}")
-    print("plant: ideal 5R1C (impctl.plant not on main yet); 8 nights (2 constrained + 6 "
-          "normal) of 5-minute rows per household; no classifiers (prior ranges)")
-    data = make_fleet(args.households, args.data)
+    print(f"plant: {args.plant}; 8 nights (2 constrained + 6 normal) of 5-minute rows per "
+          "household; no classifiers (prior ranges)")
+    data = make_fleet(args.households, args.data, args.plant)
+    if args.profile:
+        print(f"\n5. where one batch's CPU goes ({args.profile} households, one thread)")
+        profile(data, args.profile)
+        return
     work = Path(tempfile.mkdtemp(prefix="impctl-fleet-bench-"))
     try:
         if not args.full_only:

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from impctl.heatpump.decode import to_word
 from impctl.heatpump.registers import REGISTERS, Access, Generation, Kind
+from impctl.modbus import to_word, uint32_words
 
 from .realistic import PlantLike
 
@@ -128,10 +128,10 @@ def register_words(values: Mapping[int, int], generation: Generation,
             if not 0 <= i < count:
                 continue
             if ma in _UINT32:
-                raw &= 0xFFFFFFFF
-                words[i] = raw >> 16
+                high, low = uint32_words(raw & 0xFFFFFFFF)
+                words[i] = high
                 if i + 1 < count:
-                    words[i + 1] = raw & 0xFFFF
+                    words[i + 1] = low
             else:
                 words[i] = to_word(max(-0x8000, min(0x7FFF, raw)))
         for ma in missing:
@@ -144,4 +144,4 @@ def register_words(values: Mapping[int, int], generation: Generation,
 def heat_meter_words(plant: PlantLike) -> list[int]:
     """Heat-meter device image: address 0–1 = space-heating thermal power [W], uint32."""
     watts = max(0, round(plant.space_heat_metered_w))
-    return [watts >> 16, watts & 0xFFFF]
+    return uint32_words(watts)

@@ -11,8 +11,8 @@ from __future__ import annotations
 from pymodbus.pdu import ModbusPDU
 from pymodbus.pdu.register_message import ReadHoldingRegistersResponse
 
-from impctl.heatpump.decode import to_word
 from impctl.heatpump.registers import Generation
+from impctl.modbus import to_word
 
 from .image import in_layout
 

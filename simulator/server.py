@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import logging
 import os
 import time
@@ -28,15 +27,14 @@ from pathlib import Path
 import numpy as np
 from pymodbus.constants import ExcCodes
 from pymodbus.framer import FramerType
-from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from impctl.errors import InputError
 from impctl.heatpump.clock import VirtualClock
-from impctl.heatpump.decode import to_int16
 from impctl.heatpump.registers import Generation
+from impctl.modbus import to_int16
 
 from .config import SimConfig
 from .faults import parse_faults
@@ -52,6 +50,7 @@ from .image import (
     writable,
 )
 from .profiles import tt3000_undocumented
+from .wire import BadCount, Fc3Fc6Decoder, SerialServer, TcpServer, require_loopback
 
 _LOG = logging.getLogger(__name__)
 _MAX_STEPS_PER_TICK = 2000
@@ -69,31 +68,6 @@ class SimStats:
     dropped: int = 0
     writes: Counter = field(default_factory=Counter)  # documented number → accepted FC 06
     lag_s: float = 0.0  # simulated time the model is behind the clock
-
-
-class _Unsupported(ModbusPDU):
-    """Any request other than FC 03/06: answered with "illegal function"."""
-
-    def __init__(self, function_code: int) -> None:
-        super().__init__()
-        self.function_code = function_code
-
-    def decode(self, data: bytes) -> None:
-        """Nothing to decode; the request is refused whatever it holds."""
-
-
-class _BadCount(_Unsupported):
-    """FC 03 with a register count outside 1–125: answered with exception 3."""
-
-
-class _Fc3Fc6Decoder(DecodePDU):
-    def decode(self, frame: bytes) -> ModbusPDU | None:
-        if frame and frame[0] == 3 and len(frame) >= 5:
-            if not 1 <= int.from_bytes(frame[3:5], "big") <= 125:
-                return _BadCount(3)
-        if frame and frame[0] in (3, 6):
-            return super().decode(frame)
-        return _Unsupported(frame[0] & 0x7F) if frame else None
 
 
 def _make_handler(sim: KronotermSimulator) -> type[ServerRequestHandler]:
@@ -146,7 +120,7 @@ class KronotermSimulator:
         self._faults_file = faults_file
         self._faults_mtime: float | None = None
         self.gateway = GatewayFaults(self.faults, config.seed)
-        self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._server: TcpServer | SerialServer | None = None
         self._task: asyncio.Task | None = None
         self._internal = False
         self._framer_socket = True
@@ -174,7 +148,7 @@ class KronotermSimulator:
             host, _, port_text = rtu[len("socket://"):].rpartition(":")
             port = int(port_text)
         if (rtu is None or rtu.startswith("socket://")) and not allow_remote:
-            _require_loopback(host)
+            require_loopback(host)
         self._warm_up()
         self._update_faults_from_file()
         device = SimDevice(self.config.unit_id, _blocks(self.config), action=self._action)
@@ -185,12 +159,12 @@ class KronotermSimulator:
                                      action=self._meter_action))
         common = dict(trace_packet=self._trace_packet)
         if rtu is None:
-            server = _TcpServer(devices, address=(host, port), **common)
+            server = TcpServer(devices, address=(host, port), **common)
         else:
-            server = _SerialServer(devices, framer=FramerType.RTU, port=rtu, baudrate=baudrate,
+            server = SerialServer(devices, framer=FramerType.RTU, port=rtu, baudrate=baudrate,
                                    **common)
         server.handler_class = _make_handler(self)
-        server.decoder = _Fc3Fc6Decoder(True)
+        server.decoder = Fc3Fc6Decoder(True)
         self._server = server
         self._framer_socket = rtu is None
         await self._publish()
@@ -308,7 +282,7 @@ class KronotermSimulator:
             return None
         if faults.delay_s:
             await asyncio.sleep(faults.delay_s)
-        if isinstance(pdu, _BadCount):
+        if isinstance(pdu, BadCount):
             return ExceptionResponse(3, ExcCodes.ILLEGAL_VALUE)
         if pdu.function_code not in (3, 6):
             return ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_FUNCTION)
@@ -389,21 +363,6 @@ class KronotermSimulator:
         _LOG.warning("faults now: %s", self.faults.describe())
 
 
-class _HandlerMixin:
-    handler_class: type[ServerRequestHandler] = ServerRequestHandler
-
-    def callback_new_connection(self):
-        return self.handler_class(self, self.trace_packet, self.trace_pdu, self.trace_connect)
-
-
-class _TcpServer(_HandlerMixin, ModbusTcpServer):
-    pass
-
-
-class _SerialServer(_HandlerMixin, ModbusSerialServer):
-    pass
-
-
 def _log_crash(task: asyncio.Task) -> None:
     # A dead model task would leave the registers frozen without a word: say so loudly.
     if not task.cancelled() and task.exception() is not None:
@@ -414,13 +373,3 @@ def _log_crash(task: asyncio.Task) -> None:
 def _blocks(config: SimConfig) -> list[SimData]:
     return [SimData(first - 1, count=n, datatype=DataType.REGISTERS)
             for first, n in LAYOUT[config.generation]]
-
-
-def _require_loopback(host: str) -> None:
-    try:
-        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        loopback = False
-    if not loopback:
-        raise InputError(f"refusing to listen on {host!r}: the simulator binds to loopback "
-                         "unless allow_remote / --allow-remote is given", place="--host")

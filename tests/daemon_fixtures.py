@@ -87,7 +87,7 @@ def daemon_mapping(state_dir: Path, port: int, clock: VirtualClock,
         "log_level": "info",
         "heatpump": heatpump_section(port),
         "night": {"sample_interval_s": 120, "t_out_max_c": 8.0},
-        "campaign": {"enabled": False, "fit_when_complete": False},
+        "campaign": {"enabled": False, "mode": "fixed", "fit_when_complete": False},
         "clock": {"epoch": clock.epoch.isoformat(), "speed": clock.factor,
                   "wall_epoch_s": clock.wall_epoch_s},
     }

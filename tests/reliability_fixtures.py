@@ -793,7 +793,7 @@ def soak_run(tmp_path: Path, nights: int, *, speed: float, sample_interval_s: fl
             state, sim.port, sim.clock,
             night={"window": "22:00-05:00", "preheat_h": 2.0,
                    "sample_interval_s": sample_interval_s},
-            campaign={"enabled": True, "constrained_nights": constrained,
+            campaign={"enabled": True, "mode": "fixed", "constrained_nights": constrained,
                       "normal_setpoints_c": [21.0, 22.0],
                       "normal_nights_per_setpoint": (normal + 1) // 2,
                       "fit_when_complete": False}))

@@ -7,8 +7,9 @@ owner's setpoint and mode must be on the heat pump.
 
 * a full campaign (2 constrained + 3 normal nights) across the end of summer time
   (25 Oct 2026, Europe/Ljubljana): one night per day, 22:00–05:00 local, the night of the
-  change 8 h long, every night valid and restored, then the fit run in a subprocess
-  (``impctl export`` → ``impctl fit``) and stored;
+  change 8 h long, every night valid and restored, a fit after each valid night from the
+  first with a night of each kind, run in a subprocess (``impctl export`` → ``impctl fit``)
+  and stored with its night count;
 * a short campaign across the start of summer time (29 Mar 2026): the night of the change
   lasts 6 h, the next 7 h.
 """
@@ -112,17 +113,19 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path):
         if not db.exists():
             return False
         with Store(db) as store:
-            return store.last_fit() is not None
+            fit = store.last_fit()
+            return fit is not None and len(fit[1]) == 5
 
     epoch = datetime(2026, 10, 23, 19, 0, tzinfo=TZ)
     result = run(_campaign(
         tmp_path, epoch, SPEED,
-        {"constrained_nights": 2, "constrained_setpoint_c": 21.0,
+        {"mode": "fixed", "constrained_nights": 2, "constrained_setpoint_c": 21.0,
          "normal_setpoints_c": [21.0, 22.0, 23.0], "fit_when_complete": True},
         until=until, timeout_s=150), timeout_s=160)
     with Store(result["cfg"].db_path) as store:
         fit = store.last_fit()
-        fit_events = [m for _, _, m in store.events(50) if m.startswith("fit")]
+        fit_events = [m for _, _, m in store.events(50) if m.startswith("fit")][::-1]
+        fit_counts = [f.night_count for f in store.fits()]
         nights = store.nights()
         plan = store.campaign()
         pending = store.journal_pending()
@@ -153,10 +156,12 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path):
     # (already there: never written); 2042: switch-off + restore on the constrained nights.
     assert result["writes"] == {2187: 8, 2042: 4}
     _check_nights_restored(result, nights)
-    # The fit ran once, in a subprocess, on the five valid nights, and was stored.
+    # A fit after the valid nights (in a subprocess, one at a time), from the first night that
+    # gave a night of each kind (the third) to the last, each stored with its night count.
     _, fit_nights, summary = fit
     assert sorted(fit_nights) == [n.id for n in nights]
-    assert fit_events == ["fit stored (5 nights)"]
+    assert fit_counts[0] >= 3 and fit_counts[-1] == 5 and fit_counts == sorted(set(fit_counts))
+    assert fit_events == [f"fit stored ({c} nights)" for c in fit_counts]
     assert summary["fit"] and summary["lumped"]["hlc"]["unit"] == "W/K"
     # The data were the right ones: the heavy house's true HLC is found (±10 %).
     hlc = summary["lumped"]["hlc"]["value"]
@@ -179,7 +184,7 @@ def test_campaign_across_the_start_of_summer_time(tmp_path):
     epoch = datetime(2026, 3, 28, 19, 0, tzinfo=TZ)
     result = run(_campaign(
         tmp_path, epoch, SPEED,
-        {"constrained_nights": 0, "normal_setpoints_c": [21.0, 22.0]},
+        {"mode": "fixed", "constrained_nights": 0, "normal_setpoints_c": [21.0, 22.0]},
         until=until, timeout_s=60), timeout_s=70)
     with Store(result["cfg"].db_path) as store:
         nights = store.nights()

@@ -76,8 +76,8 @@ def _switched_off_with_samples(sim: SimProcess, db: Path, n: int = 3):
     return check
 
 
-ONE_CONSTRAINED = {"enabled": True, "constrained_nights": 1, "normal_setpoints_c": [],
-                   "fit_when_complete": False}
+ONE_CONSTRAINED = {"enabled": True, "mode": "fixed", "constrained_nights": 1,
+                   "normal_setpoints_c": [], "fit_when_complete": False}
 
 
 def test_sigterm_mid_night_restores_before_exit(tmp_path):

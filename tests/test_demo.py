@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import subprocess
 import sys
@@ -41,6 +42,9 @@ def test_short_demo_runs_end_to_end(demo):
     assert abs(lumped["hlc"]["error_pct"]) < 5.0
     assert abs(lumped["tau"]["error_pct"]) < 25.0
     assert summary["heat_demand"]["out_of_sample"] is True
+    # The fixed 1 + 2 campaign: three valid nights (and any invalid ones before them).
+    assert summary["nights_valid"] == 3 and summary["nights_run"] >= 3
+    assert summary["campaign"]["mode"] == "fixed" and "Campaign: fixed 1 + 2" in text
     params = {p["name"]: p for p in summary["parameters"]}
     # Product-only parameters are never claimed as measured.
     for name in ("walls_area", "windows_area", "u_windows"):
@@ -71,6 +75,46 @@ def test_demo_realistic_plant_is_the_default(demo, tmp_path):
     assert plant["realism"]["sensors"]["t_air_lag_s"] == 600.0
     lumped = {q["name"]: q for q in summary["lumped"]}
     assert lumped["hlc"]["error_pct"] is not None
+
+
+def test_demo_adaptive_campaign(demo, tmp_path):
+    """``--adaptive``: the daemon fits after each night and stops by itself; summary.json
+    tells how (classifiers of the ideal run above reused)."""
+    import shutil
+
+    out_iso, proc_iso = demo
+    assert proc_iso.returncode == 0
+    shutil.copytree(out_iso / "models", tmp_path / "models")
+    out = tmp_path / "demo"
+    proc = run_cli("demo", "--adaptive", "--max-nights", "3", "--target", "0.3,0.5",
+                   "--plant", "iso", "--speed", "10000", "--out", str(out),
+                   "--model-dir", str(tmp_path / "models"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    camp = summary["campaign"]
+    assert camp["mode"] == "adaptive" and summary["nights_run"] == len(camp["nights"]) <= 3
+    assert camp["nights"][0][0] == "constrained" and summary["nights_valid"] >= 2
+    actions = [d["action"] for d in camp["decisions"]]
+    assert actions[-1] == "stop" and actions.count("stop") == 1
+    assert camp["intervals"][-1]["valid_nights"] == summary["nights_valid"]
+    assert camp["line"].startswith("Campaign: adaptive") and camp["line"] in proc.stdout
+    assert "simulator loop-1 setpoint back at 21.0 °C, mode 1" in proc.stdout
+    # The report shows the campaign: the interval after each fit, every decision and why.
+    page = (out / "report.html").read_text()
+    assert "Campaign: how the intervals shrank" in page
+    assert html.escape(camp["decisions"][-1]["reason"]) in page
+    # The result is the daemon's last fit, on every valid night.
+    fit = json.loads((out / "fit.json").read_text())
+    assert fit["lumped"]["hlc"]["value"] == pytest.approx(camp["intervals"][-1]["hlc_w_per_k"])
+
+
+def test_demo_adaptive_options_are_checked(tmp_path):
+    for args, place in ((("--adaptive", "--nights", "1+1"), "--nights"),
+                        (("--adaptive", "--target", "5,8"), "--target")):
+        proc = run_cli("demo", *args, "--out", str(tmp_path / "d"), timeout=60)
+        assert proc.returncode == 2 and place in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()
 
 
 def test_demo_report_is_self_contained(demo):

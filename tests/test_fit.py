@@ -316,3 +316,21 @@ def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitte
         sd_stat = np.log(e.high / e.low) / (2 * 1.959964)
         sd_wide = np.log(w.high / w.low) / (2 * 1.959964)
         assert sd_wide == pytest.approx(np.hypot(sd_stat, share), rel=1e-6)
+
+
+def test_torchdiffeq_rk4_and_the_exact_discretisation_give_the_same_fit(fitted, nights_15min):
+    """The default solver (closed form per interval) and torchdiffeq's rk4 agree on the fit,
+    and the JSON names the one used."""
+    rk4 = NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0),
+                   solver="rk4").fit(nights_15min, RANGES)
+    assert fitted.solver == "exact"
+    for key in ("hlc", "c_m", "tau"):
+        a, b = fitted.lumped_[key], rk4.lumped_[key]
+        assert a.value == pytest.approx(b.value, rel=1e-3)
+        assert a.low == pytest.approx(b.low, rel=1e-3)
+        assert a.high == pytest.approx(b.high, rel=1e-3)
+    assert fitted.loss_ == pytest.approx(rk4.loss_, abs=0.05)
+    assert "exact discretisation" in fit_to_dict(fitted)["fit"]["solver"]
+    assert "torchdiffeq" in fit_to_dict(rk4)["fit"]["solver"]
+    with pytest.raises(ValueError, match="solver"):
+        NightFit(solver="euler").fit(nights_15min, RANGES)

@@ -26,6 +26,7 @@ from impctl.heatpump import (
 from impctl.heatpump.registers import TEMP_VALID_C
 from impctl.heatpump.snapshot import plan_blocks
 from impctl.heatpump.writes import check_target
+from impctl.modbus import uint32, uint32_words
 
 NOW = datetime(2026, 1, 12, 20, tzinfo=UTC)
 TEMPS = [r for r in REGISTERS.values() if r.kind is Kind.TEMP]
@@ -154,6 +155,19 @@ def test_uint32_counters_are_high_word_first():
     assert reading.value == 4_294_967_295  # unsigned: never negative
     with pytest.raises(ValueError):
         decode(register("energy_thermal"), [1], NOW)
+
+
+@given(st.integers(0, 0xFFFFFFFF))
+def test_uint32_words_are_the_inverse_of_uint32(value):
+    words = uint32_words(value)
+    assert all(0 <= w <= 0xFFFF for w in words) and uint32(words) == value
+
+
+def test_uint32_words_refuse_what_two_registers_cannot_hold():
+    assert uint32_words(100_000) == [0x0001, 0x86A0]
+    for value in (-1, 1 << 32):
+        with pytest.raises(ValueError):
+            uint32_words(value)
 
 
 def test_encode_is_int16_twos_complement():

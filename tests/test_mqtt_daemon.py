@@ -43,10 +43,10 @@ TZ = ZoneInfo("Europe/Ljubljana")
 SPEED = 3600.0
 OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)
 BASE = "impctl/gw1"
-ONE_CONSTRAINED = {"enabled": True, "constrained_nights": 1, "normal_setpoints_c": [],
-                   "fit_when_complete": False}
-#: 9 sensors/binary sensors of state, 4 fit sensors; 5 command entities with commands = true.
-N_ENTITIES = {False: 13, True: 18}
+ONE_CONSTRAINED = {"enabled": True, "mode": "fixed", "constrained_nights": 1,
+                   "normal_setpoints_c": [], "fit_when_complete": False}
+#: 14 sensors/binary sensors of state, 4 fit sensors; 5 command entities with commands = true.
+N_ENTITIES = {False: 18, True: 23}
 
 
 @contextlib.contextmanager
@@ -131,6 +131,12 @@ def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
             samples = {s.ts.isoformat(): s for s in store_query(db, lambda st: st.samples(1))}
             active = [s for s in _states(ha) if s["night_state"] == "active"]
             assert len(active) >= 5
+            # The campaign as Home Assistant shows it (issue 18): a fixed plan of one night.
+            camp = configs["homeassistant/sensor/gw1/campaign_status/config"]
+            assert render(camp["value_template"], json.dumps(active[-1]).encode()) == (
+                "fixed plan: 0/1 valid nights")
+            assert (active[-1]["campaign_mode"], active[-1]["nights_run"],
+                    active[-1]["hlc_rel_pct"]) == ("fixed", 0, None)
             matched = [s for s in active if s["ts"] in samples]
             assert len(matched) >= 5  # each published value is a stored sample's value
             for s in matched:

@@ -37,8 +37,8 @@ from impctl.heatpump import VirtualClock
 
 TZ = ZoneInfo("Europe/Ljubljana")
 OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)
-ONE_CONSTRAINED = {"enabled": True, "constrained_nights": 1, "normal_setpoints_c": [],
-                   "fit_when_complete": False}
+ONE_CONSTRAINED = {"enabled": True, "mode": "fixed", "constrained_nights": 1,
+                   "normal_setpoints_c": [], "fit_when_complete": False}
 #: ISO 8601 local time with its offset, e.g. 2026-11-23T20:19:33.802+01:00.
 STAMP = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d ")
 

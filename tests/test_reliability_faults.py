@@ -35,7 +35,7 @@ SPEED = 600.0
 #: Test-sized link timings (wall clock): a failed try costs 2 simulated minutes at 600×.
 LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02, "connect_backoff_s": [0.05, 0.2]}
 OWNER = (21.0, 1)
-QUIRK = r"^WARNING impctl\.heatpump\.link: Modbus quirk recognised: "
+QUIRK = r"^WARNING impctl\.modbus\.link: Modbus quirk recognised: "
 LINK_LOST = r"^WARNING impctl\.controller\.night\.night1: heat-pump link lost: "
 RESTORE_WAITS = r"^WARNING impctl\.controller\.restore: restore of loop1_setpoint waits for"
 

@@ -147,7 +147,8 @@ def base_config(state_dir: Path) -> dict:
                   "t_out_max_c": 8.0, "constrained_action": "loop_off",
                   "setpoint_floor_c": 18.0, "preheat_h": 2.0, "emission_lag_h": 1.0,
                   "min_coverage": 0.8},
-        "campaign": {"constrained_nights": 2, "constrained_setpoint_c": 21.0,
+        "campaign": {"mode": "fixed", "target_rel_halfwidth": {"hlc": 0.05, "tau": 0.08},
+                     "constrained_nights": 2, "constrained_setpoint_c": 21.0,
                      "normal_setpoints_c": [21.0, 22.0], "misfire_grace_s": 3600.0,
                      "enabled": True},
         "clock": {"epoch": "2026-01-12T20:00:00+00:00", "speed": 600.0,
@@ -179,6 +180,13 @@ BAD_CONFIG_VALUES: dict[tuple[str, ...], list[str]] = {
     ("campaign", "normal_setpoints_c"): ["[30.0]", "[nan]", '["21"]', "21.0"],
     ("campaign", "misfire_grace_s"): ["-1.0", *_NONFINITE],
     ("campaign", "enabled"): ['"yes"', "1"],
+    ("campaign", "mode"): ['"smart"', "1"],
+    ("campaign", "max_nights"): ["1", "2.5"],
+    ("campaign", "min_each_kind"): ["0", "5"],
+    ("campaign", "stall_nights"): ["0"],
+    ("campaign", "target_rel_halfwidth"): ["0.05"],
+    ("campaign", "target_rel_halfwidth", "hlc"): ["0", "1.5", '"5 %"', "nan"],
+    ("campaign", "target_rel_halfwidth", "colour"): ['"blue"'],
     ("clock", "speed"): ["0", "-1.0", *_NONFINITE],
     ("clock", "epoch"): ['"yesterday"', '"2026-01-12T20:00:00"', "2026-01-12T20:00:00Z"],
     ("clock", "wall_epoch_s"): ["-1.0", *_NONFINITE],
@@ -301,7 +309,7 @@ def test_fuzzed_configs_are_refused_cleanly_or_usable(values):
     from impctl.daemon.schedule import act_trigger, campaign_plan, next_act_time
     from impctl.daemon.service import clock_from_config, policy_from_config
     from impctl.heatpump import WriteBudget
-    from impctl.heatpump.link import ModbusLink
+    from impctl.modbus import ModbusLink
 
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -612,8 +620,8 @@ def test_sentinel_and_out_of_range_words_never_reach_the_store_as_temperatures(l
     stored as a sample: the stored value is missing (None) or a plausible temperature
     (−60…150 °C) that the word really encodes — never −60.0 from −600, −40.0 from −400, 0.0
     from an absent thermostat, or 3276.7 from a garbage word."""
-    from impctl.controller.night import sample_from_snapshot
-    from impctl.heatpump.decode import to_int16
+    from impctl.controller import sample_from_snapshot
+    from impctl.modbus import to_int16
     from impctl.store import Sample
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import os
 import subprocess
 import sys
@@ -37,6 +38,8 @@ TZ = "Europe/Ljubljana"
 #: Default clock speed per plant: the realistic plant's steps cost ~0.3 ms (vs µs), and the
 #: daemon shares the simulator's event loop, so it runs at half the ideal plant's speed.
 DEFAULT_SPEED = {"realistic": 10000.0, "iso": 20000.0}
+#: How long the adaptive demo waits after the stop for the daemon's last fit [s].
+FIT_WAIT_S = 180.0
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,9 @@ class DemoOptions:
     households: int = 900
     sample_interval_s: float = 300.0
     plant: str = "realistic"
+    adaptive: bool = False  # the adaptive campaign (issue 18) instead of the fixed counts
+    max_nights: int = 5  # adaptive: nights run at most
+    target_rel: tuple[float, float] = (0.05, 0.08)  # adaptive: HLC, τ 95 % half-width / estimate
 
 
 def demo_house() -> HouseParameters:
@@ -191,12 +197,7 @@ async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progre
             # realistic plant has air and furniture capacity: the paper's 1.5 K.
             "night": {"sample_interval_s": opts.sample_interval_s, "t_out_max_c": 12.0,
                       "comfort_band_k": 1.5 if realistic else 2.0},
-            "campaign": {"constrained_nights": opts.constrained_nights,
-                         # T_set 21 = the owner's day setpoint: T_max 23, T_min 19 °C.
-                         "constrained_setpoint_c": 21.0,
-                         "normal_setpoints_c": setpoints[: min(n_norm, 3)],
-                         "normal_nights_per_setpoint": per_sp if n_norm >= 3 else 1,
-                         "fit_when_complete": False},
+            "campaign": _campaign_section(opts, setpoints, per_sp),
             "clock": {"epoch": epoch.isoformat(), "speed": opts.speed,
                       "wall_epoch_s": clock.wall_epoch_s},
         }, "demo config")
@@ -217,16 +218,58 @@ async def _campaign(opts: DemoOptions, house: HouseParameters, progress: _Progre
         return cfg.db_path
 
 
+def _campaign_section(opts: DemoOptions, setpoints: list[float], per_sp: int) -> dict:
+    """``[campaign]``: the fixed counts, or the adaptive campaign (the daemon fits after
+    every valid night and decides; the demo's classifiers are ready before it starts)."""
+    # T_set 21 = the owner's day setpoint: T_max 23, T_min 19 °C (ΔT 2 K on the ideal plant).
+    common = {"constrained_setpoint_c": 21.0}
+    if opts.adaptive:
+        return {**common, "mode": "adaptive", "normal_setpoints_c": setpoints,
+                "max_nights": opts.max_nights,
+                "target_rel_halfwidth": {"hlc": opts.target_rel[0], "tau": opts.target_rel[1]}}
+    n_norm = opts.normal_nights
+    return {**common, "mode": "fixed", "constrained_nights": opts.constrained_nights,
+            "normal_setpoints_c": setpoints[: min(n_norm, 3)],
+            "normal_nights_per_setpoint": per_sp if n_norm >= 3 else 1,
+            "fit_when_complete": False}
+
+
+def _campaign_done(store: Store, adaptive: bool) -> tuple[bool, int, str]:
+    """(finished, valid nights, what the campaign is at) — adaptive: stopped and the fit of
+    every valid night stored; fixed: every plan entry valid."""
+    valid = len(store.nights(valid=True))
+    if adaptive:
+        from .daemon.fitting import fit_ready
+
+        decisions, fits = store.decisions(1), store.fits()
+        stopped = bool(decisions) and decisions[0].action == "stop"
+        fitted = (bool(fits) and fits[-1].night_count == valid) or fit_ready(store) is not None
+        return (stopped and fitted, valid,
+                f"{valid} valid, adaptive" + (": stopped" if stopped else ""))
+    plan = store.campaign()
+    done = sum(1 for *_, v in plan if v)
+    return bool(plan) and done == len(plan), done, f"{done}/{len(plan)} valid"
+
+
 async def _watch(cfg, clock, sim, progress: _Progress, trainer, task) -> None:
+    from .daemon.schedule import campaign_plan
+
     last = 0.0
+    adaptive = cfg.campaign.adaptive
+    # Adaptive: the policy stops at max_nights (refused nights do not count; a margin for them).
+    limit = cfg.campaign.max_nights + 6 if adaptive else 3 * len(campaign_plan(cfg)) + 6
+    stopped_at = None
     while not task.done():
         await asyncio.sleep(0.5)
         with Store(cfg.db_path) as store:
-            plan = store.campaign()
-            valid = sum(1 for *_, v in plan if v)
+            finished, _, where = _campaign_done(store, adaptive)
             nights = store.nights()
-        if plan and valid == len(plan):
+        if finished:
             return
+        if where.endswith("stopped"):
+            stopped_at = stopped_at or time.perf_counter()
+            if time.perf_counter() - stopped_at > FIT_WAIT_S:
+                return  # the last fit failed (logged in demo.log): what there is, is shown
         if time.perf_counter() - last >= 3.0:
             last = time.perf_counter()
             running = [n for n in nights if n.state in ("preparing", "active", "restoring")]
@@ -236,12 +279,57 @@ async def _watch(cfg, clock, sim, progress: _Progress, trainer, task) -> None:
             train = progress.train_state
             if trainer is not None and trainer.poll() is not None:
                 train = "trained" if trainer.returncode == 0 else "training FAILED"
-            progress.line(f"nights {valid}/{len(plan)} valid ({len(nights)} run) | "
+            progress.line(f"nights {where} ({len(nights)} run) | "
                           f"sim {now:%a %d %b %H:%M} T_air {sim.plant.t_air_c:.1f} °C, "
                           f"T_out {sim.plant.t_out_c:.1f} °C | {what} | classifiers: {train}")
-        if len(nights) > 3 * len(plan) + 6:
+        if len(nights) > limit:
             raise RuntimeError("demo: too many invalid nights; see `impctl nights`")
     task.result()
+
+
+def _wait_training(trainer, opts: DemoOptions, progress: _Progress, why: str) -> None:
+    if trainer is None:
+        return
+    progress.line(f"waiting for the classifier training to finish ({why})")
+    if trainer.wait() != 0:
+        raise RuntimeError(f"training failed; see {opts.out / 'train.log'}")
+    progress.train_state = "trained"
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None  # JSON has no Infinity: unknown is null
+
+
+def campaign_summary(store: Store, opts: DemoOptions) -> dict:
+    """``nights_run`` / ``nights_valid`` (both modes) and the campaign block of summary.json:
+    the interval after each fit and, adaptive, every decision with its reason."""
+    from .campaign import FitSummary
+
+    run = [n for n in store.nights() if n.state != "refused"]
+    valid = [n for n in run if n.valid]
+    intervals = []
+    for f in store.fits():
+        fs = FitSummary.from_fit_json(f.result, f.night_count)
+        intervals.append({"valid_nights": f.night_count, "hlc_w_per_k": fs.hlc_w_per_k,
+                          "hlc_rel": _finite(fs.hlc_rel), "tau_h": fs.tau_h,
+                          "tau_rel": _finite(fs.tau_rel)})
+    block = {"mode": "adaptive" if opts.adaptive else "fixed", "nights_run": len(run),
+             "nights_valid": len(valid), "nights": [[n.kind, n.setpoint_c, n.valid]
+                                                    for n in run],
+             "intervals": intervals}
+    if opts.adaptive:
+        block["target_rel_halfwidth"] = {"hlc": opts.target_rel[0], "tau": opts.target_rel[1]}
+        block["max_nights"] = opts.max_nights
+        block["decisions"] = [{"act": d.act, "action": d.action, "kind": d.kind,
+                               "setpoint_c": d.setpoint_c, "reason": d.reason}
+                              for d in reversed(store.decisions(200))]
+        stop = next((d for d in reversed(block["decisions"]) if d["action"] == "stop"), None)
+        block["line"] = (f"Campaign: adaptive, {len(run)} nights run, {len(valid)} valid. "
+                         + (stop["reason"] if stop else ""))
+    else:
+        block["line"] = (f"Campaign: fixed {opts.constrained_nights} + {opts.normal_nights}, "
+                         f"{len(run)} nights run, {len(valid)} valid.")
+    return {"nights_run": len(run), "nights_valid": len(valid), "campaign": block}
 
 
 def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
@@ -270,25 +358,37 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
     trainer = _start_training(opts, model_dir, progress)
     weather = demo_weather(opts)
+    if opts.adaptive:
+        # The daemon fits after every night and decides on those fits: with the classifiers.
+        opts = replace(opts, model_dir=model_dir)
+        _wait_training(trainer, opts, progress, "the adaptive campaign's fits use them")
+        trainer = None
     db_path = asyncio.run(_campaign(opts, house, progress, trainer, weather, realism))
-    if trainer is not None:
-        progress.line("waiting for the classifier training to finish")
-        if trainer.wait() != 0:
-            raise RuntimeError(f"training failed; see {opts.out / 'train.log'}")
-        progress.train_state = "trained"
+    _wait_training(trainer, opts, progress, "the fit uses them")
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
-    progress.line("exporting the valid nights and fitting (impctl fit)")
+    progress.line("exporting the valid nights" + ("" if opts.adaptive else
+                                                  " and fitting (impctl fit)"))
     subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
                         "--force"), check=True,
                    capture_output=True)
-    fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
-                              "--model-dir", str(model_dir)), capture_output=True, text=True)
-    if fit.returncode != 0:
-        raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
-    result = json.loads(fit_json.read_text())
-    with Store(db_path) as store:
-        store.add_fit([n.id for n in store.nights(valid=True)], result)
+    if opts.adaptive:  # the daemon's last fit, on every valid night, is the result
+        with Store(db_path) as store:
+            last, decision = store.last_fit(), store.decisions(1)
+        if last is None:
+            raise RuntimeError("demo: the adaptive campaign ended without a fit: "
+                               + (decision[0].reason if decision else "no decision")
+                               + " (see demo.log)")
+        result = last[2]
+        fit_json.write_text(json.dumps(result, indent=2) + "\n")
+    else:
+        fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
+                                  "--model-dir", str(model_dir)), capture_output=True, text=True)
+        if fit.returncode != 0:
+            raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
+        result = json.loads(fit_json.read_text())
+        with Store(db_path) as store:
+            store.add_fit([n.id for n in store.nights(valid=True)], result)
     from .report.demand import fitted_house, heat_demand_check
     from .report.summary import demo_summary, format_summary
 
@@ -296,11 +396,14 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
         demand = heat_demand_check(fitted_house(result), store, weather)
     summary = demo_summary(house, result, demand, wall_s=time.perf_counter() - progress.t0,
                            train_state=progress.train_state, plant=plant)
+    with Store(db_path) as store:
+        summary.update(campaign_summary(store, opts))
     progress.line("writing the report")
     from .report import write_report
 
     write_report(db_path, opts.out, truth=house, fit=result, summary=summary, demand=demand)
     (opts.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     echo(format_summary(summary))
+    echo(summary["campaign"]["line"])
     echo(f"report: {opts.out / 'report.html'}")
     return summary

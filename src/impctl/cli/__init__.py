@@ -23,6 +23,7 @@ def _register() -> None:
     # Each subcommand module adds itself to the group; keep imports light (no torch here).
     from . import demo_cmd, device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
     __import__(f"{__name__}.fleet_cmd")  # impctl fleet fit, impctl flex
+    __import__(f"{__name__}.campaign_cmd")  # impctl campaign next
 
 
 def run_group(group: click.Group, argv: list[str] | None, prog: str,

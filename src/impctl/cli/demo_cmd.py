@@ -24,8 +24,16 @@ def _nights(text: str) -> tuple[int, int]:
 @cli.command("demo")
 @click.option("--house", "house_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Demo your own virtual house (house TOML).")
-@click.option("--nights", default="2+6", show_default=True,
-              help="Constrained + normal nights of the campaign.")
+@click.option("--nights", default=None,
+              help="Constrained + normal nights of the fixed campaign [default: 2+6].")
+@click.option("--adaptive", is_flag=True,
+              help="The adaptive campaign instead: a fit after every night, the next night "
+                   "chosen by expected information, a stop at the target (--target) or at "
+                   "--max-nights.")
+@click.option("--max-nights", type=click.IntRange(2, 30), default=5, show_default=True,
+              help="--adaptive: nights run at most.")
+@click.option("--target", default="0.05,0.08", show_default=True,
+              help="--adaptive: HLC,τ 95 % interval half-widths relative to the estimates.")
 @click.option("--speed", type=float, default=None,
               help="Simulated seconds per wall-clock second [default: 10000 on the realistic "
                    "plant, whose steps cost more, 20000 on the ideal one].")
@@ -42,7 +50,8 @@ def _nights(text: str) -> tuple[int, int]:
               help="realistic: air/furniture capacity, radiators, a cycling weather-compensated "
                    "heat pump, gains, sensors (the house file's [plant.*] tables); iso: the "
                    "ideal 5R1C the fit assumes.")
-def demo_command(house_path, nights, speed, out, seed, model_dir, households, plant) -> None:
+def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, seed, model_dir,
+                 households, plant) -> None:
     """Run the whole product against a simulated heat pump and write the report.
 
     Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on an accelerated clock →
@@ -53,11 +62,27 @@ def demo_command(house_path, nights, speed, out, seed, model_dir, households, pl
     if speed is not None and (speed <= 0 or speed > 30000):
         raise InputError("must lie in (0, 30000] (the Modbus polling keeps up to ~20000)",
                          place="--speed")
-    c, n = _nights(nights)
+    if adaptive and nights is not None:
+        raise InputError("is a fixed campaign; --adaptive chooses its nights (use --max-nights)",
+                         place="--nights")
+    c, n = _nights(nights or "2+6")
     run_demo(DemoOptions(out=out, house_path=house_path, constrained_nights=c, normal_nights=n,
                          speed=speed, seed=seed, model_dir=model_dir, households=households,
-                         plant=plant),
+                         plant=plant, adaptive=adaptive, max_nights=max_nights,
+                         target_rel=_target(target)),
              echo=click.echo)
+
+
+def _target(text: str) -> tuple[float, float]:
+    try:
+        hlc, tau = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"expected HLC,TAU such as 0.05,0.08, got {text!r}",
+                         place="--target") from None
+    if not (0 < hlc < 1 and 0 < tau < 1):
+        raise InputError("relative half-widths must lie in (0, 1), e.g. 0.05,0.08",
+                         place="--target")
+    return hlc, tau
 
 
 @cli.command("report")

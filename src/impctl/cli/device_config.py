@@ -43,7 +43,7 @@ def state_dir_problem(state_dir: str | Path) -> str | None:
 
 def _tonight(cfg, store) -> list[str]:
     """What the next night would do, as lines for people."""
-    from ..daemon.schedule import next_act_time, peek_next_night
+    from ..daemon.schedule import next_act_time, peek_next_night, why_no_night
     from ..daemon.service import clock_from_config
 
     tz = ZoneInfo(cfg.timezone)
@@ -51,8 +51,7 @@ def _tonight(cfg, store) -> list[str]:
     req, request_id = peek_next_night(store, cfg, act)
     if req is None:
         return [f"nothing at the next night ({act.astimezone(tz):%Y-%m-%d}): "
-                + ("campaign complete" if cfg.campaign.enabled else "campaign disabled and "
-                   "no manual request")]
+                + why_no_night(store, cfg)]
     n = cfg.night
     origin = f"manual request {request_id}" if request_id is not None else "the campaign"
     start, end = req.window_start.astimezone(tz), req.window_end.astimezone(tz)
@@ -92,7 +91,20 @@ def _describe(cfg) -> list[str]:
             f"{hp.writes.daily_budget} writes/register/day (+{hp.writes.restore_reserve} "
             "for restores only)",
             f"nights:    {cfg.night.window} {cfg.timezone}, ΔT {cfg.night.comfort_band_k:g} K, "
-            f"a sample every {cfg.night.sample_interval_s:g} s"]
+            f"a sample every {cfg.night.sample_interval_s:g} s",
+            "campaign:  " + _campaign_line(cfg.campaign)]
+
+
+def _campaign_line(camp) -> str:
+    if not camp.enabled:
+        return "disabled (manual nights only)"
+    if camp.adaptive:
+        t = camp.target_rel_halfwidth
+        return (f"adaptive: until HLC ±{t.hlc:.0%} and τ ±{t.tau:.0%}, at most "
+                f"{camp.max_nights} nights, a fit after every valid night")
+    normal = len(camp.normal_setpoints_c) * camp.normal_nights_per_setpoint
+    return (f"fixed: {camp.constrained_nights} constrained + {normal} normal valid nights, "
+            f"{'a fit after every valid night' if camp.fit_when_complete else 'no fit'}")
 
 
 @cli.command("check-config")
@@ -145,3 +157,12 @@ class _NoStore:
 
     def campaign(self) -> list:
         return []
+
+    def nights(self, **_filters) -> list:  # the adaptive campaign's history: none yet
+        return []
+
+    def fits(self) -> list:
+        return []
+
+    def night_t_out_means(self) -> dict:
+        return {}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from zoneinfo import ZoneInfo
 
 
@@ -42,7 +43,8 @@ def collect_status(cfg) -> dict:
         plan = store.campaign()
         out["campaign"] = {"valid": sum(1 for *_, v in plan if v), "planned": len(plan),
                            "entries": [{"seq": s, "kind": k, "setpoint_c": sp, "night": n,
-                                        "valid": v} for s, k, sp, n, v in plan]}
+                                        "valid": v} for s, k, sp, n, v in plan],
+                           **_campaign(store, cfg)}
         fit = store.last_fit()
         out["last_fit"] = None if fit is None else {
             "created": fit[0], "nights": fit[1],
@@ -67,21 +69,89 @@ def collect_status(cfg) -> dict:
     return out
 
 
+def _campaign(store, cfg) -> dict:
+    """Mode, nights run / valid, how the intervals shrank fit after fit, the last decision."""
+    from ..daemon.adaptive import campaign_state, decide_now, fit_history, rel_pct
+
+    st = campaign_state(store, cfg)
+    camp = cfg.campaign
+    history = [{"valid_nights": f.nights, "hlc_w_per_k": _finite(f.hlc_w_per_k),
+                "hlc_rel_pct": rel_pct(f.hlc_rel), "tau_h": _finite(f.tau_h),
+                "tau_rel_pct": rel_pct(f.tau_rel)}
+               for f in fit_history(store)]
+    out = {"mode": st.mode, "nights_run": st.nights_run, "nights_valid": st.nights_valid,
+           "status": st.status, "reason": st.reason, "intervals": history,
+           "target_rel_pct": {"hlc": 100 * camp.target_rel_halfwidth.hlc,
+                              "tau": 100 * camp.target_rel_halfwidth.tau},
+           "max_nights": camp.max_nights if st.mode == "adaptive" else None,
+           "last_decision": None,
+           "decisions": [{"act": d.act, "action": d.action, "kind": d.kind,
+                          "setpoint_c": d.setpoint_c, "reason": d.reason}
+                         for d in reversed(store.decisions(50))]}
+    d = st.decision
+    if d is not None:
+        out["last_decision"] = {"act": d.act, "action": d.action, "kind": d.kind,
+                                "setpoint_c": d.setpoint_c, "reason": d.reason,
+                                "reached": d.reached, "forecast_t_out_c": d.forecast_t_out_c,
+                                "forecast_source": d.forecast_source}
+    if st.mode == "adaptive" and camp.enabled:
+        decision, fc = decide_now(store, cfg)  # what the next act would decide, as of now
+        out["next_decision"] = {"action": decision.action, "reason": decision.reason,
+                                "forecast_t_out_c": fc.t_out_c, "forecast_source": fc.source}
+    return out
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None  # JSON has no NaN: a missing value is null
+
+
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
-    from ..daemon.schedule import next_act_time, peek_next_night
+    from ..daemon.schedule import next_act_time, peek_next_night, why_no_night
     from ..daemon.service import clock_from_config
 
     act = next_act_time(cfg, clock_from_config(cfg).now())
     req, request_id = peek_next_night(store, cfg, act)
     if req is None:
-        why = ("campaign complete" if cfg.campaign.enabled else
-               "campaign disabled and no manual request")
-        return {"preheat_start": act, "kind": None, "why_none": why}
+        return {"preheat_start": act, "kind": None, "why_none": why_no_night(store, cfg)}
     return {"preheat_start": act, "kind": req.kind, "setpoint_c": req.setpoint_c,
             "t_min_c": req.t_min_c, "t_max_c": req.t_max_c, "window_start": req.window_start,
             "window_end": req.window_end, "source": req.source, "request": request_id,
             "campaign_seq": req.campaign_seq}
+
+
+def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
+    tgt = camp["target_rel_pct"]
+    if camp["mode"] == "adaptive":
+        head = (f"campaign:  adaptive (target HLC ±{tgt['hlc']:g} %, τ ±{tgt['tau']:g} %, at "
+                f"most {camp['max_nights']} nights): {camp['nights_run']} nights run, "
+                f"{camp['nights_valid']} valid; {camp['status']}")
+    else:
+        head = (f"campaign:  fixed plan, {camp['valid']}/{camp['planned']} valid nights "
+                f"({camp['nights_run']} run)")
+    lines = [head]
+    for f in camp["intervals"]:
+        def pct(v):
+            return "undetermined" if v is None else f"±{v:.1f} %"
+
+        def val(v, unit):
+            return "—" if v is None else f"{v:.0f} {unit}"
+        lines.append(f"  after {f['valid_nights']} valid nights: "
+                     f"HLC {val(f['hlc_w_per_k'], 'W/K')} "
+                     f"{pct(f['hlc_rel_pct'])}, τ {val(f['tau_h'], 'h')} "
+                     f"{pct(f['tau_rel_pct'])} (target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)")
+    d = camp.get("last_decision")
+    if d is not None:
+        when = "" if d["act"] is None else f" ({d['act'].astimezone(zone):%Y-%m-%d %H:%M})"
+        lines.append(f"decision:  {d['action']}{when}: {d['reason']}")
+    nxt = camp.get("next_decision")
+    if nxt is not None and nxt["action"] == "run" and (d is None or nxt["reason"] != d["reason"]):
+        lines.append(f"choice:    {nxt['reason']}")
+    if nxt is not None:
+        fc = nxt["forecast_t_out_c"]
+        lines.append("forecast:  " + ("no outdoor reading yet" if fc is None else
+                                      f"T_out {fc:.1f} °C ({nxt['forecast_source']})"))
+    return lines
 
 
 def format_status(st: dict, tz: str = "UTC") -> str:
@@ -123,8 +193,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                          f"{act:%H:%M}")
     if st.get("pending_requests"):
         lines.append(f"requests:  {st['pending_requests']} waiting")
-    camp = st["campaign"]
-    lines.append(f"campaign:  {camp['valid']}/{camp['planned']} valid nights")
+    lines.extend(_campaign_lines(st["campaign"], zone))
     fit = st["last_fit"]
     if fit is None:
         lines.append("last fit:  none")

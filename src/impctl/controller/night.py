@@ -27,16 +27,17 @@ from datetime import datetime, timedelta
 
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
-from ..store import Night, Sample, Store
+from ..store import Night, Store
 from .assess import assess_night
+from .incidents import Incidents
 from .owner import describe_changes, fmt_register, owner_changes
 from .plan import NightPolicy, NightRequest, anticipated_end, preheat_short
+from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
 from .restore import restore_all
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
 _JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
-_REMOTE_OFF_FUNCTION = 7
 
 
 class NightRefused(Exception):
@@ -47,64 +48,6 @@ class _Abort(Exception):
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
-
-
-def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
-    """A store sample from a snapshot (missing readings become None)."""
-    v = snap.values()
-
-    def flag(x: float | None) -> bool | None:
-        return None if x is None else bool(x)
-
-    return Sample(
-        night_id=night_id, ts=snap.timestamp, t_air_c=v["t_air_c"], t_out_c=v["t_out_c"],
-        q_hc_w=v["q_hc_w"], p_el_w=v["p_el_w"], t_supply_c=v["t_supply_c"],
-        t_return_c=v["t_return_c"],
-        working_function=None if v["working_function"] is None else int(v["working_function"]),
-        defrost=flag(v["defrost"]), error_bits=_error_bits(snap),
-        loop_mode=None if v["loop1_mode"] is None else int(v["loop1_mode"]),
-        setpoint_c=v["loop1_setpoint_c"],
-        dhw_active=None if v["working_function"] is None else int(v["working_function"]) == 1,
-    )
-
-
-def _readings_problem(snap: Snapshot) -> str | None:
-    """Why the readings a night needs are missing (an incident), or None."""
-    codes = sorted({r.reason for r in snap.readings().values()
-                    if r.missing and r.reason and r.reason.startswith("Modbus exception")})
-    if codes:
-        return "heat pump answers " + ", ".join(codes)
-    for name in ("t_air_c", "t_out_c", "q_hc_w"):
-        reading = getattr(snap, name)
-        if reading.missing:
-            return f"{name} missing ({reading.reason})"
-    return None
-
-
-def _span(what: str, since: datetime, until: datetime) -> str:
-    """An incident note: what, from when, how long (UTC)."""
-    minutes = (until - since).total_seconds() / 60
-    return f"incident: {what} from {since:%H:%M}Z for {minutes:.0f} min"
-
-
-def _error_bits(snap: Snapshot) -> int | None:
-    """errors_1 | errors_2 << 16 (None when neither could be read)."""
-    e1, e2 = snap.errors_1.value, snap.errors_2.value
-    if e1 is None and e2 is None:
-        return None
-    return int(e1 or 0) | (int(e2 or 0) << 16)
-
-
-def _alarm(snap: Snapshot) -> str | None:
-    """Why the heat pump is not fit to run an experiment now, or None."""
-    if snap.error_summary.value == 2:
-        return "heat pump reports an error (2006 = 2)"
-    bits = _error_bits(snap)
-    if bits:
-        return f"heat pump error bits set (2114/2115 = {bits:#x})"
-    if snap.error_active.value:
-        return "heat pump error display active (2113)"
-    return None
 
 
 class NightController:
@@ -131,9 +74,7 @@ class NightController:
         self.last_snapshot: Snapshot | None = None
         self.last_good_read: datetime | None = None
         self.last_t_air: datetime | None = None  # time of the last sample with T_air
-        self._lost_since: datetime | None = None
-        self._problem: tuple[str, datetime] | None = None  # missing readings: why, since when
-        self._incidents: list[str] = []  # notes for the night's reasons
+        self._incidents = Incidents(store)
         self._floor_c: float | None = None
         self._trend: list[tuple[float, float]] = []  # (POSIX s, T_air °C) since switch-off
         self._held: dict[int, float] = {}  # register → the value impctl last put there
@@ -188,7 +129,7 @@ class NightController:
         log = _LOG.getChild(f"night{night_id}")
         state, reasons = "done", []
         wrote = False
-        self._incidents, self._problem, self._lost_since = [], None, None
+        self._incidents = Incidents(self.store)
         self._held = {}
         self._abort_reason, self._running = None, True
         self._aborted.clear()
@@ -223,12 +164,7 @@ class NightController:
 
     async def _finish(self, night_id: int, state: str, reasons: list[str], wrote: bool,
                       log: logging.Logger) -> None:
-        now = self.clock.now()
-        if self._lost_since is not None:  # incidents still going on at the night's end
-            self._incidents.append(_span("link lost", self._lost_since, now))
-        if self._problem is not None:
-            self._incidents.append(_span(self._problem[0], self._problem[1], now))
-        self._lost_since = self._problem = None
+        self._incidents.close(self.clock.now())
         try:
             self.store.set_night_state(night_id, "restoring" if wrote else state)
         except Exception:  # noqa: BLE001 - the restore below matters more than the bookkeeping
@@ -242,7 +178,7 @@ class NightController:
                 retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
-        reasons += self._incidents
+        reasons += self._incidents.notes
         self.store.set_night_state(night_id, state, ended=self.clock.now())
         if state == "refused":
             self.store.assess_night(night_id, False, reasons)
@@ -263,33 +199,17 @@ class NightController:
             snap = await self.client.snapshot()
         except ModbusLinkError as exc:
             if self.last_good_read is None or self.last_snapshot is not None:
-                log.warning("heat-pump link lost: %s", exc)
-                self.store.add_event("warning", f"link lost: {exc}")
-                self._lost_since = polled
+                self._incidents.link_lost(exc, polled, log)
             self.last_snapshot = None
             return None
         now = self.clock.now()
         if self.last_snapshot is None and self.last_good_read is not None:
-            log.info("heat-pump link back")
-            self.store.add_event("info", "link back")
-            if self._lost_since is not None:
-                self._incidents.append(_span("link lost", self._lost_since, now))
-                self._lost_since = None
+            self._incidents.link_back(now, log)
         self.last_snapshot = snap
         self.last_good_read = now
         if snap.t_air_c.value is not None:
             self.last_t_air = now
-        problem = _readings_problem(snap)
-        if problem != (self._problem and self._problem[0]):
-            if self._problem is not None:
-                self._incidents.append(_span(self._problem[0], self._problem[1], now))
-                if problem is None:
-                    log.info("readings back: %s is over", self._problem[0])
-                    self.store.add_event("info", f"readings back ({self._problem[0]})")
-            if problem is not None:
-                log.warning("readings missing: %s", problem)
-                self.store.add_event("warning", f"readings missing: {problem}")
-            self._problem = None if problem is None else (problem, now)
+        self._incidents.readings(readings_problem(snap), now, log)
         if night_id is not None:
             self.store.add_sample(sample_from_snapshot(night_id, snap))
         return snap
@@ -314,7 +234,7 @@ class NightController:
             if snap is None:
                 problem = "heat pump not reachable"
             else:
-                problem = self._unfit(snap, req)
+                problem = unfit(snap, self.policy)
             if problem is None:
                 break
             if self.clock.now() >= give_up:
@@ -341,28 +261,6 @@ class NightController:
                  fmt_register(_SETPOINT, snap.loop1_setpoint_c.value),
                  fmt_register(_MODE, snap.loop1_mode.value))
         return snap
-
-    def _unfit(self, snap: Snapshot, req: NightRequest) -> str | None:
-        alarm = _alarm(snap)
-        if alarm:
-            return alarm
-        if snap.working_function.value == _REMOTE_OFF_FUNCTION:
-            return "heat pump is remote-off (working function 7)"
-        if snap.system_on.value == 0:
-            return "heating system switched off by the owner (2012 = 0)"
-        if snap.loop1_mode.value == 0:
-            return "loop 1 switched off by the owner (2042 = 0)"
-        if snap.defrost.value:
-            return "defrost running"
-        if snap.t_air_c.missing:
-            return f"no indoor temperature: {snap.t_air_c.reason}"
-        if snap.t_out_c.missing:
-            return f"no outdoor temperature: {snap.t_out_c.reason}"
-        t_out = snap.t_out_c.value
-        if not self.policy.t_out_min_c <= t_out <= self.policy.t_out_max_c:
-            return (f"outdoor {t_out:.1f} °C outside the band {self.policy.t_out_min_c:g}…"
-                    f"{self.policy.t_out_max_c:g} °C")
-        return None
 
     async def _act_and_sample(self, night_id: int, req: NightRequest, first: Snapshot,
                               log) -> str:
@@ -406,7 +304,7 @@ class NightController:
             reason = self._check(snap, req, switched_off, now)
             if reason is not None:
                 return reason
-            self.on_status(self._status_line(night_id, req, snap))
+            self.on_status(status_line(night_id, req, snap))
             next_at = max(next_at + interval, self.clock.now())
             if next_at >= req.window_end:
                 await self._sleep_until(req.window_end)
@@ -457,7 +355,7 @@ class NightController:
             if lost_s > self.policy.link_lost_limit_s:
                 raise _Abort(f"heat-pump link lost for {lost_s / 60:.0f} min")
             return None
-        alarm = _alarm(snap)
+        alarm = alarm_reason(snap)
         if alarm:
             raise _Abort(alarm)
         t_air = snap.t_air_c.value
@@ -480,14 +378,3 @@ class NightController:
             self._trend.append((now.timestamp(), t_air))
             return anticipated_end(self._trend, self.policy, req.t_min_c)
         return None
-
-    @staticmethod
-    def _status_line(night_id: int, req: NightRequest, snap: Snapshot | None) -> str:
-        if snap is None:
-            return f"night {night_id} ({req.kind}): link lost"
-        t_air = snap.t_air_c.value
-        q = snap.q_hc_w.value
-        return (f"night {night_id} ({req.kind} {req.setpoint_c:g} °C) "
-                f"{snap.timestamp:%Y-%m-%d %H:%M}Z T_air "
-                f"{'—' if t_air is None else f'{t_air:.1f}'} °C, Q_HC "
-                f"{'—' if q is None else f'{q:.0f}'} W")

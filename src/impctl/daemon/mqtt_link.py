@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
+from .adaptive import campaign_state
 from .schedule import request_expiry
 
 if TYPE_CHECKING:
@@ -79,9 +80,18 @@ class MqttLink:
             state.t_out_c = snap.t_out_c.value
             state.q_hc_w = snap.q_hc_w.value
         state.link_ok = bool(ok and d._connected.is_set())
-        plan = store.campaign()
-        state.campaign_valid = sum(1 for *_, v in plan if v)
-        state.campaign_planned = len(plan)
+        camp = campaign_state(store, d.cfg)
+        state.campaign_mode, state.campaign_status = camp.mode, camp.status
+        state.campaign_reason = camp.reason
+        state.nights_run, state.nights_valid = camp.nights_run, camp.nights_valid
+        state.hlc_rel_pct, state.tau_rel_pct = camp.hlc_rel_pct, camp.tau_rel_pct
+        if camp.mode == "adaptive":  # "valid/at most" nights
+            state.campaign_valid, state.campaign_planned = (camp.nights_valid,
+                                                            d.cfg.campaign.max_nights)
+        else:
+            plan = store.campaign()
+            state.campaign_valid = sum(1 for *_, v in plan if v)
+            state.campaign_planned = len(plan)
         budget = d.client.budget if d.client else None
         if budget is not None:
             day = d.clock.now().date()

@@ -22,8 +22,11 @@ _LOG = logging.getLogger("impctl.daemon")
 
 
 def campaign_plan(cfg: Config) -> list[tuple[str, float]]:
-    """The configured campaign as (kind, T_set °C) entries, constrained nights first."""
+    """The configured fixed campaign as (kind, T_set °C) entries, constrained nights first
+    ([] in adaptive mode: the policy chooses night by night)."""
     camp = cfg.campaign
+    if camp.adaptive:
+        return []
     plan = [("constrained", camp.constrained_setpoint_c)] * camp.constrained_nights
     for sp in camp.normal_setpoints_c:
         plan += [("normal", sp)] * camp.normal_nights_per_setpoint
@@ -85,8 +88,8 @@ def peek_next_night(store: Store, cfg: Config, act: datetime
                     ) -> tuple[NightRequest | None, int | None]:
     """What the night whose preheat starts at ``act`` would run, without taking anything:
     (request, id of the manual request it comes from or None). A pending ``--tonight``
-    trigger (not expired by ``act``) comes first, then the first campaign entry without a
-    valid night; (None, None) when there is nothing to run."""
+    trigger (not expired by ``act``) comes first, then the adaptive campaign's decision or the
+    first fixed-plan entry without a valid night; (None, None) when there is nothing to run."""
     start, end = window_after_act(act, cfg)
     band = cfg.night.comfort_band_k
     for req in store.pending_requests():
@@ -96,6 +99,14 @@ def peek_next_night(store: Store, cfg: Config, act: datetime
             return NightRequest(req.kind, sp, start, end, band, source="trigger"), req.id
     if not cfg.campaign.enabled:
         return None, None
+    if cfg.campaign.adaptive:
+        from .adaptive import decide_now  # the policy: run, skip tonight or stop
+
+        decision, _ = decide_now(store, cfg)
+        if decision.action != "run":
+            return None, None
+        return NightRequest(decision.kind, decision.setpoint_c, start, end, band,
+                            source="schedule"), None
     # Before the daemon first ran, the store has no plan yet: the configured one is what runs.
     rows = store.campaign() or [(seq, kind, sp, None, None)
                                 for seq, (kind, sp) in enumerate(campaign_plan(cfg))]
@@ -104,6 +115,17 @@ def peek_next_night(store: Store, cfg: Config, act: datetime
             return NightRequest(kind, sp, start, end, band, source="schedule",
                                 campaign_seq=seq), None
     return None, None
+
+
+def why_no_night(store: Store, cfg: Config) -> str:
+    """Why the next night runs nothing (when :func:`peek_next_night` gave None)."""
+    if not cfg.campaign.enabled:
+        return "campaign disabled and no manual request"
+    if cfg.campaign.adaptive:
+        from .adaptive import decide_now
+
+        return decide_now(store, cfg)[0].reason
+    return "campaign complete"
 
 
 def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:

@@ -7,11 +7,8 @@ Never imports torch, scikit-learn or pandas: classification and the fit run in a
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
-import os
 import signal
-import sys
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -24,12 +21,13 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudg
 from ..heatpump.clock import VirtualClock
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
+from . import adaptive
 from .config import Config
+from .fitting import fit_ready, needs_fit, run_fit
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .schedule import (
     act_trigger,
-    campaign_complete,
     campaign_plan,
     drop_expired_requests,
     next_act_time,
@@ -129,7 +127,8 @@ class Daemon:
             self.controller = NightController(
                 self.client, self.store, self.clock, policy_from_config(self.cfg),
                 on_status=self._status, stop=self.stop)
-            self.store.set_campaign(campaign_plan(self.cfg))
+            if not self.cfg.campaign.adaptive:  # the fixed plan (adaptive: none to keep)
+                self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)
         except BaseException:  # e.g. a store that cannot write: never keep the lock
             self._lock.release()
@@ -151,6 +150,8 @@ class Daemon:
                                       retry_s=2.0)
             if not self.stop.is_set():
                 self._start_scheduler()
+                if self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete:
+                    self._want_fit()  # a fit the last run did not finish (stopped mid-fit)
                 self._status(self._idle_status())
                 await self.stop.wait()
         finally:
@@ -220,8 +221,9 @@ class Daemon:
                               retry_s=1.0)
         if self.scheduler is not None and self.scheduler.running:
             self.scheduler.shutdown(wait=False)
-        if self._fit_task is not None:
+        if self._fit_task is not None:  # kill the fit subprocess and reap it
             self._fit_task.cancel()
+            await asyncio.gather(self._fit_task, return_exceptions=True)
         if self.mqtt is not None:  # MQTT hook: "offline" after the restore, before closing
             await self.mqtt.stop()
         if self.client is not None:
@@ -268,6 +270,10 @@ class Daemon:
             self.mqtt.wake()
 
     def _idle_status(self) -> str:
+        if self.cfg.campaign.adaptive:
+            st = adaptive.campaign_state(self.store, self.cfg)
+            return (f"idle; adaptive campaign {st.nights_valid}/{st.nights_run} valid nights; "
+                    f"{st.status}")
         rows = self.store.campaign()
         done = sum(1 for *_, valid in rows if valid)
         return f"idle; campaign {done}/{len(rows)} valid nights"
@@ -326,7 +332,11 @@ class Daemon:
             if skip_tonight(self):  # a household's skip_tonight (issue 17)
                 self._status(self._idle_status() + "; tonight skipped on request")
                 return
-            req = next_campaign_night(self.store, self.cfg, act or self.clock.now())
+            act = act or self.clock.now()
+            if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
+                req = adaptive.tonight(self, act)
+            else:
+                req = next_campaign_night(self.store, self.cfg, act)
             if req is None:
                 self._status(self._idle_status() + "; nothing to run tonight")
                 return
@@ -361,49 +371,29 @@ class Daemon:
         async with self._heat_pump_lock:
             night = await self.controller.run(req)
         self._status(self._idle_status())
-        if (night.valid and self.cfg.campaign.fit_when_complete and campaign_complete(self.store)
-                and self._needs_fit()):
-            self._fit_task = asyncio.create_task(self.run_fit())
+        if night.valid and (self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete):
+            self._want_fit()
 
-    def _needs_fit(self) -> bool:
-        last = self.store.last_fit()
-        valid = [n.id for n in self.store.nights(valid=True)]
-        return last is None or sorted(last[1]) != sorted(valid)
+    def _want_fit(self) -> None:
+        """Fit after a valid night; one fit at a time (the running one refits when done)."""
+        if self._fit_task is None or self._fit_task.done():
+            self._fit_task = asyncio.create_task(self._fits(), name="fit")
+            self._fit_task.add_done_callback(_log_crash)
 
-    # -- the fit, in a subprocess ------------------------------------------------------------
+    async def _fits(self) -> None:
+        while needs_fit(self.store):
+            why = fit_ready(self.store)
+            if why is not None:
+                _LOG.info("no fit yet: %s", why)
+                return
+            if await self.run_fit() is None:
+                return  # failed (logged); the next valid night tries again
+
     async def run_fit(self) -> dict | None:
-        """Export the valid nights and run ``impctl fit`` in a subprocess; store the result."""
-        work = Path(self.cfg.state_dir) / "fit"
-        work.mkdir(parents=True, exist_ok=True)
-        nights_csv, out_json = work / "nights.csv", work / "fit.json"
-        ids = [n.id for n in self.store.nights(valid=True)]
-        base = [sys.executable, "-c", "from impctl.cli import main; main()"]
-        model_dir = self.cfg.model_dir or str(Path(self.cfg.state_dir) / "models")
-        steps = [
-            [*base, "export", "--db", str(self.cfg.db_path), "--format", "csv",
-             "--out", str(nights_csv), "--force"],
-            [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
-             "--model-dir", model_dir],
-        ]
-        self._status(f"fitting {len(ids)} nights in a subprocess")
-        for cmd in steps:
-            proc = await asyncio.create_subprocess_exec(
-                *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-                env={**os.environ, "OMP_NUM_THREADS": "1"})
-            try:
-                out, err = await proc.communicate()
-            except asyncio.CancelledError:  # the daemon stops: do not leave the fit running
-                proc.kill()
-                await proc.wait()
-                raise
-            if proc.returncode != 0:
-                _LOG.error("fit step %s failed (%d): %s", cmd[3], proc.returncode,
-                           err.decode(errors="replace").strip().splitlines()[-1:] or "")
-                self.store.add_event("error", f"fit failed at {cmd[3]}")
-                return None
-        result = json.loads(out_json.read_text())
-        self.store.add_fit(ids, result)
-        self.store.add_event("info", f"fit stored ({len(ids)} nights)")
-        _LOG.info("fit stored for nights %s", ids)
-        self._status(self._idle_status() + "; fit stored")
+        """Export the valid nights and run ``impctl fit`` (and in adaptive mode ``impctl
+        campaign next``) in subprocesses; store the result."""
+        n = len(self.store.nights(valid=True))
+        self._status(f"fitting {n} nights in a subprocess")
+        result = await run_fit(self.store, self.cfg)
+        self._status(self._idle_status() + ("; fit stored" if result else "; fit failed"))
         return result

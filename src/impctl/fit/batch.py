@@ -13,10 +13,12 @@ How: each household runs ``NightFit.fit`` in its own thread with the optimiser s
 every household still running is waiting, the rendezvous merges their problems — nights
 concatenated (grids padded to the longest), problem, night and group indices offset — solves
 them together and hands each household its slice back. Problems stay independent in the merged
-call (per-problem damping, per-problem convergence), so each household's numbers equal its
-single fit to the optimiser's own tolerance: only the shared stopping rule may let a household's
-non-best starts iterate a little longer. Every night keeps its own sample times, so households
-of any sampling share a call; shorter nights are padded with zero-length steps.
+call (per-problem damping, per-problem convergence, and each household stops at the iteration
+where it would stop alone: ``units`` of :func:`~impctl.fit.lm.levenberg_marquardt`), so each
+household's numbers equal its single fit up to rounding; problems that are done are no longer
+evaluated, so a household that converges early costs nothing while the slowest one finishes.
+Every night keeps its own sample times, so households of any sampling share a call; shorter
+nights are padded with zero-length steps.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import torch
 
 from ..imp.night import NightSamples
 from . import lm
+from ._alloc import retain_freed_memory
 from .estimator import NightFit
 from .node import PackedNights
 
@@ -109,7 +112,8 @@ def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
 
 
 def _settings(p: _Problem) -> tuple:
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.max_iter, p.ctx.packed.timestamps,
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
+            p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
             p.ctx.packed.power_ok is None)
 
@@ -158,13 +162,14 @@ def _solve_group(group: list[_Problem]) -> None:
     packed = _merge_packed([p.ctx.packed for p in group])
     k = packed.grid_s.shape[1]
     first = group[0].ctx
-    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge)
-    problem, night, groups = [], [], []
+    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver)
+    problem, night, groups, units = [], [], [], []
     p_off = n_off = g_off = 0
-    for p in group:
+    for i, p in enumerate(group):
         problem.append(p.rows.problem + p_off)
         night.append(p.rows.night + n_off)
         groups.append(p.groups + g_off)
+        units.append(torch.full((int(p.groups.max()) + 1,), i))
         p_off += p.rows.n_problems
         n_off += p.ctx.packed.n_nights
         g_off += int(p.groups.max()) + 1
@@ -176,7 +181,8 @@ def _solve_group(group: list[_Problem]) -> None:
     try:
         res = lm.levenberg_marquardt(ctx, rows, torch.cat([p.u0 for p in group]),
                                      torch.cat([p.t_m0 for p in group]),
-                                     groups=torch.cat(groups), max_iter=group[0].max_iter)
+                                     groups=torch.cat(groups), units=torch.cat(units),
+                                     max_iter=group[0].max_iter)
     except Exception:  # noqa: BLE001 — one household's singular system must not sink the rest
         for p in group:
             _solve_alone(p)
@@ -186,8 +192,8 @@ def _solve_group(group: list[_Problem]) -> None:
         n_p, n_r = p.rows.n_problems, len(p.t_m0)
         ps, rs = slice(p_off, p_off + n_p), slice(r_off, r_off + n_r)
         p.result = lm.LMResult(res.u[ps], res.t_m0[rs], res.loss[ps], res.cov_u[ps],
-                               res.fisher_u[ps], res.n_iter, res.converged[ps],
-                               list(res.history))
+                               res.fisher_u[ps], int(res.iterations[ps].max()),
+                               res.converged[ps], list(res.history))
         p_off, r_off = p_off + n_p, r_off + n_r
 
 
@@ -247,6 +253,7 @@ def fit_households(
             est._rendezvous = None
             rendezvous.finished()
 
+    retain_freed_memory()
     threads_before = torch.get_num_threads()
     torch.set_num_threads(1)  # NightFit.fit saves and restores this per thread; keep it fixed
     workers = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(nights))]

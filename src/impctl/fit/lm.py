@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .node import DTYPE, PackedNights, build_rows, to_physical
+from .node import DTYPE, ROW_DEMAND, PackedNights, build_rows, to_physical
 
 N_PARAMS = 7
 _H_U = 1e-6     # forward-difference step in u
@@ -50,13 +50,43 @@ class Rows:
 
     def repeat(self, copies: int) -> Rows:
         p = self.n_problems
+
+        def rep(x):  # an expanded (zero-stride) input stays one row in memory
+            return (x[:1].expand(copies * len(x), -1) if x.stride(0) == 0 and len(x)
+                    else x.repeat(copies, 1))
+
         return Rows(
             problem=torch.cat([self.problem + c * p for c in range(copies)]),
             night=self.night.repeat(copies), row_type=self.row_type.repeat(copies),
-            phi_w=self.phi_w.repeat(copies, 1), phi_in_w=self.phi_in_w.repeat(copies, 1),
+            phi_w=rep(self.phi_w), phi_in_w=rep(self.phi_in_w),
             scale=self.scale.repeat(copies), box=self.box.repeat(copies, 1, 1),
             n_problems=p * copies,
         )
+
+    def copies(self, sel: list[torch.Tensor]) -> Rows:
+        """Copy c of the problems holds the rows ``sel[c]`` (indices, or ``slice(None)`` for
+        all), as problems c·P…c·P + P − 1 (:meth:`repeat` when every one is all rows)."""
+        p = self.n_problems
+        n = [len(self.problem[s]) for s in sel]
+
+        def cat(x):  # an expanded (zero-stride) input stays one row in memory
+            if x.stride(0) == 0 and len(x):
+                return x[:1].expand(sum(n), -1)
+            return torch.cat([x[s] for s in sel])
+
+        return Rows(torch.cat([self.problem[s] + c * p for c, s in enumerate(sel)]),
+                    cat(self.night[:, None])[:, 0], cat(self.row_type[:, None])[:, 0],
+                    cat(self.phi_w), cat(self.phi_in_w), cat(self.scale[:, None])[:, 0],
+                    self.box.repeat(len(sel), 1, 1), p * len(sel))
+
+    def at(self, idx: torch.Tensor, phi: bool = True) -> Rows:
+        """The rows ``idx`` (problems keep their numbers); ``phi=False`` for rows that do not
+        read Φ_HC (DEMAND rows): their heat-input columns become one expanded zero row."""
+        def take(x):
+            return x[idx] if phi else x.new_zeros(1, x.shape[1]).expand(len(idx), -1)
+
+        return Rows(self.problem[idx], self.night[idx], self.row_type[idx], take(self.phi_w),
+                    take(self.phi_in_w), self.scale[idx], self.box, self.n_problems)
 
     def subset(self, sel: torch.Tensor) -> Rows:
         """The rows ``sel`` (bool, R) of one problem, renumbered as problem 0."""
@@ -72,13 +102,24 @@ class Context:
     ach_vent: float
     ach_infl: float
     ridge: float = 1e-2
+    solver: str = "exact"   # NightODE method: "exact" or "rk4" (torchdiffeq)
 
 
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
     """(model − measured) at the nodes, zero off the sample mask, (R, K), in data units."""
     params = to_physical(u, rows.box)[rows.problem]
-    model = build_rows(ctx.packed, params, t_m0, rows.night, rows.row_type, rows.phi_w,
-                       rows.phi_in_w, ctx.ach_vent, ctx.ach_infl)
+    demand = rows.row_type == ROW_DEMAND
+    if bool(demand.all()) or not bool(demand.any()):
+        return _raw(ctx, rows, params, t_m0, slice(None))
+    # Each row type on its own rows: build_rows then skips the other type's arithmetic.
+    idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
+    out = torch.cat([_raw(ctx, rows, params, t_m0, i) for i in idx])
+    return out[torch.argsort(torch.cat(idx))]
+
+
+def _raw(ctx: Context, rows: Rows, params: torch.Tensor, t_m0: torch.Tensor, i) -> torch.Tensor:
+    model = build_rows(ctx.packed, params[i], t_m0[i], rows.night[i], rows.row_type[i],
+                       rows.phi_w[i], rows.phi_in_w[i], ctx.ach_vent, ctx.ach_infl, ctx.solver)
     return torch.where(model.mask, model.predict() - model.measured, 0.0)
 
 
@@ -106,24 +147,79 @@ class _Normal:
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
+    demand = rows.row_type == ROW_DEMAND
+    if bool(demand.all()) or not bool(demand.any()):
+        terms = _row_terms(ctx, rows, u, t_m0)
+    else:
+        # Each row type on its own (build_rows skips the other type's arithmetic), split
+        # once here rather than in every one of the Jacobian's copies.
+        idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
+        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i])
+                 for j, i in enumerate(idx)]
+        order = torch.argsort(torch.cat(idx))
+        terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
+    loss_rows, jtj, g_rows, c, d, gm = terms
+    ridge = ctx.ridge
+    loss = _sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
+    h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
+    g = _sum_rows(g_rows, rows) + ridge * u
+    return _Normal(loss, h, g, c, d, gm, g_rows)
+
+
+def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
+    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call)."""
     n_rows = len(t_m0)
     N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
     u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
-    m_all = torch.cat([t_m0] * (N_PARAMS + 1) + [t_m0 + _H_M])
-    r_all = residuals(ctx, rows.repeat(N_PARAMS + 2), u_all, m_all)
+    # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
+    # column: its copy is left out for those rows (the simple and per-night problems).
+    live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
+    every = slice(None)
+    sel = ([every] + [every if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
+                      for j in range(N_PARAMS)] + [every])
+    m_all = torch.cat([t_m0[s] for s in sel[:-1]] + [t_m0 + _H_M])
+    r_all = residuals(ctx, rows.copies(sel), u_all, m_all)
     r0 = r_all[:n_rows]
-    j_theta = ((r_all[n_rows:(N_PARAMS + 1) * n_rows].view(N_PARAMS, n_rows, -1) - r0) / _H_U
-               ).permute(1, 2, 0)                                   # (R, K, 7)
-    j_m = (r_all[(N_PARAMS + 1) * n_rows:] - r0) / _H_M             # (R, K)
-    ridge = ctx.ridge
-    loss = _sum_rows((r0 ** 2).sum(1), rows) + ridge * (u ** 2).sum(1)
-    h = _sum_rows(torch.einsum("rki,rkj->rij", j_theta, j_theta), rows)
-    h = h + ridge * torch.eye(N_PARAMS, dtype=DTYPE)
-    g_rows = torch.einsum("rki,rk->ri", j_theta, r0)
-    g = _sum_rows(g_rows, rows) + ridge * u
-    return _Normal(loss, h, g, torch.einsum("rki,rk->ri", j_theta, j_m), (j_m ** 2).sum(1),
-                   (j_m * r0).sum(1), g_rows)
+    ends = torch.tensor([n_rows if s is every else len(s) for s in sel]).cumsum(0).tolist()
+    # (R, 7, K): each row's Jacobian transposed, contiguous for the batched products below
+    jt = torch.zeros(n_rows, N_PARAMS, r0.shape[1], dtype=DTYPE)
+    for j in range(N_PARAMS):
+        s, part = sel[j + 1], r_all[ends[j]:ends[j + 1]]
+        jt[s, j] = (part - r0[s]) / _H_U
+    j_m = (r_all[ends[-2]:] - r0) / _H_M                                 # (R, K)
+    both = torch.stack([r0, j_m], dim=2)                                 # (R, K, 2)
+    jt_rm = torch.bmm(jt, both)                                          # (R, 7, 2)
+    return ((r0 ** 2).sum(1), torch.bmm(jt, jt.transpose(1, 2)), jt_rm[..., 0], jt_rm[..., 1],
+            (j_m ** 2).sum(1), (j_m * r0).sum(1))
+
+
+def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
+    """The problems ``keep`` (bool, P) renumbered 0…: (rows, their problem ids, row ids)."""
+    pk = keep.nonzero()[:, 0]
+    rk = keep[rows.problem].nonzero()[:, 0]
+    remap = torch.full((rows.n_problems,), -1, dtype=torch.long)
+    remap[pk] = torch.arange(len(pk))
+    return (Rows(remap[rows.problem[rk]], rows.night[rk], rows.row_type[rk], rows.phi_w[rk],
+                 rows.phi_in_w[rk], rows.scale[rk], rows.box[pk], len(pk)), pk, rk)
+
+
+def _evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+              active: torch.Tensor, current: _Normal) -> _Normal:
+    """Normal equations at (u, t_m0) for the ``active`` problems; the others keep ``current``
+    (their step is never taken). Converged problems cost nothing any more: in a merged fleet
+    batch most problems are done long before the slowest one."""
+    if bool(active.all()):
+        return _normal_equations(ctx, rows, u, t_m0)
+    out = _Normal(current.loss.clone(), current.h.clone(), current.g.clone(), current.c.clone(),
+                  current.d.clone(), current.gm.clone())
+    if not bool(active.any()):
+        return out
+    sub, pk, rk = _take(rows, active)
+    new = _normal_equations(ctx, sub, u[pk], t_m0[rk])
+    out.loss[pk], out.h[pk], out.g[pk] = new.loss, new.h, new.g
+    out.c[rk], out.d[rk], out.gm[rk] = new.c, new.d, new.gm
+    return out
 
 
 def schur(ne: _Normal, rows: Rows, lam: torch.Tensor | None = None):
@@ -148,15 +244,23 @@ def _predicted_decrease(ne: _Normal, rows: Rows, step: torch.Tensor, step_m: tor
     return -(2.0 * lin + quad)
 
 
-def _best_done(loss: torch.Tensor, done: torch.Tensor, groups: torch.Tensor) -> bool:
+def _best_done(loss: torch.Tensor, done: torch.Tensor, groups: torch.Tensor) -> torch.Tensor:
+    """(G,) bool: the group has a done problem among its lowest-loss ones, or no problem (a
+    label left unused, e.g. the prior-box group of a fit without class ranges: it must not keep
+    the others iterating to ``max_iter``)."""
     n_groups = int(groups.max()) + 1
     best = torch.full((n_groups,), float("inf"), dtype=loss.dtype).scatter_reduce(
         0, groups, loss, reduce="amin")
     is_best = loss == best[groups]
-    # every group has a done problem among its lowest-loss ones
-    ok = torch.zeros(n_groups, dtype=torch.bool).index_put_((groups[is_best & done],),
-                                                            torch.tensor(True))
-    return bool(ok.all())
+    empty = torch.bincount(groups, minlength=n_groups) == 0
+    return empty.index_put_((groups[is_best & done],), torch.tensor(True))
+
+
+def _units_done(group_done: torch.Tensor, units: torch.Tensor) -> torch.Tensor:
+    """(U,) bool: every group of the unit is done (``units`` (G,) labels each group)."""
+    n_units = int(units.max()) + 1
+    return torch.ones(n_units, dtype=torch.bool).index_put_((units[~group_done],),
+                                                            torch.tensor(False))
 
 
 @dataclass
@@ -169,11 +273,12 @@ class LMResult:
     n_iter: int
     converged: torch.Tensor    # (P,) bool
     history: list[float] = field(default_factory=list)
+    iterations: torch.Tensor | None = None  # (P,) iterations each problem took part in
 
 
 def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *,
-                        groups: torch.Tensor | None = None, max_iter: int = 60,
-                        atol: float = 1e-2) -> LMResult:
+                        groups: torch.Tensor | None = None, units: torch.Tensor | None = None,
+                        max_iter: int = 60, atol: float = 1e-2) -> LMResult:
     """Minimise every problem's loss at once (see the module docstring).
 
     A problem is done when an accepted step lowers its loss by less than ``atol``, or when a
@@ -184,6 +289,10 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
     ``groups`` (P,) labels problems that are starts of the same fit: the iterations stop once, in
     every group, the start with the lowest loss is done (the others could only tie or lose
     unless they overtake it later, which is rare: then "keep the best" keeps this one).
+
+    ``units`` (G,) labels groups that belong to one independent fit (a household of a merged
+    fleet batch): a unit whose groups are all done stops there, exactly where it would stop
+    alone, while the others go on. Done and stopped problems are not evaluated any more.
     """
     with torch.no_grad():
         u, t_m0 = u.clone(), t_m0.clone()
@@ -195,6 +304,8 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
         lam = torch.full((n_prob,), 1e-3, dtype=DTYPE)
         nu = torch.full((n_prob,), 2.0, dtype=DTYPE)
         done = torch.zeros(n_prob, dtype=torch.bool)
+        stopped = torch.zeros(n_prob, dtype=torch.bool)
+        iterations = torch.zeros(n_prob, dtype=torch.long)
         history = [float(ne.loss.sum())]
         n_iter = 0
         for n_iter in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
@@ -206,12 +317,13 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
             step = (u + step).clamp(-_U_LIMIT, _U_LIMIT) - u
             step_m = -(ne.gm + (ne.c * step[rows.problem]).sum(1)) / d
             pred = _predicted_decrease(ne, rows, step, step_m)
-            trial = _normal_equations(ctx, rows, u + step, t_m0 + step_m)
+            trial = _evaluate(ctx, rows, u + step, t_m0 + step_m, ~done & ~stopped, ne)
             actual = ne.loss - trial.loss
-            ok = torch.isfinite(trial.loss) & (actual > 0) & ~done
+            ok = torch.isfinite(trial.loss) & (actual > 0) & ~done & ~stopped
             # Converged: an accepted step gained < atol, or a nearly undamped Gauss–Newton step
             # predicts < atol (then a "rejection" is only rounding), or nothing helps any more.
-            done = done | (ok & (actual < atol)) | ((pred < atol) & (lam < 1.0)) | (lam > 1e8)
+            done = done | (~stopped & ((ok & (actual < atol)) | ((pred < atol) & (lam < 1.0))
+                                       | (lam > 1e8)))
             row_ok = ok[rows.problem]
             u = torch.where(ok[:, None], u + step, u)
             t_m0 = torch.where(row_ok, t_m0 + step_m, t_m0)
@@ -226,15 +338,23 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
             # Nielsen's damping update from the gain ratio actual/predicted decrease.
             rho = (actual / pred.clamp_min(1e-300)).clamp(0.0, 1.0)
             shrink = torch.clamp(1.0 - (2.0 * rho - 1.0) ** 3, min=1.0 / 3.0)
-            lam = torch.where(ok, (lam * shrink).clamp_min(1e-9), lam * nu)
-            nu = torch.where(ok, torch.full_like(nu, 2.0), nu * 2.0)
+            lam = torch.where(ok, (lam * shrink).clamp_min(1e-9), torch.where(stopped, lam,
+                                                                              lam * nu))
+            nu = torch.where(ok, torch.full_like(nu, 2.0), torch.where(stopped, nu, nu * 2.0))
+            iterations = torch.where(stopped, iterations, n_iter)
             history.append(float(ne.loss.sum()))
-            if bool(done.all()) or (groups is not None and _best_done(ne.loss, done, groups)):
+            if bool(done.all()):
                 break
+            if groups is not None:
+                group_done = _best_done(ne.loss, done, groups)
+                if bool(group_done.all()):
+                    break
+                if units is not None:
+                    stopped = _units_done(group_done, units)[units[groups]]
         s, _, _ = schur(ne, rows)
         cov = torch.linalg.pinv(s, hermitian=True)
         fisher = s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE)
-    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history)
+    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history, iterations)
 
 
 def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_iter: int = 300,

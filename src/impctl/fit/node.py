@@ -299,6 +299,7 @@ def build_rows(
     phi_in_w: torch.Tensor,
     ach_vent: float,
     ach_infl: float,
+    method: str = "exact",
 ) -> RowModel:
     """Rows for parameter sets ``params`` (R, 7) with initial mass temperatures ``t_m0_c`` (R,).
 
@@ -314,6 +315,7 @@ def build_rows(
         on the intervals (for the dynamics): zeros for eq. 6, the night mean for eq. 5 with the
         mean power, or the measured series (``q_w`` and ``q_in_w``); ignored for DEMAND rows
     ach_vent, ach_infl : fixed air changes [1/h]
+    method : the integration method of :class:`NightODE` ("exact" or "rk4")
     """
     net = network(params, ach_vent, ach_infl)
     te = packed.t_out_c[night_index]
@@ -322,16 +324,28 @@ def build_rows(
     ta_s = packed.t_air_in_slope[night_index]
     grid = packed.grid_s[night_index]
     demand = (row_type == ROW_DEMAND)
+    dm = demand[:, None]
+    # Rows of one type skip the other type's arithmetic (most of a fit's rows are DEMAND rows,
+    # and lm evaluates each type on its own rows).
+    any_air, any_dem = not bool(demand.all()), bool(demand.any())
+
+    def pick(dem, air):
+        return air if not any_dem else dem if not any_air else torch.where(
+            dm if dem.dim() == 2 or air.dim() == 2 else demand, dem, air)
 
     # AIR rows: eq. 5/6 in the shifted state z = T_air − k_Φ·Φ_HC.
     a_air = _unit(net, 0)
     b, c, d = _unit(net, 1), _unit(net, 2), _unit(net, 3)
     k_phi = air_temperature(0.0, 0.0, 1.0, net)
-    u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
-    u1_air = b[:, None] * te_s
-    z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
+    u0_air = u1_air = z0_air = None
+    if any_air:
+        u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
+        u1_air = b[:, None] * te_s
+        z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
     gain = torch.zeros_like(a_air)
-    if params.shape[-1] > len(PARAM_NAMES):
+    if params.shape[-1] > len(PARAM_NAMES) and not any_air:
+        gain = params[:, len(PARAM_NAMES)]
+    elif params.shape[-1] > len(PARAM_NAMES):
         # Extra heat to the air node, x(t) = gain (+ the emitter's release on constrained
         # nights), linear between the nodes: it enters like Φ_HC (z stays continuous).
         gain, em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in range(3))
@@ -352,13 +366,15 @@ def build_rows(
     a_dem = (net.h_tr_ms * (net.h_tr_ms / s - 1.0) - net.h_tr_em) / net.c_m_j_per_k
     b_air = net.h_tr_ms * net.h_tr_is / s / net.c_m_j_per_k
     b_e = (net.h_tr_ms * net.h_tr_w / s + net.h_tr_em) / net.c_m_j_per_k
-    u0_dem = b_air[:, None] * ta + b_e[:, None] * te
-    u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
     c_air = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
     c_e = -net.h_ve - net.h_tr_is * net.h_tr_w / s
     c_m = -net.h_tr_is * net.h_tr_ms / s
+    u0_dem = u1_dem = out_dem = None
+    if any_dem:
+        u0_dem = b_air[:, None] * ta + b_e[:, None] * te
+        u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
+        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain[:, None]
 
-    dm = demand[:, None]
     mask = packed.mask[night_index]
     mean_next = None
     if packed.timestamps == "instant":
@@ -369,19 +385,15 @@ def build_rows(
         mask = mask & ~(dm & packed.last[night_index])
     if packed.power_ok is not None:
         mask = mask & ~(dm & ~packed.power_ok[night_index])
-    ode = NightODE(
-        grid,
-        torch.where(demand, a_dem, a_air),
-        torch.where(dm, u0_dem, u0_air),
-        torch.where(dm, u1_dem, u1_air),
-    )
+    ode = NightODE(grid, pick(a_dem, a_air), pick(u0_dem, u0_air), pick(u1_dem, u1_air),
+                   method=method)
     return RowModel(
         ode=ode,
-        z0=torch.where(demand, t_m0_c, z0_air),
-        out_c=torch.where(demand, c_m, torch.ones_like(c_m)),
-        out_v=torch.where(dm, c_air[:, None] * ta + c_e[:, None] * te - gain[:, None],
-                          k_phi[:, None] * phi_w),
-        measured=torch.where(dm, packed.q_w[night_index], packed.t_air_c[night_index]),
+        z0=pick(t_m0_c, z0_air),
+        out_c=pick(c_m, torch.ones_like(c_m)),
+        out_v=pick(out_dem, k_phi[:, None] * phi_w if any_air else None),
+        measured=pick(packed.q_w[night_index] if any_dem else None,
+                      packed.t_air_c[night_index] if any_air else None),
         mask=mask,
         mean_next=mean_next,
     )

@@ -49,6 +49,14 @@ from ..model.house import PARAMETER_UNITS, TABLE_IV
 PARAM_NAMES = TABLE_IV
 PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
 CLASSIFIED = ("floor_area", "c_f", "u_walls")
+#: The fit JSON's "solver" text per ``NightFit.solver``.
+SOLVERS = {
+    "exact": "exact discretisation: closed-form solution of the linear night ODE on every "
+             "sample interval (inputs linear within it), chained by the exact linear "
+             "recurrence; float64",
+    "rk4": "torchdiffeq.odeint rk4, every sample interval batched in its normalised time, "
+           "chained by the exact linear recurrence; float64",
+}
 INTERVAL_METHOD = (
     "the wider of (a) Laplace: Gauss-Newton curvature of the joint loss at the optimum, "
     "per-night initial mass temperatures marginalised, residual sigma per group from the fit "
@@ -150,8 +158,7 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                              if isinstance(v, np.ndarray) else v) for k, v in p.items()}
                         for p in fit.predictions_],
         "fit": {"mode": "joint", "normal_model": fit.normal_model, "optimizer": fit.optimizer,
-                "solver": "torchdiffeq.odeint rk4, every sample interval batched in its normalised "
-                          "time, chained by the exact linear recurrence; float64",
+                "solver": SOLVERS.get(getattr(fit, "solver", "rk4")),
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
                 "starts": fit.n_starts, "iterations": fit.n_iter_, "loss": fit.loss_,
                 "sigma": fit.sigma_, "time_s": fit.fit_time_s_},

@@ -1,5 +1,9 @@
 """Kronoterm heat pump over Modbus: register map, decoding, safe client, virtual clock.
 
+Built on the generic link of :mod:`impctl.modbus` (transport, reconnects, answer attribution).
+The configuration and failures of that link are re-exported here because the client's
+configuration holds a ``LinkConfig`` and its methods raise the link's errors.
+
 Public surface::
 
     HeatPumpClient(config, clock=, budget=)   connect / snapshot / read / write / detect
@@ -8,27 +12,24 @@ Public surface::
     WriteBudget(path, daily_limit)             persistent per-register daily write budget
     VirtualClock(epoch, factor, wall_epoch_s)  real or accelerated time, shared by processes
     Register, Generation, REGISTERS, register, FORBIDDEN_WRITES
-    errors: HeatPumpError, ModbusLinkError, ModbusDeviceError, UnsupportedFeature,
-            WriteRefused, WriteBudgetExceeded, WriteVerifyError
+    errors: HeatPumpError, ModbusLinkError, ModbusDeviceError (from impctl.modbus),
+            UnsupportedFeature, WriteRefused, WriteBudgetExceeded, WriteVerifyError
 """
 
+from ..modbus import LinkConfig, ModbusDeviceError, ModbusLinkError
 from .budget import WriteBudget
 from .client import HeatPumpClient
 from .clock import VirtualClock
-from .config import ExternalRegister, HeatPumpConfig, LinkConfig, WritePolicy, config_from_mapping
+from .config import ExternalRegister, HeatPumpConfig, WritePolicy, config_from_mapping
 from .decode import Reading, decode, encode
 from .errors import (
-    TRANSIENT_EXCEPTIONS,
     HeatPumpError,
-    ModbusDeviceError,
-    ModbusLinkError,
     UnsupportedFeature,
     WriteBudgetExceeded,
     WriteRefused,
     WriteVerifyError,
 )
 from .generation import GenerationReport
-from .link import LinkStats, ModbusLink
 from .registers import (
     FORBIDDEN_WRITES,
     REGISTERS,
@@ -44,7 +45,6 @@ from .writes import WriteResult, write_rules
 
 __all__ = [
     "FORBIDDEN_WRITES",
-    "TRANSIENT_EXCEPTIONS",
     "REGISTERS",
     "Access",
     "ExternalRegister",
@@ -55,9 +55,7 @@ __all__ = [
     "HeatPumpError",
     "Kind",
     "LinkConfig",
-    "LinkStats",
     "ModbusDeviceError",
-    "ModbusLink",
     "ModbusLinkError",
     "Reading",
     "Register",

@@ -7,13 +7,13 @@ import logging
 from datetime import datetime
 from pathlib import Path
 
+from ..modbus import LinkConfig, ModbusDeviceError, ModbusLink, to_int16, uint32
 from .budget import WriteBudget
 from .clock import VirtualClock
-from .config import ExternalRegister, HeatPumpConfig, LinkConfig
-from .decode import Reading, decode, to_int16, uint32
-from .errors import HeatPumpError, ModbusDeviceError, UnsupportedFeature, WriteRefused
+from .config import ExternalRegister, HeatPumpConfig
+from .decode import Reading, decode
+from .errors import HeatPumpError, UnsupportedFeature, WriteRefused
 from .generation import GenerationReport, detect
-from .link import ModbusLink
 from .registers import Generation, Register, register
 from .snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
 from .writes import WriteResult, safe_write

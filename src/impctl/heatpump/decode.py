@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from ..errors import InputError
+from ..modbus.words import to_int16, to_word, uint32
 from .registers import ERROR_RAW_AT_OR_BELOW, TEMP_VALID_C, Kind, Register
 
 
@@ -61,26 +62,6 @@ class Reading:
                     source: str = "") -> Reading:
         """A missing reading that was never read (e.g. not on this controller)."""
         return cls(name, None, unit, timestamp, True, reason, None, source)
-
-
-def to_int16(word: int) -> int:
-    """Interpret an unsigned 16-bit register word as two's-complement int16."""
-    if not 0 <= word <= 0xFFFF:
-        raise ValueError(f"register word {word} is not in 0…65535")
-    return word - 0x10000 if word & 0x8000 else word
-
-
-def to_word(value: int) -> int:
-    """Signed int16 → the unsigned 16-bit word sent on the wire."""
-    if not -0x8000 <= value <= 0x7FFF:
-        raise ValueError(f"{value} does not fit a signed 16-bit register")
-    return value & 0xFFFF
-
-
-def uint32(words: Sequence[int]) -> int:
-    """Two register words, high word first (lower address), as an unsigned 32-bit integer."""
-    high, low = words
-    return (high << 16) | low
 
 
 def decode(reg: Register, words: Sequence[int], timestamp: datetime) -> Reading:

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .decode import to_int16, uint32
-from .errors import ModbusDeviceError
-from .link import ModbusLink
+from ..modbus import ModbusDeviceError, ModbusLink, to_int16, uint32
 from .registers import Generation
 
 #: Plausible coefficient of performance of a running heat pump.

@@ -105,7 +105,7 @@ def plan_blocks(regs: Iterable[Register], generation: Generation,
     controllers answer those with an exception), at most ``max_count`` words. Blocks that would
     have the same length are widened over documented neighbours where possible: without
     transaction ids an answer is told from the answer to another block by its length (see
-    :mod:`impctl.heatpump.attribution`).
+    :mod:`impctl.modbus.attribution`).
 
     Returns
     -------

@@ -31,18 +31,12 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 
 from ..errors import InputError
+from ..modbus import ModbusDeviceError, ModbusLink, ModbusLinkError
 from .budget import WriteBudget
 from .clock import VirtualClock
 from .config import WritePolicy
 from .decode import decode, encode, raw_value
-from .errors import (
-    HeatPumpError,
-    ModbusDeviceError,
-    ModbusLinkError,
-    WriteRefused,
-    WriteVerifyError,
-)
-from .link import ModbusLink
+from .errors import HeatPumpError, WriteRefused, WriteVerifyError
 from .registers import FORBIDDEN_WRITES, Kind, Register
 
 _LOG = logging.getLogger(__name__)

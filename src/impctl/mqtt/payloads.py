@@ -27,6 +27,12 @@ class LiveState:
     writes : register → "used/limit" today
     skip_tonight : a skip request is pending
     restore_pending : journaled registers still to restore
+    campaign_mode : "adaptive" or "fixed"
+    nights_run, nights_valid : nights the campaign ran (valid or not) / that were valid
+    hlc_rel_pct, tau_rel_pct : the last fit's 95 % half-widths relative to the estimates [%]
+        (None = no fit yet, or not determined)
+    campaign_status : short text (a Home Assistant state holds ≤ 255 characters);
+        campaign_reason : the campaign's last decision in one sentence
     """
 
     ts: datetime | None = None
@@ -42,6 +48,13 @@ class LiveState:
     writes: dict[str, str] = field(default_factory=dict)
     skip_tonight: bool = False
     restore_pending: list[str] = field(default_factory=list)
+    campaign_mode: str = "fixed"
+    nights_run: int = 0
+    nights_valid: int = 0
+    hlc_rel_pct: float | None = None
+    tau_rel_pct: float | None = None
+    campaign_status: str = ""
+    campaign_reason: str = ""
 
     def as_json(self) -> dict[str, Any]:
         """The JSON object of ``<base>/state``."""
@@ -59,6 +72,11 @@ class LiveState:
             "campaign_valid": self.campaign_valid, "campaign_planned": self.campaign_planned,
             "link_ok": self.link_ok, "writes_today": used, "writes": dict(self.writes),
             "skip_tonight": self.skip_tonight, "restore_pending": list(self.restore_pending),
+            "campaign_mode": self.campaign_mode, "nights_run": self.nights_run,
+            "nights_valid": self.nights_valid, "hlc_rel_pct": _round(self.hlc_rel_pct, 1),
+            "tau_rel_pct": _round(self.tau_rel_pct, 1),
+            "campaign_status": self.campaign_status[:255],
+            "campaign_reason": self.campaign_reason,
         }
 
 

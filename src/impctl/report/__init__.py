@@ -143,6 +143,7 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
         if why is not None:
             raise InputError(f"not a fit result: {why}", source)
         nights_html = _nights_table(store, tz)
+        campaign = _campaign_rows(store, tz)
     # Drawn into a temporary directory beside OUT and moved in only when everything is
     # written: a failure leaves no half report (and no stray PNGs).
     if not out.parent.is_dir():
@@ -152,7 +153,7 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     os.umask(umask)
     tmp.chmod(0o777 & ~umask)  # mkdtemp makes it 0700; OUT gets the usual permissions
     try:
-        _render(tmp, fit, truth, summary, demand, nights_html)
+        _render(tmp, fit, truth, summary, demand, nights_html, campaign)
         if out.exists():
             for item in tmp.iterdir():
                 os.replace(item, out / item.name)
@@ -164,8 +165,50 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     return out / "report.html"
 
 
+def _campaign_rows(store: Store, tz: str) -> tuple[list[dict], list[list[str]]]:
+    """The intervals after each stored fit, and the adaptive campaign's decisions."""
+    from ..campaign import FitSummary
+
+    def rel_pct(x: float) -> float | None:
+        return round(100 * x, 1) if x != float("inf") else None
+
+    rows = []
+    for f in store.fits():
+        try:
+            fs = FitSummary.from_fit_json(f.result, f.night_count)
+        except ValueError:
+            continue
+        rows.append({"valid_nights": f.night_count, "hlc_w_per_k": fs.hlc_w_per_k,
+                     "hlc_rel_pct": rel_pct(fs.hlc_rel), "tau_h": fs.tau_h,
+                     "tau_rel_pct": rel_pct(fs.tau_rel)})
+    zone = ZoneInfo(tz)
+    decisions = [[("—" if d.act is None else f"{d.act.astimezone(zone):%Y-%m-%d %H:%M}"),
+                  d.action, d.reason] for d in reversed(store.decisions(200))]
+    return rows, decisions
+
+
+def _campaign_section(out: Path, campaign: tuple[list[dict], list[list[str]]]) -> list[str]:
+    rows, decisions = campaign
+    if len(rows) < 2 and not decisions:
+        return []
+    parts = ["<h2>Campaign: how the intervals shrank</h2>"]
+    if rows:
+        parts.append(_table(
+            ["valid nights", "HLC [W/K]", "HLC ± [%]", "τ [h]", "τ ± [%]"],
+            [[str(r["valid_nights"]), _fmt(r["hlc_w_per_k"], ".4g"),
+              _fmt(r["hlc_rel_pct"], ".1f"), _fmt(r["tau_h"], ".4g"),
+              _fmt(r["tau_rel_pct"], ".1f")] for r in rows]))
+    if len(rows) >= 2:
+        parts.append(_img(figures.campaign_intervals(rows, out / "fig_campaign.png")))
+    if decisions:
+        parts += ["<p>Decisions of the adaptive campaign (local time of the night's preheat):"
+                  "</p>", _table(["act", "decision", "why"], decisions)]
+    return parts
+
+
 def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict | None,
-            demand: dict | None, nights_html: str) -> None:
+            demand: dict | None, nights_html: str,
+            campaign: tuple[list[dict], list[list[str]]] = ([], [])) -> None:
     figs = [
         figures.night_fits(fit, out / "fig_nights.png"),
         figures.heat_demand(demand or fit.get("validation", {}), out / "fig_heat_demand.png"),
@@ -200,6 +243,7 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         "consistent with the data, not a measurement.</p>"
         + "".join(f"<p>{html.escape(n)}</p>" for n in notes) + "</div>",
         "<h2>Nights and their data quality</h2>", nights_html,
+        *_campaign_section(out, campaign),
     ]
     if fit.get("night_quality"):
         from ..fit.report import QUALITY_HEADERS, quality_rows

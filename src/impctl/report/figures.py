@@ -150,3 +150,24 @@ def parameter_ranges(fit: dict, path: Path, truth=None) -> Path:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def campaign_intervals(rows: list[dict], path: Path) -> Path:
+    """How the 95 % half-widths of HLC and τ (relative to the estimates, %) shrank fit after
+    fit, against the valid nights each fit used (the adaptive campaign's progress)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.5, 3.2))
+    n = [r["valid_nights"] for r in rows]
+    for key, label, color in (("hlc_rel_pct", "HLC", "tab:blue"), ("tau_rel_pct", "τ",
+                                                                   "tab:orange")):
+        ys = [np.nan if r[key] is None else r[key] for r in rows]
+        ax.plot(n, ys, "o-", color=color, label=label)
+    ax.set_xlabel("valid nights in the fit")
+    ax.set_ylabel("95 % half-width / estimate [%]")
+    ax.set_yscale("log")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -7,7 +7,15 @@ temperatures in °C, powers in W.
 """
 
 from .db import SCHEMA_VERSION, Store
-from .records import Command, JournalEntry, Night, Sample, TriggerRequest
+from .records import (
+    CampaignDecision,
+    Command,
+    FitRecord,
+    JournalEntry,
+    Night,
+    Sample,
+    TriggerRequest,
+)
 
-__all__ = ["SCHEMA_VERSION", "Command", "JournalEntry", "Night", "Sample", "Store",
-           "TriggerRequest"]
+__all__ = ["SCHEMA_VERSION", "CampaignDecision", "Command", "FitRecord", "JournalEntry",
+           "Night", "Sample", "Store", "TriggerRequest"]

@@ -6,10 +6,12 @@ import json
 import os
 import sqlite3
 from collections.abc import Iterable, Sequence
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 
 from ..errors import InputError
+from ._times import _dt, _iso, _now
+from .campaign_tables import CampaignTables
 from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
 
 # Each entry migrates from version i to i + 1; never edit a released entry, append a new one.
@@ -93,27 +95,31 @@ _MIGRATIONS: tuple[str, ...] = (
         taken TEXT
     );
     """,
+    # 4: the adaptive campaign (issue 18). A fit keeps how many valid nights it used and the
+    # predictions of `impctl campaign next` made from it; each night's decision (run, skip,
+    # stop) is kept with its reason and the forecast it used.
+    """
+    ALTER TABLE fits ADD COLUMN night_count INTEGER;
+    UPDATE fits SET night_count = json_array_length(nights);
+    ALTER TABLE fits ADD COLUMN candidates TEXT;
+    CREATE TABLE decisions (
+        id INTEGER PRIMARY KEY,
+        created TEXT NOT NULL,
+        act TEXT,
+        action TEXT NOT NULL CHECK (action IN ('run', 'skip', 'stop')),
+        kind TEXT,
+        setpoint_c REAL,
+        reason TEXT NOT NULL,
+        reached INTEGER NOT NULL DEFAULT 0,
+        forecast_t_out_c REAL,
+        forecast_source TEXT
+    );
+    """,
 )
 SCHEMA_VERSION = len(_MIGRATIONS)
 
 
-def _now() -> datetime:
-    return datetime.now(UTC)
-
-
-def _iso(ts: datetime | None) -> str | None:
-    if ts is None:
-        return None
-    if ts.tzinfo is None:
-        raise ValueError("naive datetime: store only time zone-aware instants")
-    return ts.astimezone(UTC).isoformat()
-
-
-def _dt(text: str | None) -> datetime | None:
-    return None if text is None else datetime.fromisoformat(text)
-
-
-class Store:
+class Store(CampaignTables):
     """The impctl SQLite database (WAL mode, schema migrated on open).
 
     Parameters
@@ -383,49 +389,7 @@ class Store:
                                (_iso(_now()), command_id))
         return cur.rowcount == 1
 
-    # -- campaign plan ---------------------------------------------------------------------
-    def set_campaign(self, plan: Sequence[tuple[str, float]]) -> None:
-        """Replace the campaign plan (kind, setpoint °C) keeping links of entries that match."""
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
-            old = {r["seq"]: r for r in self._db.execute("SELECT * FROM campaign")}
-            self._db.execute("DELETE FROM campaign")
-            for seq, (kind, sp) in enumerate(plan):
-                keep = old.get(seq)
-                link = keep["night_id"] if keep and (keep["kind"], keep["setpoint_c"]) == (
-                    kind, sp) else None
-                self._db.execute("INSERT INTO campaign VALUES (?, ?, ?, ?)",
-                                 (seq, kind, sp, link))
-            self._db.execute("COMMIT")
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-
-    def campaign(self) -> list[tuple[int, str, float, int | None, bool | None]]:
-        """The plan: (seq, kind, setpoint °C, linked night id, that night's validity)."""
-        rows = self._db.execute(
-            "SELECT c.seq, c.kind, c.setpoint_c, c.night_id, n.valid FROM campaign c"
-            " LEFT JOIN nights n ON n.id = c.night_id ORDER BY c.seq")
-        return [(r[0], r[1], r[2], r[3], None if r[4] is None else bool(r[4])) for r in rows]
-
-    def link_campaign(self, seq: int, night_id: int) -> None:
-        """Attach a night to a plan entry (replacing an earlier, invalid attempt)."""
-        self._db.execute("UPDATE campaign SET night_id = ? WHERE seq = ?", (night_id, seq))
-
-    # -- fits and events -------------------------------------------------------------------
-    def add_fit(self, night_ids: Sequence[int], result: dict) -> int:
-        """Store a fit result (JSON-serialisable dict)."""
-        cur = self._db.execute("INSERT INTO fits (created, nights, result) VALUES (?, ?, ?)",
-                               (_iso(_now()), json.dumps(list(night_ids)), json.dumps(result)))
-        return int(cur.lastrowid)
-
-    def last_fit(self) -> tuple[datetime, list[int], dict] | None:
-        """The newest fit: (created, night ids, result), or None."""
-        row = self._db.execute("SELECT * FROM fits ORDER BY id DESC LIMIT 1").fetchone()
-        if row is None:
-            return None
-        return _dt(row["created"]), json.loads(row["nights"]), json.loads(row["result"])
-
+    # -- events ----------------------------------------------------------------------------
     def add_event(self, level: str, message: str) -> None:
         """Keep a notable event (link lost, restore done, abort) for ``impctl status``."""
         self._db.execute("INSERT INTO events (ts, level, message) VALUES (?, ?, ?)",

@@ -106,3 +106,37 @@ class Command:
     source: str
     created: datetime
     taken: datetime | None = None
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """One stored fit: the valid nights it used (ids and how many), the ``impctl fit`` JSON,
+    and in adaptive mode the predictions ``impctl campaign next`` made from it."""
+
+    id: int
+    created: datetime
+    nights: list[int]
+    night_count: int
+    result: dict
+    candidates: dict | None = None
+
+
+@dataclass(frozen=True)
+class CampaignDecision:
+    """What the adaptive campaign decided for one night, and why.
+
+    ``action``: "run" (``kind`` at ``setpoint_c`` °C), "skip" (tonight only) or "stop" (the
+    campaign ended; ``reached`` when the precision target was met). ``forecast_t_out_c`` [°C]
+    with ``forecast_source`` saying where it came from.
+    """
+
+    id: int
+    created: datetime
+    act: datetime | None
+    action: str
+    kind: str | None
+    setpoint_c: float | None
+    reason: str
+    reached: bool = False
+    forecast_t_out_c: float | None = None
+    forecast_source: str | None = None

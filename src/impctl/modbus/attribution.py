@@ -30,7 +30,8 @@ import logging
 from collections import Counter
 from dataclasses import dataclass, field
 
-_LOG = logging.getLogger("impctl.heatpump.link")
+# Quirks are link incidents: logged under the link's logger, next to its other lines.
+_LOG = logging.getLogger("impctl.modbus.link")
 
 #: Quirk name → what it is and the configuration change that fixes it.
 QUIRK_FIXES: dict[str, str] = {

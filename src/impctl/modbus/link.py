@@ -77,7 +77,8 @@ class ModbusLink:
         self._last_request = 0.0
         # True from a failure until the next good answer: one log line per incident.
         self._trouble = False
-        #: Registers whose last safe write failed (their repeated failures log at DEBUG).
+        #: Registers whose last safe write failed (their repeated failures log at DEBUG); kept
+        #: by the writer (:mod:`impctl.heatpump.writes`), per link.
         self.failed_writes: set[int] = set()
 
     def _incident(self, msg: str, *args: object) -> None:

@@ -1,0 +1,315 @@
+"""What the adaptive campaign does next: run a night (which kind, which setpoint), skip
+tonight, or stop — and one plain sentence saying why.
+
+Standard library only: the daemon imports this module (idle RSS ≤ 60 MB), the predictions it
+chooses among come from ``impctl campaign next`` (:mod:`impctl.campaign.design`) run as a
+subprocess.
+
+Rules, in order (:func:`decide`):
+
+1. **reached** — stop when the latest fit's 95 % interval half-widths of HLC and τ, relative to
+   their estimates, are within the target and at least ``min_each`` valid nights of each kind
+   were run.
+2. **max_nights** — stop when ``max_nights`` nights were run (valid or not: each one cost the
+   household a night).
+3. **cannot be identified** — stop when the worst ratio max(hlc_rel/target, tau_rel/target)
+   did not shrink by at least 10 % over the last ``stall_nights`` valid nights: more nights of
+   the same house are unlikely to help, and the household should not pay for them.
+4. **band** — skip tonight (only tonight) when the forecast outdoor temperature is outside the
+   outdoor band.
+5. **never two constrained nights in a row** — after a constrained night (valid or not) the
+   next night run is normal.
+6. **choice** — until a fit exists (or without predictions) a default order: a constrained
+   night, a normal night at the first normal setpoint, then two normal nights per constrained
+   one (the fixed 2 + 3 plan's ratio), normal setpoints in turn. With a fit and predictions:
+   the allowed candidate with the smallest predicted worst ratio
+   max(hlc_rel_pred/hlc_rel, tau_rel_pred/tau_rel), kinds still short of ``min_each`` first.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+CONSTRAINED = "constrained"
+NORMAL = "normal"
+KINDS = (CONSTRAINED, NORMAL)
+#: The worst ratio must shrink by at least this fraction over ``stall_nights`` valid nights.
+STALL_SHRINK = 0.10
+
+
+@dataclass(frozen=True)
+class Target:
+    """The precision the aggregator needs and what the household will give for it.
+
+    Attributes
+    ----------
+    hlc_rel, tau_rel : 95 % interval half-width relative to the estimate (0.05 = ±5 %)
+    max_nights : nights run (valid or not) at most — the household's cost
+    min_each : valid nights of each kind before precision may stop the campaign
+    stall_nights : "cannot be identified" when the worst ratio did not shrink by ≥ 10 % over
+        this many valid nights
+    """
+
+    hlc_rel: float = 0.05
+    tau_rel: float = 0.08
+    max_nights: int = 8
+    min_each: int = 1
+    stall_nights: int = 3
+
+    def __post_init__(self) -> None:
+        for name in ("hlc_rel", "tau_rel"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"target {name} must be a positive number, got {value!r}")
+        for name, low in (("max_nights", 1), ("min_each", 1), ("stall_nights", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ValueError(f"target {name} must be an integer >= {low}, got {value!r}")
+
+    def ratio(self, hlc_rel: float, tau_rel: float) -> float:
+        """The worst of the two half-widths over their targets (≤ 1: target met)."""
+        return max(_num(hlc_rel) / self.hlc_rel, _num(tau_rel) / self.tau_rel)
+
+
+@dataclass(frozen=True)
+class NightRecord:
+    """A night that was run: its kind, setpoint [°C], whether the fit could use it, and its
+    mean outdoor temperature [°C] when known."""
+
+    kind: str
+    setpoint_c: float
+    valid: bool
+    t_out_mean_c: float | None = None
+
+
+@dataclass(frozen=True)
+class FitSummary:
+    """One fit after ``nights`` valid nights: HLC [W/K] and τ [h] with 95 % intervals."""
+
+    nights: int
+    hlc_w_per_k: float
+    hlc_low: float
+    hlc_high: float
+    tau_h: float
+    tau_low: float
+    tau_high: float
+
+    @classmethod
+    def from_fit_json(cls, result: dict, nights: int) -> FitSummary:
+        """From the JSON written by ``impctl fit --json`` (schema ``impctl-fit/1``).
+
+        A missing or non-finite value becomes NaN, so its relative half-width is infinite:
+        never mistaken for a precise result.
+        """
+        lumped = result.get("lumped") if isinstance(result, dict) else None
+        if not isinstance(lumped, dict):
+            raise ValueError("fit result has no 'lumped' block (not an impctl-fit/1 JSON)")
+
+        def get(name: str, key: str) -> float:
+            block = lumped.get(name)
+            value = block.get(key) if isinstance(block, dict) else None
+            return _num(value, math.nan)
+
+        return cls(nights=int(nights),
+                   hlc_w_per_k=get("hlc", "value"), hlc_low=get("hlc", "low"),
+                   hlc_high=get("hlc", "high"),
+                   tau_h=get("tau", "value"), tau_low=get("tau", "low"),
+                   tau_high=get("tau", "high"))
+
+    @property
+    def hlc_rel(self) -> float:
+        """Half-width of the HLC interval relative to the estimate (inf when unknown)."""
+        return _rel(self.hlc_w_per_k, self.hlc_low, self.hlc_high)
+
+    @property
+    def tau_rel(self) -> float:
+        """Half-width of the τ interval relative to the estimate (inf when unknown)."""
+        return _rel(self.tau_h, self.tau_low, self.tau_high)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A possible next night and the predicted relative half-widths after it."""
+
+    kind: str
+    setpoint_c: float
+    hlc_rel_pred: float
+    tau_rel_pred: float
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What to do tonight.
+
+    Attributes
+    ----------
+    action : "run" | "skip" (tonight only) | "stop" (the campaign ends)
+    kind, setpoint_c : the night to run [°C]; None unless ``action == "run"``
+    reason : one plain sentence for ``impctl status``, logs and Home Assistant
+    reached : True when stopped because the precision target is met
+    """
+
+    action: str
+    kind: str | None
+    setpoint_c: float | None
+    reason: str
+    reached: bool = False
+
+
+def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
+           candidates: Sequence[Candidate], target: Target, *,
+           forecast_t_out_c: float | None, t_out_band_c: tuple[float, float],
+           constrained_setpoint_c: float, normal_setpoints_c: Sequence[float]) -> Decision:
+    """The next step of the campaign (rules in the module docstring).
+
+    Parameters
+    ----------
+    history : the nights run so far, oldest first (valid or not)
+    fits : the fits so far, oldest first (``nights`` = valid nights each used)
+    candidates : predictions for tonight from ``impctl campaign next`` (may be empty)
+    target : precision target and the household's limits
+    forecast_t_out_c : tonight's expected mean outdoor temperature [°C]; None = unknown (run)
+    t_out_band_c : (low, high) outdoor temperatures [°C] nights may run in
+    constrained_setpoint_c, normal_setpoints_c : the configured setpoints [°C]
+    """
+    if not normal_setpoints_c:
+        raise ValueError("normal_setpoints_c must name at least one setpoint")
+    run = len(history)
+    valid = {k: sum(1 for n in history if n.valid and n.kind == k) for k in KINDS}
+    enough_each = all(valid[k] >= target.min_each for k in KINDS)
+    latest = fits[-1] if fits else None
+
+    if latest is not None and enough_each and target.ratio(latest.hlc_rel, latest.tau_rel) <= 1:
+        return Decision("stop", None, None, _reached_reason(latest, target, run), reached=True)
+    if run >= target.max_nights:
+        where = (f"; the last fit has {_precision(latest)} (target ±{target.hlc_rel:.0%} / "
+                 f"±{target.tau_rel:.0%})" if latest is not None else "; no fit was possible")
+        return Decision("stop", None, None,
+                        f"Stopped after {run} nights, the most this household agreed to "
+                        f"(max_nights {target.max_nights}){where}.")
+    stalled = _stalled(fits, target)
+    if stalled is not None:
+        return Decision("stop", None, None, stalled)
+    low, high = t_out_band_c
+    if forecast_t_out_c is not None and not (low <= forecast_t_out_c <= high):
+        return Decision("skip", None, None,
+                        f"Skipping tonight: the forecast outdoor temperature "
+                        f"{forecast_t_out_c:.1f} °C is outside the band {low:g}–{high:g} °C.")
+
+    after_constrained = bool(history) and history[-1].kind == CONSTRAINED
+    allowed = [c for c in candidates if c.kind in KINDS
+               and not (after_constrained and c.kind == CONSTRAINED)
+               and math.isfinite(_num(c.hlc_rel_pred)) and math.isfinite(_num(c.tau_rel_pred))]
+    short = [k for k in KINDS if valid[k] < target.min_each]
+    if short:
+        preferred = [c for c in allowed if c.kind in short]
+        allowed = preferred or allowed
+    if latest is None or not allowed:
+        return _default(history, valid, after_constrained, constrained_setpoint_c,
+                        normal_setpoints_c, latest is None)
+    best = min(allowed, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
+                                       c.kind != NORMAL, c.setpoint_c))
+    now = target.ratio(latest.hlc_rel, latest.tau_rel)
+    then = target.ratio(best.hlc_rel_pred, best.tau_rel_pred)
+    rule = " (never two constrained nights in a row)" if after_constrained else ""
+    return Decision("run", best.kind, float(best.setpoint_c),
+                    f"Next: a {best.kind} night at {best.setpoint_c:g} °C{rule}, predicted to "
+                    f"bring HLC to ±{best.hlc_rel_pred:.1%} and τ to ±{best.tau_rel_pred:.1%} "
+                    f"(now {_precision(latest)}; worst ratio to target {now:.2f} → {then:.2f}).")
+
+
+def parse_candidates(block: dict) -> list[Candidate]:
+    """The candidates of the JSON written by ``impctl campaign next``.
+
+    ``{"forecast_t_out_c": x, "candidates": [{"kind", "setpoint_c", "hlc_rel_pred",
+    "tau_rel_pred"}, ...]}``; a null prediction becomes inf (never chosen); raises ValueError
+    naming the entry and the problem.
+    """
+    if not isinstance(block, dict) or not isinstance(block.get("candidates"), list):
+        raise ValueError("campaign JSON has no 'candidates' list")
+    out = []
+    for i, entry in enumerate(block["candidates"]):
+        if not isinstance(entry, dict):
+            raise ValueError(f"candidates[{i}] is not an object")
+        kind = entry.get("kind")
+        if kind not in KINDS:
+            raise ValueError(f"candidates[{i}].kind must be 'constrained' or 'normal', "
+                             f"got {kind!r}")
+        values = []
+        for key in ("setpoint_c", "hlc_rel_pred", "tau_rel_pred"):
+            value = entry.get(key)
+            if value is None and key != "setpoint_c":
+                value = math.inf   # written as null: the prediction failed (never chosen)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"candidates[{i}].{key} must be a number, got {value!r}")
+            values.append(float(value))
+        out.append(Candidate(kind, *values))
+    return out
+
+
+def _num(value: object, default: float = math.inf) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return default
+    value = float(value)
+    return value if not math.isnan(value) else default
+
+
+def _rel(value: float, low: float, high: float) -> float:
+    if not all(math.isfinite(x) for x in (value, low, high)) or value <= 0 or high < low:
+        return math.inf
+    return 0.5 * (high - low) / value
+
+
+def _precision(fit: FitSummary | None) -> str:
+    if fit is None:
+        return "no fit yet"
+    return f"HLC ±{_pct(fit.hlc_rel)} and τ ±{_pct(fit.tau_rel)}"
+
+
+def _pct(x: float) -> str:
+    return f"{x:.1%}" if math.isfinite(x) else "unknown"
+
+
+def _reached_reason(fit: FitSummary, target: Target, run: int) -> str:
+    return (f"Target reached after {run} nights ({fit.nights} valid): HLC {fit.hlc_w_per_k:.0f} "
+            f"W/K ±{fit.hlc_rel:.1%} (target ±{target.hlc_rel:.0%}), τ {fit.tau_h:.0f} h "
+            f"±{fit.tau_rel:.1%} (target ±{target.tau_rel:.0%}).")
+
+
+def _stalled(fits: Sequence[FitSummary], target: Target) -> str | None:
+    """The "cannot be identified" sentence when the worst ratio stopped shrinking."""
+    if not fits:
+        return None
+    latest = fits[-1]
+    earlier = [f for f in fits if f.nights <= latest.nights - target.stall_nights]
+    if not earlier:
+        return None
+    before = earlier[-1]
+    r_then = target.ratio(before.hlc_rel, before.tau_rel)
+    r_now = target.ratio(latest.hlc_rel, latest.tau_rel)
+    if math.isfinite(r_now) and r_now < (1 - STALL_SHRINK) * r_then:
+        return None
+    return (f"Stopped: this house cannot be identified to the target — after "
+            f"{latest.nights - before.nights} more valid nights the intervals went from "
+            f"{_precision(before)} to {_precision(latest)} (target ±{target.hlc_rel:.0%} / "
+            f"±{target.tau_rel:.0%}); more nights are unlikely to help.")
+
+
+def _default(history: Sequence[NightRecord], valid: dict, after_constrained: bool,
+             constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
+             no_fit: bool) -> Decision:
+    """The order without predictions: constrained, normal, then the 2 + 3 plan's ratio."""
+    n_normal_run = sum(1 for n in history if n.kind == NORMAL)
+    want_constrained = (valid[CONSTRAINED] == 0
+                        or (valid[NORMAL] > 0 and 3 * valid[CONSTRAINED] < 2 * valid[NORMAL]))
+    why = "no fit yet" if no_fit else "no prediction available"
+    if want_constrained and not after_constrained:
+        return Decision("run", CONSTRAINED, float(constrained_setpoint_c),
+                        f"Next: a constrained night at {constrained_setpoint_c:g} °C (default "
+                        f"order, {why}).")
+    setpoint = float(normal_setpoints_c[n_normal_run % len(normal_setpoints_c)])
+    rule = "; never two constrained nights in a row" if want_constrained else ""
+    return Decision("run", NORMAL, setpoint,
+                    f"Next: a normal night at {setpoint:g} °C (default order, {why}{rule}).")

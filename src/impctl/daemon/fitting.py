@@ -1,0 +1,119 @@
+"""The fit after every valid night, in subprocesses: ``impctl export`` → ``impctl fit`` and, in
+adaptive mode, ``impctl campaign next`` (the predictions for the next night).
+
+The daemon never imports torch, scikit-learn or pandas; only the JSON results come back. Each
+fit is stored with the number of valid nights it used, its predictions with it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import sys
+from pathlib import Path
+
+from ..store import Store
+from .adaptive import forecast
+from .config import Config
+
+_LOG = logging.getLogger("impctl.daemon")
+_KINDS = ("constrained", "normal")
+#: Niceness added to the fit's subprocesses.
+FIT_NICE = 10
+
+
+def fit_ready(store: Store) -> str | None:
+    """None when a fit can run on the valid nights; else why not (one plain sentence)."""
+    valid = store.nights(valid=True)
+    missing = [k for k in _KINDS if not any(n.kind == k for n in valid)]
+    if missing:
+        return f"the fit waits for a valid {' and a '.join(missing)} night"
+    return None
+
+
+def needs_fit(store: Store) -> bool:
+    """The valid nights differ from those of the newest fit."""
+    last = store.last_fit()
+    valid = [n.id for n in store.nights(valid=True)]
+    return bool(valid) and (last is None or sorted(last[1]) != sorted(valid))
+
+
+async def _step(cmd: list[str]) -> tuple[int, str]:
+    proc = await asyncio.create_subprocess_exec(
+        *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+        env={**os.environ, "OMP_NUM_THREADS": "1"})
+    try:
+        _, err = await proc.communicate()
+    except asyncio.CancelledError:  # the daemon stops: do not leave the fit running
+        proc.kill()
+        await proc.wait()
+        raise
+    lines = err.decode(errors="replace").strip().splitlines()
+    return proc.returncode, lines[-1] if lines else ""
+
+
+async def run_fit(store: Store, cfg: Config) -> dict | None:
+    """Export the valid nights and fit them; in adaptive mode predict the next night too.
+
+    Returns the fit JSON (stored), or None when a step failed (logged, an event kept).
+    """
+    work = Path(cfg.state_dir) / "fit"
+    work.mkdir(parents=True, exist_ok=True)
+    nights_csv, out_json, next_json = work / "nights.csv", work / "fit.json", work / "next.json"
+    ids = [n.id for n in store.nights(valid=True)]
+    # Niced: the fit (torch, a core for seconds to minutes) never slows tonight's sampling.
+    base = [sys.executable, "-c", f"import os; os.nice({FIT_NICE}); "
+            "from impctl.cli import main; main()"]
+    model_dir = cfg.model_dir or str(Path(cfg.state_dir) / "models")
+    steps = [
+        [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
+         "--out", str(nights_csv), "--force"],
+        [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
+         "--model-dir", model_dir],
+    ]
+    for cmd in steps:
+        code, last = await _step(cmd)
+        if code != 0:
+            _LOG.error("fit step %s failed (%d): %s", cmd[3], code, last)
+            store.add_event("error", f"fit failed at {cmd[3]}")
+            return None
+    result = json.loads(out_json.read_text())
+    fit_id = store.add_fit(ids, result)
+    store.add_event("info", f"fit stored ({len(ids)} nights)")
+    _LOG.info("fit stored for nights %s", ids)
+    if cfg.campaign.adaptive:
+        await _predict(store, cfg, fit_id, base, out_json, nights_csv, next_json)
+    return result
+
+
+async def _predict(store: Store, cfg: Config, fit_id: int, base: list[str], fit_json: Path,
+                   nights_csv: Path, next_json: Path) -> None:
+    """``impctl campaign next`` from the new fit; its candidates are stored with the fit.
+    Without them the policy follows its default order: logged, never fatal."""
+    fc = forecast(store, cfg)
+    if fc.t_out_c is None:
+        _LOG.warning("no outdoor reading: no prediction for the next night")
+        return
+    camp = cfg.campaign
+    start, end = cfg.window_minutes
+    window_h = ((end - start) % (24 * 60)) / 60
+    cmd = [*base, "campaign", "next", "--fit", str(fit_json), "--nights", str(nights_csv),
+           "--forecast-t-out-c", f"{fc.t_out_c:g}",
+           "--constrained-setpoint-c", f"{camp.constrained_setpoint_c:g}",
+           "--normal-setpoints-c", ",".join(f"{sp:g}" for sp in camp.normal_setpoints_c),
+           "--comfort-band-k", f"{cfg.night.comfort_band_k:g}",
+           "--preheat-h", f"{cfg.night.preheat_h:g}", "--window-h", f"{window_h:g}",
+           "--tz", cfg.timezone, "--json", str(next_json)]
+    code, last = await _step(cmd)
+    if code != 0:
+        _LOG.error("campaign next failed (%d): %s; the next night follows the default order",
+                   code, last)
+        store.add_event("error", "campaign next failed")
+        return
+    block = json.loads(next_json.read_text())
+    block["forecast_source"] = fc.source
+    store.set_fit_candidates(fit_id, block)
+    _LOG.info("predictions for the next night stored (forecast T_out %.1f °C, %s)",
+              fc.t_out_c, fc.source)

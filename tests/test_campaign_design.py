@@ -1,0 +1,132 @@
+"""Expected information of the next night (impctl.campaign.design) against real refits on an
+ideal 5R1C house, and ``impctl campaign next`` as a real subprocess."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from impctl.campaign import parse_candidates
+from impctl.campaign.design import Protocol, predict_candidates
+from impctl.fit.estimator import NightFit
+from impctl.fit.report import fit_to_dict
+from impctl.imp.nights_csv import write_nights
+from impctl.model import HouseParameters
+from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+
+HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, windows_area=25.0,
+                        c_f=2.2, u_walls=0.5, u_windows=1.3, ach_vent=0.0, ach_infl=0.01)
+STEP_S = 900.0
+SEED = 7
+
+
+def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
+    """Three nights of one kind on the shared weather; the third night's mean T_out [°C]."""
+    sched = imp_schedule(1, n_constrained=3 if kind == "constrained" else 0,
+                         n_normal=0 if kind == "constrained" else 3, setpoints_c=(setpoint_c,),
+                         seed=SEED)
+    sim, sp = run_schedule(HOUSE, sched)
+    _, _, w0, w1, _ = sched.windows[2]
+    return (sample_nights(sim, sp, sched, 0, sample_step_s=STEP_S, power_noise=0.05, seed=SEED),
+            float(sched.t_out_c[w0:w1, 0].mean()))
+
+
+def _fit(nights) -> dict:
+    # No sensor-offset allowance: the test is about the information of the data.
+    fit = NightFit(ach_vent=0.0, ach_infl=0.01, sensor_offsets_k=(0.0, 0.0)).fit(nights)
+    return fit_to_dict(fit)
+
+
+def _rel(result: dict, name: str) -> float:
+    q = result["lumped"][name]
+    return 0.5 * (q["high"] - q["low"]) / q["value"]
+
+
+@pytest.fixture(scope="module")
+def campaign():
+    cons, forecast = _nights("constrained", 21.0)
+    norm, _ = _nights("normal", 22.0)
+    base = [cons[0], norm[1]]
+    return {"base": base, "forecast": forecast, "with_c": base + [cons[2]],
+            "with_n": base + [norm[2]], "fit": _fit(base)}
+
+
+def test_prediction_ranks_nights_as_a_real_refit_does(campaign):
+    cands = predict_candidates(campaign["fit"], campaign["forecast"], constrained_setpoint_c=21.0,
+                               normal_setpoints_c=(22.0,), step_s=STEP_S,
+                               protocol=Protocol(preheat_h=4.0))
+    pred = {c.kind: c for c in cands}
+    now_tau, now_hlc = _rel(campaign["fit"], "tau"), _rel(campaign["fit"], "hlc")
+    # a night never widens the statistical interval
+    for c in cands:
+        assert c.tau_rel_pred <= now_tau * 1.0001 and c.hlc_rel_pred <= now_hlc * 1.0001
+    # the constrained night is predicted to shrink τ more than the normal one ...
+    assert pred["constrained"].tau_rel_pred < pred["normal"].tau_rel_pred
+    after_c, after_n = _fit(campaign["with_c"]), _fit(campaign["with_n"])
+    # ... and does so in the real refit; the normal night the same for HLC
+    assert _rel(after_c, "tau") < _rel(after_n, "tau")
+    assert pred["normal"].hlc_rel_pred < pred["constrained"].hlc_rel_pred
+    assert _rel(after_n, "hlc") < _rel(after_c, "hlc")
+    # loosely quantitative: predicted and refitted half-widths within a factor 2
+    for result, kind in ((after_c, "constrained"), (after_n, "normal")):
+        for name in ("hlc", "tau"):
+            ratio = getattr(pred[kind], f"{name}_rel_pred") / _rel(result, name)
+            assert 0.5 < ratio < 2.0, (kind, name, ratio)
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()",
+                           "campaign", "next", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_cli_writes_candidates_the_policy_reads(tmp_path, campaign):
+    fit_json = tmp_path / "fit.json"
+    fit_json.write_text(json.dumps(campaign["fit"]))
+    csv = write_nights(campaign["base"], tmp_path / "nights.csv")
+    out = tmp_path / "next.json"
+    proc = _run("--fit", str(fit_json), "--nights", str(csv), "--forecast-t-out-c", "-3.5",
+                "--normal-setpoints-c", "21,23", "--json", str(out))
+    assert proc.returncode == 0, proc.stderr
+    block = json.loads(out.read_text())
+    assert block["forecast_t_out_c"] == -3.5 and block["sample_step_s"] == pytest.approx(STEP_S)
+    cands = parse_candidates(block)
+    assert [(c.kind, c.setpoint_c) for c in cands] == [("constrained", 21.0), ("normal", 21.0),
+                                                       ("normal", 23.0)]
+    assert all(0 < c.hlc_rel_pred < 10 and 0 < c.tau_rel_pred < 10 for c in cands)
+    assert np.isfinite([c.tau_rel_pred for c in cands]).all()
+
+
+@pytest.mark.parametrize("case", ["not_json", "other_schema", "setpoint", "forecast", "no_file"])
+def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, campaign, case):
+    fit_json = tmp_path / "fit.json"
+    fit_json.write_text(json.dumps(campaign["fit"]))
+    csv = write_nights(campaign["base"], tmp_path / "nights.csv")
+    out = tmp_path / "next.json"
+    args = {"--fit": str(fit_json), "--nights": str(csv), "--forecast-t-out-c": "0",
+            "--json": str(out)}
+    expect = ""
+    if case == "not_json":
+        fit_json.write_text("{not json")
+        expect = "fit.json"
+    elif case == "other_schema":
+        fit_json.write_text(json.dumps({"schema": "something-else"}))
+        expect = "impctl-fit/1"
+    elif case == "setpoint":
+        args["--normal-setpoints-c"] = "21,hot"
+        expect = "--normal-setpoints-c"
+    elif case == "forecast":
+        args["--forecast-t-out-c"] = "80"
+        expect = "--forecast-t-out-c"
+    else:
+        args["--nights"] = str(tmp_path / "missing.csv")
+        expect = "missing.csv"
+    proc = _run(*[x for kv in args.items() for x in kv])
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and expect in lines[0], proc.stderr
+    assert not out.exists()

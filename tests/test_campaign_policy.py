@@ -1,0 +1,169 @@
+"""The adaptive campaign's decision rules (impctl.campaign.policy): stop, skip, order, choice."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from impctl.campaign import (
+    Candidate,
+    FitSummary,
+    NightRecord,
+    Target,
+    decide,
+    parse_candidates,
+)
+
+BAND = (-25.0, 8.0)
+KW = dict(forecast_t_out_c=0.0, t_out_band_c=BAND, constrained_setpoint_c=21.0,
+          normal_setpoints_c=(21.0, 22.0, 23.0))
+C = NightRecord("constrained", 21.0, True)
+N = NightRecord("normal", 21.0, True)
+
+
+def fit(nights: int, hlc_rel: float, tau_rel: float) -> FitSummary:
+    return FitSummary(nights, 200.0, 200.0 * (1 - hlc_rel), 200.0 * (1 + hlc_rel),
+                      50.0, 50.0 * (1 - tau_rel), 50.0 * (1 + tau_rel))
+
+
+CANDS = [Candidate("constrained", 21.0, 0.09, 0.09), Candidate("normal", 21.0, 0.07, 0.12),
+         Candidate("normal", 22.0, 0.065, 0.10), Candidate("normal", 23.0, 0.08, 0.11)]
+
+
+def test_default_order_without_a_fit():
+    target = Target()
+    first = decide([], [], [], target, **KW)
+    assert (first.action, first.kind, first.setpoint_c) == ("run", "constrained", 21.0)
+    second = decide([C], [], [], target, **KW)
+    assert (second.action, second.kind, second.setpoint_c) == ("run", "normal", 21.0)
+    # an invalid constrained night is retried, but never right after a constrained night
+    bad_c = NightRecord("constrained", 21.0, False)
+    assert decide([bad_c], [], [], target, **KW).kind == "normal"
+    assert decide([bad_c, N], [], [], target, **KW).kind == "constrained"
+    # with one of each but no prediction: two normal nights per constrained one, setpoints
+    # in turn
+    third = decide([C, N], [fit(2, 0.5, 0.5)], [], target, **KW)
+    assert (third.kind, third.setpoint_c) == ("normal", 22.0)
+    fourth = decide([C, N, NightRecord("normal", 22.0, True)], [], [], target, **KW)
+    assert fourth.kind == "constrained"
+
+
+def test_choice_by_predicted_worst_ratio():
+    d = decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(), **KW)
+    # worst ratios: c 0.09/0.05=1.8; n21 0.12/0.08=1.5; n22 max(1.3, 1.25)=1.3; n23 1.6
+    assert (d.action, d.kind, d.setpoint_c) == ("run", "normal", 22.0)
+    assert "22 °C" in d.reason and not d.reached
+    # the same candidates with a τ-heavy target: the constrained night wins
+    d = decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(hlc_rel=0.5, tau_rel=0.08), **KW)
+    assert d.kind == "constrained"
+
+
+def test_never_two_constrained_nights_in_a_row():
+    best_is_constrained = [Candidate("constrained", 21.0, 0.01, 0.01),
+                           Candidate("normal", 23.0, 0.3, 0.3)]
+    d = decide([N, C], [fit(2, 0.2, 0.3)], best_is_constrained, Target(), **KW)
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0)
+    # also when the constrained night was invalid (it still cost the household a night)
+    d = decide([N, NightRecord("constrained", 21.0, False)], [fit(1, 0.2, 0.3)],
+               best_is_constrained, Target(), **KW)
+    assert d.kind == "normal"
+    only_constrained = best_is_constrained[:1]
+    d = decide([N, C], [fit(2, 0.2, 0.3)], only_constrained, Target(), **KW)
+    assert d.kind == "normal"
+
+
+def test_stop_when_target_reached_needs_each_kind():
+    target = Target(min_each=1)
+    d = decide([C, N], [fit(2, 0.04, 0.07)], CANDS, target, **KW)
+    assert (d.action, d.reached) == ("stop", True)
+    assert "Target reached" in d.reason
+    # precise enough, but only one valid constrained night when two are required: the
+    # short kind goes first even though a normal night is predicted better
+    d = decide([C, N, N], [fit(3, 0.04, 0.07)], CANDS, Target(min_each=2), **KW)
+    assert d.action == "run" and d.kind == "constrained"
+    # one target met, the other not: keep going
+    assert decide([C, N], [fit(2, 0.04, 0.09)], CANDS, target, **KW).action == "run"
+
+
+def test_stop_at_max_nights_counts_invalid_nights():
+    bad = NightRecord("normal", 22.0, False)
+    history = [C, N, bad, bad]
+    d = decide(history, [fit(2, 0.3, 0.3)], CANDS, Target(max_nights=4), **KW)
+    assert (d.action, d.reached) == ("stop", False)
+    assert "4 nights" in d.reason
+    assert decide(history[:3], [fit(2, 0.3, 0.3)], CANDS, Target(max_nights=4),
+                  **KW).action == "run"
+
+
+def test_stop_when_intervals_stall():
+    target = Target(stall_nights=3, max_nights=20)
+    history = [C, N, N, C, N, N]
+    stalled = [fit(2, 0.30, 0.30), fit(3, 0.29, 0.30), fit(4, 0.29, 0.29), fit(5, 0.28, 0.28)]
+    d = decide(history, stalled, CANDS, target, **KW)
+    assert (d.action, d.reached) == ("stop", False)
+    assert "cannot be identified" in d.reason
+    shrinking = stalled[:3] + [fit(5, 0.20, 0.20)]
+    assert decide(history, shrinking, CANDS, target, **KW).action == "run"
+    # too few valid nights since the first fit to judge yet
+    assert decide(history[:4], stalled[:3], CANDS, target, **KW).action == "run"
+    # an interval that cannot be computed (inf) does not count as shrinking
+    undetermined = [fit(2, 0.3, 0.3), FitSummary(5, 200.0, math.nan, math.nan, 50, 40, 60)]
+    assert decide(history, undetermined, CANDS, target, **KW).action == "stop"
+
+
+def test_skip_tonight_outside_the_outdoor_band():
+    for t_out in (9.0, -30.0):
+        d = decide([C], [], [], Target(), **{**KW, "forecast_t_out_c": t_out})
+        assert (d.action, d.kind, d.setpoint_c) == ("skip", None, None)
+        assert f"{t_out:.1f} °C" in d.reason
+    # unknown forecast: run; stop rules come before the band
+    assert decide([C], [], [], Target(), **{**KW, "forecast_t_out_c": None}).action == "run"
+    d = decide([C, N], [fit(2, 0.01, 0.01)], [], Target(), **{**KW, "forecast_t_out_c": 30.0})
+    assert d.action == "stop"
+
+
+def test_fit_summary_from_fit_json_and_bad_values():
+    result = {"lumped": {"hlc": {"value": 200.0, "low": 190.0, "high": 210.0},
+                         "tau": {"value": 50.0, "low": 45.0, "high": 55.0}}}
+    s = FitSummary.from_fit_json(result, 3)
+    assert s.nights == 3
+    assert s.hlc_rel == pytest.approx(0.05) and s.tau_rel == pytest.approx(0.10)
+    result["lumped"]["tau"]["high"] = None
+    assert math.isinf(FitSummary.from_fit_json(result, 3).tau_rel)
+    with pytest.raises(ValueError, match="lumped"):
+        FitSummary.from_fit_json({"schema": "x"}, 1)
+    with pytest.raises(ValueError, match="hlc_rel"):
+        Target(hlc_rel=0.0)
+    with pytest.raises(ValueError, match="max_nights"):
+        Target(max_nights=0)
+
+
+def test_parse_candidates():
+    block = {"forecast_t_out_c": 1.0, "candidates": [
+        {"kind": "constrained", "setpoint_c": 21, "hlc_rel_pred": 0.1, "tau_rel_pred": 0.05},
+        {"kind": "normal", "setpoint_c": 22.0, "hlc_rel_pred": None, "tau_rel_pred": 0.2}]}
+    cands = parse_candidates(block)
+    assert cands[0] == Candidate("constrained", 21.0, 0.1, 0.05)
+    assert math.isinf(cands[1].hlc_rel_pred)
+    # a failed prediction is never chosen
+    d = decide([C, N], [fit(2, 0.3, 0.3)], cands[1:] + cands[:1], Target(), **KW)
+    assert d.kind == "constrained"
+    for bad, where in (({"candidates": "x"}, "candidates"),
+                       ({"candidates": [{"kind": "warm"}]}, r"candidates\[0\]\.kind"),
+                       ({"candidates": [{"kind": "normal", "setpoint_c": "22",
+                                         "hlc_rel_pred": 1, "tau_rel_pred": 1}]},
+                        r"candidates\[0\]\.setpoint_c")):
+        with pytest.raises(ValueError, match=where):
+            parse_candidates(bad)
+
+
+def test_package_import_stays_light():
+    code = ("import sys, impctl.campaign; "
+            "heavy = {'numpy', 'torch', 'pandas', 'sklearn'} & set(sys.modules); "
+            "print(sorted(heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"

@@ -1,0 +1,144 @@
+"""An adaptive campaign run by the real daemon against the simulator, end to end (issue 18).
+
+In-process :class:`~impctl.daemon.service.Daemon` on the accelerated clock, the in-process
+simulator on loopback Modbus TCP (the heavy house, 0 °C outdoors), a real SQLite file, and the
+fit after every valid night in real subprocesses (``impctl export`` → ``impctl fit`` →
+``impctl campaign next``). A loose target keeps it short: the campaign must stop by itself —
+at the target, or at ``max_nights`` — never run two constrained nights in a row, store each
+fit with its night count and predictions, run nothing after the stop, and leave the heat pump
+as the owner had it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from datetime import datetime
+
+from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, daemon_mapping
+from impctl_sim import SimConfig, constant_weather
+from sim_fixtures import run, simulator
+from test_daemon_campaign import FINAL, TZ, Watch, _watch
+
+from impctl.campaign import FitSummary, parse_candidates
+from impctl.cli.device_status import collect_status, format_status
+from impctl.daemon.config import config_from_mapping
+from impctl.daemon.schedule import next_act_time
+from impctl.daemon.service import Daemon
+from impctl.heatpump import VirtualClock
+from impctl.store import Store
+
+#: A day of simulated time in 4 s of wall time; 10-min samples = 36 a second (the rate of the
+#: fixed-campaign tests: faster, a loaded machine misses samples and nights end invalid). A fit
+#: (three subprocesses) takes ~10–15 s: the daemon skips the nights that come before it is
+#: stored.
+SPEED = 21600.0
+TARGET = {"hlc": 0.30, "tau": 0.40}
+MAX_NIGHTS = 3
+
+
+def _stopped(db) -> bool:
+    """A stop decided, and the fit of every valid night stored (the aggregator's result)."""
+    if not db.exists():
+        return False
+    with Store(db) as store:
+        decisions, fits = store.decisions(1), store.fits()
+        return (bool(decisions) and decisions[0].action == "stop" and bool(fits)
+                and fits[-1].night_count == len(store.nights(valid=True)))
+
+
+async def _adaptive_campaign(tmp_path):
+    epoch = datetime(2026, 1, 12, 19, 0, tzinfo=TZ)
+    clock = VirtualClock(epoch, SPEED)
+    simcfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
+                       setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
+    async with simulator(simcfg) as sim:
+        cfg = config_from_mapping(daemon_mapping(
+            tmp_path / "state", sim.port, clock, night={"sample_interval_s": 600},
+            campaign={"enabled": True, "mode": "adaptive", "target_rel_halfwidth": TARGET,
+                      "max_nights": MAX_NIGHTS, "constrained_setpoint_c": 21.0,
+                      "normal_setpoints_c": [21.0, 22.0]}), "test")
+        daemon = Daemon(cfg, clock=clock)
+        watch, done = Watch(), asyncio.Event()
+        task = asyncio.create_task(daemon.run())
+        watcher = asyncio.create_task(_watch(sim, clock, cfg.db_path, watch, done))
+        try:
+            async with asyncio.timeout(75):
+                while not _stopped(cfg.db_path):
+                    assert not task.done(), "the daemon stopped by itself"
+                    await asyncio.sleep(0.1)
+                # After the stop: the next act time passes and nothing runs.
+                with Store(cfg.db_path) as store:
+                    at_stop = len(store.nights())
+                after = next_act_time(cfg, clock.now())
+                while clock.now() < after:
+                    await asyncio.sleep(0.1)
+                await asyncio.sleep(1.0)
+                with Store(cfg.db_path) as store:
+                    last_end = max(n.ended for n in store.nights())
+                while not any(t > last_end for t, *_ in watch.idle_states):
+                    await asyncio.sleep(0.02)
+        finally:
+            daemon.stop.set()
+            assert await task == 0
+            done.set()
+            await watcher
+        return cfg, watch, (sim.plant.setpoint_c, sim.plant.loop_mode), at_stop
+
+
+def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path):
+    cfg, watch, plant, at_stop = run(_adaptive_campaign(tmp_path), timeout_s=90)
+    with Store(cfg.db_path) as store:
+        nights = store.nights()
+        fits = store.fits()
+        decisions = store.decisions()[::-1]  # oldest first
+        pending = store.journal_pending()
+        events = [m for _, _, m in store.events(50)]
+        assert store.integrity_check() == "ok"
+    # Every night ran to its end, valid (the heavy house at 0 °C), and was restored.
+    assert nights and all(n.state in FINAL and n.valid for n in nights), [
+        (n.id, n.state, n.reasons) for n in nights]
+    kinds = [n.kind for n in nights]
+    assert kinds[0] == "constrained" and "normal" in kinds
+    assert ("constrained", "constrained") not in set(zip(kinds, kinds[1:], strict=False))
+    assert len(nights) <= MAX_NIGHTS and len(nights) == at_stop  # none after the stop
+    # One decision per act time: a run for every night (in order), skips only while a fit
+    # was still running, and one stop — the last decision, recorded once.
+    runs = [d for d in decisions if d.action == "run"]
+    assert [(d.kind, d.setpoint_c) for d in runs] == [(n.kind, n.setpoint_c) for n in nights]
+    assert {d.reason for d in decisions if d.action == "skip"} <= {
+        "Skipping tonight: the fit of the last night is still running."}
+    stops = [d for d in decisions if d.action == "stop"]
+    assert len(stops) == 1 and decisions[-1] is stops[-1]
+    stop = stops[0]
+    assert stop.forecast_source.startswith("mean T_out of night ")
+    assert abs(stop.forecast_t_out_c - 0.0) < 1.0  # the simulator's constant 0 °C
+    # A fit after each valid night from the first pair of kinds on, with its night count; the
+    # stop follows from the last one.
+    assert fits and fits[-1].night_count == len(nights)
+    assert [f.night_count for f in fits] == sorted({f.night_count for f in fits})
+    last = FitSummary.from_fit_json(fits[-1].result, fits[-1].night_count)
+    if stop.reached:
+        assert last.hlc_rel <= TARGET["hlc"] and last.tau_rel <= TARGET["tau"], last
+        assert f"after {len(nights)} nights" in stop.reason
+    else:
+        assert len(nights) == MAX_NIGHTS, stop.reason
+    # Predictions of `impctl campaign next` stored with the fits, for both kinds.
+    cands = parse_candidates(fits[-1].candidates)
+    assert {c.kind for c in cands} == {"constrained", "normal"}
+    assert fits[-1].candidates["forecast_source"].startswith("mean T_out of night ")
+    assert any(e.startswith("campaign stop: ") for e in events)
+    # The heat pump showed only the owner's state between and after the nights.
+    assert watch.idle_states
+    assert {(sp, mode) for _, sp, mode in watch.idle_states} == {(OWNER_SETPOINT_C, OWNER_MODE)}
+    assert plant == (OWNER_SETPOINT_C, OWNER_MODE) and pending == []
+    # `impctl status` tells the story: the mode, the nights, how the intervals shrank, why.
+    st = collect_status(cfg)
+    camp = st["campaign"]
+    assert (camp["mode"], camp["nights_run"], camp["nights_valid"]) == (
+        "adaptive", len(nights), len(nights))
+    assert [f["valid_nights"] for f in camp["intervals"]] == [f.night_count for f in fits]
+    assert camp["last_decision"]["action"] == "stop"
+    text = format_status(st, "Europe/Ljubljana")
+    assert f"after {fits[-1].night_count} valid nights: HLC" in text
+    assert "decision:  stop" in text and stop.reason in text
+    assert st["next_night"]["kind"] is None and st["next_night"]["why_none"] == stop.reason

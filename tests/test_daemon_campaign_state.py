@@ -1,0 +1,234 @@
+"""The adaptive campaign's configuration, its store (schema 4 and the migration of older
+stores), the forecast from the daemon's own history, its decisions and what status and Home
+Assistant show — on real SQLite files and the real CLI, without a heat pump."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from datetime import UTC, datetime, timedelta
+
+import pytest
+from daemon_fixtures import run_cli
+
+from impctl.campaign import Decision
+from impctl.daemon import adaptive
+from impctl.daemon.config import config_from_mapping
+from impctl.daemon.schedule import campaign_plan
+from impctl.errors import InputError
+from impctl.mqtt.discovery import entities
+from impctl.mqtt.payloads import LiveState
+from impctl.store import SCHEMA_VERSION, Sample, Store
+
+T0 = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
+BASE = {"state_dir": "/tmp/never-created", "heatpump": {"host": "192.168.1.50"}}
+
+
+def _fit(hlc: tuple[float, float, float], tau: tuple[float, float, float]) -> dict:
+    return {"lumped": {"hlc": {"value": hlc[0], "low": hlc[1], "high": hlc[2]},
+                       "tau": {"value": tau[0], "low": tau[1], "high": tau[2]}}}
+
+
+# -- configuration -------------------------------------------------------------------------------
+def test_fixed_is_the_default_and_adaptive_is_opted_into():
+    cfg = config_from_mapping(BASE)
+    camp = cfg.campaign
+    # Fixed by default: on realistic houses the adaptive campaign did not beat it.
+    assert camp.mode == "fixed" and not camp.adaptive
+    assert campaign_plan(cfg) == [("constrained", 21.0)] * 2 + [
+        ("normal", 21.0), ("normal", 22.0), ("normal", 23.0)]
+    adaptive_cfg = config_from_mapping({**BASE, "campaign": {"mode": "adaptive"}})
+    camp = adaptive_cfg.campaign
+    assert camp.adaptive and (camp.target_rel_halfwidth.hlc, camp.target_rel_halfwidth.tau) == (
+        0.05, 0.08)
+    # At most the fixed plan's five nights unless raised.
+    assert (camp.max_nights, camp.min_each_kind, camp.stall_nights) == (5, 1, 3)
+    assert campaign_plan(adaptive_cfg) == []  # no plan: the policy chooses night by night
+    # With mode = "adaptive" the fixed counts are not used.
+    explicit = config_from_mapping({**BASE, "campaign": {
+        "mode": "adaptive", "constrained_nights": 3,
+        "target_rel_halfwidth": {"hlc": 0.1, "tau": 0.2}, "max_nights": 7}})
+    assert explicit.campaign.adaptive and campaign_plan(explicit) == []
+    assert adaptive.target(explicit).hlc_rel == 0.1 and adaptive.target(explicit).max_nights == 7
+
+
+@pytest.mark.parametrize(("campaign", "line"), [
+    ({"mode": "smart"}, "key 'campaign.mode': must be 'adaptive' or 'fixed', got 'smart'"),
+    ({"target_rel_halfwidth": {"hlc": 1.5}},
+     "key 'campaign.target_rel_halfwidth.hlc': must lie in (0, 1) (0.05 = ±5 % of the "
+     "estimate), got 1.5"),
+    ({"target_rel_halfwidth": {"tau": "8 %"}},
+     "key 'campaign.target_rel_halfwidth.tau': must be a number, got '8 %'"),
+    ({"target_rel_halfwidth": {"rho": 0.1}},
+     "key 'campaign.target_rel_halfwidth.rho': unknown key"),
+    ({"target_rel_halfwidth": 0.05},
+     "key 'campaign.target_rel_halfwidth': must be a table such as {hlc = 0.05, tau = 0.08}"),
+    ({"max_nights": 1}, "key 'campaign.max_nights': must be at least 2 × "
+                        "campaign.min_each_kind = 2 (a night of each kind)"),
+    ({"min_each_kind": 0}, "key 'campaign.min_each_kind': must be >= 1: a fit needs a night "
+                           "of each kind"),
+    ({"stall_nights": 0}, "key 'campaign.stall_nights': must be >= 1"),
+    ({"mode": "adaptive", "normal_setpoints_c": []},
+     "key 'campaign.normal_setpoints_c': the adaptive campaign needs at least one normal "
+     "setpoint to choose from"),
+])
+def test_bad_adaptive_keys_are_one_line_each(campaign, line):
+    with pytest.raises(InputError) as info:
+        config_from_mapping({**BASE, "campaign": campaign}, "cfg.toml")
+    assert str(info.value).splitlines() == [f"cfg.toml: {line}"]
+
+
+def test_bad_target_from_the_command_line_exits_2_naming_file_and_key(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('state_dir = "%s"\n[heatpump]\nhost = "192.168.1.50"\n[campaign]\n'
+                   'target_rel_halfwidth = {hlc = 0.0, tau = 0.08}\n' % (tmp_path / "state"))
+    result = run_cli("daemon", "--config", str(bad), timeout_s=30)
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.splitlines() == [
+        f"impctl: {bad}: key 'campaign.target_rel_halfwidth.hlc': must lie in (0, 1) (0.05 = "
+        "±5 % of the estimate), got 0"]
+    assert not (tmp_path / "state").exists()
+
+
+# -- the store -----------------------------------------------------------------------------------
+def test_a_schema_3_store_is_migrated_keeping_its_fits(tmp_path):
+    path = tmp_path / "impctl.db"
+    with Store(path) as store:
+        store.add_fit([1, 2, 5], _fit((180, 170, 190), (50, 45, 55)))
+    # Make it what impctl wrote before the adaptive campaign (schema 3).
+    con = sqlite3.connect(path)
+    con.executescript("DROP TABLE decisions; ALTER TABLE fits DROP COLUMN candidates;"
+                      "ALTER TABLE fits DROP COLUMN night_count; PRAGMA user_version = 3;")
+    con.close()
+    with Store(path) as store:
+        assert store.schema_version == SCHEMA_VERSION == 4
+        [fit] = store.fits()
+        assert (fit.nights, fit.night_count, fit.candidates) == ([1, 2, 5], 3, None)
+        assert fit.result["lumped"]["hlc"]["value"] == 180
+        assert store.decisions() == []
+        assert store.integrity_check() == "ok"
+
+
+def test_fits_keep_their_night_count_and_predictions(tmp_path):
+    with Store(tmp_path / "impctl.db") as store:
+        a = store.add_fit([1, 2], _fit((180, 150, 210), (50, 20, 80)))
+        b = store.add_fit([1, 2, 3], _fit((182, 172, 192), (51, 47, 55)))
+        block = {"forecast_t_out_c": -1.0, "candidates": [
+            {"kind": "normal", "setpoint_c": 22.0, "hlc_rel_pred": 0.04, "tau_rel_pred": 0.06}]}
+        store.set_fit_candidates(b, block)
+        fits = store.fits()
+    assert [(f.id, f.night_count) for f in fits] == [(a, 2), (b, 3)]
+    assert fits[0].candidates is None and fits[1].candidates == block
+
+
+# -- forecast, decisions, what is shown ----------------------------------------------------------
+def _night(store: Store, kind: str, day: int, t_out_c: float | None, *, valid: bool = True,
+           state: str = "done") -> int:
+    start = T0 + timedelta(days=day)
+    nid = store.create_night(kind, 21.0, start, start + timedelta(hours=7))
+    if t_out_c is not None:
+        for i in range(3):
+            store.add_sample(Sample(nid, start + timedelta(minutes=5 * i), t_air_c=21.0,
+                                    t_out_c=t_out_c + i))
+    store.set_night_state(nid, state, ended=start + timedelta(hours=7))
+    store.assess_night(nid, valid, [])
+    return nid
+
+
+def test_forecast_history_and_the_recorded_decisions(tmp_path):
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "adaptive", "target_rel_halfwidth": {"hlc": 0.05, "tau": 0.08},
+        "max_nights": 4}})
+    with Store(cfg.db_path) as store:
+        assert adaptive.forecast(store, cfg) == adaptive.Forecast(None, "no outdoor reading yet")
+        # No night yet: the policy starts with a constrained night, and says so.
+        decision, _ = adaptive.decide_now(store, cfg)
+        assert (decision.action, decision.kind) == ("run", "constrained")
+        _night(store, "constrained", 0, -3.0)
+        _night(store, "normal", 1, 2.0, valid=False)
+        refused = _night(store, "normal", 2, None, valid=False, state="refused")
+        history = adaptive.night_history(store)
+        # The refused night never touched the heat pump: not a night the household paid for.
+        assert [(h.kind, h.valid, h.t_out_mean_c) for h in history] == [
+            ("constrained", True, -2.0), ("normal", False, 3.0)]
+        assert refused not in [n.id for n in store.nights(states=adaptive.RUN_STATES)]
+        fc = adaptive.forecast(store, cfg)
+        assert fc.t_out_c == 3.0 and fc.source == "mean T_out of night 2 (2026-01-13)"
+        # After a constrained night the next one is normal; a stop is kept once.
+        assert adaptive.decide_now(store, cfg)[0].kind == "normal"
+        stop = Decision("stop", None, None, "Stopped: this house cannot be identified.")
+        act = T0 + timedelta(days=3)
+        adaptive.record(store, stop, fc, act)
+        adaptive.record(store, stop, fc, act + timedelta(days=1))
+        [kept] = store.decisions()
+        assert (kept.action, kept.reason, kept.forecast_t_out_c) == (
+            "stop", stop.reason, 3.0)
+        assert kept.act == act and kept.forecast_source == fc.source
+        state = adaptive.campaign_state(store, cfg)
+        assert (state.mode, state.nights_run, state.nights_valid) == ("adaptive", 2, 1)
+        assert state.status == "stopped: the house cannot be identified to the target"
+        assert state.reason == stop.reason and state.hlc_rel_pct is None
+        store.add_fit([1], _fit((200, 190, 210), (40, 0, 1e9)))
+        state = adaptive.campaign_state(store, cfg)
+        assert state.hlc_rel_pct == 5.0 and state.tau_rel_pct == pytest.approx(1.25e9, rel=0.01)
+
+
+def test_mqtt_state_and_discovery_carry_the_campaign():
+    state = LiveState(campaign_mode="adaptive", nights_run=3, nights_valid=2, hlc_rel_pct=4.26,
+                      tau_rel_pct=None, campaign_status="finished: precision reached after 3 "
+                      "nights", campaign_reason="Target reached after 3 nights. " * 20)
+    payload = state.as_json()
+    assert (payload["nights_run"], payload["nights_valid"]) == (3, 2)
+    assert payload["hlc_rel_pct"] == 4.3 and payload["tau_rel_pct"] is None
+    assert payload["campaign_status"].startswith("finished") and len(
+        payload["campaign_reason"]) > 255
+    json.dumps(payload)  # JSON-ready
+    from impctl.mqtt.config import MqttConfig
+    from impctl.mqtt.discovery import Limits
+
+    ents = {key: conf for _, key, conf in entities(
+        MqttConfig(host="h", client_id="gw"), Limits(16.0, 25.0, 1.5, 21.0))}
+    for key, field in (("nights_run", "nights_run"), ("nights_valid", "nights_valid"),
+                       ("hlc_halfwidth", "hlc_rel_pct"), ("tau_halfwidth", "tau_rel_pct"),
+                       ("campaign_status", "campaign_status")):
+        assert ents[key]["value_template"] == "{{ value_json." + field + " }}"
+    assert ents["hlc_halfwidth"]["unit_of_measurement"] == "%"
+
+
+def test_report_figure_of_the_shrinking_intervals(tmp_path):
+    from impctl.report.figures import campaign_intervals
+
+    rows = [{"valid_nights": 2, "hlc_rel_pct": 12.0, "tau_rel_pct": None},
+            {"valid_nights": 3, "hlc_rel_pct": 6.5, "tau_rel_pct": 30.0},
+            {"valid_nights": 4, "hlc_rel_pct": 4.1, "tau_rel_pct": 7.2}]
+    path = campaign_intervals(rows, tmp_path / "fig_campaign.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+
+
+def test_a_forecast_outside_the_band_skips_tonight_and_says_why(tmp_path):
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path),
+                               "night": {"t_out_max_c": 2.0},
+                               "campaign": {"mode": "adaptive"}})
+    with Store(cfg.db_path) as store:
+        _night(store, "constrained", 0, 3.0)  # mean T_out 4 °C, above the band's 2 °C
+        decision, fc = adaptive.decide_now(store, cfg)
+        assert (decision.action, fc.t_out_c) == ("skip", 4.0)
+        assert "4.0 °C" in decision.reason and "outside the band" in decision.reason
+        adaptive.record(store, decision, fc, T0 + timedelta(days=1))
+        assert store.events(1)[0][2] == f"campaign skip: {decision.reason}"
+        assert adaptive.campaign_state(store, cfg).status == "running: last night skipped"
+
+
+def test_check_config_names_the_campaign_and_its_first_night(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('state_dir = "%s"\n[heatpump]\nhost = "192.168.1.50"\n[campaign]\n'
+                   'mode = "adaptive"\ntarget_rel_halfwidth = {hlc = 0.1, tau = 0.2}\n'
+                   % (tmp_path / "state"))
+    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert ("campaign:  adaptive: until HLC ±10% and τ ±20%, at most 5 nights, a fit after "
+            "every valid night") in lines
+    assert any(line.startswith("next:      constrained night from the campaign")
+               for line in lines)
+    assert not (tmp_path / "state").exists()

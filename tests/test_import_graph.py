@@ -1,0 +1,116 @@
+"""Imports flow one way (the layout tells the pipeline): checked on the source, not by review.
+
+The graph is read from every ``import`` in ``src/impctl`` — also the lazy ones inside
+functions, which are dependencies all the same — and reduced to edges between the top-level
+packages and modules of impctl (``heatpump``, ``modbus``, ``errors`` …).
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import impctl
+
+SRC = Path(impctl.__file__).parent
+#: The fitting pipeline: each stage may import earlier ones, never a later one.
+PIPELINE = ("model", "plant", "imp", "population", "classifiers", "fit", "fleet")
+#: The device side, transport first.
+DEVICE = ("modbus", "heatpump", "controller", "daemon", "cli")
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """Absolute names of everything ``module`` (in ``path``) imports."""
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level:
+            base = ".".join(package[:len(package) - node.level + 1]
+                            + ([node.module] if node.module else []))
+            found.add(base)
+            if node.module is None:  # from . import x: x is a module of the package
+                found.update(f"{base}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            found.add(node.module)
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    """Top-level part of impctl → the other top-level parts it imports."""
+    edges: dict[str, set[str]] = defaultdict(set)
+    for path in SRC.rglob("*.py"):
+        parts = path.relative_to(SRC.parent).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        here = module.split(".")[1] if "." in module else ""
+        for name in _imports(path, module):
+            top, _, rest = name.partition(".")
+            if top == "impctl_sim":
+                edges[here].add("impctl_sim")
+            elif top == "impctl" and rest and rest.split(".")[0] != here:
+                edges[here].add(rest.split(".")[0])
+    return edges
+
+
+GRAPH = _graph()
+
+
+def test_the_graph_is_read_from_the_source():
+    # Known edges: if these are not found, the reader is broken and every rule below is void.
+    assert {"modbus", "errors"} <= GRAPH["heatpump"]
+    assert {"heatpump", "store"} <= GRAPH["controller"]
+    assert "model" in GRAPH["fit"]
+
+
+def test_the_modbus_transport_knows_no_device():
+    """impctl.modbus is generic: it knows nothing of Kronoterm, the night or the daemon."""
+    assert GRAPH["modbus"] <= {"errors"}
+
+
+def test_the_device_side_imports_only_towards_the_transport():
+    for i, part in enumerate(DEVICE):
+        later = set(DEVICE[i + 1:])
+        assert not GRAPH[part] & later, f"{part} imports {sorted(GRAPH[part] & later)}"
+    assert "impctl_sim" not in set().union(*(GRAPH[p] for p in DEVICE[:-1]))
+
+
+def test_the_pipeline_imports_only_earlier_stages():
+    for i, stage in enumerate(PIPELINE):
+        later = set(PIPELINE[i + 1:])
+        assert not GRAPH[stage] & later, f"{stage} imports {sorted(GRAPH[stage] & later)}"
+
+
+def test_the_heat_pump_and_the_model_stay_apart_from_the_fit():
+    heavy = {"fit", "classifiers", "population", "fleet", "report"}
+    for part in ("modbus", "heatpump", "controller", "daemon", "model"):
+        assert not GRAPH[part] & heavy, f"{part} imports {sorted(GRAPH[part] & heavy)}"
+
+
+def test_no_cycles_between_packages():
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+
+    def visit(node: str, path: list[str]) -> None:
+        if state.get(node) == 2:
+            return
+        assert state.get(node) != 1, "import cycle: " + " → ".join([*path, node])
+        state[node] = 1
+        for nxt in sorted(GRAPH.get(node, ())):
+            visit(nxt, [*path, node])
+        state[node] = 2
+
+    for node in sorted(GRAPH):
+        visit(node, [])
+
+
+def test_the_daemon_process_loads_neither_torch_nor_sklearn_nor_pandas():
+    """What ``impctl daemon`` imports keeps torch, scikit-learn and pandas out of its RSS."""
+    code = ("import sys, impctl.daemon.service, impctl.daemon.mqtt_link, impctl.controller, "
+            "impctl.heatpump, impctl.modbus; "
+            "print(sorted(m for m in ('torch', 'sklearn', 'pandas') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=60).stdout
+    assert out.strip() == "[]"
