@@ -5,6 +5,8 @@ A model directory holds one ``<parameter>.joblib`` per classified parameter (a f
 labels, campaign and night feature names, the emitter lag, the training seed and size, package
 versions and the evaluation report. :func:`load_models` refuses, with one line saying what to do,
 a directory without models, another format, other features, or another scikit-learn version.
+``forests.npz`` (:mod:`.compact`, when the export reproduced scikit-learn) holds the same forests
+as arrays: :func:`classify_nights` uses it when present, so classifying needs no scikit-learn.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from ..imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
 from ..population.dataset import package_versions
 from ..population.ranges import labels_of
 from .campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
+from .compact import COMPACT_FILE, load_compact, save_compact
 
 MODEL_FORMAT = 1
 METADATA_FILE = "models.json"
@@ -109,14 +112,52 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
         "report": report or {},
         "dataset": dataset_manifest or {},
     }
+    # The forests as plain arrays too, checked against scikit-learn (impctl.classifiers.compact):
+    # classifying from them needs neither scikit-learn nor unpickling.
+    if save_compact(models, directory) is not None:
+        meta["compact"] = COMPACT_FILE
     tmp = directory / (METADATA_FILE + ".tmp")
     tmp.write_text(json.dumps(meta, indent=2) + "\n")
     os.replace(tmp, directory / METADATA_FILE)
     return directory
 
 
+def add_compact(model_dir: str | Path) -> bool:
+    """Write the compact forests (:mod:`.compact`) for models saved without them (before
+    issue 14); True when the directory has them afterwards."""
+    directory = Path(model_dir)
+    models, meta = load_models(directory)
+    if save_compact(models, directory) is None:
+        return False
+    meta["compact"] = COMPACT_FILE
+    tmp = directory / (METADATA_FILE + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=2) + "\n")
+    os.replace(tmp, directory / METADATA_FILE)
+    return True
+
+
 def _minor(version: str) -> str:
     return ".".join(version.split(".")[:2])
+
+
+def _metadata(directory: Path) -> dict:
+    """``models.json`` of ``directory``, checked: format and feature names."""
+    meta_path = directory / METADATA_FILE
+    if not meta_path.is_file():
+        raise InputError(f"no trained models here; {RETRAIN}", directory)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"unreadable model metadata ({exc}); {RETRAIN} again", meta_path) from None
+    if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise InputError(f"model format {got!r}, this impctl reads {MODEL_FORMAT}; {RETRAIN} "
+                         "again", meta_path)
+    if meta.get("campaign_features") != list(CAMPAIGN_FEATURE_NAMES) or \
+            meta.get("night_features") != list(NIGHT_FEATURE_NAMES):
+        raise InputError("models were trained on other features than this impctl computes; "
+                         f"{RETRAIN} again", meta_path)
+    return meta
 
 
 def load_models(model_dir: str | Path | None = None) -> tuple[dict, dict]:
@@ -134,21 +175,8 @@ def load_models(model_dir: str | Path | None = None) -> tuple[dict, dict]:
         scikit-learn version, a missing or foreign model file.
     """
     directory = Path(model_dir) if model_dir is not None else default_model_dir()
+    meta = _metadata(directory)
     meta_path = directory / METADATA_FILE
-    if not meta_path.is_file():
-        raise InputError(f"no trained models here; {RETRAIN}", directory)
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (OSError, ValueError) as exc:
-        raise InputError(f"unreadable model metadata ({exc}); {RETRAIN} again", meta_path) from None
-    if not isinstance(meta, dict) or meta.get("format") != MODEL_FORMAT:
-        got = meta.get("format") if isinstance(meta, dict) else None
-        raise InputError(f"model format {got!r}, this impctl reads {MODEL_FORMAT}; {RETRAIN} "
-                         "again", meta_path)
-    if meta.get("campaign_features") != list(CAMPAIGN_FEATURE_NAMES) or \
-            meta.get("night_features") != list(NIGHT_FEATURE_NAMES):
-        raise InputError("models were trained on other features than this impctl computes; "
-                         f"{RETRAIN} again", meta_path)
     import sklearn
 
     saved = str(meta.get("versions", {}).get("scikit-learn", "unknown"))
@@ -201,7 +229,15 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
     InputError
         No nights, or no usable trained models (telling the user to run ``impctl train``).
     """
-    return classify_with(nights, *load_models(model_dir))
+    directory = Path(model_dir) if model_dir is not None else default_model_dir()
+    meta = _metadata(directory)
+    names = list(meta.get("parameters", {}))
+    compact = load_compact(directory, names) if meta.get("compact") and names else None
+    if compact is not None and all(
+            [list(r) for r in compact[n].ranges] == meta["parameters"][n].get("ranges")
+            for n in names):   # no scikit-learn, no unpickling: ~1.4 s less per impctl fit
+        return classify_with(nights, compact, meta)
+    return classify_with(nights, *load_models(directory))
 
 
 def classify_with(nights: list[NightSamples], models: dict, meta: dict

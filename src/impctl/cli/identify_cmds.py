@@ -37,7 +37,8 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
           plant: str) -> None:
     """Simulate the IMP on virtual households and train the parameter-range classifiers.
 
-    Writes OUT/models.json and OUT/<parameter>.joblib (the classifiers), OUT/dataset/ (Parquet
+    Writes OUT/models.json, OUT/<parameter>.joblib (the classifiers) and OUT/forests.npz (the
+    same forests as checked arrays, read by fit and classify), OUT/dataset/ (Parquet
     and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
     Table III), then prints the report.
     """
