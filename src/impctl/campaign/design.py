@@ -21,12 +21,15 @@ Criterion (documented choice; README "Adaptive campaign"):
 * **Prediction.** For q ∈ {HLC, τ} with log-gradient g_q(θ), the ratio
   r_q = g_qᵀ (F_past + F_night)⁻¹ g_q / g_qᵀ F_past⁻¹ g_q scales the fit's own statistical
   variance of log q (its reported interval with the sensor-offset allowance taken out in
-  quadrature). Scaling by the fit's reported variance rather than using F directly carries
+  quadrature, and so the meter, night-gain and structural shares). Scaling by the fit's
+  reported variance rather than using F directly carries
   over whatever widened the fit's interval beyond this simple model — the night-clustered
   sandwich, the other five parameters, the nuisance terms — assuming the next night is like
   the past ones. The sensor-offset allowance (a type-B share √(σ_in² + σ_out²)/mean ΔT that
   no number of nights removes) is added back in quadrature with the mean ΔT including the
-  new night. Predicted relative half-width = sinh(1.96·sd), the same measure as
+  new night, the night-gain share likewise, the meter and structural shares unchanged. A
+  sandwich interval also narrows by Student-t's t(G)/t(G − 1) for G fitted nights.
+  Predicted relative half-width = sinh(1.96·sd), the same measure as
   :attr:`impctl.campaign.policy.FitSummary.hlc_rel`.
 
 A candidate is scored by the policy as max(hlc_rel_pred / target_hlc, tau_rel_pred /
@@ -215,6 +218,23 @@ def _offsets(result: dict) -> tuple[float, float, int]:
     return float(math.hypot(*offsets)), float(mean_dt), samples
 
 
+def _fixed_shares(result: dict, name: str) -> tuple[float, float]:
+    """Type-B shares of ``name``'s log-sd that more nights do not shrink, besides the sensor
+    offsets: (the night-gain share, which scales with 1/mean ΔT like the offsets; the meter
+    and structural shares, which do not)."""
+    allowance = (result.get("fit") or {}).get("offset_allowance") or {}
+
+    def num(v) -> float:
+        return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else 0.0
+
+    gain = num(allowance.get("night_gain_relative_sd"))
+    fixed = num(allowance.get("meter_relative_sd")) if name in ("hlc", "c_m") else 0.0
+    structure = allowance.get("structure_relative_sd")
+    if isinstance(structure, dict):
+        fixed = math.hypot(fixed, num(structure.get(name)))
+    return gain, fixed
+
+
 def predict_candidates(result: dict, forecast_t_out_c: float, *, constrained_setpoint_c: float,
                        normal_setpoints_c: Sequence[float], step_s: float,
                        protocol: Protocol = Protocol()) -> list[Candidate]:
@@ -238,11 +258,20 @@ def predict_candidates(result: dict, forecast_t_out_c: float, *, constrained_set
     grads = lumped_gradients(house)
     offset_k, mean_dt, n_past = _offsets(result)
     share_now = offset_k / mean_dt if mean_dt > 1.0 else 0.0
-    stat = {name: _stat_sd(result, name, share_now) for name in grads}
+    fixed = {name: _fixed_shares(result, name) for name in grads}
+    stat = {name: _stat_sd(result, name, math.hypot(share_now, *fixed[name])) for name in grads}
     ridge = 1e-9 * max(float(np.trace(f_past)), 1e-12) * np.eye(2)
     past_cov = np.linalg.pinv(f_past + ridge)
     plans = [(CONSTRAINED, float(constrained_setpoint_c))]
     plans += [(NORMAL, float(sp)) for sp in normal_setpoints_c]
+    # A sandwich interval from G nights takes Student-t's quantile with G − 1 degrees of
+    # freedom (impctl.fit.uncertainty): one more night also narrows it by t(G)/t(G − 1).
+    sources = (result.get("fit") or {}).get("interval_source") or {}
+    n_nights = len(result.get("predictions") or [])
+    t_ratio = 1.0
+    if n_nights >= 2:
+        from scipy.stats import t as student_t
+        t_ratio = float(student_t.ppf(0.975, n_nights) / student_t.ppf(0.975, n_nights - 1))
     out = []
     for kind, sp in plans:
         f_new, delta = night_information(house, kind, sp, forecast_t_out_c, step_s, sigma[kind],
@@ -251,12 +280,17 @@ def predict_candidates(result: dict, forecast_t_out_c: float, *, constrained_set
         dt_all = ((mean_dt * n_past + delta * n_new) / (n_past + n_new)
                   if n_past else delta)
         share = offset_k / dt_all if dt_all > 1.0 else 0.0
+        scale = mean_dt / dt_all if dt_all > 1.0 and mean_dt > 1.0 else 1.0
         cov = np.linalg.pinv(f_past + f_new + ridge)
         pred = {}
         for name, g in grads.items():
             before = float(g @ past_cov @ g)
             ratio = float(g @ cov @ g) / before if before > 0 else 1.0
-            sd = math.sqrt(stat[name] ** 2 * min(max(ratio, 0.0), 1.0) + share ** 2)
+            if sources.get(name) == "sandwich":
+                ratio *= t_ratio ** 2
+            gain, fixed_sd = fixed[name]
+            sd = math.sqrt(stat[name] ** 2 * min(max(ratio, 0.0), 1.0) + share ** 2
+                           + (gain * scale) ** 2 + fixed_sd ** 2)
             pred[name] = math.sinh(Z95 * sd) if math.isfinite(sd) else math.inf
         out.append(Candidate(kind, sp, pred["hlc"], pred["tau"]))
     return out
