@@ -189,7 +189,7 @@ BAD_CONFIG_VALUES: dict[tuple[str, ...], list[str]] = {
     ("campaign", "target_rel_halfwidth", "colour"): ['"blue"'],
     ("clock", "speed"): ["0", "-1.0", *_NONFINITE],
     ("clock", "epoch"): ['"yesterday"', '"2026-01-12T20:00:00"', "2026-01-12T20:00:00Z"],
-    ("clock", "wall_epoch_s"): ["-1.0", *_NONFINITE],
+    ("clock", "wall_epoch_s"): ["-1.0", "1", *_NONFINITE],
     ("heatpump", "host"): ["5", "[1]"],
     ("heatpump", "port"): ["0", "70000", '"502"', "502.5"],
     ("heatpump", "timeout_s"): ["0", "-1.0", '"3"', *_NONFINITE],

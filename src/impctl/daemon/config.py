@@ -7,8 +7,9 @@ key says ``_h`` or ``_min``.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, fields
-from datetime import datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -285,6 +286,18 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
                                f"2026-01-12T20:00:00+01:00, got {cfg.clock.epoch!r}")
     if cfg.clock.wall_epoch_s < 0:
         bad("clock.wall_epoch_s", "must be >= 0 (POSIX seconds; 0 = at start)")
+    elif cfg.clock.epoch and aware and cfg.clock.speed > 0 and cfg.clock.wall_epoch_s > 0:
+        # An accelerated clock started long ago runs past the calendar (wall_epoch_s = 1 at
+        # 600× is the year 36,000): refuse it here rather than crash at the first reading.
+        try:
+            sim_s = datetime.fromisoformat(cfg.clock.epoch).timestamp() + (
+                time.time() - cfg.clock.wall_epoch_s) * cfg.clock.speed
+            datetime.fromtimestamp(sim_s, UTC) + timedelta(days=366)
+            datetime.fromtimestamp(sim_s, UTC) - timedelta(days=366)
+        except (OverflowError, ValueError, OSError):
+            bad("clock.wall_epoch_s", f"{cfg.clock.wall_epoch_s:g} s at clock.speed "
+                f"{cfg.clock.speed:g}× puts the simulated clock outside the calendar; use 0 "
+                "(= at start) or the POSIX second at which the clock showed clock.epoch")
     band = night.comfort_band_k
     setpoints = [("campaign.constrained_setpoint_c", camp.constrained_setpoint_c)]
     setpoints += [("campaign.normal_setpoints_c", sp) for sp in camp.normal_setpoints_c]
