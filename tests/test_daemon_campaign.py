@@ -61,7 +61,10 @@ async def _watch(sim, clock, db_path, watch: Watch, done: asyncio.Event) -> None
 
 
 async def _campaign(tmp_path, epoch: datetime, speed: float, campaign: dict, *,
-                    until, timeout_s: float, night: dict | None = None):
+                    until, timeout_s: float, night: dict | None = None, after=None):
+    """Run the daemon until ``until(db_path)``; then ``await after(cfg, clock)`` if given (its
+    result is returned as ``after``), and until the watcher saw the plant after the last night.
+    """
     clock = VirtualClock(epoch, speed)
     simcfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                        setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
@@ -79,6 +82,7 @@ async def _campaign(tmp_path, epoch: datetime, speed: float, campaign: dict, *,
                 while not until(cfg.db_path):
                     assert not task.done(), "the daemon stopped by itself"
                     await asyncio.sleep(0.1)
+                after_result = await after(cfg, clock) if after is not None else None
                 # Let the watcher look at the heat pump once more after the last night.
                 with Store(cfg.db_path) as store:
                     last_end = max(n.ended for n in store.nights())
@@ -90,7 +94,7 @@ async def _campaign(tmp_path, epoch: datetime, speed: float, campaign: dict, *,
             done.set()
             await watcher
         return dict(cfg=cfg, watch=watch, writes=dict(sim.stats.writes),
-                    plant=(sim.plant.setpoint_c, sim.plant.loop_mode))
+                    plant=(sim.plant.setpoint_c, sim.plant.loop_mode), after=after_result)
 
 
 def _local(ts: datetime) -> datetime:

@@ -14,17 +14,13 @@ from __future__ import annotations
 import asyncio
 from datetime import datetime
 
-from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, daemon_mapping
-from impctl_sim import SimConfig, constant_weather
-from sim_fixtures import run, simulator
-from test_daemon_campaign import FINAL, TZ, Watch, _watch
+from daemon_fixtures import OWNER_MODE, OWNER_SETPOINT_C
+from sim_fixtures import run
+from test_daemon_campaign import FINAL, TZ, _campaign
 
 from impctl.campaign import FitSummary, parse_candidates
 from impctl.cli.device_status import collect_status, format_status
-from impctl.daemon.config import config_from_mapping
 from impctl.daemon.schedule import next_act_time
-from impctl.daemon.service import Daemon
-from impctl.heatpump import VirtualClock
 from impctl.store import Store
 
 #: A day of simulated time in 4 s of wall time; 10-min samples = 36 a second (the rate of the
@@ -46,43 +42,24 @@ def _stopped(db) -> bool:
                 and fits[-1].night_count == len(store.nights(valid=True)))
 
 
+async def _after_the_stop(cfg, clock) -> int:
+    """The nights at the stop, after the next act time has passed (nothing may run then)."""
+    with Store(cfg.db_path) as store:
+        at_stop = len(store.nights())
+    after = next_act_time(cfg, clock.now())
+    while clock.now() < after:
+        await asyncio.sleep(0.1)
+    await asyncio.sleep(1.0)
+    return at_stop
+
+
 async def _adaptive_campaign(tmp_path):
-    epoch = datetime(2026, 1, 12, 19, 0, tzinfo=TZ)
-    clock = VirtualClock(epoch, SPEED)
-    simcfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
-                       setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
-    async with simulator(simcfg) as sim:
-        cfg = config_from_mapping(daemon_mapping(
-            tmp_path / "state", sim.port, clock, night={"sample_interval_s": 600},
-            campaign={"enabled": True, "mode": "adaptive", "target_rel_halfwidth": TARGET,
-                      "max_nights": MAX_NIGHTS, "constrained_setpoint_c": 21.0,
-                      "normal_setpoints_c": [21.0, 22.0]}), "test")
-        daemon = Daemon(cfg, clock=clock)
-        watch, done = Watch(), asyncio.Event()
-        task = asyncio.create_task(daemon.run())
-        watcher = asyncio.create_task(_watch(sim, clock, cfg.db_path, watch, done))
-        try:
-            async with asyncio.timeout(75):
-                while not _stopped(cfg.db_path):
-                    assert not task.done(), "the daemon stopped by itself"
-                    await asyncio.sleep(0.1)
-                # After the stop: the next act time passes and nothing runs.
-                with Store(cfg.db_path) as store:
-                    at_stop = len(store.nights())
-                after = next_act_time(cfg, clock.now())
-                while clock.now() < after:
-                    await asyncio.sleep(0.1)
-                await asyncio.sleep(1.0)
-                with Store(cfg.db_path) as store:
-                    last_end = max(n.ended for n in store.nights())
-                while not any(t > last_end for t, *_ in watch.idle_states):
-                    await asyncio.sleep(0.02)
-        finally:
-            daemon.stop.set()
-            assert await task == 0
-            done.set()
-            await watcher
-        return cfg, watch, (sim.plant.setpoint_c, sim.plant.loop_mode), at_stop
+    result = await _campaign(
+        tmp_path, datetime(2026, 1, 12, 19, 0, tzinfo=TZ), SPEED,
+        {"mode": "adaptive", "target_rel_halfwidth": TARGET, "max_nights": MAX_NIGHTS,
+         "constrained_setpoint_c": 21.0, "normal_setpoints_c": [21.0, 22.0]},
+        until=_stopped, timeout_s=75, night={"sample_interval_s": 600}, after=_after_the_stop)
+    return result["cfg"], result["watch"], result["plant"], result["after"]
 
 
 def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path):

@@ -26,7 +26,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING
 from zoneinfo import ZoneInfo
 
-from ..campaign.policy import (
+from ..campaign import (
     Candidate,
     Decision,
     FitSummary,
