@@ -120,6 +120,11 @@ def _next_night(store, cfg) -> dict | None:
             "campaign_seq": req.campaign_seq}
 
 
+def _value(v: float | None, unit: str, spec: str = ".1f") -> str:
+    """A reading with its unit, or "—" when missing."""
+    return "—" if v is None else f"{v:{spec}} {unit}"
+
+
 def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     tgt = camp["target_rel_pct"]
     if camp["mode"] == "adaptive":
@@ -133,12 +138,9 @@ def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     for f in camp["intervals"]:
         def pct(v):
             return "undetermined" if v is None else f"±{v:.1f} %"
-
-        def val(v, unit):
-            return "—" if v is None else f"{v:.0f} {unit}"
         lines.append(f"  after {f['valid_nights']} valid nights: "
-                     f"HLC {val(f['hlc_w_per_k'], 'W/K')} "
-                     f"{pct(f['hlc_rel_pct'])}, τ {val(f['tau_h'], 'h')} "
+                     f"HLC {_value(f['hlc_w_per_k'], 'W/K', '.0f')} "
+                     f"{pct(f['hlc_rel_pct'])}, τ {_value(f['tau_h'], 'h', '.0f')} "
                      f"{pct(f['tau_rel_pct'])} (target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)")
     d = camp.get("last_decision")
     if d is not None:
@@ -170,12 +172,11 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                          "it is gone; the values below are its last ones. Start the daemon "
                          "(it restores first) or run impctl restore")
         if s:
-            def fmt(v, unit, spec=".1f"):
-                return "—" if v is None else f"{v:{spec}} {unit}"
             lines.append(f"live:      {s['ts'].astimezone(zone):%Y-%m-%d %H:%M %Z} "
-                         f"T_air {fmt(s['t_air_c'], '°C')}, T_out {fmt(s['t_out_c'], '°C')}, "
-                         f"Q_HC {fmt(s['q_hc_w'], 'W', '.0f')}, "
-                         f"P_el {fmt(s['p_el_w'], 'W', '.0f')}")
+                         f"T_air {_value(s['t_air_c'], '°C')}, "
+                         f"T_out {_value(s['t_out_c'], '°C')}, "
+                         f"Q_HC {_value(s['q_hc_w'], 'W', '.0f')}, "
+                         f"P_el {_value(s['p_el_w'], 'W', '.0f')}")
     nxt = st.get("next_night")
     if nxt is not None:
         act = nxt["preheat_start"].astimezone(zone)
