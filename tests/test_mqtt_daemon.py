@@ -50,10 +50,11 @@ N_ENTITIES = {False: 18, True: 23}
 
 
 @contextlib.contextmanager
-def rig(tmp_path: Path, epoch: datetime, mqtt: dict, campaign: dict | None = None):
+def rig(tmp_path: Path, epoch: datetime, mqtt: dict, campaign: dict | None = None,
+        speed: float = SPEED):
     """(sim, config, db) with an ``[mqtt]`` section (the ideal plant: its sensors read the
     outdoor temperature exactly, which the payload checks rely on)."""
-    with sim_process(tmp_path, epoch, SPEED, plant="iso") as sim:
+    with sim_process(tmp_path, epoch, speed, plant="iso") as sim:
         mapping = daemon_mapping(
             tmp_path / "state", sim.port, sim.clock,
             night={"window": "22:00-05:00", "preheat_h": 0.5, "sample_interval_s": 300},
@@ -319,6 +320,31 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             assert stop_process(d.proc) == 0
         # A clean stop says offline itself (no last will is sent then).
         assert ha.latest(f"{BASE}/availability").payload == b"offline"
+
+
+def test_daytime_now_from_home_assistant_is_refused(tmp_path):
+    """The CLI runs a daytime ``--now`` night only with ``--force``; a dashboard button has
+    no --force, so at noon a ``now`` trigger is refused with one line and nothing is queued,
+    while ``tonight`` is queued as usual."""
+    noon = datetime(2026, 1, 12, 12, 0, tzinfo=TZ)
+    with broker(tmp_path / "broker") as b, home_assistant(b.port) as ha, \
+            rig(tmp_path, noon, mqtt_section(b, commands=True), speed=60.0) as (
+                sim, config, db):
+        d = _ready(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: ha.latest(f"{BASE}/availability"), 20, "online", proc=d.proc)
+            ha.press(f"{BASE}/cmd/trigger", json.dumps({"kind": "normal", "when": "now"}))
+            wait_until(lambda: "refused" in d.output(), 10, "the refusal", proc=d.proc)
+            ha.press(f"{BASE}/cmd/trigger", "tonight")
+            wait_until(lambda: "queued request" in d.output(), 10, "the request", proc=d.proc)
+            requests = store_query(db, lambda s: s.pending_requests())
+            assert [r.when for r in requests] == ["tonight"], requests
+            assert owner_state(sim.port) == OWNER
+        finally:
+            assert stop_process(d.proc) == 0
+        refusals = [ln for ln in d.output().splitlines() if "refused" in ln]
+        assert len(refusals) == 1 and "outside the night window" in refusals[0] \
+            and "daytime" in refusals[0], refusals
 
 
 def test_silent_broker_blocks_neither_nights_nor_shutdown(tmp_path):

@@ -120,7 +120,9 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
                          f"[{lo:g}, {hi:g}] °C", place="--setpoint")
     clock = clock_from_config(cfg)
-    daytime = _daytime(cfg, clock.now())
+    from ..daemon.schedule import daytime_reason
+
+    daytime = daytime_reason(cfg, clock.now())
     if when == "now" and daytime and not force:
         raise InputError(f"{daytime}: a --now night would run in daytime; add --force to run "
                          "it anyway, or use --tonight", place="--now")
@@ -141,19 +143,6 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         click.echo(f"impctl: warning: daemon {info.describe()}; the request waits until a "
                    f"daemon starts on {cfg.state_dir} (cancel it with impctl trigger --cancel)",
                    err=True)
-
-
-def _daytime(cfg, now) -> str | None:
-    """Why ``now`` is daytime (outside the night window and its preheat), or None."""
-    local = now.astimezone(ZoneInfo(cfg.timezone))
-    s_min, e_min = cfg.window_minutes
-    first = (s_min - round(cfg.night.preheat_h * 60)) % 1440
-    minute = local.hour * 60 + local.minute
-    inside = (first <= minute < e_min) if first < e_min else (minute >= first or minute < e_min)
-    if inside:
-        return None
-    return (f"it is {local:%H:%M %Z}, outside the night window {cfg.night.window} and its "
-            f"{cfg.night.preheat_h:g} h preheat")
 
 
 def _cancel_requests(cfg) -> None:

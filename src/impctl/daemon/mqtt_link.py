@@ -18,7 +18,7 @@ from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from ..heatpump.clock import VirtualClock
 from .adaptive import campaign_state
-from .schedule import request_expiry
+from .schedule import daytime_reason, request_expiry
 
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
@@ -122,6 +122,14 @@ class MqttLink:
     def submit(self, command: Command) -> str:
         store = self.daemon.store
         if command.name == "trigger":
+            daytime = daytime_reason(self.daemon.cfg, self.daemon.clock.now())
+            if command.when == "now" and daytime:
+                # The CLI asks for --force here; a button in a household's dashboard has
+                # none, so a daytime "now" is refused rather than switching heating off.
+                from ..mqtt.commands import BadCommand
+
+                raise BadCommand(f"{daytime}: a 'now' night would run in daytime; send "
+                                 "'tonight' instead")
             expires = request_expiry(self.daemon.cfg, self.daemon.clock, command.when)
             rid = store.add_request(command.kind, command.setpoint_c, command.when,
                                     expires=expires)

@@ -145,6 +145,20 @@ def campaign_complete(store: Store) -> bool:
     return bool(rows) and all(valid for *_, valid in rows)
 
 
+def daytime_reason(cfg: Config, now: datetime) -> str | None:
+    """Why ``now`` is daytime (outside the night window and its preheat), or None — a
+    ``now`` night then needs ``--force`` on the CLI and is refused from Home Assistant."""
+    local = now.astimezone(ZoneInfo(cfg.timezone))
+    s_min, e_min = cfg.window_minutes
+    first = (s_min - round(cfg.night.preheat_h * 60)) % 1440
+    minute = local.hour * 60 + local.minute
+    inside = (first <= minute < e_min) if first < e_min else (minute >= first or minute < e_min)
+    if inside:
+        return None
+    return (f"it is {local:%H:%M %Z}, outside the night window {cfg.night.window} and its "
+            f"{cfg.night.preheat_h:g} h preheat")
+
+
 def request_expiry(cfg: Config, clock: VirtualClock, when: str,
                    expires_h: float | None = None) -> datetime:
     """The instant (daemon's clock) after which the daemon drops a manual request unstarted:

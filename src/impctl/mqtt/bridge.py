@@ -49,7 +49,8 @@ class StateSource(Protocol):
         """The store's newest fit."""
 
     def submit(self, command: Command) -> str:
-        """Queue a household command through the store; returns a line for the log."""
+        """Queue a household command through the store; returns a line for the log, or
+        raises :class:`BadCommand` when the command may not run now (e.g. a daytime ``now``)."""
 
 
 class MqttBridge:
@@ -244,6 +245,8 @@ class MqttBridge:
             else:
                 try:
                     _LOG.info("MQTT command %s: %s", cmd.name, self.source.submit(cmd))
+                except BadCommand as exc:
+                    _LOG.warning("MQTT command %s refused: %s", topic, exc)
                 except Exception as exc:  # noqa: BLE001 - a store error must not end MQTT
                     _LOG.error("MQTT command %s could not be queued: %s", cmd.name, exc)
                 self.wake()
