@@ -1,0 +1,178 @@
+"""How right is the traded flexibility figure (``coast_h``) on realistic houses?
+
+``impctl.flex`` computes the coast — hours until T_air has fallen by 1 K after the heating is
+switched off at steady state (21 °C indoors, 0 °C outdoors) — from the *fitted 5R1C*, counting
+the slow, mass-driven cooling after the model's instantaneous switch-off drop. This bench
+compares it with the coast of the **realistic plant** itself (``impctl.plant``: air, furniture
+and emitter capacity, the heat pump's control, sensors), the house the fit never sees whole:
+
+* truth: the plant held at 21 °C for 24 h at a constant 0 °C outdoors (its control, its emitter,
+  its night gains at the household's own level — or none with ``--gains off``), then the
+  space-heating loop switched off; the coast is the time until the *true* air temperature has
+  fallen 1 K below its mean over the last heated hour;
+* ``impctl fit`` (joint fit, true class ranges, 2 constrained + 6 normal nights of 5-minute
+  rows on the same plant, as ``bench/fit.py --plant realistic``) → ``impctl.flex`` coast and its
+  interval;
+* the true 5R1C parameters through ``impctl.flex`` (what a perfect fit would say: the model's
+  own structural error);
+* the log-linear cooling baseline: τ from ln(T_air − T_out) on the constrained nights, coast
+  = τ·ln(ΔT₀/(ΔT₀ − 1 K)) for a single-capacity house.
+
+Run: ``python bench/flex.py --households 50`` (prints the table and the command).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+import torch
+
+from impctl.fit import baselines
+from impctl.fit.data import prepare_nights
+from impctl.fit.estimator import NightFit
+from impctl.fit.node import PARAM_NAMES
+from impctl.flex import flexibility_many
+from impctl.model import HouseParameters
+from impctl.plant import simulate_plant
+from impctl.population.households import sample_households
+from impctl.population.realism import sample_params
+from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
+
+VAL_SEED = 20260          # bench/fit.py's validation households
+ACH = (0.0, 0.01)
+CLASS_RANGES = {
+    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
+    "c_f": ((0.8, 1.65), (1.65, 3.7)),
+    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
+}
+T_SET_C, T_OUT_C, DROP_K = 21.0, 0.0, 1.0
+
+
+def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
+    out = {}
+    for name, rs in CLASS_RANGES.items():
+        v = float(getattr(house, name))
+        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
+    return out
+
+
+def plant_coast_h(houses: HouseParameters, params, gains: bool, dt_s: float = 60.0,
+                  heated_h: float = 24.0, off_h: float = 72.0) -> np.ndarray:
+    """Hours until the plant's true T_air falls ``DROP_K`` below its last heated hour's mean
+    after the loop is switched off (NaN if not within ``off_h``)."""
+    n = houses.n_houses
+    n_on, n_off = int(heated_h * 3600 / dt_s), int(off_h * 3600 / dt_s)
+    sp = np.concatenate([np.full(n_on, T_SET_C), np.full(n_off, np.nan)])
+    gain_w = np.broadcast_to(np.asarray(params.gains.night_w, float), (n,)) if gains \
+        else np.zeros(n)
+    run = simulate_plant(houses, params, np.full(n_on + n_off, T_OUT_C), dt_s,
+                         setpoint_c=sp, internal_gains_w=np.broadcast_to(
+                             gain_w, (n_on + n_off, n)), t_init_c=T_SET_C, seed=VAL_SEED,
+                         outputs=("t_air_c",))
+    air = np.asarray(run["t_air_c"])
+    ref = air[n_on - int(3600 / dt_s):n_on].mean(axis=0)
+    after = air[n_on:]
+    out = np.full(n, np.nan)
+    for j in range(n):
+        below = np.flatnonzero(after[:, j] <= ref[j] - DROP_K)
+        if below.size:
+            i = below[0]
+            a0 = after[i - 1, j] if i else ref[j]
+            frac = (a0 - (ref[j] - DROP_K)) / (a0 - after[i, j]) if a0 != after[i, j] else 1
+            out[j] = (i + frac) * dt_s / 3600.0
+    return out
+
+
+def loglinear_coast_h(tau_h: float) -> float:
+    dt0 = T_SET_C - T_OUT_C
+    return float(tau_h * np.log(dt0 / (dt0 - DROP_K)))
+
+
+def summarise(name: str, est: np.ndarray, truth: np.ndarray, groups: dict, lo=None, hi=None
+              ) -> list[str]:
+    ok = np.isfinite(est) & np.isfinite(truth)
+    err = 100.0 * (est - truth) / truth
+    rows = []
+    for gname, mask in groups.items():
+        m = ok & mask
+        if not m.any():
+            continue
+        e = err[m]
+        cov = "–"
+        if lo is not None:
+            inside = (lo[m] <= truth[m]) & (truth[m] <= hi[m])
+            cov = f"{100.0 * inside.mean():.0f} %"
+        rows.append(f"| {name} | {gname} ({m.sum()}) | {np.median(np.abs(e)):.1f} / "
+                    f"{np.percentile(np.abs(e), 90):.1f} % | {np.median(e):+.1f} % | {cov} |")
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--households", type=int, default=50)
+    ap.add_argument("--step-s", type=float, default=300.0, help="row step of the fitted nights")
+    ap.add_argument("--gains", choices=("night", "off"), default="night",
+                    help="the truth's internal gains while coasting")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    n = args.households
+    t_start = time.perf_counter()
+    houses = sample_households(n, seed=VAL_SEED)
+    params = sample_params(n, VAL_SEED)
+    print(f"simulating the coast of {n} realistic houses …", flush=True)
+    truth = plant_coast_h(houses, params, gains=args.gains == "night")
+    print(f"simulating their IMP nights … ({time.perf_counter() - t_start:.0f} s)", flush=True)
+    sched = imp_schedule(n, seed=VAL_SEED)
+    logged, sp = run_schedule_plant(houses, sched, params, seed=VAL_SEED)
+    fitted, tau_lo, tau_hi, loglin = [], [], [], []
+    last = time.perf_counter()
+    for i in range(n):
+        house = houses.take(i)
+        nights = sample_nights(logged, sp, sched, i, sample_step_s=args.step_s,
+                               quantise_k=0.1, power_noise=0.0, seed=VAL_SEED + i)
+        fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1]).fit(nights, true_ranges(house))
+        fitted.append(HouseParameters(**{k: fit.parameters_[k] for k in PARAM_NAMES},
+                                      ach_vent=ACH[0], ach_infl=ACH[1]))
+        tau = fit.lumped_["tau"]
+        tau_lo.append(tau.low)
+        tau_hi.append(tau.high)
+        kept, _, _ = prepare_nights(nights)
+        loglin.append(loglinear_coast_h(baselines.loglinear_tau(kept)))
+        if time.perf_counter() - last > 5 or i == n - 1:
+            print(f"  fitted {i + 1}/{n} households "
+                  f"({time.perf_counter() - t_start:.0f} s)", flush=True)
+            last = time.perf_counter()
+    stack = HouseParameters(**{k: np.array([float(getattr(h, k)) for h in fitted])
+                               for k in PARAM_NAMES}, ach_vent=ACH[0], ach_infl=ACH[1])
+    fit_flex = flexibility_many(stack, np.array(tau_lo), np.array(tau_hi),
+                                t_set_c=T_SET_C, t_out_c=T_OUT_C, drop_k=DROP_K)
+    true_5r1c = flexibility_many(HouseParameters(**{k: np.asarray(getattr(houses, k), float)
+                                                     for k in PARAM_NAMES},
+                                                  ach_vent=ACH[0], ach_infl=ACH[1]),
+                                 t_set_c=T_SET_C, t_out_c=T_OUT_C, drop_k=DROP_K)
+    est = np.array([f.coast_h for f in fit_flex])
+    lo = np.array([f.coast_h_low for f in fit_flex])
+    hi = np.array([f.coast_h_high for f in fit_flex])
+    perfect = np.array([f.coast_h for f in true_5r1c])
+    kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
+    groups = {"all": np.ones(n, bool), "radiators": kind == 0, "underfloor": kind == 1}
+    print()
+    print(f"`{' '.join(['python'] + sys.argv)}` ({time.perf_counter() - t_start:.0f} s); "
+          f"truth: realistic plant, gains {args.gains}; coast median "
+          f"{np.nanmedian(truth):.1f} h (P10–P90 {np.nanpercentile(truth, 10):.1f}–"
+          f"{np.nanpercentile(truth, 90):.1f} h)")
+    print()
+    print("| coast_h from | houses | median / P90 abs. error | signed median | "
+          "truth in 95 % interval |")
+    print("|---|---|---|---|---|")
+    for line in (summarise("impctl fit → impctl.flex", est, truth, groups, lo, hi)
+                 + summarise("true 5R1C parameters → impctl.flex", perfect, truth, groups)
+                 + summarise("log-linear τ baseline", np.array(loglin), truth, groups)):
+        print(line)
+
+
+if __name__ == "__main__":
+    main()
