@@ -21,6 +21,9 @@ def collect_status(cfg) -> dict:
         "heartbeat_age_s": None if info.heartbeat_age_s is None else round(
             info.heartbeat_age_s, 1),
         "summary": info.describe()}}
+    # The broker link as the running daemon last noted it (written on change only).
+    out["mqtt"] = None if cfg.mqtt is None else {
+        "configured": True, **((info.notes.get("mqtt") or {}) if info.running else {})}
     with Store(cfg.db_path, create=False) as store:
         running = store.nights(states=["preparing", "active", "restoring"])
         if running:
@@ -156,6 +159,23 @@ def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     return lines
 
 
+def _mqtt_lines(mq: dict | None, zone: ZoneInfo) -> list[str]:
+    """One line on the Home Assistant link (nothing when ``[mqtt]`` is not configured)."""
+    if mq is None:
+        return []
+    if "connected" not in mq:
+        return ["mqtt:      configured; no link state (the daemon is not running or just "
+                "started)"]
+    from datetime import datetime
+
+    since = datetime.fromisoformat(mq["since"]).astimezone(zone)
+    if mq["connected"]:
+        return [f"mqtt:      connected to {mq['broker']} since {since:%Y-%m-%d %H:%M %Z}"]
+    why = f": {mq['error']}" if mq.get("error") else ""
+    return [f"mqtt:      broker {mq['broker']} UNAVAILABLE since {since:%Y-%m-%d %H:%M %Z}"
+            f"{why} (nights run on; Home Assistant shows impctl unavailable)"]
+
+
 def format_status(st: dict, tz: str = "UTC") -> str:
     """The status as a few readable lines."""
     zone = ZoneInfo(tz)
@@ -202,6 +222,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
         hlc = ((fit.get("lumped") or {}).get("hlc") or {}).get("value")
         lines.append(f"last fit:  {fit['created']:%Y-%m-%d %H:%M} UTC, nights {fit['nights']}"
                      + ("" if hlc is None else f", HLC {hlc:.1f} W/K"))
+    lines.extend(_mqtt_lines(st.get("mqtt"), zone))
     link = next((e for e in st["events"] if "link" in e["message"]), None)
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))

@@ -15,7 +15,7 @@ import fcntl
 import json
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -42,12 +42,14 @@ class DaemonInfo:
     pid : its PID (or the last holder's when not running); None when never started
     role : "daemon" or "trigger --foreground"
     heartbeat_age_s : wall seconds since the last heartbeat (None without a lock file)
+    notes : what the holder published with :meth:`DaemonLock.note` (e.g. its MQTT link)
     """
 
     running: bool
     pid: int | None = None
     role: str | None = None
     heartbeat_age_s: float | None = None
+    notes: dict = field(default_factory=dict)
 
     @property
     def stale(self) -> bool:
@@ -77,12 +79,14 @@ def _age(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
-def _read(path: Path) -> tuple[int | None, str | None]:
+def _read(path: Path) -> tuple[int | None, str | None, dict]:
     try:
         data = json.loads(path.read_text() or "{}")
-        return int(data["pid"]), str(data.get("role", "daemon"))
+        notes = data.get("notes")
+        return (int(data["pid"]), str(data.get("role", "daemon")),
+                notes if isinstance(notes, dict) else {})
     except (OSError, ValueError, KeyError, TypeError):
-        return None, None
+        return None, None, {}
 
 
 def probe(state_dir: str | Path) -> DaemonInfo:
@@ -95,14 +99,14 @@ def probe(state_dir: str | Path) -> DaemonInfo:
     except OSError:  # not readable by this user: fall back to the PID alone
         return DaemonInfo(False)
     try:
-        pid, role = _read(path)
+        pid, role, notes = _read(path)
         age = max(0.0, time.time() - os.fstat(fd).st_mtime)
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:
-            return DaemonInfo(True, pid, role, age)
+            return DaemonInfo(True, pid, role, age, notes)
         fcntl.flock(fd, fcntl.LOCK_UN)
-        return DaemonInfo(False, pid, role, age)
+        return DaemonInfo(False, pid, role, age, notes)
     finally:
         os.close(fd)
 
@@ -120,6 +124,7 @@ class DaemonLock:
         self.path = Path(state_dir) / LOCK_NAME
         self.role = role
         self._fd: int | None = None
+        self._content: dict = {}
 
     def acquire(self, wait_s: float = 1.0) -> DaemonLock:
         """Take the lock, or raise :class:`DaemonRunning` naming the holder's PID.
@@ -140,17 +145,29 @@ class DaemonLock:
                     time.sleep(0.05)
                     continue
                 os.close(fd)
-                pid, role = _read(self.path)
+                pid, role, _ = _read(self.path)
                 who = f"PID {pid}" if pid is not None else "another process"
                 raise DaemonRunning(
                     f"another impctl {role or 'daemon'} ({who}) already drives the heat pump of "
                     f"this store; stop it first (systemctl stop impctl)",
                     self.path.parent) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps({"pid": os.getpid(), "role": self.role,
-                                  "started": datetime.now(UTC).isoformat()}).encode(), 0)
+        self._content = {"pid": os.getpid(), "role": self.role,
+                         "started": datetime.now(UTC).isoformat(), "notes": {}}
         self._fd = fd
+        self._write()
         return self
+
+    def _write(self) -> None:
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, json.dumps(self._content).encode(), 0)
+
+    def note(self, key: str, value: dict | None) -> None:
+        """Publish ``value`` under ``key`` for ``impctl status`` (JSON-able); the file is
+        rewritten only when a note changed, not at every heartbeat (flash storage)."""
+        if self._fd is None or self._content["notes"].get(key) == value:
+            return
+        self._content["notes"][key] = value
+        self._write()
 
     def heartbeat(self) -> None:
         """Touch the lock file: the holder is alive and healthy."""

@@ -138,6 +138,16 @@ class MqttLink:
         cid = store.add_command(command.name, "mqtt")
         return f"queued command {cid} ({command.name})"
 
+    def note_link(self, state: dict) -> None:
+        """The broker link changed: note it in the lock file for ``impctl status``."""
+        lock = self.daemon._lock
+        if lock is None:
+            return
+        try:
+            lock.note("mqtt", state)
+        except OSError as exc:  # status loses a line; MQTT and nights go on
+            _LOG.warning("could not note the MQTT link state: %s", exc)
+
     # -- the daemon's hooks ----------------------------------------------------------------------
     def wake(self) -> None:
         if self.bridge is not None:
@@ -163,6 +173,7 @@ def start_mqtt(daemon: Daemon) -> MqttLink | None:
         Limits(setpoint_min_c=lo, setpoint_max_c=hi,
                comfort_band_k=cfg.night.comfort_band_k,
                default_setpoint_c=cfg.campaign.constrained_setpoint_c))
+    link.bridge.on_link_change = link.note_link
     link.bridge.start()
     return link
 

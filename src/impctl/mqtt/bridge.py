@@ -15,7 +15,8 @@ import logging
 import random
 import ssl
 import time
-from datetime import datetime
+from collections.abc import Callable
+from datetime import UTC, datetime
 from typing import Protocol
 
 import aiomqtt
@@ -69,6 +70,11 @@ class MqttBridge:
         self.kind = "constrained"
         self.setpoint_c = limits.default_setpoint_c
         self.connected = False
+        self._since = datetime.now(UTC)   # of the current connected/unavailable state
+        self._error: str | None = None    # why the broker was last unavailable
+        #: Called with :meth:`link_state` whenever it changes (the daemon notes it for
+        #: ``impctl status``); must not raise.
+        self.on_link_change: Callable[[dict], None] | None = None
         self._wake = asyncio.Event()
         self._rediscover = asyncio.Event()
         self._task: asyncio.Task | None = None
@@ -79,6 +85,23 @@ class MqttBridge:
     def start(self) -> None:
         """Start the bridge task (returns at once)."""
         self._task = asyncio.create_task(self._run(), name="mqtt bridge")
+
+    def link_state(self) -> dict:
+        """The broker link for ``impctl status``: ``broker`` (host:port), ``connected``,
+        ``since`` (ISO 8601 UTC, of the current state) and ``error`` (why it is down)."""
+        return {"broker": f"{self.cfg.host}:{self.cfg.port}", "connected": self.connected,
+                "since": self._since.isoformat(timespec="seconds"),
+                "error": None if self.connected else self._error}
+
+    def _set_connected(self, connected: bool, error: str | None = None) -> None:
+        before = (self.connected, self._error)
+        if connected != self.connected:
+            self._since = datetime.now(UTC)
+        self.connected = connected
+        if error is not None:
+            self._error = error
+        if (self.connected, self._error) != before and self.on_link_change is not None:
+            self.on_link_change(self.link_state())
 
     def wake(self) -> None:
         """New values: publish the state now (never blocks)."""
@@ -114,7 +137,7 @@ class MqttBridge:
         while True:
             try:
                 async with self._client() as client:
-                    self.connected = True
+                    self._set_connected(True)
                     if down_since is None:
                         _LOG.info("MQTT connected to %s as %s (topics %s/…)", where,
                                   self.cfg.client_id, self.cfg.topic)
@@ -124,16 +147,18 @@ class MqttBridge:
                     delay, down_since = 1.0, None
                     await self._session(client)
             except aiomqtt.MqttError as exc:
+                self._set_connected(False, str(exc))
                 if down_since is None:  # one line per outage, not one per retry
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
                                  "to %g s)", where, exc, self.cfg.reconnect_max_s)
                     down_since = time.monotonic()
-            except Exception:  # noqa: BLE001 - MQTT must never take the daemon down
+            except Exception as exc:  # noqa: BLE001 - MQTT must never take the daemon down
+                self._set_connected(False, f"bridge failed: {exc}")
                 if down_since is None:
                     _LOG.exception("MQTT bridge failed; reconnecting with back-off")
                     down_since = time.monotonic()
             finally:
-                self.connected = False
+                self._set_connected(False)
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
             delay = min(delay * 2, self.cfg.reconnect_max_s)
 
