@@ -44,7 +44,7 @@ from daemon_fixtures import (  # noqa: E402
 )
 from mqtt_fixtures import broker  # noqa: E402
 
-from impctl.heatpump.clock import VirtualClock  # noqa: E402
+from impctl.clock import VirtualClock  # noqa: E402
 
 TARGET_MB = 60.0
 MQTT_VARIANT = "impctl daemon with [mqtt] on"

@@ -26,7 +26,8 @@ from datetime import UTC, datetime
 import pymodbus
 from impctl_sim import KronotermSimulator, SimConfig
 
-from impctl.heatpump import Generation, HeatPumpClient, HeatPumpConfig, LinkConfig, VirtualClock
+from impctl.clock import VirtualClock
+from impctl.heatpump import Generation, HeatPumpClient, HeatPumpConfig, LinkConfig
 
 EPOCH = datetime(2026, 1, 12, 20, tzinfo=UTC)
 

@@ -32,9 +32,10 @@ from impctl_sim import KronotermSimulator, SimConfig, parse_faults
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 from pymodbus.framer import FramerType
 
-from impctl.heatpump import HeatPumpClient, HeatPumpConfig, LinkConfig, VirtualClock
-from impctl.heatpump.registers import Generation, register
-from impctl.heatpump.snapshot import SNAPSHOT_REGISTERS, plan_blocks
+from impctl.clock import VirtualClock
+from impctl.heatpump import HeatPumpClient, HeatPumpConfig, LinkConfig
+from impctl.kronoterm.registers import Generation, register
+from impctl.kronoterm.snapshot import SNAPSHOT_REGISTERS, plan_blocks
 
 EPOCH = datetime(2026, 1, 12, 23, tzinfo=UTC)
 SCENARIOS = {

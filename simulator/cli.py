@@ -17,9 +17,9 @@ from pathlib import Path
 import click
 
 from impctl.cli.checks import SETPOINT_C, bounded
+from impctl.clock import VirtualClock
 from impctl.errors import InputError
-from impctl.heatpump.clock import VirtualClock
-from impctl.heatpump.registers import Generation
+from impctl.kronoterm.registers import Generation
 from impctl.model import default_house
 from impctl.weather import read_weather
 

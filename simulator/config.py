@@ -9,8 +9,8 @@ from zoneinfo import ZoneInfo
 
 import pandas as pd
 
-from impctl.heatpump.clock import VirtualClock
-from impctl.heatpump.registers import Generation
+from impctl.clock import VirtualClock
+from impctl.kronoterm.registers import Generation
 from impctl.model import HouseParameters, default_house
 from impctl.weather import winter_weather
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from impctl.heatpump.registers import REGISTERS, Access, Generation, Kind
+from impctl.kronoterm.registers import REGISTERS, Access, Generation, Kind
 from impctl.modbus import to_word, uint32_words
 
 from .realistic import PlantLike

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pymodbus.pdu import ModbusPDU
 from pymodbus.pdu.register_message import ReadHoldingRegistersResponse
 
-from impctl.heatpump.registers import Generation
+from impctl.kronoterm.registers import Generation
 from impctl.modbus import to_word
 
 from .image import in_layout

@@ -31,9 +31,9 @@ from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from impctl.clock import VirtualClock
 from impctl.errors import InputError
-from impctl.heatpump.clock import VirtualClock
-from impctl.heatpump.registers import Generation
+from impctl.kronoterm.registers import Generation
 from impctl.modbus import to_int16
 
 from .config import SimConfig

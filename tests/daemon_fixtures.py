@@ -32,7 +32,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from impctl.heatpump.clock import VirtualClock
+from impctl.clock import VirtualClock
 from impctl.model import HouseParameters, default_house
 from impctl.store import Store
 

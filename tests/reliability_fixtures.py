@@ -51,9 +51,9 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_SETPOINT_C, daemon_mapping
 from impctl_sim import KronotermSimulator, SimConfig, constant_weather
 from sim_fixtures import wait_for
 
+from impctl.clock import VirtualClock
 from impctl.daemon.config import config_from_mapping
 from impctl.daemon.service import Daemon
-from impctl.heatpump import VirtualClock
 from impctl.model import HouseParameters
 
 TZ = ZoneInfo("Europe/Ljubljana")

@@ -17,11 +17,11 @@ from typing import Any, TypeVar
 
 from impctl_sim import KronotermSimulator, SimConfig
 
+from impctl.clock import VirtualClock
 from impctl.heatpump import (
     HeatPumpClient,
     HeatPumpConfig,
     LinkConfig,
-    VirtualClock,
     WriteBudget,
     WritePolicy,
 )

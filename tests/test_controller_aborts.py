@@ -16,8 +16,8 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, OWNER_SET
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import EPOCH, budget, client, link_config, run, simulator, wait_for
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
-from impctl.heatpump import VirtualClock
 from impctl.model import default_house
 from impctl.store import Store
 

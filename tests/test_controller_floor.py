@@ -14,8 +14,9 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_SETPOINT_C
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import EPOCH, budget, client, run, simulator
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
-from impctl.heatpump import VirtualClock, WritePolicy
+from impctl.heatpump import WritePolicy
 from impctl.store import Store
 
 

@@ -19,8 +19,8 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, OWNER_SET
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import EPOCH, budget, client, run, simulator
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
-from impctl.heatpump import VirtualClock
 from impctl.store import Store
 
 SPEED = 7200.0

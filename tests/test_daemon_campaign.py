@@ -25,11 +25,11 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, daemon_ma
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import run, simulator
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightRequest
 from impctl.daemon.config import config_from_mapping
 from impctl.daemon.schedule import window_for
 from impctl.daemon.service import Daemon
-from impctl.heatpump import VirtualClock
 from impctl.store import Store
 
 TZ = ZoneInfo("Europe/Ljubljana")

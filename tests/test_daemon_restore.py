@@ -17,9 +17,9 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, daemon_ma
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import run, simulator, wait_for
 
+from impctl.clock import VirtualClock
 from impctl.daemon.config import config_from_mapping
 from impctl.daemon.service import Daemon
-from impctl.heatpump import VirtualClock
 
 EPOCH = datetime(2026, 1, 12, 9, 0, tzinfo=ZoneInfo("Europe/Ljubljana"))
 

@@ -10,8 +10,9 @@ from datetime import UTC, date, datetime, timedelta
 
 import pytest
 
+from impctl.clock import VirtualClock
 from impctl.errors import InputError
-from impctl.heatpump import VirtualClock, WriteBudget, WriteBudgetExceeded
+from impctl.heatpump import WriteBudget, WriteBudgetExceeded
 
 EPOCH = datetime(2026, 1, 12, 20, tzinfo=UTC)
 
@@ -47,7 +48,7 @@ def test_same_spec_gives_same_time_in_another_clock():
 
 def test_spec_reproduces_time_in_another_process():
     clock = VirtualClock(EPOCH, 600.0, 1_700_000_000.0)
-    code = ("import sys; from impctl.heatpump.clock import VirtualClock; "
+    code = ("import sys; from impctl.clock import VirtualClock; "
             "c = VirtualClock.from_spec(sys.argv[1], wall=lambda: 1700000100.0); "
             "print(repr(c.now_s()))")
     out = subprocess.run([sys.executable, "-c", code, clock.spec()], capture_output=True,

@@ -23,9 +23,9 @@ from impctl.heatpump import (
     registers_for,
     write_rules,
 )
-from impctl.heatpump.registers import TEMP_VALID_C
-from impctl.heatpump.snapshot import plan_blocks
 from impctl.heatpump.writes import check_target
+from impctl.kronoterm.registers import TEMP_VALID_C
+from impctl.kronoterm.snapshot import plan_blocks
 from impctl.modbus import uint32, uint32_words
 
 NOW = datetime(2026, 1, 12, 20, tzinfo=UTC)

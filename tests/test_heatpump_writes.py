@@ -18,10 +18,10 @@ from sim_fixtures import (
 )
 from umodbus.client import tcp
 
+from impctl.clock import VirtualClock
 from impctl.heatpump import (
     HeatPumpClient,
     ModbusDeviceError,
-    VirtualClock,
     WriteBudgetExceeded,
     WritePolicy,
     WriteRefused,

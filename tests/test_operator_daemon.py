@@ -33,7 +33,7 @@ from daemon_fixtures import (
     write_config,
 )
 
-from impctl.heatpump import VirtualClock
+from impctl.clock import VirtualClock
 
 TZ = ZoneInfo("Europe/Ljubljana")
 OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)

@@ -27,8 +27,8 @@ from daemon_fixtures import (
 from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import EPOCH, budget, client, simulator, wait_for
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
-from impctl.heatpump import VirtualClock
 from impctl.store import Store
 
 SPEED = 1800.0

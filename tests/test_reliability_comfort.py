@@ -55,8 +55,9 @@ from impctl_sim import KronotermSimulator, Plant, PlantParams, SimConfig, consta
 from reliability_fixtures import run_virtual
 from sim_fixtures import hp_config, link_config
 
+from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
-from impctl.heatpump import HeatPumpClient, VirtualClock, WriteBudget, WritePolicy
+from impctl.heatpump import HeatPumpClient, WriteBudget, WritePolicy
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.store import Store

@@ -298,8 +298,8 @@ def test_a_store_that_cannot_write_mid_night_does_not_keep_the_heating_off(tmp_p
     from impctl_sim import SimConfig, constant_weather
     from sim_fixtures import EPOCH, budget, client, simulator, wait_for
 
+    from impctl.clock import VirtualClock
     from impctl.controller import NightController, NightPolicy, NightRequest, restore_all
-    from impctl.heatpump import VirtualClock
     from impctl.store import Store
 
     async def body():
@@ -337,8 +337,8 @@ def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
     from reliability_fixtures import captured_logs
     from sim_fixtures import EPOCH, budget, client, simulator, wait_for
 
+    from impctl.clock import VirtualClock
     from impctl.controller import NightController, NightPolicy, NightRequest
-    from impctl.heatpump import VirtualClock
     from impctl.store import Store
 
     async def body():

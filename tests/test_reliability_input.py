@@ -573,7 +573,8 @@ class _LiveSimulator:
         from impctl_sim import KronotermSimulator, SimConfig
         from sim_fixtures import hp_config
 
-        from impctl.heatpump import HeatPumpClient, VirtualClock
+        from impctl.clock import VirtualClock
+        from impctl.heatpump import HeatPumpClient
         from impctl.store import Store
 
         self.loop = asyncio.new_event_loop()

@@ -28,7 +28,8 @@ from sim_fixtures import (
 from umodbus.client import tcp
 from umodbus.exceptions import IllegalDataAddressError, IllegalFunctionError
 
-from impctl.heatpump import Generation, HeatPumpClient, VirtualClock
+from impctl.clock import VirtualClock
+from impctl.heatpump import Generation, HeatPumpClient
 
 SIM = Path(sys.executable).with_name("impctl-sim")
 

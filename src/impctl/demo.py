@@ -28,9 +28,9 @@ from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+from .clock import VirtualClock
 from .daemon.config import config_from_mapping
 from .errors import InputError
-from .heatpump.clock import VirtualClock
 from .model import HouseParameters
 from .store import Store
 

@@ -233,10 +233,10 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
 
 
 async def _restore(cfg, store, timeout_s: float):
+    from ..clock import VirtualClock
     from ..controller import restore_all
     from ..daemon.service import clock_from_config, open_client
     from ..heatpump import ModbusLinkError
-    from ..heatpump.clock import VirtualClock
 
     clock = clock_from_config(cfg)
     client = open_client(cfg, clock)

@@ -25,8 +25,8 @@ import logging
 from collections.abc import Callable
 from datetime import datetime, timedelta
 
+from ..clock import VirtualClock
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
-from ..heatpump.clock import VirtualClock
 from ..store import Night, Store
 from .assess import assess_night
 from .incidents import Incidents

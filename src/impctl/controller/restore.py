@@ -11,8 +11,8 @@ import asyncio
 import logging
 import sqlite3
 
+from ..clock import VirtualClock
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
-from ..heatpump.clock import VirtualClock
 from ..store import JournalEntry, Store
 
 _LOG = logging.getLogger(__name__)

@@ -14,9 +14,9 @@ from datetime import UTC, datetime, timedelta
 from importlib import metadata
 from typing import TYPE_CHECKING
 
+from ..clock import VirtualClock
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
-from ..heatpump.clock import VirtualClock
 from .adaptive import campaign_state
 from .schedule import daytime_reason, request_expiry
 

@@ -13,8 +13,8 @@ from zoneinfo import ZoneInfo
 
 from apscheduler.triggers.cron import CronTrigger
 
+from ..clock import VirtualClock
 from ..controller import NightRequest
-from ..heatpump.clock import VirtualClock
 from ..store import Store
 from .config import Config
 

@@ -15,10 +15,10 @@ from pathlib import Path
 from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from apscheduler.triggers.date import DateTrigger
 
+from ..clock import VirtualClock
 from ..controller import NightController, NightPolicy, NightRequest, restore_all
 from ..controller.restore import restore_entry
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudget
-from ..heatpump.clock import VirtualClock
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from . import adaptive

@@ -1,8 +1,11 @@
-"""Kronoterm heat pump over Modbus: register map, decoding, safe client, virtual clock.
+"""Kronoterm heat pump over Modbus: the safe client (clamped, read-back, budgeted writes),
+its configuration and its health record.
 
-Built on the generic link of :mod:`impctl.modbus` (transport, reconnects, answer attribution).
-The configuration and failures of that link are re-exported here because the client's
-configuration holds a ``LinkConfig`` and its methods raise the link's errors.
+Built on the generic link of :mod:`impctl.modbus` (transport, reconnects, answer attribution)
+and on :mod:`impctl.kronoterm` (what the registers mean). The link's configuration and
+failures, and the register types the client takes and returns, are re-exported here because
+the client's configuration holds a ``LinkConfig``, its methods raise the link's errors and
+return :class:`Snapshot` / :class:`Reading`.
 
 Public surface::
 
@@ -10,18 +13,30 @@ Public surface::
     HeatPumpConfig, LinkConfig, ExternalRegister, WritePolicy, config_from_mapping
     Snapshot, Reading                          decoded values with timestamp and missing flag
     WriteBudget(path, daily_limit)             persistent per-register daily write budget
-    VirtualClock(epoch, factor, wall_epoch_s)  real or accelerated time, shared by processes
-    Register, Generation, REGISTERS, register, FORBIDDEN_WRITES
+    Register, Generation, REGISTERS, register, FORBIDDEN_WRITES   (from impctl.kronoterm)
     errors: HeatPumpError, ModbusLinkError, ModbusDeviceError (from impctl.modbus),
             UnsupportedFeature, WriteRefused, WriteBudgetExceeded, WriteVerifyError
 """
 
+from ..kronoterm import (
+    FORBIDDEN_WRITES,
+    REGISTERS,
+    Access,
+    Generation,
+    GenerationReport,
+    Kind,
+    Reading,
+    Register,
+    Snapshot,
+    decode,
+    encode,
+    register,
+    registers_for,
+)
 from ..modbus import LinkConfig, ModbusDeviceError, ModbusLinkError
 from .budget import WriteBudget
 from .client import HeatPumpClient
-from .clock import VirtualClock
 from .config import ExternalRegister, HeatPumpConfig, WritePolicy, config_from_mapping
-from .decode import Reading, decode, encode
 from .errors import (
     HeatPumpError,
     UnsupportedFeature,
@@ -29,18 +44,6 @@ from .errors import (
     WriteRefused,
     WriteVerifyError,
 )
-from .generation import GenerationReport
-from .registers import (
-    FORBIDDEN_WRITES,
-    REGISTERS,
-    Access,
-    Generation,
-    Kind,
-    Register,
-    register,
-    registers_for,
-)
-from .snapshot import Snapshot
 from .writes import WriteResult, write_rules
 
 __all__ = [
@@ -61,7 +64,6 @@ __all__ = [
     "Register",
     "Snapshot",
     "UnsupportedFeature",
-    "VirtualClock",
     "WriteBudget",
     "WriteBudgetExceeded",
     "WritePolicy",

@@ -7,15 +7,15 @@ import logging
 from datetime import datetime
 from pathlib import Path
 
+from ..clock import VirtualClock
+from ..kronoterm.decode import Reading, decode
+from ..kronoterm.generation import GenerationReport, detect
+from ..kronoterm.registers import Generation, Register, register
+from ..kronoterm.snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
 from ..modbus import LinkConfig, ModbusDeviceError, ModbusLink, to_int16, uint32
 from .budget import WriteBudget
-from .clock import VirtualClock
 from .config import ExternalRegister, HeatPumpConfig
-from .decode import Reading, decode
 from .errors import HeatPumpError, UnsupportedFeature, WriteRefused
-from .generation import GenerationReport, detect
-from .registers import Generation, Register, register
-from .snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
 from .writes import WriteResult, safe_write
 
 _LOG = logging.getLogger(__name__)

@@ -30,14 +30,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
+from ..clock import VirtualClock
 from ..errors import InputError
+from ..kronoterm.decode import decode, encode, raw_value
+from ..kronoterm.registers import FORBIDDEN_WRITES, Kind, Register
 from ..modbus import ModbusDeviceError, ModbusLink, ModbusLinkError
 from .budget import WriteBudget
-from .clock import VirtualClock
 from .config import WritePolicy
-from .decode import decode, encode, raw_value
 from .errors import HeatPumpError, WriteRefused, WriteVerifyError
-from .registers import FORBIDDEN_WRITES, Kind, Register
 
 _LOG = logging.getLogger(__name__)
 _MODES = frozenset({0, 1, 2})

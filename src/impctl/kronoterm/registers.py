@@ -33,7 +33,7 @@ class Access(StrEnum):
 
 
 class Kind(StrEnum):
-    """How a raw value is interpreted (see :mod:`impctl.heatpump.decode`)."""
+    """How a raw value is interpreted (see :mod:`impctl.kronoterm.decode`)."""
 
     TEMP = "temp"  #: measured/target temperature; sentinels and −60…150 °C sanity range apply
     NUMBER = "number"  #: signed int16 × scale (power, pressure, correction, hours …)

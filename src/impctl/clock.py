@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 
-from ..errors import InputError
+from .errors import InputError
 
 
 class VirtualClock:
