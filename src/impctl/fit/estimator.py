@@ -33,7 +33,7 @@ from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
 from . import lm
-from .data import noise_levels, prepare_nights, search_bounds, validation_table
+from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .node import (
     DTYPE,
     NUISANCE_BOUNDS,
@@ -132,6 +132,10 @@ class NightFit:
     settle_h : float
         Hours after the start of a held night whose heat power is not compared (the setpoint
         step charges emitter, air and furniture); T_air still drives the model.
+    settle_until_held : bool
+        Also leave out a held night's power until T_air first comes within 0.2 K of the
+        level it is held at (the median of the night's second half): while it climbs, the
+        heat pump runs at capacity and the emitter charges (:func:`.data.settled`).
     emitter_lag : bool
         The heat meter measures the heat into the emitter, not into the room (README
         "Accuracy", issue 14): a share of C_m (``emitter_share``, 0–0.6) sits in an emitter
@@ -184,7 +188,7 @@ class NightFit:
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
                  meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
-                 emitter_lag: bool = False):
+                 emitter_lag: bool = False, settle_until_held: bool = False):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -212,6 +216,7 @@ class NightFit:
         self.settle_h = settle_h
         self.structure_share = structure_share
         self.emitter_lag = emitter_lag
+        self.settle_until_held = settle_until_held
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -261,7 +266,7 @@ class NightFit:
         # The first hour after the setpoint step of a held night is emitter, air and furniture
         # charging and the sensor's lag (README "Accuracy", error budget): that power drives
         # nothing the 5R1C has, so it is not compared (T_air still drives the model).
-        power_ok = [ok & ((n.time_s - n.time_s[0]) >= 3600.0 * self.settle_h)
+        power_ok = [ok & settled(n, self.settle_h, self.settle_until_held)
                     if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
