@@ -204,7 +204,8 @@ class PackedNights:
     next_node: torch.Tensor
     last: torch.Tensor
     power_ok: torch.Tensor | None = None  # (N, K) bool: the power sample can be compared
-    #: the meter sees the room's heat through the emitter's lag (:func:`build_rows`)
+    #: the meter measures the heat into an emitter node that holds ``emitter_share`` of C_m
+    #: (``NightFit(emitter_lag=True)``, :func:`build_rows`)
     emitter_lag: bool = False
 
     @property
@@ -469,9 +470,9 @@ def build_rows(
     if packed.emitter_lag and any_dem and params.shape[-1] > len(PARAM_NAMES):
         # The meter measures the heat into the emitter, not into the room: with the emitter
         # node T_e = T_air + P/H_e (P the heat it gives the air, what the 5R1C demands) its
-        # balance C_e·dT_e/dt = P_meter − P gives P_meter = P + τ_e·dP/dt (+ C_e·dT_air/dt,
-        # small on a held night), τ_e = C_e/H_e — exact for a linear emitter, no extra state
-        # and no initial condition. Over a sample interval the mean of τ_e·dP/dt is
+        # balance C_e·dT_e/dt = P_meter − P gives P_meter = P + τ_e·dP/dt + C_e·dT_air/dt,
+        # τ_e = C_e/H_e — exact for a linear emitter, no extra state and no initial
+        # condition (tests/test_node.py). Over a sample interval the mean of τ_e·dP/dt is
         # τ_e·(P_k+1 − P_k)/h_k. τ_e is the emitter time constant of the release after
         # switch-off (one constant for both kinds of night); switched off with that term.
         lag_next = packed.next_node[night_index]
