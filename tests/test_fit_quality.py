@@ -78,3 +78,21 @@ def test_coarsening_keeps_the_energy_and_the_temperature_at_the_nodes():
     assert np.abs(c.t_air_c[1:-1] - true_at[1:-1]).std() < 0.05 / 1.8
     # rows already as coarse as the step are left alone
     assert coarsen(c, 300.0) is c
+
+
+def test_a_held_night_settles_when_t_air_reaches_its_held_level():
+    from impctl.fit.data import settled
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 7 * 3600.0, 300.0)
+    # a 3 K setpoint step the heat pump needs 2.5 h to climb, then held (sensor noise, 0.1 K)
+    t_air = np.round(21.0 + np.minimum(t / 9000.0, 1.0) * 3.0 + rng.normal(0, 0.05, len(t)), 1)
+    night = _night("normal", t, t_air, np.zeros(len(t)), np.full(len(t), 3000.0))
+    fixed = settled(night, 1.0)
+    assert not fixed[t < 3600.0].any() and fixed[t >= 3600.0].all()
+    held = settled(night, 1.0, until_held=True)
+    first = t[held.argmax()]
+    assert 2.0 * 3600.0 <= first <= 2.6 * 3600.0 and held[t >= first].all()
+    # a night that starts at its level settles after the fixed hour only
+    flat = _night("normal", t, np.full(len(t), 22.0), np.zeros(len(t)), np.full(len(t), 3e3))
+    assert np.array_equal(settled(flat, 1.0, until_held=True), settled(flat, 1.0))

@@ -213,3 +213,49 @@ def test_backprop_through_the_solver_gives_the_jacobian_gradient():
     # ∂loss/∂u = 2·Jᵀr (+ 2·ridge·u), the Jacobian by forward differences in the same batch
     assert torch.allclose(gu[0], 2 * ne.g[0], rtol=1e-4, atol=1e-6 * float(gu.abs().max()))
     assert torch.allclose(gm, 2 * ne.gm, rtol=1e-4)
+
+
+def test_emitter_lag_gives_the_metered_power_of_a_house_with_a_screed():
+    """A held night of a house whose emitter holds 40 % of C_m (a screed, H_e = 800 W/K),
+    simulated here step by step from the 5R1C mass equation and the emitter's own balance:
+    with ``emitter_lag`` the DEMAND rows give the heat the meter sees (into the screed, not
+    into the room), without it they miss the screed's charging."""
+    from impctl.model.continuous import mass_derivative
+
+    share, h_e = 0.4, 800.0
+    params = _params()
+    net = network(params, *ACH)
+    c_m = float(net.c_m_j_per_k[0])
+    net_m = dataclasses.replace(net, c_m_j_per_k=net.c_m_j_per_k * (1.0 - share))
+    tau_e_s = share * c_m / h_e
+    dt, hours, t_out = 10.0, 8.0, 0.0
+    t = np.arange(0.0, hours * 3600.0 + dt, dt)
+    t_air = 21.0 + 2.0 * np.minimum(t / 7200.0, 1.0)          # a setpoint step, then held
+    t_m = torch.tensor([18.0], dtype=DTYPE)
+    phi = np.zeros(len(t))
+    for k in range(len(t)):
+        free = air_temperature(t_m, t_out, 0.0, net_m)
+        k_phi = air_temperature(t_m, t_out, 1.0, net_m) - free
+        phi[k] = float((t_air[k] - free) / k_phi)
+        t_m = t_m + dt * mass_derivative(t_m, t_out, phi[k], net_m)
+    t_e = t_air + phi / h_e                                    # the screed's temperature
+    meter = phi[:-1] + share * c_m * np.diff(t_e) / dt         # heat into the screed
+    step = 30                                                  # 5-minute meter means
+    idx = np.arange(0, len(t) - 1, step)
+    q = np.array([meter[i:i + step].mean() for i in idx])
+    night = _night("normal", t[idx], t_air[idx], np.full(len(idx), t_out), q)
+    row = torch.cat([params, torch.tensor([[0.0, 0.0, tau_e_s / 3600.0, 0.0, share]],
+                                          dtype=DTYPE)], dim=1)
+
+    def predicted(lag: bool) -> np.ndarray:
+        packed = pack_nights([night], [0.0])
+        packed.emitter_lag = lag
+        rows = build_rows(packed, row if lag else params, torch.tensor([18.0], dtype=DTYPE),
+                          torch.tensor([0]), torch.tensor([ROW_DEMAND]), packed.q_w,
+                          packed.q_in_w, *ACH)
+        return rows.predict()[0][rows.mask[0]].numpy()
+
+    meas = q[:-1]
+    with_lag, without = predicted(True), predicted(False)
+    assert np.max(np.abs(with_lag - meas)) < 0.02 * np.max(meas)
+    assert np.max(np.abs(without - meas)) > 0.2 * np.max(meas)

@@ -115,7 +115,7 @@ def _settings(p: _Problem) -> tuple:
     return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
             p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
-            p.ctx.packed.power_ok is None)
+            p.ctx.packed.power_ok is None, p.ctx.packed.emitter_lag)
 
 
 def _pad(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -132,8 +132,8 @@ def _merge_packed(parts: Sequence[PackedNights]) -> PackedNights:
         name = f.name
         if name in ("night_ids", "kinds"):
             cols[name] = [x for p in parts for x in getattr(p, name)]
-        elif name == "timestamps":
-            cols[name] = parts[0].timestamps
+        elif name in ("timestamps", "emitter_lag"):   # equal within a group (_settings)
+            cols[name] = getattr(parts[0], name)
         elif name == "q_mean_w":
             cols[name] = torch.cat([p.q_mean_w for p in parts])
         elif name.endswith("_slope"):  # zero-length padded intervals have no slope

@@ -78,6 +78,26 @@ def prepare_nights(
     return kept, offsets, skipped
 
 
+def settled(night: NightSamples, settle_h: float, until_held: bool = False,
+            margin_k: float = 0.2) -> np.ndarray:
+    """Bool per sample of a held night: its power may be compared with the model.
+
+    False for the first ``settle_h`` hours and, with ``until_held``, until T_air first comes
+    within ``margin_k`` [K] of the level it is held at (the median T_air of the night's second
+    half): before that the heat pump runs at capacity while the emitter, air and furniture
+    charge, and a climbing room sensor lags.
+    """
+    t = np.asarray(night.time_s, float) - float(night.time_s[0])
+    ok = t >= 3600.0 * settle_h
+    if until_held and len(t) > 2:
+        t_air = np.asarray(night.t_air_c, float)
+        held = float(np.median(t_air[t >= 0.5 * t[-1]]))
+        reached = t_air >= held - margin_k
+        if reached.any():
+            ok &= t >= t[int(reached.argmax())]
+    return ok
+
+
 def search_bounds(ranges: dict[str, tuple[float, float]] | None,
                   physical: dict[str, tuple[float, float]] | None = None
                   ) -> dict[str, tuple[float, float]]:

@@ -33,7 +33,7 @@ from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
 from . import lm
-from .data import noise_levels, prepare_nights, search_bounds, validation_table
+from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .node import (
     DTYPE,
     NUISANCE_BOUNDS,
@@ -132,6 +132,18 @@ class NightFit:
     settle_h : float
         Hours after the start of a held night whose heat power is not compared (the setpoint
         step charges emitter, air and furniture); T_air still drives the model.
+    settle_until_held : bool
+        Also leave out a held night's power until T_air first comes within 0.2 K of the
+        level it is held at (the median of the night's second half): while it climbs, the
+        heat pump runs at capacity and the emitter charges (:func:`.data.settled`).
+    emitter_lag : bool
+        The heat meter measures the heat into the emitter, not into the room (README
+        "Accuracy", issue 14): a share of C_m (``emitter_share``, 0–0.6) sits in an emitter
+        node between the meter and the air with the time constant ``emitter_tau_h`` of the
+        release after switch-off, one pair for both kinds of night. Held nights compare
+        P + τ_e·dP/dt + C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room);
+        constrained nights add the heat the emitter gives back while the room cools. A
+        nuisance term like the others (needs ``emitter_state``; same likelihood-ratio test).
     structure_share : bool
         Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
         without the nuisance terms (a structural-sensitivity share).
@@ -175,7 +187,8 @@ class NightFit:
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
                  meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
-                 settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact"):
+                 settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
+                 emitter_lag: bool = False, settle_until_held: bool = False):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -202,6 +215,8 @@ class NightFit:
         self.night_gain_sd_w = night_gain_sd_w
         self.settle_h = settle_h
         self.structure_share = structure_share
+        self.emitter_lag = emitter_lag
+        self.settle_until_held = settle_until_held
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -251,12 +266,13 @@ class NightFit:
         # The first hour after the setpoint step of a held night is emitter, air and furniture
         # charging and the sensor's lag (README "Accuracy", error budget): that power drives
         # nothing the 5R1C has, so it is not compared (T_air still drives the model).
-        power_ok = [ok & ((n.time_s - n.time_s[0]) >= 3600.0 * self.settle_h)
+        power_ok = [ok & settled(n, self.settle_h, self.settle_until_held)
                     if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
                                             smooth_out_s=3600.0 * self.smooth_out_h,
                                             power_ok=power_ok)
+        packed.emitter_lag = bool(self.emitter_lag and self.emitter_state)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver)
         cons = packed.constrained
         demand = ~cons & torch.tensor(self.normal_model == "demand")
@@ -267,7 +283,8 @@ class NightFit:
 
         nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
             NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
-                             self.furniture_state), strict=True)}
+                             self.furniture_state, self.emitter_state and self.emitter_lag),
+            strict=True)}
         self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
         plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
         lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
@@ -477,7 +494,9 @@ class NightFit:
 
     def _starts(self, s: int) -> torch.Tensor:
         rng = np.random.default_rng(self.seed)
-        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES)))
+        # emitter_share (added last) draws after the others: the earlier starts stay the same
+        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES) - 1))
+        frac = np.concatenate([frac, rng.uniform(0.15, 0.85, size=(s, 1))], axis=1)
         u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
         u[0] = 0.0
         return u

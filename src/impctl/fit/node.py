@@ -36,6 +36,7 @@ the "interval" convention (every value a mean over the interval that starts at i
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -45,7 +46,10 @@ import torch
 from ..imp.night import NightSamples
 from ..model.continuous import air_derivative, air_temperature
 from ..model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
-from .solver import NightODE  # the integrator (re-exported: tests and readers find it here)
+from .solver import (
+    NightODE,  # the integrator (re-exported: tests and readers find it here)
+    exact_chain,
+)
 
 DTYPE = torch.float64
 
@@ -81,7 +85,12 @@ ROW_DEMAND = 1
 #: measured T_air (the data, not the state, drive it: a second state is not needed for a node
 #: that follows T_air within an hour). It is part of the house's capacity: the reported C_m and
 #: τ include it (:func:`lumped`).
-NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k")
+#: The last, emitter_share, is the share of C_m that sits in the emitter (screed, radiator
+#: water and metal, buffer) between the heat meter and the air node, with the time constant
+#: emitter_tau_h (``NightFit(emitter_lag=True)``, :func:`build_rows`); the mass node keeps
+#: the rest, so C_m and τ stay the house's whole (as the classes and the plant define them).
+NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k",
+                  "emitter_share")
 NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
     # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the
@@ -90,11 +99,14 @@ NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     "emitter_w": (0.0, 4000.0),
     "emitter_tau_h": (0.2, 8.0),
     "furniture_j_per_m2k": (0.0, 40000.0),
+    # screed 130–250 kJ/(m²K) of heated floor (real-houses.md §2): up to about half of C_m
+    "emitter_share": (0.0, 0.6),
 }
 #: Furniture–air time constant [s]: 1/0.00022 s ≈ 76 min (real-houses.md §1, the Japanese
 #: residential code's G_fur = 0.00022·C_fur).
 FURNITURE_TAU_S = 1.0 / 0.00022
 _FUR = len(PARAM_NAMES) + 3   # column of furniture_j_per_m2k in a parameter row
+_EMC = len(PARAM_NAMES) + 4   # column of emitter_share
 
 
 def bounds_tensor(bounds: dict[str, tuple[float, float]],
@@ -192,6 +204,9 @@ class PackedNights:
     next_node: torch.Tensor
     last: torch.Tensor
     power_ok: torch.Tensor | None = None  # (N, K) bool: the power sample can be compared
+    #: the meter measures the heat into an emitter node that holds ``emitter_share`` of C_m
+    #: (``NightFit(emitter_lag=True)``, :func:`build_rows`)
+    emitter_lag: bool = False
 
     @property
     def n_nights(self) -> int:
@@ -320,13 +335,20 @@ class RowModel:
     measured: torch.Tensor    # (R, K) T_air [°C] for AIR rows, Φ_HC [W] for DEMAND rows
     mask: torch.Tensor        # (R, K) bool
     mean_next: torch.Tensor | None = None  # (R, K) next node: compare (y_k + y_next)/2
+    lag_next: torch.Tensor | None = None   # (R, K) next node of the emitter-lag difference
+    lag_rate: torch.Tensor | None = None   # (R, K) τ_e/h_k [-]: 0 where there is no lag
+    lag_extra: torch.Tensor | None = None  # (R, K) C_e·dT_air/dt [W] on the interval
 
     def predict(self) -> torch.Tensor:
-        """Model output at the nodes, (R, K) (interval means where ``mean_next`` says so)."""
+        """Model output at the nodes, (R, K) (interval means where ``mean_next`` says so;
+        plus τ_e·ΔP/h on DEMAND rows with the emitter lag)."""
         y = self.out_c[:, None] * self.ode.integrate(self.z0) + self.out_v
-        if self.mean_next is None:
-            return y
-        return 0.5 * (y + torch.gather(y, 1, self.mean_next))
+        out = y if self.mean_next is None else 0.5 * (y + torch.gather(y, 1, self.mean_next))
+        if self.lag_rate is not None:
+            out = out + self.lag_rate * (torch.gather(y, 1, self.lag_next) - y)
+        if self.lag_extra is not None:
+            out = out + self.lag_extra
+        return out
 
 
 def _unit(net, which: int):
@@ -365,6 +387,11 @@ def build_rows(
     method : the integration method of :class:`NightODE` ("exact" or "rk4")
     """
     net = network(params, ach_vent, ach_infl)
+    cap_e = None   # the emitter's capacity [J/K]
+    if packed.emitter_lag and params.shape[-1] > _EMC:
+        # the emitter's share of C_m is not at the mass node (as the plant splits it)
+        cap_e = params[:, _EMC] * net.c_m_j_per_k
+        net = dataclasses.replace(net, c_m_j_per_k=net.c_m_j_per_k - cap_e)
     te = packed.t_out_c[night_index]
     te_s = packed.t_out_slope[night_index]
     ta = packed.t_air_in_c[night_index]
@@ -404,6 +431,9 @@ def build_rows(
         cons = packed.constrained[night_index][:, None]
         x = gain[:, None] + torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
+        if cap_e is not None:
+            x = x + torch.where(cons, _emitter_release(cap_e, em_tau_s, grid,
+                                                       packed.t_air_in_slope[night_index]), 0.0)
         h = torch.diff(grid, dim=1)
         x_slope = torch.zeros_like(x)
         x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
@@ -436,6 +466,21 @@ def build_rows(
         mask = mask & ~(dm & packed.last[night_index])
     if packed.power_ok is not None:
         mask = mask & ~(dm & ~packed.power_ok[night_index])
+    lag_next = lag_rate = lag_extra = None
+    if packed.emitter_lag and any_dem and params.shape[-1] > len(PARAM_NAMES):
+        # The meter measures the heat into the emitter, not into the room: with the emitter
+        # node T_e = T_air + P/H_e (P the heat it gives the air, what the 5R1C demands) its
+        # balance C_e·dT_e/dt = P_meter − P gives P_meter = P + τ_e·dP/dt + C_e·dT_air/dt,
+        # τ_e = C_e/H_e — exact for a linear emitter, no extra state and no initial
+        # condition (tests/test_node.py). Over a sample interval the mean of τ_e·dP/dt is
+        # τ_e·(P_k+1 − P_k)/h_k. τ_e is the emitter time constant of the release after
+        # switch-off (one constant for both kinds of night); switched off with that term.
+        lag_next = packed.next_node[night_index]
+        h = torch.gather(grid, 1, lag_next) - grid
+        tau_s = torch.where(demand, params[:, len(PARAM_NAMES) + 2] * 3600.0, 0.0)
+        lag_rate = torch.where(h > 0, tau_s[:, None] / h.clamp_min(1e-9), 0.0)
+        if cap_e is not None:
+            lag_extra = torch.where(demand, cap_e, 0.0)[:, None] * ta_s
     ode = NightODE(grid, pick(a_dem, a_air), pick(u0_dem, u0_air), pick(u1_dem, u1_air),
                    method=method)
     return RowModel(
@@ -447,4 +492,19 @@ def build_rows(
                       packed.t_air_c[night_index] if any_air else None),
         mask=mask,
         mean_next=mean_next,
+        lag_next=lag_next,
+        lag_rate=lag_rate,
+        lag_extra=lag_extra,
     )
+
+
+def _emitter_release(c_e: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor,
+                     t_air_slope: torch.Tensor) -> torch.Tensor:
+    """Heat [W] (R, K) an emitter of capacity C_e and time constant τ_e gives the air of a
+    cooling night beyond its initial release: its excess e = T_e − T_air obeys
+    de/dt = −e/τ_e − dT_air/dt (no metered heat), driven by the measured (smoothed) T_air and
+    starting in step with a steady cooling; the heat is (C_e/τ_e)·e."""
+    s = t_air_slope
+    e = exact_chain(-tau_s * s[:, 0], -1.0 / tau_s, torch.diff(grid, dim=1), -s[:, :-1],
+                    torch.zeros_like(s[:, :-1]))
+    return (c_e / tau_s)[:, None] * e

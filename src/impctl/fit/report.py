@@ -180,7 +180,9 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         out["fit"]["nuisance_terms"] = (
             "night_gain_w: constant heat to the air node over the campaign; emitter_w, "
             "emitter_tau_h: heat still released after the fit start on constrained nights, "
-            "emitter_w·exp(−t/emitter_tau_h); bounded, fitted with the seven, not measured "
+            "emitter_w·exp(−t/emitter_tau_h); furniture_j_per_m2k: air/furniture capacity; "
+            "emitter_share: share of C_m in the emitter between the heat meter and the room "
+            "(with emitter_lag); bounded, fitted with the seven, not measured "
             "quantities of the product")
     if getattr(fit, "night_quality_", None) is not None:
         out["night_quality"] = fit.night_quality_
