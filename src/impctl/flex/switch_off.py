@@ -51,13 +51,14 @@ class SwitchOff:
     night_gain_w : constant heat to the air node (sleepers, base load) [W]
     emitter_tau_h : time constant of the emitter's release after switch-off [h]
     furniture_j_per_m2k : air + furniture capacity at the air node, per m² of floor [J/(m²K)]
-    documented : which terms were replaced by their documented range (names)
+    documented : names of the terms replaced by their documented range (per house: a list of
+        such tuples, :meth:`stack`)
     """
 
     night_gain_w: Any = (np.nan, np.nan, np.nan)
     emitter_tau_h: Any = (np.nan, np.nan, np.nan)
     furniture_j_per_m2k: Any = (np.nan, np.nan, np.nan)
-    documented: tuple = ()
+    documented: Any = ()
 
     def values(self, n: int) -> dict[str, np.ndarray]:
         """(3, n) arrays (value, low, high) per term."""
@@ -68,7 +69,7 @@ class SwitchOff:
     def stack(cls, items: list[SwitchOff]) -> SwitchOff:
         """Single houses' terms → one object with (3, n) arrays."""
         return cls(**{k: np.stack([np.asarray(getattr(s, k), float) for s in items], axis=-1)
-                      for k in SWITCH_OFF_TERMS})
+                      for k in SWITCH_OFF_TERMS}, documented=[s.documented for s in items])
 
 
 def _triple(entry: Any, name: str) -> tuple[float, float, float, tuple[float, float]]:
@@ -108,3 +109,34 @@ def switch_off_from_fit(summary: dict) -> SwitchOff:
                 low = min(low, RADIATOR_TAU_H)
         out[name] = (value, low, high)
     return SwitchOff(**out, documented=tuple(documented))
+
+
+#: FLEET.parquet columns of the fit's switch-off terms (value, _low, _high), as the fit found
+#: them (before the rules above): a fleet row re-simulates like the fit JSON.
+COLUMNS = tuple(f"{k}{s}" for k in SWITCH_OFF_TERMS for s in ("", "_low", "_high"))
+
+
+def to_columns(nuisance: dict | None) -> dict[str, float | None]:
+    """A fit's ``nuisance`` block → the :data:`COLUMNS` values (None: not fitted)."""
+    out: dict[str, float | None] = dict.fromkeys(COLUMNS)
+    for name in SWITCH_OFF_TERMS:
+        entry = (nuisance or {}).get(name)
+        if entry:
+            for key, suffix in (("value", ""), ("low", "_low"), ("high", "_high")):
+                out[f"{name}{suffix}"] = entry.get(key)
+    return out
+
+
+def from_columns(row: Any) -> dict:
+    """:data:`COLUMNS` of a row (a mapping; missing or NaN: not fitted) → a ``nuisance``
+    block for :func:`switch_off_from_fit` (bounds: the fit's, :data:`FIT_BOUNDS`)."""
+    out: dict[str, dict | None] = {}
+    for name in SWITCH_OFF_TERMS:
+        v = row.get(name) if hasattr(row, "get") else None
+        if v is None or not np.isfinite(float(v)):
+            out[name] = None
+            continue
+        lo, hi = (row.get(f"{name}{s}") for s in ("_low", "_high"))
+        out[name] = {"value": float(v), "low": None if lo is None else float(lo),
+                     "high": None if hi is None else float(hi), "bounds": FIT_BOUNDS[name]}
+    return out
