@@ -1,24 +1,28 @@
 """How right is the traded flexibility figure (``coast_h``) on realistic houses?
 
 ``impctl.flex`` computes the coast — hours until T_air has fallen by 1 K after the heating is
-switched off at steady state (21 °C indoors, 0 °C outdoors) — from the *fitted 5R1C*, counting
-the slow, mass-driven cooling after the model's instantaneous switch-off drop. This bench
-compares it with the coast of the **realistic plant** itself (``impctl.plant``: air, furniture
-and emitter capacity, the heat pump's control, sensors), the house the fit never sees whole:
+switched off at steady state (21 °C indoors, 0 °C outdoors) — from the fit's JSON summary: the
+fitted 5R1C plus the switch-off terms the fit kept (emitter release, air/furniture, night gain;
+without them the 5R1C's instantaneous switch-off drop is not counted). This bench compares it
+with the coast of the **realistic plant** itself (``impctl.plant``: air, furniture and emitter
+capacity, the heat pump's control, sensors), the house the fit never sees whole:
 
 * truth: the plant held at 21 °C for 24 h at a constant 0 °C outdoors (its control, its emitter,
   its night gains at the household's own level — or none with ``--gains off``), then the
   space-heating loop switched off; the coast is the time until the *true* air temperature has
   fallen 1 K below its mean over the last heated hour;
 * ``impctl fit`` (joint fit, true class ranges, 2 constrained + 6 normal nights of 5-minute
-  rows on the same plant, as ``bench/fit.py --plant realistic``) → ``impctl.flex`` coast and its
-  interval;
+  rows on the same plant, as ``bench/fit.py --plant realistic``) → its JSON summary →
+  ``impctl.flex`` coast and its interval (the product's path); the same fits through the pure
+  5R1C with the jump not counted and τ's interval only (before issue 16);
 * the true 5R1C parameters through ``impctl.flex`` (what a perfect fit would say: the model's
   own structural error);
 * the log-linear cooling baseline: τ from ln(T_air − T_out) on the constrained nights, coast
   = τ·ln(ΔT₀/(ΔT₀ − 1 K)) for a single-capacity house.
 
 Run: ``python bench/flex.py --households 50`` (prints the table and the command).
+``--save FILE`` keeps truth and fit summaries; ``--load FILE`` reruns only ``impctl.flex`` on
+them (seconds: for work on the coast itself).
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ from impctl.fit.data import prepare_nights
 from impctl.fit.estimator import NightFit
 from impctl.fit.node import PARAM_NAMES
 from impctl.fit.report import fit_to_dict
-from impctl.flex import flexibility_many, flexibility_of_fit
+from impctl.flex import flexibility_many, flexibility_of_fit, house_from_fit
 from impctl.model import HouseParameters
 from impctl.plant import simulate_plant
 from impctl.population.households import sample_households
@@ -181,24 +185,35 @@ def main() -> None:
                                                      for k in PARAM_NAMES},
                                                   ach_vent=ACH[0], ach_infl=ACH[1]),
                                  t_set_c=T_SET_C, t_out_c=T_OUT_C, drop_k=DROP_K)
+    # before issue 16: the same fits, pure 5R1C, switch-off jump not counted, τ interval only
+    old = [flexibility_many(house_from_fit(s), s["lumped"]["tau"]["low"],
+                            s["lumped"]["tau"]["high"], structure_share=False,
+                            t_set_c=T_SET_C, t_out_c=T_OUT_C, drop_k=DROP_K)[0]
+           for s in cached["summaries"]]
+    before, before_lo, before_hi = (np.array([getattr(f, k) for f in old])
+                                    for k in ("coast_h", "coast_h_low", "coast_h_high"))
     est = np.array([f.coast_h for f in fit_flex])
     lo = np.array([f.coast_h_low for f in fit_flex])
     hi = np.array([f.coast_h_high for f in fit_flex])
     perfect = np.array([f.coast_h for f in true_5r1c])
     kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
     groups = {"all": np.ones(n, bool), "radiators": kind == 0, "underfloor": kind == 1}
-    methods = sorted({getattr(f, "method", "5r1c") for f in fit_flex})
+    methods = {}
+    for f in fit_flex:
+        methods[f.coast_method] = methods.get(f.coast_method, 0) + 1
     print()
     print(f"`{' '.join(['python'] + sys.argv)}` ({time.perf_counter() - t_start:.0f} s, "
           f"load average {os.getloadavg()[0]:.1f}); truth: realistic plant, gains "
           f"{args.gains}; coast median {np.nanmedian(truth):.1f} h (P10–P90 "
           f"{np.nanpercentile(truth, 10):.1f}–{np.nanpercentile(truth, 90):.1f} h); "
-          f"impctl.flex methods used: {', '.join(methods)}")
+          f"coast methods: {'; '.join(f'{k} ({v})' for k, v in methods.items())}")
     print()
     print("| coast_h from | houses | median / P90 abs. error | signed median | "
-          "truth in 95 % interval | median interval half-width |")
+          "truth in 95 % interval | median interval half-width / coast_h |")
     print("|---|---|---|---|---|---|")
     for line in (summarise("impctl fit → impctl.flex", est, truth, groups, lo, hi)
+                 + summarise("impctl fit → pure 5R1C, jump not counted (before)", before,
+                             truth, groups, before_lo, before_hi)
                  + summarise("true 5R1C parameters → impctl.flex", perfect, truth, groups)
                  + summarise("log-linear τ baseline", np.array(cached["loglinear_h"]),
                              truth, groups)):
