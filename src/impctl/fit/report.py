@@ -28,8 +28,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
                         "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
-     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h":
-                  {"value", "low", "high", "bounds"} | null},
+     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h" | "furniture_j_per_m2k":
+                  {"value", "low", "high", "bounds"} | null},   # also read by impctl.flex
      "adequacy": {"adequate": bool, "statement": str,
                   "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
                              "rmse_over_noise", "lag1_autocorrelation"}}},
