@@ -86,10 +86,12 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
     """How long a fitted house can coast with the heating off, and the heat it needs after.
 
     SOURCE: an impctl fit JSON, or a FLEET.parquet of impctl fleet fit. From steady state at
-    --t-set and --t-out, heating off: coast_h = hours until T_air has fallen by --drop (after
-    the 5R1C model's instantaneous switch-off drop, a massless-air-node artefact);
+    --t-set and --t-out, heating off: coast_h = hours until T_air has fallen by --drop;
     rebound_kwh = heat beyond steady-state demand in the 2 h after heating resumes. Computed
-    with the fitted 5R1C (impctl.model); the coast interval from τ's 95 % interval.
+    with the fitted 5R1C plus the switch-off terms the fit kept (emitter release,
+    air/furniture, night gain; without them the 5R1C's instantaneous switch-off drop is not
+    counted); the interval from τ's, those terms' and the model structure's uncertainty
+    (impctl.flex).
     """
     conditions = {"t_set_c": t_set_c, "t_out_c": t_out_c, "drop_k": drop_k}
     if source.suffix == ".json" and source.is_file():
@@ -121,4 +123,4 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
     for name, f in results.items():
         iv = f"{f.coast_h_low:.2f}–{f.coast_h_high:.2f}"
         click.echo(f"  {name:<20} {f.coast_h:>8.2f} {iv:>15} {f.rebound_kwh:>12.2f} "
-                   f"{f.steady_state_w:>9.0f} {f.switch_off_drop_k:>18.2f}")
+                   f"{f.steady_state_w:>9.0f} {f.switch_off_drop_k:>18.2f}  {f.coast_method}")

@@ -28,12 +28,13 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
                         "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
-     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h":
-                  {"value", "low", "high", "bounds"} | null},
+     "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h" | "furniture_j_per_m2k":
+                  {"value", "low", "high", "bounds"} | null},   # also read by impctl.flex
      "adequacy": {"adequate": bool, "statement": str,
                   "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
                              "rmse_over_noise", "lag1_autocorrelation"}}},
-     "flexibility": {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh", ...}}  # impctl.flex
+     "flexibility": {"coast_h", "coast_h_low", "coast_h_high", "rebound_kwh", "coast_method",
+                     "coast_gain_w", ...}}  # impctl.flex, with the "nuisance" terms
 """
 
 from __future__ import annotations
@@ -286,6 +287,9 @@ def format_table(summary: dict) -> str:
                      f"[{flex['coast_h_low']:.1f}–{flex['coast_h_high']:.1f}] until T_air has "
                      f"fallen {flex['drop_k']:g} K; then {flex['rebound_kwh']:.2f} kWh beyond "
                      f"steady demand in {flex['rebound_h']:g} h (impctl flex)")
+        if flex.get("coast_method"):
+            lines.append(f"  coast computed with: {flex['coast_method']}; internal gain during "
+                         f"the coast {flex.get('coast_gain_w') or 0:.0f} W")
     for note in summary["notes"]:
         lines.append(f"note: {note}")
     return "\n".join(lines)

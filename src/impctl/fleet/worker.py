@@ -177,6 +177,9 @@ def _fill(row: dict, fit) -> None:
     for name, value in fit.parameters_.items():
         row[PARAM_COLUMNS[name]] = float(value)
     row["ach_vent_per_h"], row["ach_infl_per_h"] = fit.ach_vent, fit.ach_infl
+    from ..flex.switch_off import to_columns
+
+    row.update(to_columns(getattr(fit, "nuisance_", None)))
     row["class_contradicted"] = bool(fit.class_check_.get("rejected", False))
     row["needs_more_nights"] = not all(e.determined for e in fit.lumped_.values())
     row["loss"] = float(fit.loss_)
@@ -188,7 +191,7 @@ def _flexibility(fitted: list[tuple[dict, object]]) -> None:
     """coast_h, rebound_kwh for all fitted households of the batch in one vectorised run."""
     if not fitted:
         return
-    from ..flex import flexibility_many
+    from ..flex import SwitchOff, flexibility_many, switch_off_from_fit
     from ..model import HouseParameters
 
     try:
@@ -196,7 +199,10 @@ def _flexibility(fitted: list[tuple[dict, object]]) -> None:
             **fit.parameters_, ach_vent=fit.ach_vent, ach_infl=fit.ach_infl)
             for _, fit in fitted])
         tau = np.array([[f.lumped_["tau"].low, f.lumped_["tau"].high] for _, f in fitted])
-        flex = flexibility_many(houses, tau[:, 0], tau[:, 1])
+        # the fit's switch-off terms, read as the fit JSON's flexibility block reads them
+        terms = SwitchOff.stack([switch_off_from_fit({"nuisance": getattr(f, "nuisance_", None)})
+                                 for _, f in fitted])
+        flex = flexibility_many(houses, tau[:, 0], tau[:, 1], switch_off=terms)
     except InputError:
         return  # a fitted house the model refuses: the flexibility columns stay empty
     for (row, _), f in zip(fitted, flex, strict=True):

@@ -98,11 +98,12 @@ def _flexibility_section(fit: dict) -> list[str]:
             ["steady-state heat demand", "W", _fmt(flex["steady_state_w"], ".0f"), "—"]]
     return [f"<h2>Flexibility (at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
             "outdoors)</h2>",
-            _table(["quantity", "unit", "estimate", "from τ's 95 % interval"], rows),
-            "<p>The 5R1C model's instantaneous air-temperature drop at switch-off "
-            f"({_fmt(flex.get('switch_off_drop_k'), '.1f')} K here) is a model artefact (a "
-            "massless air node) and is not counted in the coast; see <code>impctl flex</code>."
-            "</p>"]
+            _table(["quantity", "unit", "estimate", "95 % interval"], rows),
+            f"<p>Coast computed with: {html.escape(str(flex.get('coast_method') or '5R1C'))}"
+            f"; internal gain during the coast {_fmt(flex.get('coast_gain_w') or 0.0, '.0f')} "
+            "W. Without fitted switch-off terms the 5R1C model's instantaneous air-temperature "
+            f"drop at switch-off ({_fmt(flex.get('switch_off_drop_k'), '.1f')} K here, a "
+            "massless air node) is not counted; see <code>impctl flex</code>.</p>"]
 
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
