@@ -1,7 +1,8 @@
 """Adaptive IMP campaign (issue 18) against the fixed 2 + 3 campaign, on the realistic plant.
 
 Run:  nice .venv/bin/python bench/campaign.py [--households 100] [--plant realistic|iso]
-          [--targets 0.05/0.08,0.15/0.15] [--max-nights 8] [--step-s 300]
+          [--targets 0.05/0.08,0.25/0.25] [--max-nights 5] [--step-s 300] [--processes 2]
+          [--strategies adaptive,fixed]
 
 Households: ``sample_households(N, seed=20260)`` with realism ``sample_params(N, 20260)`` (the
 validation population of ``bench/fit.py``), class ranges the true classes (as the realistic
@@ -12,38 +13,45 @@ weather and gains (the four variants as four schedules of the same houses, every
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
 the variant it chooses. Logged: room and outdoor sensors, heat meter, 5-minute samples.
 
-Strategies, each on every household, sharing fits where their nights coincide:
+Strategies, each on every household (``--strategies``; fits of identical night sets are shared
+between strategies and targets):
 
-* **adaptive** — :func:`impctl.campaign.decide` with the candidates of
-  :func:`impctl.campaign.design.predict_candidates` (the fit after every valid night);
-* **fixed order, adaptive stop** — the same stop/skip rules, the default order (no
-  predictions): separates stopping early from choosing the night;
-* **fixed 2 + 3** — today's plan: constrained, constrained, normal 21, 22, 23 °C; an invalid
+* **adaptive** — :func:`impctl.campaign.decide` with the candidates and the 2-night outlook of
+  :func:`impctl.campaign.design.predict` (the fit after every valid night);
+* **order** — fixed order, adaptive stop: the same stop/skip rules, the default order, no
+  predictions (the floor rule on the fit's own floor): separates stopping from choosing;
+* **fixed** — today's 2 + 3 plan: constrained, constrained, normal 21, 22, 23 °C; an invalid
   night is repeated; one fit at the end.
 
 Forecast of a night: the mean outdoor temperature of the previous night (persistence: the
 daemon's own history); a night whose forecast is outside the band −25…8 °C is skipped, one
-whose first outdoor reading is outside it is run but invalid. Reported per strategy and target:
-nights run (median, P90), share reaching the target, final-interval coverage of the true HLC
-and τ, median |error|, median final half-widths.
+whose first outdoor reading is outside it is run but invalid. The plant is simulated once in
+the parent; the campaigns run in ``--processes`` forked workers (households interleaved), one
+torch thread each. Reported per strategy and target: nights run (median, P90), share whose
+final fit meets the target, final-interval coverage of the true HLC and τ, median |error|,
+median final half-widths, stop reasons.
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
+import os
 import platform
 import sys
 import time
 
-import numpy as np
+os.environ.setdefault("OMP_NUM_THREADS", "1")   # one thread per process, before numpy/torch
 
-from impctl.campaign import Candidate, FitSummary, NightRecord, Target, decide
-from impctl.campaign.design import Protocol, predict_candidates
-from impctl.fit.batch import fit_households
-from impctl.fit.report import fit_to_dict
-from impctl.population.households import sample_households
-from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
+import numpy as np  # noqa: E402
+
+from impctl.campaign import Candidate, FitSummary, NightRecord, Outlook, Target, decide  # noqa: E402
+from impctl.campaign.design import Protocol, predict  # noqa: E402
+from impctl.fit.batch import fit_households  # noqa: E402
+from impctl.fit.report import fit_to_dict  # noqa: E402
+from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.realism import sample_params  # noqa: E402
+from impctl.population.synth_nights import (  # noqa: E402
     imp_schedule,
     run_schedule,
     run_schedule_plant,
@@ -58,18 +66,20 @@ VARIANTS = (("constrained", 21.0), ("normal", 21.0), ("normal", 22.0), ("normal"
 BAND_C = (-25.0, 8.0)
 PREHEAT_H = 4.0       # imp_schedule's constrained pre-heat
 FIXED = (0, 0, 1, 2, 3)   # today's plan: constrained first, then 21, 22, 23 °C
-STRATEGIES = ("adaptive", "fixed order, adaptive stop", "fixed 2 + 3")
+STRATEGIES = {"adaptive": "adaptive", "order": "fixed order, adaptive stop",
+              "fixed": "fixed 2 + 3"}
+AHEAD = 2             # the outlook's nights
 
 
 class Progress:
-    def __init__(self, every_s: float = 5.0):
-        self.every_s, self.t0, self.last = every_s, time.monotonic(), 0.0
+    def __init__(self, every_s: float = 5.0, prefix: str = ""):
+        self.every_s, self.t0, self.last, self.prefix = every_s, time.monotonic(), 0.0, prefix
 
     def __call__(self, text: str, force: bool = False) -> None:
         now = time.monotonic()
         if force or now - self.last >= self.every_s:
             self.last = now
-            print(f"  [{now - self.t0:6.0f} s] {text}", flush=True)
+            print(f"  [{now - self.t0:6.0f} s]{self.prefix} {text}", flush=True)
 
 
 def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progress):
@@ -107,9 +117,10 @@ class Fits:
         self.houses, self.nights, self.protocol, self.step_s = houses, nights, protocol, step_s
         self.progress = progress
         self.cache: dict[tuple, dict | None] = {}
+        self.predictions: dict[tuple, tuple[list[Candidate], Outlook | None]] = {}
         self.count, self.seconds = 0, 0.0
 
-    def ensure(self, keys: list[tuple], batch: int = 12) -> None:
+    def ensure(self, keys: list[tuple], batch: int = 16) -> None:
         todo = sorted({k for k in keys if k not in self.cache})
         for b in range(0, len(todo), batch):
             chunk = todo[b:b + batch]
@@ -125,16 +136,21 @@ class Fits:
             self.progress(f"fits: {self.count} done ({self.seconds / self.count:.2f} s each), "
                           f"{len(todo) - b - len(chunk)} to go in this round")
 
-    def candidates(self, key: tuple, forecast_c: float) -> list[Candidate]:
+    def candidates(self, key: tuple, forecast_c: float) -> tuple[list[Candidate],
+                                                                 Outlook | None]:
         result = self.cache.get(key)
         if result is None:
-            return []
-        try:
-            return predict_candidates(result, forecast_c, constrained_setpoint_c=21.0,
-                                      normal_setpoints_c=(21.0, 22.0, 23.0), step_s=self.step_s,
-                                      protocol=self.protocol)
-        except (KeyError, TypeError, ValueError):
-            return []
+            return [], None
+        memo = (key, round(forecast_c, 3))
+        if memo not in self.predictions:
+            try:
+                self.predictions[memo] = predict(
+                    result, forecast_c, constrained_setpoint_c=21.0,
+                    normal_setpoints_c=(21.0, 22.0, 23.0), step_s=self.step_s,
+                    protocol=self.protocol, ahead=AHEAD)
+            except (KeyError, TypeError, ValueError):
+                self.predictions[memo] = ([], None)
+        return self.predictions[memo]
 
 
 class Campaign:
@@ -157,19 +173,19 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
     """Decide night j for campaign c; returns the variant run or None."""
     if c.done:
         return None
-    if c.strategy == "fixed 2 + 3":
+    if c.strategy == "fixed":
         n_valid = len(c.chosen)
         if n_valid >= len(FIXED):
             c.done, c.reason = True, "plan complete"
             return None
         v = FIXED[n_valid]
     else:
-        cands = []
+        cands, outlook = [], None
         if c.strategy == "adaptive" and c.key is not None:
-            cands = fits.candidates(c.key, forecast)
+            cands, outlook = fits.candidates(c.key, forecast)
         d = decide(c.history, c.fits, cands, c.target, forecast_t_out_c=forecast,
                    t_out_band_c=BAND_C, constrained_setpoint_c=21.0,
-                   normal_setpoints_c=(21.0, 22.0, 23.0))
+                   normal_setpoints_c=(21.0, 22.0, 23.0), outlook=outlook)
         if d.action == "stop":
             c.done, c.reached, c.reason = True, d.reached, d.reason
             return None
@@ -183,15 +199,16 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
     return v
 
 
-def run(args, target: Target, fits: Fits, forecast, first_t_out, k: int, n: int) -> list:
-    camps = [Campaign(i, s, target) for s in STRATEGIES for i in range(n)]
+def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: list[int],
+        strategies: list[str]) -> list:
+    camps = [Campaign(i, s, target) for s in strategies for i in households]
     for j in range(k):
         ran = [c for c in camps if step(c, j, fits, float(forecast[c.i][j]), first_t_out)
                is not None]
         keys = [c.fit_key() for c in ran]
         need = [key for c, key in zip(ran, keys, strict=True)
                 if key is not None and c.chosen and c.chosen[-1][0] == j
-                and (c.strategy != "fixed 2 + 3" or len(c.chosen) == len(FIXED))]
+                and (c.strategy != "fixed" or len(c.chosen) == len(FIXED))]
         fits.ensure(need)
         for c in ran:
             key = c.fit_key()
@@ -209,19 +226,35 @@ def run(args, target: Target, fits: Fits, forecast, first_t_out, k: int, n: int)
     return camps
 
 
-def summarise(camps: list, houses, target: Target) -> None:
+def _label(c: Campaign) -> str:
+    if c.reached:
+        return "target reached"
+    for text, label in (("most this", "max nights"), ("precision limited", "precision limited"),
+                        ("would not help", "no gain"), ("cannot be", "cannot be identified")):
+        if text in c.reason:
+            return label
+    return c.reason
+
+
+def _record(c: Campaign) -> tuple:
+    """What the parent needs of a finished campaign (picklable)."""
+    final = c.fits[-1] if c.key is not None and c.fits else None
+    return (c.strategy, c.i, len(c.history), final, _label(c))
+
+
+def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
     print(f"\nTarget: HLC ±{target.hlc_rel:.0%}, τ ±{target.tau_rel:.0%} (95 % half-width / "
           f"estimate), max {target.max_nights} nights, stall {target.stall_nights} nights")
     print(f"{'strategy':<28} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
           f"{'cover HLC/τ':>12} {'|err| HLC/τ %':>14} {'±HLC/τ % med':>13}  stopped by")
-    for s in STRATEGIES:
-        sub = [c for c in camps if c.strategy == s]
-        nights = np.array([len(c.history) for c in sub])
-        got = [c for c in sub if c.key is not None and c.fits]
+    rows = []
+    for s in strategies:
+        sub = [r for r in records if r[0] == s]
+        nights = np.array([r[2] for r in sub])
+        got = [r for r in sub if r[3] is not None]
         cov_h, cov_t, err_h, err_t, w_h, w_t = [], [], [], [], [], []
-        for c in got:
-            h = houses.take(c.i)
-            f = c.fits[-1]
+        for _, i, _, f, _ in got:
+            h = houses.take(i)
             cov_h.append(f.hlc_low <= h.hlc_w_per_k <= f.hlc_high)
             cov_t.append(f.tau_low <= h.tau_h <= f.tau_high)
             err_h.append(abs(f.hlc_w_per_k / h.hlc_w_per_k - 1) * 100)
@@ -229,10 +262,8 @@ def summarise(camps: list, houses, target: Target) -> None:
             w_h.append(f.hlc_rel * 100)
             w_t.append(f.tau_rel * 100)
         why: dict[str, int] = {}
-        for c in sub:
-            label = ("target reached" if c.reached else "max nights" if "most this" in c.reason
-                     else "cannot be identified" if "cannot be" in c.reason else c.reason)
-            why[label] = why.get(label, 0) + 1
+        for r in sub:
+            why[r[4]] = why.get(r[4], 0) + 1
 
         def pct(x):
             return 100.0 * np.mean(x) if len(x) else float("nan")
@@ -242,40 +273,84 @@ def summarise(camps: list, houses, target: Target) -> None:
 
         # "reached": the final fit meets the target — also for the fixed plan, which does not
         # stop on it
-        met = [bool(c.fits) and target.ratio(c.fits[-1].hlc_rel, c.fits[-1].tau_rel) <= 1
-               for c in sub]
-        print(f"{s:<28} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
+        met = [r[3] is not None and target.ratio(r[3].hlc_rel, r[3].tau_rel) <= 1 for r in sub]
+        reasons = ", ".join(f"{k} {v}" for k, v in sorted(why.items()))
+        print(f"{STRATEGIES[s]:<28} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
               f"{pct(met):>7.0f}% {len(sub) - len(got):>7d} "
               f"{pct(cov_h):>5.0f}/{pct(cov_t):<4.0f}% {med(err_h):>6.1f} / {med(err_t):<5.1f} "
-              f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  "
-              + ", ".join(f"{k} {v}" for k, v in sorted(why.items())))
+              f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  {reasons}")
+        rows.append(f"| {target.hlc_rel:.0%} / {target.tau_rel:.0%} | {STRATEGIES[s]} | "
+                    f"{np.median(nights):g} / {np.percentile(nights, 90):g} | {pct(met):.0f} % | "
+                    f"{pct(cov_h):.0f} / {pct(cov_t):.0f} % | {med(err_h):.1f} / "
+                    f"{med(err_t):.1f} % | {med(w_h):.1f} / {med(w_t):.1f} % | {reasons} |")
+    print("markdown:\n" + "\n".join(rows))
+
+
+#: Set in the parent before the workers fork (copy-on-write: the simulated nights are not
+#: pickled).
+_SHARED: dict = {}
+
+
+def _worker(w: int) -> tuple[list, int, float]:
+    import torch
+
+    torch.set_num_threads(1)
+    sh = _SHARED
+    households = list(range(w, sh["n"], sh["processes"]))
+    progress = Progress(prefix=f" worker {w + 1}/{sh['processes']}:")
+    fits = Fits(sh["houses"], sh["nights"], Protocol(preheat_h=PREHEAT_H), sh["step_s"],
+                progress)
+    out = []
+    for target in sh["targets"]:
+        camps = run(target, fits, sh["forecast"], sh["first_t_out"], sh["k"], households,
+                    sh["strategies"])
+        out.append([_record(c) for c in camps])
+    return out, fits.count, fits.seconds
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=100)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
-    ap.add_argument("--targets", default="0.05/0.08",
+    ap.add_argument("--targets", default="0.05/0.08,0.25/0.25",
                     help="HLC/τ relative 95 %% half-widths, comma-separated pairs")
-    ap.add_argument("--max-nights", type=int, default=8)
+    ap.add_argument("--max-nights", type=int, default=5)
     ap.add_argument("--step-s", type=float, default=300.0)
+    ap.add_argument("--processes", type=int, default=2)
+    ap.add_argument("--strategies", default="adaptive,fixed",
+                    help="comma-separated, of: " + ", ".join(STRATEGIES))
     args = ap.parse_args()
+    strategies = [x.strip() for x in args.strategies.split(",")]
+    unknown = [x for x in strategies if x not in STRATEGIES]
+    if unknown:
+        ap.error(f"--strategies: unknown {', '.join(unknown)} (known: {', '.join(STRATEGIES)})")
     n, k = args.households, args.max_nights + 2
     progress = Progress()
     t0 = time.perf_counter()
     print(f"bench/campaign.py: {n} households, {args.plant} plant, {args.step_s:g} s samples, "
-          f"{platform.processor() or platform.machine()}", flush=True)
+          f"{args.processes} processes, {platform.processor() or platform.machine()}, load "
+          f"{os.getloadavg()[0]:.1f}", flush=True)
     houses, nights, forecast, first_t_out = simulate_variants(n, k, args.plant, args.step_s,
                                                               progress)
-    protocol = Protocol(preheat_h=PREHEAT_H)
-    fits = Fits(houses, nights, protocol, args.step_s, progress)
+    t_sim = time.perf_counter() - t0
+    targets = []
     for pair in args.targets.split(","):
         hlc, tau = (float(x) for x in pair.split("/"))
-        target = Target(hlc_rel=hlc, tau_rel=tau, max_nights=args.max_nights)
-        camps = run(args, target, fits, forecast, first_t_out, k, n)
-        summarise(camps, houses, target)
-    print(f"\n{fits.count} fits, {fits.seconds:.0f} s fitting, {time.perf_counter() - t0:.0f} s "
-          f"in all")
+        targets.append(Target(hlc_rel=hlc, tau_rel=tau, max_nights=args.max_nights))
+    _SHARED.update(n=n, k=k, houses=houses, nights=nights, forecast=forecast,
+                   first_t_out=first_t_out, step_s=args.step_s, targets=targets,
+                   strategies=strategies, processes=max(1, args.processes))
+    if args.processes > 1:
+        with multiprocessing.get_context("fork").Pool(args.processes) as pool:
+            parts = pool.map(_worker, range(args.processes))
+    else:
+        parts = [_worker(0)]
+    for t, target in enumerate(targets):
+        summarise([r for part, _, _ in parts for r in part[t]], houses, target, strategies)
+    count, seconds = sum(p[1] for p in parts), sum(p[2] for p in parts)
+    print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
+          f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
+          f"{os.getloadavg()[0]:.1f}")
     print("command: " + " ".join(["python"] + sys.argv))
 
 

@@ -107,7 +107,10 @@ class FitSummary:
 
     ``hlc_floor_rel`` and ``tau_floor_rel`` are the relative 95 % half-widths of the interval's
     type-B shares alone (sensor offsets, meter, night gains, structure, model error): what no
-    number of nights removes (0 = not stated by the fit).
+    number of nights removes (0 = not stated by the fit). ``too_few_nights``: the intervals
+    rest on too few nights to mean much (the fit's ``interval_basis`` says so, or a
+    night-clustered sandwich from 2 nights, with Student-t's t(1) = 12.7, is wider than
+    ±100 %) — show "too few nights yet", not the numbers.
     """
 
     nights: int
@@ -119,6 +122,7 @@ class FitSummary:
     tau_high: float
     hlc_floor_rel: float = 0.0
     tau_floor_rel: float = 0.0
+    too_few_nights: bool = False
 
     @classmethod
     def from_fit_json(cls, result: dict, nights: int) -> FitSummary:
@@ -136,14 +140,25 @@ class FitSummary:
             value = block.get(key) if isinstance(block, dict) else None
             return _num(value, math.nan)
 
+        fit = result.get("fit") if isinstance(result.get("fit"), dict) else {}
+        sources = fit.get("interval_source") if isinstance(fit.get("interval_source"),
+                                                            dict) else {}
+        basis = fit.get("interval_basis")
         shares = type_b_shares(result)
         floor = {name: math.sinh(Z95 * math.hypot(*shares[name])) for name in ("hlc", "tau")}
+        rel = {name: _rel(get(name, "value"), get(name, "low"), get(name, "high"))
+               for name in ("hlc", "tau")}
+        # The fit's own word wins; else a 2-night sandwich wider than ±100 % (t(1) = 12.7)
+        too_few = (("too few" in basis) if isinstance(basis, str) else
+                   int(nights) <= 2 and any(sources.get(n) == "sandwich" and rel[n] > 1.0
+                                            for n in rel))
         return cls(nights=int(nights),
                    hlc_w_per_k=get("hlc", "value"), hlc_low=get("hlc", "low"),
                    hlc_high=get("hlc", "high"),
                    tau_h=get("tau", "value"), tau_low=get("tau", "low"),
                    tau_high=get("tau", "high"),
-                   hlc_floor_rel=floor["hlc"], tau_floor_rel=floor["tau"])
+                   hlc_floor_rel=floor["hlc"], tau_floor_rel=floor["tau"],
+                   too_few_nights=bool(too_few))
 
     @property
     def hlc_rel(self) -> float:

@@ -77,7 +77,8 @@ def _campaign(store, cfg) -> dict:
     camp = cfg.campaign
     history = [{"valid_nights": f.nights, "hlc_w_per_k": _finite(f.hlc_w_per_k),
                 "hlc_rel_pct": rel_pct(f.hlc_rel), "tau_h": _finite(f.tau_h),
-                "tau_rel_pct": rel_pct(f.tau_rel)}
+                "tau_rel_pct": rel_pct(f.tau_rel),
+                "interval_note": "too few nights yet" if f.too_few_nights else None}
                for f in fit_history(store)]
     out = {"mode": st.mode, "nights_run": st.nights_run, "nights_valid": st.nights_valid,
            "status": st.status, "reason": st.reason, "intervals": history,
@@ -138,6 +139,11 @@ def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     for f in camp["intervals"]:
         def pct(v):
             return "undetermined" if v is None else f"±{v:.1f} %"
+        if f.get("interval_note"):
+            lines.append(f"  after {f['valid_nights']} valid nights: "
+                         f"HLC {_value(f['hlc_w_per_k'], 'W/K', '.0f')}, "
+                         f"τ {_value(f['tau_h'], 'h', '.0f')}; interval: {f['interval_note']}")
+            continue
         lines.append(f"  after {f['valid_nights']} valid nights: "
                      f"HLC {_value(f['hlc_w_per_k'], 'W/K', '.0f')} "
                      f"{pct(f['hlc_rel_pct'])}, τ {_value(f['tau_h'], 'h', '.0f')} "

@@ -202,7 +202,8 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
     if last_fit is not None:
         try:
             fit = FitSummary.from_fit_json(last_fit[2], len(last_fit[1]))
-            hlc, tau = rel_pct(fit.hlc_rel), rel_pct(fit.tau_rel)
+            if not fit.too_few_nights:  # else hundreds of %: Home Assistant shows unknown
+                hlc, tau = rel_pct(fit.hlc_rel), rel_pct(fit.tau_rel)
         except ValueError:
             pass
     last = store.decisions(1)
