@@ -236,8 +236,8 @@ def test_check_config_names_the_campaign_and_its_first_night(tmp_path):
 
 def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
     cfg_path = tmp_path / "c.toml"
-    cfg_path.write_text('state_dir = "%s"\n[heatpump]\nhost = "192.168.1.50"\n[campaign]\n'
-                        'mode = "adaptive"\n' % tmp_path)
+    cfg_path.write_text(f'state_dir = "{tmp_path}"\n[heatpump]\nhost = "192.168.1.50"\n'
+                        '[campaign]\nmode = "adaptive"\n')
     cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path),
                                "campaign": {"mode": "adaptive"}})
     with Store(cfg.db_path) as store:
