@@ -239,7 +239,20 @@ def _label(c: Campaign) -> str:
 def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
-    return (c.strategy, c.i, len(c.history), final, _label(c))
+    return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason)
+
+
+def _trajectories(records: list, houses, strategy: str) -> None:
+    """Per household: each fit's ±HLC/±τ [%] (floor in brackets), errors, and why it stopped."""
+    print(f"\n{STRATEGIES[strategy]}: per household, each fit ±HLC/±τ % [floor] (error %)")
+    for r in sorted((r for r in records if r[0] == strategy), key=lambda r: r[1]):
+        h = houses.take(r[1])
+        steps = " → ".join(
+            f"{f.nights}: {100 * f.hlc_rel:.0f}/{100 * f.tau_rel:.0f} "
+            f"[{100 * f.hlc_floor_rel:.0f}/{100 * f.tau_floor_rel:.0f}] "
+            f"({100 * (f.hlc_w_per_k / h.hlc_w_per_k - 1):+.0f}/"
+            f"{100 * (f.tau_h / h.tau_h - 1):+.0f})" for f in r[5])
+        print(f"  {r[1]:3d} {r[2]} nights: {steps} — {r[6][:90]}")
 
 
 def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
@@ -253,7 +266,7 @@ def summarise(records: list, houses, target: Target, strategies: list[str]) -> N
         nights = np.array([r[2] for r in sub])
         got = [r for r in sub if r[3] is not None]
         cov_h, cov_t, err_h, err_t, w_h, w_t = [], [], [], [], [], []
-        for _, i, _, f, _ in got:
+        for _, i, _, f, *_ in got:
             h = houses.take(i)
             cov_h.append(f.hlc_low <= h.hlc_w_per_k <= f.hlc_high)
             cov_t.append(f.tau_low <= h.tau_h <= f.tau_high)
@@ -319,6 +332,8 @@ def main() -> None:
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--strategies", default="adaptive,fixed",
                     help="comma-separated, of: " + ", ".join(STRATEGIES))
+    ap.add_argument("--trajectories", action="store_true",
+                    help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
     strategies = [x.strip() for x in args.strategies.split(",")]
     unknown = [x for x in strategies if x not in STRATEGIES]
@@ -346,7 +361,11 @@ def main() -> None:
     else:
         parts = [_worker(0)]
     for t, target in enumerate(targets):
-        summarise([r for part, _, _ in parts for r in part[t]], houses, target, strategies)
+        records = [r for part, _, _ in parts for r in part[t]]
+        summarise(records, houses, target, strategies)
+        if args.trajectories:
+            for s in strategies:
+                _trajectories(records, houses, s)
     count, seconds = sum(p[1] for p in parts), sum(p[2] for p in parts)
     print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "

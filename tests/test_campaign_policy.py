@@ -192,6 +192,11 @@ def test_stop_when_the_floor_makes_the_target_unreachable():
     d = decide([C, N], [wide], helps, Target(), **KW,
                outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
     assert (d.action, d.kind) == ("run", "normal")
+    # ... also when two more nights are predicted to bring it down to the floor: those are
+    # the nights that get it there
+    d = decide([C, N], [wide], helps, Target(), **KW,
+               outlook=Outlook(2, 0.10, 0.08, 0.09, 0.06))
+    assert d.action == "run"
     # a floor below the target never stops on precision: the target is reachable
     low_floor = fit(2, 0.11, 0.09, floor=(0.03, 0.04))
     d = decide([C, N], [low_floor], [Candidate("normal", 22.0, 0.08, 0.07)], Target(), **KW,
@@ -213,6 +218,9 @@ def test_stop_when_the_next_night_would_not_help():
     assert decide([C, N, N], [now], enough, Target(), **KW).action == "run"
     # no prediction (the fit could not be simulated): nothing to judge, the default order
     assert decide([C, N, N], [now], [], Target(), **KW).action == "run"
+    # a fit of one night of each kind is not trusted to say that nights would not help
+    first = fit(2, 0.30, 0.20)
+    assert decide([C, N], [first], little, Target(), **KW).action == "run"
 
 
 def test_floor_and_gain_rules_wait_for_one_night_of_each_kind():

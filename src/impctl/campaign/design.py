@@ -34,6 +34,13 @@ Criterion (documented choice; README "Adaptive campaign"):
 
 A candidate is scored by the policy as max(hlc_rel_pred / target_hlc, tau_rel_pred /
 target_tau) (:func:`impctl.campaign.policy.decide`).
+
+* **Outlook.** The same prediction after ``ahead`` more nights (the most informative normal
+  and constrained candidates, by det(F_past + F_night), alternating, normal first), and the
+  *floor* then: the type-B shares alone (:func:`impctl.campaign.policy.type_b_shares`) at
+  the mean ΔT those nights bring — what no number of nights removes. The policy stops on it
+  ("precision limited by the sensors and the heat meter") when the floor alone misses the
+  target and dominates the predicted interval.
 """
 
 from __future__ import annotations

@@ -16,11 +16,14 @@ Rules, in order (:func:`decide`):
    because the interval is dominated by shares no night reduces (type-B: sensor offsets, heat
    meter, night gains, structure and model-error shares, stated in the fit JSON): the worst
    ratio of that *floor* alone is ≥ 1, the predicted worst ratio after the best candidate night
-   and after :attr:`Outlook.nights` more nights is still ≥ 1, and the floor makes up at least
-   half of the predicted variance after those nights (the worst ratio of the floor ≥ 1/√2 of
-   the predicted one). Without predictions the latest fit's own floor and interval are used.
-4. **more nights would not help** — with predictions, stop when the best candidate night is
-   predicted to shrink the worst ratio by less than 10 % (:data:`MIN_GAIN`).
+   and after :attr:`Outlook.nights` more nights is still ≥ 1, and the floor already makes up at
+   least half of the latest interval's variance (the floor's worst ratio ≥ 1/√2 of the
+   latest one: the part nights can shrink is at most as large as the part they cannot).
+   Without predictions the latest fit's own floor and interval are used.
+4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
+   stop when the best candidate night is predicted to shrink the worst ratio by less than
+   10 % (:data:`MIN_GAIN`). A fit of one night of each kind is too fragile (its sandwich has
+   one degree of freedom) to trust its own prediction that nights would not help.
 5. **cannot be identified** — stop when the worst ratio max(hlc_rel/target, tau_rel/target)
    did not shrink by at least 10 % over the last ``stall_nights`` valid nights: more nights of
    the same house are unlikely to help, and the household should not pay for them.
@@ -48,8 +51,8 @@ KINDS = (CONSTRAINED, NORMAL)
 STALL_SHRINK = 0.10
 #: "More nights would not help": the best next night must shrink the worst ratio by this much.
 MIN_GAIN = 0.10
-#: "Dominated by the floor": the floor's worst ratio is at least this fraction of the one
-#: predicted after the outlook's nights (1/√2: the floor is at least half the variance).
+#: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
+#: fit's (1/√2: the floor is at least half the variance).
 FLOOR_DOMINANT = 1 / math.sqrt(2)
 Z95 = 1.959964
 
@@ -406,10 +409,11 @@ def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook 
         hlc_floor, tau_floor = latest.hlc_floor_rel, latest.tau_floor_rel
         ahead = target.ratio(latest.hlc_rel, latest.tau_rel)
     floor = target.ratio(hlc_floor, tau_floor)
+    now = target.ratio(latest.hlc_rel, latest.tau_rel)
     tonight = (target.ratio(best.hlc_rel_pred, best.tau_rel_pred) if best is not None
-               else target.ratio(latest.hlc_rel, latest.tau_rel))
+               else now)
     if not (math.isfinite(floor) and floor >= 1 and tonight >= 1 and ahead >= 1
-            and floor >= FLOOR_DOMINANT * ahead):
+            and floor >= FLOOR_DOMINANT * now):
         return None
     return (f"Stopped: precision limited by the sensors and the heat meter: HLC "
             f"±{_pct(hlc_floor)} and τ ±{_pct(tau_floor)} is the best this house can give "
@@ -420,7 +424,7 @@ def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook 
 def _no_gain(latest: FitSummary, best: Candidate | None, target: Target) -> str | None:
     """The "more nights would not help" sentence when the best night is predicted to shrink
     the worst ratio by less than :data:`MIN_GAIN`."""
-    if best is None:
+    if best is None or latest.nights < 3:
         return None
     now = target.ratio(latest.hlc_rel, latest.tau_rel)
     then = target.ratio(best.hlc_rel_pred, best.tau_rel_pred)
