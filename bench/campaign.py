@@ -2,7 +2,7 @@
 
 Run:  nice .venv/bin/python bench/campaign.py [--households 100] [--plant realistic|iso]
           [--targets 0.05/0.08,0.25/0.25] [--max-nights 5] [--step-s 300] [--processes 2]
-          [--strategies adaptive,fixed]
+          [--strategies adaptive,unreachable,fixed]
 
 Households: ``sample_households(N, seed=20260)`` with realism ``sample_params(N, 20260)`` (the
 validation population of ``bench/fit.py``), class ranges the true classes (as the realistic
@@ -18,6 +18,9 @@ between strategies and targets):
 
 * **adaptive** — :func:`impctl.campaign.decide` with the candidates and the 2-night outlook of
   :func:`impctl.campaign.design.predict` (the fit after every valid night);
+* **unreachable** — adaptive with ``floor_dominance = 0``: stops as soon as the floor alone
+  (sensor offsets, meter, night gains, structure/model-error shares) misses the target, however
+  wide the statistical part still is;
 * **order** — fixed order, adaptive stop: the same stop/skip rules, the default order, no
   predictions (the floor rule on the fit's own floor): separates stopping from choosing;
 * **fixed** — today's 2 + 3 plan: constrained, constrained, normal 21, 22, 23 °C; an invalid
@@ -40,6 +43,7 @@ import os
 import platform
 import sys
 import time
+from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")   # one thread per process, before numpy/torch
 
@@ -66,8 +70,8 @@ VARIANTS = (("constrained", 21.0), ("normal", 21.0), ("normal", 22.0), ("normal"
 BAND_C = (-25.0, 8.0)
 PREHEAT_H = 4.0       # imp_schedule's constrained pre-heat
 FIXED = (0, 0, 1, 2, 3)   # today's plan: constrained first, then 21, 22, 23 °C
-STRATEGIES = {"adaptive": "adaptive", "order": "fixed order, adaptive stop",
-              "fixed": "fixed 2 + 3"}
+STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreachable",
+              "order": "fixed order, adaptive stop", "fixed": "fixed 2 + 3"}
 AHEAD = 2             # the outlook's nights
 
 
@@ -181,9 +185,11 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         v = FIXED[n_valid]
     else:
         cands, outlook = [], None
-        if c.strategy == "adaptive" and c.key is not None:
+        if c.strategy in ("adaptive", "unreachable") and c.key is not None:
             cands, outlook = fits.candidates(c.key, forecast)
-        d = decide(c.history, c.fits, cands, c.target, forecast_t_out_c=forecast,
+        target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
+                  else c.target)
+        d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
                    t_out_band_c=BAND_C, constrained_setpoint_c=21.0,
                    normal_setpoints_c=(21.0, 22.0, 23.0), outlook=outlook)
         if d.action == "stop":
@@ -222,7 +228,8 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
                       f"{sum(not c.done for c in camps)} campaigns running", force=True)
     for c in camps:
         if not c.done:
-            c.reason = "ran out of simulated nights"
+            c.reason = ("plan complete" if c.strategy == "fixed" and len(c.chosen) >= len(FIXED)
+                        else "ran out of simulated nights")
     return camps
 
 
@@ -330,7 +337,7 @@ def main() -> None:
     ap.add_argument("--max-nights", type=int, default=5)
     ap.add_argument("--step-s", type=float, default=300.0)
     ap.add_argument("--processes", type=int, default=2)
-    ap.add_argument("--strategies", default="adaptive,fixed",
+    ap.add_argument("--strategies", default="adaptive,unreachable,fixed",
                     help="comma-separated, of: " + ", ".join(STRATEGIES))
     ap.add_argument("--trajectories", action="store_true",
                     help="print every campaign's fits, floors, errors and stop reason")

@@ -197,6 +197,12 @@ def test_stop_when_the_floor_makes_the_target_unreachable():
     d = decide([C, N], [wide], helps, Target(), **KW,
                outlook=Outlook(2, 0.10, 0.08, 0.09, 0.06))
     assert d.action == "run"
+    # floor_dominance 0: stop as soon as the floor alone misses the target
+    d = decide([C, N], [wide], helps, Target(floor_dominance=0.0), **KW,
+               outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
+    assert "precision limited" in d.reason
+    with pytest.raises(ValueError, match="floor_dominance"):
+        Target(floor_dominance=1.5)
     # a floor below the target never stops on precision: the target is reachable
     low_floor = fit(2, 0.11, 0.09, floor=(0.03, 0.04))
     d = decide([C, N], [low_floor], [Candidate("normal", 22.0, 0.08, 0.07)], Target(), **KW,

@@ -70,6 +70,9 @@ class Target:
     min_each : valid nights of each kind before precision may stop the campaign
     stall_nights : "cannot be identified" when the worst ratio did not shrink by ≥ 10 % over
         this many valid nights
+    floor_dominance : "precision limited" needs the floor's worst ratio ≥ this fraction of the
+        latest fit's (default 1/√2: the floor is at least half the variance; 0: stop as soon as
+        the floor alone misses the target)
     """
 
     hlc_rel: float = 0.05
@@ -77,8 +80,13 @@ class Target:
     max_nights: int = 5
     min_each: int = 1
     stall_nights: int = 3
+    floor_dominance: float = FLOOR_DOMINANT
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.floor_dominance, (int, float))
+                and 0.0 <= self.floor_dominance <= 1.0):
+            raise ValueError(f"target floor_dominance must be within 0..1, got "
+                             f"{self.floor_dominance!r}")
         for name in ("hlc_rel", "tau_rel"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -413,7 +421,7 @@ def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook 
     tonight = (target.ratio(best.hlc_rel_pred, best.tau_rel_pred) if best is not None
                else now)
     if not (math.isfinite(floor) and floor >= 1 and tonight >= 1 and ahead >= 1
-            and floor >= FLOOR_DOMINANT * now):
+            and floor >= target.floor_dominance * now):
         return None
     return (f"Stopped: precision limited by the sensors and the heat meter: HLC "
             f"±{_pct(hlc_floor)} and τ ±{_pct(tau_floor)} is the best this house can give "
