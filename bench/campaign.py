@@ -167,6 +167,8 @@ class Campaign:
         self.fits: list[FitSummary] = []
         self.key: tuple | None = None
         self.done, self.reached, self.reason = False, False, ""
+        self.predicted: tuple[float, float] | None = None   # of the night just run
+        self.checks: list[tuple[float, float]] = []   # refit / predicted half-width, HLC τ
 
     def fit_key(self) -> tuple | None:
         kinds = {VARIANTS[v][0] for _, v in self.chosen}
@@ -198,7 +200,11 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         if d.action == "skip":
             return None
         v = VARIANTS.index((d.kind, d.setpoint_c))
+        c.predicted = next(((x.hlc_rel_pred, x.tau_rel_pred) for x in cands
+                            if (x.kind, x.setpoint_c) == (d.kind, d.setpoint_c)), None)
     valid = BAND_C[0] <= first_t_out[v][c.i][j] <= BAND_C[1]
+    if not valid:
+        c.predicted = None
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
         c.chosen.append((j, v))
@@ -224,6 +230,10 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
             result = fits.cache[key]
             if result is not None:
                 c.fits.append(FitSummary.from_fit_json(result, len(c.chosen)))
+                if c.predicted is not None:
+                    c.checks.append((c.fits[-1].hlc_rel / c.predicted[0],
+                                     c.fits[-1].tau_rel / c.predicted[1]))
+            c.predicted = None
         fits.progress(f"target {target.hlc_rel:.0%}/{target.tau_rel:.0%}: night {j + 1}/{k}, "
                       f"{sum(not c.done for c in camps)} campaigns running", force=True)
     for c in camps:
@@ -246,7 +256,7 @@ def _label(c: Campaign) -> str:
 def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
-    return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason)
+    return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks)
 
 
 def _trajectories(records: list, houses, strategy: str) -> None:
@@ -304,6 +314,12 @@ def summarise(records: list, houses, target: Target, strategies: list[str]) -> N
                     f"{pct(cov_h):.0f} / {pct(cov_t):.0f} % | {med(err_h):.1f} / "
                     f"{med(err_t):.1f} % | {med(w_h):.1f} / {med(w_t):.1f} % | {reasons} |")
     print("markdown:\n" + "\n".join(rows))
+    checks = np.array([x for r in records if r[0] == "adaptive" for x in r[7]])
+    if len(checks):
+        q = np.percentile(checks, [10, 50, 90], axis=0)
+        print(f"prediction check (adaptive, {len(checks)} nights): refitted / predicted "
+              f"half-width after the chosen night, median (P10–P90): HLC {q[1, 0]:.2f} "
+              f"({q[0, 0]:.2f}–{q[2, 0]:.2f}), τ {q[1, 1]:.2f} ({q[0, 1]:.2f}–{q[2, 1]:.2f})")
 
 
 #: Set in the parent before the workers fork (copy-on-write: the simulated nights are not

@@ -245,11 +245,13 @@ def test_floor_of_a_fit_json():
                          "tau": {"value": 50.0, "low": 45.0, "high": 55.0}},
               "fit": {"offset_allowance": {"relative_sd": 0.04, "meter_relative_sd": 0.03,
                                            "night_gain_relative_sd": 0.01,
-                                           "structure_relative_sd": {"hlc": 0.02, "tau": 0.0}}}}
+                                           "structure_relative_sd": {"hlc": 0.02, "tau": 0.0}},
+                      "model_error": {"group": "slow", "share": {"hlc": 0.0, "tau": 0.05}}}}
     s = FitSummary.from_fit_json(result, 2)
     assert s.hlc_floor_rel == pytest.approx(math.sinh(1.959964 * math.sqrt(
         0.04 ** 2 + 0.03 ** 2 + 0.01 ** 2 + 0.02 ** 2)))
-    assert s.tau_floor_rel == pytest.approx(math.sinh(1.959964 * math.hypot(0.04, 0.01)))
+    assert s.tau_floor_rel == pytest.approx(math.sinh(1.959964 * math.sqrt(
+        0.04 ** 2 + 0.01 ** 2 + 0.05 ** 2)))
     # an older fit states no shares: no floor, the rule never fires
     del result["fit"]
     assert FitSummary.from_fit_json(result, 2).hlc_floor_rel == 0.0

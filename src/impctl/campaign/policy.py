@@ -197,9 +197,9 @@ def type_b_shares(result: dict) -> dict[str, tuple[float, float, float]]:
     out = {}
     for name in ("hlc", "tau", "c_m"):
         fixed = meter if name in ("hlc", "c_m") else 0.0
+        model_error = fit.get("model_error")
         for block in (allowance.get("structure_relative_sd"),
-                      allowance.get("model_error_relative_sd"),
-                      fit.get("model_error_relative_sd")):
+                      model_error.get("share") if isinstance(model_error, dict) else None):
             if isinstance(block, dict):
                 fixed = math.hypot(fixed, _num(block.get(name), 0.0))
         out[name] = (offset, gain, fixed)

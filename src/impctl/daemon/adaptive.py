@@ -193,6 +193,12 @@ def rel_pct(x: float) -> float | None:
     return round(100 * x, 1) if math.isfinite(x) else None
 
 
+def absurd(fit: FitSummary) -> bool:
+    """An interval from too few nights that is wider than ±100 %: shown as "too few nights
+    yet", never as a number (a fit that says it is model-based and stays narrower is shown)."""
+    return fit.too_few_nights and not (fit.hlc_rel <= 1.0 and fit.tau_rel <= 1.0)
+
+
 def campaign_state(store: Store, cfg: Config) -> CampaignState:
     """The campaign as one record (read from the store only)."""
     nights = store.nights(states=RUN_STATES)
@@ -202,7 +208,7 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
     if last_fit is not None:
         try:
             fit = FitSummary.from_fit_json(last_fit[2], len(last_fit[1]))
-            if not fit.too_few_nights:  # else hundreds of %: Home Assistant shows unknown
+            if not absurd(fit):  # hundreds of % from 2 nights: Home Assistant shows unknown
                 hlc, tau = rel_pct(fit.hlc_rel), rel_pct(fit.tau_rel)
         except ValueError:
             pass
