@@ -243,7 +243,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
-                       emitter_state=args.nuisance).fit(nights, ranges)
+                       emitter_state=args.nuisance,
+                       model_error="default" if args.model_error else None).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -602,6 +603,9 @@ def main() -> None:
                     help="include Adam (backprop through odeint) on N of those households")
     ap.add_argument("--no-nuisance", dest="nuisance", action="store_false",
                     help="fit without the emitter-release term (the issue-4 model)")
+    ap.add_argument("--no-model-error", dest="model_error", action="store_false",
+                    help="intervals without the calibrated model-error share (impctl.fit."
+                         "model_error): the measurement-only intervals, for comparison")
     ap.add_argument("--speed", action="store_true",
                     help="only the speed figures (impctl fit wall time, in-process time)")
     ap.add_argument("--repeat", type=int, default=3,
