@@ -36,10 +36,10 @@ def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
 
 
 def _fit(nights) -> dict:
-    # No type-B shares (sensor offsets, meter, night gains, structure): the test is about the
-    # information of the data.
+    # No type-B shares (sensor offsets, meter, night gains, structure, model error): the test
+    # is about the information of the data.
     fit = NightFit(ach_vent=0.0, ach_infl=0.01, sensor_offsets_k=(0.0, 0.0), meter_error=0.0,
-                   night_gain_sd_w=0.0, structure_share=False).fit(nights)
+                   night_gain_sd_w=0.0, structure_share=False, model_error=None).fit(nights)
     return fit_to_dict(fit)
 
 
@@ -131,11 +131,13 @@ def test_outlook_floor_is_the_type_b_share_no_night_removes(campaign):
     # two more nights on similar weather: the floor barely moves (only the mean ΔT does) ...
     assert outlook.hlc_floor_rel == pytest.approx(summary.hlc_floor_rel, rel=0.2)
     assert outlook.tau_floor_rel == pytest.approx(summary.tau_floor_rel, rel=0.2)
-    # ... every prediction stays above it, and two nights predict at least as narrow as one
+    # ... every prediction stays above it, and two nights (a normal and a constrained one)
+    # predict about as narrow as the best one or narrower (the constrained night's smaller ΔT
+    # raises the offset share a little: HLC may lose a per cent of what it gains)
     for c in cands:
         assert c.hlc_rel_pred > outlook.hlc_floor_rel and c.tau_rel_pred > outlook.tau_floor_rel
     assert outlook.hlc_rel_pred >= outlook.hlc_floor_rel
-    assert outlook.hlc_rel_pred <= min(c.hlc_rel_pred for c in cands) * 1.0001
+    assert outlook.hlc_rel_pred <= min(c.hlc_rel_pred for c in cands) * 1.02
     assert outlook.tau_rel_pred <= min(c.tau_rel_pred for c in cands) * 1.0001
 
 
