@@ -181,7 +181,7 @@ def test_stop_when_the_floor_makes_the_target_unreachable():
     outlook = Outlook(2, 0.097, 0.075, 0.09, 0.06)
     d = decide([C, N], [at_floor], cands, Target(), **KW, outlook=outlook)
     assert (d.action, d.reached) == ("stop", False)
-    assert "precision limited by the sensors" in d.reason
+    assert "precision limited by what more nights cannot reduce" in d.reason
     assert "HLC ±9.0%" in d.reason and "±5%" in d.reason
     # without an outlook the fit's own floor decides the same
     assert "precision limited" in decide([C, N], [at_floor], cands, Target(), **KW).reason
@@ -252,6 +252,12 @@ def test_floor_of_a_fit_json():
         0.04 ** 2 + 0.03 ** 2 + 0.01 ** 2 + 0.02 ** 2)))
     assert s.tau_floor_rel == pytest.approx(math.sinh(1.959964 * math.sqrt(
         0.04 ** 2 + 0.01 ** 2 + 0.05 ** 2)))
+    # the reason names the largest share of the floor that misses the target most
+    assert s.hlc_floor_by == "the room and outdoor sensors' offsets"
+    assert s.tau_floor_by == "the model's error on houses like this one"
+    d = decide([C, N], [s], [], Target(hlc_rel=0.5, tau_rel=0.06), **KW)
+    assert d.reason.startswith("Stopped: precision limited by the model's error on houses "
+                               "like this one: HLC ±")
     # an older fit states no shares: no floor, the rule never fires
     del result["fit"]
     assert FitSummary.from_fit_json(result, 2).hlc_floor_rel == 0.0

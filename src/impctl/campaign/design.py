@@ -39,7 +39,7 @@ target_tau) (:func:`impctl.campaign.policy.decide`).
   and constrained candidates, by det(F_past + F_night), alternating, normal first), and the
   *floor* then: the type-B shares alone (:func:`impctl.campaign.policy.type_b_shares`) at
   the mean ΔT those nights bring — what no number of nights removes. The policy stops on it
-  ("precision limited by the sensors and the heat meter") when the floor alone misses the
+  ("precision limited by …", naming the largest share) when the floor alone misses the
   target and dominates the predicted interval.
 """
 

@@ -15,10 +15,11 @@ Rules, in order (:func:`decide`):
 3. **precision limited** — with a fit of both kinds, stop when the target cannot be reached
    because the interval is dominated by shares no night reduces (type-B: sensor offsets, heat
    meter, night gains, structure and model-error shares, stated in the fit JSON): the worst
-   ratio of that *floor* alone is ≥ 1, the predicted worst ratio after the best candidate night
-   and after :attr:`Outlook.nights` more nights is still ≥ 1, and the floor already makes up at
-   least half of the latest interval's variance (the floor's worst ratio ≥ 1/√2 of the
-   latest one: the part nights can shrink is at most as large as the part they cannot).
+   ratio of that *floor* alone is ≥ 1 (the reason names its largest share), the predicted
+   worst ratio after the best candidate night and after :attr:`Outlook.nights` more nights is
+   still ≥ 1, and the floor already makes up at least half of the latest interval's variance
+   (the floor's worst ratio ≥ 1/√2 of the latest one: the part nights can shrink is at most
+   as large as the part they cannot).
    Without predictions the latest fit's own floor and interval are used.
 4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
    stop when the best candidate night is predicted to shrink the worst ratio by less than
@@ -121,7 +122,8 @@ class FitSummary:
     number of nights removes (0 = not stated by the fit). ``too_few_nights``: the intervals
     rest on too few nights to mean much (the fit's ``interval_basis`` says so, or a
     night-clustered sandwich from 2 nights, with Student-t's t(1) = 12.7, is wider than
-    ±100 %) — show "too few nights yet", not the numbers.
+    ±100 %) — show "too few nights yet", not the numbers. ``hlc_floor_by`` and
+    ``tau_floor_by``: the largest share of each floor, in words (:data:`FLOOR_LABELS`).
     """
 
     nights: int
@@ -134,6 +136,8 @@ class FitSummary:
     hlc_floor_rel: float = 0.0
     tau_floor_rel: float = 0.0
     too_few_nights: bool = False
+    hlc_floor_by: str = ""
+    tau_floor_by: str = ""
 
     @classmethod
     def from_fit_json(cls, result: dict, nights: int) -> FitSummary:
@@ -155,8 +159,11 @@ class FitSummary:
         sources = fit.get("interval_source") if isinstance(fit.get("interval_source"),
                                                             dict) else {}
         basis = fit.get("interval_basis")
-        shares = type_b_shares(result)
-        floor = {name: math.sinh(Z95 * math.hypot(*shares[name])) for name in ("hlc", "tau")}
+        parts = type_b_parts(result)
+        floor = {name: math.sinh(Z95 * math.sqrt(sum(v * v for v in parts[name].values())))
+                 for name in ("hlc", "tau")}
+        by = {name: (FLOOR_LABELS[max(parts[name], key=parts[name].get)]
+                     if any(parts[name].values()) else "") for name in ("hlc", "tau")}
         rel = {name: _rel(get(name, "value"), get(name, "low"), get(name, "high"))
                for name in ("hlc", "tau")}
         # The fit's own word wins; else a 2-night sandwich wider than ±100 % (t(1) = 12.7)
@@ -169,7 +176,8 @@ class FitSummary:
                    tau_h=get("tau", "value"), tau_low=get("tau", "low"),
                    tau_high=get("tau", "high"),
                    hlc_floor_rel=floor["hlc"], tau_floor_rel=floor["tau"],
-                   too_few_nights=bool(too_few))
+                   too_few_nights=bool(too_few), hlc_floor_by=by["hlc"],
+                   tau_floor_by=by["tau"])
 
     @property
     def hlc_rel(self) -> float:
@@ -182,27 +190,46 @@ class FitSummary:
         return _rel(self.tau_h, self.tau_low, self.tau_high)
 
 
-def type_b_shares(result: dict) -> dict[str, tuple[float, float, float]]:
-    """The type-B shares of an ``impctl fit`` JSON's log-space sd, per lumped quantity
-    (hlc, tau, c_m): (sensor offsets, which scale with 1/mean ΔT; unmetered night gains,
-    likewise; the rest — meter gain (HLC and C_m), structure and model-error shares — which no
-    night changes). Missing fields count as 0 (an older fit states fewer shares)."""
+#: What each type-B share is, in the household's words (the stop reason names the largest).
+FLOOR_LABELS = {"offsets": "the room and outdoor sensors' offsets",
+                "gains": "unmetered night gains (sleepers, base load)",
+                "meter": "the heat meter's gain error",
+                "structure": "the model's structure",
+                "model_error": "the model's error on houses like this one"}
+
+
+def type_b_parts(result: dict) -> dict[str, dict[str, float]]:
+    """Each type-B share of an ``impctl fit`` JSON's log-space sd [–] per lumped quantity
+    (hlc, tau, c_m), by :data:`FLOOR_LABELS` key: ``fit.offset_allowance`` (sensor offsets,
+    night gains, meter — HLC and C_m only —, structure) and ``fit.model_error.share``. Missing
+    fields count as 0 (an older fit states fewer shares)."""
     fit = result.get("fit") if isinstance(result, dict) else None
     fit = fit if isinstance(fit, dict) else {}
     allowance = fit.get("offset_allowance")
     allowance = allowance if isinstance(allowance, dict) else {}
-    offset = _num(allowance.get("relative_sd"), 0.0)
-    gain = _num(allowance.get("night_gain_relative_sd"), 0.0)
-    meter = _num(allowance.get("meter_relative_sd"), 0.0)
+    model_error = fit.get("model_error")
+    blocks = {"structure": allowance.get("structure_relative_sd"),
+              "model_error": model_error.get("share") if isinstance(model_error, dict) else None}
     out = {}
     for name in ("hlc", "tau", "c_m"):
-        fixed = meter if name in ("hlc", "c_m") else 0.0
-        model_error = fit.get("model_error")
-        for block in (allowance.get("structure_relative_sd"),
-                      model_error.get("share") if isinstance(model_error, dict) else None):
-            if isinstance(block, dict):
-                fixed = math.hypot(fixed, _num(block.get(name), 0.0))
-        out[name] = (offset, gain, fixed)
+        parts = {"offsets": _num(allowance.get("relative_sd"), 0.0),
+                 "gains": _num(allowance.get("night_gain_relative_sd"), 0.0),
+                 "meter": (_num(allowance.get("meter_relative_sd"), 0.0)
+                           if name in ("hlc", "c_m") else 0.0)}
+        for key, block in blocks.items():
+            parts[key] = _num(block.get(name), 0.0) if isinstance(block, dict) else 0.0
+        out[name] = parts
+    return out
+
+
+def type_b_shares(result: dict) -> dict[str, tuple[float, float, float]]:
+    """The type-B shares of :func:`type_b_parts` grouped by how nights move them: (sensor
+    offsets, which scale with 1/mean ΔT; unmetered night gains, likewise; the rest — meter,
+    structure and model-error shares — which no night changes), per lumped quantity."""
+    out = {}
+    for name, p in type_b_parts(result).items():
+        out[name] = (p["offsets"], p["gains"],
+                     math.sqrt(p["meter"] ** 2 + p["structure"] ** 2 + p["model_error"] ** 2))
     return out
 
 
@@ -423,7 +450,10 @@ def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook 
     if not (math.isfinite(floor) and floor >= 1 and tonight >= 1 and ahead >= 1
             and floor >= target.floor_dominance * now):
         return None
-    return (f"Stopped: precision limited by the sensors and the heat meter: HLC "
+    # name what limits the quantity that misses its target the most
+    by = (latest.hlc_floor_by if hlc_floor / target.hlc_rel >= tau_floor / target.tau_rel
+          else latest.tau_floor_by) or "what more nights cannot reduce"
+    return (f"Stopped: precision limited by {by}: HLC "
             f"±{_pct(hlc_floor)} and τ ±{_pct(tau_floor)} is the best this house can give "
             f"(target ±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}; now {_precision(latest)}); "
             f"more nights would not reach the target.")

@@ -233,7 +233,7 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
         elif run >= cfg.campaign.max_nights:
             status = f"stopped: {run} nights, the most allowed (max_nights)"
         elif "precision limited" in reason:
-            status = "stopped: precision limited by the sensors and the heat meter"
+            status = "stopped: precision limited (more nights cannot reach the target)"
         elif "would not help" in reason:
             status = "stopped: more nights would not help"
         else:
