@@ -1,8 +1,9 @@
 """Calibrate the fit's model-error share on the realistic virtual population (and explain misses).
 
-Run (regenerates ``src/impctl/fit/model_error.json``; ≤ 15 min on one core, a line per house)::
+Run (regenerates ``src/impctl/fit/model_error.json``; ≤ 15 min on one core, a line per fit)::
 
     .venv/bin/python bench/calibrate_intervals.py [--households 160] [--seed 31415]
+        [--steps 300:160,3600:80]
 
 Households: ``sample_households(N, seed)`` with realism ``sample_params(N, seed)`` on the
 realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal nights, 5-minute
@@ -65,10 +66,11 @@ def _truth(house) -> dict[str, float]:
     return {"hlc": house.hlc_w_per_k, "c_m": house.c_m_j_per_k, "tau": house.tau_h}
 
 
-def collect(n: int, seed: int, step_s: float, share_on: bool, plant: str = "realistic"
-            ) -> list[dict]:
-    """Simulate and fit ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C
-    with the bench's 5 % power noise); one record per house."""
+def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
+            plant: str = "realistic") -> list[dict]:
+    """Simulate ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C with the
+    bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s];
+    one record per fit."""
     houses = sample_households(n, seed=seed)
     params = sample_params(n, seed)
     kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
@@ -78,6 +80,7 @@ def collect(n: int, seed: int, step_s: float, share_on: bool, plant: str = "real
     records = []
     started = time.perf_counter()
     t_sim = 0.0
+    n_fits = sum(min(n, k) for k in steps.values())
     for i in range(n):
         if i % CHUNK == 0:   # simulate the next chunk of houses together
             t0 = time.perf_counter()
@@ -91,30 +94,37 @@ def collect(n: int, seed: int, step_s: float, share_on: bool, plant: str = "real
                                                 seed=seed + i)
             t_sim += time.perf_counter() - t0
         house = houses.take(i)
-        nights = sample_nights(logged, sp, sub, i % CHUNK, sample_step_s=step_s,
-                               quantise_k=0.1, seed=seed + i,
-                               power_noise=0.05 if plant == "iso" else 0.0)
-        fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
-                       model_error="default" if share_on else None).fit(nights, true_ranges(house))
-        truth = _truth(house)
-        rec = {"index": i, "diagnostics": model_error.diagnostics(fit),
-               "emitter": "underfloor" if kind[i] == 1 else "radiators",
-               "on_off": bool(onoff[i]),
-               "control": "room thermostat" if control[i] == 1 else "weather curve",
-               "log_error": {}, "sd": {}, "covered": {}}
-        for q in model_error.QUANTITIES:
-            e = fit.lumped_[q]
-            rec["log_error"][q] = float(np.log(e.value / truth[q]))
-            rec["sd"][q] = float(np.log(e.high / e.low) / (2 * model_error.Z95))
-            rec["covered"][q] = bool(e.low <= truth[q] <= e.high)
-        records.append(rec)
-        el = time.perf_counter() - started
-        print(f"  house {i + 1:3d}/{n}: group {model_error.group_of(rec['diagnostics']):8s} "
-              "log error HLC/τ/C_m " + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in
-                                                ("hlc", "tau", "c_m"))
-              + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)",
-              flush=True)
+        for step_s, count in steps.items():
+            if i >= count:
+                continue
+            nights = sample_nights(logged, sp, sub, i % CHUNK, sample_step_s=step_s,
+                                   quantise_k=0.1, seed=seed + i,
+                                   power_noise=0.05 if plant == "iso" else 0.0)
+            fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
+                           model_error="default" if share_on else None
+                           ).fit(nights, true_ranges(house))
+            records.append(_record(i, step_s, fit, _truth(house), kind[i], onoff[i],
+                                   control[i]))
+            el = time.perf_counter() - started
+            rec = records[-1]
+            print(f"  fit {len(records):3d}/{n_fits}: house {i:3d}, {step_s:4.0f} s rows, group "
+                  f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
+                  + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in ("hlc", "tau", "c_m"))
+                  + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)", flush=True)
     return records
+
+
+def _record(i, step_s, fit, truth, kind, onoff, control) -> dict:
+    rec = {"index": i, "step_s": step_s, "diagnostics": model_error.diagnostics(fit),
+           "emitter": "underfloor" if kind == 1 else "radiators", "on_off": bool(onoff),
+           "control": "room thermostat" if control == 1 else "weather curve",
+           "log_error": {}, "sd": {}, "covered": {}}
+    for q in model_error.QUANTITIES:
+        e = fit.lumped_[q]
+        rec["log_error"][q] = float(np.log(e.value / truth[q]))
+        rec["sd"][q] = float(np.log(e.high / e.low) / (2 * model_error.Z95))
+        rec["covered"][q] = bool(e.low <= truth[q] <= e.high)
+    return rec
 
 
 def _sub_schedule(sched, idx):
@@ -131,21 +141,22 @@ def provenance(args, n: int) -> dict:
         except (OSError, subprocess.CalledProcessError):
             return None
 
-    return {"seed": args.seed, "n_households": n, "step_s": args.step,
+    return {"seed": args.seed, "n_households": args.households, "n_fits": n,
+            "steps": args.steps,
             "ranges": "true class", "plant": "impctl.plant realistic, realism "
             "sample_params(N, seed)", "plant_commit": git("log", "-1", "--format=%h", "--",
                                                            "src/impctl/plant"),
             "fit_commit": git("log", "-1", "--format=%h", "--", "src/impctl/fit"),
             "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%MZ"),
             "command": "python bench/calibrate_intervals.py --households "
-                       f"{n} --seed {args.seed}"}
+                       f"{args.households} --seed {args.seed} --steps {args.steps}"}
 
 
 def why_table(records: list[dict]) -> None:
     """What the fit could see, for the houses whose interval missed a truth (and for all)."""
-    print("\n### why intervals miss (share ON): diagnostics of missed vs covered houses")
+    print("\n### why intervals miss: what the fit could see for each missed house")
     print("| house | emitter | control | on/off | group | missed | err HLC/τ/C_m % | "
-          "±HLC/τ/C_m % | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
+          "±HLC/τ/C_m log % | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
           "discharge h | adequate |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in records:
@@ -198,7 +209,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=160)
     ap.add_argument("--seed", type=int, default=31415)
-    ap.add_argument("--step", type=float, default=300.0, help="sample step [s]")
+    ap.add_argument("--steps", default="300:160,3600:80",
+                    help="sample steps [s] and how many of the households each, STEP:N,…")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic",
                     help="iso: the ideal 5R1C (a check; never written as the calibration)")
     ap.add_argument("--out", default=str(model_error.CALIBRATION_FILE))
@@ -210,13 +222,14 @@ def main() -> None:
                     help="model-error share in the fits (default: on with --why, else off)")
     args = ap.parse_args()
     print("command: " + " ".join(["python"] + sys.argv), flush=True)
+    steps = {float(a): int(b) for a, b in (x.split(":") for x in args.steps.split(",") if x)}
     if args.from_records:
         records = json.loads(Path(args.from_records).read_text())
     else:
         if not args.why and (args.seed == VAL_SEED or args.seed in TRAIN_SEEDS):
             ap.error(f"--seed {args.seed} is the bench's validation or a training seed")
         share_on = args.why if args.share is None else args.share == "on"
-        records = collect(args.households, args.seed, args.step, share_on, args.plant)
+        records = collect(args.households, args.seed, steps, share_on, args.plant)
     if args.records:
         Path(args.records).write_text(json.dumps(records))
     if args.why or args.plant == "iso":
