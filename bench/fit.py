@@ -159,6 +159,11 @@ def rel(est, true):
     return 100.0 * (np.asarray(est, float) - np.asarray(true, float)) / np.asarray(true, float)
 
 
+def half_width(estimates) -> float:
+    """Median 95 % interval half-width [% of the estimate], (high − low)/2/value."""
+    return float(np.median([100.0 * (e.high - e.low) / (2.0 * e.value) for e in estimates]))
+
+
 def stats(err) -> tuple[float, float]:
     a = np.abs(np.asarray(err, float))
     a = a[np.isfinite(a)]
@@ -243,7 +248,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
-                       emitter_state=args.nuisance).fit(nights, ranges)
+                       emitter_state=args.nuisance,
+                       model_error="default" if args.model_error else None).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -361,23 +367,36 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                        for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
                                     ("C_m", e_fit["c_m"])))
     print(f"NODE joint, signed median error: {signed}")
+    print("NODE joint, median 95 % half-width: " + ", ".join(
+        f"{lab} ±{half_width(lumped(k)):.1f} %" for k, lab in (("hlc", "HLC"), ("tau", "τ"),
+                                                               ("c_m", "C_m"))))
+    _model_error_lines(fits, {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm})
+    if args.why and "types" in res:
+        from calibrate_intervals import _record, why_table
+
+        ty = res["types"]
+        why_table([_record(i, step_s, f, {"hlc": t_hlc[i], "c_m": t_cm[i], "tau": t_tau[i]},
+                           int(ty["underfloor"][i]), bool(ty["on/off"][i]),
+                           int(ty["room thermostat"][i])) for i, f in enumerate(fits)])
     if "types" in res:
         print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
-              "| coverage HLC/τ/C_m % |")
-        print("|---|---|---|---|---|---|")
+              "| coverage HLC/τ/C_m % | median ± half-width HLC/τ/C_m % |")
+        print("|---|---|---|---|---|---|---|")
         truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
         for label, sel in res["types"].items():
             if not sel.any():
                 continue
-            cells, covs = [], []
+            cells, covs, hws = [], [], []
             for k in ("hlc", "tau", "c_m"):
                 cells.append("{:.1f} / {:.1f}".format(*stats(e_fit[k][sel])))
                 ests = [e for e, m in zip(lumped(k), sel, strict=True) if m]
+                hws.append(half_width(ests))
                 tv = np.asarray(truths[k])[sel]
                 covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
                                                                                   strict=True)]))
             print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
-                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " |")
+                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " | "
+                  + " / ".join(f"{h:.0f}" for h in hws) + " |")
     if res.get("eps_floor") is not None:
         print("ε against the true house replayed on the 5R1C (--eps-truth house); the true "
               "parameters against the plant's own heat output: ε median / P90 "
@@ -417,6 +436,28 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
     if goal["time"] is not None:
         print(f"time ≤ {goal['time']:g} s: max {t.max():.2f} s "
               f"{'met' if t.max() <= goal['time'] else 'NOT met'}")
+
+
+def _model_error_lines(fits, truths: dict) -> None:
+    """The interval method and, per model-error group (:mod:`impctl.fit.model_error`), how many
+    houses, their coverage and median half-width."""
+    me = [getattr(f, "model_error_", None) for f in fits]
+    if not any(me):
+        print("intervals: measurement only (--no-model-error)")
+        return
+    first = next(m for m in me if m)
+    print(f"intervals: {first['method'].split(', group')[0]}; by group:")
+    for group in sorted({m["group"] for m in me if m}):
+        sel = [i for i, m in enumerate(me) if m and m["group"] == group]
+        cells = []
+        for k in ("hlc", "tau", "c_m"):
+            ests = [fits[i].lumped_[k] for i in sel]
+            cov = 100 * np.mean([e.low <= truths[k][i] <= e.high for e, i in zip(ests, sel,
+                                                                                  strict=True)])
+            cells.append(f"{k} {cov:.0f} % (±{half_width(ests):.0f} %)")
+        share = ", ".join(f"{k} {100 * v:.1f}" for k, v in me[sel[0]]["share"].items())
+        print(f"  {group:8s} {len(sel):3d} houses, share (log SD %) {share}: coverage "
+              + "; ".join(cells))
 
 
 def compare(houses_arr: HouseParameters, args) -> None:
@@ -602,6 +643,12 @@ def main() -> None:
                     help="include Adam (backprop through odeint) on N of those households")
     ap.add_argument("--no-nuisance", dest="nuisance", action="store_false",
                     help="fit without the emitter-release term (the issue-4 model)")
+    ap.add_argument("--no-model-error", dest="model_error", action="store_false",
+                    help="intervals without the calibrated model-error share (impctl.fit."
+                         "model_error): the measurement-only intervals, for comparison")
+    ap.add_argument("--why", action="store_true",
+                    help="realistic plant: the diagnostics of every house whose interval misses "
+                         "(bench/calibrate_intervals.py's table)")
     ap.add_argument("--speed", action="store_true",
                     help="only the speed figures (impctl fit wall time, in-process time)")
     ap.add_argument("--repeat", type=int, default=3,
@@ -680,6 +727,7 @@ def summary_row(res: dict, step_s: float, source: str) -> dict:
         row[k] = stats(rel([e.value for e in est], t))
         row[f"cov_{k}"] = 100.0 * np.mean([e.low <= v <= e.high
                                            for e, v in zip(est, t, strict=True)])
+        row[f"hw_{k}"] = half_width(est)
     row["eps"] = stats(res["eps_fit"])
     hits = res["ranges_hit"]
     row["classes_right"] = (100.0 * np.mean([all(h.values()) for h in hits])
@@ -696,14 +744,15 @@ def print_summary(rows: list[dict], args) -> None:
     print(f"\n### summary: NODE joint fit, plant {args.plant} (median / P90 of |error|; "
           "coverage of the 95 % intervals)")
     print("| rows | ranges | households | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % "
-          "| all three classes right % | time med / max s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| median ± half-width HLC/τ/C_m % | all three classes right % | time med / max s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         step = f"{r['step_s'] / 60:g}-min" if r["step_s"] < 3600 else f"{r['step_s'] / 3600:g}-h"
         cells = " | ".join(f"{r[k][0]:.1f} / {r[k][1]:.1f}" for k in ("hlc", "tau", "c_m", "eps"))
         right = "–" if r["classes_right"] is None else f"{r['classes_right']:.0f}"
         print(f"| {step} | {r['ranges']} | {r['n']} | {cells} | {r['cov_hlc']:.0f} / "
-              f"{r['cov_tau']:.0f} / {r['cov_c_m']:.0f} | {right} | {r['time'][0]:.2f} / "
+              f"{r['cov_tau']:.0f} / {r['cov_c_m']:.0f} | {r['hw_hlc']:.0f} / {r['hw_tau']:.0f} / "
+              f"{r['hw_c_m']:.0f} | {right} | {r['time'][0]:.2f} / "
               f"{r['time'][1]:.2f} |")
 
 

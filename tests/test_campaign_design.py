@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from impctl.campaign import parse_candidates
-from impctl.campaign.design import Protocol, predict_candidates
+from impctl.campaign import FitSummary, parse_candidates, parse_outlook
+from impctl.campaign.design import Z95, Protocol, predict, predict_candidates
 from impctl.fit.estimator import NightFit
 from impctl.fit.report import fit_to_dict
 from impctl.imp.nights_csv import write_nights
@@ -36,10 +36,10 @@ def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
 
 
 def _fit(nights) -> dict:
-    # No type-B shares (sensor offsets, meter, night gains, structure): the test is about the
-    # information of the data.
+    # No type-B shares (sensor offsets, meter, night gains, structure, model error): the test
+    # is about the information of the data.
     fit = NightFit(ach_vent=0.0, ach_infl=0.01, sensor_offsets_k=(0.0, 0.0), meter_error=0.0,
-                   night_gain_sd_w=0.0, structure_share=False).fit(nights)
+                   night_gain_sd_w=0.0, structure_share=False, model_error=None).fit(nights)
     return fit_to_dict(fit)
 
 
@@ -104,6 +104,41 @@ def test_cli_writes_candidates_the_policy_reads(tmp_path, campaign):
                                                        ("normal", 23.0)]
     assert all(0 < c.hlc_rel_pred < 10 and 0 < c.tau_rel_pred < 10 for c in cands)
     assert np.isfinite([c.tau_rel_pred for c in cands]).all()
+    outlook = parse_outlook(block)
+    assert outlook.nights == 2 and outlook.hlc_rel_pred <= min(c.hlc_rel_pred for c in cands)
+    assert "after 2 more nights" in proc.stdout
+
+
+def test_outlook_floor_is_the_type_b_share_no_night_removes(campaign):
+    # the fixture's fit states no type-B share; give it the default sensor offsets and a
+    # class-3 heat meter, widening its intervals as impctl.fit.uncertainty does
+    result = json.loads(json.dumps(campaign["fit"]))
+    mean_dt = float(np.mean([np.mean(np.subtract(p["t_air_measured_c"], p["t_out_c"]))
+                             for p in result["predictions"]]))
+    share, meter = float(np.hypot(0.5, 1.0) / mean_dt), 0.05 / np.sqrt(3)
+    result["fit"]["offset_allowance"] = {"sensor_offsets_k": [0.5, 1.0], "relative_sd": share,
+                                         "mean_delta_t_k": mean_dt, "meter_relative_sd": meter}
+    for name in ("hlc", "tau"):
+        q = result["lumped"][name]
+        sd = np.log(q["high"] / q["low"]) / (2 * Z95)
+        sd = np.sqrt(sd ** 2 + share ** 2 + (meter ** 2 if name == "hlc" else 0.0))
+        q["low"], q["high"] = q["value"] * np.exp(-Z95 * sd), q["value"] * np.exp(Z95 * sd)
+    cands, outlook = predict(result, campaign["forecast"], constrained_setpoint_c=21.0,
+                             normal_setpoints_c=(22.0,), step_s=STEP_S,
+                             protocol=Protocol(preheat_h=4.0), ahead=2)
+    summary = FitSummary.from_fit_json(result, 2)
+    assert summary.hlc_floor_rel == pytest.approx(np.sinh(Z95 * np.hypot(share, meter)))
+    # two more nights on similar weather: the floor barely moves (only the mean ΔT does) ...
+    assert outlook.hlc_floor_rel == pytest.approx(summary.hlc_floor_rel, rel=0.2)
+    assert outlook.tau_floor_rel == pytest.approx(summary.tau_floor_rel, rel=0.2)
+    # ... every prediction stays above it, and two nights (a normal and a constrained one)
+    # predict about as narrow as the best one or narrower (the constrained night's smaller ΔT
+    # raises the offset share a little: HLC may lose a per cent of what it gains)
+    for c in cands:
+        assert c.hlc_rel_pred > outlook.hlc_floor_rel and c.tau_rel_pred > outlook.tau_floor_rel
+    assert outlook.hlc_rel_pred >= outlook.hlc_floor_rel
+    assert outlook.hlc_rel_pred <= min(c.hlc_rel_pred for c in cands) * 1.02
+    assert outlook.tau_rel_pred <= min(c.tau_rel_pred for c in cands) * 1.0001
 
 
 @pytest.mark.parametrize("case", ["not_json", "other_schema", "setpoint", "forecast", "no_file"])

@@ -12,9 +12,11 @@ from impctl.campaign import (
     Candidate,
     FitSummary,
     NightRecord,
+    Outlook,
     Target,
     decide,
     parse_candidates,
+    parse_outlook,
 )
 
 BAND = (-25.0, 8.0)
@@ -24,9 +26,10 @@ C = NightRecord("constrained", 21.0, True)
 N = NightRecord("normal", 21.0, True)
 
 
-def fit(nights: int, hlc_rel: float, tau_rel: float) -> FitSummary:
+def fit(nights: int, hlc_rel: float, tau_rel: float, floor: tuple[float, float] = (0.0, 0.0)
+        ) -> FitSummary:
     return FitSummary(nights, 200.0, 200.0 * (1 - hlc_rel), 200.0 * (1 + hlc_rel),
-                      50.0, 50.0 * (1 - tau_rel), 50.0 * (1 + tau_rel))
+                      50.0, 50.0 * (1 - tau_rel), 50.0 * (1 + tau_rel), *floor)
 
 
 CANDS = [Candidate("constrained", 21.0, 0.09, 0.09), Candidate("normal", 21.0, 0.07, 0.12),
@@ -84,8 +87,9 @@ def test_stop_when_target_reached_needs_each_kind():
     # short kind goes first even though a normal night is predicted better
     d = decide([C, N, N], [fit(3, 0.04, 0.07)], CANDS, Target(min_each=2), **KW)
     assert d.action == "run" and d.kind == "constrained"
-    # one target met, the other not: keep going
-    assert decide([C, N], [fit(2, 0.04, 0.09)], CANDS, target, **KW).action == "run"
+    # one target met, the other not, and a night predicted to help: keep going
+    helps = [Candidate("constrained", 21.0, 0.04, 0.07)]
+    assert decide([C, N], [fit(2, 0.04, 0.09)], helps, target, **KW).action == "run"
 
 
 def test_stop_at_max_nights_counts_invalid_nights():
@@ -167,3 +171,109 @@ def test_package_import_stays_light():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_stop_when_the_floor_makes_the_target_unreachable():
+    # sensors/meter alone give HLC ±9 %, τ ±6 %: a ±5 % HLC target is out of reach, and the
+    # interval (±11 %) is mostly that floor
+    at_floor = fit(2, 0.11, 0.09, floor=(0.09, 0.06))
+    cands = [Candidate("constrained", 21.0, 0.105, 0.08), Candidate("normal", 22.0, 0.10, 0.085)]
+    outlook = Outlook(2, 0.097, 0.075, 0.09, 0.06)
+    d = decide([C, N], [at_floor], cands, Target(), **KW, outlook=outlook)
+    assert (d.action, d.reached) == ("stop", False)
+    assert "precision limited by what more nights cannot reduce" in d.reason
+    assert "HLC ±9.0%" in d.reason and "±5%" in d.reason
+    # without an outlook the fit's own floor decides the same
+    assert "precision limited" in decide([C, N], [at_floor], cands, Target(), **KW).reason
+    # the same floor, but the interval is still mostly statistics (±40 %): nights still help,
+    # the campaign goes on
+    wide = fit(2, 0.40, 0.20, floor=(0.09, 0.06))
+    helps = [Candidate("constrained", 21.0, 0.35, 0.12), Candidate("normal", 22.0, 0.30, 0.18)]
+    d = decide([C, N], [wide], helps, Target(), **KW,
+               outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
+    assert (d.action, d.kind) == ("run", "normal")
+    # ... also when two more nights are predicted to bring it down to the floor: those are
+    # the nights that get it there
+    d = decide([C, N], [wide], helps, Target(), **KW,
+               outlook=Outlook(2, 0.10, 0.08, 0.09, 0.06))
+    assert d.action == "run"
+    # floor_dominance 0: stop as soon as the floor alone misses the target
+    d = decide([C, N], [wide], helps, Target(floor_dominance=0.0), **KW,
+               outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
+    assert "precision limited" in d.reason
+    with pytest.raises(ValueError, match="floor_dominance"):
+        Target(floor_dominance=1.5)
+    # a floor below the target never stops on precision: the target is reachable
+    low_floor = fit(2, 0.11, 0.09, floor=(0.03, 0.04))
+    d = decide([C, N], [low_floor], [Candidate("normal", 22.0, 0.08, 0.07)], Target(), **KW,
+               outlook=Outlook(2, 0.06, 0.06, 0.03, 0.04))
+    assert d.action == "run"
+    # a loose target the floor allows is not "limited" either
+    assert decide([C, N], [at_floor], cands, Target(hlc_rel=0.2, tau_rel=0.2), **KW,
+                  outlook=outlook).reached
+
+
+def test_stop_when_the_next_night_would_not_help():
+    now = fit(3, 0.30, 0.20)
+    little = [Candidate("constrained", 21.0, 0.295, 0.195), Candidate("normal", 22.0, 0.28, 0.20)]
+    d = decide([C, N, N], [now], little, Target(), **KW)
+    assert (d.action, d.reached) == ("stop", False)
+    assert "more nights would not help" in d.reason and "normal night at 22 °C" in d.reason
+    # 10 % narrower or more: run it
+    enough = [Candidate("normal", 22.0, 0.26, 0.20)]
+    assert decide([C, N, N], [now], enough, Target(), **KW).action == "run"
+    # no prediction (the fit could not be simulated): nothing to judge, the default order
+    assert decide([C, N, N], [now], [], Target(), **KW).action == "run"
+    # a fit of one night of each kind is not trusted to say that nights would not help
+    first = fit(2, 0.30, 0.20)
+    assert decide([C, N], [first], little, Target(), **KW).action == "run"
+
+
+def test_floor_and_gain_rules_wait_for_one_night_of_each_kind():
+    # only normal nights valid so far: the constrained night must come first, whatever the
+    # floor and the predicted gain
+    bad_c = NightRecord("constrained", 21.0, False)
+    at_floor = fit(2, 0.11, 0.09, floor=(0.09, 0.06))
+    cands = [Candidate("constrained", 21.0, 0.105, 0.085), Candidate("normal", 22.0, 0.11, 0.09)]
+    d = decide([bad_c, N, N], [at_floor], cands, Target(), **KW,
+               outlook=Outlook(2, 0.10, 0.08, 0.09, 0.06))
+    assert (d.action, d.kind) == ("run", "constrained")
+
+
+def test_floor_of_a_fit_json():
+    result = {"lumped": {"hlc": {"value": 200.0, "low": 180.0, "high": 220.0},
+                         "tau": {"value": 50.0, "low": 45.0, "high": 55.0}},
+              "fit": {"offset_allowance": {"relative_sd": 0.04, "meter_relative_sd": 0.03,
+                                           "night_gain_relative_sd": 0.01,
+                                           "structure_relative_sd": {"hlc": 0.02, "tau": 0.0}},
+                      "model_error": {"group": "slow", "share": {"hlc": 0.0, "tau": 0.05}}}}
+    s = FitSummary.from_fit_json(result, 2)
+    assert s.hlc_floor_rel == pytest.approx(math.sinh(1.959964 * math.sqrt(
+        0.04 ** 2 + 0.03 ** 2 + 0.01 ** 2 + 0.02 ** 2)))
+    assert s.tau_floor_rel == pytest.approx(math.sinh(1.959964 * math.sqrt(
+        0.04 ** 2 + 0.01 ** 2 + 0.05 ** 2)))
+    # the reason names the largest share of the floor that misses the target most
+    assert s.hlc_floor_by == "the room and outdoor sensors' offsets"
+    assert s.tau_floor_by == "the model's error on houses like this one"
+    d = decide([C, N], [s], [], Target(hlc_rel=0.5, tau_rel=0.06), **KW)
+    assert d.reason.startswith("Stopped: precision limited by the model's error on houses "
+                               "like this one: HLC ±")
+    # an older fit states no shares: no floor, the rule never fires
+    del result["fit"]
+    assert FitSummary.from_fit_json(result, 2).hlc_floor_rel == 0.0
+
+
+def test_parse_outlook():
+    block = {"candidates": [], "outlook": {"nights": 2, "hlc_rel_pred": 0.1,
+                                           "tau_rel_pred": None, "hlc_floor_rel": 0.08,
+                                           "tau_floor_rel": 0.05}}
+    o = parse_outlook(block)
+    assert (o.nights, o.hlc_rel_pred, o.hlc_floor_rel) == (2, 0.1, 0.08)
+    assert math.isinf(o.tau_rel_pred)
+    assert parse_outlook({"candidates": []}) is None
+    for bad, where in (({"outlook": 3}, "outlook is not"),
+                       ({"outlook": {**block["outlook"], "nights": 0}}, "outlook.nights"),
+                       ({"outlook": {**block["outlook"], "hlc_floor_rel": -1}},
+                        "outlook.hlc_floor_rel")):
+        with pytest.raises(ValueError, match=where):
+            parse_outlook(bad)

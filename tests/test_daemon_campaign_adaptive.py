@@ -97,8 +97,9 @@ def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path):
     if stop.reached:
         assert last.hlc_rel <= TARGET["hlc"] and last.tau_rel <= TARGET["tau"], last
         assert f"after {len(nights)} nights" in stop.reason
-    else:
-        assert len(nights) == MAX_NIGHTS, stop.reason
+    elif len(nights) < MAX_NIGHTS:  # the other stops say why, in the household's words
+        assert ("precision limited" in stop.reason or "would not help" in stop.reason
+                or "cannot be identified" in stop.reason), stop.reason
     # Predictions of `impctl campaign next` stored with the fits, for both kinds.
     cands = parse_candidates(fits[-1].candidates)
     assert {c.kind for c in cands} == {"constrained", "normal"}

@@ -232,3 +232,43 @@ def test_check_config_names_the_campaign_and_its_first_night(tmp_path):
     assert any(line.startswith("next:      constrained night from the campaign")
                for line in lines)
     assert not (tmp_path / "state").exists()
+
+
+def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text(f'state_dir = "{tmp_path}"\n[heatpump]\nhost = "192.168.1.50"\n'
+                        '[campaign]\nmode = "adaptive"\n')
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path),
+                               "campaign": {"mode": "adaptive"}})
+    with Store(cfg.db_path) as store:
+        a, b = _night(store, "constrained", 0, -3.0), _night(store, "normal", 1, -1.0)
+        # two nights, a night-clustered sandwich with t(1): HLC ±690 %
+        wide = _fit((180, 13, 2500), (50, 30, 80))
+        wide["fit"] = {"interval_source": {"hlc": "sandwich", "tau": "laplace"}}
+        store.add_fit([a, b], wide)
+        state = adaptive.campaign_state(store, cfg)
+        assert state.hlc_rel_pct is None and state.tau_rel_pct is None
+    text = run_cli("status", "--config", str(cfg_path), timeout_s=30)
+    assert text.returncode == 0, text.stderr
+    line = next(x for x in text.stdout.splitlines() if "after 2 valid nights" in x)
+    assert "interval: too few nights yet" in line and "HLC 180 W/K" in line
+    assert "%" not in line
+    as_json = json.loads(run_cli("status", "--json", "--config", str(cfg_path),
+                                 timeout_s=30).stdout)
+    [entry] = as_json["campaign"]["intervals"]
+    assert entry["interval_note"] == "too few nights yet"
+    with Store(cfg.db_path) as store:
+        # a third night: the same width is shown as it is (the fit's own word, not ours)
+        c = _night(store, "normal", 2, -1.0)
+        store.add_fit([a, b, c], {**wide, "fit": {"interval_source": {"hlc": "sandwich"}}})
+        assert adaptive.campaign_state(store, cfg).hlc_rel_pct == pytest.approx(690.8, abs=0.1)
+        # a fit that says its 2-night interval is model-based (impctl.fit.uncertainty): its
+        # own, narrower interval is shown, with its word
+        based = {**_fit((180, 150, 210), (50, 40, 60)), "fit": {
+            "interval_basis": "too few nights (2) for the night-clustered sandwich (needs 3): "
+                              "model-based (Laplace curvature)"}}
+        store.add_fit([a, b], based)
+        assert adaptive.campaign_state(store, cfg).hlc_rel_pct == pytest.approx(16.7, abs=0.1)
+    text = run_cli("status", "--config", str(cfg_path), timeout_s=30).stdout
+    assert ("after 2 valid nights: HLC 180 W/K ±16.7 %, τ 50 h ±20.0 % (target ±5 % / ±8 %); "
+            "interval: too few nights yet: model-based") in text

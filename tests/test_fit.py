@@ -32,9 +32,10 @@ def nights_15min():
 
 @pytest.fixture(scope="module")
 def fitted(nights_15min):
-    # simulated sensors have no offsets: the statistical intervals alone
-    return NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0)).fit(
-        nights_15min, RANGES)
+    # simulated sensors have no offsets: the statistical intervals alone (no model-error share,
+    # tests/test_fit_model_error.py)
+    return NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0),
+                    model_error=None).fit(nights_15min, RANGES)
 
 
 def rel(a, b):
@@ -327,7 +328,7 @@ def test_torchdiffeq_rk4_and_the_exact_discretisation_give_the_same_fit(fitted, 
     """The default solver (closed form per interval) and torchdiffeq's rk4 agree on the fit,
     and the JSON names the one used."""
     rk4 = NightFit(normal_model="demand", n_starts=3, sensor_offsets_k=(0.0, 0.0),
-                   solver="rk4").fit(nights_15min, RANGES)
+                   solver="rk4", model_error=None).fit(nights_15min, RANGES)
     assert fitted.solver == "exact"
     for key in ("hlc", "c_m", "tau"):
         a, b = fitted.lumped_[key], rk4.lumped_[key]

@@ -13,10 +13,12 @@ from .policy import (
     Decision,
     FitSummary,
     NightRecord,
+    Outlook,
     Target,
     decide,
     parse_candidates,
+    parse_outlook,
 )
 
 __all__ = ["CONSTRAINED", "NORMAL", "Candidate", "Decision", "FitSummary", "NightRecord",
-           "Target", "decide", "parse_candidates"]
+           "Outlook", "Target", "decide", "parse_candidates", "parse_outlook"]

@@ -34,6 +34,13 @@ Criterion (documented choice; README "Adaptive campaign"):
 
 A candidate is scored by the policy as max(hlc_rel_pred / target_hlc, tau_rel_pred /
 target_tau) (:func:`impctl.campaign.policy.decide`).
+
+* **Outlook.** The same prediction after ``ahead`` more nights (the most informative normal
+  and constrained candidates, by det(F_past + F_night), alternating, normal first), and the
+  *floor* then: the type-B shares alone (:func:`impctl.campaign.policy.type_b_shares`) at
+  the mean ΔT those nights bring — what no number of nights removes. The policy stops on it
+  ("precision limited by …", naming the largest share) when the floor alone misses the
+  target and dominates the predicted interval.
 """
 
 from __future__ import annotations
@@ -45,7 +52,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..model import HouseParameters, simulate
-from .policy import CONSTRAINED, NORMAL, Candidate
+from .policy import CONSTRAINED, NORMAL, Candidate, Outlook, type_b_shares
 
 Z95 = 1.959964
 #: Relative step of the finite differences in θ, and the θ_m,0 step [K].
@@ -218,79 +225,118 @@ def _offsets(result: dict) -> tuple[float, float, int]:
     return float(math.hypot(*offsets)), float(mean_dt), samples
 
 
-def _fixed_shares(result: dict, name: str) -> tuple[float, float]:
-    """Type-B shares of ``name``'s log-sd that more nights do not shrink, besides the sensor
-    offsets: (the night-gain share, which scales with 1/mean ΔT like the offsets; the meter
-    and structural shares, which do not)."""
-    allowance = (result.get("fit") or {}).get("offset_allowance") or {}
+class _Predictor:
+    """The predicted relative half-widths of HLC and τ after any set of added nights."""
 
-    def num(v) -> float:
-        return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else 0.0
+    def __init__(self, result: dict, protocol: Protocol, step_s: float):
+        self.house = house_of_fit(result)
+        self.sigma = _sigma_eff(result)
+        self.protocol, self.step_s = protocol, step_s
+        f_past = past_information(result, self.house, step_s)
+        self.grads = lumped_gradients(self.house)
+        self.offset_k, self.mean_dt, self.n_past = _offsets(result)
+        share_now = self.offset_k / self.mean_dt if self.mean_dt > 1.0 else 0.0
+        # (night-gain share, the shares no night changes) per quantity: policy.type_b_shares
+        self.fixed = {name: shares[1:] for name, shares in type_b_shares(result).items()}
+        self.stat = {name: _stat_sd(result, name, math.hypot(share_now, *self.fixed[name]))
+                     for name in self.grads}
+        self.ridge = 1e-9 * max(float(np.trace(f_past)), 1e-12) * np.eye(2)
+        self.f_past = f_past
+        g = self.grads
+        past_cov = np.linalg.pinv(f_past + self.ridge)
+        self.before = {name: float(g[name] @ past_cov @ g[name]) for name in g}
+        self.sandwich = {name for name, src in
+                         ((result.get("fit") or {}).get("interval_source") or {}).items()
+                         if src == "sandwich"}
+        self.n_nights = len(result.get("predictions") or [])
+        self.n_new = int(round(protocol.window_h * 3600 / step_s))
 
-    gain = num(allowance.get("night_gain_relative_sd"))
-    fixed = num(allowance.get("meter_relative_sd")) if name in ("hlc", "c_m") else 0.0
-    structure = allowance.get("structure_relative_sd")
-    if isinstance(structure, dict):
-        fixed = math.hypot(fixed, num(structure.get(name)))
-    return gain, fixed
+    def night(self, kind: str, setpoint_c: float, t_out_c: float) -> tuple[np.ndarray, float]:
+        return night_information(self.house, kind, setpoint_c, t_out_c, self.step_s,
+                                 self.sigma[kind], self.protocol)
+
+    def _t_ratio(self, added: int) -> float:
+        # A sandwich interval from G nights takes Student-t's quantile with G − 1 degrees of
+        # freedom (impctl.fit.uncertainty): more nights also narrow it by t(G + k − 1)/t(G − 1).
+        if self.n_nights < 2 or added < 1:
+            return 1.0
+        from scipy.stats import t as student_t
+        return float(student_t.ppf(0.975, self.n_nights + added - 1)
+                     / student_t.ppf(0.975, self.n_nights - 1))
+
+    def after(self, nights: Sequence[tuple[np.ndarray, float]]
+              ) -> tuple[dict[str, float], dict[str, float]]:
+        """({q: predicted relative half-width}, {q: the floor then}) after ``nights``
+        [(F_night, mean ΔT [K])] are added, q ∈ {hlc, tau}."""
+        dt_sum = self.mean_dt * self.n_past + sum(d * self.n_new for _, d in nights)
+        n_all = self.n_past + self.n_new * len(nights)
+        dt_all = dt_sum / n_all if n_all else 0.0
+        share = self.offset_k / dt_all if dt_all > 1.0 else 0.0
+        scale = self.mean_dt / dt_all if dt_all > 1.0 and self.mean_dt > 1.0 else 1.0
+        cov = np.linalg.pinv(self.f_past + sum(f for f, _ in nights) + self.ridge)
+        t_ratio = self._t_ratio(len(nights))
+        pred, floor = {}, {}
+        for name, g in self.grads.items():
+            before = self.before[name]
+            ratio = float(g @ cov @ g) / before if before > 0 else 1.0
+            if name in self.sandwich:
+                ratio *= t_ratio ** 2
+            gain, fixed_sd = self.fixed[name]
+            floor_var = share ** 2 + (gain * scale) ** 2 + fixed_sd ** 2
+            sd = math.sqrt(self.stat[name] ** 2 * min(max(ratio, 0.0), 1.0) + floor_var)
+            pred[name] = math.sinh(Z95 * sd) if math.isfinite(sd) else math.inf
+            floor[name] = math.sinh(Z95 * math.sqrt(floor_var))
+        return pred, floor
+
+
+def predict(result: dict, forecast_t_out_c: float, *, constrained_setpoint_c: float,
+            normal_setpoints_c: Sequence[float], step_s: float,
+            protocol: Protocol = Protocol(), ahead: int = 2
+            ) -> tuple[list[Candidate], Outlook]:
+    """Predicted relative 95 % half-widths of HLC and τ after each candidate night, and the
+    outlook after ``ahead`` more nights.
+
+    Parameters
+    ----------
+    result : the JSON of ``impctl fit`` (schema ``impctl-fit/1``)
+    forecast_t_out_c : the next nights' mean outdoor temperature [°C]
+    constrained_setpoint_c, normal_setpoints_c : the candidates' T_set [°C]
+    step_s : the nights' sample step [s]
+    protocol : window, lag, pre-heat, band and day setpoint of a night
+    ahead : nights of the outlook: the most informative normal and constrained nights
+        (largest det(F_past + F_night)) alternating, normal first (never two constrained in a
+        row, whatever the last night was)
+
+    Returns
+    -------
+    candidates : the constrained night first, then the normal nights in setpoint order
+    outlook : predicted half-widths after ``ahead`` nights and the floor (type-B shares) then
+    """
+    if ahead < 1:
+        raise ValueError(f"ahead must be >= 1, got {ahead!r}")
+    pred = _Predictor(result, protocol, step_s)
+    plans = [(CONSTRAINED, float(constrained_setpoint_c))]
+    plans += [(NORMAL, float(sp)) for sp in normal_setpoints_c]
+    infos = [pred.night(kind, sp, forecast_t_out_c) for kind, sp in plans]
+    out = []
+    for (kind, sp), info in zip(plans, infos, strict=True):
+        after, _ = pred.after([info])
+        out.append(Candidate(kind, sp, after["hlc"], after["tau"]))
+
+    def most_informative(kind: str) -> tuple[np.ndarray, float]:
+        of_kind = [info for (k, _), info in zip(plans, infos, strict=True) if k == kind]
+        return max(of_kind, key=lambda info: float(np.linalg.det(pred.f_past + info[0])))
+
+    best = {NORMAL: most_informative(NORMAL), CONSTRAINED: infos[0]}
+    sequence = [best[NORMAL if i % 2 == 0 else CONSTRAINED] for i in range(ahead)]
+    after, floor = pred.after(sequence)
+    return out, Outlook(ahead, after["hlc"], after["tau"], floor["hlc"], floor["tau"])
 
 
 def predict_candidates(result: dict, forecast_t_out_c: float, *, constrained_setpoint_c: float,
                        normal_setpoints_c: Sequence[float], step_s: float,
                        protocol: Protocol = Protocol()) -> list[Candidate]:
-    """Predicted relative 95 % half-widths of HLC and τ after each candidate night.
-
-    Parameters
-    ----------
-    result : the JSON of ``impctl fit`` (schema ``impctl-fit/1``)
-    forecast_t_out_c : the next night's mean outdoor temperature [°C]
-    constrained_setpoint_c, normal_setpoints_c : the candidates' T_set [°C]
-    step_s : the nights' sample step [s]
-    protocol : window, lag, pre-heat, band and day setpoint of a night
-
-    Returns
-    -------
-    list of Candidate: the constrained night first, then the normal nights in setpoint order
-    """
-    house = house_of_fit(result)
-    sigma = _sigma_eff(result)
-    f_past = past_information(result, house, step_s)
-    grads = lumped_gradients(house)
-    offset_k, mean_dt, n_past = _offsets(result)
-    share_now = offset_k / mean_dt if mean_dt > 1.0 else 0.0
-    fixed = {name: _fixed_shares(result, name) for name in grads}
-    stat = {name: _stat_sd(result, name, math.hypot(share_now, *fixed[name])) for name in grads}
-    ridge = 1e-9 * max(float(np.trace(f_past)), 1e-12) * np.eye(2)
-    past_cov = np.linalg.pinv(f_past + ridge)
-    plans = [(CONSTRAINED, float(constrained_setpoint_c))]
-    plans += [(NORMAL, float(sp)) for sp in normal_setpoints_c]
-    # A sandwich interval from G nights takes Student-t's quantile with G − 1 degrees of
-    # freedom (impctl.fit.uncertainty): one more night also narrows it by t(G)/t(G − 1).
-    sources = (result.get("fit") or {}).get("interval_source") or {}
-    n_nights = len(result.get("predictions") or [])
-    t_ratio = 1.0
-    if n_nights >= 2:
-        from scipy.stats import t as student_t
-        t_ratio = float(student_t.ppf(0.975, n_nights) / student_t.ppf(0.975, n_nights - 1))
-    out = []
-    for kind, sp in plans:
-        f_new, delta = night_information(house, kind, sp, forecast_t_out_c, step_s, sigma[kind],
-                                         protocol)
-        n_new = int(round(protocol.window_h * 3600 / step_s))
-        dt_all = ((mean_dt * n_past + delta * n_new) / (n_past + n_new)
-                  if n_past else delta)
-        share = offset_k / dt_all if dt_all > 1.0 else 0.0
-        scale = mean_dt / dt_all if dt_all > 1.0 and mean_dt > 1.0 else 1.0
-        cov = np.linalg.pinv(f_past + f_new + ridge)
-        pred = {}
-        for name, g in grads.items():
-            before = float(g @ past_cov @ g)
-            ratio = float(g @ cov @ g) / before if before > 0 else 1.0
-            if sources.get(name) == "sandwich":
-                ratio *= t_ratio ** 2
-            gain, fixed_sd = fixed[name]
-            sd = math.sqrt(stat[name] ** 2 * min(max(ratio, 0.0), 1.0) + share ** 2
-                           + (gain * scale) ** 2 + fixed_sd ** 2)
-            pred[name] = math.sinh(Z95 * sd) if math.isfinite(sd) else math.inf
-        out.append(Candidate(kind, sp, pred["hlc"], pred["tau"]))
-    return out
+    """The candidates of :func:`predict` (the outlook left out)."""
+    return predict(result, forecast_t_out_c, constrained_setpoint_c=constrained_setpoint_c,
+                   normal_setpoints_c=normal_setpoints_c, step_s=step_s, protocol=protocol,
+                   ahead=1)[0]

@@ -12,14 +12,27 @@ Rules, in order (:func:`decide`):
    were run.
 2. **max_nights** — stop when ``max_nights`` nights were run (valid or not: each one cost the
    household a night).
-3. **cannot be identified** — stop when the worst ratio max(hlc_rel/target, tau_rel/target)
+3. **precision limited** — with a fit of both kinds, stop when the target cannot be reached
+   because the interval is dominated by shares no night reduces (type-B: sensor offsets, heat
+   meter, night gains, structure and model-error shares, stated in the fit JSON): the worst
+   ratio of that *floor* alone is ≥ 1 (the reason names its largest share), the predicted
+   worst ratio after the best candidate night and after :attr:`Outlook.nights` more nights is
+   still ≥ 1, and the floor already makes up at least half of the latest interval's variance
+   (the floor's worst ratio ≥ 1/√2 of the latest one: the part nights can shrink is at most
+   as large as the part they cannot).
+   Without predictions the latest fit's own floor and interval are used.
+4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
+   stop when the best candidate night is predicted to shrink the worst ratio by less than
+   10 % (:data:`MIN_GAIN`). A fit of one night of each kind is too fragile (its sandwich has
+   one degree of freedom) to trust its own prediction that nights would not help.
+5. **cannot be identified** — stop when the worst ratio max(hlc_rel/target, tau_rel/target)
    did not shrink by at least 10 % over the last ``stall_nights`` valid nights: more nights of
    the same house are unlikely to help, and the household should not pay for them.
-4. **band** — skip tonight (only tonight) when the forecast outdoor temperature is outside the
+6. **band** — skip tonight (only tonight) when the forecast outdoor temperature is outside the
    outdoor band.
-5. **never two constrained nights in a row** — after a constrained night (valid or not) the
+7. **never two constrained nights in a row** — after a constrained night (valid or not) the
    next night run is normal.
-6. **choice** — until a fit exists (or without predictions) a default order: a constrained
+8. **choice** — until a fit exists (or without predictions) a default order: a constrained
    night, a normal night at the first normal setpoint, then two normal nights per constrained
    one (the fixed 2 + 3 plan's ratio), normal setpoints in turn. With a fit and predictions:
    the allowed candidate with the smallest predicted worst ratio
@@ -37,6 +50,12 @@ NORMAL = "normal"
 KINDS = (CONSTRAINED, NORMAL)
 #: The worst ratio must shrink by at least this fraction over ``stall_nights`` valid nights.
 STALL_SHRINK = 0.10
+#: "More nights would not help": the best next night must shrink the worst ratio by this much.
+MIN_GAIN = 0.10
+#: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
+#: fit's (1/√2: the floor is at least half the variance).
+FLOOR_DOMINANT = 1 / math.sqrt(2)
+Z95 = 1.959964
 
 
 @dataclass(frozen=True)
@@ -46,19 +65,29 @@ class Target:
     Attributes
     ----------
     hlc_rel, tau_rel : 95 % interval half-width relative to the estimate (0.05 = ±5 %)
-    max_nights : nights run (valid or not) at most — the household's cost
+    max_nights : nights run (valid or not) at most — the household's cost; default 5, the
+        fixed 2 + 3 plan's nights, so the adaptive campaign never asks more of a household
+        unless raised
     min_each : valid nights of each kind before precision may stop the campaign
     stall_nights : "cannot be identified" when the worst ratio did not shrink by ≥ 10 % over
         this many valid nights
+    floor_dominance : "precision limited" needs the floor's worst ratio ≥ this fraction of the
+        latest fit's (default 1/√2: the floor is at least half the variance; 0: stop as soon as
+        the floor alone misses the target)
     """
 
     hlc_rel: float = 0.05
     tau_rel: float = 0.08
-    max_nights: int = 8
+    max_nights: int = 5
     min_each: int = 1
     stall_nights: int = 3
+    floor_dominance: float = FLOOR_DOMINANT
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.floor_dominance, (int, float))
+                and 0.0 <= self.floor_dominance <= 1.0):
+            raise ValueError(f"target floor_dominance must be within 0..1, got "
+                             f"{self.floor_dominance!r}")
         for name in ("hlc_rel", "tau_rel"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -86,7 +115,16 @@ class NightRecord:
 
 @dataclass(frozen=True)
 class FitSummary:
-    """One fit after ``nights`` valid nights: HLC [W/K] and τ [h] with 95 % intervals."""
+    """One fit after ``nights`` valid nights: HLC [W/K] and τ [h] with 95 % intervals.
+
+    ``hlc_floor_rel`` and ``tau_floor_rel`` are the relative 95 % half-widths of the interval's
+    type-B shares alone (sensor offsets, meter, night gains, structure, model error): what no
+    number of nights removes (0 = not stated by the fit). ``too_few_nights``: the intervals
+    rest on too few nights to mean much (the fit's ``interval_basis`` says so, or a
+    night-clustered sandwich from 2 nights, with Student-t's t(1) = 12.7, is wider than
+    ±100 %) — show "too few nights yet", not the numbers. ``hlc_floor_by`` and
+    ``tau_floor_by``: the largest share of each floor, in words (:data:`FLOOR_LABELS`).
+    """
 
     nights: int
     hlc_w_per_k: float
@@ -95,6 +133,11 @@ class FitSummary:
     tau_h: float
     tau_low: float
     tau_high: float
+    hlc_floor_rel: float = 0.0
+    tau_floor_rel: float = 0.0
+    too_few_nights: bool = False
+    hlc_floor_by: str = ""
+    tau_floor_by: str = ""
 
     @classmethod
     def from_fit_json(cls, result: dict, nights: int) -> FitSummary:
@@ -112,11 +155,29 @@ class FitSummary:
             value = block.get(key) if isinstance(block, dict) else None
             return _num(value, math.nan)
 
+        fit = result.get("fit") if isinstance(result.get("fit"), dict) else {}
+        sources = fit.get("interval_source") if isinstance(fit.get("interval_source"),
+                                                            dict) else {}
+        basis = fit.get("interval_basis")
+        parts = type_b_parts(result)
+        floor = {name: math.sinh(Z95 * math.sqrt(sum(v * v for v in parts[name].values())))
+                 for name in ("hlc", "tau")}
+        by = {name: (FLOOR_LABELS[max(parts[name], key=parts[name].get)]
+                     if any(parts[name].values()) else "") for name in ("hlc", "tau")}
+        rel = {name: _rel(get(name, "value"), get(name, "low"), get(name, "high"))
+               for name in ("hlc", "tau")}
+        # The fit's own word wins; else a 2-night sandwich wider than ±100 % (t(1) = 12.7)
+        too_few = (("too few" in basis) if isinstance(basis, str) else
+                   int(nights) <= 2 and any(sources.get(n) == "sandwich" and rel[n] > 1.0
+                                            for n in rel))
         return cls(nights=int(nights),
                    hlc_w_per_k=get("hlc", "value"), hlc_low=get("hlc", "low"),
                    hlc_high=get("hlc", "high"),
                    tau_h=get("tau", "value"), tau_low=get("tau", "low"),
-                   tau_high=get("tau", "high"))
+                   tau_high=get("tau", "high"),
+                   hlc_floor_rel=floor["hlc"], tau_floor_rel=floor["tau"],
+                   too_few_nights=bool(too_few), hlc_floor_by=by["hlc"],
+                   tau_floor_by=by["tau"])
 
     @property
     def hlc_rel(self) -> float:
@@ -127,6 +188,62 @@ class FitSummary:
     def tau_rel(self) -> float:
         """Half-width of the τ interval relative to the estimate (inf when unknown)."""
         return _rel(self.tau_h, self.tau_low, self.tau_high)
+
+
+#: What each type-B share is, in the household's words (the stop reason names the largest).
+FLOOR_LABELS = {"offsets": "the room and outdoor sensors' offsets",
+                "gains": "unmetered night gains (sleepers, base load)",
+                "meter": "the heat meter's gain error",
+                "structure": "the model's structure",
+                "model_error": "the model's error on houses like this one"}
+
+
+def type_b_parts(result: dict) -> dict[str, dict[str, float]]:
+    """Each type-B share of an ``impctl fit`` JSON's log-space sd [–] per lumped quantity
+    (hlc, tau, c_m), by :data:`FLOOR_LABELS` key: ``fit.offset_allowance`` (sensor offsets,
+    night gains, meter — HLC and C_m only —, structure) and ``fit.model_error.share``. Missing
+    fields count as 0 (an older fit states fewer shares)."""
+    fit = result.get("fit") if isinstance(result, dict) else None
+    fit = fit if isinstance(fit, dict) else {}
+    allowance = fit.get("offset_allowance")
+    allowance = allowance if isinstance(allowance, dict) else {}
+    model_error = fit.get("model_error")
+    blocks = {"structure": allowance.get("structure_relative_sd"),
+              "model_error": model_error.get("share") if isinstance(model_error, dict) else None}
+    out = {}
+    for name in ("hlc", "tau", "c_m"):
+        parts = {"offsets": _num(allowance.get("relative_sd"), 0.0),
+                 "gains": _num(allowance.get("night_gain_relative_sd"), 0.0),
+                 "meter": (_num(allowance.get("meter_relative_sd"), 0.0)
+                           if name in ("hlc", "c_m") else 0.0)}
+        for key, block in blocks.items():
+            parts[key] = _num(block.get(name), 0.0) if isinstance(block, dict) else 0.0
+        out[name] = parts
+    return out
+
+
+def type_b_shares(result: dict) -> dict[str, tuple[float, float, float]]:
+    """The type-B shares of :func:`type_b_parts` grouped by how nights move them: (sensor
+    offsets, which scale with 1/mean ΔT; unmetered night gains, likewise; the rest — meter,
+    structure and model-error shares — which no night changes), per lumped quantity."""
+    out = {}
+    for name, p in type_b_parts(result).items():
+        out[name] = (p["offsets"], p["gains"],
+                     math.sqrt(p["meter"] ** 2 + p["structure"] ** 2 + p["model_error"] ** 2))
+    return out
+
+
+@dataclass(frozen=True)
+class Outlook:
+    """What ``impctl campaign next`` predicts beyond tonight: the relative 95 % half-widths of
+    HLC and τ after ``nights`` more nights (the most informative of each kind, alternating),
+    and the floor then (type-B shares alone, at the mean ΔT those nights bring)."""
+
+    nights: int
+    hlc_rel_pred: float
+    tau_rel_pred: float
+    hlc_floor_rel: float
+    tau_floor_rel: float
 
 
 @dataclass(frozen=True)
@@ -161,7 +278,8 @@ class Decision:
 def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
            candidates: Sequence[Candidate], target: Target, *,
            forecast_t_out_c: float | None, t_out_band_c: tuple[float, float],
-           constrained_setpoint_c: float, normal_setpoints_c: Sequence[float]) -> Decision:
+           constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
+           outlook: Outlook | None = None) -> Decision:
     """The next step of the campaign (rules in the module docstring).
 
     Parameters
@@ -173,6 +291,8 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     forecast_t_out_c : tonight's expected mean outdoor temperature [°C]; None = unknown (run)
     t_out_band_c : (low, high) outdoor temperatures [°C] nights may run in
     constrained_setpoint_c, normal_setpoints_c : the configured setpoints [°C]
+    outlook : predictions beyond tonight from ``impctl campaign next`` (None: the latest
+        fit's own floor is used)
     """
     if not normal_setpoints_c:
         raise ValueError("normal_setpoints_c must name at least one setpoint")
@@ -189,6 +309,30 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
         return Decision("stop", None, None,
                         f"Stopped after {run} nights, the most this household agreed to "
                         f"(max_nights {target.max_nights}){where}.")
+    after_constrained = bool(history) and history[-1].kind == CONSTRAINED
+    allowed = [c for c in candidates if c.kind in KINDS
+               and not (after_constrained and c.kind == CONSTRAINED)
+               and math.isfinite(_num(c.hlc_rel_pred)) and math.isfinite(_num(c.tau_rel_pred))]
+    short = [k for k in KINDS if valid[k] < target.min_each]
+    if short:
+        preferred = [c for c in allowed if c.kind in short]
+        allowed = preferred or allowed
+    best = (min(allowed, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
+                                        c.kind != NORMAL, c.setpoint_c))
+            if allowed else None)
+    if latest is not None and enough_each:
+        # judged on every candidate: a constrained night not allowed tonight is tomorrow
+        usable = [c for c in candidates if c.kind in KINDS and math.isfinite(_num(c.hlc_rel_pred))
+                  and math.isfinite(_num(c.tau_rel_pred))]
+        best_any = (min(usable, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
+                                               c.kind != NORMAL, c.setpoint_c))
+                    if usable else None)
+        limited = _floor_limited(latest, best_any, outlook, target)
+        if limited is not None:
+            return Decision("stop", None, None, limited)
+        no_gain = _no_gain(latest, best_any, target)
+        if no_gain is not None:
+            return Decision("stop", None, None, no_gain)
     stalled = _stalled(fits, target)
     if stalled is not None:
         return Decision("stop", None, None, stalled)
@@ -198,19 +342,9 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                         f"Skipping tonight: the forecast outdoor temperature "
                         f"{forecast_t_out_c:.1f} °C is outside the band {low:g}–{high:g} °C.")
 
-    after_constrained = bool(history) and history[-1].kind == CONSTRAINED
-    allowed = [c for c in candidates if c.kind in KINDS
-               and not (after_constrained and c.kind == CONSTRAINED)
-               and math.isfinite(_num(c.hlc_rel_pred)) and math.isfinite(_num(c.tau_rel_pred))]
-    short = [k for k in KINDS if valid[k] < target.min_each]
-    if short:
-        preferred = [c for c in allowed if c.kind in short]
-        allowed = preferred or allowed
-    if latest is None or not allowed:
+    if latest is None or best is None:
         return _default(history, valid, after_constrained, constrained_setpoint_c,
                         normal_setpoints_c, latest is None)
-    best = min(allowed, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
-                                       c.kind != NORMAL, c.setpoint_c))
     now = target.ratio(latest.hlc_rel, latest.tau_rel)
     then = target.ratio(best.hlc_rel_pred, best.tau_rel_pred)
     rule = " (never two constrained nights in a row)" if after_constrained else ""
@@ -249,6 +383,28 @@ def parse_candidates(block: dict) -> list[Candidate]:
     return out
 
 
+def parse_outlook(block: dict) -> Outlook | None:
+    """The ``outlook`` of the JSON written by ``impctl campaign next`` (None when absent, as
+    from an older impctl); raises ValueError naming the field and the problem."""
+    entry = block.get("outlook") if isinstance(block, dict) else None
+    if entry is None:
+        return None
+    if not isinstance(entry, dict):
+        raise ValueError("outlook is not an object")
+    nights = entry.get("nights")
+    if isinstance(nights, bool) or not isinstance(nights, int) or nights < 1:
+        raise ValueError(f"outlook.nights must be an integer >= 1, got {nights!r}")
+    values = []
+    for key in ("hlc_rel_pred", "tau_rel_pred", "hlc_floor_rel", "tau_floor_rel"):
+        value = entry.get(key)
+        if value is None:
+            value = math.inf if key.endswith("_pred") else 0.0   # null: not predicted
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+            raise ValueError(f"outlook.{key} must be a number >= 0, got {value!r}")
+        values.append(float(value))
+    return Outlook(nights, *values)
+
+
 def _num(value: object, default: float = math.inf) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return default
@@ -276,6 +432,47 @@ def _reached_reason(fit: FitSummary, target: Target, run: int) -> str:
     return (f"Target reached after {run} nights ({fit.nights} valid): HLC {fit.hlc_w_per_k:.0f} "
             f"W/K ±{fit.hlc_rel:.1%} (target ±{target.hlc_rel:.0%}), τ {fit.tau_h:.0f} h "
             f"±{fit.tau_rel:.1%} (target ±{target.tau_rel:.0%}).")
+
+
+def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook | None,
+                   target: Target) -> str | None:
+    """The "precision limited" sentence when no number of nights can reach the target."""
+    if outlook is not None:
+        hlc_floor, tau_floor = outlook.hlc_floor_rel, outlook.tau_floor_rel
+        ahead = target.ratio(outlook.hlc_rel_pred, outlook.tau_rel_pred)
+    else:
+        hlc_floor, tau_floor = latest.hlc_floor_rel, latest.tau_floor_rel
+        ahead = target.ratio(latest.hlc_rel, latest.tau_rel)
+    floor = target.ratio(hlc_floor, tau_floor)
+    now = target.ratio(latest.hlc_rel, latest.tau_rel)
+    tonight = (target.ratio(best.hlc_rel_pred, best.tau_rel_pred) if best is not None
+               else now)
+    if not (math.isfinite(floor) and floor >= 1 and tonight >= 1 and ahead >= 1
+            and floor >= target.floor_dominance * now):
+        return None
+    # name what limits the quantity that misses its target the most
+    by = (latest.hlc_floor_by if hlc_floor / target.hlc_rel >= tau_floor / target.tau_rel
+          else latest.tau_floor_by) or "what more nights cannot reduce"
+    return (f"Stopped: precision limited by {by}: HLC "
+            f"±{_pct(hlc_floor)} and τ ±{_pct(tau_floor)} is the best this house can give "
+            f"(target ±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}; now {_precision(latest)}); "
+            f"more nights would not reach the target.")
+
+
+def _no_gain(latest: FitSummary, best: Candidate | None, target: Target) -> str | None:
+    """The "more nights would not help" sentence when the best night is predicted to shrink
+    the worst ratio by less than :data:`MIN_GAIN`."""
+    if best is None or latest.nights < 3:
+        return None
+    now = target.ratio(latest.hlc_rel, latest.tau_rel)
+    then = target.ratio(best.hlc_rel_pred, best.tau_rel_pred)
+    if not (math.isfinite(now) and math.isfinite(then)) or then < (1 - MIN_GAIN) * now:
+        return None
+    return (f"Stopped: more nights would not help — the best next night (a {best.kind} night "
+            f"at {best.setpoint_c:g} °C) is predicted to bring HLC to ±{_pct(best.hlc_rel_pred)} "
+            f"and τ to ±{_pct(best.tau_rel_pred)} (now {_precision(latest)}; target "
+            f"±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}), less than {MIN_GAIN:.0%} "
+            f"narrower.")
 
 
 def _stalled(fits: Sequence[FitSummary], target: Target) -> str | None:

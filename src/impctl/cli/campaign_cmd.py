@@ -93,11 +93,12 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
     """Predict the 95 % half-widths of HLC and τ after each possible next night.
 
     Writes {"forecast_t_out_c", "candidates": [{"kind", "setpoint_c", "hlc_rel_pred",
-    "tau_rel_pred"}]} (criterion: module impctl.campaign.design, README "Adaptive campaign").
+    "tau_rel_pred"}], "outlook": {"nights", "hlc_rel_pred", "tau_rel_pred", "hlc_floor_rel",
+    "tau_floor_rel"}} (criterion: module impctl.campaign.design, README "Adaptive campaign").
     """
     import numpy as np
 
-    from ..campaign.design import Protocol, predict_candidates
+    from ..campaign.design import Protocol, predict
     from ..imp import read_nights
     from ..store.export import refuse_database
     from .fit_cmd import _write_json
@@ -121,20 +122,28 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
                         emission_lag_h=float(result.get("fit", {}).get("emission_lag_h", 1.0)),
                         day_setpoint_c=constrained_setpoint_c)
     try:
-        candidates = predict_candidates(result, forecast_t_out_c,
-                                        constrained_setpoint_c=constrained_setpoint_c,
-                                        normal_setpoints_c=normal_setpoints_c, step_s=step_s,
-                                        protocol=protocol)
+        candidates, outlook = predict(result, forecast_t_out_c,
+                                      constrained_setpoint_c=constrained_setpoint_c,
+                                      normal_setpoints_c=normal_setpoints_c, step_s=step_s,
+                                      protocol=protocol)
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"the fit result cannot be simulated ({exc})", fit_path) from None
     out = {"forecast_t_out_c": forecast_t_out_c, "sample_step_s": step_s,
            "candidates": [{"kind": c.kind, "setpoint_c": c.setpoint_c,
                            "hlc_rel_pred": _finite(c.hlc_rel_pred),
-                           "tau_rel_pred": _finite(c.tau_rel_pred)} for c in candidates]}
+                           "tau_rel_pred": _finite(c.tau_rel_pred)} for c in candidates],
+           "outlook": {"nights": outlook.nights,
+                       "hlc_rel_pred": _finite(outlook.hlc_rel_pred),
+                       "tau_rel_pred": _finite(outlook.tau_rel_pred),
+                       "hlc_floor_rel": _finite(outlook.hlc_floor_rel),
+                       "tau_floor_rel": _finite(outlook.tau_floor_rel)}}
     _write_json(json_path, out)
     for c in candidates:
         click.echo(f"{c.kind:<11} {c.setpoint_c:5.1f} °C   HLC ±{c.hlc_rel_pred:6.1%}   "
                    f"τ ±{c.tau_rel_pred:6.1%}")
+    click.echo(f"after {outlook.nights} more nights: HLC ±{outlook.hlc_rel_pred:6.1%}   "
+               f"τ ±{outlook.tau_rel_pred:6.1%}   (floor: sensors, meter, model: HLC "
+               f"±{outlook.hlc_floor_rel:.1%}, τ ±{outlook.tau_floor_rel:.1%})")
     click.echo(f"JSON written to {json_path}")
 
 

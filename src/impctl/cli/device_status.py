@@ -74,13 +74,15 @@ def collect_status(cfg) -> dict:
 
 def _campaign(store, cfg) -> dict:
     """Mode, nights run / valid, how the intervals shrank fit after fit, the last decision."""
-    from ..daemon.adaptive import campaign_state, decide_now, fit_history, rel_pct
+    from ..daemon.adaptive import absurd, campaign_state, decide_now, fit_history, rel_pct
 
     st = campaign_state(store, cfg)
     camp = cfg.campaign
     history = [{"valid_nights": f.nights, "hlc_w_per_k": _finite(f.hlc_w_per_k),
                 "hlc_rel_pct": rel_pct(f.hlc_rel), "tau_h": _finite(f.tau_h),
-                "tau_rel_pct": rel_pct(f.tau_rel)}
+                "tau_rel_pct": rel_pct(f.tau_rel),
+                "interval_note": (None if not f.too_few_nights else "too few nights yet"
+                                  if absurd(f) else "too few nights yet: model-based")}
                for f in fit_history(store)]
     out = {"mode": st.mode, "nights_run": st.nights_run, "nights_valid": st.nights_valid,
            "status": st.status, "reason": st.reason, "intervals": history,
@@ -141,10 +143,16 @@ def _campaign_lines(camp: dict, zone: ZoneInfo) -> list[str]:
     for f in camp["intervals"]:
         def pct(v):
             return "undetermined" if v is None else f"±{v:.1f} %"
+        if f.get("interval_note") == "too few nights yet":
+            lines.append(f"  after {f['valid_nights']} valid nights: "
+                         f"HLC {_value(f['hlc_w_per_k'], 'W/K', '.0f')}, "
+                         f"τ {_value(f['tau_h'], 'h', '.0f')}; interval: {f['interval_note']}")
+            continue
         lines.append(f"  after {f['valid_nights']} valid nights: "
                      f"HLC {_value(f['hlc_w_per_k'], 'W/K', '.0f')} "
                      f"{pct(f['hlc_rel_pct'])}, τ {_value(f['tau_h'], 'h', '.0f')} "
-                     f"{pct(f['tau_rel_pct'])} (target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)")
+                     f"{pct(f['tau_rel_pct'])} (target ±{tgt['hlc']:g} % / ±{tgt['tau']:g} %)"
+                     + (f"; interval: {f['interval_note']}" if f.get("interval_note") else ""))
     d = camp.get("last_decision")
     if d is not None:
         when = "" if d["act"] is None else f" ({d['act'].astimezone(zone):%Y-%m-%d %H:%M})"

@@ -31,9 +31,11 @@ from ..campaign import (
     Decision,
     FitSummary,
     NightRecord,
+    Outlook,
     Target,
     decide,
     parse_candidates,
+    parse_outlook,
 )
 from ..controller import NightRequest
 from ..store import Store
@@ -83,17 +85,17 @@ def fit_history(store: Store) -> list[FitSummary]:
     return out
 
 
-def latest_candidates(store: Store) -> list[Candidate]:
-    """The predictions made from the newest fit; [] when it has none (then the policy
-    follows its default order)."""
+def latest_candidates(store: Store) -> tuple[list[Candidate], Outlook | None]:
+    """The predictions made from the newest fit: the candidates ([] when none: then the policy
+    follows its default order) and the outlook beyond tonight (None when none)."""
     fits = store.fits()
     if not fits or fits[-1].candidates is None:
-        return []
+        return [], None
     try:
-        return parse_candidates(fits[-1].candidates)
+        return parse_candidates(fits[-1].candidates), parse_outlook(fits[-1].candidates)
     except ValueError as exc:
         _LOG.warning("stored predictions of fit %d not usable: %s", fits[-1].id, exc)
-        return []
+        return [], None
 
 
 def forecast(store: Store, cfg: Config) -> Forecast:
@@ -111,11 +113,12 @@ def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
     """The policy's decision for the next night from what the store holds now."""
     fc = forecast(store, cfg)
     camp = cfg.campaign
-    decision = decide(night_history(store), fit_history(store), latest_candidates(store),
+    candidates, outlook = latest_candidates(store)
+    decision = decide(night_history(store), fit_history(store), candidates,
                       target(cfg), forecast_t_out_c=fc.t_out_c,
                       t_out_band_c=(cfg.night.t_out_min_c, cfg.night.t_out_max_c),
                       constrained_setpoint_c=camp.constrained_setpoint_c,
-                      normal_setpoints_c=camp.normal_setpoints_c)
+                      normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook)
     return decision, fc
 
 
@@ -190,6 +193,12 @@ def rel_pct(x: float) -> float | None:
     return round(100 * x, 1) if math.isfinite(x) else None
 
 
+def absurd(fit: FitSummary) -> bool:
+    """An interval from too few nights that is wider than ±100 %: shown as "too few nights
+    yet", never as a number (a fit that says it is model-based and stays narrower is shown)."""
+    return fit.too_few_nights and not (fit.hlc_rel <= 1.0 and fit.tau_rel <= 1.0)
+
+
 def campaign_state(store: Store, cfg: Config) -> CampaignState:
     """The campaign as one record (read from the store only)."""
     nights = store.nights(states=RUN_STATES)
@@ -199,7 +208,8 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
     if last_fit is not None:
         try:
             fit = FitSummary.from_fit_json(last_fit[2], len(last_fit[1]))
-            hlc, tau = rel_pct(fit.hlc_rel), rel_pct(fit.tau_rel)
+            if not absurd(fit):  # hundreds of % from 2 nights: Home Assistant shows unknown
+                hlc, tau = rel_pct(fit.hlc_rel), rel_pct(fit.tau_rel)
         except ValueError:
             pass
     last = store.decisions(1)
@@ -222,6 +232,10 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
             status = f"finished: precision reached after {run} nights"
         elif run >= cfg.campaign.max_nights:
             status = f"stopped: {run} nights, the most allowed (max_nights)"
+        elif "precision limited" in reason:
+            status = "stopped: precision limited (more nights cannot reach the target)"
+        elif "would not help" in reason:
+            status = "stopped: more nights would not help"
         else:
             status = "stopped: the house cannot be identified to the target"
     return CampaignState("adaptive", run, valid, hlc, tau, status, reason, decision)

@@ -32,7 +32,7 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
-from . import lm
+from . import lm, model_error
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .node import (
     DTYPE,
@@ -151,6 +151,10 @@ class NightFit:
         SD [W] of the unmetered night gains when no gain term is fitted, added to the
         intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
         :func:`.uncertainty.offset_allowance`).
+    model_error : str or None
+        Model-error share calibrated on the realistic virtual population, added to the
+        intervals in quadrature (:mod:`.model_error`): "default" (the packaged calibration), a
+        path to a calibration JSON, or None (off: the intervals describe the measurement only).
 
     Attributes (after :meth:`fit`)
     ------------------------------
@@ -188,7 +192,8 @@ class NightFit:
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
                  meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
-                 emitter_lag: bool = False, settle_until_held: bool = False):
+                 emitter_lag: bool = False, settle_until_held: bool = False,
+                 model_error: str | None = "default"):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -217,6 +222,7 @@ class NightFit:
         self.structure_share = structure_share
         self.emitter_lag = emitter_lag
         self.settle_until_held = settle_until_held
+        self.model_error = model_error
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -246,6 +252,10 @@ class NightFit:
     # ------------------------------------------------------------------ fit
     def _fit(self, nights, ranges) -> None:
         from ..imp.gaps import cut_at_gaps
+
+        # a broken calibration file is named before any work is done
+        cal = (None if self.model_error is None else model_error.load_calibration(
+            None if self.model_error == "default" else str(self.model_error)))
 
         nights, self.gaps_ = cut_at_gaps(nights, self.emission_lag_h)
         kept, offsets, self.skipped_ = prepare_nights(
@@ -342,6 +352,11 @@ class NightFit:
         self._validate()
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
         self.night_quality_ = self._night_quality(nights)
+        self.interval_basis_ = est["interval_basis"]
+        self.model_error_ = None
+        if cal is not None:
+            self.lumped_, self.model_error_ = model_error.widen(
+                self.lumped_, model_error.diagnostics(self), cal)
 
     def _night_quality(self, nights) -> list[dict]:
         used = {n.night_id: n for n in self.nights_}

@@ -151,7 +151,7 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "fixed": {"ach_vent": fit.ach_vent, "ach_infl": fit.ach_infl},
         "lumped": {k: {**v.as_dict(), "unit": u} for (k, v), u in
                    zip(fit.lumped_.items(), ("W/K", "J/K", "h"), strict=True)},
-        "interval_method": INTERVAL_METHOD,
+        "interval_method": interval_method(fit),
         "per_night": per_night,
         "per_night_average": fit.per_night_mean_,
         "validation": fit.validation_,
@@ -174,6 +174,9 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         out["fit"]["offset_allowance"] = fit.offset_allowance_
     if getattr(fit, "interval_source_", None) is not None:
         out["fit"]["interval_source"] = fit.interval_source_
+    if getattr(fit, "interval_basis_", None) is not None:
+        out["fit"]["interval_basis"] = fit.interval_basis_
+    out["fit"]["model_error"] = getattr(fit, "model_error_", None)
     if getattr(fit, "nuisance_check_", None) is not None:
         out["fit"]["nuisance_check"] = fit.nuisance_check_
     if getattr(fit, "nuisance_", None) is not None:
@@ -193,6 +196,23 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
             notes.append(fit.adequacy_["statement"])
     out["flexibility"] = flexibility_block(out)
     return _f(out)
+
+
+def interval_method(fit) -> str:
+    """The ``interval_method`` text of a fit: :data:`INTERVAL_METHOD`, then how few nights
+    changed it and the calibrated model-error share (size and group) when one was added."""
+    text = INTERVAL_METHOD
+    basis = getattr(fit, "interval_basis_", None)
+    if basis and basis.startswith("too few nights"):
+        text += f"; {basis}"
+    me = getattr(fit, "model_error_", None)
+    if me:
+        sizes = ", ".join(f"{k} {100 * v:.1f} %" for k, v in me["share"].items())
+        text += (f"; plus, in quadrature, a {me['method']} (log-space SD {sizes}; "
+                 "impctl.fit.model_error)")
+    else:
+        text += "; no model-error share (measurement-only intervals)"
+    return text
 
 
 def flexibility_block(summary: dict) -> dict:
@@ -245,6 +265,15 @@ def format_table(summary: dict) -> str:
         flag = "" if q["determined"] else "   NOT determined by these nights"
         lines.append(f"  {label:<28} {unit:<5} {q['value'] * k:>9.4g}   "
                      f"{q['low'] * k:.4g} – {q['high'] * k:.4g}{flag}")
+    fit_block = summary.get("fit", {})
+    basis = fit_block.get("interval_basis") or ""
+    if basis.startswith("too few nights"):
+        lines.append(f"  intervals: {basis}")
+    me = fit_block.get("model_error")
+    if me:
+        sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
+                          (("hlc", "HLC"), ("c_m", "C_m"), ("tau", "τ")))
+        lines.append(f"  intervals include a {me['method']} (log SD {sizes})")
     lines.append("")
     lines.append("Physical parameters (Table IV)       joint  per-night   search range "
                  "value comes from")

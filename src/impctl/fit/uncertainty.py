@@ -11,8 +11,10 @@ positive). Under model error the curvature alone is too confident, so each lumpe
 interval is the wider of that Laplace interval and a night-clustered sandwich (robust)
 interval, S⁻¹·(Σ_nights g̃·g̃ᵀ)·S⁻¹ with g̃ a night's score: it widens when the nights pull the
 parameters apart more than their noise explains; with G nights it takes the Student-t quantile
-with G − 1 degrees of freedom. A bootstrap over nights was not chosen: with
-two constrained nights it cannot resample the τ information meaningfully.
+with G − 1 degrees of freedom. With fewer than 3 nights (t(1) = 12.7) the sandwich is not used
+and the fit says so (``interval_basis``): the interval is model-based. A bootstrap over nights
+was not chosen: with two constrained nights it cannot resample the τ information meaningfully.
+The model error the curvature and the nights cannot show is added by :mod:`.model_error`.
 
 "Determined": the Fisher information of the data alone (no ridge, no bounds), expressed in the
 fraction x = (θ − lo)/(hi − lo) of each parameter's search range, regularised by a N(0, 100²)
@@ -37,6 +39,8 @@ Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)
 LUMPED_NAMES = ("hlc", "c_m", "tau")
 GROUP_NAMES = ("constrained", "normal_t_air", "normal_power")
+#: Fewest used nights for the night-clustered sandwich (module docstring).
+MIN_SANDWICH_NIGHTS = 3
 
 
 def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
@@ -89,6 +93,16 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     # Student-t quantile with G − 1 degrees of freedom (the usual small-G correction) instead
     # of the normal one — about 20 % wider with 8 nights.
     sd_sandwich = sd_sandwich * float(student_t.ppf(0.975, max(n_rows - 1, 1))) / Z95
+    if n_rows < MIN_SANDWICH_NIGHTS:
+        # With G = 2 nights the cluster covariance has one degree of freedom, t(1) = 12.7, and
+        # gives intervals of hundreds of %: not a statement about the house. Model-based
+        # instead (Laplace + the type-B and model-error shares added later), and said so.
+        sd_sandwich = torch.zeros_like(sd_sandwich)
+        basis = (f"too few nights ({n_rows}) for the night-clustered sandwich (needs "
+                 f"{MIN_SANDWICH_NIGHTS}): model-based (Laplace curvature), no check of "
+                 "night-to-night disagreement")
+    else:
+        basis = f"night-clustered sandwich over {n_rows} nights, t({n_rows - 1})"
     sd_log = torch.maximum(sd_laplace, sd_sandwich)
     estimates = {}
     for i, name in enumerate(LUMPED_NAMES):
@@ -107,7 +121,8 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     cov_x = vec @ torch.diag(1.0 / (val.clamp_min(0) + _X_PRIOR)) @ vec.T
     sd_x = cov_x.diagonal().clamp_min(0).sqrt()
     sd = dict(zip(PARAM_NAMES, sd_x[:len(PARAM_NAMES)].tolist(), strict=True))
-    out.update(interval_source={n: ("sandwich" if float(sd_sandwich[i]) > float(sd_laplace[i])
+    out.update(interval_basis=basis,
+               interval_source={n: ("sandwich" if float(sd_sandwich[i]) > float(sd_laplace[i])
                                     else "laplace") for i, n in enumerate(LUMPED_NAMES)},
                lumped=estimates, determined={n: bool(Z95 * v < 0.2) for n, v in sd.items()},
                range_fraction_sd=sd, cov_u=cov)

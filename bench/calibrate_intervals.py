@@ -1,0 +1,246 @@
+"""Calibrate the fit's model-error share on the realistic virtual population (and explain misses).
+
+Run (regenerates ``src/impctl/fit/model_error.json``; ≤ 15 min on one core, a line per fit)::
+
+    .venv/bin/python bench/calibrate_intervals.py [--households 160] [--seed 31415]
+        [--steps 300:160,3600:80]
+
+Households: ``sample_households(N, seed)`` with realism ``sample_params(N, seed)`` on the
+realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal nights, 5-minute
+rows, true class ranges) — the seed must differ from the bench's validation seed (20260) and the
+classifiers' training seeds (``impctl train --seed 0``). Each house is fitted with the share
+switched off (``NightFit(model_error=None)``); its diagnostics, interval SDs and log errors go to
+the calibration (:func:`impctl.fit.model_error.calibrate`).
+
+``--why`` (with ``--seed 20260`` for the bench's held-out houses): fit with the share ON and print,
+for every house whose interval misses a truth, what the fit could see (the "why do intervals
+miss" table); writes no calibration.
+``--records FILE`` keeps the per-house records (JSON) and ``--from-records FILE`` recalibrates
+from them without fitting.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from impctl.fit import model_error
+from impctl.fit.estimator import NightFit
+from impctl.model import HouseParameters
+from impctl.population.households import sample_households
+from impctl.population.realism import sample_params, take_params
+from impctl.population.synth_nights import (
+    imp_schedule,
+    run_schedule,
+    run_schedule_plant,
+    sample_nights,
+)
+
+VAL_SEED = 20260
+TRAIN_SEEDS = (0,)
+CLASS_RANGES = {
+    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
+    "c_f": ((0.8, 1.65), (1.65, 3.7)),
+    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
+}
+ACH = (0.0, 0.01)
+CHUNK = 40   # households simulated together (memory, and a progress line per chunk)
+
+
+def true_ranges(house) -> dict[str, tuple[float, float]]:
+    out = {}
+    for name, rs in CLASS_RANGES.items():
+        v = float(getattr(house, name))
+        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
+    return out
+
+
+def _truth(house) -> dict[str, float]:
+    return {"hlc": house.hlc_w_per_k, "c_m": house.c_m_j_per_k, "tau": house.tau_h}
+
+
+def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
+            plant: str = "realistic") -> list[dict]:
+    """Simulate ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C with the
+    bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s];
+    one record per fit."""
+    houses = sample_households(n, seed=seed)
+    params = sample_params(n, seed)
+    kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
+    onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (n,)) >= 0.999
+    control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
+    sched = imp_schedule(n, seed=seed)
+    records = []
+    started = time.perf_counter()
+    t_sim = 0.0
+    n_fits = sum(min(n, k) for k in steps.values())
+    for i in range(n):
+        if i % CHUNK == 0:   # simulate the next chunk of houses together
+            t0 = time.perf_counter()
+            idx = np.arange(i, min(n, i + CHUNK))
+            sub = _sub_schedule(sched, idx)
+            chunk = HouseParameters.stack([houses.take(int(k)) for k in idx])
+            if plant == "iso":
+                logged, sp = run_schedule(chunk, sub)
+            else:
+                logged, sp = run_schedule_plant(chunk, sub, take_params(params, idx, n),
+                                                seed=seed + i)
+            t_sim += time.perf_counter() - t0
+        house = houses.take(i)
+        for step_s, count in steps.items():
+            if i >= count:
+                continue
+            nights = sample_nights(logged, sp, sub, i % CHUNK, sample_step_s=step_s,
+                                   quantise_k=0.1, seed=seed + i,
+                                   power_noise=0.05 if plant == "iso" else 0.0)
+            fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
+                           model_error="default" if share_on else None
+                           ).fit(nights, true_ranges(house))
+            records.append(_record(i, step_s, fit, _truth(house), kind[i], onoff[i],
+                                   control[i]))
+            el = time.perf_counter() - started
+            rec = records[-1]
+            print(f"  fit {len(records):3d}/{n_fits}: house {i:3d}, {step_s:4.0f} s rows, group "
+                  f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
+                  + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in ("hlc", "tau", "c_m"))
+                  + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)", flush=True)
+    return records
+
+
+def _record(i, step_s, fit, truth, kind, onoff, control) -> dict:
+    rec = {"index": i, "step_s": step_s, "diagnostics": model_error.diagnostics(fit),
+           "emitter": "underfloor" if kind == 1 else "radiators", "on_off": bool(onoff),
+           "control": "room thermostat" if control == 1 else "weather curve",
+           "log_error": {}, "sd": {}, "covered": {}}
+    for q in model_error.QUANTITIES:
+        e = fit.lumped_[q]
+        rec["log_error"][q] = float(np.log(e.value / truth[q]))
+        rec["sd"][q] = float(np.log(e.high / e.low) / (2 * model_error.Z95))
+        rec["covered"][q] = bool(e.low <= truth[q] <= e.high)
+    return rec
+
+
+def _sub_schedule(sched, idx):
+    from dataclasses import replace
+
+    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
+
+
+def provenance(args, n: int) -> dict:
+    def git(*a):
+        try:
+            return subprocess.run(["git", *a], capture_output=True, text=True, check=True,
+                                  cwd=Path(__file__).resolve().parents[1]).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            return None
+
+    return {"seed": args.seed, "n_households": args.households, "n_fits": n,
+            "steps": args.steps,
+            "ranges": "true class", "plant": "impctl.plant realistic, realism "
+            "sample_params(N, seed)", "plant_commit": git("log", "-1", "--format=%h", "--",
+                                                           "src/impctl/plant"),
+            "fit_commit": git("log", "-1", "--format=%h", "--", "src/impctl/fit"),
+            "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%MZ"),
+            "command": "python bench/calibrate_intervals.py --households "
+                       f"{args.households} --seed {args.seed} --steps {args.steps}"}
+
+
+def why_table(records: list[dict]) -> None:
+    """What the fit could see, for the houses whose interval missed a truth (and for all)."""
+    print("\n### why intervals miss: what the fit could see for each missed house")
+    print("| house | emitter | control | on/off | group | missed | err HLC/τ/C_m % | "
+          "±HLC/τ/C_m log % | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
+          "discharge h | adequate |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in records:
+        miss = [q for q in model_error.QUANTITIES if not r["covered"][q]]
+        if not miss:
+            continue
+        d = r["diagnostics"]
+        f = (lambda v: "–" if v is None else f"{v:.2f}")   # noqa: E731
+        print(f"| {r['index']} | {r['emitter']} | {r['control']} | {'yes' if r['on_off'] else 'no'}"
+              f" | {model_error.group_of(d)} | {','.join(miss)} | "
+              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in model_error.QUANTITIES)
+              + " | " + "/".join(f"{100 * model_error.Z95 * r['sd'][q]:.0f}"
+                                 for q in model_error.QUANTITIES)
+              + f" | {f(d['rho_constrained'])} | {f(d['rho_power'])} | "
+              f"{f(d['rmse_over_noise_constrained'])} | {f(d['rmse_over_noise_power'])} | "
+              f"{f(d['emitter_discharge_h'])} | {d['adequate']} |")
+    print("\nmedians, missed (any quantity) vs covered (all three):")
+    keys = ("rho_constrained", "rho_power", "rmse_over_noise_constrained",
+            "rmse_over_noise_power", "emitter_discharge_h", "structure_share")
+    for label, sel in (("missed", lambda r: not all(r["covered"].values())),
+                       ("covered", lambda r: all(r["covered"].values()))):
+        rs = [r for r in records if sel(r)]
+        cells = []
+        for k in keys:
+            v = [r["diagnostics"][k] for r in rs if r["diagnostics"][k] is not None]
+            cells.append(f"{k} {np.median(v):.2f}" if v else f"{k} –")
+        ad = np.mean([r["diagnostics"]["adequate"] for r in rs]) if rs else float("nan")
+        nu = np.mean([r["diagnostics"]["nuisance_selected"] for r in rs]) if rs else float("nan")
+        print(f"  {label:8s} n={len(rs):3d}: " + ", ".join(cells)
+              + f", adequate {100 * ad:.0f} %, nuisance selected {100 * nu:.0f} %")
+
+
+def summary(records: list[dict], cal: dict | None) -> None:
+    print("\n### calibration records: per group, median |error| % and coverage without the share")
+    for name in model_error.GROUPS:
+        rs = [r for r in records if model_error.group_of(r["diagnostics"]) == name]
+        if not rs:
+            print(f"  {name:8s} n=  0")
+            continue
+        cells = []
+        for q in model_error.QUANTITIES:
+            e = np.median([abs(r["log_error"][q]) for r in rs]) * 100
+            c = np.mean([r["covered"][q] for r in rs]) * 100
+            s = cal["groups"][name]["share"][q] * 100 if cal else float("nan")
+            cells.append(f"{q} {e:5.1f} % cov {c:3.0f} % share {s:5.1f} %")
+        print(f"  {name:8s} n={len(rs):3d}: " + "; ".join(cells))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=160)
+    ap.add_argument("--seed", type=int, default=31415)
+    ap.add_argument("--steps", default="300:160,3600:80",
+                    help="sample steps [s] and how many of the households each, STEP:N,…")
+    ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic",
+                    help="iso: the ideal 5R1C (a check; never written as the calibration)")
+    ap.add_argument("--out", default=str(model_error.CALIBRATION_FILE))
+    ap.add_argument("--records", default=None, help="also write the per-house records here")
+    ap.add_argument("--from-records", default=None, help="recalibrate from saved records")
+    ap.add_argument("--why", action="store_true",
+                    help="fit with the share on and print the miss table; no calibration")
+    ap.add_argument("--share", choices=("on", "off"), default=None,
+                    help="model-error share in the fits (default: on with --why, else off)")
+    args = ap.parse_args()
+    print("command: " + " ".join(["python"] + sys.argv), flush=True)
+    steps = {float(a): int(b) for a, b in (x.split(":") for x in args.steps.split(",") if x)}
+    if args.from_records:
+        records = json.loads(Path(args.from_records).read_text())
+    else:
+        if not args.why and (args.seed == VAL_SEED or args.seed in TRAIN_SEEDS):
+            ap.error(f"--seed {args.seed} is the bench's validation or a training seed")
+        share_on = args.why if args.share is None else args.share == "on"
+        records = collect(args.households, args.seed, steps, share_on, args.plant)
+    if args.records:
+        Path(args.records).write_text(json.dumps(records))
+    if args.why or args.plant == "iso":
+        why_table(records)
+        summary(records, None)
+        return
+    cal = model_error.calibrate(records, provenance(args, len(records)))
+    Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")
+    summary(records, cal)
+    print(f"\nwrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,223 @@
+"""Model-error share of the intervals, calibrated on the realistic virtual population.
+
+The Laplace/sandwich intervals and the type-B shares (:mod:`.uncertainty`) describe the
+measurement; a real house also differs from the 5R1C in ways the nights cannot show (emitter
+and furniture dynamics the nuisance terms only approximate, gains, control). How far that moves
+HLC, C_m and τ is learnt from a *virtual* population of realistic houses (domain randomisation,
+:mod:`impctl.plant`), never the held-out bench households: ``bench/calibrate_intervals.py`` fits
+each with the share switched off and records |log(estimate/true)| next to what the fit can see
+(:func:`diagnostics`). Households fall into a few groups by those diagnostics (:func:`group_of`);
+per group and quantity the share s is the smallest log-space SD that, added in quadrature to each
+household's own interval SD, puts the truth inside the 95 % interval of ⌈0.95·(n + 1)⌉ of the n
+households (split-conformal: a finite-sample guarantee for an exchangeable house). At fit time
+the share of the fit's group is added in quadrature (:func:`widen`). Widening only: no bias
+correction is learnt from the simulator, a real house not being the simulator.
+
+The calibration is a small JSON file next to this module (:data:`CALIBRATION_FILE`, schema
+:data:`SCHEMA`) with its provenance (seed, N, plant version, the regenerating command).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .data import Estimate
+
+SCHEMA = "impctl-model-error/1"
+#: The grouping rule's version: a calibration file made with another rule is refused.
+GROUPING = "rows-residuals-nuisance-discharge/3"
+GROUPS = ("clean", "plain", "nuisance", "slow", "hourly")
+CALIBRATION_FILE = Path(__file__).with_name("model_error.json")
+QUANTITIES = ("hlc", "c_m", "tau")
+Z95 = 1.959964
+COVERAGE = 0.95
+#: A group with fewer calibration households than this takes the pooled share.
+MIN_GROUP = 20
+#: Emitter discharge [h] past which a constrained night is "slow" (underfloor-like: the screed
+#: keeps heating the room well after switch-off; real-houses.md §2).
+SLOW_DISCHARGE_H = 2.0
+#: "Clean" residuals (:func:`group_of`): lag-1 autocorrelation and RMSE/noise of the held-night
+#: power below these (between the ideal 5R1C's largest and the realistic houses' 10th percentile).
+RHO_CLEAN = 0.15
+RMSE_CLEAN = 1.1
+#: Median row interval [s] of the fitted nights from which a fit is in the "hourly" group.
+HOURLY_STEP_S = 1800.0
+
+
+def diagnostics(fit) -> dict:
+    """What a fitted :class:`~impctl.fit.NightFit` shows about its own model error (JSON-ready).
+
+    Keys: ``nuisance_selected`` (the LR test kept the emitter/furniture terms),
+    ``adequate`` (:func:`.quality.adequacy`), ``rho_constrained``, ``rho_power`` (lag-1 residual
+    autocorrelation), ``rmse_over_noise_constrained``, ``rmse_over_noise_power``,
+    ``emitter_discharge_h`` (median over the used constrained nights, h), ``structure_share``
+    (largest of the three, log), ``n_nights`` (used), ``row_step_s`` (median interval of the
+    fitted rows, s; 1-minute rows are fitted as 5-minute means).
+    """
+    ad = getattr(fit, "adequacy_", None) or {"adequate": True, "groups": {}}
+    groups = ad.get("groups", {})
+
+    def g(name, key):
+        v = groups.get(name, {}).get(key)
+        return None if v is None else float(v)
+
+    discharge = [q["emitter_discharge_h"] for q in (getattr(fit, "night_quality_", None) or [])
+                 if q.get("used") and q["kind"] == "constrained"
+                 and q.get("emitter_discharge_h") is not None]
+    share = getattr(fit, "structure_share_", None) or {}
+    nights = getattr(fit, "nights_", None) or []
+    steps = np.concatenate([np.diff(np.asarray(n.time_s, float)) for n in nights]) if nights \
+        else np.array([])
+    return {
+        "nuisance_selected": bool((getattr(fit, "nuisance_check_", None) or {}).get("selected")),
+        "adequate": bool(ad.get("adequate", True)),
+        "rho_constrained": g("constrained", "lag1_autocorrelation"),
+        "rho_power": g("normal_power", "lag1_autocorrelation"),
+        "rmse_over_noise_constrained": g("constrained", "rmse_over_noise"),
+        "rmse_over_noise_power": g("normal_power", "rmse_over_noise"),
+        "emitter_discharge_h": float(np.median(discharge)) if discharge else None,
+        "structure_share": max(share.values()) if share else 0.0,
+        "n_nights": len(nights),
+        "row_step_s": float(np.median(steps)) if len(steps) else None,
+    }
+
+
+def group_of(diag: dict) -> str:
+    """The calibration group of a fit's :func:`diagnostics` (rule :data:`GROUPING`).
+
+    * ``"clean"``: the held-night power residuals are white (lag-1 ρ < :data:`RHO_CLEAN`) and at
+      the reading noise (RMSE < :data:`RMSE_CLEAN` × noise) — the 5R1C describes the nights (the
+      ideal model: ρ ≤ 0.08, ratio ≤ 1.01 on 40 ideal houses; 3 of 160 realistic ones);
+    * ``"plain"``: structured residuals but the LR test kept no nuisance term — the worst group
+      on realistic houses (mostly underfloor: a slow screed release the mass absorbs);
+    * ``"slow"``: terms kept and the emitter discharge lasts ≥ :data:`SLOW_DISCHARGE_H`;
+    * ``"nuisance"``: terms kept, faster discharge;
+    * ``"hourly"``: rows ≥ :data:`HOURLY_STEP_S` apart, whatever the residuals say — hourly
+      means hide the emitter and the cycling (63 of 80 realistic houses looked "clean" at hourly
+      rows, with a median HLC error of 16 %), so the residuals cannot tell the groups apart.
+    """
+    step = diag.get("row_step_s")
+    if step is not None and step >= HOURLY_STEP_S:
+        return "hourly"
+    rho, ratio = diag.get("rho_power"), diag.get("rmse_over_noise_power")
+    if rho is not None and ratio is not None and rho < RHO_CLEAN and ratio < RMSE_CLEAN:
+        return "clean"
+    if not diag.get("nuisance_selected"):
+        return "plain"
+    dis = diag.get("emitter_discharge_h")
+    if dis is not None and dis >= SLOW_DISCHARGE_H:
+        return "slow"
+    return "nuisance"
+
+
+def required_share(log_error: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """Per household, the smallest share s [log] with |log_error| ≤ Z95·√(sd² + s²)."""
+    need = (np.abs(np.asarray(log_error, float)) / Z95) ** 2 - np.asarray(sd, float) ** 2
+    return np.sqrt(np.clip(need, 0.0, None))
+
+
+def conformal_share(log_error, sd, coverage: float = COVERAGE) -> float:
+    """The split-conformal share: the ⌈coverage·(n + 1)⌉-th smallest required share (module
+    docstring); inf when n is too small for that rank."""
+    s = np.sort(required_share(log_error, sd))
+    n = len(s)
+    k = math.ceil(coverage * (n + 1))
+    return float(s[k - 1]) if 0 < k <= n else float("inf")
+
+
+def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE) -> dict:
+    """The calibration (JSON-ready) from per-household ``records`` with keys ``diagnostics``,
+    ``log_error`` {q: log(est/true)} and ``sd`` {q: log-space SD of the fit's own interval}.
+
+    A group with fewer than :data:`MIN_GROUP` households is too small for the conformal rank:
+    "clean" then takes the largest share any of its households needed (0 if none: no realistic
+    house looked clean, so there is no evidence of model error to add), the others the share
+    of all households.
+    """
+    def share(rs):
+        return {q: conformal_share([r["log_error"][q] for r in rs], [r["sd"][q] for r in rs],
+                                   coverage) for q in QUANTITIES}
+
+    pooled = share(records)
+    groups = {}
+    for name in GROUPS:
+        rs = [r for r in records if group_of(r["diagnostics"]) == name]
+        if len(rs) >= MIN_GROUP:
+            entry = {"share": share(rs), "source": f"conformal, {coverage:.0%}"}
+        elif name == "clean":
+            entry = {"share": {q: float(max(required_share([r["log_error"][q] for r in rs],
+                                                           [r["sd"][q] for r in rs]),
+                                            default=0.0)) for q in QUANTITIES},
+                     "source": f"largest needed by its {len(rs)} households (fewer than "
+                               f"{MIN_GROUP})"}
+        else:
+            entry = {"share": pooled, "source": f"pooled (fewer than {MIN_GROUP})"}
+        groups[name] = {"n": len(rs), **entry}
+    return {"schema": SCHEMA, "grouping": GROUPING, "coverage": coverage,
+            "share_unit": "log-space SD, added in quadrature to the fit's own", "groups": groups,
+            "pooled": {"n": len(records), "share": pooled}, "provenance": provenance}
+
+
+@lru_cache(maxsize=4)
+def load_calibration(path: str | None = None) -> dict:
+    """The calibration file (default :data:`CALIBRATION_FILE`), checked.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and what is wrong with it.
+    """
+    p = Path(path) if path else CALIBRATION_FILE
+    try:
+        cal = json.loads(p.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{p}: model-error calibration unreadable ({exc}); regenerate it with "
+                         "`python bench/calibrate_intervals.py`") from None
+    problem = None
+    if not isinstance(cal, dict) or cal.get("schema") != SCHEMA:
+        problem = f"schema is not {SCHEMA!r}"
+    elif cal.get("grouping") != GROUPING:
+        problem = f"grouping {cal.get('grouping')!r} is not this code's {GROUPING!r}"
+    else:
+        for name in GROUPS:
+            share = (cal.get("groups", {}).get(name) or {}).get("share") or {}
+            bad = [q for q in QUANTITIES if not (isinstance(share.get(q), (int, float))
+                                                 and 0.0 <= share[q] < 5.0)]
+            if bad:
+                problem = f"group {name!r}: share of {', '.join(bad)} missing or not in [0, 5)"
+                break
+    if problem:
+        raise InputError(f"{p}: model-error calibration invalid: {problem}; regenerate it with "
+                         "`python bench/calibrate_intervals.py`")
+    return cal
+
+
+def widen(lumped: dict[str, Estimate], diag: dict, cal: dict) -> tuple[dict, dict]:
+    """Add the calibrated share of ``diag``'s group in quadrature to each log-space interval.
+
+    Returns
+    -------
+    (lumped with widened intervals, {"group", "share" {q: log SD}, "n_calibration", "method"})
+    """
+    group = group_of(diag)
+    entry = cal["groups"][group]
+    out = {}
+    for name, e in lumped.items():
+        s = float(entry["share"].get(name, 0.0))
+        sd = math.hypot(math.log(e.high / e.low) / (2 * Z95), s)
+        out[name] = Estimate(e.value, float(e.value * math.exp(-Z95 * sd)),
+                             float(e.value * math.exp(Z95 * sd)), e.determined)
+    prov = cal.get("provenance", {})
+    n_cal = int(cal.get("pooled", {}).get("n", 0))
+    info = {"group": group, "share": {q: float(entry["share"][q]) for q in QUANTITIES},
+            "n_group": int(entry.get("n", 0)), "n_calibration": n_cal,
+            "seed": prov.get("seed"), "version": prov.get("created"),
+            "method": (f"sandwich + type-B + model-error share calibrated on {n_cal} realistic "
+                       f"virtual households, group {group!r}")}
+    return out, info

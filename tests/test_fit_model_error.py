@@ -1,0 +1,115 @@
+"""The model-error share of the intervals (impctl.fit.model_error): the packaged calibration is
+loaded and widens a realistic house's intervals by its stated share, barely touches an ideal
+house's, a broken file is refused in one line, and two nights give a stated basis."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from impctl.errors import InputError
+from impctl.fit import model_error
+from impctl.fit.estimator import NightFit
+from impctl.fit.report import fit_to_dict, format_table
+from impctl.model import HouseParameters
+from impctl.population.households import sample_households
+from impctl.population.realism import sample_params
+from impctl.population.synth_nights import (
+    imp_schedule,
+    run_schedule_plant,
+    sample_nights,
+    synth_nights,
+)
+
+HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
+                        c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)
+RANGES = {"floor_area": (100.0, 200.0), "c_f": (0.8, 1.65), "u_walls": (0.2, 1.0)}
+
+
+def _sd(e) -> float:
+    return float(np.log(e.high / e.low) / (2 * model_error.Z95))
+
+
+@pytest.fixture(scope="module")
+def realistic_nights():
+    # one household of the realistic plant (emitter, control, gains, sensors), 5-min rows
+    houses = sample_households(1, seed=11)
+    sched = imp_schedule(1, seed=11, n_normal=4)
+    logged, sp = run_schedule_plant(houses, sched, sample_params(1, 11), seed=11)
+    return sample_nights(logged, sp, sched, 0, sample_step_s=300.0, power_noise=0.0, seed=11)
+
+
+def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic_nights):
+    cal = model_error.load_calibration()
+    assert cal["pooled"]["n"] >= 150 and cal["provenance"]["seed"] != 20260
+    assert "bench/calibrate_intervals.py" in cal["provenance"]["command"]
+    kw = dict(n_starts=2, per_night=False)
+    off = NightFit(model_error=None, **kw).fit(realistic_nights, RANGES)
+    on = NightFit(**kw).fit(realistic_nights, RANGES)
+    group = on.model_error_["group"]
+    assert group == model_error.group_of(model_error.diagnostics(off)) != "clean"
+    share = cal["groups"][group]["share"]
+    assert max(share.values()) > 0.05
+    for q in model_error.QUANTITIES:
+        a, b = off.lumped_[q], on.lumped_[q]
+        assert b.value == pytest.approx(a.value, rel=1e-9)      # widening only, no correction
+        assert _sd(b) == pytest.approx(np.hypot(_sd(a), share[q]), rel=1e-6)
+        assert b.low <= a.low and b.high >= a.high
+    summary = fit_to_dict(on)
+    assert f"group '{group}'" in summary["interval_method"]
+    assert summary["fit"]["model_error"]["n_calibration"] == cal["pooled"]["n"]
+    assert "model-error share calibrated on" in format_table(summary)
+    assert "no model-error share" in fit_to_dict(off)["interval_method"]
+
+
+def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4)
+    kw = dict(n_starts=2, per_night=False)
+    off = NightFit(model_error=None, **kw).fit(nights, RANGES)
+    on = NightFit(**kw).fit(nights, RANGES)
+    assert on.model_error_["group"] == "clean"
+    for q in model_error.QUANTITIES:
+        assert _sd(on.lumped_[q]) <= 1.5 * _sd(off.lumped_[q])
+        truth = {"hlc": HOUSE.hlc_w_per_k, "c_m": HOUSE.c_m_j_per_k, "tau": HOUSE.tau_h}[q]
+        assert on.lumped_[q].low <= truth <= on.lumped_[q].high
+
+
+@pytest.mark.parametrize("content, problem", [
+    ("{not json", "unreadable"),
+    (json.dumps({"schema": "other"}), "schema"),
+    (json.dumps({"schema": model_error.SCHEMA, "grouping": model_error.GROUPING,
+                 "groups": {"clean": {"share": {"hlc": 0.1, "c_m": 0.1}}}}), "share of tau"),
+])
+def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_path, content,
+                                                                         problem):
+    path = tmp_path / "model_error.json"
+    path.write_text(content)
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=3600.0, n_normal=1)
+    with pytest.raises(InputError, match=problem) as err:
+        NightFit(model_error=str(path)).fit(nights, RANGES)
+    msg = str(err.value)
+    assert str(path) in msg and "calibrate_intervals.py" in msg and "\n" not in msg
+
+
+def test_the_conformal_share_covers_the_stated_share_of_households():
+    rng = np.random.default_rng(0)
+    err, sd = 0.2 * rng.standard_normal(99), np.full(99, 0.05)
+    s = model_error.conformal_share(err, sd)
+    covered = np.abs(err) <= model_error.Z95 * np.hypot(sd, s)
+    assert covered.sum() == 95          # ⌈0.95·100⌉ of the 99
+    assert model_error.conformal_share(err[:5], sd[:5]) == float("inf")
+
+
+def test_two_nights_say_the_interval_is_model_based_not_sandwich():
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_constrained=1, n_normal=1)
+    fit = NightFit(n_starts=2, per_night=False).fit(nights, RANGES)
+    assert fit.interval_basis_.startswith("too few nights (2)")
+    assert all(v == "laplace" for v in fit.interval_source_.values())
+    summary = fit_to_dict(fit)
+    assert "too few nights" in summary["interval_method"]
+    assert "too few nights" in format_table(summary)
+    for q in model_error.QUANTITIES:   # no t(1) = 12.7 blow-up
+        e = fit.lumped_[q]
+        assert e.high / e.value < 2.0
