@@ -52,7 +52,7 @@ from impctl_sim import KronotermSimulator, SimConfig, constant_weather
 from sim_fixtures import wait_for
 
 from impctl.clock import VirtualClock
-from impctl.daemon.config import config_from_mapping
+from impctl.config import config_from_mapping
 from impctl.daemon.service import Daemon
 from impctl.model import HouseParameters
 

@@ -26,8 +26,8 @@ from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import run, simulator
 
 from impctl.clock import VirtualClock
+from impctl.config import config_from_mapping
 from impctl.controller import NightRequest
-from impctl.daemon.config import config_from_mapping
 from impctl.daemon.schedule import window_for
 from impctl.daemon.service import Daemon
 from impctl.store import Store

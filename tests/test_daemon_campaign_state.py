@@ -12,8 +12,8 @@ import pytest
 from daemon_fixtures import run_cli
 
 from impctl.campaign import Decision
+from impctl.config import config_from_mapping
 from impctl.daemon import adaptive
-from impctl.daemon.config import config_from_mapping
 from impctl.daemon.schedule import campaign_plan
 from impctl.errors import InputError
 from impctl.mqtt.discovery import entities

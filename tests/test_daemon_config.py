@@ -9,7 +9,7 @@ import tomllib
 
 from daemon_fixtures import ROOT, run_cli
 
-from impctl.daemon.config import CampaignConfig, ClockConfig, Config, NightConfig, load_config
+from impctl.config import CampaignConfig, ClockConfig, Config, NightConfig, load_config
 from impctl.heatpump import HeatPumpConfig, LinkConfig, WritePolicy
 
 EXAMPLE = ROOT / "deploy" / "config.example.toml"

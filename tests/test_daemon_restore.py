@@ -18,7 +18,7 @@ from impctl_sim import SimConfig, constant_weather
 from sim_fixtures import run, simulator, wait_for
 
 from impctl.clock import VirtualClock
-from impctl.daemon.config import config_from_mapping
+from impctl.config import config_from_mapping
 from impctl.daemon.service import Daemon
 
 EPOCH = datetime(2026, 1, 12, 9, 0, tzinfo=ZoneInfo("Europe/Ljubljana"))

@@ -200,7 +200,7 @@ def test_daemon_waits_through_gateway_exceptions_at_the_generation_probe(tmp_pat
     connect (systemd restarted it every 10 s). It waits now, and connects when they stop."""
     from daemon_fixtures import daemon_mapping
 
-    from impctl.daemon.config import config_from_mapping
+    from impctl.config import config_from_mapping
     from impctl.daemon.service import Daemon
     from impctl.heatpump.health import read_health
 

@@ -19,7 +19,7 @@ SRC = Path(impctl.__file__).parent
 #: The fitting pipeline: each stage may import earlier ones, never a later one.
 PIPELINE = ("model", "plant", "imp", "population", "classifiers", "fit", "fleet")
 #: The device side, transport first.
-DEVICE = ("modbus", "kronoterm", "heatpump", "controller", "daemon", "cli")
+DEVICE = ("modbus", "kronoterm", "heatpump", "controller", "config", "daemon", "cli")
 
 
 def _imports(path: Path, module: str) -> set[str]:

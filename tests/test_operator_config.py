@@ -15,7 +15,7 @@ from daemon_fixtures import ROOT, run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from impctl.daemon.config import config_from_mapping
+from impctl.config import config_from_mapping
 from impctl.errors import InputError
 
 EXAMPLE = ROOT / "deploy" / "config.example.toml"

@@ -246,7 +246,7 @@ def _write(path: Path, text: str) -> Path:
 
 def _config_refused(tmp: Path, text: str) -> None:
     """The daemon refuses this config: exit 2, one line per problem, nothing created."""
-    from impctl.daemon.config import load_config
+    from impctl.config import load_config
 
     path = _write(tmp / "config.toml", text)
     try:
@@ -305,7 +305,7 @@ _ANY_TOML_VALUE = st.one_of(
 def test_fuzzed_configs_are_refused_cleanly_or_usable(values):
     """Any value at any key: an InputError (exit 2, nothing created) or a configuration the
     daemon can start from — finite numbers, a clock, a policy, a schedule, a budget."""
-    from impctl.daemon.config import load_config
+    from impctl.config import load_config
     from impctl.daemon.schedule import act_trigger, campaign_plan, next_act_time
     from impctl.daemon.service import clock_from_config, policy_from_config
     from impctl.heatpump import WriteBudget

@@ -29,7 +29,7 @@ from pathlib import Path
 from zoneinfo import ZoneInfo
 
 from .clock import VirtualClock
-from .daemon.config import config_from_mapping
+from .config import config_from_mapping
 from .errors import InputError
 from .model import HouseParameters
 from .store import Store

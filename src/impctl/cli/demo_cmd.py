@@ -113,7 +113,7 @@ def report_command(config_path, db_path, fit_path, out) -> None:
     tz = "Europe/Ljubljana"
     fit = read_fit_json(fit_path) if fit_path is not None else None
     if db_path is None:
-        from ..daemon.config import load_config
+        from ..config import load_config
 
         cfg = load_config(config_path)
         db_path, tz = cfg.db_path, cfg.timezone

@@ -27,7 +27,7 @@ _config_option = click.option(
 
 
 def _load(config_path: Path):
-    from ..daemon.config import load_config
+    from ..config import load_config
 
     return load_config(config_path)
 

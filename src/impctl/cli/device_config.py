@@ -112,7 +112,7 @@ def _campaign_line(camp) -> str:
 def check_config_command(config_path: Path) -> None:
     """Check a configuration: every problem at once (exit 2), else what the daemon would do
     at the next night. Touches nothing: no heat pump, no store created."""
-    from ..daemon.config import ConfigError, load_config, read_config_toml
+    from ..config import ConfigError, load_config, read_config_toml
     from ..daemon.lock import probe
     from ..store import Store
 

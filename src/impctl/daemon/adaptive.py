@@ -37,9 +37,9 @@ from ..campaign import (
     parse_candidates,
     parse_outlook,
 )
+from ..config import Config
 from ..controller import NightRequest
 from ..store import Store
-from .config import Config
 from .schedule import drop_expired_requests, peek_next_night, window_after_act
 
 if TYPE_CHECKING:

@@ -14,9 +14,9 @@ import os
 import sys
 from pathlib import Path
 
+from ..config import Config
 from ..store import Store
 from .adaptive import forecast
-from .config import Config
 
 _LOG = logging.getLogger("impctl.daemon")
 _KINDS = ("constrained", "normal")

@@ -14,9 +14,9 @@ from zoneinfo import ZoneInfo
 from apscheduler.triggers.cron import CronTrigger
 
 from ..clock import VirtualClock
+from ..config import Config
 from ..controller import NightRequest
 from ..store import Store
-from .config import Config
 
 _LOG = logging.getLogger("impctl.daemon")
 

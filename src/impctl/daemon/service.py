@@ -16,13 +16,13 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from apscheduler.triggers.date import DateTrigger
 
 from ..clock import VirtualClock
+from ..config import Config
 from ..controller import NightController, NightPolicy, NightRequest, restore_all
 from ..controller.restore import restore_entry
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, WriteBudget
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from . import adaptive
-from .config import Config
 from .fitting import fit_ready, needs_fit, run_fit
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt

@@ -1,4 +1,5 @@
-"""The daemon's TOML configuration: schema, defaults, validation with one line per problem.
+"""The gateway's TOML configuration (`config.toml`, read by the daemon and the CLI): schema,
+defaults, validation with one line per problem.
 
 Every key is documented in ``deploy/config.example.toml``. Temperatures °C, durations s unless the
 key says ``_h`` or ``_min``.
@@ -13,10 +14,10 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError
-from ..heatpump import HeatPumpConfig
-from ..heatpump import config_from_mapping as heatpump_from_mapping
-from ..mqtt.config import MqttConfig, mqtt_from_mapping
+from .errors import InputError
+from .heatpump import HeatPumpConfig
+from .heatpump import config_from_mapping as heatpump_from_mapping
+from .mqtt.config import MqttConfig, mqtt_from_mapping
 
 
 class ConfigError(InputError):
