@@ -65,6 +65,16 @@ CLASS_REJECT_CHI2 = 3.84
 #: freedom as terms switched on (3 by default: 7.81).
 
 
+def stop_units(groups: torch.Tensor) -> torch.Tensor:
+    """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
+    (groups 0–2) and the per-night fits (3 + i) stop on their own, so that the joint answer
+    does not depend on whether — or how long — the per-night comparison runs."""
+    return (torch.arange(int(groups.max()) + 1) >= _FIRST_NIGHT_GROUP).long()
+
+
+_FIRST_NIGHT_GROUP = 3
+
+
 class NightFit:
     """Fit the night-time 5R1C model to IMP nights (scikit-learn style estimator).
 
@@ -493,7 +503,7 @@ class NightFit:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
         return lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
-                                          max_iter=self.max_iter)
+                                      units=stop_units(groups), max_iter=self.max_iter)
 
     def _update_sigma(self, rows, result, best) -> None:
         sel = rows.problem == best
