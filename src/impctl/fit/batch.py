@@ -194,7 +194,9 @@ def _solve_group(group: list[_Problem]) -> None:
         ps, rs = slice(p_off, p_off + n_p), slice(r_off, r_off + n_r)
         p.result = lm.LMResult(res.u[ps], res.t_m0[rs], res.loss[ps], res.cov_u[ps],
                                res.fisher_u[ps], int(res.iterations[ps].max()),
-                               res.converged[ps], list(res.history))
+                               res.converged[ps], list(res.history),
+                               terms=None if res.terms is None else
+                               res.terms.take(rs).trimmed(p.ctx.packed.grid_s.shape[1]))
         p_off, r_off = p_off + n_p, r_off + n_r
 
 
