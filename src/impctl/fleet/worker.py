@@ -59,7 +59,7 @@ def preload(model_dir: str) -> None:
     """Import torch and the fit, pin torch to one thread, load the classifiers."""
     import torch
 
-    from ..fit import batch  # noqa: F401  (imports the fit and torchdiffeq)
+    from ..fit import batch  # noqa: F401  (imports the fit)
 
     torch.set_num_threads(1)
     if model_dir != PRIOR:
@@ -146,6 +146,11 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
                 _fill(row, res)
                 fitted.append((row, res))
         _flexibility(fitted)
+    # The batched fit keeps its freed heap during the batch (fewer page faults); between
+    # batches it goes back, so a worker's memory stays flat over the run (bench/fleet.py).
+    from ..fit._alloc import release_freed_memory
+
+    release_freed_memory()
     share = (time.perf_counter() - started) / max(1, len(rows))
     cpu_share = (time.process_time() - cpu) / max(1, len(rows))
     state = worker_state()
