@@ -24,7 +24,10 @@ Measured:
 2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
    (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
 3. the whole fleet with the default local cluster (one worker process per core), wall clock
-   from the command's start (cluster start-up and worker preload included) to the last row;
+   from the command's start (cluster start-up and worker preload included) to the last row,
+   and the worker time outside the batches split into the workers' own CPU there (start,
+   imports, preload, Dask), time not on a core, and this process's CPU (client, scheduler,
+   nannies, FLEET writes);
 4. resident memory of each worker after each batch (the FLEET ``worker_rss_mb`` column): first,
    median and last batch — flat means no growth over the run;
 5. ``--profile N``: one worker's batch of N households run in this process
