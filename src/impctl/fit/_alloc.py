@@ -7,9 +7,9 @@ threshold to its maximum (32 MB) and switching trimming off serves them from the
 (``bench/fleet.py --profile``: 750,000 → 100,000 page faults, sys time 2.0 → 0.3 s per batch
 of 16). The price is that the resident memory stays at the largest batch's peak and creeps up
 with fragmentation (683 → 726 MB per worker over a 1,000-household run), so a fleet worker hands
-the freed heap back once per batch (:func:`release_freed_memory`: +1.5 % CPU, RSS after each
-batch flat to ±5 MB). Process-wide, so only the fleet's worker processes and batched fits call
-these.
+the freed heap back once per batch (:func:`release_freed_memory`: +1.5 % CPU; in one process
+the RSS after each batch is then flat to ±5 MB). Process-wide, so only the fleet's worker
+processes and batched fits call these.
 """
 
 from __future__ import annotations
