@@ -24,7 +24,10 @@ Measured:
 2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
    (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
 3. the whole fleet with the default local cluster (one worker process per core), wall clock
-   from the command's start (cluster start-up and worker preload included) to the last row;
+   from the command's start (cluster start-up and worker preload included) to the last row,
+   and the worker time outside the batches split into the workers' own CPU there (start,
+   imports, preload, Dask), time not on a core, and this process's CPU (client, scheduler,
+   nannies, FLEET writes);
 4. resident memory of each worker after each batch (the FLEET ``worker_rss_mb`` column): first,
    median and last batch — flat means no growth over the run;
 5. ``--profile N``: one worker's batch of N households run in this process
@@ -109,16 +112,30 @@ def run_fleet(data: Path, workers: int | None, batch: int, work: Path) -> tuple[
     from impctl.fleet import fit_fleet
 
     out = work / f"FLEET-{workers or 'default'}-{time.time_ns()}.parquet"
+    before = os.times()
     t0 = time.perf_counter()
     run = fit_fleet(data, out, workers=workers, batch_size=batch, progress=True,
                     echo=lambda s: print(s, file=sys.stderr))
     wall = time.perf_counter() - t0
-    cpu = pd.read_parquet(out)["cpu_s_per_household"].sum()
+    after = os.times()
+    fleet = pd.read_parquet(out)
+    cpu = fleet["cpu_s_per_household"].sum()
+    # The local cluster's worker processes are this process's children: once the cluster is
+    # closed their whole CPU time (imports, preload, Dask, batches) is in os.times().
+    children = (after.children_user + after.children_system
+                - before.children_user - before.children_system)
+    client = after.user + after.system - before.user - before.system
     print(f"  {run.found} households, {run.counts}, {wall:.1f} s wall on {run.workers} "
-          f"workers → {run.fitted / wall:.2f} households/s; worker CPU {cpu:.0f} s = "
-          f"{cpu / max(1, run.fitted):.3f} CPU-s per household; worker time outside the "
-          f"batches (cluster start, preload, Dask, idle) {wall * run.workers - cpu:.0f} s "
-          f"(load average now {os.getloadavg()[0]:.1f})")
+          f"workers → {run.fitted / wall:.2f} households/s; worker CPU in the batches "
+          f"{cpu:.0f} s = {cpu / max(1, run.fitted):.3f} CPU-s per household; worker time "
+          f"outside the batches {wall * run.workers - cpu:.0f} s (load average now "
+          f"{os.getloadavg()[0]:.1f})")
+    if children > 0:
+        print(f"  of the {wall * run.workers - cpu:.0f} worker-seconds outside the batches: "
+              f"{children - cpu:.0f} CPU-s in the worker processes outside the batches "
+              f"(start, imports, preload, Dask), {wall * run.workers - children:.0f} s not on "
+              f"a core (waiting: start-up order, the last batches, other processes); this "
+              f"process (client, scheduler, nannies, FLEET writes) used {client:.0f} CPU-s")
     return wall, out
 
 
@@ -187,7 +204,7 @@ def profile(data: Path, n: int) -> None:
 
     def lm_call() -> str:
         calls["lm"] += 1
-        return ("merged LM: 1st call (all starts: with/without emitter term, per night)"
+        return ("merged LM: 1st call (all starts, with and without the nuisance terms)"
                 if calls["lm"] % 2 else "merged LM: 2nd call (joint refit with fitted σ)")
 
     timed(worker, "read_sources", "read the households' rows (pyarrow/pandas → nights)")

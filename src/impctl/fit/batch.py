@@ -32,7 +32,7 @@ import torch
 from ..imp.night import NightSamples
 from . import lm
 from ._alloc import retain_freed_memory
-from .estimator import NightFit
+from .estimator import NightFit, stop_units
 from .node import PackedNights
 
 
@@ -164,12 +164,13 @@ def _solve_group(group: list[_Problem]) -> None:
     first = group[0].ctx
     ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver)
     problem, night, groups, units = [], [], [], []
-    p_off = n_off = g_off = 0
-    for i, p in enumerate(group):
+    p_off = n_off = g_off = u_off = 0
+    for p in group:
         problem.append(p.rows.problem + p_off)
         night.append(p.rows.night + n_off)
         groups.append(p.groups + g_off)
-        units.append(torch.full((int(p.groups.max()) + 1,), i))
+        units.append(stop_units(p.groups) + u_off)
+        u_off = int(units[-1].max()) + 1
         p_off += p.rows.n_problems
         n_off += p.ctx.packed.n_nights
         g_off += int(p.groups.max()) + 1
@@ -193,14 +194,16 @@ def _solve_group(group: list[_Problem]) -> None:
         ps, rs = slice(p_off, p_off + n_p), slice(r_off, r_off + n_r)
         p.result = lm.LMResult(res.u[ps], res.t_m0[rs], res.loss[ps], res.cov_u[ps],
                                res.fisher_u[ps], int(res.iterations[ps].max()),
-                               res.converged[ps], list(res.history))
+                               res.converged[ps], list(res.history),
+                               terms=None if res.terms is None else
+                               res.terms.take(rs).trimmed(p.ctx.packed.grid_s.shape[1]))
         p_off, r_off = p_off + n_p, r_off + n_r
 
 
 def _solve_alone(p: _Problem) -> None:
     try:
         p.result = lm.levenberg_marquardt(p.ctx, p.rows, p.u0, p.t_m0, groups=p.groups,
-                                          max_iter=p.max_iter)
+                                          units=stop_units(p.groups), max_iter=p.max_iter)
     except Exception as exc:  # noqa: BLE001 — handed to the household's own thread
         p.error = exc
 

@@ -65,6 +65,20 @@ CLASS_REJECT_CHI2 = 3.84
 #: freedom as terms switched on (3 by default: 7.81).
 
 
+def stop_units(groups: torch.Tensor) -> torch.Tensor:
+    """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
+    (groups 0–2) and the per-night fits (3 + i) stop on their own, so that the joint answer
+    does not depend on whether — or how long — the per-night comparison runs."""
+    return (torch.arange(int(groups.max()) + 1) >= _FIRST_NIGHT_GROUP).long()
+
+
+_FIRST_NIGHT_GROUP = 3
+
+
+def _rows_of(result: lm.LMResult, sel: torch.Tensor) -> lm.RowTerms | None:
+    return None if result.terms is None else result.terms.take(sel)
+
+
 class NightFit:
     """Fit the night-time 5R1C model to IMP nights (scikit-learn style estimator).
 
@@ -333,7 +347,7 @@ class NightFit:
         self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
-                      has_power=bool((~cons).any()))
+                      has_power=bool((~cons).any()), terms=_rows_of(result, sel))
         self.lumped_, self.offset_allowance_ = offset_allowance(
             est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
             0.0 if self.nuisance_check_.get("selected") and self.night_gain
@@ -434,15 +448,20 @@ class NightFit:
         second = self._optimise(rows, result.u[joint], result.t_m0[sel], lay["group"][joint])
         result.u[joint], result.t_m0[sel], result.loss[joint] = second.u, second.t_m0, \
             second.loss
+        if result.terms is not None and second.terms is not None:
+            result.terms.put(sel, second.terms)
+        else:
+            result.terms = None
         self.n_iter_ += second.n_iter
         self._update_sigma(rows, second, int(torch.argmin(second.loss[:len(lay["class"])])))
 
     def _class_check(self, rows, result, lay, best_class, ranges) -> int:
         """Likelihood-ratio test of the class ranges against the whole prior ranges."""
         best_prior = self._best(result, lay, 1)
-        sub = rows.subset(rows.problem == best_prior)
-        est = laplace(self._ctx, sub, result.u[best_prior], result.t_m0[rows.problem ==
-                      best_prior], self._group_n, has_power=True, summary_only=True)
+        sel = rows.problem == best_prior
+        est = laplace(self._ctx, rows.subset(sel), result.u[best_prior], result.t_m0[sel],
+                      self._group_n, has_power=True, summary_only=True,
+                      terms=_rows_of(result, sel))
         drop = float(result.loss[best_class] - result.loss[best_prior]) / est["inflation"]
         x = to_physical(result.u[best_prior], lay["box"][best_prior])
         outside = [n for n, (lo, hi) in (ranges or {}).items()
@@ -527,13 +546,16 @@ class NightFit:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
         return lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
-                                          max_iter=self.max_iter)
+                                      units=stop_units(groups), max_iter=self.max_iter)
 
     def _update_sigma(self, rows, result, best) -> None:
         sel = rows.problem == best
         sub = rows.subset(sel)
-        with torch.no_grad():
-            raw = lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
+        if result.terms is not None:  # the optimiser's own last evaluation at this point
+            raw = result.terms.take(sel).raw()
+        else:
+            with torch.no_grad():
+                raw = lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
         mask = self._packed.mask[sub.night]
         groups = self._group_n[sub.night]
         floors = (0.005, 0.005, 1.0)

@@ -144,6 +144,52 @@ class _Normal:
     d: torch.Tensor      # (R,)       Jmᵀ Jm
     gm: torch.Tensor     # (R,)       Jmᵀ r
     g_rows: torch.Tensor | None = None  # (R, 7) Jθᵀ r per row (for the sandwich covariance)
+    r: torch.Tensor | None = None       # (R, K) scaled residuals
+    jtj: torch.Tensor | None = None     # (R, 7, 7) Jθᵀ Jθ per row
+
+
+@dataclass
+class RowTerms:
+    """Per row, the residuals and Jacobian products at the optimum, as the optimiser last
+    evaluated them (at row scale ``scale``): the intervals and the σ update reuse them instead
+    of integrating the rows again. Residuals and Jacobian are linear in the row scale, so a
+    new σ only rescales them (:meth:`normal`)."""
+
+    r: torch.Tensor       # (R, K) scaled residuals
+    jtj: torch.Tensor     # (R, 7, 7)
+    g: torch.Tensor       # (R, 7)  Jθᵀ r
+    c: torch.Tensor       # (R, 7)  Jθᵀ Jm
+    d: torch.Tensor       # (R,)    Jmᵀ Jm
+    gm: torch.Tensor      # (R,)    Jmᵀ r
+    scale: torch.Tensor   # (R,)    the row scale they were computed with
+
+    def take(self, sel) -> RowTerms:
+        return RowTerms(*(x[sel] for x in (self.r, self.jtj, self.g, self.c, self.d, self.gm,
+                                           self.scale)))
+
+    def trimmed(self, k: int) -> RowTerms:
+        """The first ``k`` nodes (a household's own grid out of a merged, padded batch; the
+        padding's residuals are zero)."""
+        return RowTerms(self.r[:, :k].clone(), self.jtj.clone(), self.g.clone(), self.c.clone(),
+                        self.d.clone(), self.gm.clone(), self.scale.clone())
+
+    def put(self, sel, other: RowTerms) -> None:
+        """Rows ``sel`` replaced by ``other`` (a later optimiser call on those rows)."""
+        for name in ("r", "jtj", "g", "c", "d", "gm", "scale"):
+            getattr(self, name)[sel] = getattr(other, name)
+
+    def raw(self) -> torch.Tensor:
+        """(model − measured) in data units, (R, K): what :func:`raw_residuals` gives."""
+        return self.r / self.scale[:, None]
+
+    def normal(self, rows: Rows, u: torch.Tensor, ridge: float) -> _Normal:
+        """:func:`_normal_equations` of ``rows`` (these rows, at ``rows.scale``) at ``u``."""
+        f = (rows.scale / self.scale) ** 2
+        jtj, g_rows = self.jtj * f[:, None, None], self.g * f[:, None]
+        loss = _sum_rows((self.r ** 2).sum(1) * f, rows) + ridge * (u ** 2).sum(1)
+        h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
+        return _Normal(loss, h, _sum_rows(g_rows, rows) + ridge * u, self.c * f[:, None],
+                       self.d * f, self.gm * f, g_rows)
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
@@ -158,12 +204,12 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
                  for j, i in enumerate(idx)]
         order = torch.argsort(torch.cat(idx))
         terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
-    loss_rows, jtj, g_rows, c, d, gm = terms
+    loss_rows, jtj, g_rows, c, d, gm, r0 = terms
     ridge = ctx.ridge
     loss = _sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
     h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
     g = _sum_rows(g_rows, rows) + ridge * u
-    return _Normal(loss, h, g, c, d, gm, g_rows)
+    return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
 
 
 def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
@@ -191,7 +237,7 @@ def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
     both = torch.stack([r0, j_m], dim=2)                                 # (R, K, 2)
     jt_rm = torch.bmm(jt, both)                                          # (R, 7, 2)
     return ((r0 ** 2).sum(1), torch.bmm(jt, jt.transpose(1, 2)), jt_rm[..., 0], jt_rm[..., 1],
-            (j_m ** 2).sum(1), (j_m * r0).sum(1))
+            (j_m ** 2).sum(1), (j_m * r0).sum(1), r0)
 
 
 def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
@@ -211,14 +257,16 @@ def _evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
     batch most problems are done long before the slowest one."""
     if bool(active.all()):
         return _normal_equations(ctx, rows, u, t_m0)
-    out = _Normal(current.loss.clone(), current.h.clone(), current.g.clone(), current.c.clone(),
-                  current.d.clone(), current.gm.clone())
+    out = _Normal(*(x.clone() for x in (current.loss, current.h, current.g, current.c,
+                                         current.d, current.gm, current.g_rows, current.r,
+                                         current.jtj)))
     if not bool(active.any()):
         return out
     sub, pk, rk = _take(rows, active)
     new = _normal_equations(ctx, sub, u[pk], t_m0[rk])
     out.loss[pk], out.h[pk], out.g[pk] = new.loss, new.h, new.g
     out.c[rk], out.d[rk], out.gm[rk] = new.c, new.d, new.gm
+    out.g_rows[rk], out.r[rk], out.jtj[rk] = new.g_rows, new.r, new.jtj
     return out
 
 
@@ -274,6 +322,7 @@ class LMResult:
     converged: torch.Tensor    # (P,) bool
     history: list[float] = field(default_factory=list)
     iterations: torch.Tensor | None = None  # (P,) iterations each problem took part in
+    terms: RowTerms | None = None  # per row at the optimum (reused by σ update and intervals)
 
 
 def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *,
@@ -334,6 +383,9 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
                 torch.where(row_ok[:, None], trial.c, ne.c),
                 torch.where(row_ok, trial.d, ne.d),
                 torch.where(row_ok, trial.gm, ne.gm),
+                torch.where(row_ok[:, None], trial.g_rows, ne.g_rows),
+                torch.where(row_ok[:, None], trial.r, ne.r),
+                torch.where(row_ok[:, None, None], trial.jtj, ne.jtj),
             )
             # Nielsen's damping update from the gain ratio actual/predicted decrease.
             rho = (actual / pred.clamp_min(1e-300)).clamp(0.0, 1.0)
@@ -354,7 +406,8 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
         s, _, _ = schur(ne, rows)
         cov = torch.linalg.pinv(s, hermitian=True)
         fisher = s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE)
-    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history, iterations)
+    terms = RowTerms(ne.r, ne.jtj, ne.g_rows, ne.c, ne.d, ne.gm, rows.scale.clone())
+    return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history, iterations, terms)
 
 
 def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_iter: int = 300,

@@ -216,6 +216,21 @@ class PackedNights:
     def constrained(self) -> torch.Tensor:
         return torch.tensor([k == "constrained" for k in self.kinds])
 
+    def demand_mask(self) -> torch.Tensor:
+        """(N, K) bool: the nodes a DEMAND row compares — :attr:`mask` without the last
+        sample ("instant" power is the mean until the next sample) and without the power
+        samples that cannot be compared. Computed once per packing: every optimiser
+        iteration's rows read it."""
+        cached = self.__dict__.get("_demand_mask")
+        if cached is None:
+            cached = self.mask
+            if self.timestamps == "instant":
+                cached = cached & ~self.last
+            if self.power_ok is not None:
+                cached = cached & self.power_ok
+            self.__dict__["_demand_mask"] = cached
+        return cached
+
 
 def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
     """Centred moving average of samples within ±width/2 [s] (window shrinks at the ends)."""
@@ -358,6 +373,22 @@ def _unit(net, which: int):
     return air_derivative(*args, net)
 
 
+def _mixed_mask(packed: PackedNights, night_index: torch.Tensor, dm: torch.Tensor, k: int
+                ) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Compared nodes and interval-mean partners of rows of both types, (R, K) each."""
+    mask = packed.mask[night_index]
+    mean_next = None
+    if packed.timestamps == "instant":
+        # A power sample is the mean until the next sample: compare the model's interval mean
+        # (trapezoid), and drop the last sample, whose interval lies outside the night.
+        nxt = packed.next_node[night_index]
+        mean_next = torch.where(dm, nxt, torch.arange(k).expand_as(nxt))
+        mask = mask & ~(dm & packed.last[night_index])
+    if packed.power_ok is not None:
+        mask = mask & ~(dm & ~packed.power_ok[night_index])
+    return mask, mean_next
+
+
 def build_rows(
     packed: PackedNights,
     params: torch.Tensor,
@@ -456,16 +487,15 @@ def build_rows(
         u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
         out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain[:, None] + q_fur
 
-    mask = packed.mask[night_index]
     mean_next = None
-    if packed.timestamps == "instant":
-        # A power sample is the mean until the next sample: compare the model's interval mean
-        # (trapezoid), and drop the last sample, whose interval lies outside the night.
-        nxt = packed.next_node[night_index]
-        mean_next = torch.where(dm, nxt, torch.arange(grid.shape[1]).expand_as(nxt))
-        mask = mask & ~(dm & packed.last[night_index])
-    if packed.power_ok is not None:
-        mask = mask & ~(dm & ~packed.power_ok[night_index])
+    if not any_air:  # DEMAND rows only (lm builds each row type on its own rows)
+        mask = packed.demand_mask()[night_index]
+        if packed.timestamps == "instant":
+            mean_next = packed.next_node[night_index]
+    elif not any_dem:  # AIR rows compare T_air at each sample's node: no interval mean
+        mask = packed.mask[night_index]
+    else:
+        mask, mean_next = _mixed_mask(packed, night_index, dm, grid.shape[1])
     lag_next = lag_rate = lag_extra = None
     if packed.emitter_lag and any_dem and params.shape[-1] > len(PARAM_NAMES):
         # The meter measures the heat into the emitter, not into the room: with the emitter

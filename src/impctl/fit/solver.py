@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from torchdiffeq import odeint
 
 #: Rates [1/s] below which :func:`exact_chain` takes the first-order form (τ ≈ 30 years).
 _SLOW_RATE = 1e-9
@@ -101,6 +100,10 @@ class NightODE(torch.nn.Module):
         y0 = torch.zeros(z0.shape[0], h.shape[1], 2, dtype=z0.dtype)
         y0[..., 0] = 1.0
         s = torch.tensor([0.0, 1.0], dtype=z0.dtype)
+        # imported here: torchdiffeq pulls in scipy.integrate (~1 s per fleet worker start),
+        # and only "rk4" needs it
+        from torchdiffeq import odeint
+
         try:
             y1 = odeint(self._interval_rhs, y0, s, method="rk4",
                         options={"step_size": 1.0 / self.n_sub})[-1]

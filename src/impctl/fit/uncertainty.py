@@ -44,8 +44,12 @@ MIN_SANDWICH_NIGHTS = 3
 
 
 def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
-            group_n: torch.Tensor, *, has_power: bool, summary_only: bool = False) -> dict:
+            group_n: torch.Tensor, *, has_power: bool, summary_only: bool = False,
+            terms: lm.RowTerms | None = None) -> dict:
     """Intervals and flags at the optimum ``u`` (7,) of the one problem in ``sub``.
+
+    ``terms``: the optimiser's residuals and Jacobian products of these rows at ``u``
+    (:class:`.lm.RowTerms`), reused instead of evaluating them again.
 
     Returns
     -------
@@ -54,7 +58,8 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     ``autocorrelation`` (group → ρ), ``cov_u`` (7×7)
     """
     with torch.no_grad():
-        raw = lm.raw_residuals(ctx, sub, u[None], t_m0).numpy()
+        raw = (lm.raw_residuals(ctx, sub, u[None], t_m0) if terms is None
+               else terms.raw()).numpy()
     mask = ctx.packed.mask[sub.night].numpy()
     groups = group_n[sub.night]
     inflate = torch.ones(3, dtype=DTYPE)
@@ -70,7 +75,8 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     scaled = lm.Rows(sub.problem, sub.night, sub.row_type, sub.phi_w, sub.phi_in_w,
                          sub.scale / inflate[groups].sqrt(), sub.box, 1)
     with torch.no_grad():
-        ne = lm._normal_equations(ctx, scaled, u[None], t_m0)
+        ne = (lm._normal_equations(ctx, scaled, u[None], t_m0) if terms is None
+              else terms.normal(scaled, u[None], ctx.ridge))
         s_mat, _, _ = lm.schur(ne, scaled)
     cov = torch.linalg.pinv(s_mat[0], hermitian=True)
     fisher = s_mat[0] - ctx.ridge * torch.eye(len(u), dtype=DTYPE)

@@ -179,53 +179,63 @@ def nights_from_table(
     """Checked table (``timestamp`` tz-aware, numbers float) → nights; see :func:`read_nights`."""
     _check_values(table, path)
     explicit = "night" in table
+    # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
+    stamps = table["timestamp"]
+    stamp_ns = pd.DatetimeIndex(stamps).as_unit("ns").asi8
     if explicit:
-        ids = table["night"]
-        change = ids.ne(ids.shift()).to_numpy()
-        run_ids = ids[change]
+        ids = table["night"].to_numpy(dtype=object)
+        change = np.ones(len(ids), bool)
+        change[1:] = ids[1:] != ids[:-1]
+        first = np.flatnonzero(change)
+        run_ids = pd.Series(ids[first])
         dup = run_ids.duplicated().to_numpy()
         if dup.any():
-            i = int(np.flatnonzero(change)[np.argmax(dup)])
-            raise InputError(f"night {ids.iloc[i]!r} is split: its rows must be contiguous",
+            i = int(first[np.argmax(dup)])
+            raise InputError(f"night {ids[i]!r} is split: its rows must be contiguous",
                              path, _row(i))
-        starts = {n: table["timestamp"].iloc[int(np.argmax((ids == n).to_numpy()))]
-                  for n in run_ids}
+        starts = {n: stamps.iloc[int(i)] for n, i in zip(ids[first], first, strict=True)}
+        bounds = np.append(first, len(ids))
+        groups = [(ids[a], np.arange(a, b)) for a, b in zip(bounds[:-1], bounds[1:],
+                                                              strict=True)]
     else:
-        ids, starts = _window_ids(table["timestamp"], tz, window)
+        win_ids, starts = _window_ids(stamps, tz, window)
+        groups = [(n, np.asarray(r)) for n, r in
+                  table.groupby(win_ids, sort=False).groups.items()]
 
-    off = (table["heating"] == 0) if "heating" in table else (table["q_hc"] <= Q_ON_W)
+    off = ((table["heating"] == 0) if "heating" in table else (table["q_hc"] <= Q_ON_W)).to_numpy()
+    kinds_all = table["kind"].to_numpy() if "kind" in table else None
+    setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
+    values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
     nights: list[NightSamples] = []
-    for night_id, rows in table.groupby(ids, sort=False).groups.items():
+    for night_id, idx in groups:
         if night_id == "":
             continue
-        idx = np.asarray(rows)
         if len(idx) < 2:
             if explicit:
                 raise InputError(f"night {night_id!r} has only one sample", path, _row(idx[0]))
             continue
-        part = table.iloc[idx]
         start = starts[night_id]
-        time_s = (part["timestamp"] - start).dt.total_seconds().to_numpy()
-        if "kind" in part:
-            kinds = part["kind"].to_numpy()
+        time_s = (stamp_ns[idx] - pd.Timestamp(start).as_unit("ns").value) / 1e9
+        if kinds_all is not None:
+            kinds = kinds_all[idx]
             changed = kinds != kinds[0]
             if changed.any():
                 raise InputError(f"night {night_id!r} changes kind from {kinds[0]!r}",
                                  path, _row(idx[int(np.argmax(changed))]))
             kind = str(kinds[0])
         else:
-            kind = _infer_kind(time_s, off.to_numpy()[idx])
+            kind = _infer_kind(time_s, off[idx])
         setpoint = np.nan
-        if "setpoint" in part and part["setpoint"].notna().any():
-            setpoint = float(np.nanmedian(part["setpoint"].to_numpy(dtype=float)))
+        if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
+            setpoint = float(np.nanmedian(setpoint_all[idx]))
         nights.append(NightSamples(
             night_id=str(night_id),
             kind=kind,  # type: ignore[arg-type]
             start=start,
             time_s=time_s,
-            t_air_c=part["t_air"].to_numpy(dtype=float),
-            t_out_c=part["t_out"].to_numpy(dtype=float),
-            q_hc_w=part["q_hc"].to_numpy(dtype=float),
+            t_air_c=values["t_air"][idx],
+            t_out_c=values["t_out"][idx],
+            q_hc_w=values["q_hc"][idx],
             setpoint_c=setpoint,
         ))
     if not nights:
