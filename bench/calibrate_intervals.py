@@ -155,8 +155,8 @@ def provenance(args, n: int) -> dict:
 def why_table(records: list[dict]) -> None:
     """What the fit could see, for the houses whose interval missed a truth (and for all)."""
     print("\n### why intervals miss: what the fit could see for each missed house")
-    print("| house | emitter | control | on/off | group | missed | err HLC/τ/C_m % | "
-          "±HLC/τ/C_m log % | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
+    print("| house | emitter | control | on/off | group | missed | log error HLC/τ/C_m ×100 | "
+          "95 % half-width in log ×100 | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
           "discharge h | adequate |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in records:
@@ -167,9 +167,9 @@ def why_table(records: list[dict]) -> None:
         f = (lambda v: "–" if v is None else f"{v:.2f}")   # noqa: E731
         print(f"| {r['index']} | {r['emitter']} | {r['control']} | {'yes' if r['on_off'] else 'no'}"
               f" | {model_error.group_of(d)} | {','.join(miss)} | "
-              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in model_error.QUANTITIES)
+              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in ("hlc", "tau", "c_m"))
               + " | " + "/".join(f"{100 * model_error.Z95 * r['sd'][q]:.0f}"
-                                 for q in model_error.QUANTITIES)
+                                 for q in ("hlc", "tau", "c_m"))
               + f" | {f(d['rho_constrained'])} | {f(d['rho_power'])} | "
               f"{f(d['rmse_over_noise_constrained'])} | {f(d['rmse_over_noise_power'])} | "
               f"{f(d['emitter_discharge_h'])} | {d['adequate']} |")

@@ -43,7 +43,7 @@ def realistic_nights():
 
 def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic_nights):
     cal = model_error.load_calibration()
-    assert cal["pooled"]["n"] >= 150 and cal["provenance"]["seed"] != 20260
+    assert cal["provenance"]["n_households"] >= 150 and cal["provenance"]["seed"] != 20260
     assert "bench/calibrate_intervals.py" in cal["provenance"]["command"]
     kw = dict(n_starts=2, per_night=False)
     off = NightFit(model_error=None, **kw).fit(realistic_nights, RANGES)
@@ -59,7 +59,8 @@ def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic
         assert b.low <= a.low and b.high >= a.high
     summary = fit_to_dict(on)
     assert f"group '{group}'" in summary["interval_method"]
-    assert summary["fit"]["model_error"]["n_calibration"] == cal["pooled"]["n"]
+    assert summary["fit"]["model_error"]["n_calibration"] == cal["provenance"]["n_households"]
+    assert summary["fit"]["model_error"]["n_fits"] == cal["pooled"]["n"]
     assert "model-error share calibrated on" in format_table(summary)
     assert "no model-error share" in fit_to_dict(off)["interval_method"]
 

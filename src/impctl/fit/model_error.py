@@ -214,10 +214,11 @@ def widen(lumped: dict[str, Estimate], diag: dict, cal: dict) -> tuple[dict, dic
         out[name] = Estimate(e.value, float(e.value * math.exp(-Z95 * sd)),
                              float(e.value * math.exp(Z95 * sd)), e.determined)
     prov = cal.get("provenance", {})
-    n_cal = int(cal.get("pooled", {}).get("n", 0))
+    n_fits = int(cal.get("pooled", {}).get("n", 0))
+    n_cal = int(prov.get("n_households") or n_fits)
     info = {"group": group, "share": {q: float(entry["share"][q]) for q in QUANTITIES},
-            "n_group": int(entry.get("n", 0)), "n_calibration": n_cal,
+            "n_group": int(entry.get("n", 0)), "n_calibration": n_cal, "n_fits": n_fits,
             "seed": prov.get("seed"), "version": prov.get("created"),
             "method": (f"sandwich + type-B + model-error share calibrated on {n_cal} realistic "
-                       f"virtual households, group {group!r}")}
+                       f"virtual households ({n_fits} fits), group {group!r}")}
     return out, info
