@@ -205,8 +205,9 @@ def interval_method(fit) -> str:
     me = getattr(fit, "model_error_", None)
     if me:
         sizes = ", ".join(f"{k} {100 * v:.1f} %" for k, v in me["share"].items())
-        text += (f"; plus, in quadrature, a {me['method']} (log-space SD {sizes}; "
-                 "impctl.fit.model_error)")
+        text += (f"; plus, in quadrature, a model-error share calibrated on "
+                 f"{me['n_calibration']} realistic virtual households ({me.get('n_fits')} fits), "
+                 f"group '{me['group']}' (log-space SD {sizes}; impctl.fit.model_error)")
     else:
         text += "; no model-error share (measurement-only intervals)"
     return text
