@@ -61,7 +61,7 @@ def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic
     assert f"group '{group}'" in summary["interval_method"]
     assert summary["fit"]["model_error"]["n_calibration"] == cal["provenance"]["n_households"]
     assert summary["fit"]["model_error"]["n_fits"] == cal["pooled"]["n"]
-    assert "model-error share calibrated on" in format_table(summary)
+    assert "intervals: sandwich + type-B + model-error share calibrated on" in format_table(summary)
     assert "no model-error share" in fit_to_dict(off)["interval_method"]
 
 
