@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from fit import ACH, VAL_SEED, _sub_schedule, true_ranges  # bench/fit.py: the same protocol
 
 from impctl.fit import model_error
 from impctl.fit.estimator import NightFit
@@ -43,23 +44,8 @@ from impctl.population.synth_nights import (
     sample_nights,
 )
 
-VAL_SEED = 20260
 TRAIN_SEEDS = (0,)
-CLASS_RANGES = {
-    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
-    "c_f": ((0.8, 1.65), (1.65, 3.7)),
-    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
-}
-ACH = (0.0, 0.01)
 CHUNK = 40   # households simulated together (memory, and a progress line per chunk)
-
-
-def true_ranges(house) -> dict[str, tuple[float, float]]:
-    out = {}
-    for name, rs in CLASS_RANGES.items():
-        v = float(getattr(house, name))
-        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
-    return out
 
 
 def _truth(house) -> dict[str, float]:
@@ -125,12 +111,6 @@ def _record(i, step_s, fit, truth, kind, onoff, control) -> dict:
         rec["sd"][q] = float(np.log(e.high / e.low) / (2 * model_error.Z95))
         rec["covered"][q] = bool(e.low <= truth[q] <= e.high)
     return rec
-
-
-def _sub_schedule(sched, idx):
-    from dataclasses import replace
-
-    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
 
 
 def provenance(args, n: int) -> dict:
@@ -237,8 +217,11 @@ def main() -> None:
         summary(records, None)
         return
     cal = model_error.calibrate(records, provenance(args, len(records)))
-    Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")
     summary(records, cal)
+    if not all(np.isfinite(v) for g in cal["groups"].values() for v in g["share"].values()):
+        sys.exit(f"not written: {len(records)} fits are too few for a 95 % conformal share "
+                 f"(≥ {model_error.MIN_GROUP} per group, or pooled)")
+    Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")
     print(f"\nwrote {args.out}")
 
 
