@@ -66,7 +66,7 @@ def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic
 
 
 def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
-    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4)
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=300.0, n_normal=4)
     kw = dict(n_starts=2, per_night=False)
     off = NightFit(model_error=None, **kw).fit(nights, RANGES)
     on = NightFit(**kw).fit(nights, RANGES)
@@ -94,6 +94,14 @@ def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_pa
     assert str(path) in msg and "calibrate_intervals.py" in msg and "\n" not in msg
 
 
+def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():
+    # at 15-minute or hourly rows a realistic house's residuals look as clean as an ideal one's
+    clean = {"rho_power": 0.0, "rmse_over_noise_power": 1.0, "nuisance_selected": False}
+    assert model_error.group_of({**clean, "row_step_s": 300.0}) == "clean"
+    assert model_error.group_of({**clean, "row_step_s": 900.0}) == "coarse"
+    assert model_error.group_of({**clean, "row_step_s": 3600.0}) == "coarse"
+
+
 def test_the_conformal_share_covers_the_stated_share_of_households():
     rng = np.random.default_rng(0)
     err, sd = 0.2 * rng.standard_normal(99), np.full(99, 0.05)
@@ -104,7 +112,7 @@ def test_the_conformal_share_covers_the_stated_share_of_households():
 
 
 def test_two_nights_say_the_interval_is_model_based_not_sandwich():
-    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_constrained=1, n_normal=1)
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=300.0, n_constrained=1, n_normal=1)
     fit = NightFit(n_starts=2, per_night=False).fit(nights, RANGES)
     assert fit.interval_basis_.startswith("too few nights (2)")
     assert all(v == "laplace" for v in fit.interval_source_.values())
