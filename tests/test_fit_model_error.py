@@ -98,6 +98,7 @@ def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():
     # at 15-minute or hourly rows a realistic house's residuals look as clean as an ideal one's
     clean = {"rho_power": 0.0, "rmse_over_noise_power": 1.0, "nuisance_selected": False}
     assert model_error.group_of({**clean, "row_step_s": 300.0}) == "clean"
+    assert model_error.group_of({**clean, "row_step_s": 610.0}) == "clean"   # a gateway's 10 min
     assert model_error.group_of({**clean, "row_step_s": 900.0}) == "coarse"
     assert model_error.group_of({**clean, "row_step_s": 3600.0}) == "coarse"
 
