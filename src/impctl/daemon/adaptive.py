@@ -120,10 +120,10 @@ def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
 
 
 def record(store: Store, decision: Decision, fc: Forecast, act: datetime) -> None:
-    """Store the decision and log it; a stop repeated night after night is kept once (its
-    reason may change as a late fit of the last night arrives, but nothing runs after a stop)."""
+    """Store the decision and log it; a stop repeated night after night is kept once."""
     last = store.decisions(1)
-    if decision.action == "stop" and last and last[0].action == "stop":
+    if (decision.action == "stop" and last and last[0].action == "stop"
+            and last[0].reason == decision.reason):
         return
     store.add_decision(decision.action, decision.reason, kind=decision.kind,
                        setpoint_c=decision.setpoint_c, reached=decision.reached, act=act,
