@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from fit import ACH, VAL_SEED, _sub_schedule, true_ranges  # bench/fit.py: the same protocol
 
 from impctl.fit import model_error
 from impctl.fit.estimator import NightFit
@@ -43,23 +44,8 @@ from impctl.population.synth_nights import (
     sample_nights,
 )
 
-VAL_SEED = 20260
 TRAIN_SEEDS = (0,)
-CLASS_RANGES = {
-    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
-    "c_f": ((0.8, 1.65), (1.65, 3.7)),
-    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
-}
-ACH = (0.0, 0.01)
 CHUNK = 40   # households simulated together (memory, and a progress line per chunk)
-
-
-def true_ranges(house) -> dict[str, tuple[float, float]]:
-    out = {}
-    for name, rs in CLASS_RANGES.items():
-        v = float(getattr(house, name))
-        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
-    return out
 
 
 def _truth(house) -> dict[str, float]:
@@ -127,12 +113,6 @@ def _record(i, step_s, fit, truth, kind, onoff, control) -> dict:
     return rec
 
 
-def _sub_schedule(sched, idx):
-    from dataclasses import replace
-
-    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
-
-
 def provenance(args, n: int) -> dict:
     def git(*a):
         try:
@@ -155,8 +135,8 @@ def provenance(args, n: int) -> dict:
 def why_table(records: list[dict]) -> None:
     """What the fit could see, for the houses whose interval missed a truth (and for all)."""
     print("\n### why intervals miss: what the fit could see for each missed house")
-    print("| house | emitter | control | on/off | group | missed | err HLC/τ/C_m % | "
-          "±HLC/τ/C_m log % | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
+    print("| house | emitter | control | on/off | group | missed | log error HLC/τ/C_m ×100 | "
+          "95 % half-width in log ×100 | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
           "discharge h | adequate |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in records:
@@ -167,9 +147,9 @@ def why_table(records: list[dict]) -> None:
         f = (lambda v: "–" if v is None else f"{v:.2f}")   # noqa: E731
         print(f"| {r['index']} | {r['emitter']} | {r['control']} | {'yes' if r['on_off'] else 'no'}"
               f" | {model_error.group_of(d)} | {','.join(miss)} | "
-              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in model_error.QUANTITIES)
+              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in ("hlc", "tau", "c_m"))
               + " | " + "/".join(f"{100 * model_error.Z95 * r['sd'][q]:.0f}"
-                                 for q in model_error.QUANTITIES)
+                                 for q in ("hlc", "tau", "c_m"))
               + f" | {f(d['rho_constrained'])} | {f(d['rho_power'])} | "
               f"{f(d['rmse_over_noise_constrained'])} | {f(d['rmse_over_noise_power'])} | "
               f"{f(d['emitter_discharge_h'])} | {d['adequate']} |")
@@ -237,8 +217,11 @@ def main() -> None:
         summary(records, None)
         return
     cal = model_error.calibrate(records, provenance(args, len(records)))
-    Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")
     summary(records, cal)
+    if not all(np.isfinite(v) for g in cal["groups"].values() for v in g["share"].values()):
+        sys.exit(f"not written: {len(records)} fits are too few for a 95 % conformal share "
+                 f"(≥ {model_error.MIN_GROUP} per group, or pooled)")
+    Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")
     print(f"\nwrote {args.out}")
 
 

@@ -264,9 +264,10 @@ def test_emitter_term_is_selected_when_the_nights_need_it_and_only_then(fitted, 
     # heat still released after switch-off: without the term τ is biased and its interval
     # misses; with it τ is right and the interval holds
     nights = _with_emitter_release(nights_15min, HOUSE)
-    plain = NightFit(n_starts=3, emitter_state=False, sensor_offsets_k=(0, 0)).fit(nights,
-                                                                                  RANGES)
-    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0)).fit(nights, RANGES)
+    # the measurement intervals (the model-error share: tests/test_fit_model_error.py)
+    plain = NightFit(n_starts=3, emitter_state=False, sensor_offsets_k=(0, 0),
+                     model_error=None).fit(nights, RANGES)
+    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0), model_error=None).fit(nights, RANGES)
     assert rel(plain.lumped_["tau"].value, HOUSE.tau_h) > 0.08
     assert not plain.lumped_["tau"].low <= HOUSE.tau_h <= plain.lumped_["tau"].high
     assert fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] > 20
@@ -356,12 +357,12 @@ def test_a_constant_night_gain_is_not_claimed_and_the_hlc_interval_still_holds()
                    t_m_init_c=sched.t_m_init_c, internal_gains_w=300.0)
     nights = sample_nights(sim, sched.setpoint_c, sched, 0, sample_step_s=900.0, seed=4)
     fit = NightFit(n_starts=3, night_gain=True, sensor_offsets_k=(0, 0),
-                   meter_error=0.0).fit(nights, RANGES)
+                   meter_error=0.0, model_error=None).fit(nights, RANGES)
     e = fit.lumped_["hlc"]
     assert e.value < 0.98 * HOUSE.hlc_w_per_k
     assert not fit.nuisance_check_["selected"] and fit.nuisance_check_["chi2"] < 9.49
     assert e.low <= HOUSE.hlc_w_per_k <= e.high
     assert fit.offset_allowance_["night_gain_relative_sd"] > 0
     stat = NightFit(n_starts=3, night_gain=True, sensor_offsets_k=(0, 0), meter_error=0.0,
-                    night_gain_sd_w=0.0).fit(nights, RANGES).lumped_["hlc"]
+                    night_gain_sd_w=0.0, model_error=None).fit(nights, RANGES).lumped_["hlc"]
     assert e.high / e.low > 1.02 * stat.high / stat.low   # the gain share widens it

@@ -43,7 +43,7 @@ def realistic_nights():
 
 def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic_nights):
     cal = model_error.load_calibration()
-    assert cal["pooled"]["n"] >= 150 and cal["provenance"]["seed"] != 20260
+    assert cal["provenance"]["n_households"] >= 150 and cal["provenance"]["seed"] != 20260
     assert "bench/calibrate_intervals.py" in cal["provenance"]["command"]
     kw = dict(n_starts=2, per_night=False)
     off = NightFit(model_error=None, **kw).fit(realistic_nights, RANGES)
@@ -59,13 +59,14 @@ def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic
         assert b.low <= a.low and b.high >= a.high
     summary = fit_to_dict(on)
     assert f"group '{group}'" in summary["interval_method"]
-    assert summary["fit"]["model_error"]["n_calibration"] == cal["pooled"]["n"]
-    assert "model-error share calibrated on" in format_table(summary)
+    assert summary["fit"]["model_error"]["n_calibration"] == cal["provenance"]["n_households"]
+    assert summary["fit"]["model_error"]["n_fits"] == cal["pooled"]["n"]
+    assert "intervals: sandwich + type-B + model-error share calibrated on" in format_table(summary)
     assert "no model-error share" in fit_to_dict(off)["interval_method"]
 
 
 def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
-    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4)
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=300.0, n_normal=4)
     kw = dict(n_starts=2, per_night=False)
     off = NightFit(model_error=None, **kw).fit(nights, RANGES)
     on = NightFit(**kw).fit(nights, RANGES)
@@ -93,6 +94,15 @@ def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_pa
     assert str(path) in msg and "calibrate_intervals.py" in msg and "\n" not in msg
 
 
+def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():
+    # at 15-minute or hourly rows a realistic house's residuals look as clean as an ideal one's
+    clean = {"rho_power": 0.0, "rmse_over_noise_power": 1.0, "nuisance_selected": False}
+    assert model_error.group_of({**clean, "row_step_s": 300.0}) == "clean"
+    assert model_error.group_of({**clean, "row_step_s": 610.0}) == "clean"   # a gateway's 10 min
+    assert model_error.group_of({**clean, "row_step_s": 900.0}) == "coarse"
+    assert model_error.group_of({**clean, "row_step_s": 3600.0}) == "coarse"
+
+
 def test_the_conformal_share_covers_the_stated_share_of_households():
     rng = np.random.default_rng(0)
     err, sd = 0.2 * rng.standard_normal(99), np.full(99, 0.05)
@@ -103,7 +113,7 @@ def test_the_conformal_share_covers_the_stated_share_of_households():
 
 
 def test_two_nights_say_the_interval_is_model_based_not_sandwich():
-    nights = synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_constrained=1, n_normal=1)
+    nights = synth_nights(HOUSE, seed=4, sample_step_s=300.0, n_constrained=1, n_normal=1)
     fit = NightFit(n_starts=2, per_night=False).fit(nights, RANGES)
     assert fit.interval_basis_.startswith("too few nights (2)")
     assert all(v == "laplace" for v in fit.interval_source_.values())

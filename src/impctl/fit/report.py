@@ -22,7 +22,10 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "predictions": [{"night_id", "kind", "time_s", "t_air_measured_c", "t_air_model_c" | null,
                       "t_out_c", "q_measured_w", "q_model_w" (normal nights)}],
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
-             "emission_lag_h", "settle_h", "starts", "iterations", "loss", "sigma", "time_s"},
+             "emission_lag_h", "settle_h", "starts", "iterations", "loss", "sigma", "time_s",
+             "interval_basis": str,                  # sandwich over G nights, or "too few nights"
+             "model_error": {"group", "share": {"hlc", "c_m", "tau"}, "n_group",
+                             "n_calibration", "n_fits", "seed", "version", "method"} | null},
      "skipped": [{"night_id", "reason"}], "notes": [str],
      "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
@@ -208,8 +211,9 @@ def interval_method(fit) -> str:
     me = getattr(fit, "model_error_", None)
     if me:
         sizes = ", ".join(f"{k} {100 * v:.1f} %" for k, v in me["share"].items())
-        text += (f"; plus, in quadrature, a {me['method']} (log-space SD {sizes}; "
-                 "impctl.fit.model_error)")
+        text += (f"; plus, in quadrature, a model-error share calibrated on "
+                 f"{me['n_calibration']} realistic virtual households ({me.get('n_fits')} fits), "
+                 f"group '{me['group']}' (log-space SD {sizes}; impctl.fit.model_error)")
     else:
         text += "; no model-error share (measurement-only intervals)"
     return text
@@ -273,7 +277,7 @@ def format_table(summary: dict) -> str:
     if me:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
                           (("hlc", "HLC"), ("c_m", "C_m"), ("tau", "τ")))
-        lines.append(f"  intervals include a {me['method']} (log SD {sizes})")
+        lines.append(f"  intervals: {me['method']} (log SD {sizes})")
     lines.append("")
     lines.append("Physical parameters (Table IV)       joint  per-night   search range "
                  "value comes from")
