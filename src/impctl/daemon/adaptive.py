@@ -155,11 +155,11 @@ def tonight(daemon: Daemon, act: datetime) -> NightRequest | None:
         if store.take_request(request_id):
             return req
     decision, fc = decide_now(store, cfg)
-    fitting = daemon._fit_task is not None and not daemon._fit_task.done()
-    final = decision.reached or len(night_history(store)) >= cfg.campaign.max_nights
-    if fitting and not (decision.action == "stop" and final):
-        # Deciding on the previous fit would waste the night just run (never happens in real
-        # time: a fit takes minutes, the next act is ~15 h after a night's end).
+    if daemon._fit_task is not None and not daemon._fit_task.done():
+        # Deciding on the previous fit would waste the night just run, or record a stop
+        # whose reason the last night's fit is about to change — a second, different stop
+        # later (never happens in real time: a fit takes minutes, the next act is ~15 h
+        # after a night's end).
         decision = Decision("skip", None, None,
                             "Skipping tonight: the fit of the last night is still running.")
     record(store, decision, fc, act)
