@@ -49,22 +49,10 @@ from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
 from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
 
-VAL_SEED = 20260          # bench/fit.py's validation households
-ACH = (0.0, 0.01)
-CLASS_RANGES = {
-    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
-    "c_f": ((0.8, 1.65), (1.65, 3.7)),
-    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
-}
+sys.path.insert(0, str(Path(__file__).parent))
+from fit import ACH, VAL_SEED, true_ranges  # noqa: E402  (bench/fit.py: the same validation houses)
+
 T_SET_C, T_OUT_C, DROP_K = 21.0, 0.0, 1.0
-
-
-def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
-    out = {}
-    for name, rs in CLASS_RANGES.items():
-        v = float(getattr(house, name))
-        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
-    return out
 
 
 def plant_coast_h(houses: HouseParameters, params, gains: bool, dt_s: float = 60.0,
