@@ -1,6 +1,7 @@
 """Calibrate the fit's model-error share on the realistic virtual population (and explain misses).
 
-Run (regenerates ``src/impctl/fit/model_error.json``; ≤ 15 min on one core, a line per fit)::
+Run (regenerates ``src/impctl/fit/intervals/model_error.json``; ≤ 15 min on one core, a line
+per fit)::
 
     .venv/bin/python bench/calibrate_intervals.py [--households 160] [--seed 31415]
         [--steps 300:160,3600:80]
@@ -10,7 +11,7 @@ realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal ni
 rows, true class ranges) — the seed must differ from the bench's validation seed (20260) and the
 classifiers' training seeds (``impctl train --seed 0``). Each house is fitted with the share
 switched off (``NightFit(model_error=None)``); its diagnostics, interval SDs and log errors go to
-the calibration (:func:`impctl.fit.model_error.calibrate`).
+the calibration (:func:`impctl.fit.intervals.model_error.calibrate`).
 
 ``--why`` (with ``--seed 20260`` for the bench's held-out houses): fit with the share ON and print,
 for every house whose interval misses a truth, what the fit could see (the "why do intervals
@@ -32,8 +33,8 @@ from pathlib import Path
 import numpy as np
 from fit import ACH, VAL_SEED, _sub_schedule, true_ranges  # bench/fit.py: the same protocol
 
-from impctl.fit import model_error
 from impctl.fit.estimator import NightFit
+from impctl.fit.intervals import model_error
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params, take_params

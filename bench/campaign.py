@@ -51,7 +51,7 @@ import numpy as np  # noqa: E402
 
 from impctl.campaign import Candidate, FitSummary, NightRecord, Outlook, Target, decide  # noqa: E402
 from impctl.campaign.design import Protocol, predict  # noqa: E402
-from impctl.fit.batch import fit_households  # noqa: E402
+from impctl.fit.optim.batch import fit_households  # noqa: E402
 from impctl.fit.report import fit_to_dict  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402

@@ -22,7 +22,7 @@ Measured:
 1. throughput [households/s] and CPU-s per household on 1 and 2 worker processes
    (``--throughput`` households);
 2. per household, fitted alone (``NightFit.fit``, one thread) vs in a batch
-   (``impctl.fit.batch.fit_households``, one thread), ``--alone`` households;
+   (``impctl.fit.optim.batch.fit_households``, one thread), ``--alone`` households;
 3. the whole fleet with the default local cluster (one worker process per core), wall clock
    from the command's start (cluster start-up and worker preload included) to the last row,
    and the worker time outside the batches split into the workers' own CPU there (start,
@@ -152,8 +152,8 @@ def memory(out: Path) -> None:
 def batch_vs_alone(data: Path, n: int) -> None:
     import torch
 
-    from impctl.fit.batch import fit_households
     from impctl.fit.estimator import NightFit
+    from impctl.fit.optim.batch import fit_households
     from impctl.fleet.inputs import discover, read_sources
 
     torch.set_num_threads(1)
@@ -179,8 +179,10 @@ def profile(data: Path, n: int) -> None:
 
     import torch
 
-    from impctl.fit import batch, estimator, lm, solver
     from impctl.fit import data as fit_data
+    from impctl.fit import estimator
+    from impctl.fit.ode import solver
+    from impctl.fit.optim import batch, lm
     from impctl.fleet import worker
     from impctl.fleet.inputs import discover
 

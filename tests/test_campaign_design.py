@@ -111,7 +111,7 @@ def test_cli_writes_candidates_the_policy_reads(tmp_path, campaign):
 
 def test_outlook_floor_is_the_type_b_share_no_night_removes(campaign):
     # the fixture's fit states no type-B share; give it the default sensor offsets and a
-    # class-3 heat meter, widening its intervals as impctl.fit.uncertainty does
+    # class-3 heat meter, widening its intervals as impctl.fit.intervals.uncertainty does
     result = json.loads(json.dumps(campaign["fit"]))
     mean_dt = float(np.mean([np.mean(np.subtract(p["t_air_measured_c"], p["t_out_c"]))
                              for p in result["predictions"]]))

@@ -262,7 +262,8 @@ def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
         c = _night(store, "normal", 2, -1.0)
         store.add_fit([a, b, c], {**wide, "fit": {"interval_source": {"hlc": "sandwich"}}})
         assert adaptive.campaign_state(store, cfg).hlc_rel_pct == pytest.approx(690.8, abs=0.1)
-        # a fit that says its 2-night interval is model-based (impctl.fit.uncertainty): its
+        # a fit that says its 2-night interval is model-based
+        # (impctl.fit.intervals.uncertainty): its
         # own, narrower interval is shown, with its word
         based = {**_fit((180, 150, 210), (50, 40, 60)), "fit": {
             "interval_basis": "too few nights (2) for the night-clustered sandwich (needs 3): "

@@ -13,7 +13,7 @@ from impctl.errors import InputError
 from impctl.fit import baselines
 from impctl.fit.data import noise_levels, prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
-from impctl.fit.node import PARAM_NAMES
+from impctl.fit.ode.node import PARAM_NAMES
 from impctl.fit.report import fit_to_dict, format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
@@ -187,8 +187,8 @@ def test_adam_with_backprop_through_the_solver_lowers_the_loss():
     as Levenberg–Marquardt: it descends, and LM ends at least as low in far fewer steps."""
     import torch
 
-    from impctl.fit import lm as fit_lm
-    from impctl.fit.node import bounds_tensor, pack_nights
+    from impctl.fit.ode.node import bounds_tensor, pack_nights
+    from impctl.fit.optim import lm as fit_lm
 
     nights = synth_nights(HOUSE, seed=6, sample_step_s=3600.0, n_normal=3)
     kept, offsets, _ = prepare_nights(nights)
@@ -311,7 +311,7 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
 
 
 def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitted):
-    from impctl.fit.uncertainty import offset_allowance
+    from impctl.fit.intervals.uncertainty import offset_allowance
 
     wide, info = offset_allowance(fitted.lumped_, fitted.nights_, (0.5, 1.0))
     share = info["relative_sd"]

@@ -1,4 +1,4 @@
-"""Households fitted together (impctl.fit.batch) give each household its single fit's numbers,
+"""Households fitted together (impctl.fit.optim.batch) give each household its single fit's numbers,
 in fewer optimiser calls; one unusable household does not stop the others."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from impctl.errors import InputError
-from impctl.fit import lm
-from impctl.fit.batch import fit_households
 from impctl.fit.estimator import NightFit
+from impctl.fit.optim import lm
+from impctl.fit.optim.batch import fit_households
 from impctl.model import HouseParameters
 from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
 

@@ -1,4 +1,5 @@
-"""The model-error share of the intervals (impctl.fit.model_error): the packaged calibration is
+"""The model-error share of the intervals (impctl.fit.intervals.model_error): the packaged
+calibration is
 loaded and widens a realistic house's intervals by its stated share, barely touches an ideal
 house's, a broken file is refused in one line, and two nights give a stated basis."""
 
@@ -10,8 +11,8 @@ import numpy as np
 import pytest
 
 from impctl.errors import InputError
-from impctl.fit import model_error
 from impctl.fit.estimator import NightFit
+from impctl.fit.intervals import model_error
 from impctl.fit.report import fit_to_dict, format_table
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households

@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from impctl.fit import lm
 from impctl.fit.estimator import NightFit
-from impctl.fit.uncertainty import laplace
+from impctl.fit.intervals.uncertainty import laplace
+from impctl.fit.optim import lm
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
 from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from impctl.fit import lm as fit_lm
 from impctl.fit.baselines import exact_linear
-from impctl.fit.node import (
+from impctl.fit.ode.node import (
     DTYPE,
     PARAM_NAMES,
     PHYSICAL_BOUNDS,
@@ -26,6 +25,7 @@ from impctl.fit.node import (
     to_physical,
     to_unconstrained,
 )
+from impctl.fit.optim import lm as fit_lm
 from impctl.imp.night import NightSamples
 from impctl.model import HouseParameters, air_derivative, air_temperature, simulate
 

@@ -17,7 +17,7 @@ Criterion (documented choice; README "Adaptive campaign"):
 * **Information.** Finite-difference sensitivities J (one-sided, 1 %, 0.05 K) per sample,
   divided by the fit's residual σ of that group, inflated by (1 + ρ)/(1 − ρ) for the
   residuals' lag-1 autocorrelation ρ (an effective-sample-size correction, as in
-  :mod:`impctl.fit.uncertainty`): F = Σ Jᵀ J / σ_eff². F_past sums the fitted nights.
+  :mod:`impctl.fit.intervals.uncertainty`): F = Σ Jᵀ J / σ_eff². F_past sums the fitted nights.
 * **Prediction.** For q ∈ {HLC, τ} with log-gradient g_q(θ), the ratio
   r_q = g_qᵀ (F_past + F_night)⁻¹ g_q / g_qᵀ F_past⁻¹ g_q scales the fit's own statistical
   variance of log q (its reported interval with the sensor-offset allowance taken out in
@@ -257,7 +257,8 @@ class _Predictor:
 
     def _t_ratio(self, added: int) -> float:
         # A sandwich interval from G nights takes Student-t's quantile with G − 1 degrees of
-        # freedom (impctl.fit.uncertainty): more nights also narrow it by t(G + k − 1)/t(G − 1).
+        # freedom (impctl.fit.intervals.uncertainty): more nights also narrow it by
+        # t(G + k − 1)/t(G − 1).
         if self.n_nights < 2 or added < 1:
             return 1.0
         from scipy.stats import t as student_t

@@ -8,10 +8,17 @@ reading a result (:mod:`.report`) needs no torch.
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
 * :func:`fit_to_dict`, :func:`format_table`, :func:`plot_fit` (:mod:`.report`, no torch)
 
-Inside: :mod:`.node` (the ODE), :mod:`.solver` (its torchdiffeq integration), :mod:`.lm` (the
-optimiser), :mod:`.uncertainty` (intervals), :mod:`.resample` (fine rows into blocks),
-:mod:`.quality` (night quality, model adequacy; no torch), :mod:`.baselines` (the methods the
-fit is compared with).
+Inside, by concern:
+
+* :mod:`.ode` — the night dynamics: :mod:`.ode.node` (the 5R1C night ODE with its nuisance
+  terms, batched over rows) and :mod:`.ode.solver` (exact discretisation, or torchdiffeq);
+* :mod:`.optim` — the optimiser: :mod:`.optim.lm` (Levenberg–Marquardt over merged starts and
+  nights), :mod:`.optim.batch` (many households in one call: the fleet);
+* :mod:`.intervals` — :mod:`.intervals.uncertainty` (Laplace, sandwich, type-B shares) and
+  :mod:`.intervals.model_error` (the share calibrated on realistic virtual houses);
+* here: :mod:`.estimator`, :mod:`.data`, :mod:`.resample` (fine rows into blocks),
+  :mod:`.quality` (night quality, model adequacy; no torch), :mod:`.report`,
+  :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@
 classified range for floor_area, c_f and u_walls, physical bounds for the others — plus one free
 initial mass temperature per night, to IMP nights (:class:`~impctl.imp.night.NightSamples`).
 The dynamics are the paper's eq. 6 on constrained nights (from switch-off + the emission lag) and
-eq. 5 (or its demand form) on normal nights, integrated by ``torchdiffeq`` (:mod:`.node`); the
-optimiser is :mod:`.lm`. Two modes are always computed: one joint fit over all nights with
+eq. 5 (or its demand form) on normal nights, integrated by ``torchdiffeq`` (:mod:`.ode.node`); the
+optimiser is :mod:`.optim.lm`. Two modes are always computed: one joint fit over all nights with
 shared parameters (the headline) and per-night fits averaged afterwards (the paper's way).
 
 What is reported as *measured* is what the data determines (identifiability.md): the lumped
@@ -32,9 +32,10 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
-from . import lm, model_error
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
-from .node import (
+from .intervals import model_error
+from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
+from .ode.node import (
     DTYPE,
     NUISANCE_BOUNDS,
     NUISANCE_NAMES,
@@ -48,10 +49,10 @@ from .node import (
     pack_nights,
     to_physical,
 )
+from .ode.solver import METHODS
+from .optim import lm
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
-from .solver import METHODS
-from .uncertainty import laplace, nuisance_intervals, offset_allowance
 
 NORMAL_MODELS = ("demand", "series", "mean")
 LUMPED_NAMES = ("hlc", "c_m", "tau")
@@ -97,7 +98,7 @@ class NightFit:
     ach_vent, ach_infl : float
         Fixed air changes [1/h]; default the paper's (and the virtual population's) 0 and 0.01.
     timestamps : {"instant", "interval"}
-        Sample convention (:func:`~impctl.fit.node.pack_nights`).
+        Sample convention (:func:`~impctl.fit.ode.node.pack_nights`).
     smooth_air_h : float
         Width [h] of the moving average of the held T_air that drives "demand" rows, so that
         quantisation flicker does not reach the predicted power through the massless air node.
@@ -130,11 +131,11 @@ class NightFit:
         (temperatures by a centred mean, power by the block's mean; :mod:`.resample`); 0 keeps
         every row. Only with "instant" stamps.
     solver : {"exact", "rk4"}
-        How the night ODE is integrated (:class:`~impctl.fit.solver.NightODE`): "exact" (the
+        How the night ODE is integrated (:class:`~impctl.fit.ode.solver.NightODE`): "exact" (the
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
         they agree to rk4's error, "exact" is several times cheaper.
     night_gain, emitter_state, furniture_state : bool
-        Nuisance terms of the night model (:data:`~impctl.fit.node.NUISANCE_NAMES`): a constant
+        Nuisance terms of the night model (:data:`~impctl.fit.ode.node.NUISANCE_NAMES`): a constant
         heat input per campaign; the emitter's release after switch-off (amplitude and time
         constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
         Kept only when a likelihood-ratio test says the data need them.
@@ -494,7 +495,7 @@ class NightFit:
         lumped quantity between the fits with and without the nuisance terms, added in
         quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
         them is a measure of how much the remaining model error may move it (type B)."""
-        from .uncertainty import Z95
+        from .intervals.uncertainty import Z95
 
         q = {}
         for group in (0, 2):

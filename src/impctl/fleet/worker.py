@@ -67,7 +67,7 @@ def preload(model_dir: str) -> None:
     if pa.default_memory_pool().backend_name != "system":
         pa.set_memory_pool(pa.system_memory_pool())
 
-    from ..fit import batch  # noqa: F401  (imports the fit)
+    from ..fit.optim import batch  # noqa: F401  (imports the fit)
 
     torch.set_num_threads(1)
     if model_dir != PRIOR:
@@ -145,7 +145,7 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     # The batched fit keeps its freed heap during the batch (fewer page faults); once its
     # fits are gone (_fit_todo returned) the heap goes back, so a worker's memory stays flat
     # over the run (bench/fleet.py).
-    from ..fit._alloc import release_freed_memory
+    from ..fit.optim._alloc import release_freed_memory
 
     del todo
     release_freed_memory()
@@ -162,7 +162,7 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
 
 def _fit_todo(todo: list[tuple[str, list, dict | None, dict]], params: dict) -> None:
     """Fit the households of ``todo`` together and fill in their rows (nothing else is kept)."""
-    from ..fit.batch import fit_households
+    from ..fit.optim.batch import fit_households
 
     results, _ = fit_households([t[1] for t in todo], [t[2] for t in todo], **params)
     fitted = []

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from .data import Estimate
+from ...errors import InputError
+from ..data import Estimate
 
 SCHEMA = "impctl-model-error/1"
 #: The grouping rule's version: a calibration file made with another rule is refused.

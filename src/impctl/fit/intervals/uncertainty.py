@@ -31,9 +31,9 @@ import numpy as np
 import torch
 from scipy.stats import t as student_t
 
-from . import lm
-from .data import Estimate, lag1_autocorrelation
-from .node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
+from ..data import Estimate, lag1_autocorrelation
+from ..ode.node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
+from ..optim import lm
 
 Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)

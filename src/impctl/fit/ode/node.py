@@ -43,9 +43,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..imp.night import NightSamples
-from ..model.continuous import air_derivative, air_temperature
-from ..model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
+from ...imp.night import NightSamples
+from ...model.continuous import air_derivative, air_temperature
+from ...model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
 from .solver import (
     NightODE,  # the integrator (re-exported: tests and readers find it here)
     exact_chain,

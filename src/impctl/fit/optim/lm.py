@@ -1,6 +1,6 @@
 """Batched least squares over many independent fit problems at once (torch, float64).
 
-A *problem* is one parameter set u (7 unconstrained values, :mod:`.node`) shared by its rows;
+A *problem* is one parameter set u (7 unconstrained values, :mod:`..ode.node`) shared by its rows;
 each row (one night) also has its own initial mass temperature θ_m,0. Every start of the joint
 fit, every start of every per-night fit and every bootstrap replicate is a problem, and all of
 them are integrated together in one ``odeint`` call per iteration.
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .node import DTYPE, ROW_DEMAND, PackedNights, build_rows, to_physical
+from ..ode.node import DTYPE, ROW_DEMAND, PackedNights, build_rows, to_physical
 
 N_PARAMS = 7
 _H_U = 1e-6     # forward-difference step in u

@@ -3,7 +3,7 @@
 :func:`fit_households` fits each household with exactly :class:`~impctl.fit.NightFit`'s own
 procedure — the same preparation, starts, class check, refits, intervals and validation — but
 every optimiser call of every household in the batch is merged into ONE call of
-:func:`impctl.fit.lm.levenberg_marquardt`, as the single fit already merges its starts and
+:func:`impctl.fit.optim.lm.levenberg_marquardt`, as the single fit already merges its starts and
 nights. A single fit spends most of its time in Python overhead on small tensors; merged, the
 same work is a few large tensor operations, so a household costs much less in a batch than alone
 (``bench/fleet.py``).
@@ -14,7 +14,7 @@ every household still running is waiting, the rendezvous merges their problems �
 concatenated (grids padded to the longest), problem, night and group indices offset — solves
 them together and hands each household its slice back. Problems stay independent in the merged
 call (per-problem damping, per-problem convergence, and each household stops at the iteration
-where it would stop alone: ``units`` of :func:`~impctl.fit.lm.levenberg_marquardt`), so each
+where it would stop alone: ``units`` of :func:`~impctl.fit.optim.lm.levenberg_marquardt`), so each
 household's numbers equal its single fit up to rounding; problems that are done are no longer
 evaluated, so a household that converges early costs nothing while the slowest one finishes.
 Every night keeps its own sample times, so households of any sampling share a call; shorter
@@ -29,11 +29,11 @@ from dataclasses import dataclass, fields
 
 import torch
 
-from ..imp.night import NightSamples
+from ...imp.night import NightSamples
+from ..estimator import NightFit, stop_units
+from ..ode.node import PackedNights
 from . import lm
 from ._alloc import retain_freed_memory
-from .estimator import NightFit, stop_units
-from .node import PackedNights
 
 
 class _BatchFit(NightFit):
