@@ -243,6 +243,24 @@ def test_local_cluster_on_a_parquet_dataset(tmp_path, nights, monkeypatch):
     assert row["household"] == "only" and row["status"] == "ok"
 
 
+def test_local_cluster_workers_run_with_two_malloc_arenas():
+    """The default cluster's worker processes start with MALLOC_ARENA_MAX=2 (their memory
+    stays flat over a run; README "Fleets"): read from the real worker processes."""
+    import os
+
+    from impctl.fleet.run import _client
+
+    client, cluster = _client(None, 1)
+    try:
+        seen = client.run(os.environ.get, "MALLOC_ARENA_MAX")
+        pids = client.run(os.getpid)
+    finally:
+        client.close()
+        cluster.close()
+    assert list(seen.values()) == ["2"], seen
+    assert os.getpid() not in pids.values()  # a separate process, not this one
+
+
 def test_bad_input_is_one_line_and_exit_2(tmp_path, fleet_dir):
     missing = run_cli("fleet", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "F"))
     assert missing.returncode == 2 and "no such file" in missing.stderr
