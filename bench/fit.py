@@ -188,22 +188,23 @@ class _TrueHeat:
 _SIMULATED: dict = {}
 
 
-def simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
+def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
     """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
     simulated once per population size and plant, so every sample step and range source
-    reads the same nights."""
-    key = (houses_arr.n_houses, plant)
+    reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
+    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise)."""
+    key = (houses_arr.n_houses, plant, realism[0] if realism else None)
     if key not in _SIMULATED:
-        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant)
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism)
     return _SIMULATED[key]
 
 
-def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
+def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
     if plant == "iso":
         sim, sp = run_schedule(houses_arr, sched)
         return sim, sp, sim
-    params = sample_params(houses_arr.n_houses, VAL_SEED)
-    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED)
+    _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
+    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains)
     return logged, sp, _TrueHeat(logged)
 
 
@@ -212,7 +213,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
     n = houses_arr.n_houses
     sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
+                                      getattr(args, "realism", None))
     truth_e = window_energy(heat, sched)
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
@@ -471,7 +473,8 @@ def compare(houses_arr: HouseParameters, args) -> None:
     """Normal-night models (series / mean / demand) and optimisers (LM / Adam) side by side."""
     n = houses_arr.n_houses
     sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
+                                      getattr(args, "realism", None))
     truth_e = window_energy(heat, sched)
     noise = 0.05 if args.plant == "iso" else 0.0
     variants = [("demand", "lm"), ("series", "lm"), ("mean", "lm")]

@@ -133,15 +133,17 @@ class PlantSchedule:
 
 
 def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
-                       seed: int = 0, outputs: tuple[str, ...] | None = None
-                       ) -> tuple[PlantSchedule, np.ndarray]:
+                       seed: int = 0, outputs: tuple[str, ...] | None = None,
+                       gains: bool = True) -> tuple[PlantSchedule, np.ndarray]:
     """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
 
     ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
     internal and solar gains follow their ``gains`` section over the schedule's local time. The
     plant starts in the steady state at the day setpoint. Returns what the gateway logs and the
     setpoints used (the schedule's, open loop). ``outputs``: the plant outputs to keep (default
-    the logged ones and the true T_air and heat output).
+    the logged ones and the true T_air and heat output). ``gains=False``: no internal or solar
+    gains (their ranges exclude zero); they are still drawn, so the sensor noise is the same
+    as with gains.
     """
     from ..plant import simulate_plant
     from ..plant.gains import internal_gains_w, solar_gains_w
@@ -153,6 +155,8 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     day = (local.normalize().tz_localize(None).asi8 // 86_400_000_000_000)
     g_int = internal_gains_w(hours, params.gains, n, rng, sched.dt_s)
     g_sol = solar_gains_w(hours, day, params.gains, n, rng)
+    if not gains:
+        g_int, g_sol = 0.0, 0.0
     run = simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,
                          internal_gains_w=g_int, solar_gains_w=g_sol,
                          t_init_c=sched.t_m_init_c, seed=int(rng.integers(2**31)),
