@@ -3,6 +3,7 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
+          [--setpoints C,C,C]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
