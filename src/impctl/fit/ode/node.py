@@ -91,6 +91,9 @@ ROW_DEMAND = 1
 #: the rest, so C_m and τ stay the house's whole (as the classes and the plant define them).
 NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k",
                   "emitter_share")
+#: When no gain is fitted (``night_gain`` off, or not kept by the likelihood-ratio test) the
+#: night_gain_w column is pinned to an assumed value (``NightFit(night_gain_w=…)``, default
+#: :data:`impctl.model.house.NIGHT_GAIN_W`) by the box (g, g), not to 0 W.
 NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
     # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the
