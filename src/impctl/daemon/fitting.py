@@ -71,7 +71,7 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
         [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
          "--out", str(nights_csv), "--force"],
         [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
-         "--model-dir", model_dir],
+         "--model-dir", model_dir, "--night-gain-w", repr(cfg.fit.night_gain_w)],
     ]
     for cmd in steps:
         code, last = await _step(cmd)

@@ -32,7 +32,7 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
-from ..model.house import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
+from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .intervals import model_error
 from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
@@ -167,7 +167,7 @@ class NightFit:
         Assumed mean unmetered night gain [W] (sleepers ≈ 70–80 W each + base load), a
         constant heat input to the air node on every night of both kinds whenever no gain term
         is fitted (``night_gain`` off, or not kept by the likelihood-ratio test). Default the
-        documented population's centre, :data:`impctl.model.house.NIGHT_GAIN_W` (250 W,
+        documented population's centre, :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W,
         real-houses.md §4); 0 on the ideal 5R1C, which has no gains. Reported as assumed,
         not measured (``night_gain_``).
     night_gain_sd_w : float
