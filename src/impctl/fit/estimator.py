@@ -418,7 +418,8 @@ class NightFit:
                              if kept is not None else 0.0)
             q["reason"] = why.get(night.night_id)
             gain = (self.nuisance_ or {}).get("night_gain_w")
-            if gain is not None and kept is not None:
+            # an assumed gain is not an estimate of this night's (fit.night_gain says it)
+            if gain is not None and kept is not None and not gain.get("assumed"):
                 q["night_gain_w"] = gain["value"]   # one value per campaign
             out.append(q)
         return out
