@@ -506,7 +506,8 @@ def compare(houses_arr: HouseParameters, args) -> None:
             nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
                                    power_noise=noise, seed=VAL_SEED + i)
             fit = NightFit(normal_model=model, optimizer=opt, n_starts=args.starts,
-                           max_iter=40, per_night=False).fit(nights, true_ranges(house))
+                           max_iter=40, per_night=False,
+                           **night_gain(args)).fit(nights, true_ranges(house))
             for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
                          ("c_m", house.c_m_j_per_k)):
                 errs[k].append(rel(fit.lumped_[k].value, t))
@@ -538,7 +539,9 @@ def virtual_imp_check(n: int, args) -> None:
         nights = res.nights_of(i)
         cons = [x for x in nights if x.kind == "constrained"][:2]
         normal = [x for x in nights if x.kind == "normal"]
-        fit = NightFit(timestamps="interval").fit(cons + normal, true_ranges(house))
+        # the classifiers' IMP simulator has no gains: the fit is told so
+        fit = NightFit(timestamps="interval", night_gain_w=0.0).fit(cons + normal,
+                                                                    true_ranges(house))
         kept.append(sum(x.kind == "constrained" for x in fit.nights_))
         for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
                      ("c_m", house.c_m_j_per_k)):
