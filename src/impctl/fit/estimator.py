@@ -165,7 +165,8 @@ class NightFit:
         without the nuisance terms (a structural-sensitivity share).
     night_gain_w : float
         Assumed mean unmetered night gain [W] (sleepers ≈ 70–80 W each + base load), a
-        constant heat input to the air node on every night of both kinds whenever no gain term
+        constant internal gain in the model (split over the air, surface and mass nodes as
+        ISO 13790 C.1–C.3 splits Φ_int) on every night of both kinds whenever no gain term
         is fitted (``night_gain`` off, or not kept by the likelihood-ratio test). Default the
         documented population's centre, :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W,
         real-houses.md §4); 0 on the ideal 5R1C, which has no gains. Reported as assumed,
@@ -399,7 +400,8 @@ class NightFit:
     def _gain_statement(self) -> dict:
         """The night gain the reported fit used [W]: fitted (the likelihood-ratio test kept
         the term) or assumed (pinned to ``night_gain_w``), with the plain statement."""
-        fitted = bool(self.night_gain and self.nuisance_check_.get("selected"))
+        lo, hi = (float(v) for v in self._sub.box[0][len(PARAM_NAMES)])
+        fitted = hi > lo   # the reported problem's box: pinned when (g, g)
         g = float(to_physical(self._u, self._sub.box[0])[len(PARAM_NAMES)])
         sd = 0.0 if fitted else float(self.night_gain_sd_w)
         text = (f"night gain fitted {g:.0f} W" if fitted else

@@ -189,7 +189,8 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     if getattr(fit, "nuisance_", None) is not None:
         out["nuisance"] = fit.nuisance_
         out["fit"]["nuisance_terms"] = (
-            "night_gain_w: constant heat to the air node over the campaign; emitter_w, "
+            "night_gain_w: constant internal gain over the campaign (ISO 13790 split over "
+            "air, surface and mass; \"assumed\": pinned, not fitted); emitter_w, "
             "emitter_tau_h: heat still released after the fit start on constrained nights, "
             "emitter_w·exp(−t/emitter_tau_h); furniture_j_per_m2k: air/furniture capacity; "
             "emitter_share: share of C_m in the emitter between the heat meter and the room "

@@ -27,14 +27,6 @@ H_IS = 3.45
 H_MS = 9.1
 #: ρ_a·c_a, volumetric heat capacity of air, J/(m³K).
 RHO_C_AIR = 1200.0
-#: Assumed mean unmetered night gain [W] when nothing better is known: sleepers (≈ 70–80 W
-#: each) and the night base load (≈ 80–180 W), 100–400 W in all (real-houses.md §4; the
-#: realistic plant's documented range): its centre. An occupied house never has 0 W, and a fit
-#: that assumes 0 puts the gain into the HLC (README "Accuracy", issue 14: every house low).
-#: One constant for the night fit and the flex coast.
-NIGHT_GAIN_W = 250.0
-#: SD [W] of that assumption: the 100–400 W range as a uniform distribution, 300/√12.
-NIGHT_GAIN_SD_W = 300.0 / 12.0 ** 0.5
 #: Table 12 mass classes: c_f [1e5 J/(m²K)] and the A_m factor [-].
 MASS_CLASS_C_F = (0.8, 1.1, 1.65, 2.6, 3.7)
 MASS_CLASS_AM_FACTOR = (2.5, 2.5, 2.5, 3.0, 3.5)

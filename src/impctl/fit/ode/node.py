@@ -75,8 +75,9 @@ ROW_AIR = 0
 ROW_DEMAND = 1
 
 #: Nuisance terms of the night model a real house needs (real-houses.md §2, §4, §7), fitted
-#: after the seven (a row of parameters then has 10 entries): a constant heat input to the air
-#: node over the campaign (sleepers, base load; negative = extra loss) [W], and on constrained
+#: after the seven (a row of parameters then has 10 entries): a constant internal gain over
+#: the campaign (sleepers, base load) [W], split over the air, surface and mass nodes as ISO
+#: 13790 C.1–C.3 splits Φ_int (:func:`_gain_split`), and on constrained
 #: nights the heat the emitter (and the air/furniture) still releases after the fit start,
 #: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
 #: The last, furniture_j_per_m2k, is heat capacity at the air node (air and furniture, per m²
