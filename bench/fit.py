@@ -244,6 +244,18 @@ def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=N
     return logged, sp, _TrueHeat(logged)
 
 
+def night_gain(args) -> dict:
+    """The fit's assumed night gain from ``--night-gain-w`` / ``--night-gain-sd-w``: 0 W on the
+    ideal 5R1C unless given (it has no gains), the fit's default on the realistic plant."""
+    w = getattr(args, "night_gain_w", None)
+    if w is None and args.plant == "iso":
+        w = 0.0
+    out = {} if w is None else {"night_gain_w": w}
+    if getattr(args, "night_gain_sd_w", None) is not None:
+        out["night_gain_sd_w"] = args.night_gain_sd_w
+    return out
+
+
 def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args,
              limit: int | None = None) -> dict:
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
@@ -293,7 +305,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
-                       emitter_state=args.nuisance,
+                       emitter_state=args.nuisance, **night_gain(args),
                        model_error="default" if args.model_error else None).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
@@ -539,7 +551,8 @@ def compare(houses_arr: HouseParameters, args) -> None:
             nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
                                    power_noise=noise, seed=VAL_SEED + i)
             fit = NightFit(normal_model=model, optimizer=opt, n_starts=args.starts,
-                           max_iter=40, per_night=False).fit(nights, true_ranges(house))
+                           max_iter=40, per_night=False,
+                           **night_gain(args)).fit(nights, true_ranges(house))
             for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
                          ("c_m", house.c_m_j_per_k)):
                 errs[k].append(rel(fit.lumped_[k].value, t))
@@ -571,7 +584,9 @@ def virtual_imp_check(n: int, args) -> None:
         nights = res.nights_of(i)
         cons = [x for x in nights if x.kind == "constrained"][:2]
         normal = [x for x in nights if x.kind == "normal"]
-        fit = NightFit(timestamps="interval").fit(cons + normal, true_ranges(house))
+        # the classifiers' IMP simulator has no gains: the fit is told so
+        fit = NightFit(timestamps="interval", night_gain_w=0.0).fit(cons + normal,
+                                                                    true_ranges(house))
         kept.append(sum(x.kind == "constrained" for x in fit.nights_))
         for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
                      ("c_m", house.c_m_j_per_k)):
@@ -722,6 +737,12 @@ def main() -> None:
                     help="pre-heat of the normal nights alone [h]")
     ap.add_argument("--setpoints", default=None, metavar="C,C,C",
                     help="T_set of the nights in turn [°C] (default 22,23,24)")
+    ap.add_argument("--night-gain-w", type=float, default=None, metavar="W",
+                    help="the fit's assumed night gain [W] (NightFit(night_gain_w)); default 0 "
+                         "on --plant iso (the ideal 5R1C has no gains: the model-consistency "
+                         "check), the fit's default (250 W) on the realistic plant")
+    ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
+                    help="SD of that assumption [W] (default the fit's, 300/√12 ≈ 87 W)")
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
@@ -730,7 +751,7 @@ def main() -> None:
         args.households, args.steps = 10, "300"
     torch.set_num_threads(1)
     print("command: " + " ".join(["python"] + sys.argv))
-    print(f"plant: {args.plant}")
+    print(f"plant: {args.plant}; fit's night gain {night_gain(args) or 'default'}")
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
     if args.speed:

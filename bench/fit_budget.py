@@ -113,12 +113,14 @@ def groups_on(row: str) -> set[str]:
     return chosen if kind == "only" else set(GROUPS) - chosen
 
 
-def fit_args(realism) -> SimpleNamespace:
+def fit_args(realism, night_gain_w: float | None = None,
+             night_gain_sd_w: float | None = None) -> SimpleNamespace:
     """``bench/fit.py``'s options for ``--ranges true --plant realistic --no-lsq`` (its
     defaults otherwise), with the ablated realism."""
     return SimpleNamespace(plant="realistic", normal_model="demand", starts=4, nuisance=True,
                            model_error=True, lsq=False, eps_truth="house", verbose=False,
-                           model_dir=None, realism=realism)
+                           model_dir=None, realism=realism, night_gain_w=night_gain_w,
+                           night_gain_sd_w=night_gain_sd_w)
 
 
 @contextmanager
@@ -160,6 +162,10 @@ def main() -> None:
     ap.add_argument("--gain-prior-w", type=float, default=0.0, metavar="W",
                     help="add W to the metered power of every night (a known constant night "
                          "gain; the realism's night gains are drawn over 100–400 W)")
+    ap.add_argument("--night-gain-w", type=float, default=None, metavar="W",
+                    help="the fit's assumed night gain [W] (default the fit's, 250 W)")
+    ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
+                    help="SD of that assumption [W] (default the fit's, ≈ 87 W)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     rows = args.rows.split(",")
@@ -179,7 +185,9 @@ def main() -> None:
         t0 = time.perf_counter()
         params, gains = ablate(full, set(GROUPS) - on)
         with gain_prior(args.gain_prior_w):
-            res = run_step(houses, 300.0, "true", fit_args((row, params, gains)))
+            res = run_step(houses, 300.0, "true", fit_args((row, params, gains),
+                                                         args.night_gain_w,
+                                                         args.night_gain_sd_w))
         f = row_figures(res)
         cells = [f"{f[k][0]:.1f} / {f[k][1]:.1f} ({f[k][2]:+.1f})" for k in ("hlc", "tau", "c_m")]
         names = "+".join(g for g in GROUPS if g in on) or "–"

@@ -71,7 +71,9 @@ async def _campaign(tmp_path, epoch: datetime, speed: float, campaign: dict, *,
     async with simulator(simcfg) as sim:
         mapping = daemon_mapping(tmp_path / "state", sim.port, clock,
                                  night={"sample_interval_s": 300, **(night or {})},
-                                 campaign={"enabled": True, **campaign})
+                                 campaign={"enabled": True, **campaign},
+                                 # the ideal 5R1C has no night gains: [fit] tells the fit
+                                 fit={"night_gain_w": 0.0})
         cfg = config_from_mapping(mapping, "test")
         daemon = Daemon(cfg, clock=clock)
         watch, done = Watch(), asyncio.Event()
@@ -167,7 +169,9 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path):
     assert fit_counts[0] >= 3 and fit_counts[-1] == 5 and fit_counts == sorted(set(fit_counts))
     assert fit_events == [f"fit stored ({c} nights)" for c in fit_counts]
     assert summary["fit"] and summary["lumped"]["hlc"]["unit"] == "W/K"
-    # The data were the right ones: the heavy house's true HLC is found (±10 %).
+    # The data were the right ones: the heavy house's true HLC is found (±10 %), by a fit
+    # told the configured night gain ([fit] night_gain_w reached the daemon's impctl fit).
+    assert summary["fit"]["night_gain"]["statement"] == "night gain assumed 0 ± 87 W, not measured"
     hlc = summary["lumped"]["hlc"]["value"]
     assert abs(hlc / float(HEAVY_HOUSE.hlc_w_per_k) - 1) < 0.10, hlc
 

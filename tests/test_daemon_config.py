@@ -9,7 +9,14 @@ import tomllib
 
 from daemon_fixtures import ROOT, run_cli
 
-from impctl.config import CampaignConfig, ClockConfig, Config, NightConfig, load_config
+from impctl.config import (
+    CampaignConfig,
+    ClockConfig,
+    Config,
+    FitConfig,
+    NightConfig,
+    load_config,
+)
 from impctl.heatpump import HeatPumpConfig, LinkConfig, WritePolicy
 
 EXAMPLE = ROOT / "deploy" / "config.example.toml"
@@ -105,16 +112,17 @@ def test_example_config_loads_and_documents_every_key():
     # "every key, with its default unless marked example": the values are the defaults.
     assert cfg.night == NightConfig() and cfg.campaign == CampaignConfig()
     assert cfg.clock == ClockConfig() and cfg.heatpump.writes == WritePolicy()
+    assert cfg.fit == FitConfig()
     assert dataclasses.replace(cfg.heatpump.link, host="127.0.0.1") == LinkConfig()
     assert (cfg.state_dir, cfg.timezone, cfg.log_level, cfg.model_dir) == (
         "/var/lib/impctl", "Europe/Ljubljana", "info", "")
     data = tomllib.loads(EXAMPLE.read_text())
     for section, cls in (("night", NightConfig), ("campaign", CampaignConfig),
-                         ("clock", ClockConfig)):
+                         ("clock", ClockConfig), ("fit", FitConfig)):
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "source"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "source", "fit"}
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys

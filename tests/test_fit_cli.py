@@ -123,3 +123,35 @@ def test_the_cli_module_imports_without_torch():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)
     assert res.returncode == 0, res.stderr
+
+
+def test_the_configured_night_gain_reaches_the_fit_and_is_stated(tmp_path, nights):
+    """``[fit] night_gain_w`` of a real config file → the daemon's ``impctl fit`` arguments →
+    the fit: its JSON and table say the gain was assumed, with units; a bad value is one
+    clear line naming the key, and ``--night-gain-w`` out of range exits 2."""
+    from impctl.config import ConfigError, load_config
+    from impctl.daemon.fitting import fit_arguments
+
+    example = Path(__file__).parents[1] / "deploy" / "config.example.toml"
+    text = example.read_text()
+    assert "night_gain_w = 250.0" in text
+    cfg_path = tmp_path / "impctl.toml"
+    cfg_path.write_text(text.replace("night_gain_w = 250.0", "night_gain_w = 120.0"))
+    cfg = load_config(cfg_path)
+    assert cfg.fit.night_gain_w == 120.0
+    csv, out = write_nights(tmp_path / "nights.csv", nights), tmp_path / "fit.json"
+    args = fit_arguments(cfg, csv, out, str(tmp_path / "no-models"))
+    res = run_cli(*args, env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "night gain assumed 120 ± 87 W, not measured" in res.stdout
+    data = json.loads(out.read_text())
+    assert data["fit"]["night_gain"]["value_w"] == 120.0 and data["fit"]["night_gain"]["assumed"]
+    assert data["nuisance"]["night_gain_w"]["value"] == 120.0
+    assert data["flexibility"]["coast_gain_w"] == 120.0   # the coast assumes the same gain
+
+    cfg_path.write_text(text.replace("night_gain_w = 250.0", "night_gain_w = -5.0"))
+    with pytest.raises(ConfigError, match=r"fit\.night_gain_w.*W"):
+        load_config(cfg_path)
+    bad = run_cli("fit", "--nights", str(csv), "--night-gain-w", "5000",
+                  env_model_dir=tmp_path / "no-models")
+    assert bad.returncode == 2 and "--night-gain-w" in bad.stderr

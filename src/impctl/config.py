@@ -18,6 +18,7 @@ from .errors import InputError
 from .heatpump import HeatPumpConfig
 from .heatpump import config_from_mapping as heatpump_from_mapping
 from .mqtt.config import MqttConfig, mqtt_from_mapping
+from .night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
 
 
 class ConfigError(InputError):
@@ -92,6 +93,14 @@ class CampaignConfig:
 
 
 @dataclass(frozen=True)
+class FitConfig:
+    """What the daemon's fit (``impctl fit`` in a subprocess) is told about the house."""
+
+    # assumed mean unmetered night gain [W]: ≈ 70–80 W per sleeper + base load
+    night_gain_w: float = NIGHT_GAIN_W
+
+
+@dataclass(frozen=True)
 class ClockConfig:
     """Simulated time for the demo and tests: ``speed`` × real time from ``epoch``."""
 
@@ -112,6 +121,7 @@ class Config:
     night: NightConfig = field(default_factory=NightConfig)
     campaign: CampaignConfig = field(default_factory=CampaignConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     source: str = ""
 
@@ -131,7 +141,8 @@ class Config:
         return _window(self.night.window)
 
 
-_SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig}
+_SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig,
+             "fit": FitConfig}
 #: Sub-tables inside a section: key → its dataclass.
 _SUBTABLES = {"target_rel_halfwidth": TargetHalfwidth}
 #: Operational bounds. The link-lost limit: a house with the heating off may lose ~1 K/h, so
@@ -236,6 +247,10 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     def bad(key: str, text: str) -> None:
         problems.append(f"key '{key}': {text}")
 
+    gain_lo, gain_hi = NIGHT_GAIN_LIMITS_W
+    if not gain_lo <= cfg.fit.night_gain_w <= gain_hi:
+        bad("fit.night_gain_w", f"must lie in [{gain_lo:g}, {gain_hi:g}] W (≈ 70–80 W per "
+            f"sleeper + base load), got {cfg.fit.night_gain_w:g}")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
     try:

@@ -16,6 +16,7 @@ from pathlib import Path
 import click
 
 from ..errors import InputError
+from ..night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
 from . import cli
 from .checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
 
@@ -79,9 +80,14 @@ def _write_json(path: Path, data: dict) -> None:
               help="Fit at most this many nights: the most recent ones, a third of them "
                    "constrained (memory and time grow with the nights; "
                    f"{MAX_NIGHTS_RANGE[0]}–{MAX_NIGHTS_RANGE[1]}).")
+@click.option("--night-gain-w", default=NIGHT_GAIN_W, show_default=True, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="Assumed mean unmetered night gain [W] (≈ 70–80 W per sleeper + base "
+                   "load; the default is the 100–400 W range's centre). Reported as assumed, "
+                   f"not measured; {NIGHT_GAIN_LIMITS_W[0]:g}–{NIGHT_GAIN_LIMITS_W[1]:g}.")
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
-        ach_vent: float, max_nights: int) -> None:
+        ach_vent: float, max_nights: int, night_gain_w: float) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -107,7 +113,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     nights = read_nights(nights_path, tz)
     check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
-                         ach_vent=ach_vent)
+                         ach_vent=ach_vent, night_gain_w=night_gain_w)
     cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
     kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
                                       estimator.resume_threshold_w)

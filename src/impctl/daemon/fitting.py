@@ -54,6 +54,13 @@ async def _step(cmd: list[str]) -> tuple[int, str]:
     return proc.returncode, lines[-1] if lines else ""
 
 
+def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str) -> list[str]:
+    """``impctl fit`` arguments of the daemon's fit: what the config tells it about the house
+    (``[fit] night_gain_w``, the assumed night gain [W])."""
+    return ["fit", "--nights", str(nights_csv), "--json", str(out_json), "--model-dir",
+            model_dir, "--night-gain-w", repr(cfg.fit.night_gain_w)]
+
+
 async def run_fit(store: Store, cfg: Config) -> dict | None:
     """Export the valid nights and fit them; in adaptive mode predict the next night too.
 
@@ -70,8 +77,7 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
     steps = [
         [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
          "--out", str(nights_csv), "--force"],
-        [*base, "fit", "--nights", str(nights_csv), "--json", str(out_json),
-         "--model-dir", model_dir],
+        [*base, *fit_arguments(cfg, nights_csv, out_json, model_dir)],
     ]
     for cmd in steps:
         code, last = await _step(cmd)

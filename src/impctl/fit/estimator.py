@@ -32,9 +32,10 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.continuous import mass_from_air
+from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .intervals import model_error
-from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
+from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
 from .ode.node import (
     DTYPE,
     NUISANCE_BOUNDS,
@@ -162,10 +163,18 @@ class NightFit:
     structure_share : bool
         Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
         without the nuisance terms (a structural-sensitivity share).
+    night_gain_w : float
+        Assumed mean unmetered night gain [W] (sleepers ≈ 70–80 W each + base load), a
+        constant internal gain in the model (split over the air, surface and mass nodes as
+        ISO 13790 C.1–C.3 splits Φ_int) on every night of both kinds whenever no gain term
+        is fitted (``night_gain`` off, or not kept by the likelihood-ratio test). Default the
+        documented population's centre, :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W,
+        real-houses.md §4); 0 on the ideal 5R1C, which has no gains. Reported as assumed,
+        not measured (``night_gain_``).
     night_gain_sd_w : float
-        SD [W] of the unmetered night gains when no gain term is fitted, added to the
-        intervals as the share night_gain_sd_w/(HLC·mean ΔT) (see
-        :func:`.uncertainty.offset_allowance`).
+        SD [W] of that assumption (default 300/√12 ≈ 87 W, the 100–400 W range as a uniform),
+        added to the intervals as the share night_gain_sd_w/(HLC·mean ΔT) when no gain term
+        is fitted (see :func:`.uncertainty.offset_allowance`).
     model_error : str or None
         Model-error share calibrated on the realistic virtual population, added to the
         intervals in quadrature (:mod:`.model_error`): "default" (the packaged calibration), a
@@ -190,6 +199,8 @@ class NightFit:
     night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
                                     discharge, T_air resolution, used/usable_h/reason
                                     (:mod:`.quality`)
+    night_gain_ : dict              the night gain used [W]: value_w, sd_w, assumed (True:
+                                    pinned to ``night_gain_w``, not measured), statement
     adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
                                     the model describes the data well enough for its intervals
     loss_, n_iter_, fit_time_s_ : float, int, float
@@ -205,7 +216,8 @@ class NightFit:
                  night_gain: bool = False, emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
-                 meter_error: float = 0.05, night_gain_sd_w: float = 100.0,
+                 meter_error: float = 0.05, night_gain_w: float = NIGHT_GAIN_W,
+                 night_gain_sd_w: float = NIGHT_GAIN_SD_W,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
                  emitter_lag: bool = False, settle_until_held: bool = False,
                  model_error: str | None = "default"):
@@ -232,6 +244,7 @@ class NightFit:
         self.sensor_offsets_k = sensor_offsets_k
         self.solver = solver
         self.meter_error = meter_error
+        self.night_gain_w = night_gain_w
         self.night_gain_sd_w = night_gain_sd_w
         self.settle_h = settle_h
         self.structure_share = structure_share
@@ -310,8 +323,12 @@ class NightFit:
             NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
                              self.furniture_state, self.emitter_state and self.emitter_lag),
             strict=True)}
+        # a gain not fitted is pinned to the assumed one (an occupied house never has 0 W)
+        pinned = (float(self.night_gain_w),) * 2
+        if not self.night_gain:
+            nuisance["night_gain_w"] = pinned
         self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
-        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES}
+        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
         lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
                            bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance))
         rows = self._rows(lay)
@@ -363,6 +380,13 @@ class NightFit:
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
         self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
+        self.night_gain_ = self._gain_statement()
+        if self.night_gain_["assumed"]:
+            # the pinned value, with the interval of the assumption (what the flex coast uses)
+            g, sd = self.night_gain_["value_w"], self.night_gain_["sd_w"]
+            self.nuisance_["night_gain_w"] = {
+                "value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
+                "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
         self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
         self._validate()
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
@@ -372,6 +396,17 @@ class NightFit:
         if cal is not None:
             self.lumped_, self.model_error_ = model_error.widen(
                 self.lumped_, model_error.diagnostics(self), cal)
+
+    def _gain_statement(self) -> dict:
+        """The night gain the reported fit used [W]: fitted (the likelihood-ratio test kept
+        the term) or assumed (pinned to ``night_gain_w``), with the plain statement."""
+        lo, hi = (float(v) for v in self._sub.box[0][len(PARAM_NAMES)])
+        fitted = hi > lo   # the reported problem's box: pinned when (g, g)
+        g = float(to_physical(self._u, self._sub.box[0])[len(PARAM_NAMES)])
+        sd = 0.0 if fitted else float(self.night_gain_sd_w)
+        text = (f"night gain fitted {g:.0f} W" if fitted else
+                f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
+        return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
 
     def _night_quality(self, nights) -> list[dict]:
         used = {n.night_id: n for n in self.nights_}
@@ -385,7 +420,8 @@ class NightFit:
                              if kept is not None else 0.0)
             q["reason"] = why.get(night.night_id)
             gain = (self.nuisance_ or {}).get("night_gain_w")
-            if gain is not None and kept is not None:
+            # an assumed gain is not an estimate of this night's (fit.night_gain says it)
+            if gain is not None and kept is not None and not gain.get("assumed"):
                 q["night_gain_w"] = gain["value"]   # one value per campaign
             out.append(q)
         return out
@@ -495,8 +531,6 @@ class NightFit:
         lumped quantity between the fits with and without the nuisance terms, added in
         quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
         them is a measure of how much the remaining model error may move it (type B)."""
-        from .intervals.uncertainty import Z95
-
         q = {}
         for group in (0, 2):
             p = self._best(result, lay, group)

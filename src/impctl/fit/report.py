@@ -24,6 +24,7 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "settle_h", "starts", "iterations", "loss", "sigma", "time_s",
              "interval_basis": str,                  # sandwich over G nights, or "too few nights"
+             "night_gain": {"value_w", "sd_w", "assumed", "statement"},  # W; assumed: not fitted
              "model_error": {"group", "share": {"hlc", "c_m", "tau"}, "n_group",
                              "n_calibration", "n_fits", "seed", "version", "method"} | null},
      "skipped": [{"night_id", "reason"}], "notes": [str],
@@ -32,7 +33,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
                         "emitter_discharge_h", "night_gain_w", "used", "usable_h", "reason"}],
      "nuisance": {"night_gain_w" | "emitter_w" | "emitter_tau_h" | "furniture_j_per_m2k":
-                  {"value", "low", "high", "bounds"} | null},   # also read by impctl.flex
+                  {"value", "low", "high", "bounds"[, "assumed": true]} | null},
+                  # also read by impctl.flex; night_gain_w "assumed": pinned, not fitted
      "adequacy": {"adequate": bool, "statement": str,
                   "groups": {"constrained" | "normal_power": {"rmse", "unit", "noise_from_data",
                              "rmse_over_noise", "lag1_autocorrelation"}}},
@@ -182,10 +184,13 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     out["fit"]["model_error"] = getattr(fit, "model_error_", None)
     if getattr(fit, "nuisance_check_", None) is not None:
         out["fit"]["nuisance_check"] = fit.nuisance_check_
+    if getattr(fit, "night_gain_", None) is not None:
+        out["fit"]["night_gain"] = fit.night_gain_
     if getattr(fit, "nuisance_", None) is not None:
         out["nuisance"] = fit.nuisance_
         out["fit"]["nuisance_terms"] = (
-            "night_gain_w: constant heat to the air node over the campaign; emitter_w, "
+            "night_gain_w: constant internal gain over the campaign (ISO 13790 split over "
+            "air, surface and mass; \"assumed\": pinned, not fitted); emitter_w, "
             "emitter_tau_h: heat still released after the fit start on constrained nights, "
             "emitter_w·exp(−t/emitter_tau_h); furniture_j_per_m2k: air/furniture capacity; "
             "emitter_share: share of C_m in the emitter between the heat meter and the room "
@@ -273,6 +278,11 @@ def format_table(summary: dict) -> str:
     basis = fit_block.get("interval_basis") or ""
     if basis.startswith("too few nights"):
         lines.append(f"  intervals: {basis}")
+    gain = fit_block.get("night_gain")
+    if gain:
+        why = (" (impctl fit --night-gain-w; ≈ 70–80 W per sleeper + base load): it moves "
+               "HLC by its error / mean ΔT" if gain["assumed"] else "")
+        lines.append(f"  {gain['statement']}{why}")
     me = fit_block.get("model_error")
     if me:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
@@ -309,8 +319,10 @@ def format_table(summary: dict) -> str:
         lines += ["", "Nuisance terms (fitted so that the numbers above stay right; not products)"]
         for name, v in nuis.items():
             if v:
+                how = ("assumed, not measured" if v.get("assumed")
+                       else f"bounds {v['bounds'][0]:g}–{v['bounds'][1]:g}")
                 lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
-                             f"   (bounds {v['bounds'][0]:g}–{v['bounds'][1]:g})")
+                             f"   ({how})")
     lines += _quality_lines(summary)
     flex = summary.get("flexibility") or {}
     if flex.get("coast_h") is not None:

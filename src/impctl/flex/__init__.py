@@ -15,8 +15,9 @@ switch-off terms the fit kept (:mod:`.switch_off`):
    Without them the 5R1C's massless air node jumps down at once by ``switch_off_drop_k``
    (~1–3 K) and the drop is counted from just after that jump (the fit found no release after
    its emission lag, so the pure-5R1C house it describes coasts on its mass).
-   ``coast_method`` names what was used; ``coast_gain_w`` the gain assumed (0 W: no gain term
-   fitted — the fitted HLC then carries the nights' gains).
+   ``coast_method`` names what was used; ``coast_gain_w`` the gain assumed: the fit's own (its
+   fitted gain, or the gain it assumed, :mod:`impctl.night_gain`, 250 W unless the installer
+   set it) — 0 W only for an older fit that assumed none (its HLC then carries the gains).
 3. **Rebound** (``rebound_kwh`` [kWh]): heating back on at T_set from the state at the end of
    the coast (Annex C demand, C.13, capped at the house's ``max_heating_power``, uncapped by
    default); the heat delivered in the following ``rebound_h`` (2 h) beyond the steady-state
@@ -123,8 +124,12 @@ def _method(terms: dict[str, np.ndarray], documented: Any, i: int) -> str:
         documented[i] if documented else ())
     used = [names[k] + (" (documented range)" if k in doc else "")
             for k in ("emitter_tau_h", "furniture_j_per_m2k", "night_gain_w")
-            if np.isfinite(terms[k][0, i])]
-    return ("5R1C + fitted " + " + ".join(used) if used
+            if np.isfinite(terms[k][0, i]) and not (k == "night_gain_w" and k in doc)]
+    gain = terms["night_gain_w"][0, i]
+    assumed = (f" + assumed night gain {gain:.0f} W" if "night_gain_w" in doc
+               and np.isfinite(gain) else "")
+    return ("5R1C + fitted " + " + ".join(used) + assumed if used
+            else "5R1C" + assumed + ", switch-off jump not counted" if assumed
             else "5R1C, switch-off jump not counted")
 
 

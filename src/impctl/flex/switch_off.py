@@ -86,13 +86,17 @@ def _triple(entry: Any, name: str) -> tuple[float, float, float, tuple[float, fl
 
 def switch_off_from_fit(summary: dict) -> SwitchOff:
     """The coast's switch-off terms from an ``impctl fit`` summary's ``"nuisance"`` block (the
-    module docstring's rules). A term the fit did not keep (null there) is NaN here."""
+    module docstring's rules). A term the fit did not keep (null there) is NaN here. A night
+    gain the fit assumed (``"assumed": true``, :mod:`impctl.night_gain`) is used as the fit
+    used it, with the assumption's interval, and named in ``documented``."""
     nuis = summary.get("nuisance") or {}
     if not isinstance(nuis, dict):
         raise InputError("not an impctl fit result (nuisance is not a mapping)")
     out, documented = {}, []
     for name in SWITCH_OFF_TERMS:
         value, low, high, (lo_b, hi_b) = _triple(nuis.get(name), name)
+        if np.isfinite(value) and (nuis.get(name) or {}).get("assumed"):
+            documented.append(name)   # the fit's assumed gain (impctl.night_gain), not fitted
         if np.isfinite(value):
             low = value if not np.isfinite(low) else low
             high = value if not np.isfinite(high) else high

@@ -75,8 +75,9 @@ ROW_AIR = 0
 ROW_DEMAND = 1
 
 #: Nuisance terms of the night model a real house needs (real-houses.md §2, §4, §7), fitted
-#: after the seven (a row of parameters then has 10 entries): a constant heat input to the air
-#: node over the campaign (sleepers, base load; negative = extra loss) [W], and on constrained
+#: after the seven (a row of parameters then has 10 entries): a constant internal gain over
+#: the campaign (sleepers, base load) [W], split over the air, surface and mass nodes as ISO
+#: 13790 C.1–C.3 splits Φ_int (:func:`_gain_split`), and on constrained
 #: nights the heat the emitter (and the air/furniture) still releases after the fit start,
 #: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
 #: The last, furniture_j_per_m2k, is heat capacity at the air node (air and furniture, per m²
@@ -91,6 +92,9 @@ ROW_DEMAND = 1
 #: the rest, so C_m and τ stay the house's whole (as the classes and the plant define them).
 NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k",
                   "emitter_share")
+#: When no gain is fitted (``night_gain`` off, or not kept by the likelihood-ratio test) the
+#: night_gain_w column is pinned to an assumed value (``NightFit(night_gain_w=…)``, default
+#: :data:`impctl.night_gain.NIGHT_GAIN_W`) by the box (g, g), not to 0 W.
 NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
     # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the
@@ -373,6 +377,34 @@ def _unit(net, which: int):
     return air_derivative(*args, net)
 
 
+def _gain_split(net) -> tuple:
+    """Per W of a constant internal gain G, split as ISO 13790 C.1–C.3 does (Φ_ia = G/2 at the
+    air node; of G/2, A_m/A_t at the mass and 1 − A_m/A_t − H_tr,w/(9.1·A_t) at the surface;
+    the rest leaves through the windows): the realistic plant and :func:`impctl.model.simulate`
+    put sleepers and base load there, and about half of a mass/surface gain leaves through
+    H_tr,em without lowering the heat the air needs. θ_sup = θ_e (no heat recovery at night).
+
+    Returns (AIR rows: dθ_air/dt at fixed θ_air, θ_e [K/s]; θ_air at fixed θ_m [K];
+    DEMAND rows: dθ_m/dt at fixed θ_air, θ_e [K/s]; the heat the air node no longer needs at
+    fixed θ_air, θ_m [W]) — each per W of G."""
+    am = net.a_m_m2 / net.a_t_m2
+    phi_ia = 0.5
+    phi_m = 0.5 * am
+    phi_st = 0.5 * (1.0 - am - net.h_tr_w / (H_MS * net.a_t_m2))
+    s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
+    den = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
+    alpha = net.h_tr_is * net.h_tr_ms / s / den        # ∂θ_air/∂θ_m
+    # AIR rows: θ_air, θ_e held at 0 → θ_s, θ_m from the air and surface balances
+    t_s = -phi_ia / net.h_tr_is
+    t_m = (s * t_s - phi_st) / net.h_tr_ms
+    dm = (net.h_tr_ms * (t_s - t_m) - net.h_tr_em * t_m + phi_m) / net.c_m_j_per_k
+    air_rate = alpha * dm
+    air_level = (net.h_tr_is / s * phi_st + phi_ia) / den
+    dem_rate = (net.h_tr_ms / s * phi_st + phi_m) / net.c_m_j_per_k
+    dem_heat = phi_ia + net.h_tr_is / s * phi_st
+    return air_rate, air_level, dem_rate, dem_heat
+
+
 def _mixed_mask(packed: PackedNights, night_index: torch.Tensor, dm: torch.Tensor, k: int
                 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """Compared nodes and interval-mean partners of rows of both types, (R, K) each."""
@@ -452,15 +484,20 @@ def build_rows(
     if params.shape[-1] > _FUR:
         # heat the air/furniture capacity takes from the air node [W]
         q_fur = (params[:, _FUR] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
-    if params.shape[-1] > len(PARAM_NAMES) and not any_air:
+    if params.shape[-1] > len(PARAM_NAMES):
         gain = params[:, len(PARAM_NAMES)]
-    elif params.shape[-1] > len(PARAM_NAMES):
-        # Extra heat to the air node, x(t) = gain (+ the emitter's release on constrained
-        # nights), linear between the nodes: it enters like Φ_HC (z stays continuous).
-        gain, em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in range(3))
+    # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
+    g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
+    if params.shape[-1] > len(PARAM_NAMES) and any_air:
+        u0_air = u0_air + (g_air_rate * gain)[:, None]
+        z0_air = z0_air + g_air_level * gain
+        # Extra heat to the air node, x(t) = the emitter's release on constrained nights
+        # (− the furniture's uptake), linear between the nodes: it enters like Φ_HC (z stays
+        # continuous).
+        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
         em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
         cons = packed.constrained[night_index][:, None]
-        x = gain[:, None] + torch.where(cons, em_w[:, None] * torch.exp(
+        x = torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
         if cap_e is not None:
             x = x + torch.where(cons, _emitter_release(cap_e, em_tau_s, grid,
@@ -483,9 +520,10 @@ def build_rows(
     c_m = -net.h_tr_is * net.h_tr_ms / s
     u0_dem = u1_dem = out_dem = None
     if any_dem:
-        u0_dem = b_air[:, None] * ta + b_e[:, None] * te
+        u0_dem = b_air[:, None] * ta + b_e[:, None] * te + (g_dem_rate * gain)[:, None]
         u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
-        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain[:, None] + q_fur
+        out_dem = (c_air[:, None] * ta + c_e[:, None] * te - (g_dem_heat * gain)[:, None]
+                   + q_fur)
 
     mean_next = None
     if not any_air:  # DEMAND rows only (lm builds each row type on its own rows)
