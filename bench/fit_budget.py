@@ -49,7 +49,7 @@ from fit import (  # noqa: E402  (the bench's own helpers)
 
 from impctl.fit.estimator import NightFit  # noqa: E402
 from impctl.plant import PlantParams, simulate_plant  # noqa: E402
-from impctl.plant.gains import internal_gains_w, solar_gains_w  # noqa: E402
+from impctl.plant.building.gains import internal_gains_w, solar_gains_w  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 from impctl.population.synth_nights import (  # noqa: E402
