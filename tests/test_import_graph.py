@@ -142,3 +142,14 @@ def test_the_plant_rooms_know_only_the_parameters():
         assert rooms[room] <= {"params"}, f"plant.{room} imports {sorted(rooms[room])}"
     assert rooms["params"] == set()
     assert rooms["housefile"] <= {"params"}
+
+
+
+def test_the_cli_audiences_stay_apart():
+    """The operator's commands (light, next to the daemon) and the analyst's (heavy libraries
+    inside each command) share only the group and the option checks."""
+    rooms = _rooms("cli")
+    assert "checks" in rooms["analysis"] and {"analysis", "device"} <= rooms[""]
+    for room, other in (("device", "analysis"), ("analysis", "device")):
+        assert other not in rooms[room], f"cli.{room} imports cli.{other}"
+    assert rooms["checks"] == set()
