@@ -51,6 +51,7 @@ from .ode.node import (
 )
 from .ode.solver import METHODS
 from .optim import lm
+from .optim.problem import raw_residuals
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
 
@@ -556,7 +557,7 @@ class NightFit:
             raw = result.terms.take(sel).raw()
         else:
             with torch.no_grad():
-                raw = lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
+                raw = raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
         mask = self._packed.mask[sub.night]
         groups = self._group_n[sub.night]
         floors = (0.005, 0.005, 1.0)

@@ -34,6 +34,7 @@ from scipy.stats import t as student_t
 from ..data import Estimate, lag1_autocorrelation
 from ..ode.node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 from ..optim import lm
+from ..optim.problem import raw_residuals
 
 Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)
@@ -58,7 +59,7 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     ``autocorrelation`` (group → ρ), ``cov_u`` (7×7)
     """
     with torch.no_grad():
-        raw = (lm.raw_residuals(ctx, sub, u[None], t_m0) if terms is None
+        raw = (raw_residuals(ctx, sub, u[None], t_m0) if terms is None
                else terms.raw()).numpy()
     mask = ctx.packed.mask[sub.night].numpy()
     groups = group_n[sub.night]
