@@ -11,7 +11,9 @@ reading a result (:mod:`.report`) needs no torch.
 Inside, by concern:
 
 * :mod:`.ode` — the night dynamics: :mod:`.ode.node` (the 5R1C night ODE with its nuisance
-  terms, batched over rows) and :mod:`.ode.solver` (exact discretisation, or torchdiffeq);
+  terms, batched over rows), :mod:`.ode.parameters` (the fitted parameters: bounds, transforms,
+  HLC/C_m/τ), :mod:`.ode.packing` (the nights side by side) and :mod:`.ode.solver` (exact
+  discretisation, or torchdiffeq);
 * :mod:`.optim` — the optimiser: :mod:`.optim.problem` (the problems' rows and residuals),
   :mod:`.optim.lm` (Levenberg–Marquardt over merged starts and nights), :mod:`.optim.batch`
   (many households in one call: the fleet);

@@ -1,9 +1,9 @@
 """Batched least squares over many independent fit problems at once (torch, float64).
 
-A *problem* is one parameter set u (7 unconstrained values, :mod:`..ode.node`) shared by its rows;
-each row (one night) also has its own initial mass temperature θ_m,0. Every start of the joint
-fit, every start of every per-night fit and every bootstrap replicate is a problem, and all of
-them are integrated together in one ``odeint`` call per iteration.
+A *problem* is one parameter set u (7 unconstrained values, :mod:`..ode.parameters`) shared by
+its rows; each row (one night) also has its own initial mass temperature θ_m,0. Every start of
+the joint fit, every start of every per-night fit and every bootstrap replicate is a problem, and
+all of them are integrated together in one ``odeint`` call per iteration.
 
 Two optimisers on the same residuals:
 
@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..ode.node import DTYPE, ROW_DEMAND
+from ..ode.node import ROW_DEMAND
+from ..ode.parameters import DTYPE
 from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7

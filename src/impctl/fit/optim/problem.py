@@ -8,7 +8,9 @@ from dataclasses import dataclass
 
 import torch
 
-from ..ode.node import ROW_DEMAND, PackedNights, build_rows, to_physical
+from ..ode.node import ROW_DEMAND, build_rows
+from ..ode.packing import PackedNights
+from ..ode.parameters import to_physical
 
 
 @dataclass
