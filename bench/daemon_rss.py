@@ -14,7 +14,7 @@ waits ``--settle`` seconds and reads, from outside the process:
   shows up there; the process is not modified to find out).
 
 For comparison it repeats the measurement with a variant that registers only the
-device-side subcommands (``impctl.cli.device_cmds``), i.e. what the daemon would weigh if the
+device-side subcommands (``impctl.cli.device``), i.e. what the daemon would weigh if the
 CLI did not import every subcommand module at start, and with ``[mqtt]`` on (issue 17: a
 real mosquitto on loopback, the bridge connected with commands on; needs ``mosquitto``).
 """
@@ -53,7 +53,7 @@ WATCHED = (*FORBIDDEN, "numpy", "scipy", "matplotlib", "pyarrow")
 VARIANTS = {
     "impctl daemon (as deployed)": "from impctl.cli import main; main()",
     "device commands only (comparison)":
-        "import sys; from impctl.cli import cli; import impctl.cli.device_cmds; "
+        "import sys; from impctl.cli import cli; import impctl.cli.device.commands; "
         "cli.main(args=sys.argv[1:])",
 }
 

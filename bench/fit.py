@@ -82,7 +82,7 @@ import torch
 from impctl.fit import baselines
 from impctl.fit.data import prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
-from impctl.fit.ode.node import PARAM_NAMES
+from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params

@@ -40,7 +40,7 @@ import torch
 from impctl.fit import baselines
 from impctl.fit.data import prepare_nights
 from impctl.fit.estimator import NightFit
-from impctl.fit.ode.node import PARAM_NAMES
+from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.fit.report import fit_to_dict
 from impctl.flex import flexibility_many, flexibility_of_fit, house_from_fit
 from impctl.model import HouseParameters

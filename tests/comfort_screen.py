@@ -85,7 +85,7 @@ def holding_t_out_c(houses: HouseParameters, realism: PlantParams, t_hold_c: flo
     heat drawn from the water), ≥ ``margin`` × the load less the gains; from a grid of
     −25…+10 °C (+10 if it never does). Colder than that the owner's own heating falls behind,
     and a constrained night would measure the heat pump, not the experiment."""
-    from impctl.plant.heatpump import DEFROST_RANGE_C
+    from impctl.plant.hydronics.heatpump import DEFROST_RANGE_C
 
     n = houses.n_houses or 1
     core = PlantCore(houses, realism, 0, n=n)

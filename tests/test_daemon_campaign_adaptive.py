@@ -19,7 +19,7 @@ from sim_fixtures import run
 from test_daemon_campaign import FINAL, TZ, _campaign
 
 from impctl.campaign import FitSummary, parse_candidates
-from impctl.cli.device_status import collect_status, format_status
+from impctl.cli.device.status import collect_status, format_status
 from impctl.daemon.schedule import next_act_time
 from impctl.store import Store
 

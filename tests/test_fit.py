@@ -13,7 +13,7 @@ from impctl.errors import InputError
 from impctl.fit import baselines
 from impctl.fit.data import noise_levels, prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
-from impctl.fit.ode.node import PARAM_NAMES
+from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.fit.report import fit_to_dict, format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
@@ -191,7 +191,8 @@ def test_adam_with_backprop_through_the_solver_lowers_the_loss():
     as Levenberg–Marquardt: it descends, and LM ends at least as low in far fewer steps."""
     import torch
 
-    from impctl.fit.ode.node import bounds_tensor, pack_nights
+    from impctl.fit.ode.packing import pack_nights
+    from impctl.fit.ode.parameters import bounds_tensor
     from impctl.fit.optim import lm as fit_lm
 
     nights = synth_nights(HOUSE, seed=6, sample_step_s=3600.0, n_normal=3)

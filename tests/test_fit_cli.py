@@ -119,7 +119,7 @@ def test_fit_reads_hourly_unlabelled_nights(tmp_path):
 
 
 def test_the_cli_module_imports_without_torch():
-    code = ("import sys; import impctl.cli.fit_cmd; from impctl.cli import _register; "
+    code = ("import sys; import impctl.cli.analysis.fit_cmd; from impctl.cli import _register; "
             "_register(); assert 'torch' not in sys.modules, 'torch imported'")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60)

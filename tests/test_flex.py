@@ -185,7 +185,7 @@ def test_switch_off_terms_from_the_fit_summary():
 
 
 def test_fit_side_constants_are_the_fits():
-    from impctl.fit.ode.node import FURNITURE_TAU_S, NUISANCE_BOUNDS
+    from impctl.fit.ode.parameters import FURNITURE_TAU_S, NUISANCE_BOUNDS
     from impctl.flex.coast import FURNITURE_TAU_S as FLEX_TAU
     from impctl.flex.switch_off import FIT_BOUNDS
 

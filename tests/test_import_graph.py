@@ -59,6 +59,21 @@ def _graph() -> dict[str, set[str]]:
 GRAPH = _graph()
 
 
+def _rooms(package: str) -> dict[str, set[str]]:
+    """Inside ``impctl.<package>``: each room (direct subpackage or module; "" for the
+    package's own ``__init__``) → the other rooms of the package it imports."""
+    edges: dict[str, set[str]] = defaultdict(set)
+    for path in (SRC / package).rglob("*.py"):
+        parts = path.relative_to(SRC.parent).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        here = module.split(".")[2] if module.count(".") >= 2 else ""
+        for name in _imports(path, module):
+            inner = name.split(".")
+            if inner[:2] == ["impctl", package] and len(inner) > 2 and inner[2] != here:
+                edges[here].add(inner[2])
+    return edges
+
+
 def test_the_graph_is_read_from_the_source():
     # Known edges: if these are not found, the reader is broken and every rule below is void.
     assert {"modbus", "errors"} <= GRAPH["heatpump"]
@@ -114,3 +129,27 @@ def test_the_daemon_process_loads_neither_torch_nor_sklearn_nor_pandas():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=60).stdout
     assert out.strip() == "[]"
+
+
+
+def test_the_plant_rooms_know_only_the_parameters():
+    """The building, the hydronics and the instruments are physics side by side: each takes
+    its parameters and nothing of the others; only the simulation puts them together, and the
+    house file (input) and the simulation know nothing of each other."""
+    rooms = _rooms("plant")
+    assert {"building", "hydronics", "instruments", "params"} <= rooms["simulation"]
+    for room in ("building", "hydronics", "instruments"):
+        assert rooms[room] <= {"params"}, f"plant.{room} imports {sorted(rooms[room])}"
+    assert rooms["params"] == set()
+    assert rooms["housefile"] <= {"params"}
+
+
+
+def test_the_cli_audiences_stay_apart():
+    """The operator's commands (light, next to the daemon) and the analyst's (heavy libraries
+    inside each command) share only the group and the option checks."""
+    rooms = _rooms("cli")
+    assert "checks" in rooms["analysis"] and {"analysis", "device"} <= rooms[""]
+    for room, other in (("device", "analysis"), ("analysis", "device")):
+        assert other not in rooms[room], f"cli.{room} imports cli.{other}"
+    assert rooms["checks"] == set()

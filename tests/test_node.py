@@ -10,18 +10,14 @@ import pytest
 import torch
 
 from impctl.fit.baselines import exact_linear
-from impctl.fit.ode.node import (
+from impctl.fit.ode.node import ROW_AIR, ROW_DEMAND, NightODE, build_rows
+from impctl.fit.ode.packing import pack_nights, smooth
+from impctl.fit.ode.parameters import (
     DTYPE,
     PARAM_NAMES,
     PHYSICAL_BOUNDS,
-    ROW_AIR,
-    ROW_DEMAND,
-    NightODE,
     bounds_tensor,
-    build_rows,
     network,
-    pack_nights,
-    smooth,
     to_physical,
     to_unconstrained,
 )

@@ -94,7 +94,7 @@ def test_every_house_parameter_has_documented_bounds(key, above, factor):
 
 
 def test_bounds_hold_what_the_population_and_the_fit_search(tmp_path):
-    from impctl.fit.ode.node import PHYSICAL_BOUNDS
+    from impctl.fit.ode.parameters import PHYSICAL_BOUNDS
 
     for key, (lo, hi) in PHYSICAL_BOUNDS.items():
         assert HOUSE_LIMITS[key][0] <= lo and hi <= HOUSE_LIMITS[key][1], key

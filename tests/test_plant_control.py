@@ -23,7 +23,7 @@ from impctl.plant import (
     periodic,
     simulate_plant,
 )
-from impctl.plant.gains import solar_gains_w, sun_shape
+from impctl.plant.building.gains import solar_gains_w, sun_shape
 
 
 def _runs(flags: np.ndarray) -> list[tuple[bool, int, int]]:

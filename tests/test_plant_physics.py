@@ -15,7 +15,7 @@ from impctl.plant import (
     PlantParams,
     simulate_plant,
 )
-from impctl.plant.envelope import stored_j
+from impctl.plant.building.envelope import stored_j
 
 #: Slow-mode τ of the plant / ISO τ: documented tolerance (README "Realistic plant").
 #: Radiators keep τ within ±2 %; capacity moved to the air side (furniture, underfloor screed)

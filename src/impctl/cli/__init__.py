@@ -1,4 +1,5 @@
-"""The ``impctl`` command line: one click group, one module per family of subcommands.
+"""The ``impctl`` command line: one click group, one module per family of subcommands, by
+audience: :mod:`.device` (the gateway's operator) and :mod:`.analysis` (the analyst).
 
 Bad input raises :class:`impctl.errors.InputError`; :func:`main` prints it as one line on
 stderr and exits with status 2.
@@ -21,9 +22,10 @@ def cli() -> None:
 
 def _register() -> None:
     # Each subcommand module adds itself to the group; keep imports light (no torch here).
-    from . import demo_cmd, device_cmds, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
-    __import__(f"{__name__}.fleet_cmd")  # impctl fleet fit, impctl flex
-    __import__(f"{__name__}.campaign_cmd")  # impctl campaign next
+    from .analysis import demo_cmd, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
+    from .device import commands  # noqa: F401
+    __import__(f"{__name__}.analysis.fleet_cmd")  # impctl fleet fit, impctl flex
+    __import__(f"{__name__}.analysis.campaign_cmd")  # impctl campaign next
 
 
 def run_group(group: click.Group, argv: list[str] | None, prog: str,

@@ -11,9 +11,12 @@ reading a result (:mod:`.report`) needs no torch.
 Inside, by concern:
 
 * :mod:`.ode` — the night dynamics: :mod:`.ode.node` (the 5R1C night ODE with its nuisance
-  terms, batched over rows) and :mod:`.ode.solver` (exact discretisation, or torchdiffeq);
-* :mod:`.optim` — the optimiser: :mod:`.optim.lm` (Levenberg–Marquardt over merged starts and
-  nights), :mod:`.optim.batch` (many households in one call: the fleet);
+  terms, batched over rows), :mod:`.ode.parameters` (the fitted parameters: bounds, transforms,
+  HLC/C_m/τ), :mod:`.ode.packing` (the nights side by side) and :mod:`.ode.solver` (exact
+  discretisation, or torchdiffeq);
+* :mod:`.optim` — the optimiser: :mod:`.optim.problem` (the problems' rows and residuals),
+  :mod:`.optim.lm` (Levenberg–Marquardt over merged starts and nights), :mod:`.optim.batch`
+  (many households in one call: the fleet);
 * :mod:`.intervals` — :mod:`.intervals.uncertainty` (Laplace, sandwich, type-B shares) and
   :mod:`.intervals.model_error` (the share calibrated on realistic virtual houses);
 * here: :mod:`.estimator`, :mod:`.data`, :mod:`.resample` (fine rows into blocks),

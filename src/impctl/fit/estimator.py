@@ -36,22 +36,21 @@ from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .intervals import model_error
 from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
-from .ode.node import (
+from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
+from .ode.packing import pack_nights
+from .ode.parameters import (
     DTYPE,
     NUISANCE_BOUNDS,
     NUISANCE_NAMES,
     PARAM_NAMES,
-    ROW_AIR,
-    ROW_DEMAND,
     bounds_tensor,
-    build_rows,
     lumped,
     network,
-    pack_nights,
     to_physical,
 )
 from .ode.solver import METHODS
 from .optim import lm
+from .optim.problem import raw_residuals
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
 
@@ -99,7 +98,7 @@ class NightFit:
     ach_vent, ach_infl : float
         Fixed air changes [1/h]; default the paper's (and the virtual population's) 0 and 0.01.
     timestamps : {"instant", "interval"}
-        Sample convention (:func:`~impctl.fit.ode.node.pack_nights`).
+        Sample convention (:func:`~impctl.fit.ode.packing.pack_nights`).
     smooth_air_h : float
         Width [h] of the moving average of the held T_air that drives "demand" rows, so that
         quantisation flicker does not reach the predicted power through the massless air node.
@@ -136,7 +135,7 @@ class NightFit:
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
         they agree to rk4's error, "exact" is several times cheaper.
     night_gain, emitter_state, furniture_state : bool
-        Nuisance terms of the night model (:data:`~impctl.fit.ode.node.NUISANCE_NAMES`): a constant
+        Nuisance terms of the night model (:data:`~.ode.parameters.NUISANCE_NAMES`): a constant
         heat input per campaign; the emitter's release after switch-off (amplitude and time
         constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
         Kept only when a likelihood-ratio test says the data need them.
@@ -590,7 +589,7 @@ class NightFit:
             raw = result.terms.take(sel).raw()
         else:
             with torch.no_grad():
-                raw = lm.raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
+                raw = raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
         mask = self._packed.mask[sub.night]
         groups = self._group_n[sub.night]
         floors = (0.005, 0.005, 1.0)

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..model import HouseParameters, air_temperature, mass_derivative, mass_from_air, simulate
 
-#: Furniture–air time constant [s]: the fit's (:data:`impctl.fit.ode.node.FURNITURE_TAU_S`,
+#: Furniture–air time constant [s]: the fit's (:data:`impctl.fit.ode.parameters.FURNITURE_TAU_S`,
 #: real-houses.md §1); repeated here so that this module needs no torch.
 FURNITURE_TAU_S = 1.0 / 0.00022
 

@@ -1,12 +1,12 @@
 """What the real house does at switch-off beyond the 5R1C, as the coast uses it.
 
 The fit (:mod:`impctl.fit`) keeps nuisance terms when its likelihood-ratio test says the nights
-need them (``impctl.fit.ode.node.NUISANCE_NAMES``, the fit JSON's ``"nuisance"`` block): a night
-gain [W], the emitter's release after switch-off (its time constant [h]) and the air/furniture
-capacity at the air node [J/(m²K) of floor]. They are weakly determined: the fit sees the
-constrained nights only from one emission lag (1 h) after switch-off, where the emitter's and
-the furniture's releases look alike. :func:`switch_off_from_fit` turns them into the coast's
-inputs, (value, low, high) each:
+need them (``impctl.fit.ode.parameters.NUISANCE_NAMES``, the fit JSON's ``"nuisance"``
+block): a night gain [W], the emitter's release after switch-off (its time constant [h]) and
+the air/furniture capacity at the air node [J/(m²K) of floor]. They are weakly determined: the
+fit sees the constrained nights only from one emission lag (1 h) after switch-off, where the
+emitter's and the furniture's releases look alike. :func:`switch_off_from_fit` turns them into
+the coast's inputs, (value, low, high) each:
 
 * a term whose 95 % interval reaches a bound of the fit's search box is not determined by the
   nights; the coast then takes the documented physical range (real-houses.md): air/furniture
@@ -29,8 +29,9 @@ from ..errors import InputError
 
 #: The terms the coast uses, in the fit JSON's ``"nuisance"`` names.
 SWITCH_OFF_TERMS = ("night_gain_w", "emitter_tau_h", "furniture_j_per_m2k")
-#: The fit's search bounds of those terms (``impctl.fit.ode.node.NUISANCE_BOUNDS``; repeated so that
-#: this module needs no torch — a test keeps them equal). Used when a summary lacks them.
+#: The fit's search bounds of those terms (``impctl.fit.ode.parameters.NUISANCE_BOUNDS``;
+#: repeated so that this module needs no torch — a test keeps them equal). Used when a
+#: summary lacks them.
 FIT_BOUNDS = {"night_gain_w": (0.0, 500.0), "emitter_tau_h": (0.2, 8.0),
               "furniture_j_per_m2k": (0.0, 40000.0)}
 #: Air (1200 J/(m³K) × 2.5 m) + furniture 0–31 kJ/(m²K) [J/(m²K)], real-houses.md §1.

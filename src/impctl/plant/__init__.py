@@ -6,13 +6,14 @@ output ∝ (θ_w − θ_air)ⁿ, a heat pump with weather-compensated or thermos
 modulation, on/off cycling with hysteresis and anti-short-cycle timers, a start ramp, defrost and
 DHW interruptions, internal and solar gains, and imperfect sensors. Units: °C, W, J, s.
 
-Modules by physical concept: :mod:`.params` (every option, default, range), :mod:`.envelope`,
-:mod:`.emitter`, :mod:`.heatpump`, :mod:`.gains`, :mod:`.sensors`; :mod:`.simulate` runs many
-houses (batch), :mod:`.stepper` one house step by step.
+Rooms by physical concern: :mod:`.params` (every option, default, range); :mod:`.building`
+(the envelope and its capacities, the gains); :mod:`.hydronics` (the emitter, the heat pump and
+its control); :mod:`.instruments` (the sensors and the heat meter); :mod:`.simulation` runs many
+houses (batch) or one house step by step; :mod:`.housefile` reads a house file's ``[plant]``.
 """
 
-from .envelope import CapacitySplit, split_capacity
-from .gains import HouseGains
+from .building.envelope import CapacitySplit, split_capacity
+from .building.gains import HouseGains
 from .housefile import load_plant, plant_params_from_mapping
 from .params import (
     CONTROL_CURVE,
@@ -28,8 +29,8 @@ from .params import (
     PlantParams,
     Sensors,
 )
-from .simulate import OUTPUTS, PlantCore, PlantRun, simulate_plant
-from .stepper import Plant, periodic
+from .simulation.simulate import OUTPUTS, PlantCore, PlantRun, simulate_plant
+from .simulation.stepper import Plant, periodic
 
 __all__ = [
     "CONTROL_CURVE",

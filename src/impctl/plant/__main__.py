@@ -9,7 +9,7 @@ import sys
 
 from ..errors import InputError
 from .housefile import load_plant
-from .simulate import PlantCore
+from .simulation.simulate import PlantCore
 
 
 def describe(core: PlantCore) -> str:

@@ -143,7 +143,7 @@ class HeatPump(_Ranged):
         at the design point; below +5 °C rated capacities are integrated over defrost cycles
         (EN 14511), so the nominal (+7 °C) output is set such that the mean output at
         θ_design, defrosts included, is ``sizing`` × the design load
-        (:func:`impctl.plant.heatpump.nominal_output_w`).
+        (:func:`impctl.plant.hydronics.heatpump.nominal_output_w`).
     min_modulation : float, default 0.4
         Minimum output / nominal [-]; RH §3: 0.3–0.5 for inverters; 1.0 = on/off unit.
         Range 0.3–1.

@@ -158,7 +158,7 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     as with gains.
     """
     from ..plant import simulate_plant
-    from ..plant.gains import internal_gains_w, solar_gains_w
+    from ..plant.building.gains import internal_gains_w, solar_gains_w
 
     n = sched.t_out_c.shape[1]
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6A1]))

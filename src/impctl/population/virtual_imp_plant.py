@@ -33,8 +33,8 @@ from ..errors import InputError
 from ..imp import features_from_arrays
 from ..model import HouseParameters
 from ..plant import PlantCore, PlantParams
-from ..plant.envelope import NodeState
-from ..plant.gains import internal_gains_w, solar_gains_w
+from ..plant.building.envelope import NodeState
+from ..plant.building.gains import internal_gains_w, solar_gains_w
 from .realism import take_params
 from .virtual_imp import (
     ImpResult,

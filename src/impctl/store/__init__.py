@@ -6,7 +6,7 @@ sample kept, even if the process is killed the next instant). The schema is vers
 temperatures in °C, powers in W.
 """
 
-from .db import SCHEMA_VERSION, Store
+from .db import Store
 from .records import (
     CampaignDecision,
     Command,
@@ -16,6 +16,7 @@ from .records import (
     Sample,
     TriggerRequest,
 )
+from .schema import SCHEMA_VERSION
 
 __all__ = ["SCHEMA_VERSION", "CampaignDecision", "Command", "FitRecord", "JournalEntry",
            "Night", "Sample", "Store", "TriggerRequest"]

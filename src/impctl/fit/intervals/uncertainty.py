@@ -32,8 +32,9 @@ import torch
 from scipy.stats import t as student_t
 
 from ..data import Estimate, lag1_autocorrelation
-from ..ode.node import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
+from ..ode.parameters import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 from ..optim import lm
+from ..optim.problem import raw_residuals
 
 Z95 = 1.959964
 _X_PRIOR = 1e-4   # precision of the regularising prior on a range fraction (sd 100 ranges)
@@ -58,7 +59,7 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     ``autocorrelation`` (group → ρ), ``cov_u`` (7×7)
     """
     with torch.no_grad():
-        raw = (lm.raw_residuals(ctx, sub, u[None], t_m0) if terms is None
+        raw = (raw_residuals(ctx, sub, u[None], t_m0) if terms is None
                else terms.raw()).numpy()
     mask = ctx.packed.mask[sub.night].numpy()
     groups = group_n[sub.night]
@@ -178,8 +179,9 @@ def offset_allowance(lumped_in: dict, nights, sensor_offsets_k,
 
 def nuisance_intervals(u: torch.Tensor, box: torch.Tensor, cov_u: torch.Tensor
                        ) -> dict[str, dict | None]:
-    """The nuisance terms (:data:`~.node.NUISANCE_NAMES`) with 95 % intervals (Gauss–Newton
-    covariance through the sigmoid map, clipped to the bounds); None for a term switched off."""
+    """The nuisance terms (:data:`~impctl.fit.ode.parameters.NUISANCE_NAMES`) with 95 %
+    intervals (Gauss–Newton covariance through the sigmoid map, clipped to the bounds); None for
+    a term switched off."""
     out: dict[str, dict | None] = {}
     if len(u) <= len(PARAM_NAMES):
         return {name: None for name in NUISANCE_NAMES}

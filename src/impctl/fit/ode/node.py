@@ -30,317 +30,29 @@ Row types
 
 Inputs are piecewise linear in T_out and T_air (samples are instants) and piecewise constant in
 Φ_HC: the value at a sample time holds until the next sample (meter convention: ``q_hc`` at a
-row is the mean power over the interval that starts there). :func:`pack_nights` also handles
-the "interval" convention (every value a mean over the interval that starts at its stamp).
+row is the mean power over the interval that starts there). :func:`~.packing.pack_nights`
+also handles the "interval" convention (every value a mean over the interval that starts at its
+stamp).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
-from ...imp.night import NightSamples
 from ...model.continuous import air_derivative, air_temperature
-from ...model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
+from ...model.house import H_MS
+from .packing import PackedNights
+from .parameters import EMC_COLUMN, FUR_COLUMN, PARAM_NAMES, network
 from .solver import (
     NightODE,  # the integrator (re-exported: tests and readers find it here)
     exact_chain,
 )
 
-DTYPE = torch.float64
-
-
-#: The seven fitted parameters (the paper's Table IV), in this order everywhere.
-PARAM_NAMES = TABLE_IV
-PARAM_UNITS = {name: PARAMETER_UNITS[name] for name in TABLE_IV}
-#: Parameters bounded by the classifiers' ranges; the others by :data:`PHYSICAL_BOUNDS`.
-CLASSIFIED = ("floor_area", "c_f", "u_walls")
-#: Search bounds. The three classified ones are the union of the paper's Table III classes and
-#: apply only when no class range is given; the rest are wide physical limits for dwellings.
-PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
-    "floor_area": (60.0, 300.0),
-    "wall_height": (2.0, 6.0),
-    "walls_area": (20.0, 600.0),
-    "windows_area": (2.0, 150.0),
-    "c_f": (0.8, 3.7),
-    "u_walls": (0.2, 2.0),
-    "u_windows": (0.5, 5.0),
-}
-
 ROW_AIR = 0
 ROW_DEMAND = 1
-
-#: Nuisance terms of the night model a real house needs (real-houses.md §2, §4, §7), fitted
-#: after the seven (a row of parameters then has 10 entries): a constant internal gain over
-#: the campaign (sleepers, base load) [W], split over the air, surface and mass nodes as ISO
-#: 13790 C.1–C.3 splits Φ_int (:func:`_gain_split`), and on constrained
-#: nights the heat the emitter (and the air/furniture) still releases after the fit start,
-#: emitter_w·exp(−t/emitter_tau_h) [W, h]. Bounded, reported, never the product's numbers.
-#: The last, furniture_j_per_m2k, is heat capacity at the air node (air and furniture, per m²
-#: of floor, real-houses.md §1: 3 + 10–31 kJ/(m²K)), charged through the furniture's coupling
-#: time constant :data:`FURNITURE_TAU_S`: its heat flow C_fur·dT_fur/dt is computed from the
-#: measured T_air (the data, not the state, drive it: a second state is not needed for a node
-#: that follows T_air within an hour). It is part of the house's capacity: the reported C_m and
-#: τ include it (:func:`lumped`).
-#: The last, emitter_share, is the share of C_m that sits in the emitter (screed, radiator
-#: water and metal, buffer) between the heat meter and the air node, with the time constant
-#: emitter_tau_h (``NightFit(emitter_lag=True)``, :func:`build_rows`); the mass node keeps
-#: the rest, so C_m and τ stay the house's whole (as the classes and the plant define them).
-NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k",
-                  "emitter_share")
-#: When no gain is fitted (``night_gain`` off, or not kept by the likelihood-ratio test) the
-#: night_gain_w column is pinned to an assumed value (``NightFit(night_gain_w=…)``, default
-#: :data:`impctl.night_gain.NIGHT_GAIN_W`) by the box (g, g), not to 0 W.
-NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
-    # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
-    # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the
-    # gain trades against the emitter's release and the HLC (README "Accuracy")
-    "night_gain_w": (0.0, 500.0),
-    "emitter_w": (0.0, 4000.0),
-    "emitter_tau_h": (0.2, 8.0),
-    "furniture_j_per_m2k": (0.0, 40000.0),
-    # screed 130–250 kJ/(m²K) of heated floor (real-houses.md §2): up to about half of C_m
-    "emitter_share": (0.0, 0.6),
-}
-#: Furniture–air time constant [s]: 1/0.00022 s ≈ 76 min (real-houses.md §1, the Japanese
-#: residential code's G_fur = 0.00022·C_fur).
-FURNITURE_TAU_S = 1.0 / 0.00022
-_FUR = len(PARAM_NAMES) + 3   # column of furniture_j_per_m2k in a parameter row
-_EMC = len(PARAM_NAMES) + 4   # column of emitter_share
-
-
-def bounds_tensor(bounds: dict[str, tuple[float, float]],
-                  nuisance: dict[str, tuple[float, float]] | None = None) -> torch.Tensor:
-    """Bounds as a (7, 2) tensor in :data:`PARAM_NAMES` order; (10, 2) with ``nuisance``
-    bounds appended in :data:`NUISANCE_NAMES` order (``(0, 0)`` switches a term off)."""
-    names = [bounds[n] for n in PARAM_NAMES]
-    if nuisance is not None:
-        names += [nuisance[n] for n in NUISANCE_NAMES]
-    return torch.tensor(names, dtype=DTYPE)
-
-
-def to_physical(u: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
-    """Unconstrained u (…, 7) → physical parameters lo + (hi − lo)·sigmoid(u).
-
-    ``bounds`` is (7, 2) or one box per row of ``u``, (…, 7, 2).
-    """
-    return bounds[..., 0] + (bounds[..., 1] - bounds[..., 0]) * torch.sigmoid(u)
-
-
-def to_unconstrained(x: torch.Tensor, bounds: torch.Tensor) -> torch.Tensor:
-    """Inverse of :func:`to_physical`, clipped 1e-6 inside the bounds."""
-    frac = ((x - bounds[..., 0]) / (bounds[..., 1] - bounds[..., 0])).clamp(1e-6, 1 - 1e-6)
-    return torch.logit(frac)
-
-
-def network(params: torch.Tensor, ach_vent: float, ach_infl: float):
-    """The 5R1C :class:`~impctl.model.house.Conductances` of parameter rows (…, 7)."""
-    cols = [params[..., i] for i in range(len(PARAM_NAMES))]
-    return conductances(*cols, ach_vent, ach_infl)
-
-
-def lumped(params: torch.Tensor, ach_vent: float, ach_infl: float) -> torch.Tensor:
-    """(HLC [W/K], C_m [J/K], τ [h]) of parameter rows (…, 7) → (…, 3), differentiable.
-
-    With the nuisance terms appended, the air/furniture capacity is added to C_m and τ grows
-    in proportion (τ = C_m/(H_tr,em + H_tr,3), the house's definition)."""
-    net = network(params, ach_vent, ach_infl)
-    c_m, tau = net.c_m_j_per_k, net.tau_h
-    if params.shape[-1] > _FUR:
-        c_fur = params[..., _FUR] * params[..., 0]
-        tau = tau * (c_m + c_fur) / c_m
-        c_m = c_m + c_fur
-    return torch.stack([net.hlc_w_per_k, c_m, tau], dim=-1)
-
-
-def eq63_margin(bounds: dict[str, tuple[float, float]]) -> float:
-    """min over the box of H_tr,ms − H_tr,op [W/K]; eq. 63 needs it > 0 everywhere."""
-    a_lo = bounds["floor_area"][0]
-    h_ms = H_MS * float(am_factor(bounds["c_f"][0])) * a_lo
-    return h_ms - bounds["u_walls"][1] * bounds["walls_area"][1]
-
-
-TIMESTAMPS = ("instant", "interval")
-
-
-@dataclass
-class PackedNights:
-    """Nights side by side (tensors float64; N nights, K nodes = the longest night's samples).
-
-    Attributes
-    ----------
-    night_ids, kinds : per night
-    timestamps : "instant" or "interval" (see :func:`pack_nights`)
-    grid_s : (N, K) node times [s] from each night's fit start: the night's own samples,
-        the last one repeated after its end
-    t_out_c, t_air_c : (N, K) values at the nodes [°C] (held after a night's last sample)
-    t_out_slope, t_air_slope : (N, K) slope on the interval that starts at node k [K/s]
-    t_air_in_c, t_air_in_slope : (N, K) the smoothed T_air that drives DEMAND rows, and its slope
-    q_w : (N, K) heat power belonging to node k [W] (the value a sample reports)
-    q_in_w : (N, K) mean heat power over the interval that starts at node k [W]
-    q_mean_w : (N,) mean power over the night [W] (time-weighted)
-    t_fur_slope : (N, K) dT_fur/dt [K/s] of a node that follows the (30-min smoothed) measured
-        T_air with the time constant :data:`FURNITURE_TAU_S`
-    mask : (N, K) bool, node k is one of the night's samples
-    next_node : (N, K) long, index of the night's next sample (itself for the last one)
-    last : (N, K) bool, node k is the night's last sample
-    """
-
-    night_ids: list[str]
-    kinds: list[str]
-    timestamps: str
-    grid_s: torch.Tensor
-    t_out_c: torch.Tensor
-    t_out_slope: torch.Tensor
-    t_air_c: torch.Tensor
-    t_air_slope: torch.Tensor
-    t_air_in_c: torch.Tensor
-    t_air_in_slope: torch.Tensor
-    q_w: torch.Tensor
-    q_in_w: torch.Tensor
-    q_mean_w: torch.Tensor
-    t_fur_slope: torch.Tensor
-    mask: torch.Tensor
-    next_node: torch.Tensor
-    last: torch.Tensor
-    power_ok: torch.Tensor | None = None  # (N, K) bool: the power sample can be compared
-    #: the meter measures the heat into an emitter node that holds ``emitter_share`` of C_m
-    #: (``NightFit(emitter_lag=True)``, :func:`build_rows`)
-    emitter_lag: bool = False
-
-    @property
-    def n_nights(self) -> int:
-        return len(self.night_ids)
-
-    @property
-    def constrained(self) -> torch.Tensor:
-        return torch.tensor([k == "constrained" for k in self.kinds])
-
-    def demand_mask(self) -> torch.Tensor:
-        """(N, K) bool: the nodes a DEMAND row compares — :attr:`mask` without the last
-        sample ("instant" power is the mean until the next sample) and without the power
-        samples that cannot be compared. Computed once per packing: every optimiser
-        iteration's rows read it."""
-        cached = self.__dict__.get("_demand_mask")
-        if cached is None:
-            cached = self.mask
-            if self.timestamps == "instant":
-                cached = cached & ~self.last
-            if self.power_ok is not None:
-                cached = cached & self.power_ok
-            self.__dict__["_demand_mask"] = cached
-        return cached
-
-
-def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
-    """Centred moving average of samples within ±width/2 [s] (window shrinks at the ends)."""
-    if width_s <= 0 or len(t) < 3:
-        return y.copy()
-    lo = np.searchsorted(t, t - width_s / 2, side="left")
-    hi = np.searchsorted(t, t + width_s / 2, side="right")
-    c = np.concatenate([[0.0], np.cumsum(y)])
-    return (c[hi] - c[lo]) / (hi - lo)
-
-
-def furniture_rate(t: np.ndarray, t_air: np.ndarray, tau_s: float, steady: bool) -> np.ndarray:
-    """dT_fur/dt [K/s] at the samples of a node following ``t_air`` (piecewise linear) with
-    time constant ``tau_s`` (exact per interval). It starts in step with T_air (``steady``:
-    at rest, a held night from its day) or lagging a steady slope (a cooling night)."""
-    t_air = smooth(t, np.asarray(t_air, float), 1800.0)
-    h = np.diff(t)
-    slope = np.diff(t_air) / np.where(h > 0, h, 1.0)
-    e = np.zeros(len(t))           # T_fur − T_air
-    if not steady and len(slope):
-        e[0] = -tau_s * slope[0]
-    alpha = np.exp(-h / tau_s)
-    for k in range(len(h)):
-        e[k + 1] = e[k] * alpha[k] - slope[k] * tau_s * (1.0 - alpha[k])
-    return -e / tau_s
-
-
-def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
-                timestamps: str = "instant", smooth_air_s: float = 0.0,
-                smooth_out_s: float = 0.0,
-                power_ok: Sequence[np.ndarray] | None = None) -> PackedNights:
-    """Put prepared nights (already cut to their fit windows) side by side, each on its own
-    sample times (padded to the longest night by repeating its last sample: zero-length
-    intervals that change nothing).
-
-    Parameters
-    ----------
-    nights : nights whose samples all belong to the fit (see ``fit.prepare_nights``)
-    offsets_s : per night, the time [s] in its ``time_s`` that becomes grid time 0
-    timestamps : {"instant", "interval"}
-        "instant": temperatures are readings at the stamp, ``q_hc`` the mean power until the
-        next stamp. "interval": every value is the mean over the interval that starts at the
-        stamp (hourly logs, the virtual IMP): temperatures then belong to the interval's middle,
-        so the nodes move there, and the power on [middle_k, middle_k+1) is (q_k + q_k+1)/2.
-    smooth_air_s : width of the moving average applied to the T_air that drives DEMAND rows [s]
-    smooth_out_s : width of the moving average applied to T_out [s]: the outdoor temperature
-        is an input of every row, and its sensor noise (0.2–0.5 K per reading, real-houses.md
-        §5) would otherwise enter as errors in the variables and bias the fit
-    power_ok : per night, bool per sample: False where the measured power is not the space
-        heating the model describes (a DHW recharge, a defrost and the recovery after them);
-        those samples still drive the model (T_air), their power is not compared
-    """
-    if timestamps not in TIMESTAMPS:
-        raise ValueError(f"timestamps must be one of {TIMESTAMPS}")
-    rel = []
-    for night, off in zip(nights, offsets_s, strict=True):
-        t = np.asarray(night.time_s, float) - off
-        if timestamps == "interval":
-            span = np.diff(t)
-            t = t + 0.5 * np.append(span, span[-1])
-        rel.append(np.round(t, 3))
-    n, k = len(nights), max(len(t) for t in rel)
-    grid, te, te_s, ta, ta_s, tai, tai_s, q, q_in, fur = (np.zeros((n, k)) for _ in range(10))
-    mask = np.zeros((n, k), dtype=bool)
-    next_node = np.tile(np.arange(k), (n, 1))
-    last = np.zeros((n, k), dtype=bool)
-    q_mean = np.zeros(n)
-
-    def padded(y, m):
-        y = np.asarray(y, float)
-        return np.concatenate([y, np.full(k - m, y[-1])])
-
-    for i, (night, t) in enumerate(zip(nights, rel, strict=True)):
-        m = len(t)
-        grid[i] = padded(t, m)
-        t_air = np.asarray(night.t_air_c, float)
-        t_out = smooth(t, np.asarray(night.t_out_c, float), smooth_out_s)
-        for dst, dst_s, y in ((te, te_s, t_out), (ta, ta_s, t_air),
-                              (tai, tai_s, smooth(t, t_air, smooth_air_s))):
-            dst[i] = padded(y, m)
-            dst_s[i, :m - 1] = np.diff(np.asarray(y, float)) / np.diff(t)
-        fur[i, :m] = furniture_rate(t, t_air, FURNITURE_TAU_S, night.kind != "constrained")
-        qi = np.asarray(night.q_hc_w, float)
-        q[i] = padded(qi, m)
-        q_in[i] = q[i]
-        if timestamps == "interval":
-            q_in[i, :m - 1] = 0.5 * (qi[:-1] + qi[1:])
-        mask[i, :m] = True
-        next_node[i, :m - 1] += 1
-        last[i, m - 1] = True
-        span = np.diff(t)
-        q_mean[i] = float(np.sum(qi[:-1] * span) / np.sum(span))
-
-    def tt(a):
-        return torch.as_tensor(a, dtype=DTYPE)
-
-    return PackedNights(
-        night_ids=[x.night_id for x in nights], kinds=[x.kind for x in nights],
-        timestamps=timestamps, grid_s=tt(grid),
-        t_out_c=tt(te), t_out_slope=tt(te_s), t_air_c=tt(ta), t_air_slope=tt(ta_s),
-        t_air_in_c=tt(tai), t_air_in_slope=tt(tai_s), q_w=tt(q), q_in_w=tt(q_in),
-        q_mean_w=tt(q_mean), t_fur_slope=tt(fur), mask=torch.as_tensor(mask),
-        next_node=torch.as_tensor(next_node), last=torch.as_tensor(last),
-        power_ok=None if power_ok is None else torch.as_tensor(np.stack([
-            np.concatenate([np.asarray(p, bool), np.ones(k - len(p), bool)]) for p in power_ok])),
-    )
 
 
 @dataclass
@@ -438,8 +150,8 @@ def build_rows(
     Parameters
     ----------
     packed : the nights
-    params : (R, 7) physical parameters per row (:data:`PARAM_NAMES` order), or (R, 10) with
-        the :data:`NUISANCE_NAMES` terms appended
+    params : (R, 7) physical parameters per row (:data:`~.parameters.PARAM_NAMES` order), or
+        (R, 10) with the :data:`~.parameters.NUISANCE_NAMES` terms appended
     t_m0_c : (R,) mass temperature at grid time 0 [°C]
     night_index : (R,) which packed night each row models
     row_type : (R,) :data:`ROW_AIR` or :data:`ROW_DEMAND`
@@ -451,9 +163,9 @@ def build_rows(
     """
     net = network(params, ach_vent, ach_infl)
     cap_e = None   # the emitter's capacity [J/K]
-    if packed.emitter_lag and params.shape[-1] > _EMC:
+    if packed.emitter_lag and params.shape[-1] > EMC_COLUMN:
         # the emitter's share of C_m is not at the mass node (as the plant splits it)
-        cap_e = params[:, _EMC] * net.c_m_j_per_k
+        cap_e = params[:, EMC_COLUMN] * net.c_m_j_per_k
         net = dataclasses.replace(net, c_m_j_per_k=net.c_m_j_per_k - cap_e)
     te = packed.t_out_c[night_index]
     te_s = packed.t_out_slope[night_index]
@@ -481,9 +193,9 @@ def build_rows(
         z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
     gain = torch.zeros_like(a_air)
     q_fur = torch.zeros_like(te)
-    if params.shape[-1] > _FUR:
+    if params.shape[-1] > FUR_COLUMN:
         # heat the air/furniture capacity takes from the air node [W]
-        q_fur = (params[:, _FUR] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
+        q_fur = (params[:, FUR_COLUMN] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
     if params.shape[-1] > len(PARAM_NAMES):
         gain = params[:, len(PARAM_NAMES)]
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it

@@ -31,7 +31,7 @@ import torch
 
 from ...imp.night import NightSamples
 from ..estimator import NightFit, stop_units
-from ..ode.node import PackedNights
+from ..ode.packing import PackedNights
 from . import lm
 from ._alloc import retain_freed_memory
 
@@ -104,7 +104,8 @@ class _Rendezvous:
 def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
     """Problems that can share one call: the same settings and parameter layout. Each night
     keeps its own sample times (``PackedNights.grid_s`` is per night), so nights of any
-    sampling merge; a shorter night is padded the way :func:`~.node.pack_nights` pads it."""
+    sampling merge; a shorter night is padded the way
+    :func:`~impctl.fit.ode.packing.pack_nights` pads it."""
     groups: dict[tuple, list[_Problem]] = {}
     for p in problems:
         groups.setdefault(_settings(p), []).append(p)

@@ -1,9 +1,9 @@
 """Batched least squares over many independent fit problems at once (torch, float64).
 
-A *problem* is one parameter set u (7 unconstrained values, :mod:`..ode.node`) shared by its rows;
-each row (one night) also has its own initial mass temperature θ_m,0. Every start of the joint
-fit, every start of every per-night fit and every bootstrap replicate is a problem, and all of
-them are integrated together in one ``odeint`` call per iteration.
+A *problem* is one parameter set u (7 unconstrained values, :mod:`..ode.parameters`) shared by
+its rows; each row (one night) also has its own initial mass temperature θ_m,0. Every start of
+the joint fit, every start of every per-night fit and every bootstrap replicate is a problem, and
+all of them are integrated together in one ``odeint`` call per iteration.
 
 Two optimisers on the same residuals:
 
@@ -17,7 +17,8 @@ Two optimisers on the same residuals:
 
 The loss of a problem is Σ_rows weight·Σ_k ((model − measured)/σ_row)² + ridge·‖u‖². The small
 ridge is a weak prior at the centre of each search range: it decides only the directions the data
-leaves exactly flat (u_walls ↔ walls_area), where any value fits equally well.
+leaves exactly flat (u_walls ↔ walls_area), where any value fits equally well. The problems,
+their rows and their residuals: :mod:`.problem`.
 """
 
 from __future__ import annotations
@@ -26,111 +27,15 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..ode.node import DTYPE, ROW_DEMAND, PackedNights, build_rows, to_physical
+from ..ode.node import ROW_DEMAND
+from ..ode.parameters import DTYPE
+from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7
 _H_U = 1e-6     # forward-difference step in u
 _H_M = 1e-3     # … and in θ_m,0 [K] (the residuals are affine in it, so any step is exact)
 _MAX_STEP_U = 2.0
 _U_LIMIT = 8.0
-
-
-@dataclass
-class Rows:
-    """The rows of a batch of problems (R rows, K grid nodes, P problems)."""
-
-    problem: torch.Tensor      # (R,) long
-    night: torch.Tensor        # (R,) long, index into the packed nights
-    row_type: torch.Tensor     # (R,) ROW_AIR / ROW_DEMAND
-    phi_w: torch.Tensor        # (R, K) heat input of AIR rows at the nodes [W]
-    phi_in_w: torch.Tensor     # (R, K) … on the intervals [W]
-    scale: torch.Tensor        # (R,) sqrt(weight)/σ of the row's residuals
-    box: torch.Tensor          # (P, 7, 2) search box of each problem
-    n_problems: int
-
-    def repeat(self, copies: int) -> Rows:
-        p = self.n_problems
-
-        def rep(x):  # an expanded (zero-stride) input stays one row in memory
-            return (x[:1].expand(copies * len(x), -1) if x.stride(0) == 0 and len(x)
-                    else x.repeat(copies, 1))
-
-        return Rows(
-            problem=torch.cat([self.problem + c * p for c in range(copies)]),
-            night=self.night.repeat(copies), row_type=self.row_type.repeat(copies),
-            phi_w=rep(self.phi_w), phi_in_w=rep(self.phi_in_w),
-            scale=self.scale.repeat(copies), box=self.box.repeat(copies, 1, 1),
-            n_problems=p * copies,
-        )
-
-    def copies(self, sel: list[torch.Tensor]) -> Rows:
-        """Copy c of the problems holds the rows ``sel[c]`` (indices, or ``slice(None)`` for
-        all), as problems c·P…c·P + P − 1 (:meth:`repeat` when every one is all rows)."""
-        p = self.n_problems
-        n = [len(self.problem[s]) for s in sel]
-
-        def cat(x):  # an expanded (zero-stride) input stays one row in memory
-            if x.stride(0) == 0 and len(x):
-                return x[:1].expand(sum(n), -1)
-            return torch.cat([x[s] for s in sel])
-
-        return Rows(torch.cat([self.problem[s] + c * p for c, s in enumerate(sel)]),
-                    cat(self.night[:, None])[:, 0], cat(self.row_type[:, None])[:, 0],
-                    cat(self.phi_w), cat(self.phi_in_w), cat(self.scale[:, None])[:, 0],
-                    self.box.repeat(len(sel), 1, 1), p * len(sel))
-
-    def at(self, idx: torch.Tensor, phi: bool = True) -> Rows:
-        """The rows ``idx`` (problems keep their numbers); ``phi=False`` for rows that do not
-        read Φ_HC (DEMAND rows): their heat-input columns become one expanded zero row."""
-        def take(x):
-            return x[idx] if phi else x.new_zeros(1, x.shape[1]).expand(len(idx), -1)
-
-        return Rows(self.problem[idx], self.night[idx], self.row_type[idx], take(self.phi_w),
-                    take(self.phi_in_w), self.scale[idx], self.box, self.n_problems)
-
-    def subset(self, sel: torch.Tensor) -> Rows:
-        """The rows ``sel`` (bool, R) of one problem, renumbered as problem 0."""
-        problem = self.problem[sel]
-        return Rows(torch.zeros_like(problem), self.night[sel], self.row_type[sel],
-                    self.phi_w[sel], self.phi_in_w[sel], self.scale[sel],
-                    self.box[problem[:1]], 1)
-
-
-@dataclass
-class Context:
-    packed: PackedNights
-    ach_vent: float
-    ach_infl: float
-    ridge: float = 1e-2
-    solver: str = "exact"   # NightODE method: "exact" or "rk4" (torchdiffeq)
-
-
-def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
-    """(model − measured) at the nodes, zero off the sample mask, (R, K), in data units."""
-    params = to_physical(u, rows.box)[rows.problem]
-    demand = rows.row_type == ROW_DEMAND
-    if bool(demand.all()) or not bool(demand.any()):
-        return _raw(ctx, rows, params, t_m0, slice(None))
-    # Each row type on its own rows: build_rows then skips the other type's arithmetic.
-    idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
-    out = torch.cat([_raw(ctx, rows, params, t_m0, i) for i in idx])
-    return out[torch.argsort(torch.cat(idx))]
-
-
-def _raw(ctx: Context, rows: Rows, params: torch.Tensor, t_m0: torch.Tensor, i) -> torch.Tensor:
-    model = build_rows(ctx.packed, params[i], t_m0[i], rows.night[i], rows.row_type[i],
-                       rows.phi_w[i], rows.phi_in_w[i], ctx.ach_vent, ctx.ach_infl, ctx.solver)
-    return torch.where(model.mask, model.predict() - model.measured, 0.0)
-
-
-def residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
-    """Scaled residuals (R, K): raw/σ·sqrt(weight)."""
-    return raw_residuals(ctx, rows, u, t_m0) * rows.scale[:, None]
-
-
-def _sum_rows(values: torch.Tensor, rows: Rows) -> torch.Tensor:
-    out = torch.zeros((rows.n_problems,) + values.shape[1:], dtype=values.dtype)
-    return out.index_add_(0, rows.problem, values)
 
 
 @dataclass
@@ -179,16 +84,16 @@ class RowTerms:
             getattr(self, name)[sel] = getattr(other, name)
 
     def raw(self) -> torch.Tensor:
-        """(model − measured) in data units, (R, K): what :func:`raw_residuals` gives."""
+        """(model − measured) in data units, (R, K): what :func:`~.problem.raw_residuals` gives."""
         return self.r / self.scale[:, None]
 
     def normal(self, rows: Rows, u: torch.Tensor, ridge: float) -> _Normal:
         """:func:`_normal_equations` of ``rows`` (these rows, at ``rows.scale``) at ``u``."""
         f = (rows.scale / self.scale) ** 2
         jtj, g_rows = self.jtj * f[:, None, None], self.g * f[:, None]
-        loss = _sum_rows((self.r ** 2).sum(1) * f, rows) + ridge * (u ** 2).sum(1)
-        h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
-        return _Normal(loss, h, _sum_rows(g_rows, rows) + ridge * u, self.c * f[:, None],
+        loss = sum_rows((self.r ** 2).sum(1) * f, rows) + ridge * (u ** 2).sum(1)
+        h = sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
+        return _Normal(loss, h, sum_rows(g_rows, rows) + ridge * u, self.c * f[:, None],
                        self.d * f, self.gm * f, g_rows)
 
 
@@ -206,9 +111,9 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
         terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
     loss_rows, jtj, g_rows, c, d, gm, r0 = terms
     ridge = ctx.ridge
-    loss = _sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
-    h = _sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
-    g = _sum_rows(g_rows, rows) + ridge * u
+    loss = sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
+    h = sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
+    g = sum_rows(g_rows, rows) + ridge * u
     return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
 
 
@@ -279,15 +184,15 @@ def schur(ne: _Normal, rows: Rows, lam: torch.Tensor | None = None):
         h = h + torch.diag_embed(lam[:, None] * diag.clamp_min(floor))
         d = d * (1.0 + lam[rows.problem])
     d = d + 1e-12
-    s = h - _sum_rows(ne.c[:, :, None] * ne.c[:, None, :] / d[:, None, None], rows)
-    b = ne.g - _sum_rows(ne.c * (ne.gm / d)[:, None], rows)
+    s = h - sum_rows(ne.c[:, :, None] * ne.c[:, None, :] / d[:, None, None], rows)
+    b = ne.g - sum_rows(ne.c * (ne.gm / d)[:, None], rows)
     return s, b, d
 
 
 def _predicted_decrease(ne: _Normal, rows: Rows, step: torch.Tensor, step_m: torch.Tensor):
     """Decrease of the Gauss–Newton model of the loss for a step (per problem)."""
-    lin = (ne.g * step).sum(1) + _sum_rows(ne.gm * step_m, rows)
-    quad = torch.einsum("pi,pij,pj->p", step, ne.h, step) + _sum_rows(
+    lin = (ne.g * step).sum(1) + sum_rows(ne.gm * step_m, rows)
+    quad = torch.einsum("pi,pij,pj->p", step, ne.h, step) + sum_rows(
         2.0 * step_m * (ne.c * step[rows.problem]).sum(1) + ne.d * step_m ** 2, rows)
     return -(2.0 * lin + quad)
 

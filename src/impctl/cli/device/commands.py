@@ -17,8 +17,8 @@ from zoneinfo import ZoneInfo
 
 import click
 
-from ..errors import InputError
-from . import cli
+from ...errors import InputError
+from .. import cli
 
 DEFAULT_CONFIG = "/etc/impctl/config.toml"
 _config_option = click.option(
@@ -27,7 +27,7 @@ _config_option = click.option(
 
 
 def _load(config_path: Path):
-    from ..config import load_config
+    from ...config import load_config
 
     return load_config(config_path)
 
@@ -64,7 +64,7 @@ def _setup_logging(level: str, timezone: str = "UTC") -> None:
 @_config_option
 def daemon_command(config_path: Path) -> None:
     """Run the impctl service (systemd Type=notify): schedule and run IMP nights."""
-    from ..daemon.service import Daemon
+    from ...daemon.service import Daemon
 
     cfg = _load(config_path)
     _setup_logging(cfg.log_level, cfg.timezone)
@@ -93,10 +93,10 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
                     tonight: bool, now: bool, expires_h: float | None, force: bool,
                     cancel: bool, foreground: bool) -> None:
     """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
-    from ..daemon.lock import DaemonLock, probe
-    from ..daemon.schedule import request_expiry
-    from ..daemon.service import clock_from_config
-    from ..store import Store
+    from ...daemon.lock import DaemonLock, probe
+    from ...daemon.schedule import request_expiry
+    from ...daemon.service import clock_from_config
+    from ...store import Store
 
     cfg = _load(config_path)
     if cancel:
@@ -120,7 +120,7 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
                          f"[{lo:g}, {hi:g}] °C", place="--setpoint")
     clock = clock_from_config(cfg)
-    from ..daemon.schedule import daytime_reason
+    from ...daemon.schedule import daytime_reason
 
     daytime = daytime_reason(cfg, clock.now())
     if when == "now" and daytime and not force:
@@ -146,7 +146,7 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
 
 
 def _cancel_requests(cfg) -> None:
-    from ..store import Store
+    from ...store import Store
 
     if not cfg.db_path.exists():
         click.echo("nothing to cancel (no store yet)")
@@ -166,17 +166,17 @@ def _cancel_requests(cfg) -> None:
 async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     import signal
 
-    from ..daemon.lock import HEARTBEAT_S
+    from ...daemon.lock import HEARTBEAT_S
 
     async def heartbeat() -> None:  # `impctl status` shows this process as alive
         while True:
             lock.heartbeat()
             await asyncio.sleep(HEARTBEAT_S)
 
-    from ..controller import NightController, NightRequest
-    from ..daemon.schedule import next_act_time, window_after_act
-    from ..daemon.service import clock_from_config, open_client, policy_from_config
-    from ..store import Store
+    from ...controller import NightController, NightRequest
+    from ...daemon.schedule import next_act_time, window_after_act
+    from ...daemon.service import clock_from_config, open_client, policy_from_config
+    from ...store import Store
 
     clock = clock_from_config(cfg)
     stop = asyncio.Event()
@@ -214,7 +214,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
               help="Keep retrying a lost link this long [s].")
 def restore_command(config_path: Path, timeout_s: float) -> None:
     """Restore the journaled owner's settings now (also systemd's ExecStopPost)."""
-    from ..store import Store
+    from ...store import Store
 
     cfg = _load(config_path)
     _setup_logging(cfg.log_level, cfg.timezone)
@@ -233,10 +233,10 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
 
 
 async def _restore(cfg, store, timeout_s: float):
-    from ..clock import VirtualClock
-    from ..controller import restore_all
-    from ..daemon.service import clock_from_config, open_client
-    from ..heatpump import ModbusLinkError
+    from ...clock import VirtualClock
+    from ...controller import restore_all
+    from ...daemon.service import clock_from_config, open_client
+    from ...heatpump import ModbusLinkError
 
     clock = clock_from_config(cfg)
     client = open_client(cfg, clock)
@@ -258,7 +258,7 @@ async def _restore(cfg, store, timeout_s: float):
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 def status_command(config_path: Path, as_json: bool) -> None:
     """Current night and live values, campaign progress, last fit, link health, writes."""
-    from .device_status import collect_status, format_status
+    from .status import collect_status, format_status
 
     cfg = _load(config_path)
     status = collect_status(cfg)
@@ -271,7 +271,7 @@ def status_command(config_path: Path, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 def nights_command(config_path: Path, as_json: bool) -> None:
     """List the stored nights with their validity and reasons."""
-    from ..store import Store
+    from ...store import Store
 
     cfg = _load(config_path)
     tz = ZoneInfo(cfg.timezone)
@@ -317,8 +317,8 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
     or onto an existing file without --force; unknown night ids or nothing to export give
     exit status 2 and write nothing.
     """
-    from ..store import Store
-    from ..store.export import export_nights
+    from ...store import Store
+    from ...store.export import export_nights
 
     if db_path is None:
         db_path = _load(config_path).db_path
@@ -336,4 +336,4 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
 
 
 # `impctl check-config` lives in its own module; importing it registers the command.
-from . import device_config  # noqa: E402, F401
+from . import check_config  # noqa: E402, F401

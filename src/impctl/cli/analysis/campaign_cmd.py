@@ -12,9 +12,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from . import cli
-from .checks import MAX_FILE_MB, SETPOINT_C, in_range, refuse_large_file, time_zone
+from ...errors import InputError
+from .. import cli
+from ..checks import MAX_FILE_MB, SETPOINT_C, in_range, refuse_large_file, time_zone
 
 #: Forecast outdoor temperatures accepted [°C] (any winter night anywhere people heat).
 T_OUT_C = (-50.0, 40.0)
@@ -98,9 +98,9 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
     """
     import numpy as np
 
-    from ..campaign.design import Protocol, predict
-    from ..imp import read_nights
-    from ..store.export import refuse_database
+    from ...campaign.design import Protocol, predict
+    from ...imp import read_nights
+    from ...store.export import refuse_database
     from .fit_cmd import _write_json
 
     in_range(forecast_t_out_c, T_OUT_C, "--forecast-t-out-c", "°C")

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from . import cli
-from .checks import SETPOINT_C, SIM_DAYS, SIM_STEP_S, T_M_INIT_C, bounded, time_zone
+from ...errors import InputError
+from .. import cli
+from ..checks import SETPOINT_C, SIM_DAYS, SIM_STEP_S, T_M_INIT_C, bounded, time_zone
 
 #: impctl.weather.DEFAULT_TZ, repeated here to keep pandas out of the CLI's import.
 _DEFAULT_TZ = "Europe/Ljubljana"
@@ -55,11 +55,11 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     """
     import pandas as pd
 
-    from ..drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
-    from ..model import default_house, load_house
-    from ..store.export import refuse_database
-    from ..tables import step_seconds
-    from ..weather import read_weather, winter_weather
+    from ...drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
+    from ...model import default_house, load_house
+    from ...store.export import refuse_database
+    from ...tables import step_seconds
+    from ...weather import read_weather, winter_weather
 
     refuse_database(out_path, "--out")
     house = load_house(house_path) if house_path else default_house()

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import Sensors
+from ..params import Sensors
 
 Array = NDArray[np.float64]
 

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from ..night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
-from . import cli
-from .checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
+from ...errors import InputError
+from ...night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
+from .. import cli
+from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
 
 #: Nights fitted by default / accepted by --max-nights: the fit's memory and time grow about
 #: linearly with the nights (bench/fit_large.py); an IMP campaign has 5–8.
@@ -94,16 +94,16 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     what determines each (the data, or only the class range / physical bounds), and the heat
     demand and T_air validation per night.
     """
-    from ..fit.data import prepare_nights
-    from ..fit.estimator import NightFit
-    from ..fit.report import fit_to_dict, format_table, plot_fit
-    from ..imp import EMISSION_LAG_H, read_nights
-    from ..imp.gaps import cut_at_gaps
-    from ..imp.plausibility import check_units, fit_problem
+    from ...fit.data import prepare_nights
+    from ...fit.estimator import NightFit
+    from ...fit.report import fit_to_dict, format_table, plot_fit
+    from ...imp import EMISSION_LAG_H, read_nights
+    from ...imp.gaps import cut_at_gaps
+    from ...imp.plausibility import check_units, fit_problem
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
-    from ..store.export import refuse_database
+    from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")
     refuse_database(plot_path, "--plot")
@@ -191,8 +191,8 @@ def _most_recent(kept: list, max_nights: int) -> list:
 
 def _classes(nights, model_dir):
     """Classified ranges, or — without usable classifiers — the prior, said out loud."""
-    from ..classifiers.saved import classify_nights
-    from ..population.ranges import DEFAULT_RANGES
+    from ...classifiers.saved import classify_nights
+    from ...population.ranges import DEFAULT_RANGES
 
     try:
         results = classify_nights(nights, model_dir)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import CONTROL_THERMOSTAT, HeatPump
+from ..params import CONTROL_THERMOSTAT, HeatPump
 
 Array = NDArray[np.float64]
 

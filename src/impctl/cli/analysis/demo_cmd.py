@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from . import cli
+from ...errors import InputError
+from .. import cli
 
 
 def _nights(text: str) -> tuple[int, int]:
@@ -57,7 +57,7 @@ def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, s
     Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on an accelerated clock →
     classifiers (trained or cached) → Neural-ODE fit → report and a truth-vs-estimate table.
     """
-    from ..demo import DemoOptions, run_demo
+    from ...demo import DemoOptions, run_demo
 
     if speed is not None and (speed <= 0 or speed > 30000):
         raise InputError("must lie in (0, 30000] (the Modbus polling keeps up to ~20000)",
@@ -107,13 +107,13 @@ def report_command(config_path, db_path, fit_path, out) -> None:
     the store; writes OUT/report.html and OUT/fig_nights.png, fig_heat_demand.png,
     fig_classes.png, fig_parameters.png.
     """
-    from ..report import write_report
-    from ..report.fit_json import read_fit_json
+    from ...report import write_report
+    from ...report.fit_json import read_fit_json
 
     tz = "Europe/Ljubljana"
     fit = read_fit_json(fit_path) if fit_path is not None else None
     if db_path is None:
-        from ..config import load_config
+        from ...config import load_config
 
         cfg = load_config(config_path)
         db_path, tz = cfg.db_path, cfg.timezone

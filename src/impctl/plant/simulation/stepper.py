@@ -1,6 +1,6 @@
 """One house, one step at a time: the plant behind the Modbus simulator.
 
-:class:`Plant` wraps :class:`~impctl.plant.simulate.PlantCore` for a single house. The simulator
+:class:`Plant` wraps :class:`~.simulate.PlantCore` for a single house. The simulator
 sets the inputs it gets from registers (room setpoint, loop mode, system on/off) and calls
 :meth:`Plant.step` with the outdoor temperature; DHW charges come from :func:`periodic` (or any
 schedule), defrosts from the heat pump's own logic (or ``defrost=True`` to force one).
@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import HouseParameters
-from .params import PlantParams
-from .sensors import SensorBank
+from ...model import HouseParameters
+from ..instruments.sensors import SensorBank
+from ..params import PlantParams
 from .simulate import OUTPUTS, PlantCore
 
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import Gains
+from ..params import Gains
 
 Array = NDArray[np.float64]
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from . import cli
+from ...errors import InputError
+from .. import cli
 
 
 @cli.group("fleet")
@@ -52,7 +52,7 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
     Parquet file / dataset with a 'household' column plus the NIGHTS columns. A household that
     cannot be fitted (unreadable, too few nights, failed fit) gets a row saying why.
     """
-    from ..fleet.run import fit_fleet
+    from ...fleet.run import fit_fleet
 
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
                     tz=tz, timestamps=timestamps, resume=resume, batch_size=batch_size,
@@ -64,7 +64,7 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                f"in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
                f"{run.workers} workers")
     if report_dir is not None:
-        from ..fleet.report import write_fleet_report
+        from ...fleet.report import write_fleet_report
 
         page = write_fleet_report(out, report_dir)
         click.echo(f"report written to {page}")
@@ -97,7 +97,7 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
     if source.suffix == ".json" and source.is_file():
         if households:
             raise InputError("--household applies to a FLEET.parquet source", source)
-        from ..flex import flexibility_of_fit
+        from ...flex import flexibility_of_fit
 
         try:
             summary = json.loads(source.read_text())
@@ -110,7 +110,7 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
         except InputError as exc:
             raise exc.at(source) from None
     else:
-        from ..fleet.flex_rows import fleet_flexibility
+        from ...fleet.flex_rows import fleet_flexibility
 
         results = fleet_flexibility(source, list(households), **conditions)
     if as_json:

@@ -1,8 +1,8 @@
 """The realistic plant over time: batch (many houses, numpy) and step-wise (one house).
 
 Both run the same :class:`PlantCore`: per step the controller decides the heat pump's output from
-the sensors, the envelope + emitter network is solved (:mod:`impctl.plant.envelope`), the sensors
-read the result. Units: °C, W, J, s.
+the sensors, the envelope + emitter network is solved (:mod:`impctl.plant.building.envelope`),
+the sensors read the result. Units: °C, W, J, s.
 """
 
 from __future__ import annotations
@@ -13,12 +13,19 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..model import HouseParameters
-from . import emitter as em
-from .envelope import CapacitySplit, Network, NodeState, Solver, split_capacity, steady_state
-from .heatpump import Controller, ControlState, cop, nominal_output_w
-from .params import CONTROL_IDEAL, PlantParams
-from .sensors import SensorBank
+from ...model import HouseParameters
+from ..building.envelope import (
+    CapacitySplit,
+    Network,
+    NodeState,
+    Solver,
+    split_capacity,
+    steady_state,
+)
+from ..hydronics import emitter as em
+from ..hydronics.heatpump import Controller, ControlState, cop, nominal_output_w
+from ..instruments.sensors import SensorBank
+from ..params import CONTROL_IDEAL, PlantParams
 
 Array = NDArray[np.float64]
 
@@ -233,7 +240,7 @@ def simulate_plant(
     setpoint_c : array, optional
         Room setpoint per step [°C]; NaN = space heating off (loop off). Default: off.
     internal_gains_w, solar_gains_w : float or array
-        Φ_int and transmitted Φ_sol [W] (:mod:`impctl.plant.gains` builds realistic ones).
+        Φ_int and transmitted Φ_sol [W] (:mod:`impctl.plant.building.gains` builds realistic ones).
     dhw : bool array, optional
         Steps with a DHW charge (space heating paused).
     t_init_c, t_m_init_c : float or array (n,)

@@ -9,9 +9,9 @@ from zoneinfo import ZoneInfo
 
 import click
 
-from ..errors import InputError
-from . import cli
-from .device_cmds import _config_option
+from ...errors import InputError
+from .. import cli
+from .commands import _config_option
 
 
 def state_dir_problem(state_dir: str | Path) -> str | None:
@@ -43,8 +43,8 @@ def state_dir_problem(state_dir: str | Path) -> str | None:
 
 def _tonight(cfg, store) -> list[str]:
     """What the next night would do, as lines for people."""
-    from ..daemon.schedule import next_act_time, peek_next_night, why_no_night
-    from ..daemon.service import clock_from_config
+    from ...daemon.schedule import next_act_time, peek_next_night, why_no_night
+    from ...daemon.service import clock_from_config
 
     tz = ZoneInfo(cfg.timezone)
     act = next_act_time(cfg, clock_from_config(cfg).now())
@@ -112,9 +112,9 @@ def _campaign_line(camp) -> str:
 def check_config_command(config_path: Path) -> None:
     """Check a configuration: every problem at once (exit 2), else what the daemon would do
     at the next night. Touches nothing: no heat pump, no store created."""
-    from ..config import ConfigError, load_config, read_config_toml
-    from ..daemon.lock import probe
-    from ..store import Store
+    from ...config import ConfigError, load_config, read_config_toml
+    from ...daemon.lock import probe
+    from ...store import Store
 
     problems: list[InputError] = []
     cfg = None

@@ -7,7 +7,7 @@ is split, total unchanged (:func:`split_capacity`):
 * C_air = ρc_air · V at the air node (3 kJ/(m²K) of floor at 2.5 m; RH §1),
 * C_fur = furniture per m² · A_f on a furniture node coupled to the air by G_fur = rate · C_fur
   (τ ≈ 76 min; RH §1),
-* C_em = the emitter's water + metal / screed (:mod:`impctl.plant.emitter`),
+* C_em = the emitter's water + metal / screed (:mod:`impctl.plant.hydronics.emitter`),
 * C_mass = C_m − C_air − C_fur − C_em on the ISO mass node.
 
 If C_air + C_fur + C_em exceeds ``max_share`` · C_m the three are scaled down together (so a
@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..model import HouseParameters
-from ..model.house import H_MS
+from ...model import HouseParameters
+from ...model.house import H_MS
 
 Array = NDArray[np.float64]
 

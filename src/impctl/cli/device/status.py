@@ -9,10 +9,10 @@ from zoneinfo import ZoneInfo
 def collect_status(cfg) -> dict:
     """Daemon liveness, current night with its latest sample, the next night, campaign, last
     fit, link events, write counters."""
-    from ..daemon.lock import probe
-    from ..heatpump import WriteBudget
-    from ..heatpump.health import read_health
-    from ..store import Store
+    from ...daemon.lock import probe
+    from ...heatpump import WriteBudget
+    from ...heatpump.health import read_health
+    from ...store import Store
 
     info = probe(cfg.state_dir)
     out: dict = {"state_dir": cfg.state_dir, "daemon": {
@@ -58,7 +58,7 @@ def collect_status(cfg) -> dict:
         out["next_night"] = _next_night(store, cfg)
     out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
     if cfg.budget_path.exists():
-        from ..daemon.service import clock_from_config
+        from ...daemon.service import clock_from_config
 
         # The budget counts per UTC day of the clock the daemon runs on (the accelerated
         # clock of a demo or test, else real time).
@@ -74,7 +74,7 @@ def collect_status(cfg) -> dict:
 
 def _campaign(store, cfg) -> dict:
     """Mode, nights run / valid, how the intervals shrank fit after fit, the last decision."""
-    from ..daemon.adaptive import absurd, campaign_state, decide_now, fit_history, rel_pct
+    from ...daemon.adaptive import absurd, campaign_state, decide_now, fit_history, rel_pct
 
     st = campaign_state(store, cfg)
     camp = cfg.campaign
@@ -112,8 +112,8 @@ def _finite(x: float) -> float | None:
 
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
-    from ..daemon.schedule import next_act_time, peek_next_night, why_no_night
-    from ..daemon.service import clock_from_config
+    from ...daemon.schedule import next_act_time, peek_next_night, why_no_night
+    from ...daemon.service import clock_from_config
 
     act = next_act_time(cfg, clock_from_config(cfg).now())
     req, request_id = peek_next_night(store, cfg, act)
@@ -239,7 +239,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
                        for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
-    from ..heatpump.health import health_lines
+    from ...heatpump.health import health_lines
 
     lines.extend(health_lines(st.get("heatpump")))  # issue 15
     return "\n".join(lines)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .params import RADIATORS, Emitter
+from ..params import RADIATORS, Emitter
 
 Array = NDArray[np.float64]
 

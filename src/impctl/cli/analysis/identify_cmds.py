@@ -12,9 +12,9 @@ from pathlib import Path
 
 import click
 
-from ..errors import InputError
-from . import cli
-from .checks import MAX_FILE_MB, refuse_large_file, time_zone
+from ...errors import InputError
+from .. import cli
+from ..checks import MAX_FILE_MB, refuse_large_file, time_zone
 
 #: Fewest households ``impctl train`` accepts: a test split of 20 % must hold every class.
 MIN_HOUSEHOLDS = 20
@@ -42,12 +42,12 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
     Table III), then prints the report.
     """
-    from ..classifiers.report import format_report
-    from ..classifiers.saved import default_model_dir, save_models
-    from ..classifiers.training import TrainConfig, train_classifiers
-    from ..population.dataset import generate_dataset
-    from ..population.virtual_imp import ImpSimConfig, usable_nights
-    from ..weather import read_weather
+    from ...classifiers.report import format_report
+    from ...classifiers.saved import default_model_dir, save_models
+    from ...classifiers.training import TrainConfig, train_classifiers
+    from ...population.dataset import generate_dataset
+    from ...population.virtual_imp import ImpSimConfig, usable_nights
+    from ...weather import read_weather
 
     if households < MIN_HOUSEHOLDS:
         raise InputError(f"--households must be >= {MIN_HOUSEHOLDS}, got {households}")
@@ -82,7 +82,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     text = format_report(reports, small=cfg.small_campaign)
     (out / "report.txt").write_text(text)
     (out / "report.json").write_text(json.dumps(report_json, indent=2) + "\n")
-    from ..classifiers.report import reliability_figure
+    from ...classifiers.report import reliability_figure
 
     reliability_figure(reports, out / "reliability.png")
     click.echo(text)
@@ -100,11 +100,11 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
-    from ..classifiers.saved import classify_nights
-    from ..imp import read_nights
-    from ..imp.gaps import cut_at_gaps
-    from ..imp.plausibility import check_units
-    from ..population.ranges import UNITS
+    from ...classifiers.saved import classify_nights
+    from ...imp import read_nights
+    from ...imp.gaps import cut_at_gaps
+    from ...imp.plausibility import check_units
+    from ...population.ranges import UNITS
 
     refuse_large_file(nights_path, MAX_FILE_MB)
     nights = read_nights(nights_path, tz)

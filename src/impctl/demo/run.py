@@ -1,0 +1,145 @@
+"""``impctl demo`` end to end: classifiers (cached, or trained alongside), the campaign, export
+and fit, the report and the summary."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+from ..errors import InputError
+from ..store import Store
+from .campaign import campaign_summary, run_campaign
+from .options import (
+    DEFAULT_SPEED,
+    DemoOptions,
+    Progress,
+    fit_night_gain_w,
+    demo_weather,
+    house_and_realism,
+    plant_summary,
+)
+
+
+def _cmd(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from impctl.cli import main; main()", *args]
+
+
+def _models_ok(model_dir: Path) -> bool:
+    try:
+        from ..classifiers.saved import load_models
+
+        load_models(model_dir)
+        return True
+    except (InputError, OSError):
+        return False
+
+
+def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):
+    """Reuse cached classifiers if compatible, else train in a subprocess (other core)."""
+    if _models_ok(model_dir):
+        progress.train_state = "cached models reused"
+        progress.line(f"classifiers: reusing the compatible models in {model_dir}")
+        return None
+    progress.train_state = "training"
+    progress.line(f"classifiers: training on {opts.households} virtual households "
+                  f"(in a subprocess) → {model_dir}")
+    log = open(opts.out / "train.log", "w")  # noqa: SIM115 - closed when the process ends
+    return subprocess.Popen(
+        _cmd("train", "--households", str(opts.households), "--seed", str(opts.seed),
+             "--out", str(model_dir)),
+        stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+
+
+def _wait_training(trainer, opts: DemoOptions, progress: Progress, why: str) -> None:
+    if trainer is None:
+        return
+    progress.line(f"waiting for the classifier training to finish ({why})")
+    if trainer.wait() != 0:
+        raise RuntimeError(f"training failed; see {opts.out / 'train.log'}")
+    progress.train_state = "trained"
+
+
+def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
+    """Run the whole demo; returns the summary dict (also written to OUT/summary.json)."""
+    # Inputs first: a bad house file or --out must leave nothing behind (not even demo.log).
+    if opts.plant not in ("realistic", "iso"):
+        raise InputError("must be realistic or iso", place="--plant")
+    if opts.speed is None:
+        opts = replace(opts, speed=DEFAULT_SPEED[opts.plant])
+    house, realism = house_and_realism(opts)
+    if opts.out.exists() and not opts.out.is_dir():
+        raise InputError("--out must be a directory", opts.out)
+    opts.out.mkdir(parents=True, exist_ok=True)
+    # The daemon's own log (every write, restore and night verdict) goes to a file; the
+    # console shows the demo's progress lines.
+    logging.basicConfig(level=logging.INFO, force=True,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+                        handlers=[logging.FileHandler(opts.out / "demo.log", mode="w")])
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+    logging.getLogger("apscheduler").setLevel(logging.WARNING)
+    plant = plant_summary(opts, realism)
+    progress = Progress(echo)
+    progress.line(f"plant: {plant['kind']} ({plant['description']})")
+    from ..classifiers.saved import default_model_dir
+
+    model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
+    trainer = _start_training(opts, model_dir, progress)
+    weather = demo_weather(opts)
+    if opts.adaptive:
+        # The daemon fits after every night and decides on those fits: with the classifiers.
+        opts = replace(opts, model_dir=model_dir)
+        _wait_training(trainer, opts, progress, "the adaptive campaign's fits use them")
+        trainer = None
+    db_path = asyncio.run(run_campaign(opts, house, progress, trainer, weather, realism))
+    _wait_training(trainer, opts, progress, "the fit uses them")
+    nights_csv = opts.out / "nights.csv"
+    fit_json = opts.out / "fit.json"
+    progress.line("exporting the valid nights" + ("" if opts.adaptive else
+                                                  " and fitting (impctl fit)"))
+    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
+                        "--force"), check=True,
+                   capture_output=True)
+    if opts.adaptive:  # the daemon's last fit, on every valid night, is the result
+        with Store(db_path) as store:
+            last, decision = store.last_fit(), store.decisions(1)
+        if last is None:
+            raise RuntimeError("demo: the adaptive campaign ended without a fit: "
+                               + (decision[0].reason if decision else "no decision")
+                               + " (see demo.log)")
+        result = last[2]
+        fit_json.write_text(json.dumps(result, indent=2) + "\n")
+    else:
+        fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
+                                  "--model-dir", str(model_dir), "--night-gain-w",
+                                  repr(fit_night_gain_w(opts))), capture_output=True, text=True)
+        if fit.returncode != 0:
+            raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
+        result = json.loads(fit_json.read_text())
+        with Store(db_path) as store:
+            store.add_fit([n.id for n in store.nights(valid=True)], result)
+    from ..report.demand import fitted_house, heat_demand_check
+    from ..report.summary import demo_summary, format_summary
+
+    with Store(db_path) as store:
+        demand = heat_demand_check(fitted_house(result), store, weather)
+    summary = demo_summary(house, result, demand, wall_s=time.perf_counter() - progress.t0,
+                           train_state=progress.train_state, plant=plant)
+    with Store(db_path) as store:
+        summary.update(campaign_summary(store, opts))
+    progress.line("writing the report")
+    from ..report import write_report
+
+    write_report(db_path, opts.out, truth=house, fit=result, summary=summary, demand=demand)
+    (opts.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    echo(format_summary(summary))
+    echo(summary["campaign"]["line"])
+    echo(f"report: {opts.out / 'report.html'}")
+    return summary

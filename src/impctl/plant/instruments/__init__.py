@@ -1,0 +1,2 @@
+"""What the controller and the gateway see: room and outdoor sensors, the heat meter
+(:mod:`.sensors`)."""

@@ -1,0 +1,136 @@
+"""The store's schema: the migrations from an empty file to the current version.
+
+The version is SQLite's ``PRAGMA user_version``; a store is migrated forward on open, one
+transaction per version, and a store written by a newer impctl is refused.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+from ..errors import InputError
+
+# Each entry migrates from version i to i + 1; never edit a released entry, append a new one.
+MIGRATIONS: tuple[str, ...] = (
+    """
+    CREATE TABLE nights (
+        id INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL CHECK (kind IN ('constrained', 'normal')),
+        setpoint_c REAL NOT NULL,
+        t_min_c REAL,
+        t_max_c REAL,
+        window_start TEXT NOT NULL,
+        window_end TEXT NOT NULL,
+        state TEXT NOT NULL,
+        source TEXT NOT NULL,
+        valid INTEGER,
+        reasons TEXT NOT NULL DEFAULT '[]',
+        started TEXT,
+        ended TEXT
+    );
+    CREATE TABLE samples (
+        night_id INTEGER NOT NULL REFERENCES nights(id),
+        ts TEXT NOT NULL,
+        t_air_c REAL, t_out_c REAL, q_hc_w REAL, p_el_w REAL, t_supply_c REAL, t_return_c REAL,
+        working_function INTEGER, defrost INTEGER, error_bits INTEGER, loop_mode INTEGER,
+        setpoint_c REAL, dhw_active INTEGER,
+        PRIMARY KEY (night_id, ts)
+    );
+    CREATE TABLE journal (
+        id INTEGER PRIMARY KEY,
+        night_id INTEGER REFERENCES nights(id),
+        register TEXT NOT NULL,
+        address INTEGER NOT NULL,
+        raw_value INTEGER NOT NULL,
+        recorded TEXT NOT NULL,
+        restored TEXT
+    );
+    CREATE INDEX journal_pending ON journal(register) WHERE restored IS NULL;
+    CREATE TABLE requests (
+        id INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL CHECK (kind IN ('constrained', 'normal')),
+        setpoint_c REAL,
+        run_when TEXT NOT NULL CHECK (run_when IN ('now', 'tonight')),
+        created TEXT NOT NULL,
+        taken TEXT,
+        extra TEXT NOT NULL DEFAULT '{}'
+    );
+    CREATE TABLE campaign (
+        seq INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL,
+        setpoint_c REAL NOT NULL,
+        night_id INTEGER REFERENCES nights(id)
+    );
+    CREATE TABLE fits (
+        id INTEGER PRIMARY KEY,
+        created TEXT NOT NULL,
+        nights TEXT NOT NULL,
+        result TEXT NOT NULL
+    );
+    CREATE TABLE events (
+        id INTEGER PRIMARY KEY,
+        ts TEXT NOT NULL,
+        level TEXT NOT NULL,
+        message TEXT NOT NULL
+    );
+    """,
+    # 2: requests expire and can be cancelled; a journal entry can end because the owner
+    # changed the register mid-night (kept, not overwritten) instead of being restored.
+    """
+    ALTER TABLE requests ADD COLUMN expires TEXT;
+    ALTER TABLE requests ADD COLUMN outcome TEXT;
+    ALTER TABLE journal ADD COLUMN outcome TEXT;
+    """,
+    # 3: household commands (abort, skip_tonight) queued for the daemon, e.g. over MQTT.
+    """
+    CREATE TABLE commands (
+        id INTEGER PRIMARY KEY,
+        name TEXT NOT NULL CHECK (name IN ('abort', 'skip_tonight')),
+        source TEXT NOT NULL,
+        created TEXT NOT NULL,
+        taken TEXT
+    );
+    """,
+    # 4: the adaptive campaign (issue 18). A fit keeps how many valid nights it used and the
+    # predictions of `impctl campaign next` made from it; each night's decision (run, skip,
+    # stop) is kept with its reason and the forecast it used.
+    """
+    ALTER TABLE fits ADD COLUMN night_count INTEGER;
+    UPDATE fits SET night_count = json_array_length(nights);
+    ALTER TABLE fits ADD COLUMN candidates TEXT;
+    CREATE TABLE decisions (
+        id INTEGER PRIMARY KEY,
+        created TEXT NOT NULL,
+        act TEXT,
+        action TEXT NOT NULL CHECK (action IN ('run', 'skip', 'stop')),
+        kind TEXT,
+        setpoint_c REAL,
+        reason TEXT NOT NULL,
+        reached INTEGER NOT NULL DEFAULT 0,
+        forecast_t_out_c REAL,
+        forecast_source TEXT
+    );
+    """,
+)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def migrate(db: sqlite3.Connection, path: Path) -> None:
+    """Bring the open store ``db`` (file ``path``, for messages) to :data:`SCHEMA_VERSION`."""
+    version = db.execute("PRAGMA user_version").fetchone()[0]
+    if version > SCHEMA_VERSION:
+        raise InputError(
+            f"database schema {version} is newer than this impctl ({SCHEMA_VERSION}); "
+            "upgrade impctl", path)
+    for target in range(version + 1, SCHEMA_VERSION + 1):
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            for statement in MIGRATIONS[target - 1].split(";"):
+                if statement.strip():
+                    db.execute(statement)
+            db.execute(f"PRAGMA user_version = {target}")
+            db.execute("COMMIT")
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
