@@ -21,8 +21,8 @@ from .options import (
     DEFAULT_SPEED,
     DemoOptions,
     Progress,
-    fit_night_gain_w,
     demo_weather,
+    fit_night_gain_w,
     house_and_realism,
     plant_summary,
 )
