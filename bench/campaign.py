@@ -301,6 +301,7 @@ def _worker(w: int) -> tuple[list, int, float]:
 
 
 def main() -> None:
+    global SEED, NORMAL_SETPOINTS
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=100)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
@@ -317,7 +318,8 @@ def main() -> None:
                     help="the adaptive strategies' normal setpoints [°C], of 21, 22, 23")
     ap.add_argument("--rule", action="append", default=[],
                     help="override a stop rule for the adaptive strategies, NAME=VALUE: "
-                         "min_gain, stall_nights, floor_dominance (repeatable)")
+                         "min_gain, criterion (worst|balanced), stall_nights, floor_dominance "
+                         "(repeatable)")
     ap.add_argument("--bootstrap", type=int, default=2000,
                     help="bootstrap resamples of the paired comparison")
     ap.add_argument("--trajectories", action="store_true",
@@ -328,7 +330,6 @@ def main() -> None:
     if unknown:
         ap.error(f"--strategies: unknown {', '.join(unknown)} (known: {', '.join(STRATEGIES)})")
     n, k = args.households, args.max_nights + 2
-    global SEED, NORMAL_SETPOINTS
     SEED = args.seed
     NORMAL_SETPOINTS = tuple(float(x) for x in args.normal.split(","))
     if not set(NORMAL_SETPOINTS) <= {sp for kind, sp in VARIANTS if kind == "normal"}:
@@ -338,6 +339,8 @@ def main() -> None:
         name, _, value = item.partition("=")
         if name == "min_gain":
             policy.MIN_GAIN = float(value)     # before the workers fork
+        elif name == "criterion":
+            policy.CRITERION = value
         elif name in ("stall_nights", "floor_dominance"):
             overrides[name] = int(value) if name == "stall_nights" else float(value)
         else:
@@ -375,7 +378,8 @@ def main() -> None:
     print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
           f"{os.getloadavg()[0]:.1f}")
-    print(f"rules: min_gain {policy.MIN_GAIN:g}, adaptive normal setpoints "
+    print(f"rules: min_gain {policy.MIN_GAIN:g}, criterion {policy.CRITERION}, adaptive "
+          f"normal setpoints "
           f"{NORMAL_SETPOINTS}, target overrides {overrides or 'none'}")
     print("command: " + " ".join(["python"] + sys.argv))
 

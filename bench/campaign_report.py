@@ -41,7 +41,7 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
                     key = f"{kind[0]}{sp:g}"
                     count[key] = count.get(key, 0) + 1
         total = sum(count.values()) or 1
-        print(f"  {STRATEGIES[s]:<28} " + ", ".join(
+        print(f"  {STRATEGIES[s]:<40} " + ", ".join(
             f"{k} {100 * v / total:.0f} %" for k, v in sorted(count.items())))
     if "fixed" not in strategies:
         return
@@ -67,7 +67,7 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
             wins = np.mean(a[:, q] <= b[:, q]) * 100
             cells.append(f"{name} {d:+.1f} ({lo:+.1f} … {hi:+.1f}), no worse in {wins:.0f} %")
         dn = np.median(a[:, 2]) - np.median(b[:, 2])
-        print(f"  {STRATEGIES[s]:<28} n={len(common)}: " + "; ".join(cells)
+        print(f"  {STRATEGIES[s]:<40} n={len(common)}: " + "; ".join(cells)
               + f"; nights median {dn:+g}")
 
 
@@ -87,7 +87,7 @@ def trajectories(records: list, houses, strategy: str) -> None:
 def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
     print(f"\nTarget: HLC ±{target.hlc_rel:.0%}, τ ±{target.tau_rel:.0%} (95 % half-width / "
           f"estimate), max {target.max_nights} nights, stall {target.stall_nights} nights")
-    print(f"{'strategy':<28} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
+    print(f"{'strategy':<40} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
           f"{'cover HLC/τ':>12} {'|err| HLC/τ %':>14} {'±HLC/τ % med':>13}  stopped by")
     rows = []
     for s in strategies:
@@ -117,7 +117,7 @@ def summarise(records: list, houses, target: Target, strategies: list[str]) -> N
         # stop on it
         met = [r[3] is not None and target.ratio(r[3].hlc_rel, r[3].tau_rel) <= 1 for r in sub]
         reasons = ", ".join(f"{k} {v}" for k, v in sorted(why.items()))
-        print(f"{STRATEGIES[s]:<28} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
+        print(f"{STRATEGIES[s]:<40} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
               f"{pct(met):>7.0f}% {len(sub) - len(got):>7d} "
               f"{pct(cov_h):>5.0f}/{pct(cov_t):<4.0f}% {med(err_h):>6.1f} / {med(err_t):<5.1f} "
               f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  {reasons}")

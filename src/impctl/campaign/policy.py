@@ -56,6 +56,10 @@ MIN_GAIN = 0.10
 #: fit's (1/√2: the floor is at least half the variance).
 FLOOR_DOMINANT = 1 / math.sqrt(2)
 Z95 = 1.959964
+#: How the next night is chosen among the candidates: "worst" — the smallest predicted worst
+#: ratio max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of both
+#: half-widths, Σ log(predicted/now) over HLC and τ.
+CRITERION = "worst"
 
 
 @dataclass(frozen=True)
@@ -317,8 +321,8 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     if short:
         preferred = [c for c in allowed if c.kind in short]
         allowed = preferred or allowed
-    best = (min(allowed, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
-                                        c.kind != NORMAL, c.setpoint_c))
+    best = (min(allowed, key=lambda c: (_score(c, latest, target), c.kind != NORMAL,
+                                        c.setpoint_c))
             if allowed else None)
     if latest is not None and enough_each:
         # judged on every candidate: a constrained night not allowed tonight is tomorrow
@@ -352,6 +356,16 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                     f"Next: a {best.kind} night at {best.setpoint_c:g} °C{rule}, predicted to "
                     f"bring HLC to ±{best.hlc_rel_pred:.1%} and τ to ±{best.tau_rel_pred:.1%} "
                     f"(now {_precision(latest)}; worst ratio to target {now:.2f} → {then:.2f}).")
+
+
+def _score(c: Candidate, latest: FitSummary | None, target: Target) -> float:
+    """A candidate's score for the choice (smaller is better): :data:`CRITERION`."""
+    if CRITERION == "balanced" and latest is not None:
+        now = (_num(latest.hlc_rel), _num(latest.tau_rel))
+        pred = (_num(c.hlc_rel_pred), _num(c.tau_rel_pred))
+        if all(math.isfinite(x) and x > 0 for x in now + pred):
+            return math.log(pred[0] / now[0]) + math.log(pred[1] / now[1])
+    return target.ratio(c.hlc_rel_pred, c.tau_rel_pred)
 
 
 def parse_candidates(block: dict) -> list[Candidate]:
