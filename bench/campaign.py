@@ -318,7 +318,8 @@ def main() -> None:
                     help="the adaptive strategies' normal setpoints [°C], of 21, 22, 23")
     ap.add_argument("--rule", action="append", default=[],
                     help="override a stop rule for the adaptive strategies, NAME=VALUE: "
-                         "min_gain, criterion (worst|balanced), stall_nights, floor_dominance "
+                         "min_gain, criterion (worst|balanced), stall_nights, floor_dominance, "
+                         "min_each "
                          "(repeatable)")
     ap.add_argument("--bootstrap", type=int, default=2000,
                     help="bootstrap resamples of the paired comparison")
@@ -341,8 +342,8 @@ def main() -> None:
             policy.MIN_GAIN = float(value)     # before the workers fork
         elif name == "criterion":
             policy.CRITERION = value
-        elif name in ("stall_nights", "floor_dominance"):
-            overrides[name] = int(value) if name == "stall_nights" else float(value)
+        elif name in ("stall_nights", "floor_dominance", "min_each"):
+            overrides[name] = float(value) if name == "floor_dominance" else int(value)
         else:
             ap.error(f"--rule: unknown {name!r}")
     progress = Progress()
