@@ -2,7 +2,8 @@
 
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
-          [--plant iso|realistic] [--fine-households N]
+          [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
+          [--setpoints C,C,C]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -15,9 +16,10 @@ classifiers are trained with other seeds, so they never saw these houses). Each 
 the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained, 6 normal
 at 22/23/24 °C); constrained nights pre-heat to T_set + 1.5 °C and cool 22:00–05:00 (the paper's
-case study), normal nights step up from the 21 °C day. Measurements: T_air and T_out rounded to
-0.1 °C, each heat-power sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds
-(temperatures are readings, power the mean until the next sample).
+case study), normal nights step up from the 21 °C day; both 2 h before the window, as the
+gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power sample × (1 +
+0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power the mean until
+the next sample).
 
 Ranges for floor_area, c_f, u_walls: ``classifier`` (the trained forests of ``impctl train`` on
 the household's nights — the whole pipeline), ``true`` (the class holding the true value) or
@@ -50,6 +52,12 @@ households simulated by the classifiers' own IMP simulator (a second, independen
 Targets (issue 14, :data:`TARGETS`): realistic plant at 5-minute rows median HLC ≤ 5 %, τ ≤ 5 %,
 C_m ≤ 10 %, ε ≤ 8 %, coverage ≥ 90 %; at 1-minute and hourly rows reported, coverage ≥ 85 %;
 ideal 5R1C ≤ 1 / 1 / 3 %, ε ≤ 3 %, coverage ≥ 90 %; ≤ 1 s per household at 5-minute rows.
+
+``--preheat-h H`` holds T_max (constrained) and T_set (normal nights) for H hours before the
+22:00 window instead of the gateway's 2 h (``night.preheat_h``); ``--preheat-h-normal H`` sets
+the normal nights' alone (issue 14, branch h14p; before it, this bench ran constrained 4 h and
+normal 0 h, a protocol the gateway never ran: ``--preheat-h 4 --preheat-h-normal 0``). Every
+run prints what the campaign costs the household: heat [kWh] and hours above the day setpoint.
 
 ``--ranges true,classifier`` fits the same simulated nights with each range source in turn (the
 classifiers of ``--model-dir``, e.g. trained by ``impctl train --plant realistic``); a final
@@ -147,6 +155,33 @@ def demand_eps(houses: list[HouseParameters], sched, truth_energy: np.ndarray) -
     return out
 
 
+def val_schedule(n: int, args=None):
+    """The validation schedule of ``n`` households, with ``args``' pre-heat lengths if given."""
+    kw = {}
+    if args is not None and getattr(args, "preheat_h", None) is not None:
+        kw = {"constrained_preheat_h": args.preheat_h, "normal_preheat_h": args.preheat_h}
+    if args is not None and getattr(args, "preheat_h_normal", None) is not None:
+        kw["normal_preheat_h"] = args.preheat_h_normal
+    if args is not None and getattr(args, "setpoints", None):
+        kw["setpoints_c"] = tuple(float(x) for x in args.setpoints.split(","))
+    return imp_schedule(n, seed=VAL_SEED, **kw)
+
+
+def campaign_cost(heat, sched) -> tuple[float, float]:
+    """Mean heat [kWh per household] the heating delivers over the whole schedule (spin-up
+    days and the day after the last night included, so heat stored by a pre-heat and given back
+    later is netted out; compare runs), and the hours per night held above the day setpoint
+    outside the windows (the comfort cost of the pre-heat)."""
+    phi = np.atleast_2d(heat.phi_hc_w.T).T
+    n_nights = len(sched.windows)
+    kwh = phi.sum(axis=0) * sched.dt_s / 3.6e6
+    inside = np.zeros(len(sched.index), bool)
+    for _, _, w0, w1, _ in sched.windows:
+        inside[w0:w1] = True
+    raised = (sched.setpoint_c[~inside] > sched.t_m_init_c + 1e-9).sum(axis=0)
+    return float(np.mean(kwh)), float(np.median(raised) * sched.dt_s / 3600.0 / n_nights)
+
+
 def _sub_schedule(sched, idx):
     from dataclasses import replace
 
@@ -188,22 +223,24 @@ class _TrueHeat:
 _SIMULATED: dict = {}
 
 
-def simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
+def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
     """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
     simulated once per population size and plant, so every sample step and range source
-    reads the same nights."""
-    key = (houses_arr.n_houses, plant)
+    reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
+    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise)."""
+    key = (houses_arr.n_houses, plant, realism[0] if realism else None,
+           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()))
     if key not in _SIMULATED:
-        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant)
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism)
     return _SIMULATED[key]
 
 
-def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str):
+def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
     if plant == "iso":
         sim, sp = run_schedule(houses_arr, sched)
         return sim, sp, sim
-    params = sample_params(houses_arr.n_houses, VAL_SEED)
-    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED)
+    _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
+    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains)
     return logged, sp, _TrueHeat(logged)
 
 
@@ -211,9 +248,11 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
              limit: int | None = None) -> dict:
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
     n = houses_arr.n_houses
-    sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    sched = val_schedule(n, args)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
+                                      getattr(args, "realism", None))
     truth_e = window_energy(heat, sched)
+    res_cost = campaign_cost(heat, sched)
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
         # The plant's heat output also carries its gains, control and emitter, which no 5R1C
@@ -290,6 +329,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     # Steady-state demand from the coheating HLC: E = HLC·∫(T_air − T_out)dt per window.
     res["eps_coh"] = coheating_eps(res["coh_hlc"], sched, sim, truth_e)
     res["eps_floor"] = floor
+    res["cost"] = res_cost
     return res
 
 
@@ -346,6 +386,10 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
 
     print(f"\n### sample step {step_s:g} s, ranges: {range_source}, "
           f"{len(truth)} households, normal-night model '{args.normal_model}'")
+    if "cost" in res:
+        print("campaign cost: heat {:.1f} kWh per household (mean, the whole schedule: compare "
+              "runs); {:.1f} h per night above the day setpoint outside the windows"
+              .format(*res["cost"]))
     hits = res["ranges_hit"]
     if hits and hits[0]:
         share = {k: 100.0 * np.mean([h[k] for h in hits]) for k in hits[0]}
@@ -386,8 +430,9 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                            int(ty["room thermostat"][i])) for i, f in enumerate(fits)])
     if "types" in res:
         print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
-              "| coverage HLC/τ/C_m % | median ± half-width HLC/τ/C_m % |")
-        print("|---|---|---|---|---|---|---|")
+              "| signed median HLC/τ/C_m % | coverage HLC/τ/C_m % "
+              "| median ± half-width HLC/τ/C_m % |")
+        print("|---|---|---|---|---|---|---|---|")
         truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
         for label, sel in res["types"].items():
             if not sel.any():
@@ -400,7 +445,9 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
                 tv = np.asarray(truths[k])[sel]
                 covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
                                                                                   strict=True)]))
-            print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells)
+            signed = " / ".join(f"{np.nanmedian(e_fit[k][sel]):+.1f}" for k in ("hlc", "tau",
+                                                                                "c_m"))
+            print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells) + f" | {signed}"
                   + " | " + " / ".join(f"{c:.0f}" for c in covs) + " | "
                   + " / ".join(f"{h:.0f}" for h in hws) + " |")
     if res.get("eps_floor") is not None:
@@ -470,8 +517,9 @@ def _model_error_lines(fits, truths: dict) -> None:
 def compare(houses_arr: HouseParameters, args) -> None:
     """Normal-night models (series / mean / demand) and optimisers (LM / Adam) side by side."""
     n = houses_arr.n_houses
-    sched = imp_schedule(n, seed=VAL_SEED)
-    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant)
+    sched = val_schedule(n, args)
+    sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
+                                      getattr(args, "realism", None))
     truth_e = window_energy(heat, sched)
     noise = 0.05 if args.plant == "iso" else 0.0
     variants = [("demand", "lm"), ("series", "lm"), ("mean", "lm")]
@@ -667,6 +715,13 @@ def main() -> None:
     ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
                     help="validation houses on the ideal 5R1C (iso) or on the realistic plant "
                          "(impctl.plant, realism drawn with seed 20260)")
+    ap.add_argument("--preheat-h", type=float, default=None, metavar="H",
+                    help="pre-heat before the window, both kinds of night [h] (default: the "
+                         "gateway's 2 h)")
+    ap.add_argument("--preheat-h-normal", type=float, default=None, metavar="H",
+                    help="pre-heat of the normal nights alone [h]")
+    ap.add_argument("--setpoints", default=None, metavar="C,C,C",
+                    help="T_set of the nights in turn [°C] (default 22,23,24)")
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")

@@ -1,28 +1,43 @@
-"""Error budget of the night fit on the realistic plant: one realism factor at a time.
+"""Error budget of the night fit on the realistic plant: what each group of realism costs.
 
-Run:  .venv/bin/python bench/fit_budget.py [--households 20] [--factors ideal,air,...]
-          [--step 300] [--night-gain] [--no-offset-allowance] [--fit smooth_out_h=1,...]
+Run:  .venv/bin/python bench/fit_budget.py [--households 50] [--rows none,only:air,...]
 
-The validation houses of ``bench/fit.py`` (``sample_households(seed=20260)``, its IMP schedule and
-weather) run on the realistic plant with everything ideal (``PlantParams.ideal()``, no gains)
-except the named factor, which takes the value ``impctl.population.realism.sample_params`` drew
-for that house (seed 20260, as in ``bench/fit.py --plant realistic``):
+An ablation on exactly the households, weather, schedule, nights and seeds of
+``bench/fit.py --households 50 --ranges true --plant realistic --steps 300 --no-lsq`` (the
+protocol is imported from it: ``fit.run_step`` with the fit, ε and coverage it uses). Each
+group of realism is either as ``impctl.population.realism.sample_params`` drew it for the
+house (seed 20260) or at its ideal limit:
 
-* ``ideal``: nothing (checks that the plant reproduces the 5R1C the fit assumes);
-* ``air``: air and furniture capacity (``capacities``);
-* ``emitter``: radiators / underfloor screed, buffer (``emitter``), ideal control;
-* ``control``: the emitter plus the heat pump's control (weather curve / thermostat, on/off or
-  modulating, cycling, defrost) — control without an emitter is not a physical plant;
-* ``gains``: internal (night 100–400 W) and solar gains;
-* ``noise``: sensor noise, quantisation and lag, meter noise and positive-only integration;
-* ``offsets``: sensor offsets (T_air ±1 K, T_out ±2 K) and the meter's gain error (±5 %);
-* ``all``: every factor (the ``bench/fit.py --plant realistic`` houses).
+* ``meter_gain``: the heat meter's systematic gain error (±5 %) → 0;
+* ``offsets``: the sensors' offsets (T_air ±1 K, T_out ±2 K) → 0;
+* ``gains``: internal (night 100–400 W, drift) and solar gains → none (still drawn, so the
+  sensor noise stays the same);
+* ``sensors``: T_air noise, quantisation and lag, T_out noise, meter noise and positive-only
+  integration → perfect readings (the bench still rounds the logged T_air to 0.1 K, as
+  ``bench/fit.py`` does on both plants);
+* ``air``: air and furniture capacity → 0 (all of C_m in the 5R1C mass);
+* ``emitter``: radiator water and steel / underfloor screed and the buffer → a massless
+  radiator (kind radiators, 0 J/K; underfloor houses keep their exponent and water
+  temperature). The screed's range (130–250 kJ/(m²K)) has no zero: a massless underfloor
+  emitter is a massless radiator;
+* ``control``: the heat pump's control (weather curve / room thermostat, on/off cycling,
+  modulation limits, ramp, defrost) → ``CONTROL_IDEAL`` (the Annex C demand at the air node)
+  with defrost off.
 
-Per factor: median absolute error (and signed median) of HLC, τ, C_m, 95 % coverage, and two
-heat-demand errors: ``ε plant`` is ``bench/fit.py``'s (the fitted house replayed on the Annex C
-model holding the setpoints exactly, against the plant's true heat-pump output), ``ε 5R1C`` is
-against the true house replayed the same way; ``ε truth`` is ``ε plant`` of the true parameters
-themselves — the floor of ``ε plant`` that no parameter estimate can go below.
+The first three are what IMP nights cannot see: a gain error scales the metered power, an
+offset shifts ΔT, a constant night gain looks like a lower HLC (README "Limits"). The row
+``unseen`` (only those three on, each over its documented range) is the floor below which no
+fit of these nights can go.
+
+Rows (``--rows``, comma-separated, run in that order): ``all`` (bench/fit.py's houses), ``none``
+(every group ideal), ``only:G[+G…]`` (those groups on, the rest ideal), ``but:G[+G…]`` (every
+group on but those), ``unseen`` (= ``only:meter_gain+offsets+gains``). Per row: median / P90 of
+|error| and the signed median of HLC, τ, C_m; heat-demand ε (median / P90, against the true
+house replayed like the estimate, ``bench/fit.py --eps-truth house``); coverage of the 95 %
+intervals (calibrated model-error share included, as the bench's default); fit time per house.
+
+``--gain-prior-w W`` adds W to the metered power of every night before the fit: what a known
+constant night gain (e.g. the documented range's midpoint, 250 W) would buy.
 """
 
 from __future__ import annotations
@@ -30,185 +45,148 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
-from fit import (  # noqa: E402  (the bench's own helpers)
-    ACH,
-    VAL_SEED,
-    _safe_house,
-    demand_eps,
-    rel,
-    true_ranges,
-    window_energy,
-)
+import fit  # noqa: E402  (bench/fit.py's protocol)
+from fit import VAL_SEED, rel, run_step, stats  # noqa: E402
 
-from impctl.fit.estimator import NightFit  # noqa: E402
-from impctl.plant import PlantParams, simulate_plant  # noqa: E402
-from impctl.plant.gains import internal_gains_w, solar_gains_w  # noqa: E402
+from impctl.plant.params import CONTROL_IDEAL, RADIATORS, PlantParams  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
-from impctl.population.synth_nights import (  # noqa: E402
-    PlantSchedule,
-    imp_schedule,
-    run_schedule,
-    sample_nights,
-)
 
-FACTORS = ("ideal", "air", "emitter", "control", "gains", "noise", "offsets", "all")
-#: The parts of ``noise``, one at a time (``--factors lag,t_air_noise,...``).
-NOISE_PARTS = {
-    "lag": ("t_air_lag_s",),
-    "t_air_noise": ("t_air_noise_k", "t_air_quantum_k"),
-    "t_out_noise": ("t_out_noise_k",),
-    "meter": ("meter_noise", "meter_positive_only"),
+#: Groups of realism and what each is when on (module docstring); order = table order.
+GROUPS = {
+    "meter_gain": "heat-meter gain error ±5 %",
+    "offsets": "sensor offsets T_air ±1 K, T_out ±2 K",
+    "gains": "internal + solar gains",
+    "sensors": "sensor noise, quantisation, lag; meter noise",
+    "air": "air + furniture capacity",
+    "emitter": "emitter capacity (radiators, screed, buffer)",
+    "control": "heat-pump control, cycling, defrost",
 }
+#: What the nights cannot see (the floor row).
+UNSEEN = ("meter_gain", "offsets", "gains")
+DEFAULT_ROWS = (["none"] + [f"only:{g}" for g in GROUPS] + ["unseen", "all"]
+                + [f"but:{g}" for g in GROUPS])
 
 
-def factor_params(name: str, full: PlantParams) -> tuple[PlantParams, bool]:
-    """(realism options, gains on) with only factor ``name`` taken from ``full``."""
-    ideal = PlantParams.ideal()
-    s = full.sensors
-    if name == "ideal":
-        return ideal, False
-    if name == "air":
-        return replace(ideal, capacities=full.capacities), False
-    if name == "emitter":
-        return replace(ideal, emitter=full.emitter), False
-    if name == "control":
-        return replace(ideal, emitter=full.emitter, heat_pump=full.heat_pump), False
-    if name == "gains":
-        return replace(ideal, gains=full.gains), True
-    if name == "noise":
-        return replace(ideal, sensors=replace(s, t_air_offset_k=0.0, t_out_offset_k=0.0,
-                                              meter_gain_error=0.0)), False
-    if name == "offsets":
-        return replace(ideal, sensors=replace(
-            ideal.sensors, t_air_offset_k=s.t_air_offset_k, t_out_offset_k=s.t_out_offset_k,
-            meter_gain_error=s.meter_gain_error)), False
-    if name == "all":
-        return full, True
-    if name in NOISE_PARTS:
-        return replace(ideal, sensors=replace(ideal.sensors, **{
-            f: getattr(s, f) for f in NOISE_PARTS[name]})), False
-    raise SystemExit(f"unknown factor {name!r}; choose from {', '.join(FACTORS)}")
+def ablate(full: PlantParams, off: set[str]) -> tuple[PlantParams, bool]:
+    """(realism options, gains on) with the groups in ``off`` at their ideal limit."""
+    p = full
+    if "meter_gain" in off:
+        p = p.with_section("sensors", meter_gain_error=0.0)
+    if "offsets" in off:
+        p = p.with_section("sensors", t_air_offset_k=0.0, t_out_offset_k=0.0)
+    if "sensors" in off:
+        p = p.with_section("sensors", t_air_noise_k=0.0, t_air_quantum_k=0.0, t_air_lag_s=0.0,
+                           t_out_noise_k=0.0, meter_noise=0.0, meter_positive_only=0)
+    if "air" in off:
+        p = p.with_section("capacities", air_j_per_m3k=0.0, furniture_j_per_m2k=0.0)
+    if "emitter" in off:
+        p = p.with_section("emitter", kind=RADIATORS, radiator_j_per_k_per_w=0.0,
+                           buffer_l_per_kw=0.0)
+    if "control" in off:
+        p = p.with_section("heat_pump", control=CONTROL_IDEAL, defrost=0)
+    return p, "gains" not in off
 
 
-class _TrueHeat:
-    def __init__(self, run):
-        self.phi_hc_w = run["heat_pump_w"]
+def groups_on(row: str) -> set[str]:
+    """The groups a row spec switches on (module docstring)."""
+    if row == "all":
+        return set(GROUPS)
+    if row == "none":
+        return set()
+    if row == "unseen":
+        return set(UNSEEN)
+    kind, _, names = row.partition(":")
+    chosen = set(names.split("+"))
+    if kind not in ("only", "but") or not chosen or not chosen <= set(GROUPS):
+        raise SystemExit(f"--rows: {row!r}: use all, none, unseen, only:G[+G…] or but:G[+G…] "
+                         f"with G in {', '.join(GROUPS)}")
+    return chosen if kind == "only" else set(GROUPS) - chosen
 
 
-def run_plant(houses, sched, params: PlantParams, gains: bool):
-    """``run_schedule_plant`` with the gains switchable (their ranges exclude zero)."""
-    n = sched.t_out_c.shape[1]
-    rng = np.random.default_rng(np.random.SeedSequence([VAL_SEED, 0x6A1]))
-    local = sched.index.tz_convert(sched.index.tz) if sched.index.tz else sched.index
-    hours = (local.hour + local.minute / 60.0).to_numpy()
-    day = (local.normalize().tz_localize(None).asi8 // 86_400_000_000_000)
-    g_int = internal_gains_w(hours, params.gains, n, rng, sched.dt_s)
-    g_sol = solar_gains_w(hours, day, params.gains, n, rng)
-    if not gains:
-        g_int, g_sol = 0.0, 0.0
-    run = simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,
-                         internal_gains_w=g_int, solar_gains_w=g_sol,
-                         t_init_c=sched.t_m_init_c, seed=int(rng.integers(2**31)),
-                         outputs=("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w",
-                                  "heat_pump_w", "t_air_c"))
-    return PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
+def fit_args(realism) -> SimpleNamespace:
+    """``bench/fit.py``'s options for ``--ranges true --plant realistic --no-lsq`` (its
+    defaults otherwise), with the ablated realism."""
+    return SimpleNamespace(plant="realistic", normal_model="demand", starts=4, nuisance=True,
+                           model_error=True, lsq=False, eps_truth="house", verbose=False,
+                           model_dir=None, realism=realism)
 
 
-def med(v) -> float:
-    v = np.asarray(v, float)
-    return float(np.nanmedian(np.abs(v)))
+@contextmanager
+def gain_prior(watts: float):
+    """``bench/fit.py``'s nights with ``watts`` added to the metered power of every night: the
+    fit told that the house has a constant night gain of that size (heat into the room either
+    way), as a prior could tell it. 0: the nights unchanged."""
+    sample = fit.sample_nights
+    if watts:
+        fit.sample_nights = lambda *a, **k: [replace(x, q_hc_w=x.q_hc_w + watts)
+                                             for x in sample(*a, **k)]
+    try:
+        yield
+    finally:
+        fit.sample_nights = sample
 
 
-def one_factor(name: str, houses, sched, full, args, ideal_e) -> dict:
-    params, gains = factor_params(name, full)
-    logged = run_plant(houses, sched, params, gains)
-    truth_e = window_energy(_TrueHeat(logged.run), sched)
-    n = houses.n_houses
-    err = {k: [] for k in ("hlc", "tau", "c_m")}
-    cov = {k: [] for k in err}
-    fitted, times = [], []
-    for i in range(n):
-        house = houses.take(i)
-        nights = sample_nights(logged, sched.setpoint_c, sched, i, sample_step_s=args.step,
-                               quantise_k=0.1, power_noise=0.0, seed=VAL_SEED + i)
-        kw = {"night_gain": args.night_gain} if args.night_gain else {}
-        if args.no_offset_allowance:
-            kw["sensor_offsets_k"] = (0.0, 0.0)
-        fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1], per_night=False, **kw,
-                       **args.fit_kw).fit(nights, true_ranges(house))
-        for k, t in (("hlc", house.hlc_w_per_k), ("tau", house.tau_h),
-                     ("c_m", house.c_m_j_per_k)):
-            e = fit.lumped_[k]
-            err[k].append(rel(e.value, t))
-            cov[k].append(e.low <= t <= e.high)
-        fitted.append(_safe_house(fit.parameters_))
-        times.append(fit.fit_time_s_)
-        if args.verbose:
-            print(f"  {name} house {i}: HLC {err['hlc'][-1]:+.1f} τ {err['tau'][-1]:+.1f} "
-                  f"C_m {err['c_m'][-1]:+.1f} %", flush=True)
-    eps_plant = demand_eps(fitted, sched, truth_e)
-    eps_truth = 100.0 * np.mean(np.abs(ideal_e - truth_e) / truth_e, axis=0)
-    e_fit = np.full_like(ideal_e, np.nan)
-    ok = [h is not None for h in fitted]
-    if any(ok):
-        from impctl.model import HouseParameters
-
-        idx = np.flatnonzero(ok)
-        sub = HouseParameters.stack([fitted[j] for j in idx])
-        from fit import _sub_schedule
-
-        s2 = _sub_schedule(sched, idx)
-        sim, _ = run_schedule(sub, s2)
-        e_fit[:, idx] = window_energy(sim, s2)
-    eps_5r1c = 100.0 * np.mean(np.abs(e_fit - ideal_e) / ideal_e, axis=0)
-    return {"err": err, "cov": cov, "eps_plant": eps_plant, "eps_truth": eps_truth,
-            "eps_5r1c": eps_5r1c, "time": np.median(times)}
+def row_figures(res: dict) -> dict:
+    truth = res["truth"]
+    true = {"hlc": [h.hlc_w_per_k for h in truth], "tau": [h.tau_h for h in truth],
+            "c_m": [h.c_m_j_per_k for h in truth]}
+    out = {}
+    for k, t in true.items():
+        est = [f.lumped_[k] for f in res["fit"]]
+        err = rel([e.value for e in est], t)
+        out[k] = (*stats(err), float(np.nanmedian(err)))
+        out[f"cov_{k}"] = 100.0 * np.mean([e.low <= v <= e.high
+                                           for e, v in zip(est, t, strict=True)])
+    out["eps"] = stats(res["eps_fit"])
+    out["time"] = float(np.median(res["time"]))
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--households", type=int, default=20)
-    ap.add_argument("--factors", default=",".join(FACTORS))
-    ap.add_argument("--step", type=float, default=300.0, help="sample step [s]")
-    ap.add_argument("--night-gain", action="store_true", help="fit with the night-gain term")
-    ap.add_argument("--no-offset-allowance", action="store_true")
-    ap.add_argument("--fit", default="", metavar="NAME=VALUE,...",
-                    help="NightFit options, e.g. smooth_out_h=1 (numbers)")
-    ap.add_argument("--verbose", action="store_true")
+    ap.add_argument("--households", type=int, default=50)
+    ap.add_argument("--rows", default=",".join(DEFAULT_ROWS),
+                    help="row specs, comma-separated (module docstring)")
+    ap.add_argument("--gain-prior-w", type=float, default=0.0, metavar="W",
+                    help="add W to the metered power of every night (a known constant night "
+                         "gain; the realism's night gains are drawn over 100–400 W)")
     args = ap.parse_args()
-    args.fit_kw = {k: float(v) for k, v in (x.split("=") for x in args.fit.split(",") if x)}
     torch.set_num_threads(1)
+    rows = args.rows.split(",")
+    for row in rows:
+        groups_on(row)   # fail on a bad spec before any simulation
     print("command: " + " ".join(["python"] + sys.argv))
     n = args.households
     houses = sample_households(n, seed=VAL_SEED)
-    sched = imp_schedule(n, seed=VAL_SEED)
     full = sample_params(n, VAL_SEED)
-    sim, _ = run_schedule(houses, sched)
-    ideal_e = window_energy(sim, sched)   # the true house on the 5R1C, setpoints held exactly
-    print(f"{n} households, {args.step:g} s rows, true class ranges; errors: median |·| "
-          "(signed median); coverage of the 95 % intervals")
-    print("| factor | HLC % | τ % | C_m % | coverage HLC/τ/C_m % | ε plant % | ε 5R1C % "
-          "| ε truth % | fit s |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for name in args.factors.split(","):
+    print(f"{n} households of bench/fit.py --ranges true --plant realistic, 5-min rows; "
+          "median / P90 of |error| (signed median) %; ε against the true house; 95 % coverage")
+    print("groups: " + "; ".join(f"{g} = {d}" for g, d in GROUPS.items()))
+    print("| row | groups on | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % | fit s |")
+    print("|---|---|---|---|---|---|---|---|")
+    for row in rows:
+        on = groups_on(row)
         t0 = time.perf_counter()
-        r = one_factor(name, houses, sched, full, args, ideal_e)
-        cells = [f"{med(r['err'][k]):.1f} ({np.nanmedian(r['err'][k]):+.1f})"
-                 for k in ("hlc", "tau", "c_m")]
-        cov = " / ".join(f"{100 * np.mean(r['cov'][k]):.0f}" for k in ("hlc", "tau", "c_m"))
-        print(f"| {name} | " + " | ".join(cells) + f" | {cov} | {med(r['eps_plant']):.1f} | "
-              f"{med(r['eps_5r1c']):.1f} | {med(r['eps_truth']):.1f} | {r['time']:.2f} |",
-              flush=True)
-        if args.verbose:
-            print(f"  ({time.perf_counter() - t0:.0f} s)")
+        params, gains = ablate(full, set(GROUPS) - on)
+        with gain_prior(args.gain_prior_w):
+            res = run_step(houses, 300.0, "true", fit_args((row, params, gains)))
+        f = row_figures(res)
+        cells = [f"{f[k][0]:.1f} / {f[k][1]:.1f} ({f[k][2]:+.1f})" for k in ("hlc", "tau", "c_m")]
+        names = "+".join(g for g in GROUPS if g in on) or "–"
+        print(f"| {row} | {names} | " + " | ".join(cells)
+              + f" | {f['eps'][0]:.1f} / {f['eps'][1]:.1f} | {f['cov_hlc']:.0f} / "
+              f"{f['cov_tau']:.0f} / {f['cov_c_m']:.0f} | {f['time']:.2f} |", flush=True)
+        print(f"  ({row}: {time.perf_counter() - t0:.0f} s wall)", file=sys.stderr, flush=True)
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 Run:  .venv/bin/python bench/fit_emitter.py [--households 50] [--step 300]
           [--variant name:key=value,key=value ...] [--diagnose] [--plant realistic|iso]
+          [--preheat-h H] [--preheat-h-normal H]
 
 The validation houses and nights of ``bench/fit.py --ranges true --plant realistic`` (same
 seeds, same simulation), fitted once per variant (``NightFit`` keyword arguments; ``base`` is
@@ -26,12 +27,12 @@ from scipy.stats import spearmanr
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
-from fit import ACH, VAL_SEED, rel, simulate_schedule, true_ranges  # noqa: E402
+from fit import ACH, VAL_SEED, rel, simulate_schedule, true_ranges, val_schedule  # noqa: E402
 
 from impctl.fit.estimator import NightFit  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import params_table, sample_params  # noqa: E402
-from impctl.population.synth_nights import imp_schedule, sample_nights  # noqa: E402
+from impctl.population.synth_nights import sample_nights  # noqa: E402
 
 #: Realism draws the diagnosis correlates with (``params_table`` columns).
 FACTORS = ("emitter.kind", "emitter.screed_j_per_m2k", "emitter.ufh_area_share",
@@ -62,11 +63,15 @@ def main() -> None:
     ap.add_argument("--truth-box", action="store_true")
     ap.add_argument("--kinds", default="constrained,normal",
                     help="fit only these kinds of night (e.g. normal: held nights alone)")
+    ap.add_argument("--preheat-h", type=float, default=None,
+                    help="pre-heat of both kinds of night [h] (as bench/fit.py)")
+    ap.add_argument("--preheat-h-normal", type=float, default=None,
+                    help="pre-heat of the normal nights alone [h]")
     args = ap.parse_args()
     variants = [parse_variant(v) for v in (args.variant or ["base:"])]
     n = args.households
     houses = sample_households(n, seed=VAL_SEED)
-    sched = imp_schedule(n, seed=VAL_SEED)
+    sched = val_schedule(n, args)
     t0 = time.perf_counter()
     sim, sp, _ = simulate_schedule(houses, sched, args.plant)
     print(f"simulated {n} households ({args.plant}) in {time.perf_counter() - t0:.0f} s",

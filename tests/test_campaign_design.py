@@ -25,10 +25,11 @@ SEED = 7
 
 
 def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
-    """Three nights of one kind on the shared weather; the third night's mean T_out [°C]."""
+    """Three nights of one kind on the shared weather; the third night's mean T_out [°C]. The
+    pre-heat is the design's ``Protocol(preheat_h=4.0)``: constrained nights only."""
     sched = imp_schedule(1, n_constrained=3 if kind == "constrained" else 0,
                          n_normal=0 if kind == "constrained" else 3, setpoints_c=(setpoint_c,),
-                         seed=SEED)
+                         seed=SEED, constrained_preheat_h=4.0, normal_preheat_h=0.0)
     sim, sp = run_schedule(HOUSE, sched)
     _, _, w0, w1, _ = sched.windows[2]
     return (sample_nights(sim, sp, sched, 0, sample_step_s=STEP_S, power_noise=0.05, seed=SEED),

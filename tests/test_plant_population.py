@@ -78,3 +78,18 @@ def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():
         else:
             assert valid[:int(res.nights["duration_h"].iloc[i] * 6)].all()
     assert stopped >= 1
+
+
+def test_schedule_without_gains_keeps_every_other_draw():
+    """``run_schedule_plant(gains=False)`` (the error budget's ideal limit of the gains): no
+    gains reach the house, the heat pump makes up for them, the sensors read the same noise."""
+    from impctl.population.synth_nights import imp_schedule, run_schedule_plant
+
+    houses, params = sample_households(2, seed=4), sample_params(2, 4)
+    sched = imp_schedule(2, seed=4)
+    keep = ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w", "gains_w")
+    on, _ = run_schedule_plant(houses, sched, params, seed=4, outputs=keep)
+    off, _ = run_schedule_plant(houses, sched, params, seed=4, outputs=keep, gains=False)
+    assert np.all(off.run["gains_w"] == 0.0) and np.all(on.run["gains_w"].mean(axis=0) > 100.0)
+    assert np.array_equal(on.run["t_out_sensed_c"], off.run["t_out_sensed_c"])
+    assert np.all(off.run["heat_pump_w"].sum(axis=0) > on.run["heat_pump_w"].sum(axis=0))

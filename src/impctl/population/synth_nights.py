@@ -1,11 +1,14 @@
 """Simulated IMP nights for testing and benchmarking the fit (no torch).
 
-The protocol mirrors the IMP of the classifiers issue: days held at ``day_setpoint_c``; a
-*normal* night holds T_set (22, 23, 24 °C in turn) 22:00–05:00; a *constrained* night heats to
-T_max = T_set + ΔT from 18:00, switches off at 22:00 and cools until 05:00 (the paper's case
-study: a predefined period). With ``stop_at_t_min`` it stops earlier, at the first step after the
-emission lag with T_air ≤ T_min = T_set − ΔT, and then holds T_min. The T_min test waits for the
-lag because the 5R1C air node is massless: T_air drops 2–5 K the instant the heating stops, which
+The protocol is the gateway's (:class:`impctl.controller.plan.NightPolicy`, ``night.preheat_h``)
+and the virtual population's (:data:`impctl.imp.plan.DEFAULT_PREHEAT_H`): days held at
+``day_setpoint_c``; a *normal* night holds T_set (22, 23, 24 °C in turn) from
+``normal_preheat_h`` before the 22:00 window (default 2 h: 20:00) to 05:00; a *constrained* night
+heats to T_max = T_set + ΔT ``constrained_preheat_h`` before the window (default 2 h), switches off
+at 22:00 and cools until 05:00 (the paper's case study: a predefined period).
+With ``stop_at_t_min`` it stops earlier, at the first step after the emission lag with
+T_air ≤ T_min = T_set − ΔT, and then holds T_min. The T_min test waits for the lag because the
+5R1C air node is massless: T_air drops 2–5 K the instant the heating stops, which
 would end most nights at once (identifiability.md §11.2). Houses are simulated with the Annex C
 model at a fine step (vectorised over houses); samples are instants for temperatures and interval
 means for the heat power (``q_hc`` at a sample = mean power until the next sample). Measurement
@@ -21,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from ..imp.night import NightSamples
+from ..imp.plan import DEFAULT_PREHEAT_H
 from ..model import HouseParameters, simulate
 from ..weather import DEFAULT_TZ, winter_weather
 
@@ -69,8 +73,16 @@ def imp_schedule(
     sim_step_s: float = 60.0,
     seed: int = 0,
     tz: str = DEFAULT_TZ,
+    constrained_preheat_h: float = DEFAULT_PREHEAT_H,
+    normal_preheat_h: float = DEFAULT_PREHEAT_H,
 ) -> SynthSchedule:
-    """Weather and setpoints for ``n_houses`` houses (own weather per house, seeded)."""
+    """Weather and setpoints for ``n_houses`` houses (own weather per house, seeded).
+
+    ``constrained_preheat_h`` / ``normal_preheat_h`` [h]: how long before the 22:00 window the
+    setpoint is T_max (constrained) or T_set (normal) instead of ``day_setpoint_c`` (default:
+    the gateway's 2 h; until branch h14p this schedule used 4 h and 0 h, see README "Issue 14:
+    the pre-heat length").
+    """
     kinds = night_plan(n_constrained, n_normal)
     days = spinup_days + len(kinds) + 1
     series = [winter_weather(start, days, sim_step_s, seed=seed * 1000 + h, tz=tz)
@@ -86,9 +98,9 @@ def imp_schedule(
         w0, w1 = day0 + 22 * hour, day0 + 29 * hour
         t_set = setpoints_c[j % len(setpoints_c)]
         if kind == "normal":
-            sp[w0:w1] = t_set
+            sp[w0 - int(round(normal_preheat_h * hour)):w1] = t_set
         else:
-            sp[w0 - 4 * hour:w0] = t_set + band_k
+            sp[w0 - int(round(constrained_preheat_h * hour)):w0] = t_set + band_k
             sp[w0:w1] = np.nan
         night_id = str(index[w0].date())
         windows.append((night_id, kind, w0, w1, t_set))
@@ -133,15 +145,17 @@ class PlantSchedule:
 
 
 def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
-                       seed: int = 0, outputs: tuple[str, ...] | None = None
-                       ) -> tuple[PlantSchedule, np.ndarray]:
+                       seed: int = 0, outputs: tuple[str, ...] | None = None,
+                       gains: bool = True) -> tuple[PlantSchedule, np.ndarray]:
     """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
 
     ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
     internal and solar gains follow their ``gains`` section over the schedule's local time. The
     plant starts in the steady state at the day setpoint. Returns what the gateway logs and the
     setpoints used (the schedule's, open loop). ``outputs``: the plant outputs to keep (default
-    the logged ones and the true T_air and heat output).
+    the logged ones and the true T_air and heat output). ``gains=False``: no internal or solar
+    gains (their ranges exclude zero); they are still drawn, so the sensor noise is the same
+    as with gains.
     """
     from ..plant import simulate_plant
     from ..plant.gains import internal_gains_w, solar_gains_w
@@ -153,6 +167,8 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     day = (local.normalize().tz_localize(None).asi8 // 86_400_000_000_000)
     g_int = internal_gains_w(hours, params.gains, n, rng, sched.dt_s)
     g_sol = solar_gains_w(hours, day, params.gains, n, rng)
+    if not gains:
+        g_int, g_sol = 0.0, 0.0
     run = simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,
                          internal_gains_w=g_int, solar_gains_w=g_sol,
                          t_init_c=sched.t_m_init_c, seed=int(rng.integers(2**31)),
