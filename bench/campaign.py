@@ -13,7 +13,8 @@ Households: ``sample_households(N, seed=20260)`` with realism ``sample_params(N,
 validation population of ``bench/fit.py``), class ranges the true classes (as the realistic
 rows of the README's fit table). Each household gets its own winter weather. For every night
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
-21 °C (pre-heat 4 h to 22.5 °C) and normal at 21, 22 and 23 °C — is pre-simulated on the same
+21 °C (pre-heat to 22.5 °C) and normal at 21, 22 and 23 °C, each with the gateway's 2 h
+pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
 the variant it chooses. Logged: room and outdoor sensors, heat meter, 5-minute samples.
@@ -68,6 +69,7 @@ from impctl.campaign import (  # noqa: E402
 from impctl.campaign.design import Protocol, predict  # noqa: E402
 from impctl.fit.optim.batch import fit_households  # noqa: E402
 from impctl.fit.report import fit_to_dict  # noqa: E402
+from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 from impctl.population.synth_nights import (  # noqa: E402
@@ -84,7 +86,7 @@ from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validati
 SEED = 20260
 VARIANTS = (("constrained", 21.0), ("normal", 21.0), ("normal", 22.0), ("normal", 23.0))
 BAND_C = (-25.0, 8.0)
-PREHEAT_H = 4.0       # imp_schedule's constrained pre-heat
+PREHEAT_H = DEFAULT_PREHEAT_H   # imp_schedule's pre-heat (the gateway's)
 FIXED = (0, 0, 1, 2, 3)   # today's plan: constrained first, then 21, 22, 23 °C
 AHEAD = 2             # the outlook's nights
 NORMAL_SETPOINTS = (21.0, 22.0, 23.0)   # the adaptive strategies' normal candidates (--normal)
