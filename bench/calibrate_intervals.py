@@ -150,6 +150,8 @@ def provenance(args, n: int) -> dict:
             "sample_params(N, seed)", "plant_commit": git("log", "-1", "--format=%h", "--",
                                                            "src/impctl/plant"),
             "fit_commit": git("log", "-1", "--format=%h", "--", "src/impctl/fit"),
+            "protocol_commit": git("log", "-1", "--format=%h", "--",
+                                   "src/impctl/population/synth_nights.py", "src/impctl/imp"),
             "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%MZ"),
             "command": "python bench/calibrate_intervals.py --households "
                        f"{args.households} --seed {args.seed} --steps {args.steps} --subsets "
