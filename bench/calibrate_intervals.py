@@ -4,14 +4,16 @@ Run (regenerates ``src/impctl/fit/intervals/model_error.json``; ≤ 15 min on on
 per fit)::
 
     .venv/bin/python bench/calibrate_intervals.py [--households 160] [--seed 31415]
-        [--steps 300:160,3600:80]
+        [--steps 300:160,3600:80] [--subsets 1+1,1+2,2+2,2+3]
 
 Households: ``sample_households(N, seed)`` with realism ``sample_params(N, seed)`` on the
 realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal nights, 5-minute
 rows, true class ranges) — the seed must differ from the bench's validation seed (20260) and the
 classifiers' training seeds (``impctl train --seed 0``). Each house is fitted with the share
 switched off (``NightFit(model_error=None)``); its diagnostics, interval SDs and log errors go to
-the calibration (:func:`impctl.fit.intervals.model_error.calibrate`).
+the calibration (:func:`impctl.fit.intervals.model_error.calibrate`). At the first (finest) step
+each house is also fitted on the subsets of its nights a campaign fits (``--subsets``: its first
+C constrained + N normal nights, C+N ≤ 5), which calibrate the "few nights" band.
 
 ``--why`` (with ``--seed 20260`` for the bench's held-out houses): fit with the share ON and print,
 for every house whose interval misses a truth, what the fit could see (the "why do intervals
@@ -53,11 +55,23 @@ def _truth(house) -> dict[str, float]:
     return {"hlc": house.hlc_w_per_k, "c_m": house.c_m_j_per_k, "tau": house.tau_h}
 
 
+def _subset(nights: list, n_constrained: int, n_normal: int) -> list:
+    """The first ``n_constrained`` constrained and ``n_normal`` normal nights, in night order."""
+    keep, seen = [], {"constrained": 0, "normal": 0}
+    want = {"constrained": n_constrained, "normal": n_normal}
+    for night in nights:
+        if seen[night.kind] < want[night.kind]:
+            seen[night.kind] += 1
+            keep.append(night)
+    return keep
+
+
 def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
-            plant: str = "realistic") -> list[dict]:
+            plant: str = "realistic", subsets: tuple[tuple[int, int], ...] = ()) -> list[dict]:
     """Simulate ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C with the
-    bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s];
-    one record per fit."""
+    bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s]
+    (at the first step also each of ``subsets``, (constrained, normal) night counts); one record
+    per fit."""
     houses = sample_households(n, seed=seed)
     params = sample_params(n, seed)
     kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
@@ -67,7 +81,9 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
     records = []
     started = time.perf_counter()
     t_sim = 0.0
-    n_fits = sum(min(n, k) for k in steps.values())
+    n_fits = sum(min(n, k) for k in steps.values()) + len(subsets) * min(n, next(iter(
+        steps.values())))
+    first_step = next(iter(steps))
     for i in range(n):
         if i % CHUNK == 0:   # simulate the next chunk of houses together
             t0 = time.perf_counter()
@@ -87,17 +103,23 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
             nights = sample_nights(logged, sp, sub, i % CHUNK, sample_step_s=step_s,
                                    quantise_k=0.1, seed=seed + i,
                                    power_noise=0.05 if plant == "iso" else 0.0)
-            fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
-                           model_error="default" if share_on else None
-                           ).fit(nights, true_ranges(house))
-            records.append(_record(i, step_s, fit, _truth(house), kind[i], onoff[i],
-                                   control[i]))
-            el = time.perf_counter() - started
-            rec = records[-1]
-            print(f"  fit {len(records):3d}/{n_fits}: house {i:3d}, {step_s:4.0f} s rows, group "
-                  f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
-                  + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in ("hlc", "tau", "c_m"))
-                  + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)", flush=True)
+            sets = [("all", nights)] + [(f"{c}+{m}", _subset(nights, c, m))
+                                        for c, m in (subsets if step_s == first_step else ())]
+            for label, chosen in sets:
+                fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
+                               model_error="default" if share_on else None
+                               ).fit(chosen, true_ranges(house))
+                records.append(_record(i, step_s, fit, _truth(house), kind[i], onoff[i],
+                                       control[i]))
+                records[-1]["nights"] = label
+                el = time.perf_counter() - started
+                rec = records[-1]
+                print(f"  fit {len(records):3d}/{n_fits}: house {i:3d}, {step_s:4.0f} s rows, "
+                      f"nights {label:3s}, {model_error.band_of(rec['diagnostics']):4s} "
+                      f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
+                      + " ".join(f"{100 * rec['log_error'][q]:+6.1f}"
+                                 for q in ("hlc", "tau", "c_m"))
+                      + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)", flush=True)
     return records
 
 
@@ -123,14 +145,17 @@ def provenance(args, n: int) -> dict:
             return None
 
     return {"seed": args.seed, "n_households": args.households, "n_fits": n,
-            "steps": args.steps,
+            "steps": args.steps, "subsets": args.subsets,
             "ranges": "true class", "plant": "impctl.plant realistic, realism "
             "sample_params(N, seed)", "plant_commit": git("log", "-1", "--format=%h", "--",
                                                            "src/impctl/plant"),
             "fit_commit": git("log", "-1", "--format=%h", "--", "src/impctl/fit"),
+            "protocol_commit": git("log", "-1", "--format=%h", "--",
+                                   "src/impctl/population/synth_nights.py", "src/impctl/imp"),
             "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%MZ"),
             "command": "python bench/calibrate_intervals.py --households "
-                       f"{args.households} --seed {args.seed} --steps {args.steps}"}
+                       f"{args.households} --seed {args.seed} --steps {args.steps} --subsets "
+                       f"{args.subsets}"}
 
 
 def why_table(records: list[dict]) -> None:
@@ -171,19 +196,23 @@ def why_table(records: list[dict]) -> None:
 
 
 def summary(records: list[dict], cal: dict | None) -> None:
-    print("\n### calibration records: per group, median |error| % and coverage without the share")
-    for name in model_error.GROUPS:
-        rs = [r for r in records if model_error.group_of(r["diagnostics"]) == name]
-        if not rs:
-            print(f"  {name:8s} n=  0")
-            continue
-        cells = []
-        for q in model_error.QUANTITIES:
-            e = np.median([abs(r["log_error"][q]) for r in rs]) * 100
-            c = np.mean([r["covered"][q] for r in rs]) * 100
-            s = cal["groups"][name]["share"][q] * 100 if cal else float("nan")
-            cells.append(f"{q} {e:5.1f} % cov {c:3.0f} % share {s:5.1f} %")
-        print(f"  {name:8s} n={len(rs):3d}: " + "; ".join(cells))
+    print("\n### calibration records: per band and group, median |error| % and coverage without "
+          "the share")
+    for band in model_error.BANDS:
+        for name in model_error.GROUPS:
+            rs = [r for r in records if model_error.band_of(r["diagnostics"]) == band
+                  and model_error.group_of(r["diagnostics"]) == name]
+            if not rs:
+                print(f"  {band:4s} {name:8s} n=  0")
+                continue
+            cells = []
+            for q in model_error.QUANTITIES:
+                e = np.median([abs(r["log_error"][q]) for r in rs]) * 100
+                c = np.mean([r["covered"][q] for r in rs]) * 100
+                s = (cal["bands"][band]["groups"][name]["share"][q] * 100 if cal
+                     else float("nan"))
+                cells.append(f"{q} {e:5.1f} % cov {c:3.0f} % share {s:5.1f} %")
+            print(f"  {band:4s} {name:8s} n={len(rs):3d}: " + "; ".join(cells))
 
 
 def main() -> None:
@@ -192,6 +221,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=31415)
     ap.add_argument("--steps", default="300:160,3600:80",
                     help="sample steps [s] and how many of the households each, STEP:N,…")
+    ap.add_argument("--subsets", default="1+1,1+2,2+2,2+3",
+                    help="night subsets fitted too at the first step, C+N,… (the few-nights "
+                         "band); empty for none")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic",
                     help="iso: the ideal 5R1C (a check; never written as the calibration)")
     ap.add_argument("--out", default=str(model_error.CALIBRATION_FILE))
@@ -204,13 +236,14 @@ def main() -> None:
     args = ap.parse_args()
     print("command: " + " ".join(["python"] + sys.argv), flush=True)
     steps = {float(a): int(b) for a, b in (x.split(":") for x in args.steps.split(",") if x)}
+    subsets = tuple(tuple(int(v) for v in x.split("+")) for x in args.subsets.split(",") if x)
     if args.from_records:
         records = json.loads(Path(args.from_records).read_text())
     else:
         if not args.why and (args.seed == VAL_SEED or args.seed in TRAIN_SEEDS):
             ap.error(f"--seed {args.seed} is the bench's validation or a training seed")
         share_on = args.why if args.share is None else args.share == "on"
-        records = collect(args.households, args.seed, steps, share_on, args.plant)
+        records = collect(args.households, args.seed, steps, share_on, args.plant, subsets)
     if args.records:
         Path(args.records).write_text(json.dumps(records))
     if args.why or args.plant == "iso":
@@ -219,7 +252,8 @@ def main() -> None:
         return
     cal = model_error.calibrate(records, provenance(args, len(records)))
     summary(records, cal)
-    if not all(np.isfinite(v) for g in cal["groups"].values() for v in g["share"].values()):
+    if not all(np.isfinite(v) for b in cal["bands"].values() for g in b["groups"].values()
+               for v in g["share"].values()):
         sys.exit(f"not written: {len(records)} fits are too few for a 95 % conformal share "
                  f"(≥ {model_error.MIN_GROUP} per group, or pooled)")
     Path(args.out).write_text(json.dumps(cal, indent=1) + "\n")

@@ -2,13 +2,19 @@
 
 Run:  nice .venv/bin/python bench/campaign.py [--households 100] [--plant realistic|iso]
           [--targets 0.05/0.08,0.25/0.25] [--max-nights 5] [--step-s 300] [--processes 2]
-          [--strategies adaptive,unreachable,fixed]
+          [--strategies adaptive,unreachable,fixed] [--seed 20260] [--bootstrap 2000]
+
+``--seed``: another population to tune the rules on (the bench's own is 20260; report on it).
+Paired with the fixed plan (same households): the difference in median |error| of HLC and τ
+with a bootstrap 95 % interval over households (``--bootstrap`` resamples), and what nights
+each strategy ran (kind and setpoint).
 
 Households: ``sample_households(N, seed=20260)`` with realism ``sample_params(N, 20260)`` (the
 validation population of ``bench/fit.py``), class ranges the true classes (as the realistic
 rows of the README's fit table). Each household gets its own winter weather. For every night
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
-21 °C (pre-heat 4 h to 22.5 °C) and normal at 21, 22 and 23 °C — is pre-simulated on the same
+21 °C (pre-heat to 22.5 °C) and normal at 21, 22 and 23 °C, each with the gateway's 2 h
+pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
 the variant it chooses. Logged: room and outdoor sensors, heat meter, 5-minute samples.
@@ -23,6 +29,8 @@ between strategies and targets):
   wide the statistical part still is;
 * **order** — fixed order, adaptive stop: the same stop/skip rules, the default order, no
   predictions (the floor rule on the fit's own floor): separates stopping from choosing;
+* **warmest** — adaptive, its normal nights only at the warmest setpoint (the largest ΔT:
+  the smallest sensor-offset share on HLC);
 * **fixed** — today's 2 + 3 plan: constrained, constrained, normal 21, 22, 23 °C; an invalid
   night is repeated; one fit at the end.
 
@@ -49,10 +57,19 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")   # one thread per process, before
 
 import numpy as np  # noqa: E402
 
-from impctl.campaign import Candidate, FitSummary, NightRecord, Outlook, Target, decide  # noqa: E402
+from impctl.campaign import (  # noqa: E402
+    Candidate,
+    FitSummary,
+    NightRecord,
+    Outlook,
+    Target,
+    decide,
+    policy,
+)
 from impctl.campaign.design import Protocol, predict  # noqa: E402
 from impctl.fit.optim.batch import fit_households  # noqa: E402
 from impctl.fit.report import fit_to_dict  # noqa: E402
+from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 from impctl.population.synth_nights import (  # noqa: E402
@@ -63,16 +80,16 @@ from impctl.population.synth_nights import (  # noqa: E402
 )
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from campaign_report import STRATEGIES, paired, summarise, trajectories  # noqa: E402
 from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validation setup)
 
 SEED = 20260
 VARIANTS = (("constrained", 21.0), ("normal", 21.0), ("normal", 22.0), ("normal", 23.0))
 BAND_C = (-25.0, 8.0)
-PREHEAT_H = 4.0       # imp_schedule's constrained pre-heat
+PREHEAT_H = DEFAULT_PREHEAT_H   # imp_schedule's pre-heat (the gateway's)
 FIXED = (0, 0, 1, 2, 3)   # today's plan: constrained first, then 21, 22, 23 °C
-STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreachable",
-              "order": "fixed order, adaptive stop", "fixed": "fixed 2 + 3"}
 AHEAD = 2             # the outlook's nights
+NORMAL_SETPOINTS = (21.0, 22.0, 23.0)   # the adaptive strategies' normal candidates (--normal)
 
 
 class Progress:
@@ -140,17 +157,18 @@ class Fits:
             self.progress(f"fits: {self.count} done ({self.seconds / self.count:.2f} s each), "
                           f"{len(todo) - b - len(chunk)} to go in this round")
 
-    def candidates(self, key: tuple, forecast_c: float) -> tuple[list[Candidate],
+    def candidates(self, key: tuple, forecast_c: float,
+                   setpoints: tuple[float, ...] = NORMAL_SETPOINTS) -> tuple[list[Candidate],
                                                                  Outlook | None]:
         result = self.cache.get(key)
         if result is None:
             return [], None
-        memo = (key, round(forecast_c, 3))
+        memo = (key, round(forecast_c, 3), setpoints)
         if memo not in self.predictions:
             try:
                 self.predictions[memo] = predict(
                     result, forecast_c, constrained_setpoint_c=21.0,
-                    normal_setpoints_c=(21.0, 22.0, 23.0), step_s=self.step_s,
+                    normal_setpoints_c=setpoints, step_s=self.step_s,
                     protocol=self.protocol, ahead=AHEAD)
             except (KeyError, TypeError, ValueError):
                 self.predictions[memo] = ([], None)
@@ -187,13 +205,14 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         v = FIXED[n_valid]
     else:
         cands, outlook = [], None
-        if c.strategy in ("adaptive", "unreachable") and c.key is not None:
-            cands, outlook = fits.candidates(c.key, forecast)
+        setpoints = (max(NORMAL_SETPOINTS),) if c.strategy == "warmest" else NORMAL_SETPOINTS
+        if c.strategy in ("adaptive", "unreachable", "warmest") and c.key is not None:
+            cands, outlook = fits.candidates(c.key, forecast, setpoints)
         target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
                   else c.target)
         d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
                    t_out_band_c=BAND_C, constrained_setpoint_c=21.0,
-                   normal_setpoints_c=(21.0, 22.0, 23.0), outlook=outlook)
+                   normal_setpoints_c=setpoints, outlook=outlook)
         if d.action == "stop":
             c.done, c.reached, c.reason = True, d.reached, d.reason
             return None
@@ -256,70 +275,9 @@ def _label(c: Campaign) -> str:
 def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
-    return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks)
-
-
-def _trajectories(records: list, houses, strategy: str) -> None:
-    """Per household: each fit's ±HLC/±τ [%] (floor in brackets), errors, and why it stopped."""
-    print(f"\n{STRATEGIES[strategy]}: per household, each fit ±HLC/±τ % [floor] (error %)")
-    for r in sorted((r for r in records if r[0] == strategy), key=lambda r: r[1]):
-        h = houses.take(r[1])
-        steps = " → ".join(
-            f"{f.nights}: {100 * f.hlc_rel:.0f}/{100 * f.tau_rel:.0f} "
-            f"[{100 * f.hlc_floor_rel:.0f}/{100 * f.tau_floor_rel:.0f}] "
-            f"({100 * (f.hlc_w_per_k / h.hlc_w_per_k - 1):+.0f}/"
-            f"{100 * (f.tau_h / h.tau_h - 1):+.0f})" for f in r[5])
-        print(f"  {r[1]:3d} {r[2]} nights: {steps} — {r[6][:90]}")
-
-
-def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
-    print(f"\nTarget: HLC ±{target.hlc_rel:.0%}, τ ±{target.tau_rel:.0%} (95 % half-width / "
-          f"estimate), max {target.max_nights} nights, stall {target.stall_nights} nights")
-    print(f"{'strategy':<28} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
-          f"{'cover HLC/τ':>12} {'|err| HLC/τ %':>14} {'±HLC/τ % med':>13}  stopped by")
-    rows = []
-    for s in strategies:
-        sub = [r for r in records if r[0] == s]
-        nights = np.array([r[2] for r in sub])
-        got = [r for r in sub if r[3] is not None]
-        cov_h, cov_t, err_h, err_t, w_h, w_t = [], [], [], [], [], []
-        for _, i, _, f, *_ in got:
-            h = houses.take(i)
-            cov_h.append(f.hlc_low <= h.hlc_w_per_k <= f.hlc_high)
-            cov_t.append(f.tau_low <= h.tau_h <= f.tau_high)
-            err_h.append(abs(f.hlc_w_per_k / h.hlc_w_per_k - 1) * 100)
-            err_t.append(abs(f.tau_h / h.tau_h - 1) * 100)
-            w_h.append(f.hlc_rel * 100)
-            w_t.append(f.tau_rel * 100)
-        why: dict[str, int] = {}
-        for r in sub:
-            why[r[4]] = why.get(r[4], 0) + 1
-
-        def pct(x):
-            return 100.0 * np.mean(x) if len(x) else float("nan")
-
-        def med(x):
-            return float(np.median(x)) if len(x) else float("nan")
-
-        # "reached": the final fit meets the target — also for the fixed plan, which does not
-        # stop on it
-        met = [r[3] is not None and target.ratio(r[3].hlc_rel, r[3].tau_rel) <= 1 for r in sub]
-        reasons = ", ".join(f"{k} {v}" for k, v in sorted(why.items()))
-        print(f"{STRATEGIES[s]:<28} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
-              f"{pct(met):>7.0f}% {len(sub) - len(got):>7d} "
-              f"{pct(cov_h):>5.0f}/{pct(cov_t):<4.0f}% {med(err_h):>6.1f} / {med(err_t):<5.1f} "
-              f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  {reasons}")
-        rows.append(f"| {target.hlc_rel:.0%} / {target.tau_rel:.0%} | {STRATEGIES[s]} | "
-                    f"{np.median(nights):g} / {np.percentile(nights, 90):g} | {pct(met):.0f} % | "
-                    f"{pct(cov_h):.0f} / {pct(cov_t):.0f} % | {med(err_h):.1f} / "
-                    f"{med(err_t):.1f} % | {med(w_h):.1f} / {med(w_t):.1f} % | {reasons} |")
-    print("markdown:\n" + "\n".join(rows))
-    checks = np.array([x for r in records if r[0] == "adaptive" for x in r[7]])
-    if len(checks):
-        q = np.percentile(checks, [10, 50, 90], axis=0)
-        print(f"prediction check (adaptive, {len(checks)} nights): refitted / predicted "
-              f"half-width after the chosen night, median (P10–P90): HLC {q[1, 0]:.2f} "
-              f"({q[0, 0]:.2f}–{q[2, 0]:.2f}), τ {q[1, 1]:.2f} ({q[0, 1]:.2f}–{q[2, 1]:.2f})")
+    nights = tuple((n.kind, n.setpoint_c) for n in c.history)
+    return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
+            nights)
 
 
 #: Set in the parent before the workers fork (copy-on-write: the simulated nights are not
@@ -345,6 +303,7 @@ def _worker(w: int) -> tuple[list, int, float]:
 
 
 def main() -> None:
+    global SEED, NORMAL_SETPOINTS
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=100)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
@@ -355,6 +314,17 @@ def main() -> None:
     ap.add_argument("--processes", type=int, default=2)
     ap.add_argument("--strategies", default="adaptive,unreachable,fixed",
                     help="comma-separated, of: " + ", ".join(STRATEGIES))
+    ap.add_argument("--seed", type=int, default=SEED,
+                    help="population seed (tune on another; the bench's is 20260)")
+    ap.add_argument("--normal", default="21,22,23",
+                    help="the adaptive strategies' normal setpoints [°C], of 21, 22, 23")
+    ap.add_argument("--rule", action="append", default=[],
+                    help="override a stop rule for the adaptive strategies, NAME=VALUE: "
+                         "min_gain, criterion (worst|balanced), stall_nights, floor_dominance, "
+                         "min_each "
+                         "(repeatable)")
+    ap.add_argument("--bootstrap", type=int, default=2000,
+                    help="bootstrap resamples of the paired comparison")
     ap.add_argument("--trajectories", action="store_true",
                     help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
@@ -363,10 +333,26 @@ def main() -> None:
     if unknown:
         ap.error(f"--strategies: unknown {', '.join(unknown)} (known: {', '.join(STRATEGIES)})")
     n, k = args.households, args.max_nights + 2
+    SEED = args.seed
+    NORMAL_SETPOINTS = tuple(float(x) for x in args.normal.split(","))
+    if not set(NORMAL_SETPOINTS) <= {sp for kind, sp in VARIANTS if kind == "normal"}:
+        ap.error(f"--normal: setpoints must be among 21, 22, 23, got {args.normal}")
+    overrides = {}
+    for item in args.rule:
+        name, _, value = item.partition("=")
+        if name == "min_gain":
+            policy.MIN_GAIN = float(value)     # before the workers fork
+        elif name == "criterion":
+            policy.CRITERION = value
+        elif name in ("stall_nights", "floor_dominance", "min_each"):
+            overrides[name] = float(value) if name == "floor_dominance" else int(value)
+        else:
+            ap.error(f"--rule: unknown {name!r}")
     progress = Progress()
     t0 = time.perf_counter()
     print(f"bench/campaign.py: {n} households, {args.plant} plant, {args.step_s:g} s samples, "
-          f"{args.processes} processes, {platform.processor() or platform.machine()}, load "
+          f"{args.processes} processes, seed {SEED}, {platform.processor() or platform.machine()}, "
+          f"load "
           f"{os.getloadavg()[0]:.1f}", flush=True)
     houses, nights, forecast, first_t_out = simulate_variants(n, k, args.plant, args.step_s,
                                                               progress)
@@ -374,7 +360,8 @@ def main() -> None:
     targets = []
     for pair in args.targets.split(","):
         hlc, tau = (float(x) for x in pair.split("/"))
-        targets.append(Target(hlc_rel=hlc, tau_rel=tau, max_nights=args.max_nights))
+        targets.append(Target(hlc_rel=hlc, tau_rel=tau, max_nights=args.max_nights,
+                              **overrides))
     _SHARED.update(n=n, k=k, houses=houses, nights=nights, forecast=forecast,
                    first_t_out=first_t_out, step_s=args.step_s, targets=targets,
                    strategies=strategies, processes=max(1, args.processes))
@@ -386,13 +373,17 @@ def main() -> None:
     for t, target in enumerate(targets):
         records = [r for part, _, _ in parts for r in part[t]]
         summarise(records, houses, target, strategies)
+        paired(records, houses, strategies, args.bootstrap)
         if args.trajectories:
             for s in strategies:
-                _trajectories(records, houses, s)
+                trajectories(records, houses, s)
     count, seconds = sum(p[1] for p in parts), sum(p[2] for p in parts)
     print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
           f"{os.getloadavg()[0]:.1f}")
+    print(f"rules: min_gain {policy.MIN_GAIN:g}, criterion {policy.CRITERION}, adaptive "
+          f"normal setpoints "
+          f"{NORMAL_SETPOINTS}, target overrides {overrides or 'none'}")
     print("command: " + " ".join(["python"] + sys.argv))
 
 

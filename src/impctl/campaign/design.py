@@ -32,8 +32,9 @@ Criterion (documented choice; README "Adaptive campaign"):
   Predicted relative half-width = sinh(1.96·sd), the same measure as
   :attr:`impctl.campaign.policy.FitSummary.hlc_rel`.
 
-A candidate is scored by the policy as max(hlc_rel_pred / target_hlc, tau_rel_pred /
-target_tau) (:func:`impctl.campaign.policy.decide`).
+A candidate is scored by the policy (:func:`impctl.campaign.policy.decide`,
+:data:`impctl.campaign.policy.CRITERION`): by default the joint shrink Σ log(rel_pred / rel)
+over HLC and τ, counting a quantity only while it is wider than its target.
 
 * **Outlook.** The same prediction after ``ahead`` more nights (the most informative normal
   and constrained candidates, by det(F_past + F_night), alternating, normal first), and the

@@ -218,7 +218,9 @@ def interval_method(fit) -> str:
         sizes = ", ".join(f"{k} {100 * v:.1f} %" for k, v in me["share"].items())
         text += (f"; plus, in quadrature, a model-error share calibrated on "
                  f"{me['n_calibration']} realistic virtual households ({me.get('n_fits')} fits), "
-                 f"group '{me['group']}' (log-space SD {sizes}; impctl.fit.intervals.model_error)")
+                 f"group '{me['group']}'"
+                 + (f", band '{me['band']}' of night counts" if me.get("band") else "")
+                 + f" (log-space SD {sizes}; impctl.fit.intervals.model_error)")
     else:
         text += "; no model-error share (measurement-only intervals)"
     return text

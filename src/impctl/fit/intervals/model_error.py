@@ -9,8 +9,12 @@ each with the share switched off and records |log(estimate/true)| next to what t
 (:func:`diagnostics`). Households fall into a few groups by those diagnostics (:func:`group_of`);
 per group and quantity the share s is the smallest log-space SD that, added in quadrature to each
 household's own interval SD, puts the truth inside the 95 % interval of ⌈0.95·(n + 1)⌉ of the n
-households (split-conformal: a finite-sample guarantee for an exchangeable house). At fit time
-the share of the fit's group is added in quadrature (:func:`widen`). Widening only: no bias
+households (split-conformal: a finite-sample guarantee for an exchangeable house). The share is
+calibrated separately for two bands of night counts (:func:`band_of`): "few" (≤
+:data:`FEW_MAX_NIGHTS` nights, the adaptive and the fixed 2 + 3 campaigns: each calibration house
+is also fitted on its first 1 + 1, 1 + 2, 2 + 2 and 2 + 3 nights) and "many" (the full 2 + 6
+protocol) — a fit of two to five nights is not as wrong, or as sure, as one of eight. At fit time
+the share of the fit's band and group is added in quadrature (:func:`widen`). Widening only: no bias
 correction is learnt from the simulator, a real house not being the simulator.
 
 The calibration is a small JSON file next to this module (:data:`CALIBRATION_FILE`, schema
@@ -29,9 +33,9 @@ import numpy as np
 from ...errors import InputError
 from ..data import Estimate
 
-SCHEMA = "impctl-model-error/1"
+SCHEMA = "impctl-model-error/2"
 #: The grouping rule's version: a calibration file made with another rule is refused.
-GROUPING = "rows-residuals-nuisance-discharge/5"
+GROUPING = "nights-rows-residuals-nuisance-discharge/6"
 GROUPS = ("clean", "plain", "nuisance", "slow", "coarse")
 CALIBRATION_FILE = Path(__file__).with_name("model_error.json")
 QUANTITIES = ("hlc", "c_m", "tau")
@@ -50,6 +54,9 @@ RMSE_CLEAN = 1.1
 #: 15-minute rows and coarser (the fine groups are calibrated on 5-minute rows, 1-minute rows are
 #: fitted as 5-minute means; a gateway's 10-minute rows, jittering around 600 s, stay fine).
 COARSE_STEP_S = 720.0
+#: Fits of at most this many nights take the "few" band's shares (:func:`band_of`).
+FEW_MAX_NIGHTS = 5
+BANDS = ("few", "many")
 
 
 def diagnostics(fit) -> dict:
@@ -121,6 +128,20 @@ def group_of(diag: dict) -> str:
     return "nuisance"
 
 
+def band_of(diag: dict) -> str:
+    """The night-count band of a fit's :func:`diagnostics`: ``"few"`` for at most
+    :data:`FEW_MAX_NIGHTS` fitted nights (calibrated on 2–5-night subsets), else ``"many"``
+    (calibrated on 8 nights; 6–7 nights take it too)."""
+    n = diag.get("n_nights")
+    return "few" if n is not None and n <= FEW_MAX_NIGHTS else "many"
+
+
+def entry_of(cal: dict, diag: dict) -> tuple[str, str, dict]:
+    """(band, group, the calibration's entry {"n", "share", "source"}) of a fit's diagnostics."""
+    band, group = band_of(diag), group_of(diag)
+    return band, group, cal["bands"][band]["groups"][group]
+
+
 def required_share(log_error: np.ndarray, sd: np.ndarray) -> np.ndarray:
     """Per household, the smallest share s [log] with |log_error| ≤ Z95·√(sd² + s²)."""
     need = (np.abs(np.asarray(log_error, float)) / Z95) ** 2 - np.asarray(sd, float) ** 2
@@ -137,36 +158,53 @@ def conformal_share(log_error, sd, coverage: float = COVERAGE) -> float:
 
 
 def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE) -> dict:
-    """The calibration (JSON-ready) from per-household ``records`` with keys ``diagnostics``,
-    ``log_error`` {q: log(est/true)} and ``sd`` {q: log-space SD of the fit's own interval}.
+    """The calibration (JSON-ready) from per-fit ``records`` with keys ``diagnostics``,
+    ``log_error`` {q: log(est/true)} and ``sd`` {q: log-space SD of the fit's own interval};
+    per band (:func:`band_of`) and group (:func:`group_of`).
 
-    A group with fewer than :data:`MIN_GROUP` households is too small for the conformal rank:
-    "clean" then takes the largest share any of its households needed (0 if none: no realistic
-    house looked clean, so there is no evidence of model error to add), the others the share
-    of all households.
+    A cell with fewer than :data:`MIN_GROUP` fits is too small for the conformal rank:
+    "clean" then takes the largest share any of its fits needed (0 if none: no realistic
+    house looked clean, so there is no evidence of model error to add), but no more than its
+    band's pooled share (one or two of a handful of fits are no reason to be wider than the
+    whole band; with few nights 17 realistic fits looked clean, 4 needed a share), the others
+    the larger
+    of their band's pooled share and the same group's share in the other band (e.g. "coarse"
+    with few nights: the coarse rows' share or the few nights', whichever is wider).
     """
     def share(rs):
         return {q: conformal_share([r["log_error"][q] for r in rs], [r["sd"][q] for r in rs],
                                    coverage) for q in QUANTITIES}
 
-    pooled = share(records)
-    groups = {}
-    for name in GROUPS:
-        rs = [r for r in records if group_of(r["diagnostics"]) == name]
-        if len(rs) >= MIN_GROUP:
-            entry = {"share": share(rs), "source": f"conformal, {coverage:.0%}"}
-        elif name == "clean":
-            entry = {"share": {q: float(max(required_share([r["log_error"][q] for r in rs],
-                                                           [r["sd"][q] for r in rs]),
-                                            default=0.0)) for q in QUANTITIES},
-                     "source": f"largest needed by its {len(rs)} households (fewer than "
-                               f"{MIN_GROUP})"}
-        else:
-            entry = {"share": pooled, "source": f"pooled (fewer than {MIN_GROUP})"}
-        groups[name] = {"n": len(rs), **entry}
+    by_band = {b: [r for r in records if band_of(r["diagnostics"]) == b] for b in BANDS}
+    pooled = {b: share(rs) for b, rs in by_band.items()}
+    cells = {b: {g: [r for r in rs if group_of(r["diagnostics"]) == g] for g in GROUPS}
+             for b, rs in by_band.items()}
+    conformal = {b: {g: share(rs) for g, rs in c.items() if len(rs) >= MIN_GROUP}
+                 for b, c in cells.items()}
+    bands = {}
+    for b in BANDS:
+        other = next(x for x in BANDS if x != b)
+        groups = {}
+        for name, rs in cells[b].items():
+            if name in conformal[b]:
+                entry = {"share": conformal[b][name], "source": f"conformal, {coverage:.0%}"}
+            elif name == "clean":
+                entry = {"share": {q: min(pooled[b][q], float(max(
+                    required_share([r["log_error"][q] for r in rs], [r["sd"][q] for r in rs]),
+                    default=0.0))) for q in QUANTITIES},
+                         "source": f"largest needed by its {len(rs)} fits (fewer than "
+                                   f"{MIN_GROUP}), at most the band's pooled share"}
+            else:
+                alt = conformal[other].get(name, pooled[other])
+                entry = {"share": {q: max(pooled[b][q], alt[q]) for q in QUANTITIES},
+                         "source": f"fewer than {MIN_GROUP}: the wider of the band's pooled "
+                                   f"share and the group's in band {other!r}"}
+            groups[name] = {"n": len(rs), **entry}
+        bands[b] = {"n": len(by_band[b]), "pooled": pooled[b], "groups": groups}
+    bands["few"]["max_nights"] = FEW_MAX_NIGHTS
     return {"schema": SCHEMA, "grouping": GROUPING, "coverage": coverage,
-            "share_unit": "log-space SD, added in quadrature to the fit's own", "groups": groups,
-            "pooled": {"n": len(records), "share": pooled}, "provenance": provenance}
+            "share_unit": "log-space SD, added in quadrature to the fit's own", "bands": bands,
+            "pooled": {"n": len(records), "share": share(records)}, "provenance": provenance}
 
 
 @lru_cache(maxsize=4)
@@ -190,12 +228,17 @@ def load_calibration(path: str | None = None) -> dict:
     elif cal.get("grouping") != GROUPING:
         problem = f"grouping {cal.get('grouping')!r} is not this code's {GROUPING!r}"
     else:
-        for name in GROUPS:
-            share = (cal.get("groups", {}).get(name) or {}).get("share") or {}
-            bad = [q for q in QUANTITIES if not (isinstance(share.get(q), (int, float))
-                                                 and 0.0 <= share[q] < 5.0)]
-            if bad:
-                problem = f"group {name!r}: share of {', '.join(bad)} missing or not in [0, 5)"
+        for band in BANDS:
+            for name in GROUPS:
+                share = ((((cal.get("bands") or {}).get(band) or {}).get("groups") or {})
+                         .get(name) or {}).get("share") or {}
+                bad = [q for q in QUANTITIES if not (isinstance(share.get(q), (int, float))
+                                                     and 0.0 <= share[q] < 5.0)]
+                if bad:
+                    problem = (f"band {band!r}, group {name!r}: share of {', '.join(bad)} "
+                               "missing or not in [0, 5)")
+                    break
+            if problem:
                 break
     if problem:
         raise InputError(f"{p}: model-error calibration invalid: {problem}; regenerate it with "
@@ -204,14 +247,15 @@ def load_calibration(path: str | None = None) -> dict:
 
 
 def widen(lumped: dict[str, Estimate], diag: dict, cal: dict) -> tuple[dict, dict]:
-    """Add the calibrated share of ``diag``'s group in quadrature to each log-space interval.
+    """Add the calibrated share of ``diag``'s band and group in quadrature to each log-space
+    interval.
 
     Returns
     -------
-    (lumped with widened intervals, {"group", "share" {q: log SD}, "n_calibration", "method"})
+    (lumped with widened intervals, {"group", "band", "share" {q: log SD}, "n_calibration",
+    "method"})
     """
-    group = group_of(diag)
-    entry = cal["groups"][group]
+    band, group, entry = entry_of(cal, diag)
     out = {}
     for name, e in lumped.items():
         s = float(entry["share"].get(name, 0.0))
@@ -221,9 +265,11 @@ def widen(lumped: dict[str, Estimate], diag: dict, cal: dict) -> tuple[dict, dic
     prov = cal.get("provenance", {})
     n_fits = int(cal.get("pooled", {}).get("n", 0))
     n_cal = int(prov.get("n_households") or n_fits)
-    info = {"group": group, "share": {q: float(entry["share"][q]) for q in QUANTITIES},
+    info = {"group": group, "band": band,
+            "share": {q: float(entry["share"][q]) for q in QUANTITIES},
             "n_group": int(entry.get("n", 0)), "n_calibration": n_cal, "n_fits": n_fits,
             "seed": prov.get("seed"), "version": prov.get("created"),
             "method": (f"sandwich + type-B + model-error share calibrated on {n_cal} realistic "
-                       f"virtual households ({n_fits} fits), group {group!r}")}
+                       f"virtual households ({n_fits} fits), group {group!r}, "
+                       f"{'≤ ' + str(FEW_MAX_NIGHTS) if band == 'few' else 'more'} nights")}
     return out, info

@@ -1,0 +1,134 @@
+"""The tables of ``bench/campaign.py``: per strategy and target, the paired comparison with
+the fixed plan (bootstrap over households) and each campaign's trajectory.
+
+A record is the tuple ``bench/campaign.py``'s workers return per campaign: (strategy,
+household, nights run, final FitSummary or None, stop label, fits, stop reason, prediction
+checks, ((kind, setpoint °C) of each night run)).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impctl.campaign import Target
+
+STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreachable",
+              "order": "fixed order, adaptive stop",
+              "warmest": "adaptive, normal at the warmest setpoint", "fixed": "fixed 2 + 3"}
+
+
+def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, float, int]]:
+    """Per household with a final fit: (|HLC error| %, |τ error| %, nights run)."""
+    out = {}
+    for r in records:
+        if r[0] == strategy and r[3] is not None:
+            h = houses.take(r[1])
+            out[r[1]] = (abs(r[3].hlc_w_per_k / h.hlc_w_per_k - 1) * 100,
+                         abs(r[3].tau_h / h.tau_h - 1) * 100, r[2])
+    return out
+
+
+def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int = 1) -> None:
+    """Each strategy against the fixed plan on the same households: the difference of median
+    |error| [percentage points] with a bootstrap 95 % interval (households resampled, pairs
+    kept), and the nights each ran."""
+    print("\nwhat nights each strategy ran (kind at setpoint °C: share of all nights run)")
+    for s in strategies:
+        count: dict[str, int] = {}
+        for r in records:
+            if r[0] == s:
+                for kind, sp in r[8]:
+                    key = f"{kind[0]}{sp:g}"
+                    count[key] = count.get(key, 0) + 1
+        total = sum(count.values()) or 1
+        print(f"  {STRATEGIES[s]:<40} " + ", ".join(
+            f"{k} {100 * v / total:.0f} %" for k, v in sorted(count.items())))
+    if "fixed" not in strategies:
+        return
+    base = _errors(records, houses, "fixed")
+    rng = np.random.default_rng(seed)
+    print("\npaired with fixed 2 + 3 (same households): median |error| difference, "
+          "percentage points (strategy − fixed), bootstrap 95 % interval")
+    for s in strategies:
+        if s == "fixed":
+            continue
+        mine = _errors(records, houses, s)
+        common = sorted(set(mine) & set(base))
+        if len(common) < 5:
+            continue
+        a = np.array([mine[i] for i in common])
+        b = np.array([base[i] for i in common])
+        idx = rng.integers(0, len(common), (n_boot, len(common)))
+        cells = []
+        for q, name in ((0, "HLC"), (1, "τ")):
+            d = np.median(a[:, q]) - np.median(b[:, q])
+            boot = np.median(a[idx, q], axis=1) - np.median(b[idx, q], axis=1)
+            lo, hi = np.percentile(boot, [2.5, 97.5])
+            wins = np.mean(a[:, q] <= b[:, q]) * 100
+            cells.append(f"{name} {d:+.1f} ({lo:+.1f} … {hi:+.1f}), no worse in {wins:.0f} %")
+        dn = np.median(a[:, 2]) - np.median(b[:, 2])
+        print(f"  {STRATEGIES[s]:<40} n={len(common)}: " + "; ".join(cells)
+              + f"; nights median {dn:+g}")
+
+
+def trajectories(records: list, houses, strategy: str) -> None:
+    """Per household: each fit's ±HLC/±τ [%] (floor in brackets), errors, and why it stopped."""
+    print(f"\n{STRATEGIES[strategy]}: per household, each fit ±HLC/±τ % [floor] (error %)")
+    for r in sorted((r for r in records if r[0] == strategy), key=lambda r: r[1]):
+        h = houses.take(r[1])
+        steps = " → ".join(
+            f"{f.nights}: {100 * f.hlc_rel:.0f}/{100 * f.tau_rel:.0f} "
+            f"[{100 * f.hlc_floor_rel:.0f}/{100 * f.tau_floor_rel:.0f}] "
+            f"({100 * (f.hlc_w_per_k / h.hlc_w_per_k - 1):+.0f}/"
+            f"{100 * (f.tau_h / h.tau_h - 1):+.0f})" for f in r[5])
+        print(f"  {r[1]:3d} {r[2]} nights: {steps} — {r[6][:90]}")
+
+
+def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
+    print(f"\nTarget: HLC ±{target.hlc_rel:.0%}, τ ±{target.tau_rel:.0%} (95 % half-width / "
+          f"estimate), max {target.max_nights} nights, stall {target.stall_nights} nights")
+    print(f"{'strategy':<40} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
+          f"{'cover HLC/τ':>12} {'|err| HLC/τ %':>14} {'±HLC/τ % med':>13}  stopped by")
+    rows = []
+    for s in strategies:
+        sub = [r for r in records if r[0] == s]
+        nights = np.array([r[2] for r in sub])
+        got = [r for r in sub if r[3] is not None]
+        cov_h, cov_t, err_h, err_t, w_h, w_t = [], [], [], [], [], []
+        for _, i, _, f, *_ in got:
+            h = houses.take(i)
+            cov_h.append(f.hlc_low <= h.hlc_w_per_k <= f.hlc_high)
+            cov_t.append(f.tau_low <= h.tau_h <= f.tau_high)
+            err_h.append(abs(f.hlc_w_per_k / h.hlc_w_per_k - 1) * 100)
+            err_t.append(abs(f.tau_h / h.tau_h - 1) * 100)
+            w_h.append(f.hlc_rel * 100)
+            w_t.append(f.tau_rel * 100)
+        why: dict[str, int] = {}
+        for r in sub:
+            why[r[4]] = why.get(r[4], 0) + 1
+
+        def pct(x):
+            return 100.0 * np.mean(x) if len(x) else float("nan")
+
+        def med(x):
+            return float(np.median(x)) if len(x) else float("nan")
+
+        # "reached": the final fit meets the target — also for the fixed plan, which does not
+        # stop on it
+        met = [r[3] is not None and target.ratio(r[3].hlc_rel, r[3].tau_rel) <= 1 for r in sub]
+        reasons = ", ".join(f"{k} {v}" for k, v in sorted(why.items()))
+        print(f"{STRATEGIES[s]:<40} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
+              f"{pct(met):>7.0f}% {len(sub) - len(got):>7d} "
+              f"{pct(cov_h):>5.0f}/{pct(cov_t):<4.0f}% {med(err_h):>6.1f} / {med(err_t):<5.1f} "
+              f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  {reasons}")
+        rows.append(f"| {target.hlc_rel:.0%} / {target.tau_rel:.0%} | {STRATEGIES[s]} | "
+                    f"{np.median(nights):g} / {np.percentile(nights, 90):g} | {pct(met):.0f} % | "
+                    f"{pct(cov_h):.0f} / {pct(cov_t):.0f} % | {med(err_h):.1f} / "
+                    f"{med(err_t):.1f} % | {med(w_h):.1f} / {med(w_t):.1f} % | {reasons} |")
+    print("markdown:\n" + "\n".join(rows))
+    checks = np.array([x for r in records if r[0] == "adaptive" for x in r[7]])
+    if len(checks):
+        q = np.percentile(checks, [10, 50, 90], axis=0)
+        print(f"prediction check (adaptive, {len(checks)} nights): refitted / predicted "
+              f"half-width after the chosen night, median (P10–P90): HLC {q[1, 0]:.2f} "
+              f"({q[0, 0]:.2f}–{q[2, 0]:.2f}), τ {q[1, 1]:.2f} ({q[0, 1]:.2f}–{q[2, 1]:.2f})")
