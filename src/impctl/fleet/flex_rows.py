@@ -21,7 +21,7 @@ def fleet_flexibility(path: str | Path, households: list[str] | None = None,
     import pandas as pd
 
     from ..flex import SwitchOff, flexibility_many, switch_off_from_fit
-    from ..flex.switch_off import COLUMNS, from_columns
+    from ..flex.switch_off import ASSUMED_COLUMN, COLUMNS, from_columns
     from ..model import HouseParameters
 
     try:
@@ -53,7 +53,7 @@ def fleet_flexibility(path: str | Path, households: list[str] | None = None,
         ach_vent=table["ach_vent_per_h"].to_numpy(float),
         ach_infl=table["ach_infl_per_h"].to_numpy(float))
     # the fit's switch-off terms (FLEET files written before they were stored: none)
-    rows = table.reindex(columns=list(COLUMNS)).astype(float).to_dict("records")
+    rows = table.reindex(columns=[*COLUMNS, ASSUMED_COLUMN]).astype(float).to_dict("records")
     terms = SwitchOff.stack([switch_off_from_fit({"nuisance": from_columns(r)}) for r in rows])
     flex = flexibility_many(houses, table["tau_h_low"].to_numpy(float),
                             table["tau_h_high"].to_numpy(float), switch_off=terms,

@@ -119,22 +119,29 @@ def switch_off_from_fit(summary: dict) -> SwitchOff:
 #: FLEET.parquet columns of the fit's switch-off terms (value, _low, _high), as the fit found
 #: them (before the rules above): a fleet row re-simulates like the fit JSON.
 COLUMNS = tuple(f"{k}{s}" for k in SWITCH_OFF_TERMS for s in ("", "_low", "_high"))
+#: FLEET.parquet column: True when ``night_gain_w`` is the gain the fit assumed
+#: (:mod:`impctl.night_gain`), not one it fitted; empty when no gain was used.
+ASSUMED_COLUMN = "night_gain_assumed"
 
 
 def to_columns(nuisance: dict | None) -> dict[str, float | None]:
-    """A fit's ``nuisance`` block → the :data:`COLUMNS` values (None: not fitted)."""
-    out: dict[str, float | None] = dict.fromkeys(COLUMNS)
+    """A fit's ``nuisance`` block → the :data:`COLUMNS` values (None: not fitted) and
+    :data:`ASSUMED_COLUMN`."""
+    out: dict[str, float | bool | None] = dict.fromkeys((*COLUMNS, ASSUMED_COLUMN))
     for name in SWITCH_OFF_TERMS:
         entry = (nuisance or {}).get(name)
         if entry:
             for key, suffix in (("value", ""), ("low", "_low"), ("high", "_high")):
                 out[f"{name}{suffix}"] = entry.get(key)
+            if name == "night_gain_w":
+                out[ASSUMED_COLUMN] = bool(entry.get("assumed", False))
     return out
 
 
 def from_columns(row: Any) -> dict:
-    """:data:`COLUMNS` of a row (a mapping; missing or NaN: not fitted) → a ``nuisance``
-    block for :func:`switch_off_from_fit` (bounds: the fit's, :data:`FIT_BOUNDS`)."""
+    """:data:`COLUMNS` (and :data:`ASSUMED_COLUMN`) of a row (a mapping; missing or NaN: not
+    fitted) → a ``nuisance`` block for :func:`switch_off_from_fit` (bounds: the fit's,
+    :data:`FIT_BOUNDS`)."""
     out: dict[str, dict | None] = {}
     for name in SWITCH_OFF_TERMS:
         v = row.get(name) if hasattr(row, "get") else None
@@ -144,4 +151,14 @@ def from_columns(row: Any) -> dict:
         lo, hi = (row.get(f"{name}{s}") for s in ("_low", "_high"))
         out[name] = {"value": float(v), "low": None if lo is None else float(lo),
                      "high": None if hi is None else float(hi), "bounds": FIT_BOUNDS[name]}
+        if name == "night_gain_w" and _true(row.get(ASSUMED_COLUMN)):
+            out[name]["assumed"] = True
     return out
+
+
+def _true(flag: Any) -> bool:
+    # a Parquet bool read back through pandas may be None, NaN, numpy.bool_ or a float
+    try:
+        return flag is not None and bool(np.isfinite(float(flag))) and bool(flag)
+    except (TypeError, ValueError):
+        return False
