@@ -198,6 +198,14 @@ def _coerce(value: Any, default: Any, where: str, problems: list[str]) -> Any:
     return default
 
 
+def _is_table(value: Any, where: str, problems: list[str], what: str = "a [table]") -> bool:
+    """True if ``value`` is a TOML table; else one problem line naming ``where``."""
+    if isinstance(value, dict):
+        return True
+    problems.append(f"{where}: must be {what}")
+    return False
+
+
 def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
     known = {f.name: f for f in fields(cls) if f.name != "source"}
     kwargs = {}
@@ -218,22 +226,16 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
                 problems.append(_HEATPUMP_FAILED)
             continue
         if key == "mqtt" and cls is Config:  # [mqtt], parsed by impctl.mqtt.config
-            if not isinstance(value, dict):
-                problems.append(f"{where}: must be a [table]")
-                continue
-            kwargs[key] = mqtt_from_mapping(value, problems)
+            if _is_table(value, where, problems):
+                kwargs[key] = mqtt_from_mapping(value, problems)
             continue
         if key in _SECTIONS and cls is Config:
-            if not isinstance(value, dict):
-                problems.append(f"{where}: must be a [table]")
-                continue
-            kwargs[key] = _build(_SECTIONS[key], value, f"{key}.", problems)
+            if _is_table(value, where, problems):
+                kwargs[key] = _build(_SECTIONS[key], value, f"{key}.", problems)
             continue
         if key in _SUBTABLES and cls is CampaignConfig:
-            if not isinstance(value, dict):
-                problems.append(f"{where}: must be a table such as {{hlc = 0.05, tau = 0.08}}")
-                continue
-            kwargs[key] = _build(_SUBTABLES[key], value, f"{prefix}{key}.", problems)
+            if _is_table(value, where, problems, "a table such as {hlc = 0.05, tau = 0.08}"):
+                kwargs[key] = _build(_SUBTABLES[key], value, f"{prefix}{key}.", problems)
             continue
         default = known[key].default
         kwargs[key] = _coerce(value, default, where, problems)
