@@ -56,6 +56,9 @@ KINDS = (CONSTRAINED, NORMAL)
 STALL_SHRINK = 0.10
 #: "More nights would not help": the best next night must shrink the worst ratio by this much.
 MIN_GAIN = 0.10
+#: "Precision limited" judges only fits of at least this many valid nights (2: from the first
+#: fit of one night of each kind).
+MIN_FLOOR_NIGHTS = 2
 #: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
 #: fit's (1/2: the floor is at least a quarter of the variance; README "Adaptive campaign").
 FLOOR_DOMINANT = 0.5
@@ -457,6 +460,8 @@ def _reached_reason(fit: FitSummary, target: Target, run: int) -> str:
 def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook | None,
                    target: Target) -> str | None:
     """The "precision limited" sentence when no number of nights can reach the target."""
+    if latest.nights < MIN_FLOOR_NIGHTS:
+        return None
     if outlook is not None:
         hlc_floor, tau_floor = outlook.hlc_floor_rel, outlook.tau_floor_rel
         ahead = target.ratio(outlook.hlc_rel_pred, outlook.tau_rel_pred)
