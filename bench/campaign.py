@@ -329,6 +329,9 @@ def main() -> None:
                          "(repeatable)")
     ap.add_argument("--bootstrap", type=int, default=2000,
                     help="bootstrap resamples of the paired comparison")
+    ap.add_argument("--dump", default=None,
+                    help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
+                         "here (to try stop rules offline)")
     ap.add_argument("--trajectories", action="store_true",
                     help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
@@ -385,6 +388,15 @@ def main() -> None:
         if args.trajectories:
             for s in strategies:
                 trajectories(records, houses, s)
+    if args.dump:
+        import pickle
+
+        with open(args.dump, "wb") as fh:
+            pickle.dump({"targets": targets,
+                         "records": [[r for part, _, _ in parts for r in part[t]]
+                                     for t in range(len(targets))],
+                         "truth": [(houses.take(i).hlc_w_per_k, houses.take(i).tau_h)
+                                   for i in range(n)]}, fh)
     count, seconds = sum(p[1] for p in parts), sum(p[2] for p in parts)
     print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "

@@ -21,7 +21,10 @@ Rules, in order (:func:`decide`):
    variance (the floor's worst ratio ≥ 1/2 of the latest one: the part nights can shrink is
    at most √3 times the part they cannot; tuned on another population than the bench's, where
    1/√2 ran a median of 4.5 nights and 1/2 a median of 3 at no worse median errors).
-   Without predictions the latest fit's own floor and interval are used.
+   Without predictions the latest fit's own floor and interval are used. Judged from fits of
+   :data:`MIN_FLOOR_NIGHTS` valid nights (2; 3 — as rule 4 — was tried in h18c: it lifts the
+   coverage of the campaigns that stopped at 2 nights but runs a median of 5 nights, README
+   "Adaptive campaign").
 4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
    stop when the best candidate night is predicted to shrink the worst ratio by less than
    10 % (:data:`MIN_GAIN`). A fit of one night of each kind is too fragile (its sandwich has
