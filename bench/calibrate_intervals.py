@@ -18,8 +18,8 @@ at ``CampaignConfig().constrained_setpoint_c``, normal at each of its ``normal_s
 the gateway's pre-heat — simulated on the house's own weather and gains, as
 ``bench/campaign.py`` does; these fits calibrate the "few nights" band, whose file records the
 setpoints (``bands.few.protocol``). Until h18c the few band took the first C + N nights of the
-2 + 6 protocol above (constrained at 22 and 23 °C, normal 24, 22, 23 °C), nights a campaign
-never runs.
+2 + 6 protocol above (normal 22 °C, constrained 23 °C, normal 24, 22 °C, …, the second
+constrained night at 24 °C), nights a campaign never runs.
 
 ``--why`` (with ``--seed 20260`` for the bench's held-out houses): fit with the share ON and print,
 for every house whose interval misses a truth, what the fit could see (the "why do intervals
@@ -57,10 +57,10 @@ from impctl.population.synth_nights import (
 
 TRAIN_SEEDS = (0,)
 #: The few-nights band's campaign night sequences (``--sequences``): the endings of the
-#: adaptive campaign on another population than the bench's (``bench/campaign.py --seed 4242``:
-#: a constrained night, a normal one at the first setpoint, then mostly the last setpoint, a
-#: second constrained night now and then; the 2-night fits are those the floor rule stops) and
-#: the fixed 2 + 3 plan.
+#: adaptive campaign (``bench/campaign.py`` prints them; the same on seeds 20260 and 4242: a
+#: constrained night, a normal one at the first setpoint — the default order — then mostly the
+#: last setpoint, a second constrained night now and then; the 2-night fits are those the floor
+#: rule stops) and the fixed 2 + 3 plan.
 SEQUENCES = ("c.n0,c.n0.c,c.n0.n-1,c.n0.n-1.c,c.n0.n-1.n-1,c.n0.n-1.n-1.c,c.n0.n-1.n-1.n-1,"
              "c.c.n0.n1.n2")
 CHUNK = 40   # households simulated together (memory, and a progress line per chunk)
