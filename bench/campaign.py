@@ -112,7 +112,7 @@ def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progr
     for kind, sp in VARIANTS:
         sched = imp_schedule(n, n_constrained=k if kind == "constrained" else 0,
                              n_normal=0 if kind == "constrained" else k, setpoints_c=(sp,),
-                             seed=SEED)
+                             constrained_setpoint_c=sp, seed=SEED)
         if plant == "realistic":
             sim, spc = run_schedule_plant(houses, sched, params, seed=SEED)
             t_out, noise = sim.t_out_c, 0.0
