@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from impctl.imp import DEFAULT_SETPOINTS_C, write_nights
+from impctl.imp import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C, write_nights
 from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
 
@@ -104,3 +104,22 @@ def test_train_bad_input_writes_nothing(tmp_path):
     _one_error_line(run_cli("train", "--weather", str(weather), "--out", str(out)),
                     "usable nights")
     assert not out.exists()
+
+
+def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
+    """The demo reuses cached classifiers only when their population ran the gateway's nights
+    (since branch h14q: one constrained setpoint); models from the old population, whose
+    manifest has no constrained_setpoint_c, are retrained."""
+    import shutil
+
+    from impctl.demo.run import _models_ok
+
+    assert _models_ok(model_dir)
+    old = shutil.copytree(model_dir, tmp_path / "old")
+    meta = json.loads((old / "models.json").read_text())
+    del meta["dataset"]["imp"]["constrained_setpoint_c"]
+    (old / "models.json").write_text(json.dumps(meta))
+    assert not _models_ok(old)
+    meta["dataset"]["imp"]["constrained_setpoint_c"] = DEFAULT_CONSTRAINED_SETPOINT_C + 1.0
+    (old / "models.json").write_text(json.dumps(meta))
+    assert not _models_ok(old)
