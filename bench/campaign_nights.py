@@ -34,7 +34,7 @@ def variant_schedule(n: int, k: int, kind: str, setpoint_c: float, seed: int):
     house sees the same outdoor temperatures, so night j of any variant is the same date)."""
     return imp_schedule(n, n_constrained=k if kind == "constrained" else 0,
                         n_normal=0 if kind == "constrained" else k, setpoints_c=(setpoint_c,),
-                        seed=seed)
+                        constrained_setpoint_c=setpoint_c, seed=seed)
 
 
 def parse_sequence(text: str, cfg: CampaignConfig | None = None) -> tuple[int, ...]:
