@@ -31,26 +31,32 @@ from ..errors import InputError
 from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
-from ..model.continuous import mass_from_air
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .intervals import model_error
 from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
+from .layout import (
+    air_input,
+    best_of,
+    initial_mass,
+    layout,
+    problem_rows,
+    residual_sigma,
+    stop_units,
+    terms_of,
+)
 from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
 from .ode.packing import pack_nights
 from .ode.parameters import (
-    DTYPE,
     NUISANCE_BOUNDS,
     NUISANCE_NAMES,
     PARAM_NAMES,
     bounds_tensor,
     lumped,
-    network,
     to_physical,
 )
 from .ode.solver import METHODS
 from .optim import lm
-from .optim.problem import raw_residuals
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
 
@@ -64,20 +70,6 @@ CLASS_REJECT_CHI2 = 3.84
 #: The nuisance terms (night gain, emitter amplitude and time constant, air/furniture
 #: capacity) are kept when they lower the loss by more than χ² at 95 % with as many degrees of
 #: freedom as terms switched on (3 by default: 7.81).
-
-
-def stop_units(groups: torch.Tensor) -> torch.Tensor:
-    """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
-    (groups 0–2) and the per-night fits (3 + i) stop on their own, so that the joint answer
-    does not depend on whether — or how long — the per-night comparison runs."""
-    return (torch.arange(int(groups.max()) + 1) >= _FIRST_NIGHT_GROUP).long()
-
-
-_FIRST_NIGHT_GROUP = 3
-
-
-def _rows_of(result: lm.LMResult, sel: torch.Tensor) -> lm.RowTerms | None:
-    return None if result.terms is None else result.terms.take(sel)
 
 
 class NightFit:
@@ -314,7 +306,7 @@ class NightFit:
         cons = packed.constrained
         demand = ~cons & torch.tensor(self.normal_model == "demand")
         self._row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
-        self._phi_n, self._phi_in_n = self._air_input(packed, self.normal_model)
+        self._phi_n, self._phi_in_n = air_input(packed, self.normal_model)
         self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
         self.sigma_ = noise_levels(kept)
 
@@ -328,18 +320,20 @@ class NightFit:
             nuisance["night_gain_w"] = pinned
         self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
         plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
-        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
-                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance))
+        lay = layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
+                     bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
+                     n_starts=self.n_starts, seed=self.seed, per_night=self.per_night)
         rows = self._rows(lay)
-        t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
-                                  lay["box"][lay["row_problem"]])
+        t_m0 = initial_mass(packed, lay["u0"][lay["row_problem"]], lay["row_night"],
+                            lay["box"][lay["row_problem"]], self._row_type_n, self._phi_n,
+                            self.ach_vent, self.ach_infl)
         result = self._optimise(rows, lay["u0"], t_m0, lay["group"])
         self.n_iter_ = result.n_iter
         # The residual σ per group, now from the fit itself, scales the intervals. When it is
         # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
         # the joint problems are refitted with the new weights.
         guess = self.noise_ = dict(self.sigma_)
-        self._update_sigma(rows, result, self._best(result, lay, 0))
+        self._update_sigma(rows, result, best_of(result, lay, 0))
         ratio = [self.sigma_[k] / guess[k] for k in guess]
         if max(ratio) > 1.4 or min(ratio) < 0.7:
             self._refit_joint(lay, result)
@@ -348,7 +342,7 @@ class NightFit:
         # First whether the data need the nuisance terms (inside the class box), then whether
         # they contradict the class box: testing the classes with a model that lacks terms
         # the data need rejects right classes (the prior box then absorbs the misfit).
-        best = self._best(result, lay, 2 if lay["simple"] else 0)
+        best = best_of(result, lay, 2 if lay["simple"] else 0)
         self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
         if lay["simple"]:
             best = self._nuisance_check(rows, result, lay, best)
@@ -364,7 +358,7 @@ class NightFit:
         self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
-                      has_power=bool((~cons).any()), terms=_rows_of(result, sel))
+                      has_power=bool((~cons).any()), terms=terms_of(result, sel))
         self.lumped_, self.offset_allowance_ = offset_allowance(
             est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
             0.0 if self.nuisance_check_.get("selected") and self.night_gain
@@ -425,57 +419,9 @@ class NightFit:
             out.append(q)
         return out
 
-    def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
-        """Problems: joint starts in the class box with the nuisance terms ("class"), the same
-        without them ("simple"), [joint starts in the prior box, with], per night (without).
-
-        Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
-        night i. Without nuisance terms to test, "class" is the plain class box and there is
-        no "simple" group.
-        """
-        s = max(1, self.n_starts)
-        starts = self._starts(s)
-        with_nuisance = bool((nuisance_box[len(PARAM_NAMES):, 1]
-                              > nuisance_box[len(PARAM_NAMES):, 0]).any())
-        kinds = [("class", j, -1) for j in range(s)]
-        if with_nuisance:
-            kinds += [("simple", j, -1) for j in range(s)]
-        if with_prior:
-            kinds += [("prior", j, -1) for j in range(s)]
-        if self.per_night:
-            # the paper's per-night mode is a comparison, not the result: two starts suffice
-            kinds += [("night", j, i) for j in range(min(s, 2)) for i in range(n)]
-        boxes = {"class": nuisance_box, "simple": class_box, "prior": prior_box,
-                 "night": class_box}
-        row_problem, row_night, group, box, u0 = [], [], [], [], []
-        for p, (kind, j, i) in enumerate(kinds):
-            nights = range(n) if i < 0 else [i]
-            row_problem += [p] * len(nights)
-            row_night += list(nights)
-            group.append({"class": 0, "prior": 1, "simple": 2}.get(kind, 3 + i))
-            box.append(boxes[kind])
-            u0.append(starts[j])
-        def idx(k):
-            return [p for p, x in enumerate(kinds) if x[0] == k]
-        return {"kinds": kinds, "class": idx("class"), "prior": idx("prior"),
-                "simple": idx("simple"), "night": idx("night"),
-                "row_problem": torch.tensor(row_problem),
-                "row_night": torch.tensor(row_night), "group": torch.tensor(group),
-                "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
-
     def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
-        sig = torch.tensor([self.sigma_["constrained_t_air_k"], self.sigma_["normal_t_air_k"],
-                            self.sigma_["normal_power_w"]], dtype=DTYPE)
-        problem, night = lay["row_problem"], lay["row_night"]
-        box, n_prob = lay["box"], lay["n_problems"]
-        if only is not None:  # the problems `only`, renumbered 0…len(only)−1
-            keep = torch.isin(problem, torch.tensor(only))
-            remap = torch.full((n_prob,), -1, dtype=torch.long)
-            remap[torch.tensor(only)] = torch.arange(len(only))
-            problem, night = remap[problem[keep]], night[keep]
-            box, n_prob = box[torch.tensor(only)], len(only)
-        return lm.Rows(problem, night, self._row_type_n[night], self._phi_n[night],
-                           self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
+        return problem_rows(lay, self.sigma_, self._row_type_n, self._phi_n, self._phi_in_n,
+                            self._group_n, only)
 
     def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
         joint = lay["class"] + lay["simple"] + lay["prior"]
@@ -493,11 +439,11 @@ class NightFit:
 
     def _class_check(self, rows, result, lay, best_class, ranges) -> int:
         """Likelihood-ratio test of the class ranges against the whole prior ranges."""
-        best_prior = self._best(result, lay, 1)
+        best_prior = best_of(result, lay, 1)
         sel = rows.problem == best_prior
         est = laplace(self._ctx, rows.subset(sel), result.u[best_prior], result.t_m0[sel],
                       self._group_n, has_power=True, summary_only=True,
-                      terms=_rows_of(result, sel))
+                      terms=terms_of(result, sel))
         drop = float(result.loss[best_class] - result.loss[best_prior]) / est["inflation"]
         x = to_physical(result.u[best_prior], lay["box"][best_prior])
         outside = [n for n, (lo, hi) in (ranges or {}).items()
@@ -517,7 +463,7 @@ class NightFit:
         residual σ) over the 3 extra parameters against χ²₃. Not deflated for residual
         autocorrelation: on a house the model fits (the ideal 5R1C) the drop stays ≈ 1, while
         emitter and furniture heat after switch-off give drops in the hundreds."""
-        best_nuis = self._best(result, lay, 0)
+        best_nuis = best_of(result, lay, 0)
         drop = float(result.loss[best_simple] - result.loss[best_nuis])
         threshold = float(chi2.ppf(0.95, self._n_nuisance))
         selected = drop > threshold
@@ -532,7 +478,7 @@ class NightFit:
         them is a measure of how much the remaining model error may move it (type B)."""
         q = {}
         for group in (0, 2):
-            p = self._best(result, lay, group)
+            p = best_of(result, lay, group)
             x = to_physical(result.u[p], lay["box"][p])
             q[group] = lumped(x, self.ach_vent, self.ach_infl).tolist()
         out, shares = {}, {}
@@ -545,37 +491,7 @@ class NightFit:
             shares[name] = share
         return out, shares
 
-    def _best(self, result, lay, group: int) -> int:
-        members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
-        return members[int(torch.argmin(result.loss[members]))]
-
     # ------------------------------------------------------------ pieces
-    def _air_input(self, packed, model: str) -> tuple[torch.Tensor, torch.Tensor]:
-        """Φ_HC of AIR rows at the nodes and on the intervals: 0 on constrained nights (eq. 6)."""
-        cons = packed.constrained[:, None]
-        if model == "mean":
-            mean = packed.q_mean_w[:, None].expand_as(packed.q_w)
-            node, interval = mean, mean
-        else:
-            node, interval = packed.q_w, packed.q_in_w
-        return torch.where(cons, 0.0, node), torch.where(cons, 0.0, interval)
-
-    def _starts(self, s: int) -> torch.Tensor:
-        rng = np.random.default_rng(self.seed)
-        # emitter_share (added last) draws after the others: the earlier starts stay the same
-        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES) - 1))
-        frac = np.concatenate([frac, rng.uniform(0.15, 0.85, size=(s, 1))], axis=1)
-        u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
-        u[0] = 0.0
-        return u
-
-    def _initial_mass(self, u_rows, night, box_rows) -> torch.Tensor:
-        packed = self._packed
-        net = network(to_physical(u_rows, box_rows), self.ach_vent, self.ach_infl)
-        demand = self._row_type_n[night] == ROW_DEMAND
-        phi0 = torch.where(demand, packed.q_mean_w[night], self._phi_n[night, 0])
-        return mass_from_air(packed.t_air_c[night, 0], packed.t_out_c[night, 0], phi0, net)
-
     def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
@@ -583,26 +499,8 @@ class NightFit:
                                       units=stop_units(groups), max_iter=self.max_iter)
 
     def _update_sigma(self, rows, result, best) -> None:
-        sel = rows.problem == best
-        sub = rows.subset(sel)
-        if result.terms is not None:  # the optimiser's own last evaluation at this point
-            raw = result.terms.take(sel).raw()
-        else:
-            with torch.no_grad():
-                raw = raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
-        mask = self._packed.mask[sub.night]
-        groups = self._group_n[sub.night]
-        floors = (0.005, 0.005, 1.0)
-        n_all = int(mask.sum())
-        for g, key in enumerate(("constrained_t_air_k", "normal_t_air_k", "normal_power_w")):
-            m = mask & (groups == g)[:, None]
-            n_g = int(m.sum())
-            if n_g:
-                # Degrees of freedom: each night's θ_m,0 and the group's share of the 7
-                # parameters are fitted to these residuals (matters for hourly data).
-                dof = max(1.0, n_g - int((groups == g).sum()) - 7.0 * n_g / n_all)
-                rms = float(raw[m].pow(2).sum() / dof) ** 0.5
-                self.sigma_[key] = max(floors[g], rms)
+        self.sigma_ = residual_sigma(self._ctx, rows, result, best, self._packed.mask,
+                                     self._group_n, self.sigma_)
 
     def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
         return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
