@@ -180,7 +180,7 @@ def profile(data: Path, n: int) -> None:
     import torch
 
     from impctl.fit import data as fit_data
-    from impctl.fit import estimator
+    from impctl.fit import estimator, selection
     from impctl.fit.ode import solver
     from impctl.fit.optim import batch, lm
     from impctl.fleet import worker
@@ -217,6 +217,7 @@ def profile(data: Path, n: int) -> None:
     timed(lm, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
+    timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(estimator.NightFit, "_validate", "validation / predictions (two row sets)")
     timed(estimator.NightFit, "_night_quality", "night quality")
     timed(estimator.NightFit, "_update_sigma", "residual σ update")

@@ -23,9 +23,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-import numpy as np
 import torch
-from scipy.stats import chi2
 
 from ..errors import InputError
 from ..imp.features import Q_ON_W
@@ -34,7 +32,13 @@ from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
 from .intervals import model_error
-from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
+from .intervals.uncertainty import (
+    LUMPED_NAMES,
+    Z95,
+    laplace,
+    nuisance_intervals,
+    offset_allowance,
+)
 from .layout import (
     air_input,
     best_of,
@@ -59,17 +63,9 @@ from .ode.solver import METHODS
 from .optim import lm
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
+from .selection import class_check, gain_statement, nuisance_check, structure_share
 
 NORMAL_MODELS = ("demand", "series", "mean")
-LUMPED_NAMES = ("hlc", "c_m", "tau")
-#: Likelihood-ratio threshold for "the data contradict the class ranges", applied to the loss
-#: drop from the class box to the prior box in units of the autocorrelation-inflated σ: χ² with
-#: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
-#: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
-CLASS_REJECT_CHI2 = 3.84
-#: The nuisance terms (night gain, emitter amplitude and time constant, air/furniture
-#: capacity) are kept when they lower the loss by more than χ² at 95 % with as many degrees of
-#: freedom as terms switched on (3 by default: 7.81).
 
 
 class NightFit:
@@ -345,10 +341,11 @@ class NightFit:
         best = best_of(result, lay, 2 if lay["simple"] else 0)
         self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
         if lay["simple"]:
-            best = self._nuisance_check(rows, result, lay, best)
+            best, self.nuisance_check_ = nuisance_check(result, lay, best, self._n_nuisance)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
-            best = self._class_check(rows, result, lay, best, ranges)
+            best, self.class_check_ = class_check(self._ctx, rows, result, lay, best, ranges,
+                                                  self._group_n, self._n_nuisance)
         self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
@@ -365,7 +362,8 @@ class NightFit:
             else self.night_gain_sd_w)
         self.structure_share_ = None
         if self.structure_share and lay["simple"]:
-            self.lumped_, self.structure_share_ = self._structure_share(result, lay)
+            self.lumped_, self.structure_share_ = structure_share(
+                result, lay, self.lumped_, self.ach_vent, self.ach_infl)
             self.offset_allowance_["structure_relative_sd"] = self.structure_share_
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
@@ -373,7 +371,7 @@ class NightFit:
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
         self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
-        self.night_gain_ = self._gain_statement()
+        self.night_gain_ = gain_statement(self._u, self._sub.box[0], self.night_gain_sd_w)
         if self.night_gain_["assumed"]:
             # the pinned value, with the interval of the assumption (what the flex coast uses)
             g, sd = self.night_gain_["value_w"], self.night_gain_["sd_w"]
@@ -389,17 +387,6 @@ class NightFit:
         if cal is not None:
             self.lumped_, self.model_error_ = model_error.widen(
                 self.lumped_, model_error.diagnostics(self), cal)
-
-    def _gain_statement(self) -> dict:
-        """The night gain the reported fit used [W]: fitted (the likelihood-ratio test kept
-        the term) or assumed (pinned to ``night_gain_w``), with the plain statement."""
-        lo, hi = (float(v) for v in self._sub.box[0][len(PARAM_NAMES)])
-        fitted = hi > lo   # the reported problem's box: pinned when (g, g)
-        g = float(to_physical(self._u, self._sub.box[0])[len(PARAM_NAMES)])
-        sd = 0.0 if fitted else float(self.night_gain_sd_w)
-        text = (f"night gain fitted {g:.0f} W" if fitted else
-                f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
-        return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
 
     def _night_quality(self, nights) -> list[dict]:
         used = {n.night_id: n for n in self.nights_}
@@ -437,61 +424,6 @@ class NightFit:
         self.n_iter_ += second.n_iter
         self._update_sigma(rows, second, int(torch.argmin(second.loss[:len(lay["class"])])))
 
-    def _class_check(self, rows, result, lay, best_class, ranges) -> int:
-        """Likelihood-ratio test of the class ranges against the whole prior ranges."""
-        best_prior = best_of(result, lay, 1)
-        sel = rows.problem == best_prior
-        est = laplace(self._ctx, rows.subset(sel), result.u[best_prior], result.t_m0[sel],
-                      self._group_n, has_power=True, summary_only=True,
-                      terms=terms_of(result, sel))
-        drop = float(result.loss[best_class] - result.loss[best_prior]) / est["inflation"]
-        x = to_physical(result.u[best_prior], lay["box"][best_prior])
-        outside = [n for n, (lo, hi) in (ranges or {}).items()
-                   if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
-        # The prior problems carry the nuisance terms; against a class fit without them the
-        # test has those extra degrees of freedom too.
-        threshold = (float(chi2.ppf(0.95, 1 + self._n_nuisance)) if best_class in lay["simple"]
-                     else CLASS_REJECT_CHI2)
-        rejected = drop > threshold
-        self.class_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
-                             "rejected": rejected, "outside": outside if rejected else []}
-        return best_prior if rejected else best_class
-
-    def _nuisance_check(self, rows, result, lay, best_simple) -> int:
-        """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
-        likelihood-ratio test says the data need them: the loss drop (in units of the fitted
-        residual σ) over the 3 extra parameters against χ²₃. Not deflated for residual
-        autocorrelation: on a house the model fits (the ideal 5R1C) the drop stays ≈ 1, while
-        emitter and furniture heat after switch-off give drops in the hundreds."""
-        best_nuis = best_of(result, lay, 0)
-        drop = float(result.loss[best_simple] - result.loss[best_nuis])
-        threshold = float(chi2.ppf(0.95, self._n_nuisance))
-        selected = drop > threshold
-        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
-                                "selected": selected}
-        return best_nuis if selected else best_simple
-
-    def _structure_share(self, result, lay) -> tuple[dict, dict]:
-        """Widen the intervals by the structural sensitivity: half the log-difference of each
-        lumped quantity between the fits with and without the nuisance terms, added in
-        quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
-        them is a measure of how much the remaining model error may move it (type B)."""
-        q = {}
-        for group in (0, 2):
-            p = best_of(result, lay, group)
-            x = to_physical(result.u[p], lay["box"][p])
-            q[group] = lumped(x, self.ach_vent, self.ach_infl).tolist()
-        out, shares = {}, {}
-        for i, name in enumerate(LUMPED_NAMES):
-            e = self.lumped_[name]
-            share = 0.5 * abs(float(np.log(q[0][i] / q[2][i])))
-            sd = np.hypot(np.log(e.high / e.low) / (2 * Z95), share)
-            out[name] = type(e)(e.value, float(e.value * np.exp(-Z95 * sd)),
-                                float(e.value * np.exp(Z95 * sd)), e.determined)
-            shares[name] = share
-        return out, shares
-
-    # ------------------------------------------------------------ pieces
     def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
