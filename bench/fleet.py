@@ -218,7 +218,7 @@ def profile(data: Path, n: int) -> None:
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
-    timed(estimator.NightFit, "_validate", "validation / predictions (two row sets)")
+    timed(estimator, "in_sample_validation", "validation / predictions (two row sets)")
     timed(estimator.NightFit, "_night_quality", "night quality")
     timed(estimator.NightFit, "_update_sigma", "residual σ update")
     timed(estimator, "pack_nights", "pack nights into tensors")

@@ -30,15 +30,9 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
-from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
+from .data import noise_levels, prepare_nights, search_bounds, settled
 from .intervals import model_error
-from .intervals.uncertainty import (
-    LUMPED_NAMES,
-    Z95,
-    laplace,
-    nuisance_intervals,
-    offset_allowance,
-)
+from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
 from .layout import (
     air_input,
     best_of,
@@ -49,14 +43,13 @@ from .layout import (
     stop_units,
     terms_of,
 )
-from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
+from .ode.node import ROW_AIR, ROW_DEMAND
 from .ode.packing import pack_nights
 from .ode.parameters import (
     NUISANCE_BOUNDS,
     NUISANCE_NAMES,
     PARAM_NAMES,
     bounds_tensor,
-    lumped,
     to_physical,
 )
 from .ode.solver import METHODS
@@ -64,6 +57,7 @@ from .optim import lm
 from .quality import adequacy, night_quality, power_usable
 from .resample import coarsen
 from .selection import class_check, gain_statement, nuisance_check, structure_share
+from .validation import in_sample_validation, per_night_fits
 
 NORMAL_MODELS = ("demand", "series", "mean")
 
@@ -378,8 +372,12 @@ class NightFit:
             self.nuisance_["night_gain_w"] = {
                 "value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
                 "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
-        self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
-        self._validate()
+        self.per_night_, self.per_night_mean_ = per_night_fits(result, lay, packed, self.ach_vent,
+                                                               self.ach_infl)
+        self.validation_, self.predictions_ = in_sample_validation(
+            packed, kept, self._u, self._sub.box[0], self._t_m0, self._phi_n, self._phi_in_n,
+            ach_vent=self.ach_vent, ach_infl=self.ach_infl, solver=self.solver,
+            normal_model=self.normal_model)
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
         self.night_quality_ = self._night_quality(nights)
         self.interval_basis_ = est["interval_basis"]
@@ -437,60 +435,6 @@ class NightFit:
     def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
         return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
                         strict=True))
-
-    def _per_night(self, result, lay):
-        if not lay["night"]:
-            return [], {}
-        n = self._packed.n_nights
-        members = torch.tensor(lay["night"]).view(-1, n)      # (starts, nights)
-        best = members[result.loss[members].argmin(0), torch.arange(n)]
-        params = to_physical(result.u[best], lay["box"][best])[:, :len(PARAM_NAMES)]
-        q = lumped(params, self.ach_vent, self.ach_infl)
-        entries = []
-        for i, nid in enumerate(self._packed.night_ids):
-            kind = self._packed.kinds[i]
-            entries.append({
-                "night_id": nid, "kind": kind,
-                "parameters": dict(zip(PARAM_NAMES, params[i].tolist(), strict=True)),
-                "lumped": dict(zip(LUMPED_NAMES, q[i].tolist(), strict=True)),
-                # a night without heat power carries no absolute scale
-                "determines": ["tau"] if kind == "constrained" else ["hlc", "c_m", "tau"],
-            })
-        mean_params = params.mean(0)
-        mean = {"parameters": dict(zip(PARAM_NAMES, mean_params.tolist(), strict=True)),
-                "lumped": dict(zip(LUMPED_NAMES, lumped(mean_params, self.ach_vent,
-                                                        self.ach_infl).tolist(), strict=True))}
-        return entries, mean
-
-    def _validate(self) -> None:
-        """In-sample Tables II/V: heat demand on normal nights, T_air RMSE on constrained ones."""
-        packed = self._packed
-        n = packed.n_nights
-        params = to_physical(self._u, self._sub.box[0]).expand(n, -1)
-        idx = torch.arange(n)
-        with torch.no_grad():
-            t_air = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_AIR),
-                               self._phi_n, self._phi_in_n, self.ach_vent,
-                               self.ach_infl, self.solver).predict().numpy()
-            q_model = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_DEMAND),
-                                 self._phi_n, self._phi_in_n, self.ach_vent,
-                                 self.ach_infl, self.solver).predict().numpy()
-        mask = packed.mask.numpy()
-        self.validation_ = validation_table(packed.night_ids, packed.kinds,
-                                            packed.grid_s.numpy(), mask, packed.t_air_c.numpy(),
-                                            packed.q_w.numpy(), t_air, q_model)
-        self.predictions_ = []
-        for i, night in enumerate(self.nights_):
-            m = mask[i]
-            # With the demand model a normal night's T_air is an input, not a prediction.
-            as_input = night.kind == "normal" and self.normal_model == "demand"
-            entry = {"night_id": night.night_id, "kind": night.kind,
-                     "time_s": night.time_s, "t_air_measured_c": night.t_air_c,
-                     "t_air_model_c": None if as_input else t_air[i][m],
-                     "t_out_c": night.t_out_c, "q_measured_w": night.q_hc_w}
-            if night.kind == "normal":
-                entry["q_model_w"] = q_model[i][m]
-            self.predictions_.append(entry)
 
     def to_dict(self) -> dict:
         """JSON-ready summary (see :mod:`.report`)."""
