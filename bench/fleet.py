@@ -219,7 +219,7 @@ def profile(data: Path, n: int) -> None:
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(estimator, "in_sample_validation", "validation / predictions (two row sets)")
-    timed(estimator.NightFit, "_night_quality", "night quality")
+    timed(estimator, "used_nights_quality", "night quality")
     timed(estimator.NightFit, "_update_sigma", "residual σ update")
     timed(estimator, "pack_nights", "pack nights into tensors")
     timed(estimator, "coarsen", "coarsen to 5-min blocks")

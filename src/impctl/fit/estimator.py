@@ -54,7 +54,7 @@ from .ode.parameters import (
 )
 from .ode.solver import METHODS
 from .optim import lm
-from .quality import adequacy, night_quality, power_usable
+from .quality import adequacy, power_usable, used_nights_quality
 from .resample import coarsen
 from .selection import class_check, gain_statement, nuisance_check, structure_share
 from .validation import in_sample_validation, per_night_fits
@@ -379,30 +379,13 @@ class NightFit:
             ach_vent=self.ach_vent, ach_infl=self.ach_infl, solver=self.solver,
             normal_model=self.normal_model)
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
-        self.night_quality_ = self._night_quality(nights)
+        self.night_quality_ = used_nights_quality(nights, kept, self.skipped_,
+                                                  self.resume_threshold_w, self.nuisance_)
         self.interval_basis_ = est["interval_basis"]
         self.model_error_ = None
         if cal is not None:
             self.lumped_, self.model_error_ = model_error.widen(
                 self.lumped_, model_error.diagnostics(self), cal)
-
-    def _night_quality(self, nights) -> list[dict]:
-        used = {n.night_id: n for n in self.nights_}
-        why = dict(self.skipped_)
-        out = []
-        for night in nights:
-            q = night_quality(night, self.resume_threshold_w)
-            kept = used.get(night.night_id)
-            q["used"] = kept is not None
-            q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
-                             if kept is not None else 0.0)
-            q["reason"] = why.get(night.night_id)
-            gain = (self.nuisance_ or {}).get("night_gain_w")
-            # an assumed gain is not an estimate of this night's (fit.night_gain says it)
-            if gain is not None and kept is not None and not gain.get("assumed"):
-                q["night_gain_w"] = gain["value"]   # one value per campaign
-            out.append(q)
-        return out
 
     def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
         return problem_rows(lay, self.sigma_, self._row_type_n, self._phi_n, self._phi_in_n,
