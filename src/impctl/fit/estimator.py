@@ -34,24 +34,18 @@ from .data import noise_levels, prepare_nights, search_bounds, settled
 from .intervals import model_error
 from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
 from .layout import (
-    air_input,
     best_of,
     initial_mass,
     layout,
+    night_rows,
+    nuisance_boxes,
     problem_rows,
     residual_sigma,
     stop_units,
     terms_of,
 )
-from .ode.node import ROW_AIR, ROW_DEMAND
 from .ode.packing import pack_nights
-from .ode.parameters import (
-    NUISANCE_BOUNDS,
-    NUISANCE_NAMES,
-    PARAM_NAMES,
-    bounds_tensor,
-    to_physical,
-)
+from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
 from .quality import adequacy, power_usable, used_nights_quality
@@ -293,23 +287,13 @@ class NightFit:
                                             power_ok=power_ok)
         packed.emitter_lag = bool(self.emitter_lag and self.emitter_state)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver)
-        cons = packed.constrained
-        demand = ~cons & torch.tensor(self.normal_model == "demand")
-        self._row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
-        self._phi_n, self._phi_in_n = air_input(packed, self.normal_model)
-        self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
+        self._row_type_n, self._phi_n, self._phi_in_n, self._group_n = night_rows(
+            packed, self.normal_model)
         self.sigma_ = noise_levels(kept)
 
-        nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
-            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
-                             self.furniture_state, self.emitter_state and self.emitter_lag),
-            strict=True)}
-        # a gain not fitted is pinned to the assumed one (an occupied house never has 0 W)
-        pinned = (float(self.night_gain_w),) * 2
-        if not self.night_gain:
-            nuisance["night_gain_w"] = pinned
+        nuisance, plain = nuisance_boxes(self.night_gain, self.emitter_state,
+                                         self.furniture_state, self.emitter_lag, self.night_gain_w)
         self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
-        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
         lay = layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
                      bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
                      n_starts=self.n_starts, seed=self.seed, per_night=self.per_night)
@@ -349,7 +333,7 @@ class NightFit:
         self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
         self.parameters_ = self._param_dict(self._u, self._sub.box[0])
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
-                      has_power=bool((~cons).any()), terms=terms_of(result, sel))
+                      has_power=bool((~packed.constrained).any()), terms=terms_of(result, sel))
         self.lumped_, self.offset_allowance_ = offset_allowance(
             est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
             0.0 if self.nuisance_check_.get("selected") and self.night_gain

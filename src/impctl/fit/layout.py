@@ -5,8 +5,10 @@ terms, the same starts in the whole prior box, and each night alone (the paper's
 Here is how they are laid out — which start in which box over which nights, in which group —
 and the rows the optimiser evaluates for them, weighted by the residual σ of each group.
 
+* :func:`nuisance_boxes` — the bounds of the nuisance terms, switched on and off;
 * :func:`layout` — the problems, their groups and boxes; :func:`best_of` — the best of a group;
 * :func:`stop_units` — which groups stop together (:func:`.optim.lm.levenberg_marquardt`);
+* :func:`night_rows` — each night's row type, heat input and residual group;
 * :func:`problem_rows` — the optimiser's rows; :func:`air_input` — Φ_HC of the AIR rows;
 * :func:`initial_mass` — the mass temperature each row starts from (the start's parameters);
 * :func:`residual_sigma` — the residual σ per group, from a fit (the rows' weights).
@@ -18,8 +20,15 @@ import numpy as np
 import torch
 
 from ..model.continuous import mass_from_air
-from .ode.node import ROW_DEMAND
-from .ode.parameters import DTYPE, NUISANCE_NAMES, PARAM_NAMES, network, to_physical
+from .ode.node import ROW_AIR, ROW_DEMAND
+from .ode.parameters import (
+    DTYPE,
+    NUISANCE_BOUNDS,
+    NUISANCE_NAMES,
+    PARAM_NAMES,
+    network,
+    to_physical,
+)
 from .optim import lm
 from .optim.problem import raw_residuals
 
@@ -47,6 +56,22 @@ def starts(s: int, seed: int) -> torch.Tensor:
     u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
     u[0] = 0.0
     return u
+
+
+def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
+                   emitter_lag: bool, night_gain_w: float) -> tuple[dict, dict]:
+    """Bounds of the nuisance terms (:data:`~.ode.parameters.NUISANCE_NAMES`) with the terms
+    switched on as asked, and with all of them off (``plain``); (0, 0) is off. A night gain
+    that is not fitted is pinned to ``night_gain_w`` [W] in both."""
+    nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
+        NUISANCE_NAMES, (night_gain, emitter_state, emitter_state, furniture_state,
+                         emitter_state and emitter_lag), strict=True)}
+    # a gain not fitted is pinned to the assumed one (an occupied house never has 0 W)
+    pinned = (float(night_gain_w),) * 2
+    if not night_gain:
+        nuisance["night_gain_w"] = pinned
+    plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
+    return nuisance, plain
 
 
 def layout(n: int, with_prior: bool, nuisance_box, class_box, prior_box, *, n_starts: int,
@@ -111,6 +136,18 @@ def problem_rows(lay: dict, sigma: dict[str, float], row_type_n: torch.Tensor, p
         box, n_prob = box[torch.tensor(only)], len(only)
     return lm.Rows(problem, night, row_type_n[night], phi_n[night],
                    phi_in_n[night], 1.0 / sig[group_n[night]], box, n_prob)
+
+
+def night_rows(packed, normal_model: str) -> tuple[torch.Tensor, ...]:
+    """Per night: its row type (AIR, or DEMAND for normal nights with the "demand" model), Φ_HC
+    [W] of AIR rows at the nodes and on the intervals (:func:`air_input`) and its residual
+    group (0 constrained T_air, 1 normal T_air, 2 normal power)."""
+    cons = packed.constrained
+    demand = ~cons & torch.tensor(normal_model == "demand")
+    row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
+    phi_n, phi_in_n = air_input(packed, normal_model)
+    group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
+    return row_type_n, phi_n, phi_in_n, group_n
 
 
 def air_input(packed, model: str) -> tuple[torch.Tensor, torch.Tensor]:
