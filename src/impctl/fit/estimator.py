@@ -30,7 +30,7 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
-from .data import noise_levels, prepare_nights, search_bounds, settled
+from .data import compared_power, noise_levels, prepare_nights, search_bounds
 from .intervals import model_error
 from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
 from .layout import (
@@ -48,7 +48,7 @@ from .ode.packing import pack_nights
 from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
-from .quality import adequacy, power_usable, used_nights_quality
+from .quality import adequacy, used_nights_quality
 from .resample import coarsen
 from .selection import class_check, gain_statement, nuisance_check, structure_share
 from .validation import in_sample_validation, per_night_fits
@@ -273,14 +273,8 @@ class NightFit:
         with_prior = class_box != prior_box
         self.classified_ = sorted(ranges or {})
         self.nights_ = kept
-        # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
-        # only the power during the interruption and its recovery is not compared.
-        power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
-        # The first hour after the setpoint step of a held night is emitter, air and furniture
-        # charging and the sensor's lag (README "Accuracy", error budget): that power drives
-        # nothing the 5R1C has, so it is not compared (T_air still drives the model).
-        power_ok = [ok & settled(n, self.settle_h, self.settle_until_held)
-                    if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
+        power_ok = compared_power(kept, self.resume_threshold_w, self.settle_h,
+                                  self.settle_until_held)
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
                                             smooth_out_s=3600.0 * self.smooth_out_h,
