@@ -32,7 +32,7 @@ from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .data import compared_power, noise_levels, prepare_nights, search_bounds
 from .intervals import model_error
-from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
+from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import (
     best_of,
     initial_mass,
@@ -45,12 +45,12 @@ from .layout import (
     terms_of,
 )
 from .ode.packing import pack_nights
-from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, bounds_tensor, to_physical
+from .ode.parameters import PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
 from .quality import adequacy, used_nights_quality
 from .resample import coarsen
-from .selection import class_check, gain_statement, nuisance_check, structure_share
+from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
 from .validation import in_sample_validation, per_night_fits
 
 NORMAL_MODELS = ("demand", "series", "mean")
@@ -325,7 +325,8 @@ class NightFit:
         self._t_m0 = result.t_m0[sel]
         self.loss_ = float(result.loss[best])
         self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
-        self.parameters_ = self._param_dict(self._u, self._sub.box[0])
+        x = to_physical(self._u, self._sub.box[0])[:len(PARAM_NAMES)]
+        self.parameters_ = dict(zip(PARAM_NAMES, x.tolist(), strict=True))
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
                       has_power=bool((~packed.constrained).any()), terms=terms_of(result, sel))
         self.lumped_, self.offset_allowance_ = offset_allowance(
@@ -345,11 +346,7 @@ class NightFit:
         self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
         self.night_gain_ = gain_statement(self._u, self._sub.box[0], self.night_gain_sd_w)
         if self.night_gain_["assumed"]:
-            # the pinned value, with the interval of the assumption (what the flex coast uses)
-            g, sd = self.night_gain_["value_w"], self.night_gain_["sd_w"]
-            self.nuisance_["night_gain_w"] = {
-                "value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
-                "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
+            self.nuisance_["night_gain_w"] = assumed_gain(self.night_gain_)
         self.per_night_, self.per_night_mean_ = per_night_fits(result, lay, packed, self.ach_vent,
                                                                self.ach_infl)
         self.validation_, self.predictions_ = in_sample_validation(
@@ -392,10 +389,6 @@ class NightFit:
     def _update_sigma(self, rows, result, best) -> None:
         self.sigma_ = residual_sigma(self._ctx, rows, result, best, self._packed.mask,
                                      self._group_n, self.sigma_)
-
-    def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
-        return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
-                        strict=True))
 
     def to_dict(self) -> dict:
         """JSON-ready summary (see :mod:`.report`)."""

@@ -5,7 +5,7 @@ terms, and in the class box and the whole prior box. First the data decide wheth
 nuisance terms (:func:`nuisance_check`), then whether they contradict the class ranges
 (:func:`class_check`); :func:`structure_share` widens the intervals by how far the nuisance terms
 move the answer, and :func:`gain_statement` says whether the reported night gain was fitted or
-assumed.
+assumed (:func:`assumed_gain`: then with the interval of the assumption).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from scipy.stats import chi2
 from .data import Estimate
 from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
 from .layout import best_of, terms_of
-from .ode.parameters import PARAM_NAMES, lumped, to_physical
+from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, lumped, to_physical
 from .optim import lm
 
 #: Likelihood-ratio threshold for "the data contradict the class ranges", applied to the loss
@@ -107,3 +107,11 @@ def gain_statement(u: torch.Tensor, box: torch.Tensor, night_gain_sd_w: float) -
     text = (f"night gain fitted {g:.0f} W" if fitted else
             f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
     return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
+
+
+def assumed_gain(statement: dict) -> dict:
+    """The ``nuisance_`` entry of an assumed night gain (:func:`gain_statement`): the pinned
+    value [W] with the 95 % interval of the assumption (what the flex coast uses)."""
+    g, sd = statement["value_w"], statement["sd_w"]
+    return {"value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
+            "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
