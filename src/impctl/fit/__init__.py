@@ -19,9 +19,11 @@ Inside, by concern:
   (many households in one call: the fleet);
 * :mod:`.intervals` — :mod:`.intervals.uncertainty` (Laplace, sandwich, type-B shares) and
   :mod:`.intervals.model_error` (the share calibrated on realistic virtual houses);
-* here: :mod:`.estimator`, :mod:`.data`, :mod:`.resample` (fine rows into blocks),
-  :mod:`.quality` (night quality, model adequacy; no torch), :mod:`.report`,
-  :mod:`.baselines` (the methods the fit is compared with).
+* here: :mod:`.estimator` (the procedure), :mod:`.layout` (the problems one fit solves in one
+  optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
+  the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
+  :mod:`.data`, :mod:`.resample` (fine rows into blocks), :mod:`.quality` (night quality, model
+  adequacy; no torch), :mod:`.report`, :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations

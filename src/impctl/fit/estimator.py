@@ -10,12 +10,15 @@ shared parameters (the headline) and per-night fits averaged afterwards (the pap
 
 What is reported as *measured* is what the data determines (identifiability.md): the lumped
 HLC, C_m and τ with 95 % intervals, and for each physical parameter whether the data pins it
-down or only its search range does (:mod:`.uncertainty`).
+down or only its search range does (:mod:`.intervals.uncertainty`).
 
 Class ranges are a prior, and a wrong class biases even the lumped quantities. The joint fit is
 therefore run twice in the same batch — inside the class ranges and inside the whole prior
 ranges — and a likelihood-ratio test decides: if the data fit clearly better outside the class
 ranges, the classification is reported as contradicted and the prior-range fit is used.
+
+Here is the procedure; its pieces live by concern: :mod:`.layout` (the problems of the one
+optimiser call), :mod:`.selection` (the likelihood-ratio tests), :mod:`.validation`.
 """
 
 from __future__ import annotations
