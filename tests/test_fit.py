@@ -14,7 +14,8 @@ from impctl.fit import baselines
 from impctl.fit.data import noise_levels, prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
 from impctl.fit.ode.parameters import PARAM_NAMES
-from impctl.fit.report import fit_to_dict, format_table
+from impctl.fit.report import fit_to_dict
+from impctl.fit.table import format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
 from impctl.population.synth_nights import synth_nights

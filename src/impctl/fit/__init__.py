@@ -6,7 +6,8 @@ reading a result (:mod:`.report`) needs no torch.
 
 * :class:`NightFit` (:mod:`.estimator`): the estimator (torch)
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
-* :func:`fit_to_dict`, :func:`format_table`, :func:`plot_fit` (:mod:`.report`, no torch)
+* :func:`fit_to_dict`, :func:`plot_fit` (:mod:`.report`), :func:`format_table` (:mod:`.table`):
+  the JSON summary, its figure, its printed form (no torch)
 
 Inside, by concern:
 
@@ -23,7 +24,8 @@ Inside, by concern:
   optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
   the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
   :mod:`.data`, :mod:`.resample` (fine rows into blocks), :mod:`.quality` (night quality, model
-  adequacy; no torch), :mod:`.report`, :mod:`.baselines` (the methods the fit is compared with).
+  adequacy; no torch), :mod:`.report` (the JSON, the figure), :mod:`.table` (the printed form),
+  :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from .._lazy import attach
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "estimator": ["NightFit"],
     "data": ["prepare_nights"],
-    "report": ["fit_to_dict", "format_table", "plot_fit"],
+    "report": ["fit_to_dict", "plot_fit"],
+    "table": ["format_table"],
 })
 __all__ = [*_LAZY_NAMES]
