@@ -6,8 +6,8 @@ reading a result (:mod:`.report`) needs no torch.
 
 * :class:`NightFit` (:mod:`.estimator`): the estimator (torch)
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
-* :func:`fit_to_dict`, :func:`plot_fit` (:mod:`.report`), :func:`format_table` (:mod:`.table`):
-  the JSON summary, its figure, its printed form (no torch)
+* :func:`fit_to_dict` (:mod:`.report`), :func:`format_table` (:mod:`.table`), :func:`plot_fit`
+  (:mod:`.plot`): the JSON summary, its printed form, the figure (no torch)
 
 Inside, by concern:
 
@@ -24,8 +24,8 @@ Inside, by concern:
   optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
   the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
   :mod:`.data`, :mod:`.resample` (fine rows into blocks), :mod:`.quality` (night quality, model
-  adequacy; no torch), :mod:`.report` (the JSON, the figure), :mod:`.table` (the printed form),
-  :mod:`.baselines` (the methods the fit is compared with).
+  adequacy; no torch), :mod:`.report` (the JSON), :mod:`.table` (its printed form),
+  :mod:`.plot`, :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ from .._lazy import attach
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "estimator": ["NightFit"],
     "data": ["prepare_nights"],
-    "report": ["fit_to_dict", "plot_fit"],
+    "report": ["fit_to_dict"],
     "table": ["format_table"],
+    "plot": ["plot_fit"],
 })
 __all__ = [*_LAZY_NAMES]
