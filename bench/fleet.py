@@ -182,7 +182,7 @@ def profile(data: Path, n: int) -> None:
     from impctl.fit import data as fit_data
     from impctl.fit import estimator, selection
     from impctl.fit.ode import solver
-    from impctl.fit.optim import batch, lm
+    from impctl.fit.optim import batch, lm, problem
     from impctl.fleet import worker
     from impctl.fleet.inputs import discover
 
@@ -214,7 +214,7 @@ def profile(data: Path, n: int) -> None:
     timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
     timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
-    timed(lm, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
+    timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
