@@ -30,8 +30,7 @@ from dataclasses import dataclass, fields
 import torch
 
 from ...imp.night import NightSamples
-from ..estimator import NightFit
-from ..layout import stop_units
+from ..estimator import NightFit, stop_units
 from ..ode.packing import PackedNights
 from . import lm
 from ._alloc import retain_freed_memory
