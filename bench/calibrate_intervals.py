@@ -1,19 +1,25 @@
 """Calibrate the fit's model-error share on the realistic virtual population (and explain misses).
 
-Run (regenerates ``src/impctl/fit/intervals/model_error.json``; ≤ 15 min on one core, a line
-per fit)::
+Run (regenerates ``src/impctl/fit/intervals/model_error.json``; 1,520 fits in about 5 min on
+one core, batched, a line per batch of 16)::
 
-    .venv/bin/python bench/calibrate_intervals.py [--households 160] [--seed 31415]
-        [--steps 300:160,3600:80] [--subsets 1+1,1+2,2+2,2+3]
+    OMP_NUM_THREADS=1 .venv/bin/python bench/calibrate_intervals.py [--households 160]
+        [--seed 31415] [--steps 300:160,3600:80] [--sequences c.n0,c.n0.n-1,…]
 
 Households: ``sample_households(N, seed)`` with realism ``sample_params(N, seed)`` on the
 realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal nights, 5-minute
 rows, true class ranges) — the seed must differ from the bench's validation seed (20260) and the
 classifiers' training seeds (``impctl train --seed 0``). Each house is fitted with the share
 switched off (``NightFit(model_error=None)``); its diagnostics, interval SDs and log errors go to
-the calibration (:func:`impctl.fit.intervals.model_error.calibrate`). At the first (finest) step
-each house is also fitted on the subsets of its nights a campaign fits (``--subsets``: its first
-C constrained + N normal nights, C+N ≤ 5), which calibrate the "few nights" band.
+the calibration (:func:`impctl.fit.intervals.model_error.calibrate`): the "many nights" band.
+At the first (finest) step each house is also fitted on the nights a campaign on a gateway
+ends on (``--sequences``, :data:`SEQUENCES`): every variant of a campaign night — constrained
+at ``CampaignConfig().constrained_setpoint_c``, normal at each of its ``normal_setpoints_c``,
+the gateway's pre-heat — simulated on the house's own weather and gains, as
+``bench/campaign.py`` does; these fits calibrate the "few nights" band, whose file records the
+setpoints (``bands.few.protocol``). Until h18c the few band took the first C + N nights of the
+2 + 6 protocol above (normal 22 °C, constrained 23 °C, normal 24, 22 °C, …, the second
+constrained night at 24 °C), nights a campaign never runs.
 
 ``--why`` (with ``--seed 20260`` for the bench's held-out houses): fit with the share ON and print,
 for every house whose interval misses a truth, what the fit could see (the "why do intervals
@@ -32,11 +38,13 @@ import sys
 import time
 from pathlib import Path
 
+import campaign_nights  # bench/campaign_nights.py: the gateway's nights, as bench/campaign.py
 import numpy as np
 from fit import ACH, VAL_SEED, _sub_schedule, true_ranges  # bench/fit.py: the same protocol
 
-from impctl.fit.estimator import NightFit
+from impctl.config import CampaignConfig
 from impctl.fit.intervals import model_error
+from impctl.fit.optim.batch import fit_households
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params, take_params
@@ -48,6 +56,13 @@ from impctl.population.synth_nights import (
 )
 
 TRAIN_SEEDS = (0,)
+#: The few-nights band's campaign night sequences (``--sequences``): the endings of the
+#: adaptive campaign (``bench/campaign.py`` prints them; the same on seeds 20260 and 4242: a
+#: constrained night, a normal one at the first setpoint — the default order — then mostly the
+#: last setpoint, a second constrained night now and then; the 2-night fits are those the floor
+#: rule stops) and the fixed 2 + 3 plan.
+SEQUENCES = ("c.n0,c.n0.c,c.n0.n-1,c.n0.n-1.c,c.n0.n-1.n-1,c.n0.n-1.n-1.c,c.n0.n-1.n-1.n-1,"
+             "c.c.n0.n1.n2")
 CHUNK = 40   # households simulated together (memory, and a progress line per chunk)
 
 
@@ -55,71 +70,80 @@ def _truth(house) -> dict[str, float]:
     return {"hlc": house.hlc_w_per_k, "c_m": house.c_m_j_per_k, "tau": house.tau_h}
 
 
-def _subset(nights: list, n_constrained: int, n_normal: int) -> list:
-    """The first ``n_constrained`` constrained and ``n_normal`` normal nights, in night order."""
-    keep, seen = [], {"constrained": 0, "normal": 0}
-    want = {"constrained": n_constrained, "normal": n_normal}
-    for night in nights:
-        if seen[night.kind] < want[night.kind]:
-            seen[night.kind] += 1
-            keep.append(night)
-    return keep
-
-
 def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
-            plant: str = "realistic", subsets: tuple[tuple[int, int], ...] = ()) -> list[dict]:
+            plant: str = "realistic", sequences: tuple[tuple[int, ...], ...] = (),
+            batch: int = 16) -> list[dict]:
     """Simulate ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C with the
     bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s]
-    (at the first step also each of ``subsets``, (constrained, normal) night counts); one record
-    per fit."""
+    on the 2 + 6 protocol (the "many" band); at the first step also each of ``sequences``
+    (campaign night sequences, indices into :func:`campaign_nights.variants`: the gateway's
+    nights, the "few" band). One record per fit; fits in batches of ``batch`` households
+    (:func:`impctl.fit.optim.batch.fit_households`, the same numbers as single fits)."""
     houses = sample_households(n, seed=seed)
     params = sample_params(n, seed)
     kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
     onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (n,)) >= 0.999
     control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
     sched = imp_schedule(n, seed=seed)
+    variants = campaign_nights.variants()
+    k = max((len(q) for q in sequences), default=0)
+    var_sched = [campaign_nights.variant_schedule(n, k, kd, sp, seed) for kd, sp in variants] \
+        if k else []
     records = []
     started = time.perf_counter()
     t_sim = 0.0
-    n_fits = sum(min(n, k) for k in steps.values()) + len(subsets) * min(n, next(iter(
-        steps.values())))
     first_step = next(iter(steps))
-    for i in range(n):
-        if i % CHUNK == 0:   # simulate the next chunk of houses together
-            t0 = time.perf_counter()
-            idx = np.arange(i, min(n, i + CHUNK))
-            sub = _sub_schedule(sched, idx)
-            chunk = HouseParameters.stack([houses.take(int(k)) for k in idx])
-            if plant == "iso":
-                logged, sp = run_schedule(chunk, sub)
-            else:
-                logged, sp = run_schedule_plant(chunk, sub, take_params(params, idx, n),
-                                                seed=seed + i)
-            t_sim += time.perf_counter() - t0
-        house = houses.take(i)
+    n_fits = sum(min(n, c) for c in steps.values()) + len(sequences) * min(n, steps[first_step])
+    noise = 0.05 if plant == "iso" else 0.0
+
+    def simulate(sch, idx, i):
+        sub = _sub_schedule(sch, idx)
+        chunk = HouseParameters.stack([houses.take(int(h)) for h in idx])
+        if plant == "iso":
+            return (*run_schedule(chunk, sub), sub)
+        return (*run_schedule_plant(chunk, sub, take_params(params, idx, n), seed=seed + i), sub)
+
+    for i0 in range(0, n, CHUNK):   # simulate the next chunk of houses together
+        t0 = time.perf_counter()
+        idx = np.arange(i0, min(n, i0 + CHUNK))
+        logged, sp, sub = simulate(sched, idx, i0)
+        var_sims = [simulate(vs, idx, i0) for vs in var_sched]
+        t_sim += time.perf_counter() - t0
+        jobs = []   # (house, step, label, nights)
         for step_s, count in steps.items():
-            if i >= count:
-                continue
-            nights = sample_nights(logged, sp, sub, i % CHUNK, sample_step_s=step_s,
-                                   quantise_k=0.1, seed=seed + i,
-                                   power_noise=0.05 if plant == "iso" else 0.0)
-            sets = [("all", nights)] + [(f"{c}+{m}", _subset(nights, c, m))
-                                        for c, m in (subsets if step_s == first_step else ())]
-            for label, chosen in sets:
-                fit = NightFit(ach_vent=ACH[0], ach_infl=ACH[1],
-                               model_error="default" if share_on else None
-                               ).fit(chosen, true_ranges(house))
-                records.append(_record(i, step_s, fit, _truth(house), kind[i], onoff[i],
-                                       control[i]))
+            for i in idx[idx < count]:
+                def cut(sim, spc, sch, i=int(i), step_s=step_s):
+                    return sample_nights(sim, spc, sch, i % CHUNK, sample_step_s=step_s,
+                                         quantise_k=0.1, seed=seed + i, power_noise=noise)
+                jobs.append((int(i), step_s, "all", cut(logged, sp, sub)))
+                if step_s != first_step:
+                    continue
+                per_variant = [cut(*vs) for vs in var_sims]
+                for q in sequences:
+                    jobs.append((int(i), step_s, campaign_nights.label(q),
+                                 [per_variant[v][j] for j, v in enumerate(q)]))
+        for b in range(0, len(jobs), batch):
+            part = jobs[b:b + batch]
+            fits, _ = fit_households([j[3] for j in part],
+                                     [true_ranges(houses.take(j[0])) for j in part],
+                                     ach_vent=ACH[0], ach_infl=ACH[1],
+                                     model_error="default" if share_on else None)
+            for (i, step_s, label, _), fit in zip(part, fits, strict=True):
+                if isinstance(fit, BaseException):
+                    print(f"  house {i:3d}, nights {label}: fit failed ({fit}); left out",
+                          flush=True)
+                    continue
+                records.append(_record(i, step_s, fit, _truth(houses.take(i)), kind[i],
+                                       onoff[i], control[i]))
                 records[-1]["nights"] = label
-                el = time.perf_counter() - started
-                rec = records[-1]
-                print(f"  fit {len(records):3d}/{n_fits}: house {i:3d}, {step_s:4.0f} s rows, "
-                      f"nights {label:3s}, {model_error.band_of(rec['diagnostics']):4s} "
-                      f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
-                      + " ".join(f"{100 * rec['log_error'][q]:+6.1f}"
-                                 for q in ("hlc", "tau", "c_m"))
-                      + f" %  ({el:.0f} s, of which simulation {t_sim:.0f} s)", flush=True)
+            rec = records[-1]
+            print(f"  fit {len(records):4d}/{n_fits}: house {part[-1][0]:3d}, "
+                  f"{part[-1][1]:4.0f} s rows, nights {part[-1][2]}, "
+                  f"{model_error.band_of(rec['diagnostics']):4s} "
+                  f"{model_error.group_of(rec['diagnostics']):8s} log error HLC/τ/C_m "
+                  + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in ("hlc", "tau", "c_m"))
+                  + f" %  ({time.perf_counter() - started:.0f} s, of which simulation "
+                    f"{t_sim:.0f} s)", flush=True)
     return records
 
 
@@ -145,7 +169,7 @@ def provenance(args, n: int) -> dict:
             return None
 
     return {"seed": args.seed, "n_households": args.households, "n_fits": n,
-            "steps": args.steps, "subsets": args.subsets,
+            "steps": args.steps, "sequences": args.sequences,
             "ranges": "true class", "plant": "impctl.plant realistic, realism "
             "sample_params(N, seed)", "plant_commit": git("log", "-1", "--format=%h", "--",
                                                            "src/impctl/plant"),
@@ -154,8 +178,8 @@ def provenance(args, n: int) -> dict:
                                    "src/impctl/population/synth_nights.py", "src/impctl/imp"),
             "created": dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%MZ"),
             "command": "python bench/calibrate_intervals.py --households "
-                       f"{args.households} --seed {args.seed} --steps {args.steps} --subsets "
-                       f"{args.subsets}"}
+                       f"{args.households} --seed {args.seed} --steps {args.steps} --sequences "
+                       f"{args.sequences}"}
 
 
 def why_table(records: list[dict]) -> None:
@@ -221,9 +245,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=31415)
     ap.add_argument("--steps", default="300:160,3600:80",
                     help="sample steps [s] and how many of the households each, STEP:N,…")
-    ap.add_argument("--subsets", default="1+1,1+2,2+2,2+3",
-                    help="night subsets fitted too at the first step, C+N,… (the few-nights "
-                         "band); empty for none")
+    ap.add_argument("--sequences", default=SEQUENCES,
+                    help="campaign night sequences fitted too at the first step (the "
+                         "few-nights band), comma-separated, each of c (constrained) and nK "
+                         "(normal at the K-th normal setpoint of CampaignConfig, n-1 the "
+                         "last) joined by dots; empty for none")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic",
                     help="iso: the ideal 5R1C (a check; never written as the calibration)")
     ap.add_argument("--out", default=str(model_error.CALIBRATION_FILE))
@@ -236,21 +262,29 @@ def main() -> None:
     args = ap.parse_args()
     print("command: " + " ".join(["python"] + sys.argv), flush=True)
     steps = {float(a): int(b) for a, b in (x.split(":") for x in args.steps.split(",") if x)}
-    subsets = tuple(tuple(int(v) for v in x.split("+")) for x in args.subsets.split(",") if x)
+    try:
+        sequences = tuple(campaign_nights.parse_sequence(x) for x in args.sequences.split(",")
+                          if x)
+    except ValueError as exc:
+        ap.error(f"--sequences: {exc}")
     if args.from_records:
         records = json.loads(Path(args.from_records).read_text())
     else:
         if not args.why and (args.seed == VAL_SEED or args.seed in TRAIN_SEEDS):
             ap.error(f"--seed {args.seed} is the bench's validation or a training seed")
         share_on = args.why if args.share is None else args.share == "on"
-        records = collect(args.households, args.seed, steps, share_on, args.plant, subsets)
+        records = collect(args.households, args.seed, steps, share_on, args.plant, sequences)
     if args.records:
         Path(args.records).write_text(json.dumps(records))
     if args.why or args.plant == "iso":
         why_table(records)
         summary(records, None)
         return
-    cal = model_error.calibrate(records, provenance(args, len(records)))
+    cfg = CampaignConfig()
+    protocol = {"constrained_setpoint_c": float(cfg.constrained_setpoint_c),
+                "normal_setpoints_c": [float(x) for x in cfg.normal_setpoints_c],
+                "sequences": sorted({r["nights"] for r in records if r["nights"] != "all"})}
+    cal = model_error.calibrate(records, provenance(args, len(records)), protocol=protocol)
     summary(records, cal)
     if not all(np.isfinite(v) for b in cal["bands"].values() for g in b["groups"].values()
                for v in g["share"].values()):

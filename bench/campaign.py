@@ -13,7 +13,9 @@ Households: ``sample_households(N, seed=20260)`` with realism ``sample_params(N,
 validation population of ``bench/fit.py``), class ranges the true classes (as the realistic
 rows of the README's fit table). Each household gets its own winter weather. For every night
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
-21 °C (pre-heat to 22.5 °C) and normal at 21, 22 and 23 °C, each with the gateway's 2 h
+the gateway's constrained setpoint and normal at each of its normal setpoints
+(``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 22.5 °C,
+and 21, 22, 23 °C today), each with the gateway's 2 h
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
@@ -31,8 +33,8 @@ between strategies and targets):
   predictions (the floor rule on the fit's own floor): separates stopping from choosing;
 * **warmest** — adaptive, its normal nights only at the warmest setpoint (the largest ΔT:
   the smallest sensor-offset share on HLC);
-* **fixed** — today's 2 + 3 plan: constrained, constrained, normal 21, 22, 23 °C; an invalid
-  night is repeated; one fit at the end.
+* **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
+  normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
 
 Forecast of a night: the mean outdoor temperature of the previous night (persistence: the
 daemon's own history); a night whose forecast is outside the band −25…8 °C is skipped, one
@@ -73,23 +75,25 @@ from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 from impctl.population.synth_nights import (  # noqa: E402
-    imp_schedule,
     run_schedule,
     run_schedule_plant,
     sample_nights,
 )
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from campaign_report import STRATEGIES, paired, summarise, trajectories  # noqa: E402
+from campaign_nights import fixed_plan, variant_schedule, variants  # noqa: E402
+from campaign_report import STRATEGIES, by_night_set, paired, summarise, trajectories  # noqa: E402
 from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validation setup)
 
 SEED = 20260
-VARIANTS = (("constrained", 21.0), ("normal", 21.0), ("normal", 22.0), ("normal", 23.0))
+VARIANTS = variants()   # (kind, setpoint °C): the constrained night first, then each normal
 BAND_C = (-25.0, 8.0)
 PREHEAT_H = DEFAULT_PREHEAT_H   # imp_schedule's pre-heat (the gateway's)
-FIXED = (0, 0, 1, 2, 3)   # today's plan: constrained first, then 21, 22, 23 °C
+FIXED = fixed_plan()    # indices into VARIANTS
 AHEAD = 2             # the outlook's nights
-NORMAL_SETPOINTS = (21.0, 22.0, 23.0)   # the adaptive strategies' normal candidates (--normal)
+CONSTRAINED_C = VARIANTS[0][1]
+#: the adaptive strategies' normal candidates (--normal)
+NORMAL_SETPOINTS = tuple(sp for kind, sp in VARIANTS if kind == "normal")
 
 
 class Progress:
@@ -110,9 +114,7 @@ def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progr
     nights, first_t_out = [], []
     forecast = None
     for kind, sp in VARIANTS:
-        sched = imp_schedule(n, n_constrained=k if kind == "constrained" else 0,
-                             n_normal=0 if kind == "constrained" else k, setpoints_c=(sp,),
-                             seed=SEED)
+        sched = variant_schedule(n, k, kind, sp, SEED)
         if plant == "realistic":
             sim, spc = run_schedule_plant(houses, sched, params, seed=SEED)
             t_out, noise = sim.t_out_c, 0.0
@@ -167,7 +169,7 @@ class Fits:
         if memo not in self.predictions:
             try:
                 self.predictions[memo] = predict(
-                    result, forecast_c, constrained_setpoint_c=21.0,
+                    result, forecast_c, constrained_setpoint_c=CONSTRAINED_C,
                     normal_setpoints_c=setpoints, step_s=self.step_s,
                     protocol=self.protocol, ahead=AHEAD)
             except (KeyError, TypeError, ValueError):
@@ -211,7 +213,7 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
                   else c.target)
         d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
-                   t_out_band_c=BAND_C, constrained_setpoint_c=21.0,
+                   t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
                    normal_setpoints_c=setpoints, outlook=outlook)
         if d.action == "stop":
             c.done, c.reached, c.reason = True, d.reached, d.reason
@@ -276,8 +278,9 @@ def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
     nights = tuple((n.kind, n.setpoint_c) for n in c.history)
+    fitted = tuple(VARIANTS[v] for _, v in c.chosen) if final is not None else ()
     return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
-            nights)
+            nights, fitted)
 
 
 #: Set in the parent before the workers fork (copy-on-write: the simulated nights are not
@@ -316,15 +319,19 @@ def main() -> None:
                     help="comma-separated, of: " + ", ".join(STRATEGIES))
     ap.add_argument("--seed", type=int, default=SEED,
                     help="population seed (tune on another; the bench's is 20260)")
-    ap.add_argument("--normal", default="21,22,23",
-                    help="the adaptive strategies' normal setpoints [°C], of 21, 22, 23")
+    ap.add_argument("--normal", default=",".join(f"{x:g}" for x in NORMAL_SETPOINTS),
+                    help="the adaptive strategies' normal setpoints [°C], among the default's")
     ap.add_argument("--rule", action="append", default=[],
                     help="override a stop rule for the adaptive strategies, NAME=VALUE: "
-                         "min_gain, criterion (worst|balanced), stall_nights, floor_dominance, "
+                         "min_gain, min_floor_nights, criterion (worst|balanced), stall_nights, "
+                         "floor_dominance, "
                          "min_each "
                          "(repeatable)")
     ap.add_argument("--bootstrap", type=int, default=2000,
                     help="bootstrap resamples of the paired comparison")
+    ap.add_argument("--dump", default=None,
+                    help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
+                         "here (to try stop rules offline)")
     ap.add_argument("--trajectories", action="store_true",
                     help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
@@ -336,12 +343,15 @@ def main() -> None:
     SEED = args.seed
     NORMAL_SETPOINTS = tuple(float(x) for x in args.normal.split(","))
     if not set(NORMAL_SETPOINTS) <= {sp for kind, sp in VARIANTS if kind == "normal"}:
-        ap.error(f"--normal: setpoints must be among 21, 22, 23, got {args.normal}")
+        ap.error(f"--normal: setpoints must be among the gateway's normal setpoints "
+                 f"{[sp for kind, sp in VARIANTS if kind == 'normal']}, got {args.normal}")
     overrides = {}
     for item in args.rule:
         name, _, value = item.partition("=")
         if name == "min_gain":
             policy.MIN_GAIN = float(value)     # before the workers fork
+        elif name == "min_floor_nights":
+            policy.MIN_FLOOR_NIGHTS = int(value)
         elif name == "criterion":
             policy.CRITERION = value
         elif name in ("stall_nights", "floor_dominance", "min_each"):
@@ -374,14 +384,25 @@ def main() -> None:
         records = [r for part, _, _ in parts for r in part[t]]
         summarise(records, houses, target, strategies)
         paired(records, houses, strategies, args.bootstrap)
+        by_night_set(records, houses, strategies)
         if args.trajectories:
             for s in strategies:
                 trajectories(records, houses, s)
+    if args.dump:
+        import pickle
+
+        with open(args.dump, "wb") as fh:
+            pickle.dump({"targets": targets,
+                         "records": [[r for part, _, _ in parts for r in part[t]]
+                                     for t in range(len(targets))],
+                         "truth": [(houses.take(i).hlc_w_per_k, houses.take(i).tau_h)
+                                   for i in range(n)]}, fh)
     count, seconds = sum(p[1] for p in parts), sum(p[2] for p in parts)
     print(f"\n{count} fits, {seconds:.0f} s fitting (summed over processes), simulation "
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
           f"{os.getloadavg()[0]:.1f}")
-    print(f"rules: min_gain {policy.MIN_GAIN:g}, criterion {policy.CRITERION}, adaptive "
+    print(f"rules: min_gain {policy.MIN_GAIN:g}, min_floor_nights {policy.MIN_FLOOR_NIGHTS}, "
+          f"criterion {policy.CRITERION}, adaptive "
           f"normal setpoints "
           f"{NORMAL_SETPOINTS}, target overrides {overrides or 'none'}")
     print("command: " + " ".join(["python"] + sys.argv))

@@ -3,7 +3,8 @@ the fixed plan (bootstrap over households) and each campaign's trajectory.
 
 A record is the tuple ``bench/campaign.py``'s workers return per campaign: (strategy,
 household, nights run, final FitSummary or None, stop label, fits, stop reason, prediction
-checks, ((kind, setpoint °C) of each night run)).
+checks, ((kind, setpoint °C) of each night run), ((kind, setpoint °C) of each night the final fit
+used)).
 """
 
 from __future__ import annotations
@@ -132,3 +133,29 @@ def summarise(records: list, houses, target: Target, strategies: list[str]) -> N
         print(f"prediction check (adaptive, {len(checks)} nights): refitted / predicted "
               f"half-width after the chosen night, median (P10–P90): HLC {q[1, 0]:.2f} "
               f"({q[0, 0]:.2f}–{q[2, 0]:.2f}), τ {q[1, 1]:.2f} ({q[0, 1]:.2f}–{q[2, 1]:.2f})")
+
+
+def _mix(fitted: tuple) -> str:
+    """A final fit's nights: "1c+3n" (constrained + normal)."""
+    c = sum(kind == "constrained" for kind, _ in fitted)
+    return f"{c}c+{len(fitted) - c}n"
+
+
+def by_night_set(records: list, houses, strategies: list[str], top: int = 6) -> None:
+    """Coverage of the true HLC and τ by the final interval, per kind mix of the final fit's
+    nights and per exact night sequence (the ``top`` most frequent): where intervals miss."""
+    print("\ntruth in final interval HLC / τ by the final fit's nights (n: fits)")
+    for s in strategies:
+        got = [r for r in records if r[0] == s and r[3] is not None]
+        for label, key in (("kind mix", lambda r: _mix(r[9])),
+                           ("sequence", lambda r: " ".join(f"{k[0]}{sp:g}" for k, sp in r[9]))):
+            groups: dict[str, list[tuple[bool, bool]]] = {}
+            for r in got:
+                h = houses.take(r[1])
+                groups.setdefault(key(r), []).append(
+                    (r[3].hlc_low <= h.hlc_w_per_k <= r[3].hlc_high,
+                     r[3].tau_low <= h.tau_h <= r[3].tau_high))
+            ranked = sorted(groups.items(), key=lambda kv: -len(kv[1]))[:top]
+            print(f"  {STRATEGIES[s]:<32} {label}: " + "; ".join(
+                f"{k} n={len(v)} {100 * np.mean([a for a, _ in v]):.0f}/"
+                f"{100 * np.mean([b for _, b in v]):.0f} %" for k, v in ranked))

@@ -1,12 +1,13 @@
 """Time to generate the virtual population and to train the range classifiers; their accuracy.
 
 Run:  .venv/bin/python bench/classify.py [--households 900] [--seed 0] [--repeat 3]
-          [--plant iso|realistic]
+          [--plant iso|realistic] [--constrained-setpoint C|cycle]
 
 ``--plant realistic`` draws the households' realism (emitters, heat pumps, gains, sensors) and
 runs their nights on :mod:`impctl.plant` (60 s steps; the ≤ 5 s target is for the ideal 5R1C).
 
-Generates the 900-household dataset (15 weather days × 6 IMP nights each = 81,000 nights,
+Generates the 900-household dataset (15 weather days × 4 IMP nights each — the gateway's plans,
+1 constrained + 3 normal, :func:`impctl.imp.imp_plans` — = 54,000 nights,
 vectorised 5R1C at 10-min steps; target ≤ 5 s), trains the three Random-Forest range
 classifiers (target ≤ 15 s; the shuffled-label baseline forests are timed separately, they are
 evaluation, not training), and prints the accuracy table next to the baselines and the paper's
@@ -26,6 +27,7 @@ import numpy as np
 from impctl.classifiers.report import format_report
 from impctl.classifiers.training import TrainConfig, train_classifiers
 from impctl.population.dataset import generate_dataset
+from impctl.population.virtual_imp import ImpSimConfig
 
 
 def main() -> None:
@@ -34,6 +36,10 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--plant", choices=("iso", "realistic"), default="iso")
+    parser.add_argument("--constrained-setpoint", default=None, metavar="C",
+                        help="T_set of the population's constrained nights [°C] (default the "
+                             "gateway's, impctl.night_protocol); 'cycle': every kind at every "
+                             "normal setpoint (the population before branch h14q)")
     parser.add_argument("--figure", default=None,
                         help="write the reliability diagram (calibrated vs vote shares) here")
     args = parser.parse_args()
@@ -41,10 +47,14 @@ def main() -> None:
           f"{os.cpu_count()} CPUs, {platform.machine()}")
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}\n")
 
+    imp = ImpSimConfig()
+    if args.constrained_setpoint is not None:
+        c_sp = args.constrained_setpoint
+        imp = ImpSimConfig(constrained_setpoint_c=None if c_sp == "cycle" else float(c_sp))
     gen_s = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        dataset = generate_dataset(args.households, args.seed, plant=args.plant)
+        dataset = generate_dataset(args.households, args.seed, plant=args.plant, imp=imp)
         gen_s.append(time.perf_counter() - t0)
     print(f"plant: {args.plant}")
     print(f"dataset: {args.households} households, {len(dataset.nights):,} nights, "

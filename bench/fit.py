@@ -3,7 +3,7 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
-          [--setpoints C,C,C]
+          [--setpoints C,C,C] [--constrained-setpoint C|cycle]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -14,12 +14,13 @@ heat meter's interval mean (no extra noise); the demand truth is the true heat-p
 Validation population: ``impctl.population.households.sample_households`` with seed 20260 (the
 classifiers are trained with other seeds, so they never saw these houses). Each household runs
 the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
-with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained, 6 normal
-at 22/23/24 °C); constrained nights pre-heat to T_set + 1.5 °C and cool 22:00–05:00 (the paper's
-case study), normal nights step up from the 21 °C day; both 2 h before the window, as the
-gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power sample × (1 +
-0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power the mean until
-the next sample).
+with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
+21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
+:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + 1.5 °C and cool
+22:00–05:00 (the paper's case study), normal nights step up from the 21 °C day; both 2 h before
+the window, as the gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power
+sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power
+the mean until the next sample).
 
 Ranges for floor_area, c_f, u_walls: ``classifier`` (the trained forests of ``impctl train`` on
 the household's nights — the whole pipeline), ``true`` (the class holding the true value) or
@@ -164,22 +165,32 @@ def val_schedule(n: int, args=None):
         kw["normal_preheat_h"] = args.preheat_h_normal
     if args is not None and getattr(args, "setpoints", None):
         kw["setpoints_c"] = tuple(float(x) for x in args.setpoints.split(","))
+    c_sp = getattr(args, "constrained_setpoint", None) if args is not None else None
+    if c_sp is not None:
+        kw["constrained_setpoint_c"] = None if c_sp == "cycle" else float(c_sp)
     return imp_schedule(n, seed=VAL_SEED, **kw)
 
 
-def campaign_cost(heat, sched) -> tuple[float, float]:
-    """Mean heat [kWh per household] the heating delivers over the whole schedule (spin-up
-    days and the day after the last night included, so heat stored by a pre-heat and given back
-    later is netted out; compare runs), and the hours per night held above the day setpoint
-    outside the windows (the comfort cost of the pre-heat)."""
+def campaign_cost(heat, sched) -> tuple[float, float, float, float]:
+    """What the campaign costs the household: mean heat [kWh per household] the heating
+    delivers over the whole schedule (spin-up days and the day after the last night included,
+    so heat stored by a pre-heat and given back later is netted out; compare runs); the hours
+    per night held above the day setpoint outside the windows (the evening pre-heat) and inside
+    them (normal nights above the owner's setpoint); the degree-hours per night the setpoint is
+    above the day setpoint, evening and window together [K·h] (a constrained window, heating
+    off, counts 0)."""
     phi = np.atleast_2d(heat.phi_hc_w.T).T
     n_nights = len(sched.windows)
     kwh = phi.sum(axis=0) * sched.dt_s / 3.6e6
     inside = np.zeros(len(sched.index), bool)
     for _, _, w0, w1, _ in sched.windows:
         inside[w0:w1] = True
-    raised = (sched.setpoint_c[~inside] > sched.t_m_init_c + 1e-9).sum(axis=0)
-    return float(np.mean(kwh)), float(np.median(raised) * sched.dt_s / 3600.0 / n_nights)
+    excess = np.nan_to_num(sched.setpoint_c - sched.t_m_init_c, nan=0.0)
+    above = excess > 1e-9
+    per_night_h = sched.dt_s / 3600.0 / n_nights
+    return (float(np.mean(kwh)), float(np.median(above[~inside].sum(axis=0)) * per_night_h),
+            float(np.median(above[inside].sum(axis=0)) * per_night_h),
+            float(np.median(np.clip(excess, 0.0, None).sum(axis=0)) * per_night_h))
 
 
 def _sub_schedule(sched, idx):
@@ -400,8 +411,8 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
           f"{len(truth)} households, normal-night model '{args.normal_model}'")
     if "cost" in res:
         print("campaign cost: heat {:.1f} kWh per household (mean, the whole schedule: compare "
-              "runs); {:.1f} h per night above the day setpoint outside the windows"
-              .format(*res["cost"]))
+              "runs); per night above the day setpoint: {:.2f} h before the window, {:.2f} h in "
+              "it, {:.2f} K·h".format(*res["cost"]))
     hits = res["ranges_hit"]
     if hits and hits[0]:
         share = {k: 100.0 * np.mean([h[k] for h in hits]) for k in hits[0]}
@@ -736,7 +747,12 @@ def main() -> None:
     ap.add_argument("--preheat-h-normal", type=float, default=None, metavar="H",
                     help="pre-heat of the normal nights alone [h]")
     ap.add_argument("--setpoints", default=None, metavar="C,C,C",
-                    help="T_set of the nights in turn [°C] (default 22,23,24)")
+                    help="T_set of the normal nights in turn [°C] (default "
+                         "impctl.imp.plan.DEFAULT_SETPOINTS_C)")
+    ap.add_argument("--constrained-setpoint", default=None, metavar="C",
+                    help="T_set of the constrained nights [°C] (default "
+                         "DEFAULT_CONSTRAINED_SETPOINT_C); 'cycle': the schedule before branch "
+                         "h14q (every night at --setpoints in turn)")
     ap.add_argument("--night-gain-w", type=float, default=None, metavar="W",
                     help="the fit's assumed night gain [W] (NightFit(night_gain_w)); default 0 "
                          "on --plant iso (the ideal 5R1C has no gains: the model-consistency "

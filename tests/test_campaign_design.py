@@ -29,6 +29,7 @@ def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
     pre-heat is the design's ``Protocol(preheat_h=4.0)``: constrained nights only."""
     sched = imp_schedule(1, n_constrained=3 if kind == "constrained" else 0,
                          n_normal=0 if kind == "constrained" else 3, setpoints_c=(setpoint_c,),
+                         constrained_setpoint_c=setpoint_c,
                          seed=SEED, constrained_preheat_h=4.0, normal_preheat_h=0.0)
     sim, sp = run_schedule(HOUSE, sched)
     _, _, w0, w1, _ = sched.windows[2]

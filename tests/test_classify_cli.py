@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from impctl.imp import write_nights
+from impctl.imp import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C, write_nights
 from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
 
@@ -55,7 +55,9 @@ def test_classify_prints_table_and_json(model_dir, nights_csv):
     done = run_cli("classify", "--nights", str(nights_csv), "--model-dir", str(model_dir))
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0] == "18 nights: 9 constrained, 9 normal"
+    # 3 days × the population's plans: 1 constrained + 1 per normal setpoint (the gateway's)
+    n_normal = 3 * len(DEFAULT_SETPOINTS_C)
+    assert lines[0] == f"{3 + n_normal} nights: 3 constrained, {n_normal} normal"
     assert [ln.split()[0] for ln in lines[2:]] == ["floor_area", "c_f", "u_walls"]
     done = run_cli("classify", "--nights", str(nights_csv), "--model-dir", str(model_dir),
                    "--json")
@@ -64,7 +66,7 @@ def test_classify_prints_table_and_json(model_dir, nights_csv):
         cls = data["classes"][name]
         assert cls["range"][0] < cls["range"][1] and 0 < cls["probability"] <= 1
         assert cls["probability"] == max(cls["probabilities"].values())
-    assert data["nights"]["constrained"] == 9
+    assert data["nights"]["constrained"] == 3
 
 
 def _one_error_line(done: subprocess.CompletedProcess, *words: str) -> str:
@@ -102,3 +104,22 @@ def test_train_bad_input_writes_nothing(tmp_path):
     _one_error_line(run_cli("train", "--weather", str(weather), "--out", str(out)),
                     "usable nights")
     assert not out.exists()
+
+
+def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
+    """The demo reuses cached classifiers only when their population ran the gateway's nights
+    (since branch h14q: one constrained setpoint); models from the old population, whose
+    manifest has no constrained_setpoint_c, are retrained."""
+    import shutil
+
+    from impctl.demo.run import _models_ok
+
+    assert _models_ok(model_dir)
+    old = shutil.copytree(model_dir, tmp_path / "old")
+    meta = json.loads((old / "models.json").read_text())
+    del meta["dataset"]["imp"]["constrained_setpoint_c"]
+    (old / "models.json").write_text(json.dumps(meta))
+    assert not _models_ok(old)
+    meta["dataset"]["imp"]["constrained_setpoint_c"] = DEFAULT_CONSTRAINED_SETPOINT_C + 1.0
+    (old / "models.json").write_text(json.dumps(meta))
+    assert not _models_ok(old)

@@ -18,6 +18,7 @@ from impctl.daemon.schedule import campaign_plan
 from impctl.errors import InputError
 from impctl.mqtt.discovery import entities
 from impctl.mqtt.payloads import LiveState
+from impctl.night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from impctl.store import SCHEMA_VERSION, Sample, Store
 
 T0 = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
@@ -35,8 +36,9 @@ def test_fixed_is_the_default_and_adaptive_is_opted_into():
     camp = cfg.campaign
     # Fixed by default: on realistic houses the adaptive campaign did not beat it.
     assert camp.mode == "fixed" and not camp.adaptive
-    assert campaign_plan(cfg) == [("constrained", 21.0)] * 2 + [
-        ("normal", 21.0), ("normal", 22.0), ("normal", 23.0)]
+    # the gateway's protocol (impctl.night_protocol): 2 constrained, one normal per setpoint
+    assert campaign_plan(cfg) == [("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)] * 2 + [
+        ("normal", sp) for sp in DEFAULT_SETPOINTS_C]
     adaptive_cfg = config_from_mapping({**BASE, "campaign": {"mode": "adaptive"}})
     camp = adaptive_cfg.campaign
     assert camp.adaptive and (camp.target_rel_halfwidth.hlc, camp.target_rel_halfwidth.tau) == (

@@ -46,7 +46,7 @@ comfort_band_k = 4.0            # wider than max_comfort_band_k (3 K)
 
 [campaign]
 constrained_setpoint_c = 21.0
-normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [16, 23]
+normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [16, 24]
 """)
     result = run_cli("daemon", "--config", str(bad), timeout_s=30)
     assert result.returncode == 2
@@ -57,9 +57,9 @@ normal_setpoints_c = [21.0, 25.0]   # above heatpump.writes.loop1_setpoint_c = [
         "key 'night.sample_interval_s': must be a number, got 'sixty'",
         "key 'night.comfort_band_k': must lie in (0, 3] K (night.max_comfort_band_k)",
         "key 'campaign.normal_setpoints_c': 25 °C is outside the safety limits "
-        "heatpump.writes.loop1_setpoint_c = [16, 23] °C",
+        "heatpump.writes.loop1_setpoint_c = [16, 24] °C",
         "key 'campaign.constrained_setpoint_c': T_max = T_set + ΔT = 25 °C exceeds the safety "
-        "limit 23 °C",
+        "limit 24 °C",
     ]
     assert not state.exists()  # refused before anything was created
 

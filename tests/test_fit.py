@@ -30,8 +30,12 @@ IDEAL = {"night_gain_w": 0.0}
 
 @pytest.fixture(scope="module")
 def nights_15min():
-    # 2 constrained + 4 normal nights, quantised to 0.1 °C, 5 % power noise, 15-min samples
-    return synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4)
+    # 2 constrained + 4 normal nights, quantised to 0.1 °C, 5 % power noise, 15-min samples;
+    # the setpoints this house's interval bound was set on (every night at 22/23/24 °C in turn:
+    # constrained at 23 °C; the default became the gateway's constrained 21 °C in branch h14q,
+    # on which its HLC interval is 1.31 wide instead of under 1.3)
+    return synth_nights(HOUSE, seed=4, sample_step_s=900.0, n_normal=4,
+                        setpoints_c=(22.0, 23.0, 24.0), constrained_setpoint_c=None)
 
 
 @pytest.fixture(scope="module")

@@ -91,8 +91,15 @@ def test_an_ideal_fit_is_clean_and_its_interval_barely_widened():
      "schema"),    # the 8-night-only calibration: refused, not read as the few-nights band
     (json.dumps({"schema": model_error.SCHEMA, "grouping": "rows-residuals-nuisance-discharge/5"}),
      "grouping"),
+    (json.dumps({"schema": "impctl-model-error/2", "grouping": model_error.GROUPING}),
+     "schema"),    # the few band of the 2 + 6 protocol's first nights: refused
     (json.dumps({"schema": model_error.SCHEMA, "grouping": model_error.GROUPING,
-                 "bands": {"few": {"groups": {"clean": {"share": {"hlc": 0.1, "c_m": 0.1}}}}}}),
+                 "bands": {"few": {"groups": {}}}}),
+     "band 'few' has no protocol"),
+    (json.dumps({"schema": model_error.SCHEMA, "grouping": model_error.GROUPING,
+                 "bands": {"few": {"protocol": {"constrained_setpoint_c": 21.0,
+                                                "normal_setpoints_c": [21.0]},
+                                   "groups": {"clean": {"share": {"hlc": 0.1, "c_m": 0.1}}}}}}),
      "band 'few', group 'clean': share of tau"),
 ])
 def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_path, content,
@@ -104,6 +111,21 @@ def test_a_corrupt_calibration_file_gives_one_clear_error_before_any_work(tmp_pa
         NightFit(model_error=str(path)).fit(nights, RANGES)
     msg = str(err.value)
     assert str(path) in msg and "calibrate_intervals.py" in msg and "\n" not in msg
+
+
+def test_the_few_band_was_calibrated_on_the_gateways_campaign_nights():
+    # stale-file check: the few band must be calibrated on the nights a gateway runs by
+    # default; after a change of CampaignConfig's setpoints regenerate model_error.json
+    # (bench/calibrate_intervals.py reads them from there)
+    from impctl.config import CampaignConfig
+
+    cfg = CampaignConfig()
+    cal = model_error.load_calibration()
+    assert model_error.few_protocol(cal) == (cfg.constrained_setpoint_c,
+                                             tuple(cfg.normal_setpoints_c))
+    sequences = cal["bands"]["few"]["protocol"]["sequences"]
+    assert any(s.startswith("c") and s.count("c") == 1 for s in sequences)   # adaptive endings
+    assert any(s.count("c") == cfg.constrained_nights for s in sequences)    # the fixed plan
 
 
 def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():

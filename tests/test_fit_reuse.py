@@ -20,9 +20,11 @@ SEED, N, HOUSE = 8, 10, 6   # a realistic house whose joint fit used to move wit
 @pytest.fixture(scope="module")
 def realistic_nights():
     houses = sample_households(N, seed=SEED)
-    # The protocol this house was picked on (pre-heat 4 h constrained, 0 h normal; the
-    # default became the gateway's 2 h in branch h14p).
-    sched = imp_schedule(N, seed=SEED, constrained_preheat_h=4.0, normal_preheat_h=0.0)
+    # The protocol this house was picked on (pre-heat 4 h constrained, 0 h normal, every
+    # night at 22/23/24 °C in turn; the defaults became the gateway's 2 h in branch h14p and
+    # its constrained 21 °C in branch h14q).
+    sched = imp_schedule(N, seed=SEED, constrained_preheat_h=4.0, normal_preheat_h=0.0,
+                         setpoints_c=(22.0, 23.0, 24.0), constrained_setpoint_c=None)
     sim, sp = run_schedule_plant(houses, sched, sample_params(N, SEED), seed=SEED)
     return sample_nights(sim, sp, sched, HOUSE, sample_step_s=300.0, power_noise=0.0,
                          seed=HOUSE)

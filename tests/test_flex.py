@@ -234,10 +234,12 @@ def test_coast_on_realistic_houses_is_closer_to_the_plants_own():
 
     n, seed = 4, 11
     houses, params = sample_households(n, seed=seed), sample_params(n, seed)
-    # The protocol these houses were picked on (pre-heat 4 h constrained, 0 h normal; the
-    # default became the gateway's 2 h in branch h14p, with which the fit keeps no emitter
-    # terms for one of them).
-    sched = imp_schedule(n, seed=seed, constrained_preheat_h=4.0, normal_preheat_h=0.0)
+    # The protocol these houses were picked on (pre-heat 4 h constrained, 0 h normal, every
+    # night at 22/23/24 °C in turn; the defaults became the gateway's 2 h in branch h14p and
+    # its constrained 21 °C in branch h14q, with which the fit keeps no emitter terms for one
+    # of them).
+    sched = imp_schedule(n, seed=seed, constrained_preheat_h=4.0, normal_preheat_h=0.0,
+                         setpoints_c=(22.0, 23.0, 24.0), constrained_setpoint_c=None)
     logged, sp = run_schedule_plant(houses, sched, params, seed=seed)
     kinds = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
     truth = _plant_coast_h(houses, params)

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 
 from impctl.errors import InputError
 from impctl.imp import (
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_SETPOINTS_C,
     EMISSION_LAG_H,
     NIGHT_FEATURE_NAMES,
     NightPlan,
@@ -68,11 +70,16 @@ def test_bad_plans_are_refused(kw, place):
     assert err.value.place == place
 
 
-def test_imp_plans_cover_every_kind_and_setpoint():
+def test_imp_plans_are_the_gateways_nights():
+    # One constrained plan at the gateway's constrained T_set, a normal plan per normal setpoint.
     plans = imp_plans()
-    assert len(plans) == 6
+    assert len(plans) == 1 + len(DEFAULT_SETPOINTS_C)
     assert {(p.kind, p.setpoint_c) for p in plans} == {
-        (k, s) for k in ("constrained", "normal") for s in (22.0, 23.0, 24.0)}
+        ("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)} | {
+        ("normal", s) for s in DEFAULT_SETPOINTS_C}
+    every = imp_plans(constrained_setpoint_c=None)
+    assert {(p.kind, p.setpoint_c) for p in every} == {
+        (k, s) for k in ("constrained", "normal") for s in DEFAULT_SETPOINTS_C}
 
 
 # --- features ----------------------------------------------------------------------------------

@@ -63,10 +63,11 @@ def test_window_across_dst_change_is_six_hours(tmp_path):
 def test_write_then_read_gives_the_same_nights_and_features(tmp_path):
     from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
-    result = simulate_imp(sample_households(1, seed=5), config=ImpSimConfig(days=2), seed=5)
+    cfg = ImpSimConfig(days=2)
+    result = simulate_imp(sample_households(1, seed=5), config=cfg, seed=5)
     nights = result.nights_of(0)
     back = read_nights(write_nights(nights, tmp_path / "n.csv"), TZ)
-    assert len(back) == len(nights) == 12
+    assert len(back) == len(nights) == 2 * len(cfg.plans())
     by_id = {n.night_id: n for n in back}
     for night in nights:
         got = by_id[night.night_id]

@@ -33,7 +33,7 @@ def test_realistic_nights_differ_from_iso_as_real_houses_do():
     """Same households and weather days: on the realistic plant the constrained nights start
     without the ISO air-node jump and the normal-night heat reads as a meter's interval mean."""
     houses = sample_households(6, seed=2)
-    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,))
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), constrained_setpoint_c=22.0)
     res = simulate_imp_plant(houses, sample_params(6, 2), config=cfg, seed=3)
     cons = (res.nights["kind"] == "constrained").to_numpy()
     t_air = res.t_air_c[:, cons]
@@ -44,7 +44,7 @@ def test_realistic_nights_differ_from_iso_as_real_houses_do():
 
 
 def test_generate_dataset_realistic_is_reproducible():
-    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,))
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), constrained_setpoint_c=22.0)
     a = generate_dataset(8, seed=4, imp=cfg, plant="realistic")
     b = generate_dataset(8, seed=4, imp=cfg, plant="realistic")
     assert a.manifest["plant"] == "realistic"
@@ -62,7 +62,8 @@ def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():
     """With stop_at_t_min a constrained night's samples end at the first sensed T_air below
     T_min after the emission lag, and the heating resumes there."""
     houses = sample_households(6, seed=7)
-    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), band_k=0.5, stop_at_t_min=True)
+    cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), constrained_setpoint_c=22.0, band_k=0.5,
+                       stop_at_t_min=True)
     res = simulate_imp_plant(houses, sample_params(6, 7), config=cfg, seed=1)
     cons = np.flatnonzero((res.nights["kind"] == "constrained").to_numpy())
     lag = int(np.ceil(cfg.emitter_lag_h * 3600 / cfg.step_s))

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from impctl.errors import InputError
-from impctl.imp import NIGHT_FEATURE_NAMES
+from impctl.imp import DEFAULT_SETPOINTS_C, NIGHT_FEATURE_NAMES
 from impctl.population import (
     DEFAULT_RANGES,
     ImpSimConfig,
@@ -77,8 +77,10 @@ def quiet_run():
 def test_imp_run_layout_and_normal_nights_hold_the_setpoint(quiet_run):
     pop, r = quiet_run
     n = r.nights
-    assert len(n) == 12 * 3 * 6 and r.t_air_c.shape == (r.time_s.size, len(n))
-    assert (n.groupby("household").size() == 18).all()
+    plans = len(ImpSimConfig().plans())  # the gateway's: 1 constrained + 1 per normal setpoint
+    assert plans == 1 + len(DEFAULT_SETPOINTS_C)
+    assert len(n) == 12 * 3 * plans and r.t_air_c.shape == (r.time_s.size, len(n))
+    assert (n.groupby("household").size() == 3 * plans).all()
     assert set(n.columns) >= set(NIGHT_FEATURE_NAMES) | {"household", "kind", "setpoint_c"}
     normal = (n["kind"] == "normal").to_numpy()
     valid = r.valid[:, normal]
@@ -156,7 +158,7 @@ def test_dataset_is_reproducible_and_round_trips(tmp_path):
     a = generate_dataset(130, seed=9, imp=cfg)               # two vectorised blocks
     b = generate_dataset(130, seed=9, imp=cfg)
     pd.testing.assert_frame_equal(a.nights, b.nights)
-    assert len(a.nights) == 130 * 2 * 6 and a.nights["household"].nunique() == 130
+    assert len(a.nights) == 130 * 2 * len(cfg.plans()) and a.nights["household"].nunique() == 130
     m = a.manifest
     assert m["seed"] == 9 and m["n_households"] == 130 and m["imp"]["days"] == 2
     assert set(m["night_features"]) == set(NIGHT_FEATURE_NAMES)

@@ -19,6 +19,12 @@ from .heatpump import HeatPumpConfig
 from .heatpump import config_from_mapping as heatpump_from_mapping
 from .mqtt.config import MqttConfig, mqtt_from_mapping
 from .night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
+from .night_protocol import (
+    DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_PREHEAT_H,
+    DEFAULT_SETPOINTS_C,
+)
 
 
 class ConfigError(InputError):
@@ -37,7 +43,7 @@ class NightConfig:
     """How one IMP night runs."""
 
     window: str = "22:00-05:00"
-    comfort_band_k: float = 1.5
+    comfort_band_k: float = DEFAULT_BAND_K
     sample_interval_s: float = 60.0
     abort_margin_k: float = 0.5
     link_lost_limit_s: float = 900.0
@@ -45,7 +51,7 @@ class NightConfig:
     t_out_max_c: float = 8.0
     constrained_action: str = "loop_off"  # "loop_off" (mode 0) or "setpoint_floor"
     setpoint_floor_c: float = 18.0
-    preheat_h: float = 2.0
+    preheat_h: float = DEFAULT_PREHEAT_H
     emission_lag_h: float = 1.0
     min_coverage: float = 0.8
     max_comfort_band_k: float = 3.0
@@ -79,8 +85,8 @@ class CampaignConfig:
     min_each_kind: int = 1
     stall_nights: int = 3
     constrained_nights: int = 2
-    constrained_setpoint_c: float = 21.0
-    normal_setpoints_c: tuple[float, ...] = (21.0, 22.0, 23.0)
+    constrained_setpoint_c: float = DEFAULT_CONSTRAINED_SETPOINT_C
+    normal_setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C
     normal_nights_per_setpoint: int = 1
     misfire_grace_s: float = 3600.0
     fit_when_complete: bool = True  # fixed mode: fit after every valid night (false: never)

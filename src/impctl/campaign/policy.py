@@ -21,7 +21,10 @@ Rules, in order (:func:`decide`):
    variance (the floor's worst ratio ≥ 1/2 of the latest one: the part nights can shrink is
    at most √3 times the part they cannot; tuned on another population than the bench's, where
    1/√2 ran a median of 4.5 nights and 1/2 a median of 3 at no worse median errors).
-   Without predictions the latest fit's own floor and interval are used.
+   Without predictions the latest fit's own floor and interval are used. Judged from fits of
+   :data:`MIN_FLOOR_NIGHTS` valid nights (2; 3 — as rule 4 — was tried in h18c: it lifts the
+   coverage of the campaigns that stopped at 2 nights but runs a median of 5 nights, README
+   "Adaptive campaign").
 4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
    stop when the best candidate night is predicted to shrink the worst ratio by less than
    10 % (:data:`MIN_GAIN`). A fit of one night of each kind is too fragile (its sandwich has
@@ -56,6 +59,9 @@ KINDS = (CONSTRAINED, NORMAL)
 STALL_SHRINK = 0.10
 #: "More nights would not help": the best next night must shrink the worst ratio by this much.
 MIN_GAIN = 0.10
+#: "Precision limited" judges only fits of at least this many valid nights (2: from the first
+#: fit of one night of each kind).
+MIN_FLOOR_NIGHTS = 2
 #: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
 #: fit's (1/2: the floor is at least a quarter of the variance; README "Adaptive campaign").
 FLOOR_DOMINANT = 0.5
@@ -457,6 +463,8 @@ def _reached_reason(fit: FitSummary, target: Target, run: int) -> str:
 def _floor_limited(latest: FitSummary, best: Candidate | None, outlook: Outlook | None,
                    target: Target) -> str | None:
     """The "precision limited" sentence when no number of nights can reach the target."""
+    if latest.nights < MIN_FLOOR_NIGHTS:
+        return None
     if outlook is not None:
         hlc_floor, tau_floor = outlook.hlc_floor_rel, outlook.tau_floor_rel
         ahead = target.ratio(outlook.hlc_rel_pred, outlook.tau_rel_pred)

@@ -13,6 +13,7 @@ from zoneinfo import ZoneInfo
 from ..clock import VirtualClock
 from ..config import config_from_mapping
 from ..model import HouseParameters
+from ..night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from ..store import Store
 from .options import FIT_WAIT_S, TZ, DemoOptions, Progress, fit_night_gain_w, plant_summary
 
@@ -29,7 +30,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
     state = opts.out / "state"
     state.mkdir(parents=True, exist_ok=True)
     n_norm = opts.normal_nights
-    setpoints = [22.0, 23.0, 24.0]  # the paper's normal-night setpoints; the day is 21 °C
+    setpoints = list(DEFAULT_SETPOINTS_C)  # the gateway's normal nights; the day is 21 °C
     per_sp = max(1, -(-n_norm // len(setpoints)))
     realistic = opts.plant == "realistic"
     # The realistic plant costs more per step: 2-min steps keep it (and the daemon sharing its
@@ -47,7 +48,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             "heatpump": {"host": "127.0.0.1", "port": sim.port, "timeout_s": 1.0,
                          "retries": 0, "attempts": 3, "retry_delay_s": 0.05,
                          "connect_backoff_s": [0.05, 0.5], "drain_s": 0.0,
-                         "writes": {"verify_delay_s": 0.0, "loop1_setpoint_c": [16.0, 25.0]}},
+                         "writes": {"verify_delay_s": 0.0}},
             # The ideal plant: ΔT 2 K, not the paper's 1.5 K: its air node has no heat
             # capacity, so the house drops ~1.2 K at switch-off and a 1.5 K band would end
             # most constrained nights before 3 h of usable cooling (see the README). The
@@ -79,8 +80,9 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
 def _campaign_section(opts: DemoOptions, setpoints: list[float], per_sp: int) -> dict:
     """``[campaign]``: the fixed counts, or the adaptive campaign (the daemon fits after
     every valid night and decides; the demo's classifiers are ready before it starts)."""
-    # T_set 21 = the owner's day setpoint: T_max 23, T_min 19 °C (ΔT 2 K on the ideal plant).
-    common = {"constrained_setpoint_c": 21.0}
+    # The gateway's constrained T_set (21 °C, the owner's day setpoint): T_max 22.5, T_min
+    # 19.5 °C (ΔT 2 K on the ideal plant: 23 and 19 °C).
+    common = {"constrained_setpoint_c": DEFAULT_CONSTRAINED_SETPOINT_C}
     if opts.adaptive:
         return {**common, "mode": "adaptive", "normal_setpoints_c": setpoints,
                 "max_nights": opts.max_nights,

@@ -32,14 +32,23 @@ def _cmd(*args: str) -> list[str]:
     return [sys.executable, "-c", "from impctl.cli import main; main()", *args]
 
 
+#: What a cached model's population must share with the demo's nights to be reused.
+_PROTOCOL_KEYS = ("setpoints_c", "constrained_setpoint_c", "band_k", "preheat_h")
+
+
 def _models_ok(model_dir: Path) -> bool:
+    """Loadable models trained on the nights the gateway runs (README "Issue 14: one
+    protocol"): models from a population of another protocol are retrained, not reused."""
     try:
         from ..classifiers.saved import load_models
+        from ..population.virtual_imp import ImpSimConfig
 
-        load_models(model_dir)
-        return True
+        _, meta = load_models(model_dir)
     except (InputError, OSError):
         return False
+    imp = (meta.get("dataset") or {}).get("imp") or {}
+    want = ImpSimConfig().as_dict()
+    return all(imp.get(k) == want[k] for k in _PROTOCOL_KEYS)
 
 
 def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):

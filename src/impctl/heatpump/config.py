@@ -22,7 +22,7 @@ reads the same structure from a parsed TOML table::
     scale = 1.0
 
     [heatpump.writes]
-    loop1_setpoint_c = [16.0, 23.0]
+    loop1_setpoint_c = [16.0, 24.0]
     daily_budget = 12
 """
 
@@ -85,7 +85,9 @@ class WritePolicy:
 
     Attributes
     ----------
-    loop1_setpoint_c : (min, max) clamp for 2187 [°C].
+    loop1_setpoint_c : (min, max) clamp for 2187 [°C]; the default top, 24 °C, is the IMP's
+        highest normal-night setpoint (:mod:`impctl.night_protocol`), so the default campaign is
+        never clamped.
     loop2_setpoint_c : (min, max) clamp for 2049 [°C]; ``None`` = loop 2 not writable.
     correction_k : (min, max) clamp for 2014 [K], within −4…4; ``None`` = not writable.
     daily_budget : writes per register per day (UTC day of the client's clock); build the
@@ -96,7 +98,7 @@ class WritePolicy:
         the owner's settings may use, so a spent budget never keeps the heating off.
     """
 
-    loop1_setpoint_c: tuple[float, float] = (16.0, 23.0)
+    loop1_setpoint_c: tuple[float, float] = (16.0, 24.0)
     loop2_setpoint_c: tuple[float, float] | None = None
     correction_k: tuple[int, int] | None = None
     daily_budget: int = 12

@@ -18,6 +18,7 @@ from .night import NightKind, NightSamples
 from .nights_csv import read_nights, write_nights
 from .plan import (
     DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
     DEFAULT_WINDOW,
@@ -29,6 +30,7 @@ from .plan import (
 
 __all__ = [
     "DEFAULT_BAND_K",
+    "DEFAULT_CONSTRAINED_SETPOINT_C",
     "DEFAULT_PREHEAT_H",
     "DEFAULT_SETPOINTS_C",
     "DEFAULT_WINDOW",

@@ -28,18 +28,21 @@ from dataclasses import dataclass
 import pandas as pd
 
 from ..errors import InputError
+from ..night_protocol import (
+    DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_PREHEAT_H,
+    DEFAULT_SETPOINTS_C,
+)
 from .night import NightKind
 
 #: Emitter lag [h]: emitters give no heat from this long after switch-off (paper §III-A).
 EMISSION_LAG_H = 1.0
-#: Comfort band ΔT [K] around T_set (the paper's case study: 1.5 °C).
-DEFAULT_BAND_K = 1.5
-#: Setpoints T_set [°C] of the IMP's normal nights (paper §IV-A).
-DEFAULT_SETPOINTS_C = (22.0, 23.0, 24.0)
+# DEFAULT_BAND_K, DEFAULT_SETPOINTS_C, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_PREHEAT_H: the
+# protocol's defaults live in impctl.night_protocol (the daemon's config reads them without
+# pandas); they are names of this module too.
 #: Local window start and end (paper: 22:00–05:00, space heating only, no hot water).
 DEFAULT_WINDOW = (dt.time(22, 0), dt.time(5, 0))
-#: Time the house is held at T_max before a constrained window [h].
-DEFAULT_PREHEAT_H = 2.0
 
 NIGHT_KINDS: tuple[NightKind, ...] = ("constrained", "normal")
 
@@ -163,10 +166,18 @@ def imp_plans(
     setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C,
     band_k: float = DEFAULT_BAND_K,
     kinds: tuple[NightKind, ...] = NIGHT_KINDS,
+    constrained_setpoint_c: float | None = DEFAULT_CONSTRAINED_SETPOINT_C,
     **plan_kw,
 ) -> list[NightPlan]:
-    """The IMP's night plans: every kind at every setpoint (default 2 × 3 = 6 plans).
+    """The IMP's night plans, as the gateway's ``[campaign]`` runs them: one constrained plan at
+    ``constrained_setpoint_c`` [°C] and a normal plan at each of ``setpoints_c`` [°C] (default
+    1 + 3 = 4 plans); ``constrained_setpoint_c=None``: every kind at every setpoint.
 
     ``plan_kw`` (window_start, window_end, preheat_h, stop_at_t_min) go to every plan.
     """
-    return [NightPlan(kind, float(sp), band_k, **plan_kw) for kind in kinds for sp in setpoints_c]
+    def at(kind: NightKind) -> tuple[float, ...]:
+        if kind == "constrained" and constrained_setpoint_c is not None:
+            return (constrained_setpoint_c,)
+        return setpoints_c
+
+    return [NightPlan(kind, float(sp), band_k, **plan_kw) for kind in kinds for sp in at(kind)]

@@ -2,9 +2,10 @@
 
 The protocol is the gateway's (:class:`impctl.controller.plan.NightPolicy`, ``night.preheat_h``)
 and the virtual population's (:data:`impctl.imp.plan.DEFAULT_PREHEAT_H`): days held at
-``day_setpoint_c``; a *normal* night holds T_set (22, 23, 24 °C in turn) from
-``normal_preheat_h`` before the 22:00 window (default 2 h: 20:00) to 05:00; a *constrained* night
-heats to T_max = T_set + ΔT ``constrained_preheat_h`` before the window (default 2 h), switches off
+``day_setpoint_c``; a *normal* night holds T_set (the gateway's normal setpoints in turn, 22, 23,
+24 °C) from ``normal_preheat_h`` before the 22:00 window (default 2 h: 20:00) to 05:00; a
+*constrained* night (T_set = the gateway's constrained setpoint, 21 °C) heats to T_max = T_set +
+ΔT ``constrained_preheat_h`` before the window (default 2 h), switches off
 at 22:00 and cools until 05:00 (the paper's case study: a predefined period).
 With ``stop_at_t_min`` it stops earlier, at the first step after the emission lag with
 T_air ≤ T_min = T_set − ΔT, and then holds T_min. The T_min test waits for the lag because the
@@ -24,7 +25,12 @@ import numpy as np
 import pandas as pd
 
 from ..imp.night import NightSamples
-from ..imp.plan import DEFAULT_PREHEAT_H
+from ..imp.plan import (
+    DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_PREHEAT_H,
+    DEFAULT_SETPOINTS_C,
+)
 from ..model import HouseParameters, simulate
 from ..weather import DEFAULT_TZ, winter_weather
 
@@ -65,8 +71,9 @@ def imp_schedule(
     *,
     n_constrained: int = 2,
     n_normal: int = 6,
-    setpoints_c: tuple[float, ...] = (22.0, 23.0, 24.0),
-    band_k: float = 1.5,
+    setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C,
+    constrained_setpoint_c: float | None = DEFAULT_CONSTRAINED_SETPOINT_C,
+    band_k: float = DEFAULT_BAND_K,
     day_setpoint_c: float = 21.0,
     spinup_days: int = 2,
     start: str = "2026-01-05",
@@ -82,6 +89,13 @@ def imp_schedule(
     setpoint is T_max (constrained) or T_set (normal) instead of ``day_setpoint_c`` (default:
     the gateway's 2 h; until branch h14p this schedule used 4 h and 0 h, see README "Issue 14:
     the pre-heat length").
+
+    Normal night k (k-th of its kind) holds ``setpoints_c[k % len(setpoints_c)]`` [°C]; every
+    constrained night has T_set = ``constrained_setpoint_c`` [°C] (T_max = T_set + ``band_k``),
+    as the gateway's ``[campaign]``. ``constrained_setpoint_c=None`` is the schedule before
+    branch h14q: night j of either kind at ``setpoints_c[j % len(setpoints_c)]`` (with 2 + 6
+    nights and 22/23/24 °C: constrained nights at 23 and 24 °C, normal nights 3 × 22, 2 × 23,
+    1 × 24 °C).
     """
     kinds = night_plan(n_constrained, n_normal)
     days = spinup_days + len(kinds) + 1
@@ -93,10 +107,17 @@ def imp_schedule(
     per_day = int(round(86400 / sim_step_s))
     hour = int(round(3600 / sim_step_s))
     windows = []
+    k_normal = 0
     for j, kind in enumerate(kinds):
         day0 = (spinup_days + j) * per_day
         w0, w1 = day0 + 22 * hour, day0 + 29 * hour
-        t_set = setpoints_c[j % len(setpoints_c)]
+        if constrained_setpoint_c is None:
+            t_set = setpoints_c[j % len(setpoints_c)]
+        elif kind == "constrained":
+            t_set = constrained_setpoint_c
+        else:
+            t_set = setpoints_c[k_normal % len(setpoints_c)]
+        k_normal += kind == "normal"
         if kind == "normal":
             sp[w0 - int(round(normal_preheat_h * hour)):w1] = t_set
         else:

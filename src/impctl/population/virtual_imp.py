@@ -44,6 +44,7 @@ import pandas as pd
 from ..errors import InputError
 from ..imp import (
     DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
     DEFAULT_WINDOW,
@@ -63,13 +64,17 @@ from ..weather import DEFAULT_TZ, winter_weather
 class ImpSimConfig:
     """How the IMP is run on virtual households (module docstring); units in the names.
 
-    ``days`` weather days per household, each with every plan of ``kinds`` × ``setpoints_c``.
+    ``days`` weather days per household, each with every plan of :func:`~impctl.imp.imp_plans`:
+    a constrained night at ``constrained_setpoint_c`` and a normal night at each of
+    ``setpoints_c`` (the gateway's ``[campaign]`` defaults; ``constrained_setpoint_c=None``:
+    every kind at every setpoint, the population before branch h14q).
     Only nights whose mean T_out is below ``max_t_out_c`` are used (they need heating demand).
     ``day_setpoint_c``: (low, high) of the households' normal daytime setpoint [°C].
     """
 
     days: int = 15
     setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C
+    constrained_setpoint_c: float | None = DEFAULT_CONSTRAINED_SETPOINT_C
     kinds: tuple[str, ...] = NIGHT_KINDS
     band_k: float = DEFAULT_BAND_K
     window: tuple[dt.time, dt.time] = DEFAULT_WINDOW
@@ -99,6 +104,7 @@ class ImpSimConfig:
     def plans(self) -> list[NightPlan]:
         """The night plans run on every weather day."""
         return imp_plans(self.setpoints_c, self.band_k, self.kinds,  # type: ignore[arg-type]
+                         constrained_setpoint_c=self.constrained_setpoint_c,
                          window_start=self.window[0], window_end=self.window[1],
                          preheat_h=self.preheat_h, stop_at_t_min=self.stop_at_t_min)
 

@@ -12,7 +12,8 @@ household's own interval SD, puts the truth inside the 95 % interval of ⌈0.95�
 households (split-conformal: a finite-sample guarantee for an exchangeable house). The share is
 calibrated separately for two bands of night counts (:func:`band_of`): "few" (≤
 :data:`FEW_MAX_NIGHTS` nights, the adaptive and the fixed 2 + 3 campaigns: each calibration house
-is also fitted on its first 1 + 1, 1 + 2, 2 + 2 and 2 + 3 nights) and "many" (the full 2 + 6
+is also fitted on the night sequences those campaigns end on, at the gateway's setpoints —
+``CampaignConfig``'s defaults, recorded as the band's ``protocol``) and "many" (the full 2 + 6
 protocol) — a fit of two to five nights is not as wrong, or as sure, as one of eight. At fit time
 the share of the fit's band and group is added in quadrature (:func:`widen`). Widening only: no bias
 correction is learnt from the simulator, a real house not being the simulator.
@@ -33,7 +34,9 @@ import numpy as np
 from ...errors import InputError
 from ..data import Estimate
 
-SCHEMA = "impctl-model-error/2"
+#: /3 (h18c): the few band is calibrated on the gateway's campaign nights and records their
+#: setpoints (``bands.few.protocol``); a /2 file (the 2 + 6 protocol's first nights) is refused.
+SCHEMA = "impctl-model-error/3"
 #: The grouping rule's version: a calibration file made with another rule is refused.
 GROUPING = "nights-rows-residuals-nuisance-discharge/6"
 GROUPS = ("clean", "plain", "nuisance", "slow", "coarse")
@@ -157,10 +160,12 @@ def conformal_share(log_error, sd, coverage: float = COVERAGE) -> float:
     return float(s[k - 1]) if 0 < k <= n else float("inf")
 
 
-def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE) -> dict:
+def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE,
+              protocol: dict | None = None) -> dict:
     """The calibration (JSON-ready) from per-fit ``records`` with keys ``diagnostics``,
     ``log_error`` {q: log(est/true)} and ``sd`` {q: log-space SD of the fit's own interval};
-    per band (:func:`band_of`) and group (:func:`group_of`).
+    per band (:func:`band_of`) and group (:func:`group_of`). ``protocol``: the few band's
+    nights ({"constrained_setpoint_c" [°C], "normal_setpoints_c" [°C], "sequences"}).
 
     A cell with fewer than :data:`MIN_GROUP` fits is too small for the conformal rank:
     "clean" then takes the largest share any of its fits needed (0 if none: no realistic
@@ -202,9 +207,24 @@ def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE)
             groups[name] = {"n": len(rs), **entry}
         bands[b] = {"n": len(by_band[b]), "pooled": pooled[b], "groups": groups}
     bands["few"]["max_nights"] = FEW_MAX_NIGHTS
+    bands["few"]["protocol"] = protocol or {}
     return {"schema": SCHEMA, "grouping": GROUPING, "coverage": coverage,
             "share_unit": "log-space SD, added in quadrature to the fit's own", "bands": bands,
             "pooled": {"n": len(records), "share": share(records)}, "provenance": provenance}
+
+
+def _protocol_ok(protocol) -> bool:
+    if not isinstance(protocol, dict):
+        return False
+    c, n = protocol.get("constrained_setpoint_c"), protocol.get("normal_setpoints_c")
+    return (isinstance(c, (int, float)) and isinstance(n, list) and len(n) > 0
+            and all(isinstance(x, (int, float)) for x in n))
+
+
+def few_protocol(cal: dict) -> tuple[float, tuple[float, ...]]:
+    """(constrained setpoint, normal setpoints) [°C] the few band was calibrated on."""
+    p = cal["bands"]["few"]["protocol"]
+    return float(p["constrained_setpoint_c"]), tuple(float(x) for x in p["normal_setpoints_c"])
 
 
 @lru_cache(maxsize=4)
@@ -227,6 +247,9 @@ def load_calibration(path: str | None = None) -> dict:
         problem = f"schema is not {SCHEMA!r}"
     elif cal.get("grouping") != GROUPING:
         problem = f"grouping {cal.get('grouping')!r} is not this code's {GROUPING!r}"
+    elif not _protocol_ok(((cal.get("bands") or {}).get("few") or {}).get("protocol")):
+        problem = ("band 'few' has no protocol (constrained_setpoint_c, normal_setpoints_c "
+                   "[°C]): not calibrated on campaign nights")
     else:
         for band in BANDS:
             for name in GROUPS:

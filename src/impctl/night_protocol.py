@@ -1,0 +1,21 @@
+"""The IMP night protocol's defaults: one set of numbers for the gateway and every simulation.
+
+The gateway's ``[campaign]`` / ``[night]`` defaults (:mod:`impctl.config`), the night plans
+(:mod:`impctl.imp.plan`), the bench's and the interval calibration's nights
+(:func:`impctl.population.synth_nights.imp_schedule`) and the classifiers' virtual population
+(:class:`impctl.population.virtual_imp.ImpSimConfig`) all read them, so the product is measured
+on the protocol it runs (README "Accuracy", issue 14: "one protocol", branch h14q). Pure
+constants: imported by the daemon's config, so no numpy or pandas here.
+"""
+
+from __future__ import annotations
+
+#: T_set [°C] of the constrained nights: held at T_max = T_set + ΔT for the pre-heat, then the
+#: heating is off in the window.
+DEFAULT_CONSTRAINED_SETPOINT_C = 21.0
+#: T_set [°C] of the normal nights, in turn (held through the window, heat output logged).
+DEFAULT_SETPOINTS_C = (22.0, 23.0, 24.0)
+#: Comfort band ΔT [K] around T_set (the paper's case study: 1.5 °C).
+DEFAULT_BAND_K = 1.5
+#: Time [h] the night's pre-window setpoint (T_max or T_set) is held before the window.
+DEFAULT_PREHEAT_H = 2.0
