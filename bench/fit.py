@@ -68,6 +68,12 @@ first N households at steps under 5 minutes. The issue-14 table, re-runnable as 
 
     python bench/fit.py --households 50 --ranges true,classifier --plant realistic \
         --steps 300,60,3600 --fine-households 20 --no-lsq --model-dir MODELS
+
+Here: the runs (fit and baselines per household, the variants, the virtual-IMP cross-check) and
+the command line; the protocol (houses, schedule, simulation, demand truth) is in
+``bench/_fit_protocol.py``, the printed tables in ``bench/_fit_tables.py``, ``--speed`` in
+``bench/_fit_speed.py``. The other bench scripts import the protocol from here (``from fit
+import ...``).
 """
 
 from __future__ import annotations
@@ -79,192 +85,31 @@ import time
 
 import numpy as np
 import torch
+from _fit_protocol import (  # also imported from here by the other bench scripts
+    ACH,
+    VAL_SEED,
+    _safe_house,
+    _sub_schedule,
+    campaign_cost,
+    classifier_ranges,
+    coheating_eps,
+    demand_eps,
+    night_gain,
+    simulate_schedule,
+    true_ranges,
+    val_schedule,
+    window_energy,
+)
+from _fit_speed import speed
+from _fit_tables import print_summary, rel, report, stats, summary_row
 
 from impctl.fit import baselines
 from impctl.fit.data import prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
-from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
-    imp_schedule,
-    run_schedule,
-    run_schedule_plant,
-    sample_nights,
-)
-
-VAL_SEED = 20260
-CLASS_RANGES = {
-    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
-    "c_f": ((0.8, 1.65), (1.65, 3.7)),
-    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
-}
-ACH = (0.0, 0.01)
-#: Issue 14's targets (median |error| %, coverage %, max fit time s); None: reported only.
-TARGETS = {
-    ("iso", "5-min"): {"hlc": 1.0, "tau": 1.0, "c_m": 3.0, "eps": 3.0, "coverage": 90.0,
-                       "time": 1.0},
-    ("realistic", "5-min"): {"hlc": 5.0, "tau": 5.0, "c_m": 10.0, "eps": 8.0,
-                             "coverage": 90.0, "time": 1.0},
-    ("realistic", "other"): {"hlc": None, "tau": None, "c_m": None, "eps": None,
-                             "coverage": 85.0, "time": None},
-}
-
-
-def targets(plant: str, step_s: float) -> dict:
-    """The issue-14 targets of a run; steps other than 5 minutes are reported (coverage
-    ≥ 85 % on the realistic plant, nothing set on the ideal one)."""
-    if step_s == 300.0:
-        return TARGETS[(plant, "5-min")]
-    if plant == "realistic":
-        return TARGETS[("realistic", "other")]
-    return dict.fromkeys(TARGETS[("iso", "5-min")])
-
-
-def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
-    out = {}
-    for name, rs in CLASS_RANGES.items():
-        v = float(getattr(house, name))
-        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
-    return out
-
-
-def classifier_ranges(nights, model_dir):
-    from impctl.classifiers import classify_nights
-
-    return {k: tuple(v.range) for k, v in classify_nights(nights, model_dir).items()}
-
-
-def house_from(params: dict[str, float]) -> HouseParameters:
-    return HouseParameters(**{n: params[n] for n in PARAM_NAMES}, ach_vent=ACH[0],
-                           ach_infl=ACH[1])
-
-
-def demand_eps(houses: list[HouseParameters], sched, truth_energy: np.ndarray) -> np.ndarray:
-    """Mean |E − E_true|/E_true [%] over the normal nights, per household (NaN if no house)."""
-    ok = [h is not None for h in houses]
-    out = np.full(len(houses), np.nan)
-    if not any(ok):
-        return out
-    idx = np.flatnonzero(ok)
-    sub = HouseParameters.stack([houses[i] for i in idx])
-    sched_sub = _sub_schedule(sched, idx)
-    sim, _ = run_schedule(sub, sched_sub)
-    e = window_energy(sim, sched_sub)
-    out[idx] = 100.0 * np.mean(np.abs(e - truth_energy[:, idx]) / truth_energy[:, idx], axis=0)
-    return out
-
-
-def val_schedule(n: int, args=None):
-    """The validation schedule of ``n`` households, with ``args``' pre-heat lengths if given."""
-    kw = {}
-    if args is not None and getattr(args, "preheat_h", None) is not None:
-        kw = {"constrained_preheat_h": args.preheat_h, "normal_preheat_h": args.preheat_h}
-    if args is not None and getattr(args, "preheat_h_normal", None) is not None:
-        kw["normal_preheat_h"] = args.preheat_h_normal
-    if args is not None and getattr(args, "setpoints", None):
-        kw["setpoints_c"] = tuple(float(x) for x in args.setpoints.split(","))
-    c_sp = getattr(args, "constrained_setpoint", None) if args is not None else None
-    if c_sp is not None:
-        kw["constrained_setpoint_c"] = None if c_sp == "cycle" else float(c_sp)
-    return imp_schedule(n, seed=VAL_SEED, **kw)
-
-
-def campaign_cost(heat, sched) -> tuple[float, float, float, float]:
-    """What the campaign costs the household: mean heat [kWh per household] the heating
-    delivers over the whole schedule (spin-up days and the day after the last night included,
-    so heat stored by a pre-heat and given back later is netted out; compare runs); the hours
-    per night held above the day setpoint outside the windows (the evening pre-heat) and inside
-    them (normal nights above the owner's setpoint); the degree-hours per night the setpoint is
-    above the day setpoint, evening and window together [K·h] (a constrained window, heating
-    off, counts 0)."""
-    phi = np.atleast_2d(heat.phi_hc_w.T).T
-    n_nights = len(sched.windows)
-    kwh = phi.sum(axis=0) * sched.dt_s / 3.6e6
-    inside = np.zeros(len(sched.index), bool)
-    for _, _, w0, w1, _ in sched.windows:
-        inside[w0:w1] = True
-    excess = np.nan_to_num(sched.setpoint_c - sched.t_m_init_c, nan=0.0)
-    above = excess > 1e-9
-    per_night_h = sched.dt_s / 3600.0 / n_nights
-    return (float(np.mean(kwh)), float(np.median(above[~inside].sum(axis=0)) * per_night_h),
-            float(np.median(above[inside].sum(axis=0)) * per_night_h),
-            float(np.median(np.clip(excess, 0.0, None).sum(axis=0)) * per_night_h))
-
-
-def _sub_schedule(sched, idx):
-    from dataclasses import replace
-
-    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
-
-
-def window_energy(sim, sched) -> np.ndarray:
-    """Heat delivered in each normal-night window [kWh], (n_normal, n_houses)."""
-    phi = np.atleast_2d(sim.phi_hc_w.T).T
-    rows = [phi[w0:w1].sum(axis=0) * sched.dt_s / 3.6e6
-            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
-    return np.array(rows)
-
-
-def rel(est, true):
-    return 100.0 * (np.asarray(est, float) - np.asarray(true, float)) / np.asarray(true, float)
-
-
-def half_width(estimates) -> float:
-    """Median 95 % interval half-width [% of the estimate], (high − low)/2/value."""
-    return float(np.median([100.0 * (e.high - e.low) / (2.0 * e.value) for e in estimates]))
-
-
-def stats(err) -> tuple[float, float]:
-    a = np.abs(np.asarray(err, float))
-    a = a[np.isfinite(a)]
-    if not len(a):
-        return float("nan"), float("nan")
-    return float(np.median(a)), float(np.percentile(a, 90))
-
-
-class _TrueHeat:
-    """The realistic plant's true heat-pump output, for the demand truth (not the meter)."""
-
-    def __init__(self, logged):
-        self.phi_hc_w = logged.run["heat_pump_w"]
-
-
-_SIMULATED: dict = {}
-
-
-def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
-    """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
-    simulated once per population size and plant, so every sample step and range source
-    reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
-    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise)."""
-    key = (houses_arr.n_houses, plant, realism[0] if realism else None,
-           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()))
-    if key not in _SIMULATED:
-        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism)
-    return _SIMULATED[key]
-
-
-def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
-    if plant == "iso":
-        sim, sp = run_schedule(houses_arr, sched)
-        return sim, sp, sim
-    _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
-    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains)
-    return logged, sp, _TrueHeat(logged)
-
-
-def night_gain(args) -> dict:
-    """The fit's assumed night gain from ``--night-gain-w`` / ``--night-gain-sd-w``: 0 W on the
-    ideal 5R1C unless given (it has no gains), the fit's default on the realistic plant."""
-    w = getattr(args, "night_gain_w", None)
-    if w is None and args.plant == "iso":
-        w = 0.0
-    out = {} if w is None else {"night_gain_w": w}
-    if getattr(args, "night_gain_sd_w", None) is not None:
-        out["night_gain_sd_w"] = args.night_gain_sd_w
-    return out
+from impctl.population.synth_nights import run_schedule, sample_nights
 
 
 def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args,
@@ -356,187 +201,6 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     return res
 
 
-def coheating_eps(hlc, sched, sim, truth_e):
-    t_air = np.atleast_2d(sim.t_air_c.T).T[:, :len(hlc)]
-    rows = [((t_air[w0:w1] - sched.t_out_c[w0:w1]).sum(axis=0) * sched.dt_s / 3.6e6)
-            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
-    e = np.array(rows) * np.asarray(hlc)[None, :]
-    return 100.0 * np.mean(np.abs(e - truth_e) / truth_e, axis=0)
-
-
-def _safe_house(params):
-    try:
-        return house_from(params)
-    except Exception:  # a parameter set outside the model's domain cannot be replayed
-        return None
-
-
-def report(res: dict, step_s: float, range_source: str, args) -> None:
-    truth = res["truth"]
-    t_hlc = [h.hlc_w_per_k for h in truth]
-    t_tau = [h.tau_h for h in truth]
-    t_cm = [h.c_m_j_per_k for h in truth]
-    fits = res["fit"]
-
-    def lumped(name):
-        return [f.lumped_[name] for f in fits]
-
-    cov = {}
-    for name, t in (("hlc", t_hlc), ("tau", t_tau), ("c_m", t_cm)):
-        est = lumped(name)
-        cov[name] = 100.0 * np.mean([e.low <= v <= e.high for e, v in zip(est, t, strict=True)])
-    rows = []
-    e_fit = {k: rel([e.value for e in lumped(k)], t)
-             for k, t in (("hlc", t_hlc), ("tau", t_tau), ("c_m", t_cm))}
-    rows.append(("NODE joint (default)", e_fit["hlc"], e_fit["tau"], e_fit["c_m"],
-                 res["eps_fit"], cov, np.median(res["time"])))
-    pn = res["per_night_mean"]
-    rows.append(("NODE per-night mean", rel([p["lumped"]["hlc"] for p in pn], t_hlc),
-                 rel([p["lumped"]["tau"] for p in pn], t_tau),
-                 rel([p["lumped"]["c_m"] for p in pn], t_cm), res["eps_pn"], None, None))
-    if args.lsq:
-        lsq = res["lsq"]
-        rows.append(("scipy least_squares (exact)", rel([x["hlc"] for x in lsq], t_hlc),
-                     rel([x["tau"] for x in lsq], t_tau), rel([x["c_m"] for x in lsq], t_cm),
-                     res["eps_lsq"], None, np.median(res["lsq_time"])))
-    coh, ll = np.asarray(res["coh_hlc"]), np.asarray(res["loglin_tau"])
-    rows.append(("coheating HLC / log-lin τ / τ·HLC", rel(coh, t_hlc), rel(ll, t_tau),
-                 rel(coh * ll * 3600.0, t_cm), res["eps_coh"], None, None))
-    mids = [house_from(m) for m in res["mid"]]
-    rows.append(("prior midpoint", rel([h.hlc_w_per_k for h in mids], t_hlc),
-                 rel([h.tau_h for h in mids], t_tau), rel([h.c_m_j_per_k for h in mids], t_cm),
-                 res["eps_mid"], None, None))
-
-    print(f"\n### sample step {step_s:g} s, ranges: {range_source}, "
-          f"{len(truth)} households, normal-night model '{args.normal_model}'")
-    if "cost" in res:
-        print("campaign cost: heat {:.1f} kWh per household (mean, the whole schedule: compare "
-              "runs); per night above the day setpoint: {:.2f} h before the window, {:.2f} h in "
-              "it, {:.2f} K·h".format(*res["cost"]))
-    hits = res["ranges_hit"]
-    if hits and hits[0]:
-        share = {k: 100.0 * np.mean([h[k] for h in hits]) for k in hits[0]}
-        all_in = 100.0 * np.mean([all(h.values()) for h in hits])
-        print("true value inside the range used: " + ", ".join(
-            f"{k} {v:.0f} %" for k, v in share.items()) + f"; all three {all_in:.0f} %")
-        checks = res["class_check"]
-        rej = np.array([c["rejected"] for c in checks])
-        wrong = np.array([not all(h.values()) for h in hits])
-        chi2 = np.array([c.get("chi2", np.nan) for c in checks])
-        print(f"class ranges rejected by the likelihood-ratio test: {100 * rej.mean():.0f} % "
-              f"of households ({rej[wrong].sum()} of {wrong.sum()} with a wrong class, "
-              f"{rej[~wrong].sum()} of {(~wrong).sum()} with right classes); "
-              f"median Δχ² right {np.nanmedian(chi2[~wrong]) if (~wrong).any() else np.nan:.1f}"
-              f", wrong {np.nanmedian(chi2[wrong]) if wrong.any() else np.nan:.1f}")
-    print("| method | HLC med / P90 % | τ med / P90 % | C_m med / P90 % | ε med / P90 % "
-          "| coverage HLC/τ/C_m % | time s |")
-    print("|---|---|---|---|---|---|---|")
-    for name, eh, et, ec, eps, cv, tm in rows:
-        cells = [f"{a:.1f} / {b:.1f}" for a, b in (stats(eh), stats(et), stats(ec), stats(eps))]
-        cv_s = f"{cv['hlc']:.0f} / {cv['tau']:.0f} / {cv['c_m']:.0f}" if cv else "–"
-        tm_s = f"{tm:.2f}" if tm is not None else "–"
-        print(f"| {name} | " + " | ".join(cells) + f" | {cv_s} | {tm_s} |")
-    signed = ", ".join(f"{k} {np.nanmedian(v):+.1f} % ({np.mean(np.asarray(v) < 0):.0%} low)"
-                       for k, v in (("HLC", e_fit["hlc"]), ("τ", e_fit["tau"]),
-                                    ("C_m", e_fit["c_m"])))
-    print(f"NODE joint, signed median error: {signed}")
-    print("NODE joint, median 95 % half-width: " + ", ".join(
-        f"{lab} ±{half_width(lumped(k)):.1f} %" for k, lab in (("hlc", "HLC"), ("tau", "τ"),
-                                                               ("c_m", "C_m"))))
-    _model_error_lines(fits, {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm})
-    if args.why and "types" in res:
-        from calibrate_intervals import _record, why_table
-
-        ty = res["types"]
-        why_table([_record(i, step_s, f, {"hlc": t_hlc[i], "c_m": t_cm[i], "tau": t_tau[i]},
-                           int(ty["underfloor"][i]), bool(ty["on/off"][i]),
-                           int(ty["room thermostat"][i])) for i, f in enumerate(fits)])
-    if "types" in res:
-        print("\n| NODE joint by type | houses | HLC med / P90 % | τ med / P90 % | C_m med / P90 % "
-              "| signed median HLC/τ/C_m % | coverage HLC/τ/C_m % "
-              "| median ± half-width HLC/τ/C_m % |")
-        print("|---|---|---|---|---|---|---|---|")
-        truths = {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm}
-        for label, sel in res["types"].items():
-            if not sel.any():
-                continue
-            cells, covs, hws = [], [], []
-            for k in ("hlc", "tau", "c_m"):
-                cells.append("{:.1f} / {:.1f}".format(*stats(e_fit[k][sel])))
-                ests = [e for e, m in zip(lumped(k), sel, strict=True) if m]
-                hws.append(half_width(ests))
-                tv = np.asarray(truths[k])[sel]
-                covs.append(100 * np.mean([e.low <= v <= e.high for e, v in zip(ests, tv,
-                                                                                  strict=True)]))
-            signed = " / ".join(f"{np.nanmedian(e_fit[k][sel]):+.1f}" for k in ("hlc", "tau",
-                                                                                "c_m"))
-            print(f"| {label} | {int(sel.sum())} | " + " | ".join(cells) + f" | {signed}"
-                  + " | " + " / ".join(f"{c:.0f}" for c in covs) + " | "
-                  + " / ".join(f"{h:.0f}" for h in hws) + " |")
-    if res.get("eps_floor") is not None:
-        print("ε against the true house replayed on the 5R1C (--eps-truth house); the true "
-              "parameters against the plant's own heat output: ε median / P90 "
-              "{:.1f} / {:.1f} %".format(*stats(res["eps_floor"])))
-    t = np.asarray(res["time"])
-    print(f"fit time per household: median {np.median(t):.2f} s, max {t.max():.2f} s; "
-          "in-sample ε (fitted initial mass temperatures) median "
-          f"{np.nanmedian(res['eps_in']):.2f} %")
-    if "types" in res:
-        print("heat demand ε by type (NODE joint, median / P90 %): " + ", ".join(
-            "{} {:.1f} / {:.1f}".format(label, *stats(res["eps_fit"][sel]))
-            for label, sel in res["types"].items() if sel.any()))
-
-    print("\n| parameter | true range in population | NODE med / P90 % "
-          "| prior midpoint med / P90 % | flagged determined % |")
-    print("|---|---|---|---|---|")
-    for name in PARAM_NAMES:
-        tv = np.array([float(getattr(h, name)) for h in truth])
-        fv = np.array([f.parameters_[name] for f in fits])
-        mv = np.array([m[name] for m in res["mid"]])
-        det = 100.0 * np.mean([f.determined_[name] for f in fits])
-        a, b = stats(rel(fv, tv))
-        c, d = stats(rel(mv, tv))
-        print(f"| {name} | {tv.min():.3g}–{tv.max():.3g} | {a:.1f} / {b:.1f} | {c:.1f} / {d:.1f} "
-              f"| {det:.0f} |")
-
-    med = {k: stats(v)[0] for k, v in e_fit.items()}
-    eps_med = stats(res["eps_fit"])[0]
-    goal = targets(args.plant, step_s)
-    print("\ntargets (median, issue 14): " + ", ".join([
-        _verdict("HLC", med["hlc"], goal["hlc"]), _verdict("τ", med["tau"], goal["tau"]),
-        _verdict("C_m", med["c_m"], goal["c_m"]), _verdict("ε", eps_med, goal["eps"])]))
-    if goal["coverage"] is not None:
-        print(f"coverage ≥ {goal['coverage']:g} %: " + ", ".join(
-            f"{k} {v:.0f} % {'met' if v >= goal['coverage'] else 'NOT met'}"
-            for k, v in cov.items()))
-    if goal["time"] is not None:
-        print(f"time ≤ {goal['time']:g} s: max {t.max():.2f} s "
-              f"{'met' if t.max() <= goal['time'] else 'NOT met'}")
-
-
-def _model_error_lines(fits, truths: dict) -> None:
-    """The interval method and, per model-error group
-    (:mod:`impctl.fit.intervals.model_error`), how many
-    houses, their coverage and median half-width."""
-    me = [getattr(f, "model_error_", None) for f in fits]
-    if not any(me):
-        print("intervals: measurement only (--no-model-error)")
-        return
-    first = next(m for m in me if m)
-    print(f"intervals: {first['method'].split(', group')[0]}; by group:")
-    for group in sorted({m["group"] for m in me if m}):
-        sel = [i for i, m in enumerate(me) if m and m["group"] == group]
-        cells = []
-        for k in ("hlc", "tau", "c_m"):
-            ests = [fits[i].lumped_[k] for i in sel]
-            cov = 100 * np.mean([e.low <= truths[k][i] <= e.high for e, i in zip(ests, sel,
-                                                                                  strict=True)])
-            cells.append(f"{k} {cov:.0f} % (±{half_width(ests):.0f} %)")
-        share = ", ".join(f"{k} {100 * v:.1f}" for k, v in me[sel[0]]["share"].items())
-        print(f"  {group:8s} {len(sel):3d} houses, share (log SD %) {share}: coverage "
-              + "; ".join(cells))
-
-
 def compare(houses_arr: HouseParameters, args) -> None:
     """Normal-night models (series / mean / demand) and optimisers (LM / Adam) side by side."""
     n = houses_arr.n_houses
@@ -616,89 +280,6 @@ def virtual_imp_check(n: int, args) -> None:
     cov = " / ".join(f"{100 * np.mean(cover[k]):.0f}" for k in ("hlc", "tau", "c_m"))
     print("| " + " | ".join(cells) + f" | {cov} | {np.median(times):.2f} / "
           f"{np.max(times):.2f} |")
-
-
-def speed(args) -> None:
-    """The issue's three speed figures: ``impctl fit`` wall time on the demo's export and on 8
-    nights of 1-minute rows (subprocess, imports and classification included), and the
-    in-process fit per household at 5-minute rows (one core)."""
-    import os
-    import subprocess
-    import tempfile
-    from pathlib import Path
-
-    from impctl.imp.nights_csv import write_nights
-
-    houses = sample_households(4, seed=VAL_SEED)
-    sched = imp_schedule(4, seed=VAL_SEED)
-    sim, sp = run_schedule(houses, sched)
-    tmp = Path(tempfile.mkdtemp(prefix="impctl-bench-fit-"))
-    files = []
-    if args.demo_csv:
-        files.append(("demo export (" + Path(args.demo_csv).name + ")", Path(args.demo_csv)))
-    minute = sample_nights(sim, sp, sched, 0, sample_step_s=60.0, quantise_k=0.1,
-                           power_noise=0.05, seed=VAL_SEED)
-    files.append(("8 nights of 1-minute rows", write_nights(minute, tmp / "minute.csv")))
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    print("\n### speed (target: impctl fit ≤ 5 s wall per file, in-process ≤ 1 s per household "
-          f"at 5-minute rows, one core); each command run {args.repeat} times, min / median")
-    if args.model_dir:
-        from impctl.classifiers.compact import COMPACT_FILE
-
-        have = (Path(args.model_dir) / COMPACT_FILE).is_file()
-        what = "compact forests" if have else "pickled forests only: retrain for the fast path"
-        print(f"classifiers: {args.model_dir} ({what})")
-    out = tmp / "fit.json"
-    cmds = []
-    for label, path in files:
-        cmd = [str(Path(sys.executable).parent / "impctl"), "fit", "--nights", str(path),
-               "--json", str(out)]
-        cmds.append(cmd + (["--model-dir", str(args.model_dir)] if args.model_dir else []))
-        print(f"{label}: OMP_NUM_THREADS=1 {' '.join(cmds[-1])}")
-    print("| what | rows | wall s | CPU s (user+sys) | fit s (in JSON) "
-          "| load average before / after |")
-    print("|---|---|---|---|---|---|")
-    for (label, path), cmd in zip(files, cmds, strict=True):
-        walls, cpus, fits = [], [], []
-        load0 = os.getloadavg()[0]
-        for _ in range(args.repeat):
-            before = os.times()
-            t0 = time.perf_counter()
-            done = subprocess.run(cmd, env=env, capture_output=True, text=True)
-            walls.append(time.perf_counter() - t0)
-            after = os.times()
-            cpus.append(after.children_user - before.children_user
-                        + after.children_system - before.children_system)
-            if done.returncode != 0:
-                break
-            import json
-
-            fits.append(json.loads(out.read_text())["fit"]["time_s"])
-        if done.returncode != 0:
-            print(f"| {label} | – | failed: {done.stderr.strip().splitlines()[-1]} | | | |")
-            continue
-        rows = sum(1 for _ in open(path)) - 1
-        print(f"| {label} | {rows} | {min(walls):.1f} / {np.median(walls):.1f} "
-              f"| {min(cpus):.1f} / {np.median(cpus):.1f} | {min(fits):.2f} / "
-              f"{np.median(fits):.2f} | {load0:.1f} / {os.getloadavg()[0]:.1f} |", flush=True)
-    times, cpu = [], []
-    for i in range(houses.n_houses):
-        nights = sample_nights(sim, sp, sched, i, sample_step_s=300.0, quantise_k=0.1,
-                               power_noise=0.05, seed=VAL_SEED + i)
-        c0 = time.process_time()
-        times.append(NightFit().fit(nights, true_ranges(houses.take(i))).fit_time_s_)
-        cpu.append(time.process_time() - c0)
-    print(f"| in-process NightFit.fit, 5-minute rows, {len(times)} households | 8 nights "
-          f"| median {np.median(times):.2f}, max {np.max(times):.2f} "
-          f"| median {np.median(cpu):.2f}, max {np.max(cpu):.2f} | – |")
-    print(f"load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores "
-          "(other work slows every figure)")
-
-
-def _verdict(name, value, target):
-    if target is None:
-        return f"{name} {value:.1f} % (reported)"
-    return f"{name} {value:.1f} % {'met' if value <= target else 'NOT met'} (≤ {target:g} %)"
 
 
 def main() -> None:
@@ -813,46 +394,6 @@ def _classifier_source(model_dir) -> str:
           f"{meta.get('n_households')} households, plant {data.get('plant', 'iso')}, "
           f"compact forests {'yes' if meta.get('compact') else 'no'}")
     return "classifier"
-
-
-def summary_row(res: dict, step_s: float, source: str) -> dict:
-    """The NODE joint fit's figures of one (sample step, range source) run."""
-    truth = res["truth"]
-    true = {"hlc": [h.hlc_w_per_k for h in truth], "tau": [h.tau_h for h in truth],
-            "c_m": [h.c_m_j_per_k for h in truth]}
-    row = {"step_s": step_s, "ranges": source, "n": len(truth)}
-    for k, t in true.items():
-        est = [f.lumped_[k] for f in res["fit"]]
-        row[k] = stats(rel([e.value for e in est], t))
-        row[f"cov_{k}"] = 100.0 * np.mean([e.low <= v <= e.high
-                                           for e, v in zip(est, t, strict=True)])
-        row[f"hw_{k}"] = half_width(est)
-    row["eps"] = stats(res["eps_fit"])
-    hits = res["ranges_hit"]
-    row["classes_right"] = (100.0 * np.mean([all(h.values()) for h in hits])
-                            if hits and hits[0] else None)
-    t = np.asarray(res["time"])
-    row["time"] = (float(np.median(t)), float(t.max()))
-    return row
-
-
-def print_summary(rows: list[dict], args) -> None:
-    """One line per sample step and range source: the issue-14 table's NODE rows."""
-    if not rows:
-        return
-    print(f"\n### summary: NODE joint fit, plant {args.plant} (median / P90 of |error|; "
-          "coverage of the 95 % intervals)")
-    print("| rows | ranges | households | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % "
-          "| median ± half-width HLC/τ/C_m % | all three classes right % | time med / max s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        step = f"{r['step_s'] / 60:g}-min" if r["step_s"] < 3600 else f"{r['step_s'] / 3600:g}-h"
-        cells = " | ".join(f"{r[k][0]:.1f} / {r[k][1]:.1f}" for k in ("hlc", "tau", "c_m", "eps"))
-        right = "–" if r["classes_right"] is None else f"{r['classes_right']:.0f}"
-        print(f"| {step} | {r['ranges']} | {r['n']} | {cells} | {r['cov_hlc']:.0f} / "
-              f"{r['cov_tau']:.0f} / {r['cov_c_m']:.0f} | {r['hw_hlc']:.0f} / {r['hw_tau']:.0f} / "
-              f"{r['hw_c_m']:.0f} | {right} | {r['time'][0]:.2f} / "
-              f"{r['time'][1]:.2f} |")
 
 
 if __name__ == "__main__":

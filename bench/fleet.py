@@ -180,9 +180,9 @@ def profile(data: Path, n: int) -> None:
     import torch
 
     from impctl.fit import data as fit_data
-    from impctl.fit import estimator
+    from impctl.fit import estimator, selection
     from impctl.fit.ode import solver
-    from impctl.fit.optim import batch, lm
+    from impctl.fit.optim import batch, lm, problem
     from impctl.fleet import worker
     from impctl.fleet.inputs import discover
 
@@ -214,11 +214,12 @@ def profile(data: Path, n: int) -> None:
     timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
     timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
-    timed(lm, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
+    timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
-    timed(estimator.NightFit, "_validate", "validation / predictions (two row sets)")
-    timed(estimator.NightFit, "_night_quality", "night quality")
+    timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
+    timed(estimator, "in_sample_validation", "validation / predictions (two row sets)")
+    timed(estimator, "used_nights_quality", "night quality")
     timed(estimator.NightFit, "_update_sigma", "residual σ update")
     timed(estimator, "pack_nights", "pack nights into tensors")
     timed(estimator, "coarsen", "coarsen to 5-min blocks")

@@ -6,7 +6,8 @@ reading a result (:mod:`.report`) needs no torch.
 
 * :class:`NightFit` (:mod:`.estimator`): the estimator (torch)
 * :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
-* :func:`fit_to_dict`, :func:`format_table`, :func:`plot_fit` (:mod:`.report`, no torch)
+* :func:`fit_to_dict` (:mod:`.report`), :func:`format_table` (:mod:`.table`), :func:`plot_fit`
+  (:mod:`.plot`): the JSON summary, its printed form, the figure (no torch)
 
 Inside, by concern:
 
@@ -19,9 +20,12 @@ Inside, by concern:
   (many households in one call: the fleet);
 * :mod:`.intervals` — :mod:`.intervals.uncertainty` (Laplace, sandwich, type-B shares) and
   :mod:`.intervals.model_error` (the share calibrated on realistic virtual houses);
-* here: :mod:`.estimator`, :mod:`.data`, :mod:`.resample` (fine rows into blocks),
-  :mod:`.quality` (night quality, model adequacy; no torch), :mod:`.report`,
-  :mod:`.baselines` (the methods the fit is compared with).
+* here: :mod:`.estimator` (the procedure), :mod:`.layout` (the problems one fit solves in one
+  optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
+  the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
+  :mod:`.data`, :mod:`.resample` (fine rows into blocks), :mod:`.quality` (night quality, model
+  adequacy; no torch), :mod:`.report` (the JSON), :mod:`.table` (its printed form),
+  :mod:`.plot`, :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ from .._lazy import attach
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "estimator": ["NightFit"],
     "data": ["prepare_nights"],
-    "report": ["fit_to_dict", "format_table", "plot_fit"],
+    "report": ["fit_to_dict"],
+    "table": ["format_table"],
+    "plot": ["plot_fit"],
 })
 __all__ = [*_LAZY_NAMES]

@@ -2,6 +2,7 @@
 
 * :func:`prepare_nights` — cut each night to its fit window (the emission lag, resumed heating),
   drop the short ones;
+* :func:`compared_power` — which power samples are compared (:func:`settled` on held nights);
 * :func:`search_bounds` — the search box: class ranges, physical bounds, ISO domains;
 * :func:`noise_levels` — measurement noise per residual group, from the data alone;
 * :func:`validation_table` — the paper's Tables II/V per night;
@@ -21,6 +22,7 @@ from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..model.house import H_MS, LAMBDA_AT, am_factor
 from .ode.parameters import CLASSIFIED, PARAM_NAMES, PHYSICAL_BOUNDS, eq63_margin
+from .quality import power_usable
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,21 @@ def settled(night: NightSamples, settle_h: float, until_held: bool = False,
         if reached.any():
             ok &= t >= t[int(reached.argmax())]
     return ok
+
+
+def compared_power(nights: Sequence[NightSamples], threshold_w: float, settle_h: float,
+                   until_held: bool = False) -> list[np.ndarray]:
+    """Bool per sample of each night: its heat power is compared with the model (the rest of
+    the night still drives it). ``threshold_w`` [W] as :func:`.quality.power_usable`;
+    ``settle_h`` [h] and ``until_held`` as :func:`settled`, on held nights."""
+    # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
+    # only the power during the interruption and its recovery is not compared.
+    power_ok = [power_usable(n, threshold_w) for n in nights]
+    # The first hour after the setpoint step of a held night is emitter, air and furniture
+    # charging and the sensor's lag (README "Accuracy", error budget): that power drives
+    # nothing the 5R1C has, so it is not compared (T_air still drives the model).
+    return [ok & settled(n, settle_h, until_held)
+            if n.kind == "normal" else ok for n, ok in zip(nights, power_ok, strict=True)]
 
 
 def search_bounds(ranges: dict[str, tuple[float, float]] | None,

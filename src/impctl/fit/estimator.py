@@ -10,12 +10,15 @@ shared parameters (the headline) and per-night fits averaged afterwards (the pap
 
 What is reported as *measured* is what the data determines (identifiability.md): the lumped
 HLC, C_m and τ with 95 % intervals, and for each physical parameter whether the data pins it
-down or only its search range does (:mod:`.uncertainty`).
+down or only its search range does (:mod:`.intervals.uncertainty`).
 
 Class ranges are a prior, and a wrong class biases even the lumped quantities. The joint fit is
 therefore run twice in the same batch — inside the class ranges and inside the whole prior
 ranges — and a likelihood-ratio test decides: if the data fit clearly better outside the class
 ranges, the classification is reported as contradicted and the prior-range fit is used.
+
+Here is the procedure; its pieces live by concern: :mod:`.layout` (the problems of the one
+optimiser call), :mod:`.selection` (the likelihood-ratio tests), :mod:`.validation`.
 """
 
 from __future__ import annotations
@@ -23,61 +26,37 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-import numpy as np
 import torch
-from scipy.stats import chi2
 
 from ..errors import InputError
 from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
-from ..model.continuous import mass_from_air
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
-from .data import noise_levels, prepare_nights, search_bounds, settled, validation_table
+from .data import compared_power, noise_levels, prepare_nights, search_bounds
 from .intervals import model_error
-from .intervals.uncertainty import Z95, laplace, nuisance_intervals, offset_allowance
-from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
-from .ode.packing import pack_nights
-from .ode.parameters import (
-    DTYPE,
-    NUISANCE_BOUNDS,
-    NUISANCE_NAMES,
-    PARAM_NAMES,
-    bounds_tensor,
-    lumped,
-    network,
-    to_physical,
+from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
+from .layout import (
+    best_of,
+    initial_mass,
+    layout,
+    night_rows,
+    nuisance_boxes,
+    problem_rows,
+    residual_sigma,
+    stop_units,
+    terms_of,
 )
+from .ode.packing import pack_nights
+from .ode.parameters import PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
-from .optim.problem import raw_residuals
-from .quality import adequacy, night_quality, power_usable
+from .quality import adequacy, used_nights_quality
 from .resample import coarsen
+from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
+from .validation import in_sample_validation, per_night_fits
 
 NORMAL_MODELS = ("demand", "series", "mean")
-LUMPED_NAMES = ("hlc", "c_m", "tau")
-#: Likelihood-ratio threshold for "the data contradict the class ranges", applied to the loss
-#: drop from the class box to the prior box in units of the autocorrelation-inflated σ: χ² with
-#: one degree of freedom at 95 %. With a right class the optimum is interior and the drop ≈ 0
-#: (at most 0.7 over 28 right-class households of ``bench/fit.py``; 9 of 22 wrong ones exceed it).
-CLASS_REJECT_CHI2 = 3.84
-#: The nuisance terms (night gain, emitter amplitude and time constant, air/furniture
-#: capacity) are kept when they lower the loss by more than χ² at 95 % with as many degrees of
-#: freedom as terms switched on (3 by default: 7.81).
-
-
-def stop_units(groups: torch.Tensor) -> torch.Tensor:
-    """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
-    (groups 0–2) and the per-night fits (3 + i) stop on their own, so that the joint answer
-    does not depend on whether — or how long — the per-night comparison runs."""
-    return (torch.arange(int(groups.max()) + 1) >= _FIRST_NIGHT_GROUP).long()
-
-
-_FIRST_NIGHT_GROUP = 3
-
-
-def _rows_of(result: lm.LMResult, sel: torch.Tensor) -> lm.RowTerms | None:
-    return None if result.terms is None else result.terms.take(sel)
 
 
 class NightFit:
@@ -297,49 +276,35 @@ class NightFit:
         with_prior = class_box != prior_box
         self.classified_ = sorted(ranges or {})
         self.nights_ = kept
-        # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
-        # only the power during the interruption and its recovery is not compared.
-        power_ok = [power_usable(n, self.resume_threshold_w) for n in kept]
-        # The first hour after the setpoint step of a held night is emitter, air and furniture
-        # charging and the sensor's lag (README "Accuracy", error budget): that power drives
-        # nothing the 5R1C has, so it is not compared (T_air still drives the model).
-        power_ok = [ok & settled(n, self.settle_h, self.settle_until_held)
-                    if n.kind == "normal" else ok for n, ok in zip(kept, power_ok, strict=True)]
+        power_ok = compared_power(kept, self.resume_threshold_w, self.settle_h,
+                                  self.settle_until_held)
         packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
                                             smooth_air_s=3600.0 * self.smooth_air_h,
                                             smooth_out_s=3600.0 * self.smooth_out_h,
                                             power_ok=power_ok)
         packed.emitter_lag = bool(self.emitter_lag and self.emitter_state)
         self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver)
-        cons = packed.constrained
-        demand = ~cons & torch.tensor(self.normal_model == "demand")
-        self._row_type_n = torch.where(demand, ROW_DEMAND, ROW_AIR)
-        self._phi_n, self._phi_in_n = self._air_input(packed, self.normal_model)
-        self._group_n = torch.where(cons, 0, torch.where(demand, 2, 1))
+        self._row_type_n, self._phi_n, self._phi_in_n, self._group_n = night_rows(
+            packed, self.normal_model)
         self.sigma_ = noise_levels(kept)
 
-        nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
-            NUISANCE_NAMES, (self.night_gain, self.emitter_state, self.emitter_state,
-                             self.furniture_state, self.emitter_state and self.emitter_lag),
-            strict=True)}
-        # a gain not fitted is pinned to the assumed one (an occupied house never has 0 W)
-        pinned = (float(self.night_gain_w),) * 2
-        if not self.night_gain:
-            nuisance["night_gain_w"] = pinned
+        nuisance, plain = nuisance_boxes(self.night_gain, self.emitter_state,
+                                         self.furniture_state, self.emitter_lag, self.night_gain_w)
         self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
-        plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
-        lay = self._layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
-                           bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance))
+        lay = layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
+                     bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
+                     n_starts=self.n_starts, seed=self.seed, per_night=self.per_night)
         rows = self._rows(lay)
-        t_m0 = self._initial_mass(lay["u0"][lay["row_problem"]], lay["row_night"],
-                                  lay["box"][lay["row_problem"]])
+        t_m0 = initial_mass(packed, lay["u0"][lay["row_problem"]], lay["row_night"],
+                            lay["box"][lay["row_problem"]], self._row_type_n, self._phi_n,
+                            self.ach_vent, self.ach_infl)
         result = self._optimise(rows, lay["u0"], t_m0, lay["group"])
         self.n_iter_ = result.n_iter
         # The residual σ per group, now from the fit itself, scales the intervals. When it is
         # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
         # the joint problems are refitted with the new weights.
         guess = self.noise_ = dict(self.sigma_)
-        self._update_sigma(rows, result, self._best(result, lay, 0))
+        self._update_sigma(rows, result, best_of(result, lay, 0))
         ratio = [self.sigma_[k] / guess[k] for k in guess]
         if max(ratio) > 1.4 or min(ratio) < 0.7:
             self._refit_joint(lay, result)
@@ -348,13 +313,14 @@ class NightFit:
         # First whether the data need the nuisance terms (inside the class box), then whether
         # they contradict the class box: testing the classes with a model that lacks terms
         # the data need rejects right classes (the prior box then absorbs the misfit).
-        best = self._best(result, lay, 2 if lay["simple"] else 0)
+        best = best_of(result, lay, 2 if lay["simple"] else 0)
         self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
         if lay["simple"]:
-            best = self._nuisance_check(rows, result, lay, best)
+            best, self.nuisance_check_ = nuisance_check(result, lay, best, self._n_nuisance)
         self.class_check_ = {"applied": with_prior, "rejected": False}
         if with_prior:
-            best = self._class_check(rows, result, lay, best, ranges)
+            best, self.class_check_ = class_check(self._ctx, rows, result, lay, best, ranges,
+                                                  self._group_n, self._n_nuisance)
         self.bounds_ = class_box if best not in lay["prior"] else prior_box
         sel = rows.problem == best
         self._sub = rows.subset(sel)
@@ -362,16 +328,18 @@ class NightFit:
         self._t_m0 = result.t_m0[sel]
         self.loss_ = float(result.loss[best])
         self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
-        self.parameters_ = self._param_dict(self._u, self._sub.box[0])
+        x = to_physical(self._u, self._sub.box[0])[:len(PARAM_NAMES)]
+        self.parameters_ = dict(zip(PARAM_NAMES, x.tolist(), strict=True))
         est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
-                      has_power=bool((~cons).any()), terms=_rows_of(result, sel))
+                      has_power=bool((~packed.constrained).any()), terms=terms_of(result, sel))
         self.lumped_, self.offset_allowance_ = offset_allowance(
             est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
             0.0 if self.nuisance_check_.get("selected") and self.night_gain
             else self.night_gain_sd_w)
         self.structure_share_ = None
         if self.structure_share and lay["simple"]:
-            self.lumped_, self.structure_share_ = self._structure_share(result, lay)
+            self.lumped_, self.structure_share_ = structure_share(
+                result, lay, self.lumped_, self.ach_vent, self.ach_infl)
             self.offset_allowance_["structure_relative_sd"] = self.structure_share_
         self.interval_source_ = est["interval_source"]
         self.determined_ = est["determined"]
@@ -379,103 +347,27 @@ class NightFit:
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
         self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
-        self.night_gain_ = self._gain_statement()
+        self.night_gain_ = gain_statement(self._u, self._sub.box[0], self.night_gain_sd_w)
         if self.night_gain_["assumed"]:
-            # the pinned value, with the interval of the assumption (what the flex coast uses)
-            g, sd = self.night_gain_["value_w"], self.night_gain_["sd_w"]
-            self.nuisance_["night_gain_w"] = {
-                "value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
-                "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
-        self.per_night_, self.per_night_mean_ = self._per_night(result, lay)
-        self._validate()
+            self.nuisance_["night_gain_w"] = assumed_gain(self.night_gain_)
+        self.per_night_, self.per_night_mean_ = per_night_fits(result, lay, packed, self.ach_vent,
+                                                               self.ach_infl)
+        self.validation_, self.predictions_ = in_sample_validation(
+            packed, kept, self._u, self._sub.box[0], self._t_m0, self._phi_n, self._phi_in_n,
+            ach_vent=self.ach_vent, ach_infl=self.ach_infl, solver=self.solver,
+            normal_model=self.normal_model)
         self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
-        self.night_quality_ = self._night_quality(nights)
+        self.night_quality_ = used_nights_quality(nights, kept, self.skipped_,
+                                                  self.resume_threshold_w, self.nuisance_)
         self.interval_basis_ = est["interval_basis"]
         self.model_error_ = None
         if cal is not None:
             self.lumped_, self.model_error_ = model_error.widen(
                 self.lumped_, model_error.diagnostics(self), cal)
 
-    def _gain_statement(self) -> dict:
-        """The night gain the reported fit used [W]: fitted (the likelihood-ratio test kept
-        the term) or assumed (pinned to ``night_gain_w``), with the plain statement."""
-        lo, hi = (float(v) for v in self._sub.box[0][len(PARAM_NAMES)])
-        fitted = hi > lo   # the reported problem's box: pinned when (g, g)
-        g = float(to_physical(self._u, self._sub.box[0])[len(PARAM_NAMES)])
-        sd = 0.0 if fitted else float(self.night_gain_sd_w)
-        text = (f"night gain fitted {g:.0f} W" if fitted else
-                f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
-        return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
-
-    def _night_quality(self, nights) -> list[dict]:
-        used = {n.night_id: n for n in self.nights_}
-        why = dict(self.skipped_)
-        out = []
-        for night in nights:
-            q = night_quality(night, self.resume_threshold_w)
-            kept = used.get(night.night_id)
-            q["used"] = kept is not None
-            q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
-                             if kept is not None else 0.0)
-            q["reason"] = why.get(night.night_id)
-            gain = (self.nuisance_ or {}).get("night_gain_w")
-            # an assumed gain is not an estimate of this night's (fit.night_gain says it)
-            if gain is not None and kept is not None and not gain.get("assumed"):
-                q["night_gain_w"] = gain["value"]   # one value per campaign
-            out.append(q)
-        return out
-
-    def _layout(self, n: int, with_prior: bool, nuisance_box, class_box, prior_box) -> dict:
-        """Problems: joint starts in the class box with the nuisance terms ("class"), the same
-        without them ("simple"), [joint starts in the prior box, with], per night (without).
-
-        Groups (for "keep the best" and early stopping): 0 class, 1 prior, 2 simple, 3 + i
-        night i. Without nuisance terms to test, "class" is the plain class box and there is
-        no "simple" group.
-        """
-        s = max(1, self.n_starts)
-        starts = self._starts(s)
-        with_nuisance = bool((nuisance_box[len(PARAM_NAMES):, 1]
-                              > nuisance_box[len(PARAM_NAMES):, 0]).any())
-        kinds = [("class", j, -1) for j in range(s)]
-        if with_nuisance:
-            kinds += [("simple", j, -1) for j in range(s)]
-        if with_prior:
-            kinds += [("prior", j, -1) for j in range(s)]
-        if self.per_night:
-            # the paper's per-night mode is a comparison, not the result: two starts suffice
-            kinds += [("night", j, i) for j in range(min(s, 2)) for i in range(n)]
-        boxes = {"class": nuisance_box, "simple": class_box, "prior": prior_box,
-                 "night": class_box}
-        row_problem, row_night, group, box, u0 = [], [], [], [], []
-        for p, (kind, j, i) in enumerate(kinds):
-            nights = range(n) if i < 0 else [i]
-            row_problem += [p] * len(nights)
-            row_night += list(nights)
-            group.append({"class": 0, "prior": 1, "simple": 2}.get(kind, 3 + i))
-            box.append(boxes[kind])
-            u0.append(starts[j])
-        def idx(k):
-            return [p for p, x in enumerate(kinds) if x[0] == k]
-        return {"kinds": kinds, "class": idx("class"), "prior": idx("prior"),
-                "simple": idx("simple"), "night": idx("night"),
-                "row_problem": torch.tensor(row_problem),
-                "row_night": torch.tensor(row_night), "group": torch.tensor(group),
-                "box": torch.stack(box), "u0": torch.stack(u0), "n_problems": len(kinds)}
-
     def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
-        sig = torch.tensor([self.sigma_["constrained_t_air_k"], self.sigma_["normal_t_air_k"],
-                            self.sigma_["normal_power_w"]], dtype=DTYPE)
-        problem, night = lay["row_problem"], lay["row_night"]
-        box, n_prob = lay["box"], lay["n_problems"]
-        if only is not None:  # the problems `only`, renumbered 0…len(only)−1
-            keep = torch.isin(problem, torch.tensor(only))
-            remap = torch.full((n_prob,), -1, dtype=torch.long)
-            remap[torch.tensor(only)] = torch.arange(len(only))
-            problem, night = remap[problem[keep]], night[keep]
-            box, n_prob = box[torch.tensor(only)], len(only)
-        return lm.Rows(problem, night, self._row_type_n[night], self._phi_n[night],
-                           self._phi_in_n[night], 1.0 / sig[self._group_n[night]], box, n_prob)
+        return problem_rows(lay, self.sigma_, self._row_type_n, self._phi_n, self._phi_in_n,
+                            self._group_n, only)
 
     def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
         joint = lay["class"] + lay["simple"] + lay["prior"]
@@ -491,91 +383,6 @@ class NightFit:
         self.n_iter_ += second.n_iter
         self._update_sigma(rows, second, int(torch.argmin(second.loss[:len(lay["class"])])))
 
-    def _class_check(self, rows, result, lay, best_class, ranges) -> int:
-        """Likelihood-ratio test of the class ranges against the whole prior ranges."""
-        best_prior = self._best(result, lay, 1)
-        sel = rows.problem == best_prior
-        est = laplace(self._ctx, rows.subset(sel), result.u[best_prior], result.t_m0[sel],
-                      self._group_n, has_power=True, summary_only=True,
-                      terms=_rows_of(result, sel))
-        drop = float(result.loss[best_class] - result.loss[best_prior]) / est["inflation"]
-        x = to_physical(result.u[best_prior], lay["box"][best_prior])
-        outside = [n for n, (lo, hi) in (ranges or {}).items()
-                   if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
-        # The prior problems carry the nuisance terms; against a class fit without them the
-        # test has those extra degrees of freedom too.
-        threshold = (float(chi2.ppf(0.95, 1 + self._n_nuisance)) if best_class in lay["simple"]
-                     else CLASS_REJECT_CHI2)
-        rejected = drop > threshold
-        self.class_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
-                             "rejected": rejected, "outside": outside if rejected else []}
-        return best_prior if rejected else best_class
-
-    def _nuisance_check(self, rows, result, lay, best_simple) -> int:
-        """Forward selection (Bacher & Madsen 2011): keep the nuisance terms only when the
-        likelihood-ratio test says the data need them: the loss drop (in units of the fitted
-        residual σ) over the 3 extra parameters against χ²₃. Not deflated for residual
-        autocorrelation: on a house the model fits (the ideal 5R1C) the drop stays ≈ 1, while
-        emitter and furniture heat after switch-off give drops in the hundreds."""
-        best_nuis = self._best(result, lay, 0)
-        drop = float(result.loss[best_simple] - result.loss[best_nuis])
-        threshold = float(chi2.ppf(0.95, self._n_nuisance))
-        selected = drop > threshold
-        self.nuisance_check_ = {"applied": True, "chi2": drop, "threshold": threshold,
-                                "selected": selected}
-        return best_nuis if selected else best_simple
-
-    def _structure_share(self, result, lay) -> tuple[dict, dict]:
-        """Widen the intervals by the structural sensitivity: half the log-difference of each
-        lumped quantity between the fits with and without the nuisance terms, added in
-        quadrature. When the data need terms the 5R1C lacks, how far the answer moves with
-        them is a measure of how much the remaining model error may move it (type B)."""
-        q = {}
-        for group in (0, 2):
-            p = self._best(result, lay, group)
-            x = to_physical(result.u[p], lay["box"][p])
-            q[group] = lumped(x, self.ach_vent, self.ach_infl).tolist()
-        out, shares = {}, {}
-        for i, name in enumerate(LUMPED_NAMES):
-            e = self.lumped_[name]
-            share = 0.5 * abs(float(np.log(q[0][i] / q[2][i])))
-            sd = np.hypot(np.log(e.high / e.low) / (2 * Z95), share)
-            out[name] = type(e)(e.value, float(e.value * np.exp(-Z95 * sd)),
-                                float(e.value * np.exp(Z95 * sd)), e.determined)
-            shares[name] = share
-        return out, shares
-
-    def _best(self, result, lay, group: int) -> int:
-        members = [p for p in range(lay["n_problems"]) if int(lay["group"][p]) == group]
-        return members[int(torch.argmin(result.loss[members]))]
-
-    # ------------------------------------------------------------ pieces
-    def _air_input(self, packed, model: str) -> tuple[torch.Tensor, torch.Tensor]:
-        """Φ_HC of AIR rows at the nodes and on the intervals: 0 on constrained nights (eq. 6)."""
-        cons = packed.constrained[:, None]
-        if model == "mean":
-            mean = packed.q_mean_w[:, None].expand_as(packed.q_w)
-            node, interval = mean, mean
-        else:
-            node, interval = packed.q_w, packed.q_in_w
-        return torch.where(cons, 0.0, node), torch.where(cons, 0.0, interval)
-
-    def _starts(self, s: int) -> torch.Tensor:
-        rng = np.random.default_rng(self.seed)
-        # emitter_share (added last) draws after the others: the earlier starts stay the same
-        frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES) - 1))
-        frac = np.concatenate([frac, rng.uniform(0.15, 0.85, size=(s, 1))], axis=1)
-        u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
-        u[0] = 0.0
-        return u
-
-    def _initial_mass(self, u_rows, night, box_rows) -> torch.Tensor:
-        packed = self._packed
-        net = network(to_physical(u_rows, box_rows), self.ach_vent, self.ach_infl)
-        demand = self._row_type_n[night] == ROW_DEMAND
-        phi0 = torch.where(demand, packed.q_mean_w[night], self._phi_n[night, 0])
-        return mass_from_air(packed.t_air_c[night, 0], packed.t_out_c[night, 0], phi0, net)
-
     def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
@@ -583,84 +390,8 @@ class NightFit:
                                       units=stop_units(groups), max_iter=self.max_iter)
 
     def _update_sigma(self, rows, result, best) -> None:
-        sel = rows.problem == best
-        sub = rows.subset(sel)
-        if result.terms is not None:  # the optimiser's own last evaluation at this point
-            raw = result.terms.take(sel).raw()
-        else:
-            with torch.no_grad():
-                raw = raw_residuals(self._ctx, sub, result.u[best][None], result.t_m0[sel])
-        mask = self._packed.mask[sub.night]
-        groups = self._group_n[sub.night]
-        floors = (0.005, 0.005, 1.0)
-        n_all = int(mask.sum())
-        for g, key in enumerate(("constrained_t_air_k", "normal_t_air_k", "normal_power_w")):
-            m = mask & (groups == g)[:, None]
-            n_g = int(m.sum())
-            if n_g:
-                # Degrees of freedom: each night's θ_m,0 and the group's share of the 7
-                # parameters are fitted to these residuals (matters for hourly data).
-                dof = max(1.0, n_g - int((groups == g).sum()) - 7.0 * n_g / n_all)
-                rms = float(raw[m].pow(2).sum() / dof) ** 0.5
-                self.sigma_[key] = max(floors[g], rms)
-
-    def _param_dict(self, u: torch.Tensor, box: torch.Tensor) -> dict[str, float]:
-        return dict(zip(PARAM_NAMES, to_physical(u, box)[:len(PARAM_NAMES)].tolist(),
-                        strict=True))
-
-    def _per_night(self, result, lay):
-        if not lay["night"]:
-            return [], {}
-        n = self._packed.n_nights
-        members = torch.tensor(lay["night"]).view(-1, n)      # (starts, nights)
-        best = members[result.loss[members].argmin(0), torch.arange(n)]
-        params = to_physical(result.u[best], lay["box"][best])[:, :len(PARAM_NAMES)]
-        q = lumped(params, self.ach_vent, self.ach_infl)
-        entries = []
-        for i, nid in enumerate(self._packed.night_ids):
-            kind = self._packed.kinds[i]
-            entries.append({
-                "night_id": nid, "kind": kind,
-                "parameters": dict(zip(PARAM_NAMES, params[i].tolist(), strict=True)),
-                "lumped": dict(zip(LUMPED_NAMES, q[i].tolist(), strict=True)),
-                # a night without heat power carries no absolute scale
-                "determines": ["tau"] if kind == "constrained" else ["hlc", "c_m", "tau"],
-            })
-        mean_params = params.mean(0)
-        mean = {"parameters": dict(zip(PARAM_NAMES, mean_params.tolist(), strict=True)),
-                "lumped": dict(zip(LUMPED_NAMES, lumped(mean_params, self.ach_vent,
-                                                        self.ach_infl).tolist(), strict=True))}
-        return entries, mean
-
-    def _validate(self) -> None:
-        """In-sample Tables II/V: heat demand on normal nights, T_air RMSE on constrained ones."""
-        packed = self._packed
-        n = packed.n_nights
-        params = to_physical(self._u, self._sub.box[0]).expand(n, -1)
-        idx = torch.arange(n)
-        with torch.no_grad():
-            t_air = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_AIR),
-                               self._phi_n, self._phi_in_n, self.ach_vent,
-                               self.ach_infl, self.solver).predict().numpy()
-            q_model = build_rows(packed, params, self._t_m0, idx, torch.full((n,), ROW_DEMAND),
-                                 self._phi_n, self._phi_in_n, self.ach_vent,
-                                 self.ach_infl, self.solver).predict().numpy()
-        mask = packed.mask.numpy()
-        self.validation_ = validation_table(packed.night_ids, packed.kinds,
-                                            packed.grid_s.numpy(), mask, packed.t_air_c.numpy(),
-                                            packed.q_w.numpy(), t_air, q_model)
-        self.predictions_ = []
-        for i, night in enumerate(self.nights_):
-            m = mask[i]
-            # With the demand model a normal night's T_air is an input, not a prediction.
-            as_input = night.kind == "normal" and self.normal_model == "demand"
-            entry = {"night_id": night.night_id, "kind": night.kind,
-                     "time_s": night.time_s, "t_air_measured_c": night.t_air_c,
-                     "t_air_model_c": None if as_input else t_air[i][m],
-                     "t_out_c": night.t_out_c, "q_measured_w": night.q_hc_w}
-            if night.kind == "normal":
-                entry["q_model_w"] = q_model[i][m]
-            self.predictions_.append(entry)
+        self.sigma_ = residual_sigma(self._ctx, rows, result, best, self._packed.mask,
+                                     self._group_n, self.sigma_)
 
     def to_dict(self) -> dict:
         """JSON-ready summary (see :mod:`.report`)."""

@@ -5,6 +5,7 @@ helps or not before trusting a fitted value:
 
 * :func:`night_quality` — per night: rows, hours, T_air resolution, heat-pump cycling (cycles/h),
   DHW/defrost interruptions, emitter discharge time after switch-off;
+  :func:`used_nights_quality` — the same for each night given to a fit, with whether it was used;
 * :func:`adequacy` — per fit: residual RMSE and lag-1 autocorrelation per residual group, and a
   plain statement when the residuals say the model misses structure in the data (then its
   intervals, which assume it does not, are too narrow).
@@ -24,6 +25,8 @@ Thresholds (documented choices, real-houses.md §3, §6, §7):
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -129,6 +132,30 @@ def night_quality(night: NightSamples, threshold_w: float = Q_ON_W) -> dict:
         if cooling.sum() >= 8:
             out["emitter_discharge_h"] = emitter_discharge_h(t[cooling], ta[cooling],
                                                              te[cooling])
+    return out
+
+
+def used_nights_quality(nights: Sequence[NightSamples], used: Sequence[NightSamples],
+                        skipped: Sequence[tuple[str, str]], threshold_w: float,
+                        nuisance: dict | None) -> list[dict]:
+    """:func:`night_quality` of each given night, with whether the fit used it (``used``: the
+    nights as fitted), its usable hours, why not (``skipped``) and the fitted night gain [W]
+    (from ``nuisance``; not when only assumed); JSON-ready."""
+    used_by_id = {n.night_id: n for n in used}
+    why = dict(skipped)
+    out = []
+    for night in nights:
+        q = night_quality(night, threshold_w)
+        kept = used_by_id.get(night.night_id)
+        q["used"] = kept is not None
+        q["usable_h"] = (float(kept.time_s[-1] - kept.time_s[0]) / 3600.0
+                         if kept is not None else 0.0)
+        q["reason"] = why.get(night.night_id)
+        gain = (nuisance or {}).get("night_gain_w")
+        # an assumed gain is not an estimate of this night's (fit.night_gain says it)
+        if gain is not None and kept is not None and not gain.get("assumed"):
+            q["night_gain_w"] = gain["value"]   # one value per campaign
+        out.append(q)
     return out
 
 

@@ -1,4 +1,5 @@
-"""The fit's JSON summary, its printed table and its plot (no torch needed to read a result).
+"""The fit's JSON summary (no torch needed to read a result); printed by :mod:`.table`, plotted
+by :mod:`.plot`.
 
 JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, tau h::
 
@@ -44,7 +45,6 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -70,24 +70,6 @@ INTERVAL_METHOD = (
     "to model error: widens when the nights disagree); delta method in log space; plus, in "
     "quadrature, the shares of uncalibrated sensor offsets, of unmetered night gains and, on "
     "HLC and C_m, of the heat meter's gain error (fit.offset_allowance)")
-_WHY_NOT = {
-    "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
-    "wall_height": "enters only the tiny ventilation conductance (ach fixed)",
-    "walls_area": "enters only as H_op = u_walls·walls_area",
-    "windows_area": "enters only as H_w = u_windows·windows_area",
-    "c_f": "enters only through C_m = c_f·A_f",
-    "u_walls": "enters only as H_op = u_walls·walls_area",
-    "u_windows": "enters only as H_w = u_windows·windows_area",
-}
-
-
-_CAVEAT = {
-    "floor_area": "the data — via the mass-charging transient and ISO's fixed h_is, h_ms; "
-                  "C_m is the robust quantity",
-    "c_f": "the data — via C_m and the Table 12 mass-area factor; C_m is the robust quantity",
-}
-
-
 def _f(x: Any) -> Any:
     if isinstance(x, np.integer):
         return int(x)
@@ -236,192 +218,3 @@ def flexibility_block(summary: dict) -> dict:
         return flexibility_of_fit(summary).block()
     except InputError:
         return dict.fromkeys(BLOCK_KEYS)
-
-
-def _fmt(v: float | None, digits: int = 3) -> str:
-    if v is None:
-        return "–"
-    return f"{v:.{digits}g}" if abs(v) < 1e4 else f"{v:.4g}"
-
-
-def format_table(summary: dict) -> str:
-    """The printed form of a :func:`fit_to_dict` summary."""
-    lines = []
-    pn = summary["per_night"]
-    n_c = sum(p["kind"] == "constrained" for p in pn)
-    fit = summary["fit"]
-    lines.append(f"Fitted {len(pn)} nights ({n_c} constrained, {len(pn) - n_c} normal) in "
-                 f"{fit['time_s']:.2f} s — joint fit, normal nights as '{fit['normal_model']}'")
-    for g in summary.get("gaps", []):
-        lines.append(f"  gap in {g['kind']} night {g['night_id']}: no samples for "
-                     f"{g['hours']:.1f} h; cut to {g['kept_from_s'] / 3600:.1f}–"
-                     f"{g['kept_to_s'] / 3600:.1f} h after the window start")
-    for s in summary["skipped"]:
-        lines.append(f"  skipped {s['night_id']}: {s['reason']}")
-    lines.append("")
-    lines.append("Classes")
-    for name, c in summary["classes"].items():
-        p = c["probability"]
-        ptxt = f"p = {p:.2f}" if p is not None else c["source"] or ""
-        rng = f"{c['range'][0]:g}–{c['range'][1]:g}"
-        flag = "  contradicted by the nights" if c.get("contradicted") else ""
-        lines.append(f"  {name:<11} {rng:<10} {PARAM_UNITS[name]:<12} {ptxt}{flag}")
-    lines.append("")
-    lines.append("What the data determines                value       95 % interval")
-    labels = {"hlc": ("HLC, heat loss coefficient", "W/K", 1.0),
-              "c_m": ("C_m, heat capacity", "MJ/K", 1e-6),
-              "tau": ("τ, time constant", "h", 1.0)}
-    for key, (label, unit, k) in labels.items():
-        q = summary["lumped"][key]
-        flag = "" if q["determined"] else "   NOT determined by these nights"
-        lines.append(f"  {label:<28} {unit:<5} {q['value'] * k:>9.4g}   "
-                     f"{q['low'] * k:.4g} – {q['high'] * k:.4g}{flag}")
-    fit_block = summary.get("fit", {})
-    basis = fit_block.get("interval_basis") or ""
-    if basis.startswith("too few nights"):
-        lines.append(f"  intervals: {basis}")
-    gain = fit_block.get("night_gain")
-    if gain:
-        why = (" (impctl fit --night-gain-w; ≈ 70–80 W per sleeper + base load): it moves "
-               "HLC by its error / mean ΔT" if gain["assumed"] else "")
-        lines.append(f"  {gain['statement']}{why}")
-    me = fit_block.get("model_error")
-    if me:
-        sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
-                          (("hlc", "HLC"), ("c_m", "C_m"), ("tau", "τ")))
-        lines.append(f"  intervals: {me['method']} (log SD {sizes})")
-    lines.append("")
-    lines.append("Physical parameters (Table IV)       joint  per-night   search range "
-                 "value comes from")
-    avg = summary.get("per_night_average", {}).get("parameters", {})
-    for name in PARAM_NAMES:
-        lo, hi = summary["bounds"][name]
-        basis = summary["basis"][name]
-        if basis == "data":
-            src = _CAVEAT.get(name, "the data")
-        else:
-            src = f"{basis} only — {_WHY_NOT[name]}"
-        rng = f"{_fmt(lo)}–{_fmt(hi)}"
-        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(summary['parameters'][name]):>8}"
-                     f"  {_fmt(avg.get(name)):>9}   {rng:<12} {src}")
-    val = summary["validation"]
-    lines.append("")
-    lines.append("Validation (in-sample: each night's initial mass temperature is fitted)")
-    if val["normal"]:
-        lines.append("  normal night     Q measured kWh  Q model kWh  ΔQ_total kWh  ΔQ_power kW"
-                     "   ε %")
-        for r in val["normal"]:
-            lines.append(f"  {r['night_id']:<16} {r['q_measured_kwh']:>14.2f} "
-                         f"{r['q_model_kwh']:>12.2f} {r['dq_total_kwh']:>13.2f} "
-                         f"{r['dq_power_kw']:>12.3f} {r['eps_pct']:>6.1f}")
-    for r in val["constrained"]:
-        lines.append(f"  constrained {r['night_id']}: T_air RMSE {r['rmse_k']:.3f} K")
-    nuis = summary.get("nuisance") or {}
-    if any(nuis.values()):
-        lines += ["", "Nuisance terms (fitted so that the numbers above stay right; not products)"]
-        for name, v in nuis.items():
-            if v:
-                how = ("assumed, not measured" if v.get("assumed")
-                       else f"bounds {v['bounds'][0]:g}–{v['bounds'][1]:g}")
-                lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
-                             f"   ({how})")
-    lines += _quality_lines(summary)
-    flex = summary.get("flexibility") or {}
-    if flex.get("coast_h") is not None:
-        lines.append("")
-        lines.append(f"Flexibility at {flex['t_set_c']:g} °C indoors, {flex['t_out_c']:g} °C "
-                     f"outdoors: heating off for {flex['coast_h']:.1f} h "
-                     f"[{flex['coast_h_low']:.1f}–{flex['coast_h_high']:.1f}] until T_air has "
-                     f"fallen {flex['drop_k']:g} K; then {flex['rebound_kwh']:.2f} kWh beyond "
-                     f"steady demand in {flex['rebound_h']:g} h (impctl flex)")
-        if flex.get("coast_method"):
-            lines.append(f"  coast computed with: {flex['coast_method']}; internal gain during "
-                         f"the coast {flex.get('coast_gain_w') or 0:.0f} W")
-    for note in summary["notes"]:
-        lines.append(f"note: {note}")
-    return "\n".join(lines)
-
-
-def quality_rows(summary: dict) -> list[list[str]]:
-    """Night-quality rows (also the HTML report's table): one per given night."""
-    def num(v, spec):
-        return "–" if v is None else format(v, spec)
-
-    rows = []
-    for q in summary.get("night_quality", []):
-        stops = ", ".join(f"{i['kind']} {i['minutes']:.0f} min at {i['start_h']:.1f} h"
-                          for i in q["interruptions"]) or "none"
-        rows.append([str(q["night_id"]), q["kind"], num(q["usable_h"], ".1f"),
-                     num(q["cycles_per_h"], ".1f"), num(q["emitter_discharge_h"], ".1f"),
-                     num(q.get("night_gain_w"), ".0f"), num(q["t_air_resolution_k"], ".3g"),
-                     stops, "used" if q["used"] else f"not used: {q['reason']}"])
-    return rows
-
-
-QUALITY_HEADERS = ["night", "kind", "usable h", "cycles/h", "emitter discharge h",
-                   "night gain W", "T_air resolution K", "DHW/defrost interruptions", "use"]
-
-
-def _quality_lines(summary: dict) -> list[str]:
-    lines = []
-    rows = quality_rows(summary)
-    if rows:
-        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(QUALITY_HEADERS)]
-        lines += ["", "Night quality"]
-        for r in [QUALITY_HEADERS, *rows]:
-            lines.append("  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
-    adequacy = summary.get("adequacy")
-    if adequacy:
-        lines += ["", "Model adequacy (residuals of the joint fit)"]
-        for group, g in adequacy["groups"].items():
-            lines.append(f"  {group:<13} RMSE {g['rmse']:.3g} {g['unit']} "
-                         f"({g['rmse_over_noise']:.1f}× the reading noise), lag-1 "
-                         f"autocorrelation {g['lag1_autocorrelation']:.2f}")
-        lines.append(f"  {adequacy['statement']}")
-    return lines
-
-
-def plot_fit(fit, path: str | Path) -> None:
-    """Measured vs fitted T_air per night (the paper's Fig. 5) and heat power on normal nights."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    preds = fit.predictions_
-    n = len(preds)
-    fig, axes = plt.subplots(2, n, figsize=(max(6.0, 2.6 * n), 5.5), squeeze=False,
-                             sharey="row")
-    for i, p in enumerate(preds):
-        t_h = np.asarray(p["time_s"]) / 3600.0
-        ax = axes[0, i]
-        ax.plot(t_h, p["t_air_measured_c"], ".", ms=3, label="measured")
-        if p["t_air_model_c"] is not None:
-            ax.plot(t_h, p["t_air_model_c"], "-", lw=1.2, label="fitted")
-        else:
-            ax.text(0.5, 0.08, "held: model input", ha="center", transform=ax.transAxes,
-                    fontsize=7)
-        ax.set_title(f"{p['night_id']}\n{p['kind']}", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax2 = axes[1, i]
-        if "q_model_w" in p:
-            ax2.plot(t_h, np.asarray(p["q_measured_w"]) / 1e3, ".", ms=3, label="measured")
-            ax2.plot(t_h, np.asarray(p["q_model_w"]) / 1e3, "-", lw=1.2, label="predicted")
-        else:
-            ax2.text(0.5, 0.5, "heating off", ha="center", va="center",
-                     transform=ax2.transAxes, fontsize=8)
-            ax2.set_xlim(ax.get_xlim())
-        ax2.set_xlabel("h since window start", fontsize=7)
-        ax2.tick_params(labelsize=7)
-    axes[0, 0].set_ylabel("T_air [°C]")
-    axes[1, 0].set_ylabel("heat power [kW]")
-    for row in axes:
-        with_lines = [a for a in row if a.get_legend_handles_labels()[0]]
-        if with_lines:
-            with_lines[0].legend(fontsize=7)
-    hlc = fit.lumped_["hlc"]
-    fig.suptitle(f"5R1C night fit: HLC {hlc.value:.0f} W/K [{hlc.low:.0f}–{hlc.high:.0f}], "
-                 f"τ {fit.lumped_['tau'].value:.1f} h", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -113,7 +113,7 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     preload(settings.model_dir)
     _LOADS["batches"] += 1
     # No FLEET column reads the paper's per-night fits, and the joint fit does not depend on
-    # them (they stop on their own: estimator.stop_units): skipping them saves ~10 % of a batch.
+    # them (they stop on their own: fit.layout.stop_units): skipping them saves ~10 % of a batch.
     params = {"normal_model": settings.normal_model, "timestamps": settings.timestamps,
               "ach_vent": settings.ach_vent, "ach_infl": settings.ach_infl, "per_night": False}
     probe = NightFit(**params)

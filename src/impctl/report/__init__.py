@@ -250,7 +250,7 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         *_campaign_section(out, campaign),
     ]
     if fit.get("night_quality"):
-        from ..fit.report import QUALITY_HEADERS, quality_rows
+        from ..fit.table import QUALITY_HEADERS, quality_rows
 
         parts += ["<h2>Night quality and model adequacy</h2>",
                   _table(QUALITY_HEADERS, quality_rows(fit)),

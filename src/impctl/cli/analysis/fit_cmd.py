@@ -96,7 +96,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     """
     from ...fit.data import prepare_nights
     from ...fit.estimator import NightFit
-    from ...fit.report import fit_to_dict, format_table, plot_fit
+    from ...fit.plot import plot_fit
+    from ...fit.report import fit_to_dict
+    from ...fit.table import format_table
     from ...imp import EMISSION_LAG_H, read_nights
     from ...imp.gaps import cut_at_gaps
     from ...imp.plausibility import check_units, fit_problem

@@ -1,0 +1,165 @@
+"""bench/fit.py's validation protocol (imported by it, and through it by the other bench
+scripts): the validation houses' class ranges, the IMP schedule, the simulation on the ideal 5R1C
+or the realistic plant (once per population), the heat-demand truth, and the fit's assumed night
+gain per plant. The protocol itself is described in bench/fit.py's docstring.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from impctl.fit.ode.parameters import PARAM_NAMES
+from impctl.model import HouseParameters
+from impctl.population.realism import sample_params
+from impctl.population.synth_nights import imp_schedule, run_schedule, run_schedule_plant
+
+VAL_SEED = 20260
+CLASS_RANGES = {
+    "floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),
+    "c_f": ((0.8, 1.65), (1.65, 3.7)),
+    "u_walls": ((0.2, 1.0), (1.0, 2.0)),
+}
+ACH = (0.0, 0.01)
+
+
+def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
+    out = {}
+    for name, rs in CLASS_RANGES.items():
+        v = float(getattr(house, name))
+        out[name] = next((r for r in rs if r[0] <= v < r[1]), rs[-1])
+    return out
+
+
+def classifier_ranges(nights, model_dir):
+    from impctl.classifiers import classify_nights
+
+    return {k: tuple(v.range) for k, v in classify_nights(nights, model_dir).items()}
+
+
+def house_from(params: dict[str, float]) -> HouseParameters:
+    return HouseParameters(**{n: params[n] for n in PARAM_NAMES}, ach_vent=ACH[0],
+                           ach_infl=ACH[1])
+
+
+def demand_eps(houses: list[HouseParameters], sched, truth_energy: np.ndarray) -> np.ndarray:
+    """Mean |E − E_true|/E_true [%] over the normal nights, per household (NaN if no house)."""
+    ok = [h is not None for h in houses]
+    out = np.full(len(houses), np.nan)
+    if not any(ok):
+        return out
+    idx = np.flatnonzero(ok)
+    sub = HouseParameters.stack([houses[i] for i in idx])
+    sched_sub = _sub_schedule(sched, idx)
+    sim, _ = run_schedule(sub, sched_sub)
+    e = window_energy(sim, sched_sub)
+    out[idx] = 100.0 * np.mean(np.abs(e - truth_energy[:, idx]) / truth_energy[:, idx], axis=0)
+    return out
+
+
+def val_schedule(n: int, args=None):
+    """The validation schedule of ``n`` households, with ``args``' pre-heat lengths if given."""
+    kw = {}
+    if args is not None and getattr(args, "preheat_h", None) is not None:
+        kw = {"constrained_preheat_h": args.preheat_h, "normal_preheat_h": args.preheat_h}
+    if args is not None and getattr(args, "preheat_h_normal", None) is not None:
+        kw["normal_preheat_h"] = args.preheat_h_normal
+    if args is not None and getattr(args, "setpoints", None):
+        kw["setpoints_c"] = tuple(float(x) for x in args.setpoints.split(","))
+    c_sp = getattr(args, "constrained_setpoint", None) if args is not None else None
+    if c_sp is not None:
+        kw["constrained_setpoint_c"] = None if c_sp == "cycle" else float(c_sp)
+    return imp_schedule(n, seed=VAL_SEED, **kw)
+
+
+def campaign_cost(heat, sched) -> tuple[float, float, float, float]:
+    """What the campaign costs the household: mean heat [kWh per household] the heating
+    delivers over the whole schedule (spin-up days and the day after the last night included,
+    so heat stored by a pre-heat and given back later is netted out; compare runs); the hours
+    per night held above the day setpoint outside the windows (the evening pre-heat) and inside
+    them (normal nights above the owner's setpoint); the degree-hours per night the setpoint is
+    above the day setpoint, evening and window together [K·h] (a constrained window, heating
+    off, counts 0)."""
+    phi = np.atleast_2d(heat.phi_hc_w.T).T
+    n_nights = len(sched.windows)
+    kwh = phi.sum(axis=0) * sched.dt_s / 3.6e6
+    inside = np.zeros(len(sched.index), bool)
+    for _, _, w0, w1, _ in sched.windows:
+        inside[w0:w1] = True
+    excess = np.nan_to_num(sched.setpoint_c - sched.t_m_init_c, nan=0.0)
+    above = excess > 1e-9
+    per_night_h = sched.dt_s / 3600.0 / n_nights
+    return (float(np.mean(kwh)), float(np.median(above[~inside].sum(axis=0)) * per_night_h),
+            float(np.median(above[inside].sum(axis=0)) * per_night_h),
+            float(np.median(np.clip(excess, 0.0, None).sum(axis=0)) * per_night_h))
+
+
+def _sub_schedule(sched, idx):
+    from dataclasses import replace
+
+    return replace(sched, t_out_c=sched.t_out_c[:, idx], setpoint_c=sched.setpoint_c[:, idx])
+
+
+def window_energy(sim, sched) -> np.ndarray:
+    """Heat delivered in each normal-night window [kWh], (n_normal, n_houses)."""
+    phi = np.atleast_2d(sim.phi_hc_w.T).T
+    rows = [phi[w0:w1].sum(axis=0) * sched.dt_s / 3.6e6
+            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
+    return np.array(rows)
+
+
+class _TrueHeat:
+    """The realistic plant's true heat-pump output, for the demand truth (not the meter)."""
+
+    def __init__(self, logged):
+        self.phi_hc_w = logged.run["heat_pump_w"]
+
+
+_SIMULATED: dict = {}
+
+
+def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
+    """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
+    simulated once per population size and plant, so every sample step and range source
+    reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
+    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise)."""
+    key = (houses_arr.n_houses, plant, realism[0] if realism else None,
+           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()))
+    if key not in _SIMULATED:
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism)
+    return _SIMULATED[key]
+
+
+def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
+    if plant == "iso":
+        sim, sp = run_schedule(houses_arr, sched)
+        return sim, sp, sim
+    _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
+    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains)
+    return logged, sp, _TrueHeat(logged)
+
+
+def night_gain(args) -> dict:
+    """The fit's assumed night gain from ``--night-gain-w`` / ``--night-gain-sd-w``: 0 W on the
+    ideal 5R1C unless given (it has no gains), the fit's default on the realistic plant."""
+    w = getattr(args, "night_gain_w", None)
+    if w is None and args.plant == "iso":
+        w = 0.0
+    out = {} if w is None else {"night_gain_w": w}
+    if getattr(args, "night_gain_sd_w", None) is not None:
+        out["night_gain_sd_w"] = args.night_gain_sd_w
+    return out
+
+
+def coheating_eps(hlc, sched, sim, truth_e):
+    t_air = np.atleast_2d(sim.t_air_c.T).T[:, :len(hlc)]
+    rows = [((t_air[w0:w1] - sched.t_out_c[w0:w1]).sum(axis=0) * sched.dt_s / 3.6e6)
+            for _, kind, w0, w1, _ in sched.windows if kind == "normal"]
+    e = np.array(rows) * np.asarray(hlc)[None, :]
+    return 100.0 * np.mean(np.abs(e - truth_e) / truth_e, axis=0)
+
+
+def _safe_house(params):
+    try:
+        return house_from(params)
+    except Exception:  # a parameter set outside the model's domain cannot be replayed
+        return None
