@@ -15,7 +15,11 @@ from impctl.campaign import Target
 
 STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreachable",
               "order": "fixed order, adaptive stop",
-              "warmest": "adaptive, normal at the warmest setpoint", "fixed": "fixed 2 + 3"}
+              "warmest": "adaptive, normal at the warmest setpoint",
+              "balanced": "adaptive, balanced choice",
+              "plan": "adaptive, plan order + early stop",
+              "plan_warm": "adaptive, plan order warmest first",
+              "spread": "adaptive, balanced + farthest setpoint", "fixed": "fixed 2 + 3"}
 
 
 def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, float, int]]:

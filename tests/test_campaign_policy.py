@@ -296,3 +296,49 @@ def test_parse_outlook():
                         "outlook.hlc_floor_rel")):
         with pytest.raises(ValueError, match=where):
             parse_outlook(bad)
+
+
+def test_plan_criterion_runs_a_prefix_of_the_fixed_plan():
+    plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
+    assert plan == (("constrained", 21.0), ("normal", 22.0), ("constrained", 21.0),
+                    ("normal", 23.0), ("normal", 24.0))
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan", "plan": plan}
+    n22, n23 = NightRecord("normal", 22.0, True), NightRecord("normal", 23.0, True)
+    # the best predicted night is normal at 23 °C; the plan's next night is constrained
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.4, 0.4),
+             Candidate("normal", 23.0, 0.1, 0.1), Candidate("normal", 24.0, 0.4, 0.4)]
+    seen = []
+    history: list[NightRecord] = []
+    for _ in range(5):
+        d = decide(history, [fit(2, 0.6, 0.6)] if len(history) >= 2 else [], cands,
+                   Target(), **kw)
+        assert d.action == "run" and "fixed plan" in d.reason
+        seen.append((d.kind, d.setpoint_c))
+        history.append(NightRecord(d.kind, d.setpoint_c, True))
+    assert tuple(seen) == plan
+    assert decide(history, [fit(5, 0.6, 0.6)], cands, Target(), **kw).action == "stop"
+    # an invalid constrained night is repeated, never right after a constrained night
+    bad_c = NightRecord("constrained", 21.0, False)
+    d = decide([C, n22, bad_c], [fit(2, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0) and "in a row" in d.reason
+    d = decide([C, n22, bad_c, n23], [fit(3, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("constrained", 21.0)
+    # the stop rules still apply: precise enough after three nights stops
+    assert decide([C, n22, C], [fit(3, 0.04, 0.07)], cands, Target(),
+                  **kw).reached
+    with pytest.raises(ValueError, match="criterion"):
+        decide([], [], [], Target(), **{**kw, "criterion": "nonsense"})
+
+
+def test_spread_criterion_takes_the_setpoint_farthest_from_those_run():
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0)}
+    n22 = NightRecord("normal", 22.0, True)
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.2, 0.2),
+             Candidate("normal", 23.0, 0.3, 0.3), Candidate("normal", 24.0, 0.35, 0.35)]
+    assert decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw,
+                  criterion="balanced").setpoint_c == 22.0
+    d = decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw, criterion="spread")
+    assert (d.kind, d.setpoint_c) == ("normal", 24.0)
+    n24 = NightRecord("normal", 24.0, True)
+    d = decide([C, n22, n24], [fit(3, 0.6, 0.6)], cands, Target(), **kw, criterion="spread")
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0)

@@ -70,6 +70,10 @@ Z95 = 1.959964
 #: ratio max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
 #: half-widths still wider than their targets, Σ log(predicted/now) over HLC and τ.
 CRITERION = "balanced"
+#: The criteria :func:`decide` knows (``criterion=``): "plan" runs the fixed plan's nights in
+#: :func:`plan_order` (the stop rules decide how many); "spread" is "balanced" for the kind and
+#: the normal setpoint farthest from those already run.
+CRITERIA = ("balanced", "worst", "plan", "spread")
 
 
 @dataclass(frozen=True)
@@ -289,11 +293,35 @@ class Decision:
     reached: bool = False
 
 
+def plan_order(constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
+               constrained_nights: int = 2, normal_nights_per_setpoint: int = 1
+               ) -> tuple[tuple[str, float], ...]:
+    """The fixed plan's nights as (kind, setpoint [°C]) in the order the adaptive campaign runs
+    them with ``criterion="plan"``: a constrained night first, then the normal nights in the
+    plan's setpoint order with one of the remaining constrained nights after each, so that no
+    two constrained nights follow each other (2 + 3 at 21; 22, 23, 24 °C: c21 n22 c21 n23
+    n24). Every prefix is a subset of the fixed plan's nights."""
+    normals = [(NORMAL, float(sp)) for sp in normal_setpoints_c
+               for _ in range(max(normal_nights_per_setpoint, 0))]
+    left = max(constrained_nights, 0)
+    out: list[tuple[str, float]] = []
+    if left:
+        out.append((CONSTRAINED, float(constrained_setpoint_c)))
+        left -= 1
+    for night in normals:
+        out.append(night)
+        if left:
+            out.append((CONSTRAINED, float(constrained_setpoint_c)))
+            left -= 1
+    return tuple(out)
+
+
 def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
            candidates: Sequence[Candidate], target: Target, *,
            forecast_t_out_c: float | None, t_out_band_c: tuple[float, float],
            constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
-           outlook: Outlook | None = None) -> Decision:
+           outlook: Outlook | None = None, criterion: str | None = None,
+           plan: Sequence[tuple[str, float]] | None = None) -> Decision:
     """The next step of the campaign (rules in the module docstring).
 
     Parameters
@@ -307,9 +335,16 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     constrained_setpoint_c, normal_setpoints_c : the configured setpoints [°C]
     outlook : predictions beyond tonight from ``impctl campaign next`` (None: the latest
         fit's own floor is used)
+    criterion : how the next night is chosen, one of :data:`CRITERIA` (None:
+        :data:`CRITERION`)
+    plan : the nights of the fixed plan, in the order "plan" runs them (None:
+        :func:`plan_order` of the setpoints with 2 constrained nights, one per setpoint)
     """
     if not normal_setpoints_c:
         raise ValueError("normal_setpoints_c must name at least one setpoint")
+    criterion = CRITERION if criterion is None else criterion
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
     run = len(history)
     valid = {k: sum(1 for n in history if n.valid and n.kind == k) for k in KINDS}
     enough_each = all(valid[k] >= target.min_each for k in KINDS)
@@ -331,9 +366,11 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     if short:
         preferred = [c for c in allowed if c.kind in short]
         allowed = preferred or allowed
-    best = (min(allowed, key=lambda c: (_score(c, latest, target), c.kind != NORMAL,
-                                        c.setpoint_c))
+    best = (min(allowed, key=lambda c: (_score(c, latest, target, criterion),
+                                        c.kind != NORMAL, c.setpoint_c))
             if allowed else None)
+    if best is not None and best.kind == NORMAL and criterion == "spread":
+        best = _farthest(allowed, history)
     if latest is not None and enough_each:
         # judged on every candidate: a constrained night not allowed tonight is tomorrow
         usable = [c for c in candidates if c.kind in KINDS and math.isfinite(_num(c.hlc_rel_pred))
@@ -356,6 +393,10 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                         f"Skipping tonight: the forecast outdoor temperature "
                         f"{forecast_t_out_c:.1f} °C is outside the band {low:g}–{high:g} °C.")
 
+    if criterion == "plan":
+        return _plan_next(history, plan if plan is not None else
+                          plan_order(constrained_setpoint_c, normal_setpoints_c),
+                          after_constrained, candidates, latest)
     if latest is None or best is None:
         return _default(history, valid, after_constrained, constrained_setpoint_c,
                         normal_setpoints_c, latest is None)
@@ -368,9 +409,54 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                     f"(now {_precision(latest)}; worst ratio to target {now:.2f} → {then:.2f}).")
 
 
-def _score(c: Candidate, latest: FitSummary | None, target: Target) -> float:
-    """A candidate's score for the choice (smaller is better): :data:`CRITERION`."""
-    if CRITERION == "balanced" and latest is not None:
+def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]],
+               after_constrained: bool, candidates: Sequence[Candidate],
+               latest: FitSummary | None) -> Decision:
+    """The first night of ``plan`` (repeated when ``max_nights`` exceeds it) not yet run
+    validly; a constrained one right after a constrained night waits for the next normal."""
+    if not plan:
+        raise ValueError("plan must name at least one night")
+    done: dict[tuple[str, float], int] = {}
+    for n in history:
+        if n.valid:
+            key = (n.kind, float(n.setpoint_c))
+            done[key] = done.get(key, 0) + 1
+    todo = []
+    for night in list(plan) * (len(history) // len(plan) + 2):
+        key = (night[0], float(night[1]))
+        if done.get(key, 0) > 0:
+            done[key] -= 1
+        else:
+            todo.append(key)
+    kind, setpoint = todo[0]
+    rule = ""
+    if kind == CONSTRAINED and after_constrained:
+        normal = next((k for k in todo if k[0] == NORMAL), None)
+        if normal is not None:
+            (kind, setpoint), rule = normal, " (never two constrained nights in a row)"
+    pred = next((c for c in candidates if c.kind == kind and c.setpoint_c == setpoint), None)
+    said = (f", predicted to bring HLC to ±{_pct(pred.hlc_rel_pred)} and τ to "
+            f"±{_pct(pred.tau_rel_pred)} (now {_precision(latest)})"
+            if pred is not None and latest is not None else "")
+    return Decision("run", kind, float(setpoint),
+                    f"Next: a {kind} night at {setpoint:g} °C, the fixed plan's next "
+                    f"night{rule}{said}.")
+
+
+def _farthest(allowed: Sequence[Candidate], history: Sequence[NightRecord]) -> Candidate:
+    """The normal candidate whose setpoint is farthest from every valid normal night's so far
+    (ties: the warmest): nights at different ΔT separate HLC from the night gain."""
+    run = [n.setpoint_c for n in history if n.valid and n.kind == NORMAL]
+    normal = [c for c in allowed if c.kind == NORMAL]
+    return max(normal, key=lambda c: (min((abs(c.setpoint_c - sp) for sp in run),
+                                          default=math.inf), c.setpoint_c))
+
+
+def _score(c: Candidate, latest: FitSummary | None, target: Target,
+           criterion: str = CRITERION) -> float:
+    """A candidate's score for the choice (smaller is better): "worst" — the predicted worst
+    ratio; otherwise the balanced joint shrink."""
+    if criterion != "worst" and latest is not None:
         now = (_num(latest.hlc_rel), _num(latest.tau_rel))
         pred = (_num(c.hlc_rel_pred), _num(c.tau_rel_pred))
         short = [q for q, goal in enumerate((target.hlc_rel, target.tau_rel)) if now[q] > goal]

@@ -36,6 +36,7 @@ from ..campaign import (
     decide,
     parse_candidates,
     parse_outlook,
+    plan_order,
 )
 from ..config import Config
 from ..controller import NightRequest
@@ -118,7 +119,10 @@ def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
                       target(cfg), forecast_t_out_c=fc.t_out_c,
                       t_out_band_c=(cfg.night.t_out_min_c, cfg.night.t_out_max_c),
                       constrained_setpoint_c=camp.constrained_setpoint_c,
-                      normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook)
+                      normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook,
+                      plan=plan_order(camp.constrained_setpoint_c, camp.normal_setpoints_c,
+                                      camp.constrained_nights,
+                                      camp.normal_nights_per_setpoint) or None)
     return decision, fc
 
 
