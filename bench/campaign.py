@@ -37,7 +37,8 @@ between strategies and targets):
   ``criterion`` (:data:`impctl.campaign.policy.CRITERIA`): "plan" runs the fixed plan's
   nights in :func:`impctl.campaign.policy.plan_order` (c, n22, c, n23, n24), "plan_warm" the
   same with the normal setpoints warmest first, "spread" the balanced kind at the normal
-  setpoint farthest from those already run;
+  setpoint farthest from those already run, "plan_balanced" the balanced choice among the
+  plan's nights not yet run;
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
 
@@ -100,8 +101,10 @@ CONSTRAINED_C = VARIANTS[0][1]
 #: the adaptive strategies' normal candidates (--normal)
 NORMAL_SETPOINTS = tuple(sp for kind, sp in VARIANTS if kind == "normal")
 #: strategies that ask design.predict for candidates, and their criterion (None: the policy's)
-PREDICTED = ("adaptive", "unreachable", "warmest", "balanced", "plan", "plan_warm", "spread")
-CRITERIA = {"balanced": "balanced", "plan": "plan", "plan_warm": "plan", "spread": "spread"}
+PREDICTED = ("adaptive", "unreachable", "warmest", "balanced", "plan", "plan_warm", "spread",
+             "plan_balanced")
+CRITERIA = {"balanced": "balanced", "plan": "plan", "plan_warm": "plan", "spread": "spread",
+            "plan_balanced": "plan_balanced"}
 PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS),
          "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS[::-1])}
 

@@ -19,7 +19,8 @@ STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreac
               "balanced": "adaptive, balanced choice",
               "plan": "adaptive, plan order + early stop",
               "plan_warm": "adaptive, plan order warmest first",
-              "spread": "adaptive, balanced + farthest setpoint", "fixed": "fixed 2 + 3"}
+              "spread": "adaptive, balanced + farthest setpoint",
+              "plan_balanced": "adaptive, balanced among the plan's nights", "fixed": "fixed 2 + 3"}
 
 
 def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, float, int]]:

@@ -342,3 +342,18 @@ def test_spread_criterion_takes_the_setpoint_farthest_from_those_run():
     n24 = NightRecord("normal", 24.0, True)
     d = decide([C, n22, n24], [fit(3, 0.6, 0.6)], cands, Target(), **kw, criterion="spread")
     assert (d.kind, d.setpoint_c) == ("normal", 23.0)
+
+
+def test_plan_balanced_chooses_among_the_plan_nights_not_yet_run():
+    plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan_balanced",
+          "plan": plan}
+    n22, n24 = NightRecord("normal", 22.0, True), NightRecord("normal", 24.0, True)
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.1, 0.1),
+             Candidate("normal", 23.0, 0.3, 0.3), Candidate("normal", 24.0, 0.2, 0.2)]
+    # 22 °C is predicted best but already run: the best of the rest, 24 °C
+    d = decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 24.0)
+    # both constrained nights run: only 23 °C is left of the plan
+    d = decide([C, n22, C, n24], [fit(4, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0)

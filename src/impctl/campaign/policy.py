@@ -73,7 +73,7 @@ CRITERION = "balanced"
 #: The criteria :func:`decide` knows (``criterion=``): "plan" runs the fixed plan's nights in
 #: :func:`plan_order` (the stop rules decide how many); "spread" is "balanced" for the kind and
 #: the normal setpoint farthest from those already run.
-CRITERIA = ("balanced", "worst", "plan", "spread")
+CRITERIA = ("balanced", "worst", "plan", "spread", "plan_balanced")
 
 
 @dataclass(frozen=True)
@@ -393,10 +393,12 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                         f"Skipping tonight: the forecast outdoor temperature "
                         f"{forecast_t_out_c:.1f} °C is outside the band {low:g}–{high:g} °C.")
 
-    if criterion == "plan":
+    if criterion in ("plan", "plan_balanced"):
+        choose = ((lambda c: _score(c, latest, target, "balanced"))
+                  if criterion == "plan_balanced" and latest is not None else None)
         return _plan_next(history, plan if plan is not None else
                           plan_order(constrained_setpoint_c, normal_setpoints_c),
-                          after_constrained, candidates, latest)
+                          after_constrained, candidates, latest, choose)
     if latest is None or best is None:
         return _default(history, valid, after_constrained, constrained_setpoint_c,
                         normal_setpoints_c, latest is None)
@@ -411,9 +413,11 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
 
 def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]],
                after_constrained: bool, candidates: Sequence[Candidate],
-               latest: FitSummary | None) -> Decision:
+               latest: FitSummary | None, choose=None) -> Decision:
     """The first night of ``plan`` (repeated when ``max_nights`` exceeds it) not yet run
-    validly; a constrained one right after a constrained night waits for the next normal."""
+    validly; a constrained one right after a constrained night waits for the next normal.
+    With ``choose`` (a candidate's score, smaller is better): the best-scored of the plan's
+    nights not yet run instead of the first."""
     if not plan:
         raise ValueError("plan must name at least one night")
     done: dict[tuple[str, float], int] = {}
@@ -421,14 +425,23 @@ def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]]
         if n.valid:
             key = (n.kind, float(n.setpoint_c))
             done[key] = done.get(key, 0) + 1
-    todo = []
-    for night in list(plan) * (len(history) // len(plan) + 2):
+    todo, cycle = [], []   # the plan's nights not yet run, and which repetition of the plan
+    for i, night in enumerate(list(plan) * (len(history) // len(plan) + 2)):
         key = (night[0], float(night[1]))
         if done.get(key, 0) > 0:
             done[key] -= 1
         else:
             todo.append(key)
+            cycle.append(i // len(plan))
     kind, setpoint = todo[0]
+    if choose is not None:
+        left = {key for key, c in zip(todo, cycle, strict=True) if c == cycle[0]}
+        scored = [c for c in candidates if (c.kind, float(c.setpoint_c)) in left
+                  and not (after_constrained and c.kind == CONSTRAINED)
+                  and math.isfinite(_num(c.hlc_rel_pred)) and math.isfinite(_num(c.tau_rel_pred))]
+        if scored:
+            pick = min(scored, key=lambda c: (choose(c), c.kind != NORMAL, c.setpoint_c))
+            kind, setpoint = pick.kind, float(pick.setpoint_c)
     rule = ""
     if kind == CONSTRAINED and after_constrained:
         normal = next((k for k in todo if k[0] == NORMAL), None)
