@@ -38,7 +38,7 @@ between strategies and targets):
   nights in :func:`impctl.campaign.policy.plan_order` (c, n22, c, n23, n24), "plan_warm" the
   same with the normal setpoints warmest first, "spread" the balanced kind at the normal
   setpoint farthest from those already run, "plan_balanced" the balanced choice among the
-  plan's nights not yet run;
+  plan's nights not yet run; **h18c** — the rules before h18d (balanced, floor rule at 1/2);
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
 
@@ -105,8 +105,11 @@ PREDICTED = ("adaptive", "unreachable", "warmest", "balanced", "plan", "plan_war
              "plan_balanced")
 CRITERIA = {"balanced": "balanced", "plan": "plan", "plan_warm": "plan", "spread": "spread",
             "plan_balanced": "plan_balanced"}
-PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS),
-         "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS[::-1])}
+PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS, warmest_first=False),
+         "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS)}
+#: strategies with the rules before h18d: the balanced choice, the floor rule at 1/2
+CRITERIA["h18c"] = "balanced"
+PREDICTED += ("h18c",)
 
 
 class Progress:
@@ -224,6 +227,7 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         if c.strategy in PREDICTED and c.key is not None:
             cands, outlook = fits.candidates(c.key, forecast, setpoints)
         target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
+                  else replace(c.target, floor_dominance=0.5) if c.strategy == "h18c"
                   else c.target)
         d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
                    t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,

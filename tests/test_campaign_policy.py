@@ -38,7 +38,9 @@ CANDS = [Candidate("constrained", 21.0, 0.09, 0.09), Candidate("normal", 21.0, 0
 
 
 def test_default_order_without_a_fit():
+    # the order of the balanced and worst-ratio criteria without a fit or predictions
     target = Target()
+    KW = {**globals()["KW"], "criterion": "balanced"}
     first = decide([], [], [], target, **KW)
     assert (first.action, first.kind, first.setpoint_c) == ("run", "constrained", 21.0)
     second = decide([C], [], [], target, **KW)
@@ -67,7 +69,8 @@ def test_choice_by_predicted_worst_ratio(monkeypatch):
 
 
 def test_balanced_choice_shrinks_both_half_widths_still_short_of_their_targets(monkeypatch):
-    assert policy.CRITERION == "balanced"     # the default
+    assert policy.CRITERION == "plan"     # the default since h18d
+    monkeypatch.setattr(policy, "CRITERION", "balanced")
     # HLC far above its target (its floor): the worst ratio looks only at HLC and takes the
     # night that narrows HLC a little more; balanced takes the one that narrows both
     wide_hlc = fit(3, 0.80, 0.30)
@@ -172,7 +175,8 @@ def test_parse_candidates():
     assert cands[0] == Candidate("constrained", 21.0, 0.1, 0.05)
     assert math.isinf(cands[1].hlc_rel_pred)
     # a failed prediction is never chosen
-    d = decide([C, N], [fit(2, 0.3, 0.3)], cands[1:] + cands[:1], Target(), **KW)
+    d = decide([C, N], [fit(2, 0.3, 0.3)], cands[1:] + cands[:1], Target(), **KW,
+               criterion="balanced")
     assert d.kind == "constrained"
     for bad, where in (({"candidates": "x"}, "candidates"),
                        ({"candidates": [{"kind": "warm"}]}, r"candidates\[0\]\.kind"),
@@ -299,11 +303,15 @@ def test_parse_outlook():
 
 
 def test_plan_criterion_runs_a_prefix_of_the_fixed_plan():
+    assert policy.plan_order(21.0, (22.0, 23.0, 24.0), warmest_first=False) == (
+        ("constrained", 21.0), ("normal", 22.0), ("constrained", 21.0), ("normal", 23.0),
+        ("normal", 24.0))
     plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
-    assert plan == (("constrained", 21.0), ("normal", 22.0), ("constrained", 21.0),
-                    ("normal", 23.0), ("normal", 24.0))
-    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan", "plan": plan}
-    n22, n23 = NightRecord("normal", 22.0, True), NightRecord("normal", 23.0, True)
+    assert plan == (("constrained", 21.0), ("normal", 24.0), ("constrained", 21.0),
+                    ("normal", 23.0), ("normal", 22.0))
+    # the default plan: 2 constrained nights, one per setpoint
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan"}
+    n22, n23 = NightRecord("normal", 24.0, True), NightRecord("normal", 23.0, True)
     # the best predicted night is normal at 23 °C; the plan's next night is constrained
     cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.4, 0.4),
              Candidate("normal", 23.0, 0.1, 0.1), Candidate("normal", 24.0, 0.4, 0.4)]
@@ -323,6 +331,9 @@ def test_plan_criterion_runs_a_prefix_of_the_fixed_plan():
     assert (d.kind, d.setpoint_c) == ("normal", 23.0) and "in a row" in d.reason
     d = decide([C, n22, bad_c, n23], [fit(3, 0.6, 0.6)], cands, Target(), **kw)
     assert (d.kind, d.setpoint_c) == ("constrained", 21.0)
+    # a kind short of min_each goes first
+    d = decide([C, n22, n23], [fit(3, 0.04, 0.07)], cands, Target(min_each=2), **kw)
+    assert (d.action, d.kind) == ("run", "constrained")
     # the stop rules still apply: precise enough after three nights stops
     assert decide([C, n22, C], [fit(3, 0.04, 0.07)], cands, Target(),
                   **kw).reached

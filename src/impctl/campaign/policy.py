@@ -64,12 +64,12 @@ MIN_GAIN = 0.10
 MIN_FLOOR_NIGHTS = 2
 #: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
 #: fit's (1/2: the floor is at least a quarter of the variance; README "Adaptive campaign").
-FLOOR_DOMINANT = 0.5
+FLOOR_DOMINANT = 0.35
 Z95 = 1.959964
 #: How the next night is chosen among the candidates: "worst" — the smallest predicted worst
 #: ratio max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
 #: half-widths still wider than their targets, Σ log(predicted/now) over HLC and τ.
-CRITERION = "balanced"
+CRITERION = "plan"
 #: The criteria :func:`decide` knows (``criterion=``): "plan" runs the fixed plan's nights in
 #: :func:`plan_order` (the stop rules decide how many); "spread" is "balanced" for the kind and
 #: the normal setpoint farthest from those already run.
@@ -294,14 +294,17 @@ class Decision:
 
 
 def plan_order(constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
-               constrained_nights: int = 2, normal_nights_per_setpoint: int = 1
-               ) -> tuple[tuple[str, float], ...]:
+               constrained_nights: int = 2, normal_nights_per_setpoint: int = 1, *,
+               warmest_first: bool = True) -> tuple[tuple[str, float], ...]:
     """The fixed plan's nights as (kind, setpoint [°C]) in the order the adaptive campaign runs
-    them with ``criterion="plan"``: a constrained night first, then the normal nights in the
-    plan's setpoint order with one of the remaining constrained nights after each, so that no
-    two constrained nights follow each other (2 + 3 at 21; 22, 23, 24 °C: c21 n22 c21 n23
-    n24). Every prefix is a subset of the fixed plan's nights."""
-    normals = [(NORMAL, float(sp)) for sp in normal_setpoints_c
+    them with ``criterion="plan"``: a constrained night first, then the normal nights —
+    warmest setpoint first (the largest indoor–outdoor difference, the farthest from the
+    constrained night's: what separates HLC from the night gain soonest), else in the plan's
+    order — with one of the remaining constrained nights after each, so that no two
+    constrained nights follow each other (2 + 3 at 21; 22, 23, 24 °C: c21 n24 c21 n23 n22).
+    Every prefix is a subset of the fixed plan's nights."""
+    order = sorted(normal_setpoints_c, reverse=True) if warmest_first else normal_setpoints_c
+    normals = [(NORMAL, float(sp)) for sp in order
                for _ in range(max(normal_nights_per_setpoint, 0))]
     left = max(constrained_nights, 0)
     out: list[tuple[str, float]] = []
@@ -398,7 +401,7 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                   if criterion == "plan_balanced" and latest is not None else None)
         return _plan_next(history, plan if plan is not None else
                           plan_order(constrained_setpoint_c, normal_setpoints_c),
-                          after_constrained, candidates, latest, choose)
+                          after_constrained, candidates, latest, choose, short)
     if latest is None or best is None:
         return _default(history, valid, after_constrained, constrained_setpoint_c,
                         normal_setpoints_c, latest is None)
@@ -413,11 +416,13 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
 
 def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]],
                after_constrained: bool, candidates: Sequence[Candidate],
-               latest: FitSummary | None, choose=None) -> Decision:
+               latest: FitSummary | None, choose=None, short: Sequence[str] = ()
+               ) -> Decision:
     """The first night of ``plan`` (repeated when ``max_nights`` exceeds it) not yet run
     validly; a constrained one right after a constrained night waits for the next normal.
     With ``choose`` (a candidate's score, smaller is better): the best-scored of the plan's
-    nights not yet run instead of the first."""
+    nights not yet run instead of the first. A kind in ``short`` (fewer valid nights than
+    ``min_each``) goes first."""
     if not plan:
         raise ValueError("plan must name at least one night")
     done: dict[tuple[str, float], int] = {}
@@ -433,8 +438,10 @@ def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]]
         else:
             todo.append(key)
             cycle.append(i // len(plan))
-    kind, setpoint = todo[0]
-    if choose is not None:
+    first = [k for k in todo if k[0] in short
+             and not (after_constrained and k[0] == CONSTRAINED)]
+    kind, setpoint = first[0] if first else todo[0]
+    if choose is not None and not first:
         left = {key for key, c in zip(todo, cycle, strict=True) if c == cycle[0]}
         scored = [c for c in candidates if (c.kind, float(c.setpoint_c)) in left
                   and not (after_constrained and c.kind == CONSTRAINED)
