@@ -18,9 +18,10 @@ Rules, in order (:func:`decide`):
    ratio of that *floor* alone is ≥ 1 (the reason names its largest share), the predicted
    worst ratio after the best candidate night and after :attr:`Outlook.nights` more nights is
    still ≥ 1, and the floor already makes up at least a quarter of the latest interval's
-   variance (the floor's worst ratio ≥ 1/2 of the latest one: the part nights can shrink is
-   at most √3 times the part they cannot; tuned on another population than the bench's, where
-   1/√2 ran a median of 4.5 nights and 1/2 a median of 3 at no worse median errors).
+   variance (the floor's worst ratio ≥ 0.35 of the latest one, :data:`FLOOR_DOMINANT`: the
+   floor is at least an eighth of the variance; tuned with the plan order on another
+   population than the bench's, where 1/2 ran a median of 5 nights and 0.35 a median of 2 at
+   no worse median errors — README "Adaptive campaign", h18d).
    Without predictions the latest fit's own floor and interval are used. Judged from fits of
    :data:`MIN_FLOOR_NIGHTS` valid nights (2; 3 — as rule 4 — was tried in h18c: it lifts the
    coverage of the campaigns that stopped at 2 nights but runs a median of 5 nights, README
@@ -36,8 +37,15 @@ Rules, in order (:func:`decide`):
    outdoor band.
 7. **never two constrained nights in a row** — after a constrained night (valid or not) the
    next night run is normal.
-8. **choice** — until a fit exists (or without predictions) a default order: a constrained
-   night, a normal night at the first normal setpoint, then two normal nights per constrained
+8. **choice** — :data:`CRITERION` "plan" (the default since h18d): the fixed plan's nights
+   in :func:`plan_order` — a constrained night, the normal nights warmest setpoint first, the
+   second constrained night after the first normal one (c21 n24 c21 n23 n22) — so the nights
+   run are always a prefix of the fixed plan's, and the stop rules decide how many; an
+   invalid night is repeated, kinds still short of ``min_each`` first. The information
+   criterion below picked nights the fitted 5R1C finds informative but realistic houses do
+   not (h18c: even five adaptive nights were 2.5 points worse on HLC than the plan's).
+   With "balanced" or "worst": until a fit exists (or without predictions) a default
+   order: a constrained night, a normal night at the first normal setpoint, then two normal nights per constrained
    one (the fixed 2 + 3 plan's ratio), normal setpoints in turn. With a fit and predictions:
    the allowed candidate with the largest predicted joint shrink of the half-widths still
    wider than their targets, Σ log(rel_pred/rel) over HLC and τ (:data:`CRITERION` "balanced"; the
@@ -63,11 +71,13 @@ MIN_GAIN = 0.10
 #: fit of one night of each kind).
 MIN_FLOOR_NIGHTS = 2
 #: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
-#: fit's (1/2: the floor is at least a quarter of the variance; README "Adaptive campaign").
+#: fit's (0.35: the floor is at least an eighth of the variance; 1/2 before h18d; README
+#: "Adaptive campaign").
 FLOOR_DOMINANT = 0.35
 Z95 = 1.959964
-#: How the next night is chosen among the candidates: "worst" — the smallest predicted worst
-#: ratio max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
+#: How the next night is chosen: "plan" — the fixed plan's next night in :func:`plan_order`
+#: (the default since h18d); "worst" — the candidate with the smallest predicted worst ratio
+#: max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
 #: half-widths still wider than their targets, Σ log(predicted/now) over HLC and τ.
 CRITERION = "plan"
 #: The criteria :func:`decide` knows (``criterion=``): "plan" runs the fixed plan's nights in
@@ -90,8 +100,8 @@ class Target:
     stall_nights : "cannot be identified" when the worst ratio did not shrink by ≥ 10 % over
         this many valid nights
     floor_dominance : "precision limited" needs the floor's worst ratio ≥ this fraction of the
-        latest fit's (default 1/2: the floor is at least a quarter of the variance; 0: stop as
-        soon as the floor alone misses the target)
+        latest fit's (default 0.35: the floor is at least an eighth of the variance; 0: stop
+        as soon as the floor alone misses the target)
     """
 
     hlc_rel: float = 0.05
