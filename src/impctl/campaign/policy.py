@@ -45,8 +45,9 @@ Rules, in order (:func:`decide`):
    criterion below picked nights the fitted 5R1C finds informative but realistic houses do
    not (h18c: even five adaptive nights were 2.5 points worse on HLC than the plan's).
    With "balanced" or "worst": until a fit exists (or without predictions) a default
-   order: a constrained night, a normal night at the first normal setpoint, then two normal nights per constrained
-   one (the fixed 2 + 3 plan's ratio), normal setpoints in turn. With a fit and predictions:
+   order: a constrained night, a normal night at the first normal setpoint, then two
+   normal nights per constrained one (the fixed 2 + 3 plan's ratio), normal setpoints in
+   turn. With a fit and predictions:
    the allowed candidate with the largest predicted joint shrink of the half-widths still
    wider than their targets, Σ log(rel_pred/rel) over HLC and τ (:data:`CRITERION` "balanced"; the
    smallest predicted worst ratio max(±HLC/target, ±τ/target) with "worst", which with an HLC
