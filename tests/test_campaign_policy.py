@@ -368,3 +368,16 @@ def test_plan_balanced_chooses_among_the_plan_nights_not_yet_run():
     # both constrained nights run: only 23 °C is left of the plan
     d = decide([C, n22, C, n24], [fit(4, 0.6, 0.6)], cands, Target(), **kw)
     assert (d.kind, d.setpoint_c) == ("normal", 23.0)
+
+
+def test_daemon_plan_from_the_campaign_config():
+    from impctl.config import CampaignConfig, Config
+    from impctl.daemon.adaptive import _plan
+
+    cfg = Config(campaign=CampaignConfig(constrained_setpoint_c=20.0,
+                                         normal_setpoints_c=(21.0, 23.0),
+                                         normal_nights_per_setpoint=2))
+    assert _plan(cfg) == (("constrained", 20.0), ("normal", 23.0), ("constrained", 20.0),
+                          ("normal", 23.0), ("normal", 21.0), ("normal", 21.0))
+    # counts that leave out a kind: the policy's default plan instead
+    assert _plan(Config(campaign=CampaignConfig(constrained_nights=0))) is None
