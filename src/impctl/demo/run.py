@@ -37,8 +37,8 @@ _PROTOCOL_KEYS = ("setpoints_c", "constrained_setpoint_c", "band_k", "preheat_h"
 
 
 def _models_ok(model_dir: Path) -> bool:
-    """Loadable models trained on the nights the gateway runs (README "Issue 14: one
-    protocol"): models from a population of another protocol are retrained, not reused."""
+    """Loadable models trained on the nights the gateway runs (bench/RESULTS.md "Issue 14:
+    one protocol"): models from a population of another protocol are retrained, not reused."""
     try:
         from ..classifiers.saved import load_models
         from ..population.virtual_imp import ImpSimConfig

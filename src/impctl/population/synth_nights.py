@@ -87,8 +87,8 @@ def imp_schedule(
 
     ``constrained_preheat_h`` / ``normal_preheat_h`` [h]: how long before the 22:00 window the
     setpoint is T_max (constrained) or T_set (normal) instead of ``day_setpoint_c`` (default:
-    the gateway's 2 h; until branch h14p this schedule used 4 h and 0 h, see README "Issue 14:
-    the pre-heat length").
+    the gateway's 2 h; until branch h14p this schedule used 4 h and 0 h, see bench/RESULTS.md
+    "Issue 14: the pre-heat length").
 
     Normal night k (k-th of its kind) holds ``setpoints_c[k % len(setpoints_c)]`` [°C]; every
     constrained night has T_set = ``constrained_setpoint_c`` [°C] (T_max = T_set + ``band_k``),
