@@ -15,7 +15,7 @@ rows of the README's fit table). Each household gets its own winter weather. For
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
 the gateway's constrained setpoint and normal at each of its normal setpoints
 (``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 22.5 °C,
-and 21, 22, 23 °C today), each with the gateway's 2 h
+and 22, 23, 24 °C today), each with the gateway's 2 h
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
