@@ -15,7 +15,7 @@ rows of the README's fit table). Each household gets its own winter weather. For
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
 the gateway's constrained setpoint and normal at each of its normal setpoints
 (``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 22.5 °C,
-and 21, 22, 23 °C today), each with the gateway's 2 h
+and 22, 23, 24 °C today), each with the gateway's 2 h
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
@@ -33,6 +33,12 @@ between strategies and targets):
   predictions (the floor rule on the fit's own floor): separates stopping from choosing;
 * **warmest** — adaptive, its normal nights only at the warmest setpoint (the largest ΔT:
   the smallest sensor-offset share on HLC);
+* **balanced** / **plan** / **plan_warm** / **spread** — adaptive with that
+  ``criterion`` (:data:`impctl.campaign.policy.CRITERIA`): "plan" runs the fixed plan's
+  nights in :func:`impctl.campaign.policy.plan_order` (c, n22, c, n23, n24), "plan_warm" the
+  same with the normal setpoints warmest first, "spread" the balanced kind at the normal
+  setpoint farthest from those already run, "plan_balanced" the balanced choice among the
+  plan's nights not yet run; **h18c** — the rules before h18d (balanced, floor rule at 1/2);
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
 
@@ -94,6 +100,16 @@ AHEAD = 2             # the outlook's nights
 CONSTRAINED_C = VARIANTS[0][1]
 #: the adaptive strategies' normal candidates (--normal)
 NORMAL_SETPOINTS = tuple(sp for kind, sp in VARIANTS if kind == "normal")
+#: strategies that ask design.predict for candidates, and their criterion (None: the policy's)
+PREDICTED = ("adaptive", "unreachable", "warmest", "balanced", "plan", "plan_warm", "spread",
+             "plan_balanced")
+CRITERIA = {"balanced": "balanced", "plan": "plan", "plan_warm": "plan", "spread": "spread",
+            "plan_balanced": "plan_balanced"}
+PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS, warmest_first=False),
+         "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS)}
+#: strategies with the rules before h18d: the balanced choice, the floor rule at 1/2
+CRITERIA["h18c"] = "balanced"
+PREDICTED += ("h18c",)
 
 
 class Progress:
@@ -208,13 +224,15 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
     else:
         cands, outlook = [], None
         setpoints = (max(NORMAL_SETPOINTS),) if c.strategy == "warmest" else NORMAL_SETPOINTS
-        if c.strategy in ("adaptive", "unreachable", "warmest") and c.key is not None:
+        if c.strategy in PREDICTED and c.key is not None:
             cands, outlook = fits.candidates(c.key, forecast, setpoints)
         target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
+                  else replace(c.target, floor_dominance=0.5) if c.strategy == "h18c"
                   else c.target)
         d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
                    t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
-                   normal_setpoints_c=setpoints, outlook=outlook)
+                   normal_setpoints_c=setpoints, outlook=outlook,
+                   criterion=CRITERIA.get(c.strategy), plan=PLANS.get(c.strategy))
         if d.action == "stop":
             c.done, c.reached, c.reason = True, d.reached, d.reason
             return None

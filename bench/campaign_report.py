@@ -15,7 +15,13 @@ from impctl.campaign import Target
 
 STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreachable",
               "order": "fixed order, adaptive stop",
-              "warmest": "adaptive, normal at the warmest setpoint", "fixed": "fixed 2 + 3"}
+              "warmest": "adaptive, normal at the warmest setpoint",
+              "balanced": "adaptive, balanced choice",
+              "plan": "adaptive, plan order + early stop",
+              "plan_warm": "adaptive, plan order warmest first",
+              "spread": "adaptive, balanced + farthest setpoint",
+              "plan_balanced": "adaptive, balanced among the plan's nights",
+              "h18c": "adaptive, h18c rules (balanced, floor 1/2)", "fixed": "fixed 2 + 3"}
 
 
 def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, float, int]]:

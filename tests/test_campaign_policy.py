@@ -38,7 +38,9 @@ CANDS = [Candidate("constrained", 21.0, 0.09, 0.09), Candidate("normal", 21.0, 0
 
 
 def test_default_order_without_a_fit():
+    # the order of the balanced and worst-ratio criteria without a fit or predictions
     target = Target()
+    KW = {**globals()["KW"], "criterion": "balanced"}
     first = decide([], [], [], target, **KW)
     assert (first.action, first.kind, first.setpoint_c) == ("run", "constrained", 21.0)
     second = decide([C], [], [], target, **KW)
@@ -67,7 +69,8 @@ def test_choice_by_predicted_worst_ratio(monkeypatch):
 
 
 def test_balanced_choice_shrinks_both_half_widths_still_short_of_their_targets(monkeypatch):
-    assert policy.CRITERION == "balanced"     # the default
+    assert policy.CRITERION == "plan"     # the default since h18d
+    monkeypatch.setattr(policy, "CRITERION", "balanced")
     # HLC far above its target (its floor): the worst ratio looks only at HLC and takes the
     # night that narrows HLC a little more; balanced takes the one that narrows both
     wide_hlc = fit(3, 0.80, 0.30)
@@ -172,7 +175,8 @@ def test_parse_candidates():
     assert cands[0] == Candidate("constrained", 21.0, 0.1, 0.05)
     assert math.isinf(cands[1].hlc_rel_pred)
     # a failed prediction is never chosen
-    d = decide([C, N], [fit(2, 0.3, 0.3)], cands[1:] + cands[:1], Target(), **KW)
+    d = decide([C, N], [fit(2, 0.3, 0.3)], cands[1:] + cands[:1], Target(), **KW,
+               criterion="balanced")
     assert d.kind == "constrained"
     for bad, where in (({"candidates": "x"}, "candidates"),
                        ({"candidates": [{"kind": "warm"}]}, r"candidates\[0\]\.kind"),
@@ -296,3 +300,84 @@ def test_parse_outlook():
                         "outlook.hlc_floor_rel")):
         with pytest.raises(ValueError, match=where):
             parse_outlook(bad)
+
+
+def test_plan_criterion_runs_a_prefix_of_the_fixed_plan():
+    assert policy.plan_order(21.0, (22.0, 23.0, 24.0), warmest_first=False) == (
+        ("constrained", 21.0), ("normal", 22.0), ("constrained", 21.0), ("normal", 23.0),
+        ("normal", 24.0))
+    plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
+    assert plan == (("constrained", 21.0), ("normal", 24.0), ("constrained", 21.0),
+                    ("normal", 23.0), ("normal", 22.0))
+    # the default plan: 2 constrained nights, one per setpoint
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan"}
+    n22, n23 = NightRecord("normal", 24.0, True), NightRecord("normal", 23.0, True)
+    # the best predicted night is normal at 23 °C; the plan's next night is constrained
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.4, 0.4),
+             Candidate("normal", 23.0, 0.1, 0.1), Candidate("normal", 24.0, 0.4, 0.4)]
+    seen = []
+    history: list[NightRecord] = []
+    for _ in range(5):
+        d = decide(history, [fit(2, 0.6, 0.6)] if len(history) >= 2 else [], cands,
+                   Target(), **kw)
+        assert d.action == "run" and "fixed plan" in d.reason
+        seen.append((d.kind, d.setpoint_c))
+        history.append(NightRecord(d.kind, d.setpoint_c, True))
+    assert tuple(seen) == plan
+    assert decide(history, [fit(5, 0.6, 0.6)], cands, Target(), **kw).action == "stop"
+    # an invalid constrained night is repeated, never right after a constrained night
+    bad_c = NightRecord("constrained", 21.0, False)
+    d = decide([C, n22, bad_c], [fit(2, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0) and "in a row" in d.reason
+    d = decide([C, n22, bad_c, n23], [fit(3, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("constrained", 21.0)
+    # a kind short of min_each goes first
+    d = decide([C, n22, n23], [fit(3, 0.04, 0.07)], cands, Target(min_each=2), **kw)
+    assert (d.action, d.kind) == ("run", "constrained")
+    # the stop rules still apply: precise enough after three nights stops
+    assert decide([C, n22, C], [fit(3, 0.04, 0.07)], cands, Target(),
+                  **kw).reached
+    with pytest.raises(ValueError, match="criterion"):
+        decide([], [], [], Target(), **{**kw, "criterion": "nonsense"})
+
+
+def test_spread_criterion_takes_the_setpoint_farthest_from_those_run():
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0)}
+    n22 = NightRecord("normal", 22.0, True)
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.2, 0.2),
+             Candidate("normal", 23.0, 0.3, 0.3), Candidate("normal", 24.0, 0.35, 0.35)]
+    assert decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw,
+                  criterion="balanced").setpoint_c == 22.0
+    d = decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw, criterion="spread")
+    assert (d.kind, d.setpoint_c) == ("normal", 24.0)
+    n24 = NightRecord("normal", 24.0, True)
+    d = decide([C, n22, n24], [fit(3, 0.6, 0.6)], cands, Target(), **kw, criterion="spread")
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0)
+
+
+def test_plan_balanced_chooses_among_the_plan_nights_not_yet_run():
+    plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan_balanced",
+          "plan": plan}
+    n22, n24 = NightRecord("normal", 22.0, True), NightRecord("normal", 24.0, True)
+    cands = [Candidate("constrained", 21.0, 0.5, 0.5), Candidate("normal", 22.0, 0.1, 0.1),
+             Candidate("normal", 23.0, 0.3, 0.3), Candidate("normal", 24.0, 0.2, 0.2)]
+    # 22 °C is predicted best but already run: the best of the rest, 24 °C
+    d = decide([C, n22], [fit(2, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 24.0)
+    # both constrained nights run: only 23 °C is left of the plan
+    d = decide([C, n22, C, n24], [fit(4, 0.6, 0.6)], cands, Target(), **kw)
+    assert (d.kind, d.setpoint_c) == ("normal", 23.0)
+
+
+def test_daemon_plan_from_the_campaign_config():
+    from impctl.config import CampaignConfig, Config
+    from impctl.daemon.adaptive import _plan
+
+    cfg = Config(campaign=CampaignConfig(constrained_setpoint_c=20.0,
+                                         normal_setpoints_c=(21.0, 23.0),
+                                         normal_nights_per_setpoint=2))
+    assert _plan(cfg) == (("constrained", 20.0), ("normal", 23.0), ("constrained", 20.0),
+                          ("normal", 23.0), ("normal", 21.0), ("normal", 21.0))
+    # counts that leave out a kind: the policy's default plan instead
+    assert _plan(Config(campaign=CampaignConfig(constrained_nights=0))) is None

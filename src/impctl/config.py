@@ -73,9 +73,10 @@ class CampaignConfig:
     ``normal_nights_per_setpoint`` plan. ``mode = "adaptive"``: after every valid night the
     daemon fits, predicts what each possible next night would bring (``impctl campaign next``)
     and runs, skips or stops by :func:`impctl.campaign.decide` until HLC and τ are known to
-    ``target_rel_halfwidth``, at most ``max_nights`` nights. Fixed is the default because on
-    the realistic plant the adaptive campaign needed more nights than the fixed 2 + 3 for no
-    better accuracy (README "Adaptive campaign"); ``max_nights`` defaults to the fixed plan's 5,
+    ``target_rel_halfwidth``, at most ``max_nights`` nights, running the fixed plan's nights in
+    :func:`impctl.campaign.plan_order`. Fixed is the default: the adaptive campaign's accuracy
+    is about the plan's, not shown at least as good (README "Adaptive campaign");
+    ``max_nights`` defaults to the fixed plan's 5,
     so opting in never costs a household more nights than the plan unless it is raised.
     """
 

@@ -18,7 +18,9 @@ from .policy import (
     decide,
     parse_candidates,
     parse_outlook,
+    plan_order,
 )
 
 __all__ = ["CONSTRAINED", "NORMAL", "Candidate", "Decision", "FitSummary", "NightRecord",
-           "Outlook", "Target", "decide", "parse_candidates", "parse_outlook"]
+           "Outlook", "Target", "decide", "parse_candidates", "parse_outlook",
+           "plan_order"]

@@ -33,8 +33,10 @@ Criterion (documented choice; README "Adaptive campaign"):
   :attr:`impctl.campaign.policy.FitSummary.hlc_rel`.
 
 A candidate is scored by the policy (:func:`impctl.campaign.policy.decide`,
-:data:`impctl.campaign.policy.CRITERION`): by default the joint shrink Σ log(rel_pred / rel)
-over HLC and τ, counting a quantity only while it is wider than its target.
+:data:`impctl.campaign.policy.CRITERION`): with "balanced" the joint shrink Σ log(rel_pred /
+rel) over HLC and τ, counting a quantity only while it is wider than its target. Since h18d the
+default ("plan") runs the fixed plan's nights in order and uses the predictions only for the
+stop rules ("more nights would not help", "precision limited").
 
 * **Outlook.** The same prediction after ``ahead`` more nights (the most informative normal
   and constrained candidates, by det(F_past + F_night), alternating, normal first), and the

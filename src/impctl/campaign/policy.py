@@ -18,9 +18,10 @@ Rules, in order (:func:`decide`):
    ratio of that *floor* alone is ≥ 1 (the reason names its largest share), the predicted
    worst ratio after the best candidate night and after :attr:`Outlook.nights` more nights is
    still ≥ 1, and the floor already makes up at least a quarter of the latest interval's
-   variance (the floor's worst ratio ≥ 1/2 of the latest one: the part nights can shrink is
-   at most √3 times the part they cannot; tuned on another population than the bench's, where
-   1/√2 ran a median of 4.5 nights and 1/2 a median of 3 at no worse median errors).
+   variance (the floor's worst ratio ≥ 0.35 of the latest one, :data:`FLOOR_DOMINANT`: the
+   floor is at least an eighth of the variance; tuned with the plan order on another
+   population than the bench's, where 1/2 ran a median of 5 nights and 0.35 a median of 2 at
+   no worse median errors — README "Adaptive campaign", h18d).
    Without predictions the latest fit's own floor and interval are used. Judged from fits of
    :data:`MIN_FLOOR_NIGHTS` valid nights (2; 3 — as rule 4 — was tried in h18c: it lifts the
    coverage of the campaigns that stopped at 2 nights but runs a median of 5 nights, README
@@ -36,9 +37,17 @@ Rules, in order (:func:`decide`):
    outdoor band.
 7. **never two constrained nights in a row** — after a constrained night (valid or not) the
    next night run is normal.
-8. **choice** — until a fit exists (or without predictions) a default order: a constrained
-   night, a normal night at the first normal setpoint, then two normal nights per constrained
-   one (the fixed 2 + 3 plan's ratio), normal setpoints in turn. With a fit and predictions:
+8. **choice** — :data:`CRITERION` "plan" (the default since h18d): the fixed plan's nights
+   in :func:`plan_order` — a constrained night, the normal nights warmest setpoint first, the
+   second constrained night after the first normal one (c21 n24 c21 n23 n22) — so the nights
+   run are always a prefix of the fixed plan's, and the stop rules decide how many; an
+   invalid night is repeated, kinds still short of ``min_each`` first. The information
+   criterion below picked nights the fitted 5R1C finds informative but realistic houses do
+   not (h18c: even five adaptive nights were 2.5 points worse on HLC than the plan's).
+   With "balanced" or "worst": until a fit exists (or without predictions) a default
+   order: a constrained night, a normal night at the first normal setpoint, then two
+   normal nights per constrained one (the fixed 2 + 3 plan's ratio), normal setpoints in
+   turn. With a fit and predictions:
    the allowed candidate with the largest predicted joint shrink of the half-widths still
    wider than their targets, Σ log(rel_pred/rel) over HLC and τ (:data:`CRITERION` "balanced"; the
    smallest predicted worst ratio max(±HLC/target, ±τ/target) with "worst", which with an HLC
@@ -63,13 +72,19 @@ MIN_GAIN = 0.10
 #: fit of one night of each kind).
 MIN_FLOOR_NIGHTS = 2
 #: "Dominated by the floor": the floor's worst ratio is at least this fraction of the latest
-#: fit's (1/2: the floor is at least a quarter of the variance; README "Adaptive campaign").
-FLOOR_DOMINANT = 0.5
+#: fit's (0.35: the floor is at least an eighth of the variance; 1/2 before h18d; README
+#: "Adaptive campaign").
+FLOOR_DOMINANT = 0.35
 Z95 = 1.959964
-#: How the next night is chosen among the candidates: "worst" — the smallest predicted worst
-#: ratio max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
+#: How the next night is chosen: "plan" — the fixed plan's next night in :func:`plan_order`
+#: (the default since h18d); "worst" — the candidate with the smallest predicted worst ratio
+#: max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
 #: half-widths still wider than their targets, Σ log(predicted/now) over HLC and τ.
-CRITERION = "balanced"
+CRITERION = "plan"
+#: The criteria :func:`decide` knows (``criterion=``): "plan" runs the fixed plan's nights in
+#: :func:`plan_order` (the stop rules decide how many); "spread" is "balanced" for the kind and
+#: the normal setpoint farthest from those already run.
+CRITERIA = ("balanced", "worst", "plan", "spread", "plan_balanced")
 
 
 @dataclass(frozen=True)
@@ -86,8 +101,8 @@ class Target:
     stall_nights : "cannot be identified" when the worst ratio did not shrink by ≥ 10 % over
         this many valid nights
     floor_dominance : "precision limited" needs the floor's worst ratio ≥ this fraction of the
-        latest fit's (default 1/2: the floor is at least a quarter of the variance; 0: stop as
-        soon as the floor alone misses the target)
+        latest fit's (default 0.35: the floor is at least an eighth of the variance; 0: stop
+        as soon as the floor alone misses the target)
     """
 
     hlc_rel: float = 0.05
@@ -289,11 +304,38 @@ class Decision:
     reached: bool = False
 
 
+def plan_order(constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
+               constrained_nights: int = 2, normal_nights_per_setpoint: int = 1, *,
+               warmest_first: bool = True) -> tuple[tuple[str, float], ...]:
+    """The fixed plan's nights as (kind, setpoint [°C]) in the order the adaptive campaign runs
+    them with ``criterion="plan"``: a constrained night first, then the normal nights —
+    warmest setpoint first (the largest indoor–outdoor difference, the farthest from the
+    constrained night's: what separates HLC from the night gain soonest), else in the plan's
+    order — with one of the remaining constrained nights after each, so that no two
+    constrained nights follow each other (2 + 3 at 21; 22, 23, 24 °C: c21 n24 c21 n23 n22).
+    Every prefix is a subset of the fixed plan's nights."""
+    order = sorted(normal_setpoints_c, reverse=True) if warmest_first else normal_setpoints_c
+    normals = [(NORMAL, float(sp)) for sp in order
+               for _ in range(max(normal_nights_per_setpoint, 0))]
+    left = max(constrained_nights, 0)
+    out: list[tuple[str, float]] = []
+    if left:
+        out.append((CONSTRAINED, float(constrained_setpoint_c)))
+        left -= 1
+    for night in normals:
+        out.append(night)
+        if left:
+            out.append((CONSTRAINED, float(constrained_setpoint_c)))
+            left -= 1
+    return tuple(out)
+
+
 def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
            candidates: Sequence[Candidate], target: Target, *,
            forecast_t_out_c: float | None, t_out_band_c: tuple[float, float],
            constrained_setpoint_c: float, normal_setpoints_c: Sequence[float],
-           outlook: Outlook | None = None) -> Decision:
+           outlook: Outlook | None = None, criterion: str | None = None,
+           plan: Sequence[tuple[str, float]] | None = None) -> Decision:
     """The next step of the campaign (rules in the module docstring).
 
     Parameters
@@ -307,9 +349,16 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     constrained_setpoint_c, normal_setpoints_c : the configured setpoints [°C]
     outlook : predictions beyond tonight from ``impctl campaign next`` (None: the latest
         fit's own floor is used)
+    criterion : how the next night is chosen, one of :data:`CRITERIA` (None:
+        :data:`CRITERION`)
+    plan : the nights of the fixed plan, in the order "plan" runs them (None:
+        :func:`plan_order` of the setpoints with 2 constrained nights, one per setpoint)
     """
     if not normal_setpoints_c:
         raise ValueError("normal_setpoints_c must name at least one setpoint")
+    criterion = CRITERION if criterion is None else criterion
+    if criterion not in CRITERIA:
+        raise ValueError(f"criterion must be one of {', '.join(CRITERIA)}, got {criterion!r}")
     run = len(history)
     valid = {k: sum(1 for n in history if n.valid and n.kind == k) for k in KINDS}
     enough_each = all(valid[k] >= target.min_each for k in KINDS)
@@ -331,9 +380,11 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
     if short:
         preferred = [c for c in allowed if c.kind in short]
         allowed = preferred or allowed
-    best = (min(allowed, key=lambda c: (_score(c, latest, target), c.kind != NORMAL,
-                                        c.setpoint_c))
+    best = (min(allowed, key=lambda c: (_score(c, latest, target, criterion),
+                                        c.kind != NORMAL, c.setpoint_c))
             if allowed else None)
+    if best is not None and best.kind == NORMAL and criterion == "spread":
+        best = _farthest(allowed, history)
     if latest is not None and enough_each:
         # judged on every candidate: a constrained night not allowed tonight is tomorrow
         usable = [c for c in candidates if c.kind in KINDS and math.isfinite(_num(c.hlc_rel_pred))
@@ -356,6 +407,12 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                         f"Skipping tonight: the forecast outdoor temperature "
                         f"{forecast_t_out_c:.1f} °C is outside the band {low:g}–{high:g} °C.")
 
+    if criterion in ("plan", "plan_balanced"):
+        choose = ((lambda c: _score(c, latest, target, "balanced"))
+                  if criterion == "plan_balanced" and latest is not None else None)
+        return _plan_next(history, plan if plan is not None else
+                          plan_order(constrained_setpoint_c, normal_setpoints_c),
+                          after_constrained, candidates, latest, choose, short)
     if latest is None or best is None:
         return _default(history, valid, after_constrained, constrained_setpoint_c,
                         normal_setpoints_c, latest is None)
@@ -368,9 +425,69 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
                     f"(now {_precision(latest)}; worst ratio to target {now:.2f} → {then:.2f}).")
 
 
-def _score(c: Candidate, latest: FitSummary | None, target: Target) -> float:
-    """A candidate's score for the choice (smaller is better): :data:`CRITERION`."""
-    if CRITERION == "balanced" and latest is not None:
+def _plan_next(history: Sequence[NightRecord], plan: Sequence[tuple[str, float]],
+               after_constrained: bool, candidates: Sequence[Candidate],
+               latest: FitSummary | None, choose=None, short: Sequence[str] = ()
+               ) -> Decision:
+    """The first night of ``plan`` (repeated when ``max_nights`` exceeds it) not yet run
+    validly; a constrained one right after a constrained night waits for the next normal.
+    With ``choose`` (a candidate's score, smaller is better): the best-scored of the plan's
+    nights not yet run instead of the first. A kind in ``short`` (fewer valid nights than
+    ``min_each``) goes first."""
+    if not plan:
+        raise ValueError("plan must name at least one night")
+    done: dict[tuple[str, float], int] = {}
+    for n in history:
+        if n.valid:
+            key = (n.kind, float(n.setpoint_c))
+            done[key] = done.get(key, 0) + 1
+    todo, cycle = [], []   # the plan's nights not yet run, and which repetition of the plan
+    for i, night in enumerate(list(plan) * (len(history) // len(plan) + 2)):
+        key = (night[0], float(night[1]))
+        if done.get(key, 0) > 0:
+            done[key] -= 1
+        else:
+            todo.append(key)
+            cycle.append(i // len(plan))
+    first = [k for k in todo if k[0] in short
+             and not (after_constrained and k[0] == CONSTRAINED)]
+    kind, setpoint = first[0] if first else todo[0]
+    if choose is not None and not first:
+        left = {key for key, c in zip(todo, cycle, strict=True) if c == cycle[0]}
+        scored = [c for c in candidates if (c.kind, float(c.setpoint_c)) in left
+                  and not (after_constrained and c.kind == CONSTRAINED)
+                  and math.isfinite(_num(c.hlc_rel_pred)) and math.isfinite(_num(c.tau_rel_pred))]
+        if scored:
+            pick = min(scored, key=lambda c: (choose(c), c.kind != NORMAL, c.setpoint_c))
+            kind, setpoint = pick.kind, float(pick.setpoint_c)
+    rule = ""
+    if kind == CONSTRAINED and after_constrained:
+        normal = next((k for k in todo if k[0] == NORMAL), None)
+        if normal is not None:
+            (kind, setpoint), rule = normal, " (never two constrained nights in a row)"
+    pred = next((c for c in candidates if c.kind == kind and c.setpoint_c == setpoint), None)
+    said = (f", predicted to bring HLC to ±{_pct(pred.hlc_rel_pred)} and τ to "
+            f"±{_pct(pred.tau_rel_pred)} (now {_precision(latest)})"
+            if pred is not None and latest is not None else "")
+    return Decision("run", kind, float(setpoint),
+                    f"Next: a {kind} night at {setpoint:g} °C, the fixed plan's next "
+                    f"night{rule}{said}.")
+
+
+def _farthest(allowed: Sequence[Candidate], history: Sequence[NightRecord]) -> Candidate:
+    """The normal candidate whose setpoint is farthest from every valid normal night's so far
+    (ties: the warmest): nights at different ΔT separate HLC from the night gain."""
+    run = [n.setpoint_c for n in history if n.valid and n.kind == NORMAL]
+    normal = [c for c in allowed if c.kind == NORMAL]
+    return max(normal, key=lambda c: (min((abs(c.setpoint_c - sp) for sp in run),
+                                          default=math.inf), c.setpoint_c))
+
+
+def _score(c: Candidate, latest: FitSummary | None, target: Target,
+           criterion: str = CRITERION) -> float:
+    """A candidate's score for the choice (smaller is better): "worst" — the predicted worst
+    ratio; otherwise the balanced joint shrink."""
+    if criterion != "worst" and latest is not None:
         now = (_num(latest.hlc_rel), _num(latest.tau_rel))
         pred = (_num(c.hlc_rel_pred), _num(c.tau_rel_pred))
         short = [q for q, goal in enumerate((target.hlc_rel, target.tau_rel)) if now[q] > goal]

@@ -36,6 +36,7 @@ from ..campaign import (
     decide,
     parse_candidates,
     parse_outlook,
+    plan_order,
 )
 from ..config import Config
 from ..controller import NightRequest
@@ -118,8 +119,18 @@ def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
                       target(cfg), forecast_t_out_c=fc.t_out_c,
                       t_out_band_c=(cfg.night.t_out_min_c, cfg.night.t_out_max_c),
                       constrained_setpoint_c=camp.constrained_setpoint_c,
-                      normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook)
+                      normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook,
+                      plan=_plan(cfg))
     return decision, fc
+
+
+def _plan(cfg: Config) -> tuple[tuple[str, float], ...] | None:
+    """The fixed plan's nights in the order the adaptive campaign runs them; None (the
+    policy's default plan) when the configured counts leave out a kind."""
+    camp = cfg.campaign
+    plan = plan_order(camp.constrained_setpoint_c, camp.normal_setpoints_c,
+                      camp.constrained_nights, camp.normal_nights_per_setpoint)
+    return plan if {kind for kind, _ in plan} == {"constrained", "normal"} else None
 
 
 def record(store: Store, decision: Decision, fc: Forecast, act: datetime) -> None:
