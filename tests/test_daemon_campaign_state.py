@@ -70,6 +70,8 @@ def test_fixed_is_the_default_and_adaptive_is_opted_into():
     ({"min_each_kind": 0}, "key 'campaign.min_each_kind': must be >= 1: a fit needs a night "
                            "of each kind"),
     ({"stall_nights": 0}, "key 'campaign.stall_nights': must be >= 1"),
+    ({"next_night": "smart"},
+     "key 'campaign.next_night': must be 'plan' or 'information', got 'smart'"),
     ({"mode": "adaptive", "normal_setpoints_c": []},
      "key 'campaign.normal_setpoints_c': the adaptive campaign needs at least one normal "
      "setpoint to choose from"),
@@ -205,6 +207,34 @@ def test_report_figure_of_the_shrinking_intervals(tmp_path):
             {"valid_nights": 4, "hlc_rel_pct": 4.1, "tau_rel_pct": 7.2}]
     path = campaign_intervals(rows, tmp_path / "fig_campaign.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 5000
+
+
+@pytest.mark.parametrize(("next_night", "expected"), [
+    ("plan", ("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)),   # c21 n24 → c21, the plan's next
+    ("information", ("normal", 22.0)),    # the candidate predicted to narrow HLC and τ most
+])
+def test_next_night_follows_the_configured_choice(tmp_path, next_night, expected):
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "adaptive", "next_night": next_night}})
+    with Store(cfg.db_path) as store:
+        ids = []
+        for day, (kind, sp) in enumerate([("constrained", DEFAULT_CONSTRAINED_SETPOINT_C),
+                                          ("normal", max(DEFAULT_SETPOINTS_C))]):
+            start = T0 + timedelta(days=day)
+            nid = store.create_night(kind, sp, start, start + timedelta(hours=7))
+            store.add_sample(Sample(nid, start, t_air_c=21.0, t_out_c=0.0))
+            store.set_night_state(nid, "done", ended=start + timedelta(hours=7))
+            store.assess_night(nid, True, [])
+            ids.append(nid)
+        # ±40 % / ±50 %: far from the 5 % / 8 % target, no stop rule applies after two nights
+        fit = store.add_fit(ids, _fit((200, 120, 280), (40, 20, 60)))
+        store.set_fit_candidates(fit, {"forecast_t_out_c": 0.0, "candidates": [
+            {"kind": "constrained", "setpoint_c": 21.0, "hlc_rel_pred": 0.35,
+             "tau_rel_pred": 0.30},
+            {"kind": "normal", "setpoint_c": 22.0, "hlc_rel_pred": 0.20, "tau_rel_pred": 0.25},
+            {"kind": "normal", "setpoint_c": 23.0, "hlc_rel_pred": 0.30, "tau_rel_pred": 0.40}]})
+        decision, _ = adaptive.decide_now(store, cfg)
+    assert (decision.action, decision.kind, decision.setpoint_c) == ("run", *expected)
 
 
 def test_a_forecast_outside_the_band_skips_tonight_and_says_why(tmp_path):

@@ -74,7 +74,8 @@ class CampaignConfig:
     daemon fits, predicts what each possible next night would bring (``impctl campaign next``)
     and runs, skips or stops by :func:`impctl.campaign.decide` until HLC and τ are known to
     ``target_rel_halfwidth``, at most ``max_nights`` nights, running the fixed plan's nights in
-    :func:`impctl.campaign.plan_order`. Fixed is the default: the adaptive campaign's accuracy
+    :func:`impctl.campaign.plan_order` (``next_night = "information"``: the candidate the latest
+    fit predicts most informative instead). Fixed is the default: the adaptive campaign's accuracy
     is about the plan's, not shown at least as good (README "Adaptive campaign");
     ``max_nights`` defaults to the fixed plan's 5,
     so opting in never costs a household more nights than the plan unless it is raised.
@@ -85,6 +86,9 @@ class CampaignConfig:
     max_nights: int = 5
     min_each_kind: int = 1
     stall_nights: int = 3
+    # adaptive: "plan" (the fixed plan's nights in plan order) or "information" (the night the
+    # current fit predicts most informative; README "Adaptive campaign" for why plan is default)
+    next_night: str = "plan"
     constrained_nights: int = 2
     constrained_setpoint_c: float = DEFAULT_CONSTRAINED_SETPOINT_C
     normal_setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C
@@ -366,6 +370,8 @@ def _check_adaptive(camp: CampaignConfig, bad) -> None:
                                    f"{2 * camp.min_each_kind} (a night of each kind)")
     if camp.stall_nights < 1:
         bad("campaign.stall_nights", "must be >= 1")
+    if camp.next_night not in ("plan", "information"):
+        bad("campaign.next_night", f"must be 'plan' or 'information', got {camp.next_night!r}")
     if camp.mode == "adaptive" and not camp.normal_setpoints_c:
         bad("campaign.normal_setpoints_c", "the adaptive campaign needs at least one normal "
                                            "setpoint to choose from")

@@ -120,8 +120,12 @@ def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
                       t_out_band_c=(cfg.night.t_out_min_c, cfg.night.t_out_max_c),
                       constrained_setpoint_c=camp.constrained_setpoint_c,
                       normal_setpoints_c=camp.normal_setpoints_c, outlook=outlook,
-                      plan=_plan(cfg))
+                      plan=_plan(cfg), criterion=CRITERION_OF[camp.next_night])
     return decision, fc
+
+
+#: ``[campaign] next_night`` → :func:`impctl.campaign.decide`'s criterion.
+CRITERION_OF = {"plan": "plan", "information": "balanced"}
 
 
 def _plan(cfg: Config) -> tuple[tuple[str, float], ...] | None:
