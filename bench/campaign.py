@@ -76,7 +76,7 @@ from impctl.campaign import (  # noqa: E402
 )
 from impctl.campaign.design import Protocol, predict  # noqa: E402
 from impctl.fit.optim.batch import fit_households  # noqa: E402
-from impctl.fit.report import fit_to_dict  # noqa: E402
+from impctl.fit.result.report import fit_to_dict  # noqa: E402
 from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402

@@ -104,8 +104,8 @@ from _fit_speed import speed
 from _fit_tables import print_summary, rel, report, stats, summary_row
 
 from impctl.fit import baselines
-from impctl.fit.data import prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
+from impctl.fit.nights.data import prepare_nights, search_bounds
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params

@@ -179,8 +179,8 @@ def profile(data: Path, n: int) -> None:
 
     import torch
 
-    from impctl.fit import data as fit_data
     from impctl.fit import estimator, selection
+    from impctl.fit.nights import data as fit_data
     from impctl.fit.ode import solver
     from impctl.fit.optim import batch, lm, problem
     from impctl.fleet import worker

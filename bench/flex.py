@@ -38,10 +38,10 @@ import numpy as np
 import torch
 
 from impctl.fit import baselines
-from impctl.fit.data import prepare_nights
 from impctl.fit.estimator import NightFit
+from impctl.fit.nights.data import prepare_nights
 from impctl.fit.ode.parameters import PARAM_NAMES
-from impctl.fit.report import fit_to_dict
+from impctl.fit.result.report import fit_to_dict
 from impctl.flex import flexibility_many, flexibility_of_fit, house_from_fit
 from impctl.model import HouseParameters
 from impctl.plant import simulate_plant

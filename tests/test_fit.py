@@ -11,11 +11,11 @@ import pytest
 
 from impctl.errors import InputError
 from impctl.fit import baselines
-from impctl.fit.data import noise_levels, prepare_nights, search_bounds
 from impctl.fit.estimator import NightFit
+from impctl.fit.nights.data import noise_levels, prepare_nights, search_bounds
 from impctl.fit.ode.parameters import PARAM_NAMES
-from impctl.fit.report import fit_to_dict
-from impctl.fit.table import format_table
+from impctl.fit.result.report import fit_to_dict
+from impctl.fit.result.table import format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
 from impctl.population.synth_nights import synth_nights
@@ -314,7 +314,7 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
     assert all(q["interruptions"][0]["kind"] == "dhw_or_stop" for q in normal)
     assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.04  # first hour not compared
     # compared anyway, the missing hour drags the HLC far down
-    from impctl.fit import data
+    from impctl.fit.nights import data
 
     monkeypatch.setattr(data, "power_usable", lambda n, thr: np.ones(len(n.time_s), bool))
     blind = NightFit(**IDEAL, n_starts=3).fit(nights, RANGES)

@@ -13,8 +13,8 @@ import pytest
 from impctl.errors import InputError
 from impctl.fit.estimator import NightFit
 from impctl.fit.intervals import model_error
-from impctl.fit.report import fit_to_dict
-from impctl.fit.table import format_table
+from impctl.fit.result.report import fit_to_dict
+from impctl.fit.result.table import format_table
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params

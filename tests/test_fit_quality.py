@@ -1,5 +1,5 @@
-"""Night quality and model adequacy (impctl.fit.quality) on signals with known answers, and
-the coarsening of fine rows (impctl.fit.resample)."""
+"""Night quality and model adequacy (impctl.fit.nights.quality) on signals with known answers, and
+the coarsening of fine rows (impctl.fit.nights.resample)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from impctl.fit.quality import adequacy, night_quality
-from impctl.fit.resample import coarsen
+from impctl.fit.nights.quality import adequacy, night_quality
+from impctl.fit.nights.resample import coarsen
 from impctl.imp.night import NightSamples
 
 
@@ -81,7 +81,7 @@ def test_coarsening_keeps_the_energy_and_the_temperature_at_the_nodes():
 
 
 def test_a_held_night_settles_when_t_air_reaches_its_held_level():
-    from impctl.fit.data import settled
+    from impctl.fit.nights.data import settled
 
     rng = np.random.default_rng(3)
     t = np.arange(0.0, 7 * 3600.0, 300.0)

@@ -226,7 +226,7 @@ def test_coast_on_realistic_houses_is_closer_to_the_plants_own():
     impctl fit: the coast of the fit's JSON (with its switch-off terms) lands closer to the
     plant's own coast than the pure-5R1C coast of the same fit, and its interval holds it."""
     from impctl.fit.estimator import NightFit
-    from impctl.fit.report import fit_to_dict
+    from impctl.fit.result.report import fit_to_dict
     from impctl.flex import house_from_fit
     from impctl.population.households import sample_households
     from impctl.population.realism import sample_params

@@ -146,7 +146,7 @@ def store_and_fit(tmp_path_factory, nights):
     from datetime import UTC, datetime
 
     from impctl.fit.estimator import NightFit
-    from impctl.fit.report import fit_to_dict
+    from impctl.fit.result.report import fit_to_dict
     from impctl.store import Store
 
     work = tmp_path_factory.mktemp("report")

@@ -2,12 +2,13 @@
 
 Pipeline position: classifiers → **fit** → fleet. torch is imported only when a name that needs
 it is first used (the names below are resolved lazily), so ``import impctl.fit`` stays light and
-reading a result (:mod:`.report`) needs no torch.
+reading a result (:mod:`.result`) needs no torch.
 
 * :class:`NightFit` (:mod:`.estimator`): the estimator (torch)
-* :func:`prepare_nights` (:mod:`.data`): measured nights → the fit's input
-* :func:`fit_to_dict` (:mod:`.report`), :func:`format_table` (:mod:`.table`), :func:`plot_fit`
-  (:mod:`.plot`): the JSON summary, its printed form, the figure (no torch)
+* :func:`prepare_nights` (:mod:`.nights.data`): measured nights → the fit's input
+* :func:`fit_to_dict` (:mod:`.result.report`), :func:`format_table` (:mod:`.result.table`),
+  :func:`plot_fit` (:mod:`.result.plot`): the JSON summary, its printed form, the figure (no
+  torch)
 
 Inside, by concern:
 
@@ -20,12 +21,15 @@ Inside, by concern:
   (many households in one call: the fleet);
 * :mod:`.intervals` — :mod:`.intervals.uncertainty` (Laplace, sandwich, type-B shares) and
   :mod:`.intervals.model_error` (the share calibrated on realistic virtual houses);
+* :mod:`.nights` — the fit's input (no torch): :mod:`.nights.data` (measured nights → rows),
+  :mod:`.nights.resample` (fine rows into blocks), :mod:`.nights.quality` (night quality, model
+  adequacy);
+* :mod:`.result` — the result (no torch): :mod:`.result.report` (the JSON),
+  :mod:`.result.table` (its printed form), :mod:`.result.plot` (the figure);
 * here: :mod:`.estimator` (the procedure), :mod:`.layout` (the problems one fit solves in one
   optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
   the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
-  :mod:`.data`, :mod:`.resample` (fine rows into blocks), :mod:`.quality` (night quality, model
-  adequacy; no torch), :mod:`.report` (the JSON), :mod:`.table` (its printed form),
-  :mod:`.plot`, :mod:`.baselines` (the methods the fit is compared with).
+  :mod:`.baselines` (the methods the fit is compared with).
 """
 
 from __future__ import annotations
@@ -35,9 +39,9 @@ from .._lazy import attach
 # Resolved on first use (impctl._lazy), so that importing the package stays light.
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "estimator": ["NightFit"],
-    "data": ["prepare_nights"],
-    "report": ["fit_to_dict"],
-    "table": ["format_table"],
-    "plot": ["plot_fit"],
+    "nights.data": ["prepare_nights"],
+    "result.report": ["fit_to_dict"],
+    "result.table": ["format_table"],
+    "result.plot": ["plot_fit"],
 })
 __all__ = [*_LAZY_NAMES]

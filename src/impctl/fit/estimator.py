@@ -33,7 +33,6 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
-from .data import compared_power, noise_levels, prepare_nights, search_bounds
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import (
@@ -47,12 +46,13 @@ from .layout import (
     stop_units,
     terms_of,
 )
+from .nights.data import compared_power, noise_levels, prepare_nights, search_bounds
+from .nights.quality import adequacy, used_nights_quality
+from .nights.resample import coarsen
 from .ode.packing import pack_nights
 from .ode.parameters import PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
-from .quality import adequacy, used_nights_quality
-from .resample import coarsen
 from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
 from .validation import in_sample_validation, per_night_fits
 
@@ -107,8 +107,8 @@ class NightFit:
         Seed of the random starts.
     fit_step_s : float
         Rows finer than this [s] are combined into blocks of this length before the fit
-        (temperatures by a centred mean, power by the block's mean; :mod:`.resample`); 0 keeps
-        every row. Only with "instant" stamps.
+        (temperatures by a centred mean, power by the block's mean;
+        :mod:`.nights.resample`); 0 keeps every row. Only with "instant" stamps.
     solver : {"exact", "rk4"}
         How the night ODE is integrated (:class:`~impctl.fit.ode.solver.NightODE`): "exact" (the
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
@@ -176,7 +176,7 @@ class NightFit:
                                        piece first (rule in :mod:`impctl.imp.gaps`)
     night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
                                     discharge, T_air resolution, used/usable_h/reason
-                                    (:mod:`.quality`)
+                                    (:mod:`.nights.quality`)
     night_gain_ : dict              the night gain used [W]: value_w, sd_w, assumed (True:
                                     pinned to ``night_gain_w``, not measured), statement
     adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
@@ -394,7 +394,7 @@ class NightFit:
                                      self._group_n, self.sigma_)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (see :mod:`.report`)."""
-        from .report import fit_to_dict
+        """JSON-ready summary (see :mod:`.result.report`)."""
+        from .result.report import fit_to_dict
 
         return fit_to_dict(self)

@@ -14,9 +14,9 @@ import numpy as np
 import torch
 from scipy.stats import chi2
 
-from .data import Estimate
 from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
 from .layout import best_of, terms_of
+from .nights.data import Estimate
 from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, lumped, to_physical
 from .optim import lm
 

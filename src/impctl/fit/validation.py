@@ -14,8 +14,8 @@ from collections.abc import Sequence
 import torch
 
 from ..imp.night import NightSamples
-from .data import validation_table
 from .intervals.uncertainty import LUMPED_NAMES
+from .nights.data import validation_table
 from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
 from .ode.packing import PackedNights
 from .ode.parameters import PARAM_NAMES, lumped, to_physical

@@ -106,8 +106,8 @@ _NEEDS = {"constrained": "no usable constrained night (it carries τ)",
 
 def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household."""
-    from ..fit.data import prepare_nights
     from ..fit.estimator import NightFit
+    from ..fit.nights.data import prepare_nights
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)

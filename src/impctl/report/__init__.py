@@ -85,7 +85,7 @@ def _param_table(fit: dict, truth: HouseParameters | None) -> str:
 
 def _flexibility_section(fit: dict) -> list[str]:
     """What the house offers an aggregator (:mod:`impctl.flex`), from the fit's block."""
-    from ..fit.report import flexibility_block
+    from ..fit.result.report import flexibility_block
 
     flex = fit.get("flexibility") or flexibility_block(fit)
     if flex.get("coast_h") is None:
@@ -250,7 +250,7 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         *_campaign_section(out, campaign),
     ]
     if fit.get("night_quality"):
-        from ..fit.table import QUALITY_HEADERS, quality_rows
+        from ..fit.result.table import QUALITY_HEADERS, quality_rows
 
         parts += ["<h2>Night quality and model adequacy</h2>",
                   _table(QUALITY_HEADERS, quality_rows(fit)),

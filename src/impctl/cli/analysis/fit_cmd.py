@@ -94,11 +94,11 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     what determines each (the data, or only the class range / physical bounds), and the heat
     demand and T_air validation per night.
     """
-    from ...fit.data import prepare_nights
     from ...fit.estimator import NightFit
-    from ...fit.plot import plot_fit
-    from ...fit.report import fit_to_dict
-    from ...fit.table import format_table
+    from ...fit.nights.data import prepare_nights
+    from ...fit.result.plot import plot_fit
+    from ...fit.result.report import fit_to_dict
+    from ...fit.result.table import format_table
     from ...imp import EMISSION_LAG_H, read_nights
     from ...imp.gaps import cut_at_gaps
     from ...imp.plausibility import check_units, fit_problem

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import InputError
-from ..data import Estimate
+from ..nights.data import Estimate
 
 #: /3 (h18c): the few band is calibrated on the gateway's campaign nights and records their
 #: setpoints (``bands.few.protocol``); a /2 file (the 2 + 6 protocol's first nights) is refused.

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from scipy.stats import t as student_t
 
-from ..data import Estimate, lag1_autocorrelation
+from ..nights.data import Estimate, lag1_autocorrelation
 from ..ode.parameters import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 from ..optim import lm
 from ..optim.problem import raw_residuals

@@ -30,8 +30,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..imp.features import Q_ON_W
-from ..imp.night import NightSamples
+from ...imp.features import Q_ON_W
+from ...imp.night import NightSamples
 
 STOP_MIN_MIN = 20.0
 RHO_INADEQUATE = 0.8
@@ -163,7 +163,7 @@ def adequacy(sigma_fit: dict[str, float], sigma_data: dict[str, float],
              autocorrelation: dict[str, float]) -> dict:
     """Residual RMSE and lag-1 autocorrelation per group, and the statement (module docstring).
 
-    ``sigma_fit``/``sigma_data`` use the keys of :func:`~impctl.fit.data.noise_levels`;
+    ``sigma_fit``/``sigma_data`` use the keys of :func:`~impctl.fit.nights.data.noise_levels`;
     ``autocorrelation`` those of :mod:`.uncertainty` (constrained, normal_t_air, normal_power).
     """
     keys = {"constrained": "constrained_t_air_k", "normal_power": "normal_power_w"}

@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.house import PARAMETER_UNITS, TABLE_IV
+from ...model.house import PARAMETER_UNITS, TABLE_IV
 
 # From the model, not from .node, so that reading a result needs no torch.
 PARAM_NAMES = TABLE_IV
@@ -211,8 +211,8 @@ def interval_method(fit) -> str:
 def flexibility_block(summary: dict) -> dict:
     """The ``"flexibility"`` block of a summary at the default conditions (:mod:`impctl.flex`);
     all values None when the fitted house cannot be simulated."""
-    from ..errors import InputError
-    from ..flex import BLOCK_KEYS, flexibility_of_fit
+    from ...errors import InputError
+    from ...flex import BLOCK_KEYS, flexibility_of_fit
 
     try:
         return flexibility_of_fit(summary).block()

@@ -19,7 +19,7 @@ import dataclasses
 
 import numpy as np
 
-from ..imp.night import NightSamples
+from ...imp.night import NightSamples
 
 
 def median_step_s(night: NightSamples) -> float:
