@@ -77,8 +77,10 @@ def quiet_run():
 def test_imp_run_layout_and_normal_nights_hold_the_setpoint(quiet_run):
     pop, r = quiet_run
     n = r.nights
-    plans = len(ImpSimConfig().plans())  # the gateway's: 1 constrained + 1 per normal setpoint
-    assert plans == 1 + len(DEFAULT_SETPOINTS_C)
+    # The gateway's plans: constrained_per_day replays of its constrained night + 1 per normal
+    # setpoint.
+    plans = len(ImpSimConfig().plans())
+    assert plans == ImpSimConfig().constrained_per_day + len(DEFAULT_SETPOINTS_C)
     assert len(n) == 12 * 3 * plans and r.t_air_c.shape == (r.time_s.size, len(n))
     assert (n.groupby("household").size() == 3 * plans).all()
     assert set(n.columns) >= set(NIGHT_FEATURE_NAMES) | {"household", "kind", "setpoint_c"}
@@ -198,7 +200,8 @@ def test_more_constrained_nights_a_day_each_at_its_drawn_setpoint():
     # Each replay cools from its own T_max = T_set + ΔT (held through the pre-heat).
     first = r.t_air_c[0, cons]
     assert np.corrcoef(first, sp[cons])[0, 1] > 0.5
-    base = simulate_imp(houses, config=ImpSimConfig(days=2, **QUIET), seed=5).nights
+    base = simulate_imp(houses, config=ImpSimConfig(days=2, constrained_per_day=1, **QUIET),
+                        seed=5).nights
     assert (base["kind"] == "constrained").sum() * 3 == cons.sum()
     with pytest.raises(InputError, match="constrained_per_day"):
         ImpSimConfig(constrained_per_day=0)

@@ -94,7 +94,7 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
-    constrained_per_day: int = 1
+    constrained_per_day: int = 3
     constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ
 
@@ -203,7 +203,8 @@ class ImpResult:
     ----------
     nights : DataFrame
         One row per night: ``household`` (index into the houses), ``day`` (0…days−1), ``date``,
-        ``kind``, ``setpoint_c`` [°C], ``start`` (tz-aware), ``duration_h`` [h], then the night
+        ``kind``, ``replay`` (0, 1, … for a plan run more than once a day), ``setpoint_c`` [°C],
+        ``start`` (tz-aware), ``duration_h`` [h], then the night
         features (:data:`impctl.imp.NIGHT_FEATURE_NAMES`).
     time_s : ndarray (n_samples,) or None
         Sample times since the window start [s], shared by all nights.
@@ -226,8 +227,10 @@ class ImpResult:
             raise ValueError("samples were not kept (simulate_imp(..., keep_samples=True))")
         row = self.nights.iloc[i]
         m = self.valid[:, i]
+        replay = f"-r{row['replay']}" if row.get("replay", 0) else ""
         return NightSamples(
-            night_id=f"h{row['household']}-{row['date']}-{row['kind']}-{row['setpoint_c']:g}",
+            night_id=f"h{row['household']}-{row['date']}-{row['kind']}-{row['setpoint_c']:g}"
+                     f"{replay}",
             kind=row["kind"], start=row["start"], time_s=self.time_s[m],
             t_air_c=self.t_air_c[m, i], t_out_c=self.t_out_c[m, i], q_hc_w=self.q_hc_w[m, i],
             setpoint_c=float(row["setpoint_c"]),
@@ -391,6 +394,8 @@ def night_result(pick: np.ndarray, cand: pd.DataFrame, plans, n: int, days: int,
         "day": np.tile(np.repeat(np.arange(days), n_p), n),
         "date": cand["date"].to_numpy()[night_rows],
         "kind": np.tile([p.kind for p in plans], n * days),
+        # 0, 1, … for repeated plans of one day (constrained_per_day), so night ids stay unique
+        "replay": np.tile([sum(q == p for q in plans[:j]) for j, p in enumerate(plans)], n * days),
         "setpoint_c": sp_night,
         "start": pd.DatetimeIndex(cand["start"])[night_rows],
         "duration_h": np.repeat(duration_s, n_p) / 3600.0,
