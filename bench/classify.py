@@ -7,9 +7,9 @@ Run:  .venv/bin/python bench/classify.py [--households 900] [--seed 0] [--repeat
 ``--plant realistic`` draws the households' realism (emitters, heat pumps, gains, sensors) and
 runs their nights on :mod:`impctl.plant` (60 s steps; the ≤ 5 s target is for the ideal 5R1C).
 
-Generates the 900-household dataset (15 weather days × 6 IMP nights each — the gateway's plans,
-3 constrained replays at its constrained T_set + 3 normal, :func:`impctl.imp.imp_plans` and
-``ImpSimConfig.constrained_per_day`` — = 81,000 nights,
+Generates the 900-household dataset (15 weather days × 4 IMP nights each — the gateway's plans,
+1 constrained + 3 normal, :func:`impctl.imp.imp_plans`; ``--constrained-per-day 3``: 6 — =
+54,000 nights,
 vectorised 5R1C at 10-min steps; target ≤ 5 s), trains the three Random-Forest range
 classifiers (target ≤ 15 s; the shuffled-label baseline forests are timed separately, they are
 evaluation, not training), and prints the accuracy table next to the baselines and the paper's
@@ -43,8 +43,7 @@ def main() -> None:
                              "gateway's, impctl.night_protocol); 'cycle': every kind at every "
                              "normal setpoint (the population before branch h14q)")
     parser.add_argument("--constrained-per-day", type=int, default=None, metavar="N",
-                        help="constrained plans per weather day (default ImpSimConfig's 3; 1: "
-                             "the population of branch h14q)")
+                        help="constrained replays per weather day (default ImpSimConfig's 1)")
     parser.add_argument("--constrained-jitter-k", type=float, default=None, metavar="K",
                         help="draw each constrained night's T_set within ±K of its setpoint")
     parser.add_argument("--figure", default=None,

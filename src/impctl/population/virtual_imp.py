@@ -72,9 +72,9 @@ class ImpSimConfig:
     ``day_setpoint_c``: (low, high) of the households' normal daytime setpoint [°C].
     ``constrained_per_day`` constrained plans run on every weather day, each constrained night's
     T_set drawn uniformly within ``constrained_jitter_k`` [K] of ``constrained_setpoint_c``
-    (domain randomisation: a gateway's owner may configure it); one constrained night a day
-    gives the classifiers a third of the old population's cooling curves (README "Accuracy",
-    branch h14r).
+    (domain randomisation: a gateway's owner may configure it). Default one, at the gateway's
+    T_set: three replays a day measured no better on realistic held-out houses (README
+    "Accuracy", branch h14r).
     """
 
     days: int = 15
@@ -94,7 +94,7 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
-    constrained_per_day: int = 3
+    constrained_per_day: int = 1
     constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ
 
