@@ -1,7 +1,7 @@
 """Two virtual populations, one set of test households: paired class accuracy and Brier score.
 
 Run:  .venv/bin/python bench/classify_compare.py [--seed 0] [--campaigns 5] [--plant realistic]
-          [--a '{"constrained_per_day": 1}'] [--b '{"constrained_per_day": 3}']
+          [--a '{"constrained_per_day": 1}'] [--b '{"constrained_per_day": 3}'] [--cross]
 
 ``--a`` / ``--b`` are :class:`impctl.population.virtual_imp.ImpSimConfig` keyword arguments (JSON).
 Each population is generated (900 households, same seed: same households and test split) and
@@ -36,11 +36,15 @@ from impctl.population.ranges import bin_values
 from impctl.population.virtual_imp import ImpSimConfig
 
 
-def _score(kw: dict, args) -> tuple[dict, np.ndarray]:
-    """Per test household and parameter: mean Brier, accuracy and majority hit over campaigns."""
+def _score(kw: dict, args, trained: tuple | None = None) -> tuple[dict, np.ndarray, tuple]:
+    """Per test household and parameter: mean Brier, accuracy and majority hit over campaigns
+    of population ``kw``'s nights, scored by ``trained`` = (models, reports) if given, else by
+    classifiers trained on that population (returned as the third item)."""
     dataset = generate_dataset(args.households, args.seed, plant=args.plant,
                                imp=ImpSimConfig(**kw))
-    models, reports = train_classifiers(dataset, TrainConfig(), args.seed, with_baselines=False)
+    if trained is None:
+        trained = train_classifiers(dataset, TrainConfig(), args.seed, with_baselines=False)
+    models, reports = trained
     values, ids = night_cube(dataset.nights[dataset.nights["replay"] == 0])
     test = np.array(next(iter(reports.values())).test_households)
     k = args.campaigns
@@ -61,7 +65,7 @@ def _score(kw: dict, args) -> tuple[dict, np.ndarray]:
         out[name] = tuple(v.reshape(-1, k).mean(axis=1) for v in
                           (brier, (p.argmax(axis=1) == y).astype(float),
                            (y == majority).astype(float)))
-    return out, test
+    return out, test, trained
 
 
 def main() -> None:
@@ -72,10 +76,13 @@ def main() -> None:
     ap.add_argument("--plant", choices=("iso", "realistic"), default="realistic")
     ap.add_argument("--a", default='{"constrained_per_day": 1}')
     ap.add_argument("--b", default='{"constrained_per_day": 3}')
+    ap.add_argument("--cross", action="store_true",
+                    help="score B's nights with the classifiers trained on A (e.g. A the "
+                         "population, B its nights stopped at T_min as the gateway's are)")
     args = ap.parse_args()
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
-    a, test_a = _score(json.loads(args.a), args)
-    b, test_b = _score(json.loads(args.b), args)
+    a, test_a, trained_a = _score(json.loads(args.a), args)
+    b, test_b, _ = _score(json.loads(args.b), args, trained_a if args.cross else None)
     assert (test_a == test_b).all()
     boot = np.random.default_rng(0).integers(0, len(test_a), (4000, len(test_a)))
 
@@ -84,7 +91,8 @@ def main() -> None:
         lo, hi = np.percentile(m, [2.5, 97.5])
         return f"{v.mean() * scale:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
 
-    print(f"A = {args.a}; B = {args.b}; {len(test_a)} test households × {args.campaigns} "
+    print(f"A = {args.a}; B = {args.b}{' scored by the classifiers of A' if args.cross else ''}; "
+          f"{len(test_a)} test households × {args.campaigns} "
           "campaigns of 2 + 6 nights; 95 % bootstrap intervals over households\n")
     print("| parameter | accuracy A / B % | majority % | Brier A / B | Brier B − A | "
           "margin over majority A / B (points) |")
