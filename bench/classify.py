@@ -1,13 +1,15 @@
 """Time to generate the virtual population and to train the range classifiers; their accuracy.
 
 Run:  .venv/bin/python bench/classify.py [--households 900] [--seed 0] [--repeat 3]
-          [--plant iso|realistic] [--constrained-setpoint C|cycle]
+          [--plant iso|realistic] [--constrained-setpoint C|cycle] [--constrained-per-day N]
+          [--constrained-jitter-k K]
 
 ``--plant realistic`` draws the households' realism (emitters, heat pumps, gains, sensors) and
 runs their nights on :mod:`impctl.plant` (60 s steps; the ≤ 5 s target is for the ideal 5R1C).
 
 Generates the 900-household dataset (15 weather days × 4 IMP nights each — the gateway's plans,
-1 constrained + 3 normal, :func:`impctl.imp.imp_plans` — = 54,000 nights,
+1 constrained + 3 normal, :func:`impctl.imp.imp_plans`; ``--constrained-per-day 3``: 6 — =
+54,000 nights,
 vectorised 5R1C at 10-min steps; target ≤ 5 s), trains the three Random-Forest range
 classifiers (target ≤ 15 s; the shuffled-label baseline forests are timed separately, they are
 evaluation, not training), and prints the accuracy table next to the baselines and the paper's
@@ -40,6 +42,10 @@ def main() -> None:
                         help="T_set of the population's constrained nights [°C] (default the "
                              "gateway's, impctl.night_protocol); 'cycle': every kind at every "
                              "normal setpoint (the population before branch h14q)")
+    parser.add_argument("--constrained-per-day", type=int, default=None, metavar="N",
+                        help="constrained replays per weather day (default ImpSimConfig's 1)")
+    parser.add_argument("--constrained-jitter-k", type=float, default=None, metavar="K",
+                        help="draw each constrained night's T_set within ±K of its setpoint")
     parser.add_argument("--figure", default=None,
                         help="write the reliability diagram (calibrated vs vote shares) here")
     args = parser.parse_args()
@@ -47,10 +53,15 @@ def main() -> None:
           f"{os.cpu_count()} CPUs, {platform.machine()}")
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}\n")
 
-    imp = ImpSimConfig()
+    kw: dict = {}
     if args.constrained_setpoint is not None:
         c_sp = args.constrained_setpoint
-        imp = ImpSimConfig(constrained_setpoint_c=None if c_sp == "cycle" else float(c_sp))
+        kw["constrained_setpoint_c"] = None if c_sp == "cycle" else float(c_sp)
+    if args.constrained_per_day is not None:
+        kw["constrained_per_day"] = args.constrained_per_day
+    if args.constrained_jitter_k is not None:
+        kw["constrained_jitter_k"] = args.constrained_jitter_k
+    imp = ImpSimConfig(**kw)
     gen_s = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()

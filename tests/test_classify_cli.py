@@ -34,7 +34,9 @@ def model_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def nights_csv(tmp_path_factory) -> Path:
-    result = simulate_imp(sample_households(1, seed=8), config=ImpSimConfig(days=3), seed=8)
+    # One constrained night a day, as a real household's export has (not the population's replays).
+    result = simulate_imp(sample_households(1, seed=8),
+                          config=ImpSimConfig(days=3, constrained_per_day=1), seed=8)
     path = tmp_path_factory.mktemp("nights") / "nights.csv"
     return write_nights(result.nights_of(0), path)
 

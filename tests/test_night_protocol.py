@@ -44,9 +44,14 @@ def test_gateway_bench_and_population_run_the_same_nights():
     for _, kind, w0, _, t_set in sched.windows:
         held = sched.setpoint_c[w0 - 1, 0]
         assert held == (t_set + DEFAULT_BAND_K if kind == "constrained" else t_set), kind
-    # The classifiers' virtual population: every plan it simulates is one the gateway runs.
-    population = _plan_setpoints((p.kind, p.setpoint_c) for p in ImpSimConfig().plans())
-    assert set(population) == set(gateway) and set(population.values()) == {1}
+    # The classifiers' virtual population: every plan it simulates is one the gateway runs
+    # (the constrained one replayed constrained_per_day times a weather day).
+    imp = ImpSimConfig()
+    population = _plan_setpoints((p.kind, p.setpoint_c) for p in imp.plans())
+    assert set(population) == set(gateway) and imp.constrained_jitter_k == 0
+    assert population == Counter({("constrained", DEFAULT_CONSTRAINED_SETPOINT_C):
+                                  imp.constrained_per_day}
+                                 | {("normal", sp): 1 for sp in DEFAULT_SETPOINTS_C})
     assert all(p.band_k == DEFAULT_BAND_K and p.preheat_h == DEFAULT_PREHEAT_H
                for p in ImpSimConfig().plans())
 

@@ -94,3 +94,22 @@ def test_schedule_without_gains_keeps_every_other_draw():
     assert np.all(off.run["gains_w"] == 0.0) and np.all(on.run["gains_w"].mean(axis=0) > 100.0)
     assert np.array_equal(on.run["t_out_sensed_c"], off.run["t_out_sensed_c"])
     assert np.all(off.run["heat_pump_w"].sum(axis=0) > on.run["heat_pump_w"].sum(axis=0))
+
+
+def test_constrained_replays_on_the_realistic_plant():
+    houses = sample_households(3, seed=4)
+    cfg = ImpSimConfig(days=1, setpoints_c=(22.0,), constrained_per_day=3,
+                       constrained_jitter_k=1.0)
+    res = simulate_imp_plant(houses, sample_params(3, 4), config=cfg, seed=2)
+    n = res.nights
+    cons = (n["kind"] == "constrained").to_numpy()
+    assert cons.sum() == 9 and sorted(set(n["replay"][cons])) == [0, 1, 2]
+    sp = n["setpoint_c"].to_numpy()
+    assert np.all(np.abs(sp[cons] - 21.0) <= 1.0) and np.unique(sp[cons]).size == 9
+    assert set(sp[~cons]) == {22.0}
+    # Replays of one evening are different nights (own T_set, sensor noise, gains), and the
+    # heating stays off in each of them after the emitter lag.
+    for h in range(3):
+        mine = np.flatnonzero(cons & (n["household"] == h).to_numpy())
+        assert not np.allclose(res.t_air_c[:, mine[0]], res.t_air_c[:, mine[1]])
+        assert (res.q_hc_w[6:, mine][res.valid[6:, mine]] < 1.0).all()

@@ -77,8 +77,10 @@ def quiet_run():
 def test_imp_run_layout_and_normal_nights_hold_the_setpoint(quiet_run):
     pop, r = quiet_run
     n = r.nights
-    plans = len(ImpSimConfig().plans())  # the gateway's: 1 constrained + 1 per normal setpoint
-    assert plans == 1 + len(DEFAULT_SETPOINTS_C)
+    # The gateway's plans: constrained_per_day replays of its constrained night + 1 per normal
+    # setpoint.
+    plans = len(ImpSimConfig().plans())
+    assert plans == ImpSimConfig().constrained_per_day + len(DEFAULT_SETPOINTS_C)
     assert len(n) == 12 * 3 * plans and r.t_air_c.shape == (r.time_s.size, len(n))
     assert (n.groupby("household").size() == 3 * plans).all()
     assert set(n.columns) >= set(NIGHT_FEATURE_NAMES) | {"household", "kind", "setpoint_c"}
@@ -179,3 +181,27 @@ def test_campaign_picks_distinct_dates_of_one_household(quiet_run):
     assert [n.start for n in nights] == sorted(n.start for n in nights)
     with pytest.raises(ValueError, match="3 dates"):
         r.campaign(4, n_constrained=2, n_normal=2)
+
+
+def test_more_constrained_nights_a_day_each_at_its_drawn_setpoint():
+    """``constrained_per_day`` constrained replays of every weather day, their T_set drawn within
+    ``constrained_jitter_k`` of the gateway's; the normal nights keep their setpoints."""
+    houses = sample_households(4, seed=5)
+    cfg = ImpSimConfig(days=2, constrained_per_day=3, constrained_jitter_k=0.5, **QUIET)
+    r = simulate_imp(houses, config=cfg, seed=5)
+    n = r.nights
+    assert len(cfg.plans()) == 3 + len(DEFAULT_SETPOINTS_C)
+    assert (n.groupby(["household", "day"])["kind"].apply(
+        lambda k: (k == "constrained").sum()) == 3).all()
+    cons = (n["kind"] == "constrained").to_numpy()
+    sp = n["setpoint_c"].to_numpy()
+    assert np.all(np.abs(sp[cons] - 21.0) <= 0.5) and np.unique(sp[cons]).size == cons.sum()
+    assert set(sp[~cons]) == set(DEFAULT_SETPOINTS_C)
+    # Each replay cools from its own T_max = T_set + ΔT (held through the pre-heat).
+    first = r.t_air_c[0, cons]
+    assert np.corrcoef(first, sp[cons])[0, 1] > 0.5
+    base = simulate_imp(houses, config=ImpSimConfig(days=2, constrained_per_day=1, **QUIET),
+                        seed=5).nights
+    assert (base["kind"] == "constrained").sum() * 3 == cons.sum()
+    with pytest.raises(InputError, match="constrained_per_day"):
+        ImpSimConfig(constrained_per_day=0)

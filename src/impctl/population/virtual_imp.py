@@ -70,6 +70,11 @@ class ImpSimConfig:
     every kind at every setpoint, the population before branch h14q).
     Only nights whose mean T_out is below ``max_t_out_c`` are used (they need heating demand).
     ``day_setpoint_c``: (low, high) of the households' normal daytime setpoint [°C].
+    ``constrained_per_day`` constrained plans run on every weather day, each constrained night's
+    T_set drawn uniformly within ``constrained_jitter_k`` [K] of ``constrained_setpoint_c``
+    (domain randomisation: a gateway's owner may configure it). Default one, at the gateway's
+    T_set: three replays a day measured no better on realistic held-out houses (README
+    "Accuracy", branch h14r).
     """
 
     days: int = 15
@@ -89,6 +94,8 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
+    constrained_per_day: int = 1
+    constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ
 
     def __post_init__(self) -> None:
@@ -100,13 +107,30 @@ class ImpSimConfig:
             raise InputError("preheat_h must cover at least one step", place="preheat_h")
         if self.quantum_k < 0 or self.noise_t_air_k < 0 or self.noise_q_rel < 0:
             raise InputError("quantum and noise must be >= 0", place="noise")
+        if self.constrained_per_day < 1 or self.constrained_jitter_k < 0:
+            raise InputError("constrained_per_day must be >= 1 and constrained_jitter_k >= 0",
+                             place="constrained_per_day")
 
     def plans(self) -> list[NightPlan]:
-        """The night plans run on every weather day."""
-        return imp_plans(self.setpoints_c, self.band_k, self.kinds,  # type: ignore[arg-type]
-                         constrained_setpoint_c=self.constrained_setpoint_c,
-                         window_start=self.window[0], window_end=self.window[1],
-                         preheat_h=self.preheat_h, stop_at_t_min=self.stop_at_t_min)
+        """The night plans run on every weather day (before the T_set draw)."""
+        plans = imp_plans(self.setpoints_c, self.band_k, self.kinds,  # type: ignore[arg-type]
+                          constrained_setpoint_c=self.constrained_setpoint_c,
+                          window_start=self.window[0], window_end=self.window[1],
+                          preheat_h=self.preheat_h, stop_at_t_min=self.stop_at_t_min)
+        if self.constrained_setpoint_c is None:
+            return plans
+        extra = [p for p in plans if p.kind == "constrained"] * (self.constrained_per_day - 1)
+        return extra + plans
+
+    def setpoint_shift_k(self, plans: list[NightPlan], n_columns: int,
+                         rng: np.random.Generator) -> np.ndarray:
+        """T_set shift [K] of every (household, day, plan) column: uniform within
+        ``constrained_jitter_k`` on constrained nights, 0 on normal nights."""
+        cons = np.tile([p.kind == "constrained" for p in plans], n_columns // len(plans))
+        if self.constrained_jitter_k == 0:
+            return np.zeros(n_columns)
+        k = self.constrained_jitter_k
+        return np.where(cons, rng.uniform(-k, k, n_columns), 0.0)
 
     def as_dict(self) -> dict:
         """Plain-JSON form for manifests."""
@@ -179,7 +203,8 @@ class ImpResult:
     ----------
     nights : DataFrame
         One row per night: ``household`` (index into the houses), ``day`` (0…days−1), ``date``,
-        ``kind``, ``setpoint_c`` [°C], ``start`` (tz-aware), ``duration_h`` [h], then the night
+        ``kind``, ``replay`` (0, 1, … for a plan run more than once a day), ``setpoint_c`` [°C],
+        ``start`` (tz-aware), ``duration_h`` [h], then the night
         features (:data:`impctl.imp.NIGHT_FEATURE_NAMES`).
     time_s : ndarray (n_samples,) or None
         Sample times since the window start [s], shared by all nights.
@@ -202,8 +227,10 @@ class ImpResult:
             raise ValueError("samples were not kept (simulate_imp(..., keep_samples=True))")
         row = self.nights.iloc[i]
         m = self.valid[:, i]
+        replay = f"-r{row['replay']}" if row.get("replay", 0) else ""
         return NightSamples(
-            night_id=f"h{row['household']}-{row['date']}-{row['kind']}-{row['setpoint_c']:g}",
+            night_id=f"h{row['household']}-{row['date']}-{row['kind']}-{row['setpoint_c']:g}"
+                     f"{replay}",
             kind=row["kind"], start=row["start"], time_s=self.time_s[m],
             t_air_c=self.t_air_c[m, i], t_out_c=self.t_out_c[m, i], q_hc_w=self.q_hc_w[m, i],
             setpoint_c=float(row["setpoint_c"]),
@@ -312,7 +339,8 @@ def simulate_imp(
     te = np.interp((start_s - preheat_s)[None, :] + (np.arange(n_ph)[:, None] + 0.5) * cfg.step_s,
                    w_t, w_v)
     te = np.repeat(te, n_p, axis=1)
-    sp_pre = np.tile([p.preheat_setpoint_c for p in plans], n * days)
+    shift = cfg.setpoint_shift_k(plans, n * days * n_p, rng)
+    sp_pre = np.tile([p.preheat_setpoint_c for p in plans], n * days) + shift
     pre = simulate(houses_n, te, cfg.step_s, setpoint_c=np.broadcast_to(sp_pre, te.shape),
                    internal_gains_w=zeros(n_ph), solar_gains_w=zeros(n_ph), t_m_init_c=t_m)
 
@@ -328,7 +356,7 @@ def simulate_imp(
     in_lag = time_s < lag_s
     forced = np.where(in_lag[:, None] & cons[None, :],
                       share[:, None] * pre.phi_hc_w[-1][None, :], np.nan)
-    sp_win = np.tile([p.window_setpoint_c for p in plans], n * days)
+    sp_win = np.tile([p.window_setpoint_c for p in plans], n * days) + shift
     win = simulate(houses_n, te, cfg.step_s, setpoint_c=np.broadcast_to(sp_win, te.shape),
                    phi_hc_w=forced, internal_gains_w=zeros(n_w), solar_gains_w=zeros(n_w),
                    t_m_init_c=pre.t_m_c[-1])
@@ -345,7 +373,7 @@ def simulate_imp(
     if cfg.quantum_k > 0:
         t_air = np.round(t_air / cfg.quantum_k) * cfg.quantum_k
         te = np.round(te / cfg.quantum_k) * cfg.quantum_k
-    sp_night = np.tile([p.setpoint_c for p in plans], n * days)
+    sp_night = np.tile([p.setpoint_c for p in plans], n * days) + shift
     feats = features_from_arrays(time_s, t_air, te, q_obs, constrained=cons, setpoint_c=sp_night,
                                  valid=valid, emission_lag_h=cfg.emitter_lag_h)
 
@@ -366,6 +394,8 @@ def night_result(pick: np.ndarray, cand: pd.DataFrame, plans, n: int, days: int,
         "day": np.tile(np.repeat(np.arange(days), n_p), n),
         "date": cand["date"].to_numpy()[night_rows],
         "kind": np.tile([p.kind for p in plans], n * days),
+        # 0, 1, … for repeated plans of one day (constrained_per_day), so night ids stay unique
+        "replay": np.tile([sum(q == p for q in plans[:j]) for j, p in enumerate(plans)], n * days),
         "setpoint_c": sp_night,
         "start": pd.DatetimeIndex(cand["start"])[night_rows],
         "duration_h": np.repeat(duration_s, n_p) / 3600.0,

@@ -149,8 +149,9 @@ def simulate_imp_plant(
                       stride, axis=0)
     g_sol = np.repeat(solar_gains_w(hours, dayno, core.params.gains, n_cols, rng), stride, axis=0)
     cons = np.tile([p.kind == "constrained" for p in plans], n * days)
-    sp_pre = np.tile([p.preheat_setpoint_c for p in plans], n * days)
-    sp_night = np.tile([p.setpoint_c for p in plans], n * days)
+    shift = cfg.setpoint_shift_k(plans, n_cols, rng)
+    sp_pre = np.tile([p.preheat_setpoint_c for p in plans], n * days) + shift
+    sp_night = np.tile([p.setpoint_c for p in plans], n * days) + shift
     t_min = sp_night - cfg.band_k
     lag_samples = int(ceil(cfg.emitter_lag_h * 3600.0 / cfg.step_s))
     resumed = np.zeros(n_cols, bool)
