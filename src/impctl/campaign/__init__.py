@@ -1,12 +1,15 @@
 """The adaptive IMP campaign: stop as soon as HLC and τ are known to the precision the
 aggregator needs, and choose each next night by the information it is expected to bring.
 
-:mod:`.policy` (standard library only, imported by the daemon) decides run / skip / stop;
+:mod:`.records` holds what the policy reads and writes (target, nights, fit summaries,
+predictions, decision); :mod:`.policy` decides run / skip / stop (both standard library only,
+imported by the daemon);
 :mod:`.design` (numpy + :mod:`impctl.model`, run by ``impctl campaign next`` in a subprocess)
 predicts, for each possible next night, the interval half-widths after it.
 """
 
-from .policy import (
+from .policy import decide, plan_order
+from .records import (
     CONSTRAINED,
     NORMAL,
     Candidate,
@@ -15,10 +18,8 @@ from .policy import (
     NightRecord,
     Outlook,
     Target,
-    decide,
     parse_candidates,
     parse_outlook,
-    plan_order,
 )
 
 __all__ = ["CONSTRAINED", "NORMAL", "Candidate", "Decision", "FitSummary", "NightRecord",

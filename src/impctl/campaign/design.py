@@ -30,7 +30,7 @@ Criterion (documented choice; README "Adaptive campaign"):
   new night, the night-gain share likewise, the meter and structural shares unchanged. A
   sandwich interval also narrows by Student-t's t(G)/t(G − 1) for G fitted nights.
   Predicted relative half-width = sinh(1.96·sd), the same measure as
-  :attr:`impctl.campaign.policy.FitSummary.hlc_rel`.
+  :attr:`impctl.campaign.records.FitSummary.hlc_rel`.
 
 A candidate is scored by the policy (:func:`impctl.campaign.policy.decide`,
 :data:`impctl.campaign.policy.CRITERION`): with "balanced" the joint shrink Σ log(rel_pred /
@@ -40,7 +40,7 @@ stop rules ("more nights would not help", "precision limited").
 
 * **Outlook.** The same prediction after ``ahead`` more nights (the most informative normal
   and constrained candidates, by det(F_past + F_night), alternating, normal first), and the
-  *floor* then: the type-B shares alone (:func:`impctl.campaign.policy.type_b_shares`) at
+  *floor* then: the type-B shares alone (:func:`impctl.campaign.records.type_b_shares`) at
   the mean ΔT those nights bring — what no number of nights removes. The policy stops on it
   ("precision limited by …", naming the largest share) when the floor alone misses the
   target and dominates the predicted interval.
@@ -55,7 +55,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..model import HouseParameters, simulate
-from .policy import CONSTRAINED, NORMAL, Candidate, Outlook, type_b_shares
+from .records import CONSTRAINED, NORMAL, Candidate, Outlook, type_b_shares
 
 Z95 = 1.959964
 #: Relative step of the finite differences in θ, and the θ_m,0 step [K].
@@ -239,7 +239,7 @@ class _Predictor:
         self.grads = lumped_gradients(self.house)
         self.offset_k, self.mean_dt, self.n_past = _offsets(result)
         share_now = self.offset_k / self.mean_dt if self.mean_dt > 1.0 else 0.0
-        # (night-gain share, the shares no night changes) per quantity: policy.type_b_shares
+        # (night-gain share, the shares no night changes) per quantity: records.type_b_shares
         self.fixed = {name: shares[1:] for name, shares in type_b_shares(result).items()}
         self.stat = {name: _stat_sd(result, name, math.hypot(share_now, *self.fixed[name]))
                      for name in self.grads}

@@ -1,0 +1,149 @@
+"""The sections of the gateway's ``config.toml`` as frozen dataclasses, with their defaults:
+``[night]``, ``[campaign]`` (and its ``target_rel_halfwidth`` table), ``[fit]``, ``[clock]``
+and the whole :class:`Config` (``[heatpump]`` and ``[mqtt]`` come from their packages).
+
+Temperatures °C, durations s unless the key says ``_h`` or ``_min``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..heatpump import HeatPumpConfig
+from ..mqtt.config import MqttConfig
+from ..night_gain import NIGHT_GAIN_W
+from ..night_protocol import (
+    DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_PREHEAT_H,
+    DEFAULT_SETPOINTS_C,
+)
+
+
+@dataclass(frozen=True)
+class NightConfig:
+    """How one IMP night runs."""
+
+    window: str = "22:00-05:00"
+    comfort_band_k: float = DEFAULT_BAND_K
+    sample_interval_s: float = 60.0
+    abort_margin_k: float = 0.5
+    link_lost_limit_s: float = 900.0
+    t_out_min_c: float = -25.0
+    t_out_max_c: float = 8.0
+    constrained_action: str = "loop_off"  # "loop_off" (mode 0) or "setpoint_floor"
+    setpoint_floor_c: float = 18.0
+    preheat_h: float = DEFAULT_PREHEAT_H
+    emission_lag_h: float = 1.0
+    min_coverage: float = 0.8
+    max_comfort_band_k: float = 3.0
+
+
+@dataclass(frozen=True)
+class TargetHalfwidth:
+    """``[campaign] target_rel_halfwidth``: 95 % interval half-width / estimate (0.05 = ±5 %)."""
+
+    hlc: float = 0.05
+    tau: float = 0.08
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Which nights to run and when to fit.
+
+    ``mode = "fixed"`` (the default): the ``constrained_nights`` + setpoints ×
+    ``normal_nights_per_setpoint`` plan. ``mode = "adaptive"``: after every valid night the
+    daemon fits, predicts what each possible next night would bring (``impctl campaign next``)
+    and runs, skips or stops by :func:`impctl.campaign.decide` until HLC and τ are known to
+    ``target_rel_halfwidth``, at most ``max_nights`` nights, running the fixed plan's nights in
+    :func:`impctl.campaign.plan_order` (``next_night = "information"``: the candidate the latest
+    fit predicts most informative instead). Fixed is the default: the adaptive campaign's accuracy
+    is about the plan's, not shown at least as good (README "Adaptive campaign");
+    ``max_nights`` defaults to the fixed plan's 5,
+    so opting in never costs a household more nights than the plan unless it is raised.
+    """
+
+    mode: str = "fixed"
+    target_rel_halfwidth: TargetHalfwidth = field(default_factory=TargetHalfwidth)
+    max_nights: int = 5
+    min_each_kind: int = 1
+    stall_nights: int = 3
+    # adaptive: "plan" (the fixed plan's nights in plan order) or "information" (the night the
+    # current fit predicts most informative; README "Adaptive campaign" for why plan is default)
+    next_night: str = "plan"
+    constrained_nights: int = 2
+    constrained_setpoint_c: float = DEFAULT_CONSTRAINED_SETPOINT_C
+    normal_setpoints_c: tuple[float, ...] = DEFAULT_SETPOINTS_C
+    normal_nights_per_setpoint: int = 1
+    misfire_grace_s: float = 3600.0
+    fit_when_complete: bool = True  # fixed mode: fit after every valid night (false: never)
+    enabled: bool = True
+
+    @property
+    def adaptive(self) -> bool:
+        """True in ``mode = "adaptive"``."""
+        return self.mode == "adaptive"
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """What the daemon's fit (``impctl fit`` in a subprocess) is told about the house."""
+
+    # assumed mean unmetered night gain [W]: ≈ 70–80 W per sleeper + base load
+    night_gain_w: float = NIGHT_GAIN_W
+
+
+@dataclass(frozen=True)
+class ClockConfig:
+    """Simulated time for the demo and tests: ``speed`` × real time from ``epoch``."""
+
+    epoch: str = ""                      # ISO 8601 instant; empty = real time
+    speed: float = 1.0
+    wall_epoch_s: float = 0.0            # POSIX s at which the clock showed epoch; 0 = start
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole daemon configuration."""
+
+    state_dir: str = "/var/lib/impctl"
+    timezone: str = "Europe/Ljubljana"
+    log_level: str = "info"
+    model_dir: str = ""
+    heatpump: HeatPumpConfig = field(default_factory=HeatPumpConfig)
+    night: NightConfig = field(default_factory=NightConfig)
+    campaign: CampaignConfig = field(default_factory=CampaignConfig)
+    clock: ClockConfig = field(default_factory=ClockConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
+    mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
+    source: str = ""
+
+    @property
+    def db_path(self) -> Path:
+        """The SQLite store in the state directory."""
+        return Path(self.state_dir) / "impctl.db"
+
+    @property
+    def budget_path(self) -> Path:
+        """The write-counter database in the state directory."""
+        return Path(self.state_dir) / "writes.db"
+
+    @property
+    def window_minutes(self) -> tuple[int, int]:
+        """The night window as minutes after local midnight (start, end)."""
+        return _window(self.night.window)
+
+
+
+
+def _window(text: str) -> tuple[int, int]:
+    a, b = text.split("-")
+    out = []
+    for part in (a, b):
+        h, m = part.strip().split(":")
+        hh, mm = int(h), int(m)
+        if not (0 <= hh < 24 and 0 <= mm < 60):
+            raise ValueError(text)
+        out.append(hh * 60 + mm)
+    return out[0], out[1]
