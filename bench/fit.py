@@ -3,7 +3,7 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
-          [--setpoints C,C,C] [--constrained-setpoint C|cycle]
+          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -95,6 +95,7 @@ from _fit_protocol import (  # also imported from here by the other bench script
     coheating_eps,
     demand_eps,
     night_gain,
+    short_constrained,
     simulate_schedule,
     true_ranges,
     val_schedule,
@@ -117,10 +118,19 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
     n = houses_arr.n_houses
     sched = val_schedule(n, args)
+    stop = getattr(args, "stop_at_t_min", False)
     sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
-                                      getattr(args, "realism", None))
+                                      getattr(args, "realism", None), stop_at_t_min=stop)
     truth_e = window_energy(heat, sched)
     res_cost = campaign_cost(heat, sched)
+    if stop:
+        # The fit still gets every night as recorded; the gateway would have repeated these.
+        short = short_constrained(sp, sched)
+        print(f"stop at T_min: {short.sum()} of {short.size} constrained nights "
+              f"({100.0 * short.mean():.0f} %) have < 3 h after the 1 h emission lag (invalid, "
+              f"the gateway repeats them); households with ≥ 1 invalid "
+              f"{short.any(axis=0).sum()}, with none valid {short.all(axis=0).sum()} "
+              f"of {short.shape[1]}")
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
         # The plant's heat output also carries its gains, control and emitter, which no 5R1C
@@ -343,6 +353,9 @@ def main() -> None:
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
+    ap.add_argument("--stop-at-t-min", action="store_true",
+                    help="constrained nights end at T_min (day setpoint from there), as the "
+                         "gateway's; prints how many the gateway's 3 h rule makes invalid")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"
