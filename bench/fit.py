@@ -60,6 +60,10 @@ the normal nights' alone (issue 14, branch h14p; before it, this bench ran const
 normal 0 h, a protocol the gateway never ran: ``--preheat-h 4 --preheat-h-normal 0``). Every
 run prints what the campaign costs the household: heat [kWh] and hours above the day setpoint.
 
+``--stop-at-t-min`` ends every constrained night at T_min as the gateway does (day setpoint from
+there; the night's rows end there) and prints how many the gateway's validity rule (< 3 h after
+the 1 h emission lag) would repeat, with the errors split by it (issue 14, branch h14t).
+
 ``--ranges true,classifier`` fits the same simulated nights with each range source in turn (the
 classifiers of ``--model-dir``, e.g. trained by ``impctl train --plant realistic``); a final
 summary table has one row per sample step and range source (median / P90, coverage, share of
@@ -158,6 +162,11 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             "radiators": kind == 0, "underfloor": kind == 1,
             "modulating": ~onoff, "on/off": onoff,
             "weather curve": control == 0, "room thermostat": control == 1}
+    if stop:
+        res.setdefault("types", {}).update({
+            "both constrained valid": ~short[:, :n].any(axis=0),
+            "one valid": short[:, :n].any(axis=0) & ~short[:, :n].all(axis=0),
+            "none valid": short[:, :n].all(axis=0)})
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
