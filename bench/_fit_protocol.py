@@ -117,24 +117,28 @@ class _TrueHeat:
 _SIMULATED: dict = {}
 
 
-def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
+def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None,
+                      stop_at_t_min: bool = False):
     """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
     simulated once per population size and plant, so every sample step and range source
     reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
-    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise)."""
+    realism (``bench/fit_budget.py``'s ablation; same seeds otherwise). ``stop_at_t_min``:
+    constrained nights end at T_min as the gateway's (issue 14, branch h14t)."""
     key = (houses_arr.n_houses, plant, realism[0] if realism else None,
-           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()))
+           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()), stop_at_t_min)
     if key not in _SIMULATED:
-        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism)
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism, stop_at_t_min)
     return _SIMULATED[key]
 
 
-def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None):
+def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None,
+                       stop_at_t_min: bool = False):
     if plant == "iso":
-        sim, sp = run_schedule(houses_arr, sched)
+        sim, sp = run_schedule(houses_arr, sched, stop_at_t_min=stop_at_t_min)
         return sim, sp, sim
     _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
-    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains)
+    logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains,
+                                    stop_at_t_min=stop_at_t_min)
     return logged, sp, _TrueHeat(logged)
 
 
@@ -163,3 +167,17 @@ def _safe_house(params):
         return house_from(params)
     except Exception:  # a parameter set outside the model's domain cannot be replayed
         return None
+
+
+def short_constrained(sp, sched, lag_h: float = 1.0, need_h: float = 3.0) -> np.ndarray:
+    """(n_constrained, n_houses) True where a constrained night ended (heating back on) with
+    less than ``need_h`` [h] after switch-off + ``lag_h`` [h]: the gateway's validity rule
+    (:func:`impctl.controller.assess`), such a night is invalid and would be repeated."""
+    rows = []
+    for _, kind, w0, w1, _ in sched.windows:
+        if kind != "constrained":
+            continue
+        on = ~np.isnan(sp[w0:w1])
+        span_h = np.where(on.any(axis=0), on.argmax(axis=0), w1 - w0) * sched.dt_s / 3600.0
+        rows.append(span_h - lag_h < need_h)
+    return np.array(rows)

@@ -3,7 +3,7 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
-          [--setpoints C,C,C] [--constrained-setpoint C|cycle]
+          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -60,6 +60,10 @@ the normal nights' alone (issue 14, branch h14p; before it, this bench ran const
 normal 0 h, a protocol the gateway never ran: ``--preheat-h 4 --preheat-h-normal 0``). Every
 run prints what the campaign costs the household: heat [kWh] and hours above the day setpoint.
 
+``--stop-at-t-min`` ends every constrained night at T_min as the gateway does (day setpoint from
+there; the night's rows end there) and prints how many the gateway's validity rule (< 3 h after
+the 1 h emission lag) would repeat, with the errors split by it (issue 14, branch h14t).
+
 ``--ranges true,classifier`` fits the same simulated nights with each range source in turn (the
 classifiers of ``--model-dir``, e.g. trained by ``impctl train --plant realistic``); a final
 summary table has one row per sample step and range source (median / P90, coverage, share of
@@ -95,6 +99,7 @@ from _fit_protocol import (  # also imported from here by the other bench script
     coheating_eps,
     demand_eps,
     night_gain,
+    short_constrained,
     simulate_schedule,
     true_ranges,
     val_schedule,
@@ -117,10 +122,19 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     """Fit the first ``limit`` (default all) households at ``step_s`` and the baselines."""
     n = houses_arr.n_houses
     sched = val_schedule(n, args)
+    stop = getattr(args, "stop_at_t_min", False)
     sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
-                                      getattr(args, "realism", None))
+                                      getattr(args, "realism", None), stop_at_t_min=stop)
     truth_e = window_energy(heat, sched)
     res_cost = campaign_cost(heat, sched)
+    if stop:
+        # The fit still gets every night as recorded; the gateway would have repeated these.
+        short = short_constrained(sp, sched)
+        print(f"stop at T_min: {short.sum()} of {short.size} constrained nights "
+              f"({100.0 * short.mean():.0f} %) have < 3 h after the 1 h emission lag (invalid, "
+              f"the gateway repeats them); households with ≥ 1 invalid "
+              f"{short.any(axis=0).sum()}, with none valid {short.all(axis=0).sum()} "
+              f"of {short.shape[1]}")
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
         # The plant's heat output also carries its gains, control and emitter, which no 5R1C
@@ -148,6 +162,11 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             "radiators": kind == 0, "underfloor": kind == 1,
             "modulating": ~onoff, "on/off": onoff,
             "weather curve": control == 0, "room thermostat": control == 1}
+    if stop:
+        res.setdefault("types", {}).update({
+            "both constrained valid": ~short[:, :n].any(axis=0),
+            "one valid": short[:, :n].any(axis=0) & ~short[:, :n].all(axis=0),
+            "none valid": short[:, :n].all(axis=0)})
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
@@ -343,6 +362,9 @@ def main() -> None:
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
+    ap.add_argument("--stop-at-t-min", action="store_true",
+                    help="constrained nights end at T_min (day setpoint from there), as the "
+                         "gateway's; prints how many the gateway's 3 h rule makes invalid")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"

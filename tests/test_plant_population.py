@@ -113,3 +113,33 @@ def test_constrained_replays_on_the_realistic_plant():
         mine = np.flatnonzero(cons & (n["household"] == h).to_numpy())
         assert not np.allclose(res.t_air_c[:, mine[0]], res.t_air_c[:, mine[1]])
         assert (res.q_hc_w[6:, mine][res.valid[6:, mine]] < 1.0).all()
+
+
+def test_plant_schedule_stops_constrained_nights_at_t_min_as_the_gateway():
+    from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
+
+    n, seed = 6, 20260
+    houses = sample_households(n, seed=seed)
+    sched = imp_schedule(n, seed=seed, n_constrained=1, n_normal=1, spinup_days=1)
+    params = sample_params(n, seed)
+    open_run, open_sp = run_schedule_plant(houses, sched, params, seed=seed)
+    stop_run, sp = run_schedule_plant(houses, sched, params, seed=seed, stop_at_t_min=True)
+    assert np.array_equal(open_sp, sched.setpoint_c, equal_nan=True)      # default unchanged
+    (_, _, w0, w1, t_set), = [w for w in sched.windows if w[1] == "constrained"]
+    lag = int(round(3600 / sched.dt_s))
+    on = ~np.isnan(sp[w0:w1])
+    stopped = on.any(axis=0)
+    assert stopped.any() and not stopped.all()
+    for h in range(n):
+        if not stopped[h]:
+            assert np.array_equal(stop_run.t_air_c[:, h], open_run.t_air_c[:, h])
+            continue
+        k = int(on[:, h].argmax())
+        assert k >= lag and stop_run.t_air_c[w0 + k, h] <= t_set - 1.5        # sensor at T_min
+        assert (open_run.t_air_c[w0 + lag:w0 + k, h] > t_set - 1.5).all()     # not before
+        assert (sp[w0 + k:w1, h] == sched.t_m_init_c).all()                   # day setpoint
+        # Causal: up to the stop the night is the open-loop one; the rows end there.
+        assert np.array_equal(stop_run.t_air_c[:w0 + k, h], open_run.t_air_c[:w0 + k, h])
+        night, = [x for x in sample_nights(stop_run, sp, sched, h, power_noise=0.0)
+                  if x.kind == "constrained"]
+        assert k * sched.dt_s - 300.0 <= night.time_s[-1] < k * sched.dt_s

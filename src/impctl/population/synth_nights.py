@@ -167,7 +167,9 @@ class PlantSchedule:
 
 def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
                        seed: int = 0, outputs: tuple[str, ...] | None = None,
-                       gains: bool = True) -> tuple[PlantSchedule, np.ndarray]:
+                       gains: bool = True, stop_at_t_min: bool = False,
+                       band_k: float = DEFAULT_BAND_K, emission_lag_h: float = 1.0,
+                       ) -> tuple[PlantSchedule, np.ndarray]:
     """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
 
     ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
@@ -176,7 +178,10 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     setpoints used (the schedule's, open loop). ``outputs``: the plant outputs to keep (default
     the logged ones and the true T_air and heat output). ``gains=False``: no internal or solar
     gains (their ranges exclude zero); they are still drawn, so the sensor noise is the same
-    as with gains.
+    as with gains. ``stop_at_t_min``: a constrained night ends as the gateway ends it — at the
+    first step after ``emission_lag_h`` [h] where the room sensor reads ≤ T_min = T_set −
+    ``band_k`` [°C], the setpoint is back at the day setpoint from there (nights in order, one
+    re-simulation each: the plant and its noise are causal, so what precedes is unchanged).
     """
     from ..plant import simulate_plant
     from ..plant.building.gains import internal_gains_w, solar_gains_w
@@ -190,13 +195,31 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     g_sol = solar_gains_w(hours, day, params.gains, n, rng)
     if not gains:
         g_int, g_sol = 0.0, 0.0
-    run = simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,
-                         internal_gains_w=g_int, solar_gains_w=g_sol,
-                         t_init_c=sched.t_m_init_c, seed=int(rng.integers(2**31)),
-                         outputs=outputs or ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w",
-                                             "heat_pump_w", "t_air_c"))
+    plant_seed = int(rng.integers(2**31))
+    keep = outputs or ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w", "t_air_c")
+    if stop_at_t_min and "t_air_sensed_c" not in keep:
+        keep = (*keep, "t_air_sensed_c")
+
+    def _run(sp):
+        return simulate_plant(houses, params, sched.t_out_c, sched.dt_s, setpoint_c=sp,
+                              internal_gains_w=g_int, solar_gains_w=g_sol,
+                              t_init_c=sched.t_m_init_c, seed=plant_seed, outputs=keep)
+
+    sp = sched.setpoint_c.copy()
+    run = _run(sp)
+    if stop_at_t_min:
+        lag = int(round(emission_lag_h * 3600 / sched.dt_s))
+        for _, kind, w0, w1, t_set in sched.windows:
+            if kind != "constrained":
+                continue
+            below = np.atleast_2d(run["t_air_sensed_c"].T).T[w0:w1] <= t_set - band_k
+            below[:lag] = False
+            first = np.where(below.any(axis=0), below.argmax(axis=0), w1 - w0)
+            steps = np.arange(w1 - w0)[:, None]
+            sp[w0:w1] = np.where(steps >= first[None, :], sched.t_m_init_c, np.nan)
+            run = _run(sp)
     logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
-    return logged, sched.setpoint_c.copy()
+    return logged, sp
 
 
 def sample_nights(
