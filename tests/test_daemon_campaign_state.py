@@ -14,7 +14,7 @@ from daemon_fixtures import run_cli
 from impctl.campaign import Decision
 from impctl.config import config_from_mapping
 from impctl.daemon import adaptive
-from impctl.daemon.schedule import campaign_plan
+from impctl.daemon.schedule import campaign_plan, peek_next_night, why_no_night
 from impctl.errors import InputError
 from impctl.mqtt.discovery import entities
 from impctl.mqtt.payloads import LiveState
@@ -70,6 +70,7 @@ def test_fixed_is_the_default_and_adaptive_is_opted_into():
     ({"min_each_kind": 0}, "key 'campaign.min_each_kind': must be >= 1: a fit needs a night "
                            "of each kind"),
     ({"stall_nights": 0}, "key 'campaign.stall_nights': must be >= 1"),
+    ({"max_invalid_nights": 0}, "key 'campaign.max_invalid_nights': must be >= 1"),
     ({"next_night": "smart"},
      "key 'campaign.next_night': must be 'plan' or 'information', got 'smart'"),
     ({"mode": "adaptive", "normal_setpoints_c": []},
@@ -305,3 +306,34 @@ def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
     text = run_cli("status", "--config", str(cfg_path), timeout_s=30).stdout
     assert ("after 2 valid nights: HLC 180 W/K ±16.7 %, τ 50 h ±20.0 % (target ±5 % / ±8 %); "
             "interval: too few nights yet: model-based") in text
+
+
+def test_fixed_campaign_stops_repeating_nights_the_house_cannot_make_valid(tmp_path):
+    """A house that reaches T_min too early every constrained night: the fixed plan repeats the
+    night until ``max_invalid_nights`` scheduled nights were invalid, then stops and says why.
+    A manual night's failure is not the campaign's and does not count."""
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "fixed", "max_invalid_nights": 2}})
+    act = T0 + timedelta(days=10)
+    short = "cooled to T_min 1.4 h after the emission lag (needs 3 h)"
+
+    def failed(day: int, source: str) -> None:
+        start = T0 + timedelta(days=day)
+        nid = store.create_night("constrained", 21.0, start, start + timedelta(hours=7),
+                                 source=source)
+        store.set_night_state(nid, "aborted", ended=start + timedelta(hours=3))
+        store.assess_night(nid, False, [short])
+
+    with Store(cfg.db_path) as store:
+        store.set_campaign(campaign_plan(cfg))
+        failed(0, "schedule")
+        failed(1, "trigger")
+        req, _ = peek_next_night(store, cfg, act)
+        assert (req.kind, req.setpoint_c) == ("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)
+        failed(2, "schedule")
+        assert peek_next_night(store, cfg, act) == (None, None)
+        why = why_no_night(store, cfg)
+    assert why.startswith("campaign stopped: 2 scheduled nights were not valid (limit "
+                          "campaign.max_invalid_nights = 2; the last, a constrained night, "
+                          "because: cooled to T_min 1.4 h")
+    assert "night.comfort_band_k" in why

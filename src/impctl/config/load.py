@@ -244,6 +244,8 @@ def _check_adaptive(camp: CampaignConfig, bad) -> None:
                                    f"{2 * camp.min_each_kind} (a night of each kind)")
     if camp.stall_nights < 1:
         bad("campaign.stall_nights", "must be >= 1")
+    if camp.max_invalid_nights < 1:
+        bad("campaign.max_invalid_nights", "must be >= 1")
     if camp.next_night not in ("plan", "information"):
         bad("campaign.next_night", f"must be 'plan' or 'information', got {camp.next_night!r}")
     if camp.mode == "adaptive" and not camp.normal_setpoints_c:

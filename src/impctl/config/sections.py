@@ -78,6 +78,9 @@ class CampaignConfig:
     normal_nights_per_setpoint: int = 1
     misfire_grace_s: float = 3600.0
     fit_when_complete: bool = True  # fixed mode: fit after every valid night (false: never)
+    # fixed mode: stop repeating after this many scheduled nights ended invalid (the household
+    # is not asked for a cold night, night after night, that the house cannot make valid)
+    max_invalid_nights: int = 3
     enabled: bool = True
 
     @property

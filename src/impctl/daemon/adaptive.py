@@ -41,15 +41,13 @@ from ..campaign import (
 from ..config import Config
 from ..controller import NightRequest
 from ..store import Store
-from .schedule import drop_expired_requests, peek_next_night, window_after_act
+from .schedule import RUN_STATES, drop_expired_requests, peek_next_night, window_after_act
 
 if TYPE_CHECKING:
     from ..store import CampaignDecision
     from .service import Daemon
 
 _LOG = logging.getLogger("impctl.daemon")
-#: Nights that ran (the heat pump was driven, or the process died during it) and are over.
-RUN_STATES = ("done", "aborted", "interrupted")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,8 @@ from ..controller import NightRequest
 from ..store import Store
 
 _LOG = logging.getLogger("impctl.daemon")
+#: Nights that ran (the heat pump was driven, or the process died during it) and are over.
+RUN_STATES = ("done", "aborted", "interrupted")
 
 
 def campaign_plan(cfg: Config) -> list[tuple[str, float]]:
@@ -107,6 +109,8 @@ def peek_next_night(store: Store, cfg: Config, act: datetime
             return None, None
         return NightRequest(decision.kind, decision.setpoint_c, start, end, band,
                             source="schedule"), None
+    if gave_up(store, cfg) is not None:
+        return None, None
     # Before the daemon first ran, the store has no plan yet: the configured one is what runs.
     rows = store.campaign() or [(seq, kind, sp, None, None)
                                 for seq, (kind, sp) in enumerate(campaign_plan(cfg))]
@@ -125,7 +129,24 @@ def why_no_night(store: Store, cfg: Config) -> str:
         from .adaptive import decide_now
 
         return decide_now(store, cfg)[0].reason
-    return "campaign complete"
+    stopped = gave_up(store, cfg)
+    return stopped if stopped is not None else "campaign complete"
+
+
+def gave_up(store: Store, cfg: Config) -> str | None:
+    """Why the fixed campaign stopped repeating nights (None while it goes on): a house whose
+    scheduled nights keep ending invalid (a constrained night that reaches T_min before 3 h of
+    cooling, every night) would otherwise cost the household a cold night, night after night."""
+    invalid = [n for n in store.nights(states=RUN_STATES, valid=False) if n.source == "schedule"]
+    limit = cfg.campaign.max_invalid_nights
+    if len(invalid) < limit:
+        return None
+    last = invalid[-1]
+    why = "; ".join(last.reasons) or "no reason recorded"
+    return (f"campaign stopped: {len(invalid)} scheduled nights were not valid (limit "
+            f"campaign.max_invalid_nights = {limit}; the last, a {last.kind} night, because: "
+            f"{why}). If constrained nights keep reaching T_min too early, a wider "
+            f"night.comfort_band_k gives them room; raise the limit to go on")
 
 
 def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:

@@ -88,7 +88,11 @@ def _campaign_section(opts: DemoOptions, setpoints: list[float], per_sp: int) ->
                 "max_nights": opts.max_nights,
                 "target_rel_halfwidth": {"hlc": opts.target_rel[0], "tau": opts.target_rel[1]}}
     n_norm = opts.normal_nights
+    # The demo's own guard (_watch: 3 × the plan + 6 nights) ends a demo that cannot finish;
+    # the daemon's stop after invalid nights must not come first and leave it waiting.
+    n_plan = opts.constrained_nights + n_norm
     return {**common, "mode": "fixed", "constrained_nights": opts.constrained_nights,
+            "max_invalid_nights": 2 * n_plan + 6,
             "normal_setpoints_c": setpoints[: min(n_norm, 3)],
             "normal_nights_per_setpoint": per_sp if n_norm >= 3 else 1,
             "fit_when_complete": False}
@@ -112,7 +116,7 @@ def _campaign_done(store: Store, adaptive: bool) -> tuple[bool, int, str]:
 
 
 async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
-    from ..daemon.schedule import campaign_plan
+    from ..daemon.schedule import campaign_plan, gave_up
 
     last = 0.0
     adaptive = cfg.campaign.adaptive
@@ -126,6 +130,11 @@ async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
             nights = store.nights()
         if finished:
             return
+        if not adaptive:
+            with Store(cfg.db_path) as store:
+                stopped = gave_up(store, cfg)
+            if stopped is not None:
+                raise RuntimeError(f"demo: {stopped}")
         if where.endswith("stopped"):
             stopped_at = stopped_at or time.perf_counter()
             if time.perf_counter() - stopped_at > FIT_WAIT_S:
