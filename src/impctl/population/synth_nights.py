@@ -128,6 +128,18 @@ def imp_schedule(
     return SynthSchedule(index, sim_step_s, t_out, sp, windows, day_setpoint_c)
 
 
+def _stopped_at_t_min(t_air_c: np.ndarray, w0: int, w1: int, t_min_c: float, lag: int,
+                      after_c) -> np.ndarray:
+    """A constrained window's setpoints (steps w0:w1, per house) when it ends as the gateway
+    ends it: off (NaN) until the first step after ``lag`` steps where ``t_air_c`` [°C] reads
+    ≤ ``t_min_c``, ``after_c`` [°C] from there; off to the end where T_min is never reached."""
+    below = np.atleast_2d(t_air_c.T).T[w0:w1] <= t_min_c
+    below[:lag] = False
+    first = np.where(below.any(axis=0), below.argmax(axis=0), w1 - w0)
+    steps = np.arange(w1 - w0)[:, None]
+    return np.where(steps >= first[None, :], after_c, np.nan)
+
+
 def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float = 1.5,
                  stop_at_t_min: bool = False, emission_lag_h: float = 1.0):
     """Simulate houses through the schedule (closed loop on T_min if ``stop_at_t_min``).
@@ -142,13 +154,7 @@ def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float = 1
     for _, kind, w0, w1, t_set in sched.windows:
         if kind != "constrained":
             continue
-        t_air = np.atleast_2d(sim.t_air_c.T).T
-        below = t_air[w0:w1] <= t_set - band_k
-        below[:lag] = False
-        hit = below.any(axis=0)
-        first = np.where(hit, below.argmax(axis=0), w1 - w0)
-        steps = np.arange(w1 - w0)[:, None]
-        sp[w0:w1] = np.where(steps >= first[None, :], t_set - band_k, np.nan)
+        sp[w0:w1] = _stopped_at_t_min(sim.t_air_c, w0, w1, t_set - band_k, lag, t_set - band_k)
     sim = simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp, t_m_init_c=sched.t_m_init_c)
     return sim, sp
 
@@ -212,11 +218,8 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
         for _, kind, w0, w1, t_set in sched.windows:
             if kind != "constrained":
                 continue
-            below = np.atleast_2d(run["t_air_sensed_c"].T).T[w0:w1] <= t_set - band_k
-            below[:lag] = False
-            first = np.where(below.any(axis=0), below.argmax(axis=0), w1 - w0)
-            steps = np.arange(w1 - w0)[:, None]
-            sp[w0:w1] = np.where(steps >= first[None, :], sched.t_m_init_c, np.nan)
+            sp[w0:w1] = _stopped_at_t_min(run["t_air_sensed_c"], w0, w1, t_set - band_k, lag,
+                                          sched.t_m_init_c)
             run = _run(sp)
     logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
     return logged, sp
