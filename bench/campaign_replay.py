@@ -133,6 +133,9 @@ def main() -> None:
     ap.add_argument("--full", default="full@8", help="the dump's no-early-stop strategy")
     ap.add_argument("--bootstrap", type=int, default=2000)
     ap.add_argument("--rules", default=None, help="comma-separated names (default: all)")
+    ap.add_argument("--online", default="",
+                    help="also these strategies as the bench ran them (comma-separated), "
+                         "e.g. normal_after@8, whose nights are not the continued plan's")
     ap.add_argument("--prefixes", action="store_true",
                     help="also every household stopped after the first k valid nights of the "
                          "continued plan, k = 2 … max (no stop rule)")
@@ -173,6 +176,8 @@ def main() -> None:
               flush=True)
 
     row("fixed 2 + 3", {i: (r[2], r[3], r[6]) for i, r in fixed.items()})
+    for name in filter(None, args.online.split(",")):
+        row(f"{name} (as run)", {i: (r[2], r[3], r[6]) for i, r in online[name].items()})
     if args.prefixes:
         for k in range(2, max(len(r[11]) for r in full.values()) + 1):
             out = {}
