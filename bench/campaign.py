@@ -39,6 +39,14 @@ between strategies and targets):
   same with the normal setpoints warmest first, "spread" the balanced kind at the normal
   setpoint farthest from those already run, "plan_balanced" the balanced choice among the
   plan's nights not yet run; **h18c** — the rules before h18d (balanced, floor rule at 1/2);
+* **full** — the plan's nights in :func:`impctl.campaign.policy.plan_order`, continued in its
+  order past the plan (c21 n24 c21 n23 n22 c21 n24 c21 …), no stop rule but ``max_nights``:
+  every decision's inputs (night, forecast, candidates, outlook) are recorded, so any stop rule
+  of a plan-order campaign can be replayed on its fits offline (``bench/campaign_replay.py``);
+* **normal_after** — adaptive, the plan followed by normal nights only (n24 n23 n22 …);
+* **min3** — adaptive with "precision limited" judged from fits of 3 valid nights;
+* ``NAME@N`` — strategy NAME with ``max_nights`` N (default ``--max-nights``): e.g.
+  ``adaptive@8`` runs the plan continued for the houses whose intervals are still wide;
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
 
@@ -109,7 +117,23 @@ PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS, warmest_firs
          "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS)}
 #: strategies with the rules before h18d: the balanced choice, the floor rule at 1/2
 CRITERIA["h18c"] = "balanced"
-PREDICTED += ("h18c",)
+PREDICTED += ("h18c", "full", "normal_after", "min3")
+#: the plan continued past its five nights by normal nights only (warmest first)
+PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
+    ("normal", sp) for sp in sorted(NORMAL_SETPOINTS, reverse=True))
+#: policy constants a strategy runs with (set around its decisions only)
+POLICY_RULES = {"min3": {"MIN_FLOOR_NIGHTS": 3}}
+
+
+def base(strategy: str) -> str:
+    """"adaptive@8" → "adaptive"."""
+    return strategy.split("@", 1)[0]
+
+
+def max_nights_of(strategy: str, default: int) -> int:
+    """"adaptive@8" → 8; without "@N": ``default``."""
+    _, at, n = strategy.partition("@")
+    return int(n) if at else default
 
 
 class Progress:
@@ -205,6 +229,11 @@ class Campaign:
         self.done, self.reached, self.reason = False, False, ""
         self.predicted: tuple[float, float] | None = None   # of the night just run
         self.checks: list[tuple[float, float]] = []   # refit / predicted half-width, HLC τ
+        #: every decision's inputs: (night index, forecast °C, candidates, outlook, fits so far)
+        self.seen: list[tuple[int, float, list, Outlook | None, int]] = []
+        #: per fit: what else its JSON says (per-night lumped values, adequacy, model-error
+        #: group), for stop rules tried offline
+        self.extras: list[dict] = []
 
     def fit_key(self) -> tuple | None:
         kinds = {VARIANTS[v][0] for _, v in self.chosen}
@@ -215,7 +244,8 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
     """Decide night j for campaign c; returns the variant run or None."""
     if c.done:
         return None
-    if c.strategy == "fixed":
+    name = base(c.strategy)
+    if name == "fixed":
         n_valid = len(c.chosen)
         if n_valid >= len(FIXED):
             c.done, c.reason = True, "plan complete"
@@ -223,16 +253,29 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         v = FIXED[n_valid]
     else:
         cands, outlook = [], None
-        setpoints = (max(NORMAL_SETPOINTS),) if c.strategy == "warmest" else NORMAL_SETPOINTS
-        if c.strategy in PREDICTED and c.key is not None:
+        setpoints = (max(NORMAL_SETPOINTS),) if name == "warmest" else NORMAL_SETPOINTS
+        if name in PREDICTED and c.key is not None:
             cands, outlook = fits.candidates(c.key, forecast, setpoints)
-        target = (replace(c.target, floor_dominance=0.0) if c.strategy == "unreachable"
-                  else replace(c.target, floor_dominance=0.5) if c.strategy == "h18c"
-                  else c.target)
-        d = decide(c.history, c.fits, cands, target, forecast_t_out_c=forecast,
-                   t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
-                   normal_setpoints_c=setpoints, outlook=outlook,
-                   criterion=CRITERIA.get(c.strategy), plan=PLANS.get(c.strategy))
+        c.seen.append((j, forecast, cands, outlook, len(c.fits)))
+        target = (replace(c.target, floor_dominance=0.0) if name == "unreachable"
+                  else replace(c.target, floor_dominance=0.5) if name == "h18c"
+                  # no early stop: the floor rule never dominates, no stall, no predictions
+                  else replace(c.target, floor_dominance=1.0, stall_nights=10 ** 6)
+                  if name == "full" else c.target)
+        saved = {k: getattr(policy, k) for k in POLICY_RULES.get(name, {})}
+        for k, value in POLICY_RULES.get(name, {}).items():
+            setattr(policy, k, value)
+        try:
+            d = decide(c.history, c.fits, [] if name == "full" else cands, target,
+                       forecast_t_out_c=forecast, t_out_band_c=BAND_C,
+                       constrained_setpoint_c=CONSTRAINED_C, normal_setpoints_c=setpoints,
+                       outlook=None if name == "full" else outlook,
+                       criterion=CRITERIA.get(name, "plan" if name in PLANS or name == "full"
+                                              else None),
+                       plan=PLANS.get(name, PLANS["plan_warm"] if name == "full" else None))
+        finally:
+            for k, value in saved.items():
+                setattr(policy, k, value)
         if d.action == "stop":
             c.done, c.reached, c.reason = True, d.reached, d.reason
             return None
@@ -252,14 +295,15 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
 
 def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: list[int],
         strategies: list[str]) -> list:
-    camps = [Campaign(i, s, target) for s in strategies for i in households]
+    camps = [Campaign(i, s, replace(target, max_nights=max_nights_of(s, target.max_nights)))
+             for s in strategies for i in households]
     for j in range(k):
         ran = [c for c in camps if step(c, j, fits, float(forecast[c.i][j]), first_t_out)
                is not None]
         keys = [c.fit_key() for c in ran]
         need = [key for c, key in zip(ran, keys, strict=True)
                 if key is not None and c.chosen and c.chosen[-1][0] == j
-                and (c.strategy != "fixed" or len(c.chosen) == len(FIXED))]
+                and (base(c.strategy) != "fixed" or len(c.chosen) == len(FIXED))]
         fits.ensure(need)
         for c in ran:
             key = c.fit_key()
@@ -269,6 +313,7 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
             result = fits.cache[key]
             if result is not None:
                 c.fits.append(FitSummary.from_fit_json(result, len(c.chosen)))
+                c.extras.append(_extras(result))
                 if c.predicted is not None:
                     c.checks.append((c.fits[-1].hlc_rel / c.predicted[0],
                                      c.fits[-1].tau_rel / c.predicted[1]))
@@ -277,9 +322,21 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
                       f"{sum(not c.done for c in camps)} campaigns running", force=True)
     for c in camps:
         if not c.done:
-            c.reason = ("plan complete" if c.strategy == "fixed" and len(c.chosen) >= len(FIXED)
+            c.reason = ("plan complete" if base(c.strategy) == "fixed"
+                        and len(c.chosen) >= len(FIXED)
                         else "ran out of simulated nights")
     return camps
+
+
+def _extras(result: dict) -> dict:
+    """The parts of a fit JSON a stop rule might read besides :class:`FitSummary`'s."""
+    per_night = [{"kind": p.get("kind"), "lumped": p.get("lumped")}
+                 for p in result.get("per_night", [])]
+    fit = result.get("fit", {})
+    return {"per_night": per_night, "adequacy": result.get("adequacy"),
+            "model_error": fit.get("model_error"), "interval_source": fit.get("interval_source"),
+            "night_gain": fit.get("night_gain"), "sigma": fit.get("sigma"),
+            "validation": result.get("validation")}
 
 
 def _label(c: Campaign) -> str:
@@ -298,7 +355,7 @@ def _record(c: Campaign) -> tuple:
     nights = tuple((n.kind, n.setpoint_c) for n in c.history)
     fitted = tuple(VARIANTS[v] for _, v in c.chosen) if final is not None else ()
     return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
-            nights, fitted)
+            nights, fitted, c.seen, tuple(c.history), c.extras)
 
 
 #: Set in the parent before the workers fork (copy-on-write: the simulated nights are not
@@ -354,10 +411,12 @@ def main() -> None:
                     help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
     strategies = [x.strip() for x in args.strategies.split(",")]
-    unknown = [x for x in strategies if x not in STRATEGIES]
+    unknown = [x for x in strategies if base(x) not in STRATEGIES
+               or not (x.partition("@")[2] or "1").isdigit()]
     if unknown:
         ap.error(f"--strategies: unknown {', '.join(unknown)} (known: {', '.join(STRATEGIES)})")
-    n, k = args.households, args.max_nights + 2
+    n = args.households
+    k = max(max_nights_of(s, args.max_nights) for s in strategies) + 2
     SEED = args.seed
     NORMAL_SETPOINTS = tuple(float(x) for x in args.normal.split(","))
     if not set(NORMAL_SETPOINTS) <= {sp for kind, sp in VARIANTS if kind == "normal"}:

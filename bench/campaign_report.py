@@ -21,7 +21,17 @@ STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreac
               "plan_warm": "adaptive, plan order warmest first",
               "spread": "adaptive, balanced + farthest setpoint",
               "plan_balanced": "adaptive, balanced among the plan's nights",
-              "h18c": "adaptive, h18c rules (balanced, floor 1/2)", "fixed": "fixed 2 + 3"}
+              "h18c": "adaptive, h18c rules (balanced, floor 1/2)",
+              "full": "plan continued, no early stop",
+              "normal_after": "adaptive, plan then normal nights",
+              "min3": "adaptive, precision limited from 3 nights",
+              "fixed": "fixed 2 + 3"}
+
+
+def label(strategy: str) -> str:
+    """"adaptive@8" → "adaptive, max 8 nights"."""
+    name, at, n = strategy.partition("@")
+    return STRATEGIES[name] + (f", max {n} nights" if at else "")
 
 
 def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, float, int]]:
@@ -48,12 +58,11 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
                     key = f"{kind[0]}{sp:g}"
                     count[key] = count.get(key, 0) + 1
         total = sum(count.values()) or 1
-        print(f"  {STRATEGIES[s]:<40} " + ", ".join(
+        print(f"  {label(s):<40} " + ", ".join(
             f"{k} {100 * v / total:.0f} %" for k, v in sorted(count.items())))
     if "fixed" not in strategies:
         return
     base = _errors(records, houses, "fixed")
-    rng = np.random.default_rng(seed)
     print("\npaired with fixed 2 + 3 (same households): median |error| difference, "
           "percentage points (strategy − fixed), bootstrap 95 % interval")
     for s in strategies:
@@ -65,22 +74,34 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
             continue
         a = np.array([mine[i] for i in common])
         b = np.array([base[i] for i in common])
-        idx = rng.integers(0, len(common), (n_boot, len(common)))
         cells = []
-        for q, name in ((0, "HLC"), (1, "τ")):
-            d = np.median(a[:, q]) - np.median(b[:, q])
-            boot = np.median(a[idx, q], axis=1) - np.median(b[idx, q], axis=1)
-            lo, hi = np.percentile(boot, [2.5, 97.5])
+        for q, name, (d, lo, hi) in zip((0, 1), ("HLC", "τ"), paired_diff(a, b, n_boot, seed),
+                                        strict=True):
             wins = np.mean(a[:, q] <= b[:, q]) * 100
             cells.append(f"{name} {d:+.1f} ({lo:+.1f} … {hi:+.1f}), no worse in {wins:.0f} %")
         dn = np.median(a[:, 2]) - np.median(b[:, 2])
-        print(f"  {STRATEGIES[s]:<40} n={len(common)}: " + "; ".join(cells)
+        print(f"  {label(s):<40} n={len(common)}: " + "; ".join(cells)
               + f"; nights median {dn:+g}")
+
+
+def paired_diff(a: np.ndarray, b: np.ndarray, n_boot: int, seed: int = 1
+                ) -> list[tuple[float, float, float]]:
+    """Difference of median |error| [percentage points], ``a`` − ``b`` (rows: the same
+    households; columns 0 HLC, 1 τ), with its bootstrap 95 % interval (households resampled,
+    pairs kept; the same resamples for every strategy compared on the same households)."""
+    idx = np.random.default_rng(seed).integers(0, len(a), (n_boot, len(a)))
+    out = []
+    for q in (0, 1):
+        d = np.median(a[:, q]) - np.median(b[:, q])
+        boot = np.median(a[idx, q], axis=1) - np.median(b[idx, q], axis=1)
+        lo, hi = np.percentile(boot, [2.5, 97.5])
+        out.append((float(d), float(lo), float(hi)))
+    return out
 
 
 def trajectories(records: list, houses, strategy: str) -> None:
     """Per household: each fit's ±HLC/±τ [%] (floor in brackets), errors, and why it stopped."""
-    print(f"\n{STRATEGIES[strategy]}: per household, each fit ±HLC/±τ % [floor] (error %)")
+    print(f"\n{label(strategy)}: per household, each fit ±HLC/±τ % [floor] (error %)")
     for r in sorted((r for r in records if r[0] == strategy), key=lambda r: r[1]):
         h = houses.take(r[1])
         steps = " → ".join(
@@ -94,7 +115,7 @@ def trajectories(records: list, houses, strategy: str) -> None:
 def summarise(records: list, houses, target: Target, strategies: list[str]) -> None:
     print(f"\nTarget: HLC ±{target.hlc_rel:.0%}, τ ±{target.tau_rel:.0%} (95 % half-width / "
           f"estimate), max {target.max_nights} nights, stall {target.stall_nights} nights")
-    print(f"{'strategy':<40} {'nights med/P90':>14} {'reached':>8} {'no fit':>7} "
+    print(f"{'strategy':<40} {'nights med/P90/max':>18} {'reached':>8} {'no fit':>7} "
           f"{'cover HLC/τ':>12} {'|err| HLC/τ %':>14} {'±HLC/τ % med':>13}  stopped by")
     rows = []
     for s in strategies:
@@ -124,12 +145,14 @@ def summarise(records: list, houses, target: Target, strategies: list[str]) -> N
         # stop on it
         met = [r[3] is not None and target.ratio(r[3].hlc_rel, r[3].tau_rel) <= 1 for r in sub]
         reasons = ", ".join(f"{k} {v}" for k, v in sorted(why.items()))
-        print(f"{STRATEGIES[s]:<40} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<5.1f} "
+        print(f"{label(s):<40} {np.median(nights):>6.1f} / {np.percentile(nights, 90):<4.1f} / "
+              f"{nights.max():<2d} "
               f"{pct(met):>7.0f}% {len(sub) - len(got):>7d} "
               f"{pct(cov_h):>5.0f}/{pct(cov_t):<4.0f}% {med(err_h):>6.1f} / {med(err_t):<5.1f} "
               f"{med(w_h):>5.1f} / {med(w_t):<5.1f}  {reasons}")
-        rows.append(f"| {target.hlc_rel:.0%} / {target.tau_rel:.0%} | {STRATEGIES[s]} | "
-                    f"{np.median(nights):g} / {np.percentile(nights, 90):g} | {pct(met):.0f} % | "
+        rows.append(f"| {target.hlc_rel:.0%} / {target.tau_rel:.0%} | {label(s)} | "
+                    f"{np.median(nights):g} / {np.percentile(nights, 90):g} / {nights.max()} | "
+                    f"{pct(met):.0f} % | "
                     f"{pct(cov_h):.0f} / {pct(cov_t):.0f} % | {med(err_h):.1f} / "
                     f"{med(err_t):.1f} % | {med(w_h):.1f} / {med(w_t):.1f} % | {reasons} |")
     print("markdown:\n" + "\n".join(rows))
@@ -153,7 +176,7 @@ def by_night_set(records: list, houses, strategies: list[str], top: int = 6) -> 
     print("\ntruth in final interval HLC / τ by the final fit's nights (n: fits)")
     for s in strategies:
         got = [r for r in records if r[0] == s and r[3] is not None]
-        for label, key in (("kind mix", lambda r: _mix(r[9])),
+        for group, key in (("kind mix", lambda r: _mix(r[9])),
                            ("sequence", lambda r: " ".join(f"{k[0]}{sp:g}" for k, sp in r[9]))):
             groups: dict[str, list[tuple[bool, bool]]] = {}
             for r in got:
@@ -162,6 +185,6 @@ def by_night_set(records: list, houses, strategies: list[str], top: int = 6) -> 
                     (r[3].hlc_low <= h.hlc_w_per_k <= r[3].hlc_high,
                      r[3].tau_low <= h.tau_h <= r[3].tau_high))
             ranked = sorted(groups.items(), key=lambda kv: -len(kv[1]))[:top]
-            print(f"  {STRATEGIES[s]:<32} {label}: " + "; ".join(
+            print(f"  {label(s):<32} {group}: " + "; ".join(
                 f"{k} n={len(v)} {100 * np.mean([a for a, _ in v]):.0f}/"
                 f"{100 * np.mean([b for _, b in v]):.0f} %" for k, v in ranked))

@@ -381,3 +381,21 @@ def test_daemon_plan_from_the_campaign_config():
                           ("normal", 23.0), ("normal", 21.0), ("normal", 21.0))
     # counts that leave out a kind: the policy's default plan instead
     assert _plan(Config(campaign=CampaignConfig(constrained_nights=0))) is None
+
+
+def test_a_raised_max_nights_continues_the_plan_in_its_order():
+    # max_nights above the plan's five (h18e's bench): the plan again from its start, never
+    # two constrained nights in a row, stopped at max_nights, valid or not
+    plan = policy.plan_order(21.0, (22.0, 23.0, 24.0))
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0), "criterion": "plan", "plan": plan}
+    history: list[NightRecord] = []
+    for n in range(8):
+        d = decide(history, [fit(max(n, 2), 0.6, 0.6)] if n >= 2 else [], [],
+                   Target(max_nights=8), **kw)
+        assert d.action == "run", d.reason
+        # the 7th night is invalid: repeated as the 8th
+        history.append(NightRecord(d.kind, d.setpoint_c, n != 6))
+    assert [(n.kind, n.setpoint_c) for n in history] == list(plan) + [
+        ("constrained", 21.0), ("normal", 24.0), ("normal", 24.0)]
+    d = decide(history, [fit(7, 0.6, 0.6)], [], Target(max_nights=8), **kw)
+    assert d.action == "stop" and "max_nights 8" in d.reason

@@ -1,0 +1,203 @@
+"""Stop rules of the plan-order adaptive campaign replayed offline on ``bench/campaign.py``'s
+dump (issue 18, h18e): how many nights, how accurate, against the fixed 2 + 3 plan.
+
+Run:  .venv/bin/python bench/campaign_replay.py DUMP.pkl [--full full@8] [--bootstrap 2000]
+          [--rules NAME,...]
+
+``DUMP.pkl`` comes from ``bench/campaign.py --strategies …,full@8,fixed --dump DUMP.pkl``. The
+``full@N`` campaigns ran the plan's nights continued in its order (c21 n24 c21 n23 n22 c21 n24
+c21 …) with no stop rule but ``max_nights`` and recorded every decision's inputs (night,
+forecast, candidates, outlook, fits so far). Every plan-order campaign runs a prefix of those
+nights, so a stop rule is replayed exactly by asking :func:`impctl.campaign.decide` — with the
+rule's settings — at each recorded decision and stopping at the first "stop" (checked: the
+replayed ``adaptive`` and ``adaptive@N`` rows equal ``bench/campaign.py``'s own). Rules that
+need more than the policy reads (``veto``: a stop is overruled, the plan's next night runs)
+try what the data suggest before any is built into the policy.
+
+Printed per rule: nights run median / P90 / max, truth inside the final HLC / τ interval, median
+|error|, and the paired difference of median |error| against the fixed plan (bootstrap 95 %
+interval over households).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pickle
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from impctl.campaign import decide, policy
+
+sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from campaign import BAND_C, CONSTRAINED_C, NORMAL_SETPOINTS, PLANS  # noqa: E402
+from campaign_report import paired_diff  # noqa: E402
+
+
+def _disagree(extras: dict, limit: float, quantity: str = "tau") -> bool:
+    """The fit's per-night estimates of ``quantity`` (each night fitted alone: the
+    constrained and the normal night) differ by more than ``limit`` (|log| of the largest
+    over the smallest)."""
+    values = [p["lumped"].get(quantity) for p in extras.get("per_night", [])
+              if isinstance(p.get("lumped"), dict)]
+    values = [v for v in values if isinstance(v, (int, float)) and v > 0]
+    return len(values) >= 2 and math.log(max(values) / min(values)) > limit
+
+
+def _floor_share(fit) -> float:
+    """The floor's share of the worst ratio (HLC's, the one that misses most)."""
+    return fit.hlc_floor_rel / fit.hlc_rel if fit.hlc_rel > 0 else 0.0
+
+
+#: name → (target overrides, policy constants, veto(fits, extras, history) -> bool or None)
+RULES: dict[str, tuple[dict, dict, object]] = {}
+for _n in (5, 6, 7, 8):
+    RULES[f"adaptive@{_n}"] = ({"max_nights": _n}, {}, None)
+    RULES[f"min3@{_n}"] = ({"max_nights": _n}, {"MIN_FLOOR_NIGHTS": 3}, None)
+    RULES[f"min4@{_n}"] = ({"max_nights": _n}, {"MIN_FLOOR_NIGHTS": 4}, None)
+    # stop at 4 valid nights (c n24 c n23) when a stop rule says so, else at max_nights
+    RULES[f"four_or_max@{_n}"] = (
+        {"max_nights": _n}, {"MIN_FLOOR_NIGHTS": 4},
+        (lambda fits, extras, hist: bool(fits) and fits[-1].nights != 4))
+    for _lim in (0.3, 0.6, 1.0):
+        for _q in ("tau", "hlc"):
+            # a stricter stop for houses whose first nights disagree: no stop at 2 nights
+            RULES[f"disagree_{_q}{_lim:g}@{_n}"] = (
+                {"max_nights": _n}, {},
+                (lambda fits, extras, hist, lim=_lim, q=_q: bool(extras)
+                 and fits[-1].nights < 3 and _disagree(extras[-1], lim, q)))
+    # the model-error group of the two-night fit: no stop at 2 nights for "plain" fits
+    RULES[f"not_plain_at_2@{_n}"] = (
+        {"max_nights": _n}, {},
+        (lambda fits, extras, hist: bool(extras) and fits[-1].nights < 3
+         and (extras[-1].get("model_error") or {}).get("group") == "plain"))
+    for _lim in (0.4, 0.6, 0.8):
+        # both: no stop at 2 when the first nights disagree on τ, none between 3 and max
+        RULES[f"disagree_tau{_lim:g}_or_max@{_n}"] = (
+            {"max_nights": _n}, {},
+            (lambda fits, extras, hist, lim=_lim: bool(fits) and (
+                fits[-1].nights >= 3 or _disagree(extras[-1], lim, "tau"))))
+    # stop at 2 nights (as adaptive) or at max_nights, never in between
+    RULES[f"two_or_max@{_n}"] = (
+        {"max_nights": _n}, {}, (lambda fits, extras, hist: bool(fits) and fits[-1].nights >= 3))
+    for _share in (0.5, 0.6, 0.7):
+        # a minimum of 3 nights when the floor is most of the two-night interval
+        RULES[f"min3_share{_share:g}@{_n}"] = (
+            {"max_nights": _n}, {},
+            (lambda fits, extras, hist, sh=_share: bool(fits) and fits[-1].nights < 3
+             and _floor_share(fits[-1]) >= sh))
+    for _fd in (0.25, 0.5):
+        RULES[f"floor{_fd:g}@{_n}"] = ({"max_nights": _n, "floor_dominance": _fd}, {}, None)
+    RULES[f"gain20@{_n}"] = ({"max_nights": _n}, {"MIN_GAIN": 0.2}, None)
+    RULES[f"stall2@{_n}"] = ({"max_nights": _n, "stall_nights": 2}, {}, None)
+
+
+def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, object, str]:
+    """(nights run, final FitSummary or None, stop reason) of one household under ``rule``."""
+    overrides, constants, veto = rule
+    target = replace(target, **overrides)
+    history, fits, seen, extras = rec[11], rec[5], rec[10], rec[12]
+    saved = {k: getattr(policy, k) for k in constants}
+    for k, value in constants.items():
+        setattr(policy, k, value)
+    try:
+        h = 0
+        for _j, forecast, cands, outlook, n_fits in seen:
+            d = decide(history[:h], fits[:n_fits], cands, target, forecast_t_out_c=forecast,
+                       t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
+                       normal_setpoints_c=NORMAL_SETPOINTS, outlook=outlook,
+                       criterion="plan", plan=PLANS["plan_warm"])
+            if (d.action == "stop" and veto is not None and not d.reached
+                    and h < target.max_nights and veto(fits[:n_fits], extras[:n_fits],
+                                                       history[:h])):
+                d = replace(d, action="run" if BAND_C[0] <= forecast <= BAND_C[1]
+                            else "skip")
+            if d.action == "stop":
+                return h, (fits[n_fits - 1] if n_fits else None), d.reason
+            if d.action == "skip":
+                continue
+            if h >= len(history):
+                break
+            h += 1
+        return h, (fits[-1] if fits else None), "ran out of the full campaign's nights"
+    finally:
+        for k, value in saved.items():
+            setattr(policy, k, value)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("dump")
+    ap.add_argument("--full", default="full@8", help="the dump's no-early-stop strategy")
+    ap.add_argument("--bootstrap", type=int, default=2000)
+    ap.add_argument("--rules", default=None, help="comma-separated names (default: all)")
+    ap.add_argument("--online", default="",
+                    help="also these strategies as the bench ran them (comma-separated), "
+                         "e.g. normal_after@8, whose nights are not the continued plan's")
+    ap.add_argument("--prefixes", action="store_true",
+                    help="also every household stopped after the first k valid nights of the "
+                         "continued plan, k = 2 … max (no stop rule)")
+    args = ap.parse_args()
+    with open(args.dump, "rb") as fh:
+        dump = pickle.load(fh)
+    target, records = dump["targets"][0], dump["records"][0]
+    truth = dump["truth"]
+    full = {r[1]: r for r in records if r[0] == args.full}
+    fixed = {r[1]: r for r in records if r[0] == "fixed" and r[3] is not None}
+    online = {}
+    for r in records:
+        online.setdefault(r[0], {})[r[1]] = r
+    names = args.rules.split(",") if args.rules else list(RULES)
+    print(f"{len(full)} households ({args.full}), {len(fixed)} fixed fits; target "
+          f"±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}")
+    print("| rule | nights median / P90 / max | truth inside HLC / τ | median abs. error HLC / τ"
+          " | paired − fixed HLC / τ, pp (95 % interval) |")
+    print("|---|---|---|---|---|")
+
+    def row(name: str, out: dict) -> None:
+        nights = np.array([n for n, _, _ in out.values()])
+        got = {i: f for i, (_, f, _) in out.items() if f is not None}
+        cov = np.mean([[f.hlc_low <= truth[i][0] <= f.hlc_high,
+                        f.tau_low <= truth[i][1] <= f.tau_high] for i, f in got.items()],
+                      axis=0) * 100
+        err = {i: (abs(f.hlc_w_per_k / truth[i][0] - 1) * 100,
+                   abs(f.tau_h / truth[i][1] - 1) * 100) for i, f in got.items()}
+        med = np.median(np.array(list(err.values())), axis=0)
+        common = sorted(set(err) & set(fixed))
+        a = np.array([err[i] for i in common])
+        b = np.array([(abs(fixed[i][3].hlc_w_per_k / truth[i][0] - 1) * 100,
+                       abs(fixed[i][3].tau_h / truth[i][1] - 1) * 100) for i in common])
+        (dh, lh, hh), (dt, lt, ht) = paired_diff(a, b, args.bootstrap)
+        print(f"| {name} | {np.median(nights):g} / {np.percentile(nights, 90):g} / "
+              f"{nights.max()} | {cov[0]:.0f} / {cov[1]:.0f} % | {med[0]:.1f} / {med[1]:.1f} % | "
+              f"{dh:+.1f} ({lh:+.1f} … {hh:+.1f}) / {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) |",
+              flush=True)
+
+    row("fixed 2 + 3", {i: (r[2], r[3], r[6]) for i, r in fixed.items()})
+    for name in filter(None, args.online.split(",")):
+        row(f"{name} (as run)", {i: (r[2], r[3], r[6]) for i, r in online[name].items()})
+    if args.prefixes:
+        for k in range(2, max(len(r[11]) for r in full.values()) + 1):
+            out = {}
+            for i, rec in full.items():
+                fits = [f for f in rec[5] if f.nights <= k]
+                valid = np.cumsum([n.valid for n in rec[11]])
+                out[i] = (int(np.searchsorted(valid, k) + 1) if valid[-1] >= k else len(valid),
+                          fits[-1] if fits else None, "")
+            row(f"first {k} valid nights of the continued plan", out)
+    for name in names:
+        out = {i: replay(rec, RULES[name], target) for i, rec in full.items()}
+        same = "adaptive" if name == "adaptive@5" else name
+        if same in online:   # the replay must equal the bench's own campaign
+            diff = [i for i, (n, f, _) in out.items()
+                    if (n, f) != (online[same][i][2], online[same][i][3])]
+            if diff:
+                print(f"  ! {name}: replay differs from the online campaign for households "
+                      f"{diff[:10]}")
+        row(name, out)
+
+
+if __name__ == "__main__":
+    main()
