@@ -123,7 +123,9 @@ def test_plant_schedule_stops_constrained_nights_at_t_min_as_the_gateway():
     sched = imp_schedule(n, seed=seed, n_constrained=1, n_normal=1, spinup_days=1)
     params = sample_params(n, seed)
     open_run, open_sp = run_schedule_plant(houses, sched, params, seed=seed)
-    stop_run, sp = run_schedule_plant(houses, sched, params, seed=seed, stop_at_t_min=True)
+    # At T_min itself (the gateway's anticipated end: tests/test_gateway_nights.py).
+    stop_run, sp = run_schedule_plant(houses, sched, params, seed=seed, stop_at_t_min=True,
+                                      anticipate=False)
     assert np.array_equal(open_sp, sched.setpoint_c, equal_nan=True)      # default unchanged
     (_, _, w0, w1, t_set), = [w for w in sched.windows if w[1] == "constrained"]
     lag = int(round(3600 / sched.dt_s))
