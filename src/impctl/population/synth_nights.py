@@ -381,7 +381,9 @@ def sample_nights(
             on = ~np.isnan(spc[w0:w1])
             end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
             steps = steps[steps < end]
-        if steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
+        if not len(steps):   # never switched off (pre-heat short): a night without samples
+            q = np.zeros(0)
+        elif steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
             q = phi[steps[0]:steps[0] + len(steps) * stride].reshape(-1, stride).mean(axis=1)
         else:
             q = np.array([phi[s:s + stride].mean() for s in steps])
