@@ -307,3 +307,28 @@ def gateway_types(gate: dict, n: int, valid_h: float) -> dict:
             else f"shortest used night ≥ {lo:g} h"
         out[label] = (short >= lo) & (short < hi)
     return out
+
+
+def dump(res: dict, path: str) -> None:
+    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits and, on the
+    gateway's nights, the valid constrained nights used, those paid and the comfort cost."""
+    import json
+
+    truth = res["truth"]
+    true = {"hlc": [h.hlc_w_per_k for h in truth], "tau": [h.tau_h for h in truth],
+            "c_m": [h.c_m_j_per_k for h in truth]}
+    out = {"eps_pct": [float(x) for x in res["eps_fit"]]}
+    for k, t in true.items():
+        est = [f.lumped_[k] for f in res["fit"]]
+        out[f"{k}_err_pct"] = [float(x) for x in rel([e.value for e in est], t)]
+        out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
+    gate = res.get("gateway")
+    if gate is not None:
+        n = len(truth)
+        out["n_used"] = gate["used"][:, :n].sum(axis=0).tolist()
+        out["paid"] = gate["paid"][:n].tolist()
+        out["coldest_c"] = gate["comfort"]["coldest_c"][:n].tolist()
+        out["kh_per_night"] = gate["comfort"]["kh_per_night"][:n].tolist()
+    with open(path, "w") as fh:
+        json.dump(out, fh)
+    print(f"per-household figures written to {path}")

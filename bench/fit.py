@@ -3,7 +3,8 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
-          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--stop-at-t-min]
+          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--band-k K] [--valid-h H]
+          [--no-anticipate] [--no-stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -16,8 +17,8 @@ classifiers are trained with other seeds, so they never saw these houses). Each 
 the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
 21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
-:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + 1.5 °C and cool
-22:00–05:00 (the paper's case study), normal nights step up from the 21 °C day; both 2 h before
+:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + ΔT and cool from
+22:00 until the gateway ends them (below), normal nights step up from the 21 °C day; both 2 h before
 the window, as the gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power
 sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power
 the mean until the next sample).
@@ -60,9 +61,18 @@ the normal nights' alone (issue 14, branch h14p; before it, this bench ran const
 normal 0 h, a protocol the gateway never ran: ``--preheat-h 4 --preheat-h-normal 0``). Every
 run prints what the campaign costs the household: heat [kWh] and hours above the day setpoint.
 
-``--stop-at-t-min`` ends every constrained night at T_min as the gateway does (day setpoint from
-there; the night's rows end there) and prints how many the gateway's validity rule (< 3 h after
-the 1 h emission lag) would repeat, with the errors split by it (issue 14, branch h14t).
+Constrained nights are the gateway's (default since branch h14w; ``--no-stop-at-t-min``: cool to
+05:00 and fit every night, the figures before): each ends where the gateway ends it — T_min =
+T_set − ``--band-k`` (default ``night_protocol.DEFAULT_BAND_K``) or the anticipated T_min, the day
+setpoint from there, not switched off where the pre-heat fell short (``--no-anticipate``: at T_min
+only) — and is valid with ≥ ``--valid-h`` (``night_protocol.MIN_NIGHT_H``, 3 h) after the 1 h
+emission lag; an invalid one is repeated on a spare constrained night after the plan, up to
+``campaign.max_invalid_nights`` (3) invalid nights, and the fit gets the first two valid ones
+and the six normal nights. A household with no valid one is not identified by the campaign (the
+gateway does not fit it); the bench still fits its normal nights and prints it apart (τ and C_m
+then come from the ranges, not from data). Every run prints the invalid nights, the repeats,
+the households identified and the comfort cost (coldest room, degree-hours below the day
+setpoint), and the errors by what the gateway kept (issue 14, branches h14t, h14w).
 
 ``--ranges true,classifier`` fits the same simulated nights with each range source in turn (the
 classifiers of ``--model-dir``, e.g. trained by ``impctl train --plant realistic``); a final
@@ -108,7 +118,16 @@ from _fit_protocol import (  # also imported from here by the other bench script
     window_energy,
 )
 from _fit_speed import speed
-from _fit_tables import gateway_lines, gateway_types, print_summary, rel, report, stats, summary_row
+from _fit_tables import (
+    dump,
+    gateway_lines,
+    gateway_types,
+    print_summary,
+    rel,
+    report,
+    stats,
+    summary_row,
+)
 
 from impctl.fit import baselines
 from impctl.fit.estimator import NightFit
@@ -136,7 +155,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     res_cost = campaign_cost(heat, sched)
     gate = gateway_campaign(sp, sched, need_h=valid_h) if stop else None
     if stop:
-        gateway_lines(gate, comfort_cost(sim, sched, gate["run"]), sched, valid_h)
+        gate["comfort"] = comfort_cost(sim, sched, gate["run"])
+        gateway_lines(gate, gate["comfort"], sched, valid_h)
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
         # The plant's heat output also carries its gains, control and emitter, which no 5R1C
@@ -222,6 +242,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     res["eps_coh"] = coheating_eps(res["coh_hlc"], sched, sim, truth_e)
     res["eps_floor"] = floor
     res["cost"] = res_cost
+    res["gateway"] = gate
     return res
 
 
@@ -379,6 +400,9 @@ def main() -> None:
     ap.add_argument("--valid-h", type=float, default=MIN_NIGHT_H, metavar="H",
                     help="hours after the emission lag a constrained night needs to be valid "
                          "(the gateway's MIN_NIGHT_H); also the fit's min_night_h")
+    ap.add_argument("--dump", default=None, metavar="PREFIX",
+                    help="write each run's per-household errors to PREFIX-STEP-RANGES.json "
+                         "(for paired comparisons between runs)")
     ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
                     help="stop exactly at T_min, not where the gateway anticipates it")
     args = ap.parse_args()
@@ -410,6 +434,8 @@ def main() -> None:
         for source in sources:
             res = run_step(houses, step, source, args, limit)
             report(res, step, source, args)
+            if args.dump:
+                dump(res, f"{args.dump}-{step:g}-{source}.json")
             rows.append(summary_row(res, step, source))
     print_summary(rows, args)
 
