@@ -12,10 +12,10 @@ from impctl.config import CampaignConfig
 from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.model import HouseParameters
 from impctl.night_protocol import MIN_NIGHT_H
+from impctl.population.gateway_nights import gateway_constrained_nights
 from impctl.population.realism import sample_params
 from impctl.population.synth_nights import (
     PlantSchedule,
-    gateway_constrained_nights,
     imp_schedule,
     run_schedule,
     run_schedule_plant,

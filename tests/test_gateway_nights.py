@@ -13,11 +13,10 @@ import pytest
 from impctl.controller.plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from impctl.fit.nights.data import prepare_nights
 from impctl.night_protocol import MIN_NIGHT_H
+from impctl.population.gateway_nights import gateway_constrained_nights, gateway_end
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
 from impctl.population.synth_nights import (
-    gateway_constrained_nights,
-    gateway_end,
     imp_schedule,
     run_schedule,
     run_schedule_plant,
