@@ -189,7 +189,7 @@ def _safe_house(params):
 
 def gateway_campaign(sp, sched, need_h: float = MIN_NIGHT_H) -> dict:
     """The constrained nights a gateway runs and keeps, per household
-    (:func:`impctl.population.synth_nights.gateway_constrained_nights` with the gateway's
+    (:func:`impctl.population.gateway_nights.gateway_constrained_nights` with the gateway's
     ``[campaign]`` defaults: 2 valid constrained nights wanted, at most
     ``campaign.max_invalid_nights`` invalid ones; valid = ≥ ``need_h`` [h] after the 1 h lag)."""
     cfg = CampaignConfig()
