@@ -8,10 +8,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from impctl.config import CampaignConfig
 from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.model import HouseParameters
+from impctl.night_protocol import MIN_NIGHT_H
+from impctl.population.gateway_nights import gateway_constrained_nights
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import imp_schedule, run_schedule, run_schedule_plant
+from impctl.population.synth_nights import (
+    PlantSchedule,
+    imp_schedule,
+    run_schedule,
+    run_schedule_plant,
+)
 
 VAL_SEED = 20260
 CLASS_RANGES = {
@@ -68,6 +76,12 @@ def val_schedule(n: int, args=None):
     c_sp = getattr(args, "constrained_setpoint", None) if args is not None else None
     if c_sp is not None:
         kw["constrained_setpoint_c"] = None if c_sp == "cycle" else float(c_sp)
+    if args is not None and getattr(args, "band_k", None) is not None:
+        kw["band_k"] = float(args.band_k)
+    if args is not None and getattr(args, "stop_at_t_min", False):
+        # The gateway repeats an invalid constrained night, up to campaign.max_invalid_nights
+        # invalid nights a campaign: spare constrained nights after the plan (issue 14, h14w).
+        kw["n_spare_constrained"] = CampaignConfig().max_invalid_nights
     return imp_schedule(n, seed=VAL_SEED, **kw)
 
 
@@ -118,27 +132,31 @@ _SIMULATED: dict = {}
 
 
 def simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None,
-                      stop_at_t_min: bool = False):
+                      stop_at_t_min: bool = False, anticipate: bool = True):
     """(what the gateway logs, setpoints, object whose phi_hc_w is the true heat output);
     simulated once per population size and plant, so every sample step and range source
     reads the same nights. ``realism``: (name, PlantParams, gains on) in place of the drawn
     realism (``bench/fit_budget.py``'s ablation; same seeds otherwise). ``stop_at_t_min``:
-    constrained nights end at T_min as the gateway's (issue 14, branch h14t)."""
+    constrained nights end as the gateway's (issue 14, branches h14t, h14w; ``anticipate``: also
+    where the T_air trend reaches T_min within half an hour, as the gateway)."""
     key = (houses_arr.n_houses, plant, realism[0] if realism else None,
-           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()), stop_at_t_min)
+           hash(np.nan_to_num(sched.setpoint_c, nan=-1.0).tobytes()), stop_at_t_min,
+           sched.band_k, anticipate)
     if key not in _SIMULATED:
-        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism, stop_at_t_min)
+        _SIMULATED[key] = _simulate_schedule(houses_arr, sched, plant, realism, stop_at_t_min,
+                                             anticipate)
     return _SIMULATED[key]
 
 
 def _simulate_schedule(houses_arr: HouseParameters, sched, plant: str, realism=None,
-                       stop_at_t_min: bool = False):
+                       stop_at_t_min: bool = False, anticipate: bool = True):
     if plant == "iso":
-        sim, sp = run_schedule(houses_arr, sched, stop_at_t_min=stop_at_t_min)
+        sim, sp = run_schedule(houses_arr, sched, stop_at_t_min=stop_at_t_min,
+                               anticipate=anticipate)
         return sim, sp, sim
     _, params, gains = realism or (None, sample_params(houses_arr.n_houses, VAL_SEED), True)
     logged, sp = run_schedule_plant(houses_arr, sched, params, seed=VAL_SEED, gains=gains,
-                                    stop_at_t_min=stop_at_t_min)
+                                    stop_at_t_min=stop_at_t_min, anticipate=anticipate)
     return logged, sp, _TrueHeat(logged)
 
 
@@ -169,15 +187,41 @@ def _safe_house(params):
         return None
 
 
-def short_constrained(sp, sched, lag_h: float = 1.0, need_h: float = 3.0) -> np.ndarray:
-    """(n_constrained, n_houses) True where a constrained night ended (heating back on) with
-    less than ``need_h`` [h] after switch-off + ``lag_h`` [h]: the gateway's validity rule
-    (:func:`impctl.controller.assess`), such a night is invalid and would be repeated."""
-    rows = []
+def gateway_campaign(sp, sched, need_h: float = MIN_NIGHT_H) -> dict:
+    """The constrained nights a gateway runs and keeps, per household
+    (:func:`impctl.population.gateway_nights.gateway_constrained_nights` with the gateway's
+    ``[campaign]`` defaults: 2 valid constrained nights wanted, at most
+    ``campaign.max_invalid_nights`` invalid ones; valid = ≥ ``need_h`` [h] after the 1 h lag)."""
+    cfg = CampaignConfig()
+    return gateway_constrained_nights(sp, sched, n_needed=cfg.constrained_nights,
+                                      max_invalid=cfg.max_invalid_nights, need_h=need_h)
+
+
+def comfort_cost(sim, sched, run: np.ndarray, after_h: float = 3.0) -> dict:
+    """What the constrained nights the household ran cost it in comfort, from the true room
+    temperature (the plant's T_air, not the sensor): per household the coldest T_air [°C] and
+    the degree-hours below the day setpoint [K·h] per night run, from the window's start to
+    ``after_h`` [h] after its end (the recovery counted). ``run``: (n_constrained, n_houses)."""
+    t_air = sim.run["t_air_c"] if isinstance(sim, PlantSchedule) else sim.t_air_c
+    t_air = np.atleast_2d(np.asarray(t_air).T).T
+    extra = int(round(after_h * 3600 / sched.dt_s))
+    cold, dh = [], []
     for _, kind, w0, w1, _ in sched.windows:
         if kind != "constrained":
             continue
-        on = ~np.isnan(sp[w0:w1])
-        span_h = np.where(on.any(axis=0), on.argmax(axis=0), w1 - w0) * sched.dt_s / 3600.0
-        rows.append(span_h - lag_h < need_h)
-    return np.array(rows)
+        seg = t_air[w0:min(len(t_air), w1 + extra)]
+        cold.append(seg.min(axis=0))
+        dh.append(np.clip(sched.t_m_init_c - seg, 0.0, None).sum(axis=0) * sched.dt_s / 3600.0)
+    cold, dh = np.array(cold), np.array(dh)
+    n_run = np.maximum(run.sum(axis=0), 1)
+    return {"coldest_c": np.where(run, cold, np.inf).min(axis=0),
+            "kh_per_night": np.where(run, dh, 0.0).sum(axis=0) / n_run,
+            "kh_total": np.where(run, dh, 0.0).sum(axis=0)}
+
+
+def short_constrained(sp, sched, lag_h: float = 1.0, need_h: float = MIN_NIGHT_H) -> np.ndarray:
+    """(n_constrained, n_houses) True where a constrained night ended (heating back on) with
+    less than ``need_h`` [h] after switch-off + ``lag_h`` [h]: the gateway's validity rule
+    (:func:`impctl.controller.assess`), such a night is invalid and would be repeated."""
+    return gateway_constrained_nights(sp, sched, lag_h=lag_h, need_h=need_h)["usable_h"] \
+        < need_h - 1e-9

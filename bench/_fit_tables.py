@@ -258,3 +258,77 @@ def print_summary(rows: list[dict], args) -> None:
               f"{r['cov_tau']:.0f} / {r['cov_c_m']:.0f} | {r['hw_hlc']:.0f} / {r['hw_tau']:.0f} / "
               f"{r['hw_c_m']:.0f} | {right} | {r['time'][0]:.2f} / "
               f"{r['time'][1]:.2f} |")
+
+
+def gateway_lines(gate: dict, comfort: dict, sched, valid_h: float) -> None:
+    """What the gateway's constrained nights give and cost (``bench/fit.py``, stop at T_min):
+    invalid nights, repeats, households identified, the household's comfort."""
+    n_planned = gate["run"].shape[0] - sched.n_spare
+    usable = gate["usable_h"]
+    short_planned = usable[:n_planned] < valid_h - 1e-9
+    run, used = gate["run"], gate["used"]
+    n_used = used.sum(axis=0)
+    paid = gate["paid"]
+    n_normal = sum(kind == "normal" for _, kind, *_ in sched.windows)
+    dist = ", ".join(f"{k}: {int((paid == k).sum())}" for k in range(n_planned, paid.max() + 1))
+    print(f"gateway's constrained nights (band ±{sched.band_k:g} K, valid = ≥ {valid_h:g} h after "
+          f"the 1 h lag): planned nights too short {short_planned.sum()} of {short_planned.size} "
+          f"({100.0 * short_planned.mean():.0f} %); usable hours of the planned nights median "
+          f"{np.median(usable[:n_planned]):.1f} h, P10 {np.percentile(usable[:n_planned], 10):.1f}"
+          f" h; nights run {run.sum()}, invalid {(run & ~used).sum()} "
+          f"({100.0 * (run & ~used).sum() / run.sum():.0f} %)")
+    print(f"  constrained nights paid per household: mean {paid.mean():.2f} ({dist}); campaign "
+          f"nights {n_normal} normal + those, mean {n_normal + paid.mean():.2f}; households "
+          f"with 2 valid {(n_used >= 2).sum()}, 1 valid {(n_used == 1).sum()}, none valid (not "
+          f"identified by this campaign) {(n_used == 0).sum()} of {len(paid)}")
+    cold, kh = comfort["coldest_c"], comfort["kh_per_night"]
+    print(f"  comfort (true T_air, window start to 3 h after its end, the nights run): coldest "
+          f"median {np.median(cold):.1f} °C, P10 {np.percentile(cold, 10):.1f} °C, min "
+          f"{cold.min():.1f} °C; below the day setpoint per night median {np.median(kh):.1f} "
+          f"K·h, P90 {np.percentile(kh, 90):.1f}; per household (all nights run) median "
+          f"{np.median(comfort['kh_total']):.1f}, P90 {np.percentile(comfort['kh_total'], 90):.1f}"
+          " K·h", flush=True)
+
+
+def gateway_types(gate: dict, n: int, valid_h: float) -> dict:
+    """Households by what the gateway kept: valid constrained nights (0 = not identified: its
+    fit has normal nights only, τ and C_m not determined) and the shortest used night."""
+    used = gate["used"][:, :n]
+    n_used = used.sum(axis=0)
+    short = np.where(used, gate["usable_h"][:, :n], np.inf).min(axis=0)
+    out = {"identified (≥ 1 valid constrained night)": n_used >= 1,
+           "— 2 valid": n_used >= 2, "— 1 valid (campaign stopped)": n_used == 1,
+           "NOT identified (0 valid; τ, C_m not determined)": n_used == 0}
+    edges = sorted({valid_h, 3.0, 4.0, 5.0})
+    for lo, hi in zip(edges, [*edges[1:], np.inf], strict=True):
+        if lo < valid_h:
+            continue
+        label = f"shortest used night {lo:g}–{hi:g} h" if np.isfinite(hi) \
+            else f"shortest used night ≥ {lo:g} h"
+        out[label] = (short >= lo) & (short < hi)
+    return out
+
+
+def dump(res: dict, path: str) -> None:
+    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits and, on the
+    gateway's nights, the valid constrained nights used, those paid and the comfort cost."""
+    import json
+
+    truth = res["truth"]
+    true = {"hlc": [h.hlc_w_per_k for h in truth], "tau": [h.tau_h for h in truth],
+            "c_m": [h.c_m_j_per_k for h in truth]}
+    out = {"eps_pct": [float(x) for x in res["eps_fit"]]}
+    for k, t in true.items():
+        est = [f.lumped_[k] for f in res["fit"]]
+        out[f"{k}_err_pct"] = [float(x) for x in rel([e.value for e in est], t)]
+        out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
+    gate = res.get("gateway")
+    if gate is not None:
+        n = len(truth)
+        out["n_used"] = gate["used"][:, :n].sum(axis=0).tolist()
+        out["paid"] = gate["paid"][:n].tolist()
+        out["coldest_c"] = gate["comfort"]["coldest_c"][:n].tolist()
+        out["kh_per_night"] = gate["comfort"]["kh_per_night"][:n].tolist()
+    with open(path, "w") as fh:
+        json.dump(out, fh)
+    print(f"per-household figures written to {path}")

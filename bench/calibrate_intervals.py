@@ -40,12 +40,19 @@ from pathlib import Path
 
 import campaign_nights  # bench/campaign_nights.py: the gateway's nights, as bench/campaign.py
 import numpy as np
-from fit import ACH, VAL_SEED, _sub_schedule, true_ranges  # bench/fit.py: the same protocol
+from fit import (  # bench/fit.py: the same protocol
+    ACH,
+    VAL_SEED,
+    _sub_schedule,
+    gateway_campaign,
+    true_ranges,
+)
 
 from impctl.config import CampaignConfig
 from impctl.fit.intervals import model_error
 from impctl.fit.optim.batch import fit_households
 from impctl.model import HouseParameters
+from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params, take_params
 from impctl.population.synth_nights import (
@@ -70,25 +77,51 @@ def _truth(house) -> dict[str, float]:
     return {"hlc": house.hlc_w_per_k, "c_m": house.c_m_j_per_k, "tau": house.tau_h}
 
 
+def _used_variant_nights(usable_h: np.ndarray, sequence: tuple[int, ...]) -> list[int] | None:
+    """Night index per position of ``sequence`` (indices into the variants) as a gateway gets
+    them: a constrained night at position j is the first valid one (``usable_h`` [h] per
+    constrained variant night ≥ MIN_NIGHT_H) from night j on not used yet — the gateway
+    repeats an invalid one on a later night; -1 where none is left (the night is missing from
+    the fit); None when no constrained night is valid (the gateway does not fit)."""
+    valid = list(usable_h >= MIN_NIGHT_H - 1e-9)
+    out, taken = [], set()
+    for j, v in enumerate(sequence):
+        if v != 0:
+            out.append(j)
+            continue
+        k = next((k for k in range(j, len(valid)) if valid[k] and k not in taken), -1)
+        taken.add(k)
+        out.append(k)
+    return out if any(k >= 0 for k, v in zip(out, sequence, strict=True) if v == 0) else None
+
+
 def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
             plant: str = "realistic", sequences: tuple[tuple[int, ...], ...] = (),
-            batch: int = 16) -> list[dict]:
+            batch: int = 16, gateway: bool = True) -> list[dict]:
     """Simulate ``n`` households (realistic plant, or ``plant="iso"``: the ideal 5R1C with the
     bench's 5 % power noise) and fit the first ``steps[step]`` of them at each sample step [s]
     on the 2 + 6 protocol (the "many" band); at the first step also each of ``sequences``
     (campaign night sequences, indices into :func:`campaign_nights.variants`: the gateway's
     nights, the "few" band). One record per fit; fits in batches of ``batch`` households
-    (:func:`impctl.fit.optim.batch.fit_households`, the same numbers as single fits)."""
+    (:func:`impctl.fit.optim.batch.fit_households`, the same numbers as single fits).
+    ``gateway``: constrained nights end as the gateway ends them (T_min or its anticipation,
+    then the day setpoint) and the fit gets only the valid ones, an invalid one repeated on a
+    spare night (``campaign.max_invalid_nights`` of them); a household with no valid
+    constrained night is not fitted (the gateway waits for one). False: every constrained night
+    cools to 05:00 (the calibration before branch h14w)."""
     houses = sample_households(n, seed=seed)
     params = sample_params(n, seed)
     kind = np.broadcast_to(np.asarray(params.emitter.kind), (n,))
     onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (n,)) >= 0.999
     control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
-    sched = imp_schedule(n, seed=seed)
+    spares = CampaignConfig().max_invalid_nights if gateway else 0
+    sched = imp_schedule(n, seed=seed, n_spare_constrained=spares)
     variants = campaign_nights.variants()
     k = max((len(q) for q in sequences), default=0)
-    var_sched = [campaign_nights.variant_schedule(n, k, kd, sp, seed) for kd, sp in variants] \
+    var_sched = [campaign_nights.variant_schedule(n, k + (spares if kd == "constrained" else 0),
+                                                  kd, sp, seed) for kd, sp in variants] \
         if k else []
+    skipped = {"all": 0, "few": 0}
     records = []
     started = time.perf_counter()
     t_sim = 0.0
@@ -100,8 +133,9 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
         sub = _sub_schedule(sch, idx)
         chunk = HouseParameters.stack([houses.take(int(h)) for h in idx])
         if plant == "iso":
-            return (*run_schedule(chunk, sub), sub)
-        return (*run_schedule_plant(chunk, sub, take_params(params, idx, n), seed=seed + i), sub)
+            return (*run_schedule(chunk, sub, stop_at_t_min=gateway), sub)
+        return (*run_schedule_plant(chunk, sub, take_params(params, idx, n), seed=seed + i,
+                                    stop_at_t_min=gateway), sub)
 
     for i0 in range(0, n, CHUNK):   # simulate the next chunk of houses together
         t0 = time.perf_counter()
@@ -109,19 +143,33 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
         logged, sp, sub = simulate(sched, idx, i0)
         var_sims = [simulate(vs, idx, i0) for vs in var_sched]
         t_sim += time.perf_counter() - t0
+        used = gateway_campaign(sp, sub)["used"]
+        var_usable = (gateway_campaign(var_sims[0][1], var_sims[0][2])["usable_h"]
+                      if var_sims else None)
         jobs = []   # (house, step, label, nights)
         for step_s, count in steps.items():
             for i in idx[idx < count]:
                 def cut(sim, spc, sch, i=int(i), step_s=step_s):
                     return sample_nights(sim, spc, sch, i % CHUNK, sample_step_s=step_s,
                                          quantise_k=0.1, seed=seed + i, power_noise=noise)
-                jobs.append((int(i), step_s, "all", cut(logged, sp, sub)))
+                keep = iter(used[:, i % CHUNK])
+                nights = [x for x in cut(logged, sp, sub)
+                          if x.kind != "constrained" or next(keep)]
+                if any(x.kind == "constrained" for x in nights):
+                    jobs.append((int(i), step_s, "all", nights))
+                else:
+                    skipped["all"] += 1
                 if step_s != first_step:
                     continue
                 per_variant = [cut(*vs) for vs in var_sims]
                 for q in sequences:
+                    at = _used_variant_nights(var_usable[:, i % CHUNK], q)
+                    if at is None:
+                        skipped["few"] += 1
+                        continue
                     jobs.append((int(i), step_s, campaign_nights.label(q),
-                                 [per_variant[v][j] for j, v in enumerate(q)]))
+                                 [per_variant[v][j] for j, v in zip(at, q, strict=True)
+                                  if j >= 0]))
         for b in range(0, len(jobs), batch):
             part = jobs[b:b + batch]
             fits, _ = fit_households([j[3] for j in part],
@@ -144,6 +192,10 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
                   + " ".join(f"{100 * rec['log_error'][q]:+6.1f}" for q in ("hlc", "tau", "c_m"))
                   + f" %  ({time.perf_counter() - started:.0f} s, of which simulation "
                     f"{t_sim:.0f} s)", flush=True)
+    if gateway:
+        print(f"not fitted (no valid constrained night: the gateway would not fit them): "
+              f"{skipped['all']} 2 + 6 campaigns, {skipped['few']} campaign sequences",
+              flush=True)
     return records
 
 
@@ -252,6 +304,9 @@ def main() -> None:
                          "last) joined by dots; empty for none")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic",
                     help="iso: the ideal 5R1C (a check; never written as the calibration)")
+    ap.add_argument("--cool-to-window-end", dest="gateway", action="store_false",
+                    help="constrained nights cool to 05:00, every one fitted (the calibration "
+                         "before branch h14w; never the gateway's nights)")
     ap.add_argument("--out", default=str(model_error.CALIBRATION_FILE))
     ap.add_argument("--records", default=None, help="also write the per-house records here")
     ap.add_argument("--from-records", default=None, help="recalibrate from saved records")
@@ -273,7 +328,8 @@ def main() -> None:
         if not args.why and (args.seed == VAL_SEED or args.seed in TRAIN_SEEDS):
             ap.error(f"--seed {args.seed} is the bench's validation or a training seed")
         share_on = args.why if args.share is None else args.share == "on"
-        records = collect(args.households, args.seed, steps, share_on, args.plant, sequences)
+        records = collect(args.households, args.seed, steps, share_on, args.plant, sequences,
+                          gateway=args.gateway)
     if args.records:
         Path(args.records).write_text(json.dumps(records))
     if args.why or args.plant == "iso":
@@ -283,7 +339,12 @@ def main() -> None:
     cfg = CampaignConfig()
     protocol = {"constrained_setpoint_c": float(cfg.constrained_setpoint_c),
                 "normal_setpoints_c": [float(x) for x in cfg.normal_setpoints_c],
-                "sequences": sorted({r["nights"] for r in records if r["nights"] != "all"})}
+                "sequences": sorted({r["nights"] for r in records if r["nights"] != "all"}),
+                "band_k": DEFAULT_BAND_K,
+                "constrained_nights": ("gateway: end at T_min or its anticipation, valid with "
+                                       f"≥ {MIN_NIGHT_H:g} h after the lag, invalid ones "
+                                       "repeated" if getattr(args, "gateway", True)
+                                       else "cool to the window's end")}
     cal = model_error.calibrate(records, provenance(args, len(records)), protocol=protocol)
     summary(records, cal)
     if not all(np.isfinite(v) for b in cal["bands"].values() for g in b["groups"].values()

@@ -3,7 +3,8 @@
 Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|prior[,…]]
           [--model-dir DIR] [--steps 300,3600] [--compare N] [--adam N] [--quick] [--verbose]
           [--plant iso|realistic] [--fine-households N] [--preheat-h H] [--preheat-h-normal H]
-          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--stop-at-t-min]
+          [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--band-k K] [--valid-h H]
+          [--no-anticipate] [--no-stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
 ``--plant realistic``: the same houses, weather and schedule on the realistic plant
@@ -16,8 +17,8 @@ classifiers are trained with other seeds, so they never saw these houses). Each 
 the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
 21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
-:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + 1.5 °C and cool
-22:00–05:00 (the paper's case study), normal nights step up from the 21 °C day; both 2 h before
+:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + ΔT and cool from
+22:00 until the gateway ends them (below), normal nights step up from the 21 °C day; both 2 h before
 the window, as the gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power
 sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power
 the mean until the next sample).
@@ -60,9 +61,18 @@ the normal nights' alone (issue 14, branch h14p; before it, this bench ran const
 normal 0 h, a protocol the gateway never ran: ``--preheat-h 4 --preheat-h-normal 0``). Every
 run prints what the campaign costs the household: heat [kWh] and hours above the day setpoint.
 
-``--stop-at-t-min`` ends every constrained night at T_min as the gateway does (day setpoint from
-there; the night's rows end there) and prints how many the gateway's validity rule (< 3 h after
-the 1 h emission lag) would repeat, with the errors split by it (issue 14, branch h14t).
+Constrained nights are the gateway's (default since branch h14w; ``--no-stop-at-t-min``: cool to
+05:00 and fit every night, the figures before): each ends where the gateway ends it — T_min =
+T_set − ``--band-k`` (default ``night_protocol.DEFAULT_BAND_K``) or the anticipated T_min, the day
+setpoint from there, not switched off where the pre-heat fell short (``--no-anticipate``: at T_min
+only) — and is valid with ≥ ``--valid-h`` (``night_protocol.MIN_NIGHT_H``, 3 h) after the 1 h
+emission lag; an invalid one is repeated on a spare constrained night after the plan, up to
+``campaign.max_invalid_nights`` (3) invalid nights, and the fit gets the first two valid ones
+and the six normal nights. A household with no valid one is not identified by the campaign (the
+gateway does not fit it); the bench still fits its normal nights and prints it apart (τ and C_m
+then come from the ranges, not from data). Every run prints the invalid nights, the repeats,
+the households identified and the comfort cost (coldest room, degree-hours below the day
+setpoint), and the errors by what the gateway kept (issue 14, branches h14t, h14w).
 
 ``--ranges true,classifier`` fits the same simulated nights with each range source in turn (the
 classifiers of ``--model-dir``, e.g. trained by ``impctl train --plant realistic``); a final
@@ -86,6 +96,7 @@ import argparse
 import platform
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -97,21 +108,32 @@ from _fit_protocol import (  # also imported from here by the other bench script
     campaign_cost,
     classifier_ranges,
     coheating_eps,
+    comfort_cost,
     demand_eps,
+    gateway_campaign,
     night_gain,
-    short_constrained,
     simulate_schedule,
     true_ranges,
     val_schedule,
     window_energy,
 )
 from _fit_speed import speed
-from _fit_tables import print_summary, rel, report, stats, summary_row
+from _fit_tables import (
+    dump,
+    gateway_lines,
+    gateway_types,
+    print_summary,
+    rel,
+    report,
+    stats,
+    summary_row,
+)
 
 from impctl.fit import baselines
 from impctl.fit.estimator import NightFit
 from impctl.fit.nights.data import prepare_nights, search_bounds
 from impctl.model import HouseParameters
+from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
 from impctl.population.synth_nights import run_schedule, sample_nights
@@ -123,24 +145,24 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     n = houses_arr.n_houses
     sched = val_schedule(n, args)
     stop = getattr(args, "stop_at_t_min", False)
+    valid_h = getattr(args, "valid_h", MIN_NIGHT_H)
     sim, sp, heat = simulate_schedule(houses_arr, sched, args.plant,
-                                      getattr(args, "realism", None), stop_at_t_min=stop)
+                                      getattr(args, "realism", None), stop_at_t_min=stop,
+                                      anticipate=getattr(args, "anticipate", True))
+    # Heat demand is replayed on the setpoints the nights really had (the stops included).
+    sched_sp = replace(sched, setpoint_c=sp)
     truth_e = window_energy(heat, sched)
     res_cost = campaign_cost(heat, sched)
+    gate = gateway_campaign(sp, sched, need_h=valid_h) if stop else None
     if stop:
-        # The fit still gets every night as recorded; the gateway would have repeated these.
-        short = short_constrained(sp, sched)
-        print(f"stop at T_min: {short.sum()} of {short.size} constrained nights "
-              f"({100.0 * short.mean():.0f} %) have < 3 h after the 1 h emission lag (invalid, "
-              f"the gateway repeats them); households with ≥ 1 invalid "
-              f"{short.any(axis=0).sum()}, with none valid {short.all(axis=0).sum()} "
-              f"of {short.shape[1]}")
+        gate["comfort"] = comfort_cost(sim, sched, gate["run"])
+        gateway_lines(gate, gate["comfort"], sched, valid_h)
     floor = None
     if args.plant != "iso" and args.eps_truth == "house":
         # The plant's heat output also carries its gains, control and emitter, which no 5R1C
         # parameter set can know (true parameters alone miss it by ~11 %): ε compares with
         # the true house replayed the same way as the estimate.
-        house_sim, _ = run_schedule(houses_arr, sched)
+        house_sim, _ = run_schedule(houses_arr, sched_sp)
         house_e = window_energy(house_sim, sched)
         floor = 100.0 * np.mean(np.abs(house_e - truth_e) / truth_e, axis=0)
         truth_e = house_e
@@ -148,6 +170,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
     if limit is not None and limit < n:
         n = limit
         sched, truth_e = _sub_schedule(sched, np.arange(n)), truth_e[:, :n]
+        sched_sp = _sub_schedule(sched_sp, np.arange(n))
     res = {k: [] for k in ("fit", "lsq", "coh_hlc", "loglin_tau", "mid", "time", "lsq_time",
                            "truth", "fit_house", "lsq_house", "mid_house", "ranges_hit",
                            "eps_in", "per_night_mean")}
@@ -163,14 +186,16 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             "modulating": ~onoff, "on/off": onoff,
             "weather curve": control == 0, "room thermostat": control == 1}
     if stop:
-        res.setdefault("types", {}).update({
-            "both constrained valid": ~short[:, :n].any(axis=0),
-            "one valid": short[:, :n].any(axis=0) & ~short[:, :n].all(axis=0),
-            "none valid": short[:, :n].all(axis=0)})
+        res.setdefault("types", {}).update(gateway_types(gate, n, valid_h))
     for i in range(n):
         house = houses_arr.take(i)
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
                                power_noise=noise, seed=VAL_SEED + i)
+        if stop:
+            # The fit gets what the gateway keeps: the valid constrained nights it ran (the
+            # first two), never an invalid or a spare not run; the normal nights all.
+            used = iter(gate["used"][:, i])
+            nights = [x for x in nights if x.kind != "constrained" or next(used)]
         if range_source == "true":
             ranges = true_ranges(house)
         elif range_source == "classifier":
@@ -180,7 +205,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
-                       emitter_state=args.nuisance, **night_gain(args),
+                       emitter_state=args.nuisance, **night_gain(args), min_night_h=valid_h,
                        model_error="default" if args.model_error else None).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
@@ -208,15 +233,16 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
                   f"tau {rel(q['tau'].value, house.tau_h):+6.1f} %  "
                   f"C_m {rel(q['c_m'].value, house.c_m_j_per_k):+6.1f} %  "
                   f"{fit.fit_time_s_:.2f} s", flush=True)
-    res["eps_fit"] = demand_eps(res["fit_house"], sched, truth_e)
-    res["eps_lsq"] = demand_eps(res["lsq_house"], sched, truth_e) if args.lsq else None
-    res["eps_mid"] = demand_eps(res["mid_house"], sched, truth_e)
+    res["eps_fit"] = demand_eps(res["fit_house"], sched_sp, truth_e)
+    res["eps_lsq"] = demand_eps(res["lsq_house"], sched_sp, truth_e) if args.lsq else None
+    res["eps_mid"] = demand_eps(res["mid_house"], sched_sp, truth_e)
     res["eps_pn"] = demand_eps([_safe_house(p["parameters"]) for p in res["per_night_mean"]],
-                               sched, truth_e)
+                               sched_sp, truth_e)
     # Steady-state demand from the coheating HLC: E = HLC·∫(T_air − T_out)dt per window.
     res["eps_coh"] = coheating_eps(res["coh_hlc"], sched, sim, truth_e)
     res["eps_floor"] = floor
     res["cost"] = res_cost
+    res["gateway"] = gate
     return res
 
 
@@ -362,9 +388,23 @@ def main() -> None:
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
-    ap.add_argument("--stop-at-t-min", action="store_true",
-                    help="constrained nights end at T_min (day setpoint from there), as the "
-                         "gateway's; prints how many the gateway's 3 h rule makes invalid")
+    ap.add_argument("--stop-at-t-min", action="store_true", default=True,
+                    help="(default) constrained nights end as the gateway's: at T_min or its "
+                         "anticipation, day setpoint from there; invalid ones repeated on spare "
+                         "nights, the fit given the valid ones (issue 14, h14w)")
+    ap.add_argument("--no-stop-at-t-min", dest="stop_at_t_min", action="store_false",
+                    help="constrained nights cool to 05:00, every night fitted (the figures "
+                         "before branch h14w)")
+    ap.add_argument("--band-k", type=float, default=DEFAULT_BAND_K, metavar="K",
+                    help="comfort band ΔT [K]: pre-heat to T_set + ΔT, stop at T_set − ΔT")
+    ap.add_argument("--valid-h", type=float, default=MIN_NIGHT_H, metavar="H",
+                    help="hours after the emission lag a constrained night needs to be valid "
+                         "(the gateway's MIN_NIGHT_H); also the fit's min_night_h")
+    ap.add_argument("--dump", default=None, metavar="PREFIX",
+                    help="write each run's per-household errors to PREFIX-STEP-RANGES.json "
+                         "(for paired comparisons between runs)")
+    ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
+                    help="stop exactly at T_min, not where the gateway anticipates it")
     args = ap.parse_args()
     if args.quick:
         args.households, args.steps = 10, "300"
@@ -394,6 +434,8 @@ def main() -> None:
         for source in sources:
             res = run_step(houses, step, source, args, limit)
             report(res, step, source, args)
+            if args.dump:
+                dump(res, f"{args.dump}-{step:g}-{source}.json")
             rows.append(summary_row(res, step, source))
     print_summary(rows, args)
 

@@ -105,7 +105,9 @@ def test_fit_refuses_a_too_short_constrained_night(tmp_path, nights):
 
 
 def test_fit_reads_hourly_unlabelled_nights(tmp_path):
-    hourly = synth_nights(HOUSE, seed=12, sample_step_s=3600.0, n_normal=3)
+    # ΔT 1.5 K, the band this check was set on: at the default 2.5 K (h14w) this ideal
+    # house's hourly 2 + 3 fit misses τ by 10.5 % (bench/RESULTS.md, issue 14, h14w).
+    hourly = synth_nights(HOUSE, seed=12, sample_step_s=3600.0, n_normal=3, band_k=1.5)
     csv = write_nights(tmp_path / "hourly.csv", hourly, labelled=False)
     out = tmp_path / "fit.json"
     # the synthetic 5R1C house has no night gains: the fit is told so

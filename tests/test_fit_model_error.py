@@ -128,6 +128,17 @@ def test_the_few_band_was_calibrated_on_the_gateways_campaign_nights():
     assert any(s.count("c") == cfg.constrained_nights for s in sequences)    # the fixed plan
 
 
+def test_the_calibration_ran_the_gateways_constrained_nights():
+    # stale-file check (issue 14, h14w): the share is calibrated on constrained nights that end
+    # as the gateway ends them, at the default band; after a change of DEFAULT_BAND_K
+    # regenerate model_error.json with bench/calibrate_intervals.py
+    from impctl.night_protocol import DEFAULT_BAND_K
+
+    protocol = model_error.load_calibration()["bands"]["few"]["protocol"]
+    assert protocol.get("band_k") == DEFAULT_BAND_K
+    assert str(protocol.get("constrained_nights", "")).startswith("gateway")
+
+
 def test_coarse_rows_take_the_coarse_share_whatever_the_residuals_say():
     # at 15-minute or hourly rows a realistic house's residuals look as clean as an ideal one's
     clean = {"rho_power": 0.0, "rmse_over_noise_power": 1.0, "nuisance_selected": False}

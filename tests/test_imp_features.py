@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from impctl.errors import InputError
 from impctl.imp import (
+    DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_SETPOINTS_C,
     EMISSION_LAG_H,
@@ -30,8 +31,10 @@ TZ = "Europe/Ljubljana"
 
 def test_plan_band_and_setpoints():
     plan = NightPlan("constrained", setpoint_c=23.0)
-    assert (plan.t_max_c, plan.t_min_c) == (24.5, 21.5)
-    assert plan.preheat_setpoint_c == 24.5 and plan.window_setpoint_c == 21.5
+    assert (plan.t_max_c, plan.t_min_c) == (23.0 + DEFAULT_BAND_K, 23.0 - DEFAULT_BAND_K)
+    assert plan.preheat_setpoint_c == plan.t_max_c and plan.window_setpoint_c == plan.t_min_c
+    narrow = NightPlan("constrained", setpoint_c=23.0, band_k=1.5)
+    assert (narrow.t_max_c, narrow.t_min_c) == (24.5, 21.5)
     free = NightPlan("constrained", 23.0, stop_at_t_min=False)
     assert np.isnan(free.window_setpoint_c)
     normal = NightPlan("normal", 22.0)

@@ -109,7 +109,7 @@ def test_check_config_says_what_runs_tonight():
     out = result.stdout
     assert "no problem found" in out and "tcp 192.168.1.50:502 unit 20" in out
     assert "next:      constrained night from the campaign, window" in out
-    assert "preheat: loop-1 setpoint 22.5 °C" in out and "T_min 19.5 °C" in out
+    assert "preheat: loop-1 setpoint 23.5 °C" in out and "T_min 18.5 °C" in out
 
 
 def test_check_config_with_a_writable_state_dir(tmp_path):

@@ -21,12 +21,13 @@ def _raised_from(sched, w0: int) -> pd.Timestamp:
 def test_default_preheat_is_the_gateways():
     assert NightPolicy().preheat_h == NightConfig().preheat_h == DEFAULT_PREHEAT_H
     sched = imp_schedule(1, seed=1)
+    assert sched.band_k == NightConfig().comfort_band_k      # the gateway's ΔT
     kinds = {kind for _, kind, *_ in sched.windows}
     assert kinds == {"constrained", "normal"}
     for _, kind, w0, _, t_set in sched.windows:
         start = _raised_from(sched, w0)
         assert (sched.index[w0] - start) == pd.Timedelta(hours=DEFAULT_PREHEAT_H), kind
-        want = t_set + 1.5 if kind == "constrained" else t_set
+        want = t_set + sched.band_k if kind == "constrained" else t_set
         assert sched.setpoint_c[w0 - 1, 0] == want
 
 

@@ -15,7 +15,28 @@ from __future__ import annotations
 DEFAULT_CONSTRAINED_SETPOINT_C = 21.0
 #: T_set [°C] of the normal nights, in turn (held through the window, heat output logged).
 DEFAULT_SETPOINTS_C = (22.0, 23.0, 24.0)
-#: Comfort band ΔT [K] around T_set (the paper's case study: 1.5 °C).
-DEFAULT_BAND_K = 1.5
+#: Comfort band ΔT [K] around T_set: constrained nights pre-heat to T_set + ΔT and end at
+#: T_set − ΔT. 2.5 K since branch h14w (the paper's case study and the product before: 1.5 K):
+#: with 1.5 K about half of the realistic houses' constrained nights reach T_min with less than
+#: MIN_NIGHT_H of cooling after the lag and a third of the households never record a valid one
+#: (bench/RESULTS.md, "Issue 14: the gateway's constrained nights everywhere").
+DEFAULT_BAND_K = 2.5
 #: Time [h] the night's pre-window setpoint (T_max or T_set) is held before the window.
 DEFAULT_PREHEAT_H = 2.0
+
+#: Hours of data a night needs to be valid [h] — for a constrained night counted after the
+#: switch-off plus the emission lag (the part the fit uses). The gateway's assessment
+#: (:func:`impctl.controller.assess.assess_night`), the fit's shortest night
+#: (``NightFit(min_night_h)``) and the bench's gateway nights read it (issue 14, branch h14w).
+MIN_NIGHT_H = 3.0
+#: How a constrained night ends on the gateway before T_min (:class:`impctl.controller.plan.
+#: NightPolicy`, mirrored by :func:`impctl.population.synth_nights.run_schedule_plant`): the
+#: least-squares trend of T_air over the last TREND_WINDOW_S [s] (at least MIN_TREND_SPAN_S)
+#: reaches T_min within ANTICIPATE_S [s] while T_air is within ANTICIPATE_WITHIN_K [K] of it.
+ANTICIPATE_S = 1800.0
+ANTICIPATE_WITHIN_K = 1.0
+TREND_WINDOW_S = 1800.0
+MIN_TREND_SPAN_S = 600.0
+#: A constrained night switches the heating off only if T_air is this far above T_min at the
+#: window's start [K]; otherwise the heating is left on and the night is not valid.
+SWITCH_OFF_MIN_K = 1.5

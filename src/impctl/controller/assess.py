@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..night_protocol import MIN_NIGHT_H
 from ..store import Store
 from .heat_output import heat_output_problems
 from .plan import NightPolicy
@@ -17,8 +18,9 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     -------
     (valid, reasons) — reasons say why a night is not valid, and note minor issues of a
     valid one. Thresholds: coverage ≥ ``policy.min_coverage`` of the expected samples up to the
-    night's end; at least 3 h of data (for constrained nights: after switch-off plus the
-    emission lag, which is what the fit uses); defrost and DHW each ≤ 10 % of the samples;
+    night's end; at least :data:`~impctl.night_protocol.MIN_NIGHT_H` (3 h) of data (for
+    constrained nights: after switch-off plus the emission lag, which is what the fit uses);
+    defrost and DHW each ≤ 10 % of the samples;
     no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples; Q_HC
     believable against electrical power, COP and compressor state, not stuck, within capacity
     (:mod:`.heat_output`).
@@ -31,12 +33,14 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     covered_until = min(end, night.window_end)
     span_s = max(0.0, (covered_until - night.window_start).total_seconds())
     expected = span_s / policy.sample_interval_s
-    # The fit uses a constrained night only from switch-off + emission lag, and needs 3 h of
-    # it; a night that reached T_min sooner is complete but carries too little cooling.
+    # The fit uses a constrained night only from switch-off + emission lag, and needs
+    # MIN_NIGHT_H of it; a night that reached T_min sooner is complete but carries too little
+    # cooling.
     usable_s = span_s - (policy.emission_lag_h * 3600 if night.kind == "constrained" else 0)
-    if usable_s < 3 * 3600:
+    if usable_s < MIN_NIGHT_H * 3600:
         after = " after the emission lag" if night.kind == "constrained" else ""
-        reasons.append(f"only {max(usable_s, 0) / 3600:.1f} h of data{after} (< 3 h)")
+        reasons.append(f"only {max(usable_s, 0) / 3600:.1f} h of data{after} "
+                       f"(< {MIN_NIGHT_H:g} h)")
     if expected > 0:
         coverage = len(samples) / (expected + 1)
         if coverage < policy.min_coverage:

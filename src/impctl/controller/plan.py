@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime
 
+from .. import night_protocol as _protocol
+
 
 @dataclass(frozen=True)
 class NightRequest:
@@ -101,14 +103,14 @@ class NightPolicy:
     min_coverage: float = 0.8
     emission_lag_h: float = 1.0
     restore_timeout_s: float = 3600.0
-    anticipate_s: float = 1800.0
-    switch_off_min_k: float = 1.5
-    anticipate_within_k: float = 1.0
-    trend_window_s: float = 1800.0
+    anticipate_s: float = _protocol.ANTICIPATE_S
+    switch_off_min_k: float = _protocol.SWITCH_OFF_MIN_K
+    anticipate_within_k: float = _protocol.ANTICIPATE_WITHIN_K
+    trend_window_s: float = _protocol.TREND_WINDOW_S
 
 
 #: The T_air trend of the anticipated end needs samples over at least this span [s].
-MIN_TREND_SPAN_S = 600.0
+MIN_TREND_SPAN_S = _protocol.MIN_TREND_SPAN_S
 
 
 def anticipated_end(trend: list[tuple[float, float]], policy: NightPolicy,

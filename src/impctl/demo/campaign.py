@@ -13,7 +13,7 @@ from zoneinfo import ZoneInfo
 from ..clock import VirtualClock
 from ..config import config_from_mapping
 from ..model import HouseParameters
-from ..night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
+from ..night_protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from ..store import Store
 from .options import FIT_WAIT_S, TZ, DemoOptions, Progress, fit_night_gain_w, plant_summary
 
@@ -49,12 +49,10 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
                          "retries": 0, "attempts": 3, "retry_delay_s": 0.05,
                          "connect_backoff_s": [0.05, 0.5], "drain_s": 0.0,
                          "writes": {"verify_delay_s": 0.0}},
-            # The ideal plant: ΔT 2 K, not the paper's 1.5 K: its air node has no heat
-            # capacity, so the house drops ~1.2 K at switch-off and a 1.5 K band would end
-            # most constrained nights before 3 h of usable cooling (see the README). The
-            # realistic plant has air and furniture capacity: the paper's 1.5 K.
+            # The gateway's band (DEFAULT_BAND_K, 2.5 K since h14w) on both plants: the ideal
+            # plant's massless air node drops ~1.2 K at switch-off, so it needs at least 2 K.
             "night": {"sample_interval_s": opts.sample_interval_s, "t_out_max_c": 12.0,
-                      "comfort_band_k": 1.5 if realistic else 2.0},
+                      "comfort_band_k": max(DEFAULT_BAND_K, 2.0)},
             "campaign": _campaign_section(opts, setpoints, per_sp),
             "clock": {"epoch": epoch.isoformat(), "speed": opts.speed,
                       "wall_epoch_s": clock.wall_epoch_s},
@@ -80,8 +78,8 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
 def _campaign_section(opts: DemoOptions, setpoints: list[float], per_sp: int) -> dict:
     """``[campaign]``: the fixed counts, or the adaptive campaign (the daemon fits after
     every valid night and decides; the demo's classifiers are ready before it starts)."""
-    # The gateway's constrained T_set (21 °C, the owner's day setpoint): T_max 22.5, T_min
-    # 19.5 °C (ΔT 2 K on the ideal plant: 23 and 19 °C).
+    # The gateway's constrained T_set (21 °C, the owner's day setpoint): T_max 23.5, T_min
+    # 18.5 °C with the default ΔT 2.5 K.
     common = {"constrained_setpoint_c": DEFAULT_CONSTRAINED_SETPOINT_C}
     if opts.adaptive:
         return {**common, "mode": "adaptive", "normal_setpoints_c": setpoints,

@@ -33,6 +33,7 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
+from ..night_protocol import MIN_NIGHT_H
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import (
@@ -189,7 +190,7 @@ class NightFit:
                  smooth_air_h: float = 1.0, smooth_out_h: float = 0.0,
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
-                 per_night: bool = True, min_night_h: float = 3.0, ridge: float = 1e-2,
+                 per_night: bool = True, min_night_h: float = MIN_NIGHT_H, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
                  night_gain: bool = False, emitter_state: bool = True,
                  furniture_state: bool = True,

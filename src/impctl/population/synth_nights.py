@@ -7,14 +7,18 @@ and the virtual population's (:data:`impctl.imp.plan.DEFAULT_PREHEAT_H`): days h
 *constrained* night (T_set = the gateway's constrained setpoint, 21 °C) heats to T_max = T_set +
 ΔT ``constrained_preheat_h`` before the window (default 2 h), switches off
 at 22:00 and cools until 05:00 (the paper's case study: a predefined period).
-With ``stop_at_t_min`` it stops earlier, at the first step after the emission lag with
-T_air ≤ T_min = T_set − ΔT, and then holds T_min. The T_min test waits for the lag because the
-5R1C air node is massless: T_air drops 2–5 K the instant the heating stops, which
-would end most nights at once (identifiability.md §11.2). Houses are simulated with the Annex C
-model at a fine step (vectorised over houses); samples are instants for temperatures and interval
-means for the heat power (``q_hc`` at a sample = mean power until the next sample). Measurement
-model: T_air and T_out rounded to ``quantise_k``; each power sample × (1 + ``power_noise``·N(0,
-1)).
+With ``stop_at_t_min`` it ends as the gateway ends it (:mod:`.gateway_nights`): at T_min = T_set −
+ΔT, or earlier where the T_air trend reaches T_min within half an hour, then back at the day
+setpoint (the owner's, restored); not switched off at all where the pre-heat left T_air less
+than :data:`~impctl.night_protocol.SWITCH_OFF_MIN_K` above T_min. The T_min test waits for the
+emission lag because the 5R1C air node is massless: T_air drops 2–5 K the instant the heating
+stops, which would end most nights at once (identifiability.md §11.2); a night that ends within
+the lag is too short to be valid either way. The schedule carries its comfort band
+(``SynthSchedule.band_k``), so the band of the pre-heat and of the stop cannot differ.
+Houses are simulated with the Annex C model at a fine step (vectorised over houses); samples are
+instants for temperatures and interval means for the heat power (``q_hc`` at a sample = mean
+power until the next sample). Measurement model: T_air and T_out rounded to ``quantise_k``; each
+power sample × (1 + ``power_noise``·N(0, 1)).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from ..imp.plan import (
 )
 from ..model import HouseParameters, simulate
 from ..weather import DEFAULT_TZ, winter_weather
+from .gateway_nights import with_gateway_stops
 
 
 @dataclass
@@ -46,7 +51,11 @@ class SynthSchedule:
     t_out_c : (n_steps, n_houses) outdoor temperature [°C]
     setpoint_c : (n_steps, n_houses) heating setpoint [°C], NaN = off
     windows : per night (night_id, kind, first step, end step (exclusive), T_set)
-    t_m_init_c : mass temperature before the first step [°C]
+    t_m_init_c : mass temperature before the first step [°C]; also the day setpoint
+    band_k : comfort band ΔT [K] of the constrained nights (T_max = T_set + ΔT for the pre-heat,
+        T_min = T_set − ΔT for the stop)
+    n_spare : the last ``n_spare`` windows are spare constrained nights, run by a gateway only
+        to repeat an invalid one (:func:`.gateway_nights.gateway_constrained_nights`)
     """
 
     index: pd.DatetimeIndex
@@ -55,6 +64,8 @@ class SynthSchedule:
     setpoint_c: np.ndarray
     windows: list[tuple[str, str, int, int, float]]
     t_m_init_c: float
+    band_k: float = DEFAULT_BAND_K
+    n_spare: int = 0
 
 
 def night_plan(n_constrained: int, n_normal: int) -> list[str]:
@@ -82,6 +93,7 @@ def imp_schedule(
     tz: str = DEFAULT_TZ,
     constrained_preheat_h: float = DEFAULT_PREHEAT_H,
     normal_preheat_h: float = DEFAULT_PREHEAT_H,
+    n_spare_constrained: int = 0,
 ) -> SynthSchedule:
     """Weather and setpoints for ``n_houses`` houses (own weather per house, seeded).
 
@@ -96,8 +108,11 @@ def imp_schedule(
     branch h14q: night j of either kind at ``setpoints_c[j % len(setpoints_c)]`` (with 2 + 6
     nights and 22/23/24 °C: constrained nights at 23 and 24 °C, normal nights 3 × 22, 2 × 23,
     1 × 24 °C).
+
+    ``n_spare_constrained``: that many more constrained nights after the plan (the gateway
+    repeats an invalid constrained night; the planned nights and their weather are unchanged).
     """
-    kinds = night_plan(n_constrained, n_normal)
+    kinds = night_plan(n_constrained, n_normal) + ["constrained"] * n_spare_constrained
     days = spinup_days + len(kinds) + 1
     series = [winter_weather(start, days, sim_step_s, seed=seed * 1000 + h, tz=tz)
               for h in range(n_houses)]
@@ -112,7 +127,8 @@ def imp_schedule(
         day0 = (spinup_days + j) * per_day
         w0, w1 = day0 + 22 * hour, day0 + 29 * hour
         if constrained_setpoint_c is None:
-            t_set = setpoints_c[j % len(setpoints_c)]
+            t_set = setpoints_c[j % len(setpoints_c)] if j < n_constrained + n_normal \
+                else setpoints_c[0]
         elif kind == "constrained":
             t_set = constrained_setpoint_c
         else:
@@ -125,38 +141,35 @@ def imp_schedule(
             sp[w0:w1] = np.nan
         night_id = str(index[w0].date())
         windows.append((night_id, kind, w0, w1, t_set))
-    return SynthSchedule(index, sim_step_s, t_out, sp, windows, day_setpoint_c)
+    return SynthSchedule(index, sim_step_s, t_out, sp, windows, day_setpoint_c, band_k,
+                         n_spare_constrained)
 
 
-def _stopped_at_t_min(t_air_c: np.ndarray, w0: int, w1: int, t_min_c: float, lag: int,
-                      after_c) -> np.ndarray:
-    """A constrained window's setpoints (steps w0:w1, per house) when it ends as the gateway
-    ends it: off (NaN) until the first step after ``lag`` steps where ``t_air_c`` [°C] reads
-    ≤ ``t_min_c``, ``after_c`` [°C] from there; off to the end where T_min is never reached."""
-    below = np.atleast_2d(t_air_c.T).T[w0:w1] <= t_min_c
-    below[:lag] = False
-    first = np.where(below.any(axis=0), below.argmax(axis=0), w1 - w0)
-    steps = np.arange(w1 - w0)[:, None]
-    return np.where(steps >= first[None, :], after_c, np.nan)
+def _schedule_band(sched: SynthSchedule, band_k: float | None) -> None:
+    if band_k is not None and abs(band_k - sched.band_k) > 1e-9:
+        raise ValueError(f"band_k {band_k:g} K differs from the schedule's {sched.band_k:g} K "
+                         "(imp_schedule(band_k=…) sets both the pre-heat and the stop)")
 
 
-def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float = 1.5,
-                 stop_at_t_min: bool = False, emission_lag_h: float = 1.0):
-    """Simulate houses through the schedule (closed loop on T_min if ``stop_at_t_min``).
+def run_schedule(house: HouseParameters, sched: SynthSchedule, band_k: float | None = None,
+                 stop_at_t_min: bool = False, emission_lag_h: float = 1.0,
+                 anticipate: bool = True):
+    """Simulate houses through the schedule (closed loop on T_min if ``stop_at_t_min``: each
+    constrained night ends as the gateway ends it, see :func:`run_schedule_plant`).
 
-    Returns the :class:`~impctl.model.Simulation` and the setpoints actually used.
+    ``band_k`` [K]: None (the schedule's ``band_k``); a value other than the schedule's is an
+    error. Returns the :class:`~impctl.model.Simulation` and the setpoints actually used.
     """
-    sp = sched.setpoint_c.copy()
-    sim = simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp, t_m_init_c=sched.t_m_init_c)
+    _schedule_band(sched, band_k)
+
+    def _run(sp):
+        return simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp,
+                        t_m_init_c=sched.t_m_init_c)
+
     if not stop_at_t_min:
-        return sim, sp
-    lag = int(round(emission_lag_h * 3600 / sched.dt_s))
-    for _, kind, w0, w1, t_set in sched.windows:
-        if kind != "constrained":
-            continue
-        sp[w0:w1] = _stopped_at_t_min(sim.t_air_c, w0, w1, t_set - band_k, lag, t_set - band_k)
-    sim = simulate(house, sched.t_out_c, sched.dt_s, setpoint_c=sp, t_m_init_c=sched.t_m_init_c)
-    return sim, sp
+        sp = sched.setpoint_c.copy()
+        return _run(sp), sp
+    return with_gateway_stops(_run, lambda sim: sim.t_air_c, sched, emission_lag_h, anticipate)
 
 
 @dataclass
@@ -174,8 +187,8 @@ class PlantSchedule:
 def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
                        seed: int = 0, outputs: tuple[str, ...] | None = None,
                        gains: bool = True, stop_at_t_min: bool = False,
-                       band_k: float = DEFAULT_BAND_K, emission_lag_h: float = 1.0,
-                       ) -> tuple[PlantSchedule, np.ndarray]:
+                       band_k: float | None = None, emission_lag_h: float = 1.0,
+                       anticipate: bool = True) -> tuple[PlantSchedule, np.ndarray]:
     """Simulate houses through the schedule on the realistic plant (:mod:`impctl.plant`).
 
     ``params`` are the houses' realism options (:func:`impctl.population.realism.sample_params`);
@@ -186,9 +199,13 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     gains (their ranges exclude zero); they are still drawn, so the sensor noise is the same
     as with gains. ``stop_at_t_min``: a constrained night ends as the gateway ends it — at the
     first step after ``emission_lag_h`` [h] where the room sensor reads ≤ T_min = T_set −
-    ``band_k`` [°C], the setpoint is back at the day setpoint from there (nights in order, one
-    re-simulation each: the plant and its noise are causal, so what precedes is unchanged).
+    ΔT [°C] or (``anticipate``) its trend reaches T_min within half an hour
+    (:func:`.gateway_nights.gateway_end`); the setpoint is back at the day setpoint from there
+    (nights in order, one re-simulation each: the plant and its noise are causal, so what
+    precedes is unchanged). ΔT is the schedule's ``band_k``; the ``band_k`` argument [K] is kept for
+    callers that pass it and must equal it.
     """
+    _schedule_band(sched, band_k)
     from ..plant import simulate_plant
     from ..plant.building.gains import internal_gains_w, solar_gains_w
 
@@ -211,16 +228,12 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
                               internal_gains_w=g_int, solar_gains_w=g_sol,
                               t_init_c=sched.t_m_init_c, seed=plant_seed, outputs=keep)
 
-    sp = sched.setpoint_c.copy()
-    run = _run(sp)
     if stop_at_t_min:
-        lag = int(round(emission_lag_h * 3600 / sched.dt_s))
-        for _, kind, w0, w1, t_set in sched.windows:
-            if kind != "constrained":
-                continue
-            sp[w0:w1] = _stopped_at_t_min(run["t_air_sensed_c"], w0, w1, t_set - band_k, lag,
-                                          sched.t_m_init_c)
-            run = _run(sp)
+        run, sp = with_gateway_stops(_run, lambda r: r["t_air_sensed_c"], sched,
+                                      emission_lag_h, anticipate)
+    else:
+        sp = sched.setpoint_c.copy()
+        run = _run(sp)
     logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
     return logged, sp
 
@@ -256,7 +269,9 @@ def sample_nights(
             on = ~np.isnan(spc[w0:w1])
             end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
             steps = steps[steps < end]
-        if steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
+        if not len(steps):   # never switched off (pre-heat short): a night without samples
+            q = np.zeros(0)
+        elif steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
             q = phi[steps[0]:steps[0] + len(steps) * stride].reshape(-1, stride).mean(axis=1)
         else:
             q = np.array([phi[s:s + stride].mean() for s in steps])

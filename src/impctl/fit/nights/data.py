@@ -21,6 +21,7 @@ from ...imp.features import Q_ON_W
 from ...imp.night import NightSamples
 from ...imp.plan import EMISSION_LAG_H
 from ...model.house import H_MS, LAMBDA_AT, am_factor
+from ...night_protocol import MIN_NIGHT_H
 from ..ode.parameters import CLASSIFIED, PARAM_NAMES, PHYSICAL_BOUNDS, eq63_margin
 from .quality import power_usable
 
@@ -41,7 +42,7 @@ class Estimate:
 def prepare_nights(
     nights: Sequence[NightSamples],
     emission_lag_h: float = EMISSION_LAG_H,
-    min_hours: float = 3.0,
+    min_hours: float = MIN_NIGHT_H,
     resume_threshold_w: float = Q_ON_W,
 ) -> tuple[list[NightSamples], list[float], list[tuple[str, str]]]:
     """Cut each night to its fit window and drop the unusable ones.
