@@ -55,6 +55,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..model import HouseParameters, simulate
+from ..night_protocol import DEFAULT_BAND_K, DEFAULT_PREHEAT_H
 from .records import CONSTRAINED, NORMAL, Candidate, Outlook, type_b_shares
 
 Z95 = 1.959964
@@ -72,8 +73,8 @@ class Protocol:
 
     window_h: float = 7.0
     emission_lag_h: float = 1.0
-    preheat_h: float = 2.0
-    band_k: float = 1.5
+    preheat_h: float = DEFAULT_PREHEAT_H
+    band_k: float = DEFAULT_BAND_K
     day_setpoint_c: float = 21.0
 
 

@@ -13,6 +13,12 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
+from ...night_protocol import (
+    DEFAULT_BAND_K,
+    DEFAULT_CONSTRAINED_SETPOINT_C,
+    DEFAULT_PREHEAT_H,
+    DEFAULT_SETPOINTS_C,
+)
 from .. import cli
 from ..checks import MAX_FILE_MB, SETPOINT_C, in_range, refuse_large_file, time_zone
 
@@ -72,13 +78,15 @@ def _read_fit(path: Path) -> dict:
               help="NIGHTS.csv the fit used (its sample step is the next night's).")
 @click.option("--forecast-t-out-c", required=True, type=float,
               help="The next night's mean outdoor temperature [°C].")
-@click.option("--constrained-setpoint-c", default=21.0, show_default=True, type=float,
+@click.option("--constrained-setpoint-c", default=DEFAULT_CONSTRAINED_SETPOINT_C,
+              show_default=True, type=float,
               callback=_setpoint, help="T_set of a constrained night [°C].")
-@click.option("--normal-setpoints-c", default="21,22,23", show_default=True,
+@click.option("--normal-setpoints-c", default=",".join(f"{x:g}" for x in DEFAULT_SETPOINTS_C),
+              show_default=True,
               callback=_setpoints, help="T_set of the normal nights, comma-separated [°C].")
-@click.option("--comfort-band-k", default=1.5, show_default=True, type=float,
+@click.option("--comfort-band-k", default=DEFAULT_BAND_K, show_default=True, type=float,
               help="Constrained nights pre-heat to T_set + band and end at T_set − band [K].")
-@click.option("--preheat-h", default=2.0, show_default=True, type=float,
+@click.option("--preheat-h", default=DEFAULT_PREHEAT_H, show_default=True, type=float,
               help="Pre-heat before a constrained night [h].")
 @click.option("--window-h", default=7.0, show_default=True, type=float,
               help="Length of the night window [h].")
