@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from datetime import timedelta
 
 from impctl_sim.faults import DEFAULT_GREETING
-from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig
+from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig, run_virtual
 from sim_fixtures import run
 
 SPEED = 600.0
@@ -171,7 +171,7 @@ def _run_side_by_side(tmp_path, scenarios: dict[str, Callable], timeout_s: float
         results = await asyncio.gather(*(scenarios[n]() for n in names),
                                        return_exceptions=True)
         return {n: r for n, r in zip(names, results, strict=True) if r is not None}
-    failures = run(body(), timeout_s)
+    failures = run_virtual(body(), timeout_s)
     assert not failures, "\n".join(f"{n}: {type(e).__name__}: {e}" for n, e in failures.items())
 
 
@@ -181,7 +181,7 @@ def test_link_faults_and_exception_codes_across_the_end_of_a_night(tmp_path):
 
 
 def test_gateway_exceptions_across_the_end_of_a_night(tmp_path):
-    run(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
+    run_virtual(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
 
 
 async def _link_down_30_min(tmp_path) -> None:
