@@ -10,7 +10,10 @@ Each fault of :data:`NIGHT_FAULTS` hits a constrained night from 15 simulated mi
 window's end until 15 minutes after it, so it spans ≥ 5 polls *and* the end-of-night restore:
 the restore has to wait for the link and complete once the fault is gone. The rigs run side
 by side in one event loop (each keeps its own logs, see ``reliability_fixtures.RIG``); the
-clock runs 600× (one poll per simulated minute = 0.1 s of wall time).
+clock runs 600× the loop's time (one poll per simulated minute = 0.1 s), on a virtual-time
+loop (``reliability_fixtures.VirtualTimeLoop``): link timeouts, back-offs and the proxy's
+stall count in the same loop seconds, and however loaded the machine, computation takes no
+simulated time, so the rigs never fall behind their clock.
 
 "One clear line per incident" is checked on what the journal would show at ``log_level =
 info``: at WARNING and above exactly the line naming the incident when it starts (and, when
@@ -84,7 +87,7 @@ def _greeting_and_reconnect(rig: DaemonRig) -> None:
 _PASS = _proxy("pass")
 NIGHT_FAULTS = [
     Fault("drop mid-read", _proxy("drop-read"), _PASS, (LINK_LOST, RESTORE_WAITS), "link lost"),
-    # 5 s of wall-clock silence (25 link timeouts; 50 simulated minutes at 600×); it ends by
+    # 5 s of silence (25 link timeouts; 50 simulated minutes at 600×); it ends by
     # itself, so the restore may get through before the switch back.
     Fault("5 s stall", _proxy("stall", stall_s=5.0), _PASS, (LINK_LOST, RESTORE_WAITS),
           "link lost", minutes=70.0, blocks_restore=False),
