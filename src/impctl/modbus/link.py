@@ -48,6 +48,15 @@ def _loop_s() -> float:
     return asyncio.get_running_loop().time()
 
 
+def _honour_cancel() -> None:
+    """Raise the cancellation that Python 3.11's ``wait_for`` (inside pymodbus' connect) drops
+    when it arrives as a refused connection completes (CPython gh-86296): the task still
+    counts the request, so a stop (SIGTERM) is not left waiting for the connect deadline."""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError("cancelled while connecting")
+
+
 class _Unattributable(ModbusLinkError):
     """An answer that cannot be shown to be the answer to its own request."""
 
@@ -167,6 +176,7 @@ class ModbusLink:
             self.attribution.draining = True
             if await self._client.connect():
                 break
+            _honour_cancel()
             left = None if deadline is None else deadline - _loop_s()
             if left is not None and left <= 0:
                 self.close()
