@@ -31,8 +31,7 @@ from dataclasses import dataclass, field
 from datetime import timedelta
 
 from impctl_sim.faults import DEFAULT_GREETING
-from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig, run_virtual
-from sim_fixtures import run
+from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig, loop_wall, run_virtual
 
 SPEED = 600.0
 #: Test-sized link timings (wall clock): a failed try costs 2 simulated minutes at 600×.
@@ -306,7 +305,7 @@ def test_a_store_that_cannot_write_mid_night_does_not_keep_the_heating_off(tmp_p
     from impctl.store import Store
 
     async def body():
-        clock = VirtualClock(EPOCH, 7200.0)
+        clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())
         cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0))
         async with simulator(cfg) as sim, client(sim, budget=budget(tmp_path)) as hp:
             with Store(tmp_path / "impctl.db") as store:
@@ -328,7 +327,7 @@ def test_a_store_that_cannot_write_mid_night_does_not_keep_the_heating_off(tmp_p
                 assert len(store.journal_pending()) == 2  # restored, but not yet recorded
                 assert await restore_all(hp, store, clock=clock, timeout_s=60) == []
                 assert dict(sim.stats.writes) == writes  # nothing written twice
-    run(body(), 60)
+    run_virtual(body(), 60)
 
 
 def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
@@ -345,7 +344,7 @@ def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
     from impctl.store import Store
 
     async def body():
-        clock = VirtualClock(EPOCH, 7200.0)
+        clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())
         cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0))
         async with simulator(cfg) as sim, client(sim, budget=budget(tmp_path)) as hp:
             with Store(tmp_path / "impctl.db") as store, captured_logs(clock) as logs:
@@ -368,4 +367,4 @@ def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
                 assert len(warnings) == 2, warnings  # the incident, then the abort
                 assert "readings missing: t_air_c missing" in warnings[0]
                 assert "night aborted: no indoor temperature" in warnings[1]
-    run(body(), 60)
+    run_virtual(body(), 60)
