@@ -186,7 +186,10 @@ def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
 
 
 def test_broker_outage_mid_night_loses_no_sample(tmp_path):
-    epoch = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+    # 21:45, 7 h 15 min before the window's end: a `now` trigger from Home Assistant is
+    # refused in daytime, and at 3600× a start at 03:00 left 2 s for the daemon's start-up,
+    # the discovery and three presses — not enough on a loaded machine.
+    epoch = datetime(2026, 1, 12, 21, 45, tzinfo=TZ)
     with broker(tmp_path / "broker") as b, home_assistant(b.port) as ha, \
             rig(tmp_path, epoch, mqtt_section(b, commands=True)) as (sim, config, db):
         d = _ready(config, db, tmp_path / "daemon.log")
