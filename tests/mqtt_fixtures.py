@@ -11,6 +11,7 @@ and can press buttons. Nothing is mocked.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import shutil
 import socket
@@ -97,6 +98,9 @@ class Received:
         return json.loads(self.payload)
 
 
+_CLIENT_IDS = itertools.count(1)
+
+
 class HomeAssistant:
     """A subscriber like Home Assistant's MQTT integration (paho-mqtt, its own thread)."""
 
@@ -104,7 +108,10 @@ class HomeAssistant:
                  topics: tuple[str, ...] = ("homeassistant/#", "impctl/#")):
         self.messages: list[Received] = []
         self._lock = threading.Lock()
-        self.client = paho.Client(paho.CallbackAPIVersion.VERSION2, client_id="test-ha")
+        # Its own client id: a second client with the same id (``retained()``) would make
+        # the broker drop this one (session takeover), and a press could find it offline.
+        self.client = paho.Client(paho.CallbackAPIVersion.VERSION2,
+                                  client_id=f"test-ha-{next(_CLIENT_IDS)}")
         if username:
             self.client.username_pw_set(username, password)
         self.client.reconnect_delay_set(0.1, 0.5)
@@ -141,7 +148,10 @@ class HomeAssistant:
             return self.last.get(topic)
 
     def press(self, topic: str, payload: str) -> None:
-        self.client.publish(topic, payload, qos=1).wait_for_publish(5)
+        # Connected first (the connect runs in paho's thread): on a loaded machine the
+        # CONNACK may come after the test's first press.
+        wait_until(self.client.is_connected, 30, "Home Assistant's MQTT connection")
+        self.client.publish(topic, payload, qos=1).wait_for_publish(30)
 
 
 @contextlib.contextmanager

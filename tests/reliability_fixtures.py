@@ -335,6 +335,7 @@ class DaemonRig:
     task: asyncio.Task
     clock: VirtualClock
     logs: LogLines
+    context: contextvars.Context  # the daemon's tasks' (RIG = its name)
 
     @property
     def store(self):
@@ -355,6 +356,10 @@ class DaemonRig:
         exists."""
         before = len(self.store.nights())
         self.store.add_request(kind, setpoint_c, "now")
+        # Taken at once, as the daemon's 1 s trigger-poll job would (APScheduler times its
+        # jobs on the wall clock, not on the loop's, possibly virtual, time), in the rig's
+        # context so that the night's log lines are this rig's.
+        await asyncio.create_task(self.daemon._poll_requests(), context=self.context)
         await wait_for(lambda: len(self.store.nights()) > before, 20)
         return self.store.nights()[-1].id
 
@@ -382,13 +387,23 @@ class DaemonRig:
         return night.valid is not None and not self.store.journal_pending()
 
 
+def loop_wall() -> Callable[[], float]:
+    """POSIX seconds that advance with the running loop's clock: the wall time on a standard
+    loop; on a :class:`VirtualTimeLoop` the simulated clock then follows the loop's virtual
+    time, so however slow the machine, computation takes no simulated time."""
+    loop = asyncio.get_running_loop()
+    offset = time.time() - loop.time()
+    return lambda: loop.time() + offset
+
+
 @contextlib.asynccontextmanager
 async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = HEAVY_HOUSE,
                      t_out_c: float = 0.0, epoch: datetime = MORNING,
                      heatpump: dict | None = None, night: dict | None = None,
                      sim_faults: str | None = None, name: str = "rig"
                      ) -> AsyncIterator[DaemonRig]:
-    """Simulator → proxy → in-process daemon, one event loop, one accelerated clock.
+    """Simulator → proxy → in-process daemon, one event loop, one accelerated clock (on the
+    loop's time: run it with :func:`run_virtual` to make it independent of the machine's load).
 
     The night window of a manual (``--now``) night lasts ``night['window']``; the default
     here is one hour after a 6-minute preheat. Several rigs may run in one event loop; give
@@ -396,7 +411,7 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
     """
     from impctl_sim import parse_faults
 
-    clock = VirtualClock(epoch, speed)
+    clock = VirtualClock(epoch, speed, wall=loop_wall())
     cfg = SimConfig(clock=clock, house=house, weather=constant_weather(t_out_c),
                     setpoint_c=OWNER_SETPOINT_C,
                     faults=parse_faults(sim_faults) if sim_faults else parse_faults("none"))
@@ -417,7 +432,7 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
         try:
             await wait_for(lambda: daemon.scheduler is not None or task.done(), 20)
             assert not task.done(), task
-            yield DaemonRig(sim, proxy, daemon, task, clock, logs)
+            yield DaemonRig(sim, proxy, daemon, task, clock, logs, context)
         finally:
             daemon.stop.set()
             with contextlib.suppress(Exception):

@@ -17,14 +17,18 @@ from datetime import datetime, timedelta
 import pytest
 from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, OWNER_SETPOINT_RAW
 from impctl_sim import SimConfig, constant_weather
-from sim_fixtures import EPOCH, budget, client, run, simulator
+from reliability_fixtures import run_virtual
+from sim_fixtures import EPOCH, budget, client, simulator
 
 from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
 from impctl.store import Store
 
-# 3600×: one 120 s sample every 33 ms of wall time, so a snapshot delayed by a loaded machine
-# (the sampler never bursts to catch up) still leaves ≥ 90 % of the window sampled.
+# 3600× on a virtual-time event loop (:class:`reliability_fixtures.VirtualTimeLoop`): the
+# clock follows the loop's time, which jumps to the next timer when nothing is ready, so a
+# simulated hour costs 1 s of loop time and computation none. A loaded machine makes the
+# night take longer in wall time but cannot make the clock outrun the sampler (at 3600× of
+# the wall clock a 120 s sample is due every 33 ms, which a busy 2-core machine misses).
 SPEED = 3600.0
 #: A valid constrained night needs 3 h of data after switch-off + the 1 h emission lag.
 WINDOW_H = 4.5
@@ -50,8 +54,14 @@ async def _watch(sim, clock: VirtualClock, db_path, trace: Trace, done: asyncio.
         other.close()
 
 
+def _loop_clock() -> VirtualClock:
+    """The simulated clock of the running (virtual-time) loop, :data:`SPEED` × its time."""
+    loop = asyncio.get_running_loop()
+    return VirtualClock(EPOCH, SPEED, loop.time(), wall=loop.time)
+
+
 async def _run_night(tmp_path, kind: str, setpoint_c: float):
-    clock = VirtualClock(EPOCH, SPEED)
+    clock = _loop_clock()
     cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                     setpoint_c=OWNER_SETPOINT_C, plant_kind="iso")
     policy = NightPolicy(sample_interval_s=120.0, preheat_h=1.0)
@@ -99,7 +109,7 @@ def _check_restored_and_recorded(r) -> None:
 
 
 def test_constrained_night_switches_off_then_restores(tmp_path):
-    r = run(_run_night(tmp_path, "constrained", 21.0), timeout_s=60)
+    r = run_virtual(_run_night(tmp_path, "constrained", 21.0), timeout_s=60)
     req, trace = r["req"], r["trace"]
     act = req.window_start - timedelta(hours=1)
     preheat = [(sp, mode) for t, sp, mode in trace.plant
@@ -124,7 +134,7 @@ def test_constrained_night_switches_off_then_restores(tmp_path):
 
 
 def test_normal_night_holds_setpoint_then_restores(tmp_path):
-    r = run(_run_night(tmp_path, "normal", 22.0), timeout_s=60)
+    r = run_virtual(_run_night(tmp_path, "normal", 22.0), timeout_s=60)
     req, trace = r["req"], r["trace"]
     act = req.window_start - timedelta(hours=1)
     during = {(sp, mode) for t, sp, mode in trace.plant
@@ -144,7 +154,7 @@ def test_a_second_night_journals_the_owner_again(tmp_path, kind):
     """Two nights in a row on one store: the second journal entry is the owner's value, never
     a value impctl wrote itself."""
     async def body():
-        clock = VirtualClock(EPOCH, SPEED)
+        clock = _loop_clock()
         cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                         setpoint_c=20.5)
         policy = NightPolicy(sample_interval_s=300.0, preheat_h=0.5, min_coverage=0.5)
@@ -161,4 +171,4 @@ def test_a_second_night_journals_the_owner_again(tmp_path, kind):
                 raws = store._db.execute(
                     "SELECT register, raw_value FROM journal ORDER BY id").fetchall()
                 assert [tuple(r) for r in raws] == [("loop1_setpoint", 205), ("loop1_mode", 1)] * 2
-    run(body(), timeout_s=60)
+    run_virtual(body(), timeout_s=60)

@@ -144,7 +144,10 @@ def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):
 def test_trigger_now_then_status_nights_export_restore(tmp_path):
     from impctl.imp import read_nights
 
-    with rig(tmp_path, night={"preheat_h": 0.5}, epoch=MORNING) as (sim, config, db):
+    # One poll per 600 s: 167 ms of wall time at 3600×, which 12 reads from the simulator
+    # subprocess fit even on a loaded machine (120 s left 33 ms: coverage fell to 42 %).
+    with rig(tmp_path, night={"preheat_h": 0.5, "sample_interval_s": 600},
+             epoch=MORNING) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
             # --force: the daemon's start may take the simulated clock past 05:00 already.

@@ -230,6 +230,27 @@ def test_connect_loop_gives_up_after_max_wait():
     run(body())
 
 
+def test_a_stop_while_connecting_is_honoured_at_once():
+    """Cancelling a connect loop (the daemon's SIGTERM while the heat pump is unreachable)
+    ends it at once, also when the cancellation meets a refused connection inside pymodbus'
+    ``wait_for`` (Python 3.11 drops it there; the loop then ran on to its deadline)."""
+    async def body():
+        port = free_port()
+        late = 0
+        for i in range(200):
+            hp = HeatPumpClient(hp_config(port, link=link_config(
+                port, connect_backoff_s=(0.001, 0.002))), clock=clock(600.0))
+            connecting = asyncio.ensure_future(hp.connect(max_wait_s=5.0))
+            await asyncio.sleep(0.0005 * (i % 20))  # cancel at many points of the loop
+            started = time.monotonic()
+            connecting.cancel()
+            await asyncio.gather(connecting, return_exceptions=True)
+            late += time.monotonic() - started > 1.0
+            hp.close()
+        assert late == 0, f"{late} of 200 cancellations waited for the connect deadline"
+    run(body(), 60)
+
+
 def test_rtu_over_socket_url():
     async def body():
         port = free_port()

@@ -51,13 +51,13 @@ N_ENTITIES = {False: 18, True: 23}
 
 @contextlib.contextmanager
 def rig(tmp_path: Path, epoch: datetime, mqtt: dict, campaign: dict | None = None,
-        speed: float = SPEED):
+        speed: float = SPEED, window: str = "22:00-05:00"):
     """(sim, config, db) with an ``[mqtt]`` section (the ideal plant: its sensors read the
     outdoor temperature exactly, which the payload checks rely on)."""
     with sim_process(tmp_path, epoch, speed, plant="iso") as sim:
         mapping = daemon_mapping(
             tmp_path / "state", sim.port, sim.clock,
-            night={"window": "22:00-05:00", "preheat_h": 0.5, "sample_interval_s": 300},
+            night={"window": window, "preheat_h": 0.5, "sample_interval_s": 300},
             campaign=campaign or {"enabled": False}, mqtt=mqtt)
         config = write_config(tmp_path / "config.toml", mapping)
         yield sim, config, tmp_path / "state" / "impctl.db"
@@ -186,9 +186,16 @@ def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
 
 
 def test_broker_outage_mid_night_loses_no_sample(tmp_path):
-    epoch = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+    # 21:45, long before the window's end: a `now` trigger from Home Assistant is refused
+    # in daytime, and at 3600× a start at 03:00 left 2 s for the daemon's start-up, the
+    # discovery and three presses — not enough on a loaded machine. A 12 h window: the
+    # night (12.5 s) must outlast the outage, the CLI call and both clients' reconnects,
+    # which took 6–7 s on a loaded machine (a 7 h night then ended 1.4 s after the daemon
+    # was back, before Home Assistant had re-subscribed).
+    epoch = datetime(2026, 1, 12, 21, 45, tzinfo=TZ)
     with broker(tmp_path / "broker") as b, home_assistant(b.port) as ha, \
-            rig(tmp_path, epoch, mqtt_section(b, commands=True)) as (sim, config, db):
+            rig(tmp_path, epoch, mqtt_section(b, commands=True),
+                window="22:00-10:00") as (sim, config, db):
         d = _ready(config, db, tmp_path / "daemon.log")
         try:
             wait_until(lambda: len(_configs(ha)) == N_ENTITIES[True], 20, "discovery",

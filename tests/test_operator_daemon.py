@@ -183,11 +183,16 @@ def test_foreground_night_holds_the_lock_and_shows_as_alive(tmp_path):
 
     morning = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
     with sim_process(tmp_path, morning, 1200.0) as sim:
+        # A 3.5 h window: the night (3.75 h with its preheat) lasts 11 s at 1200×, so it still
+        # runs while `impctl status` and a second `impctl daemon` start (a few seconds on a
+        # loaded machine); if it ended first, the second daemon would take the lock and run.
         config = write_config(tmp_path / "config.toml", daemon_mapping(
             tmp_path / "state", sim.port, sim.clock,
-            night={"window": "02:30-04:00", "preheat_h": 0.25}))
+            night={"window": "02:30-06:00", "preheat_h": 0.25}))
+        # --force: at 1200× the 03:00 start is past the window's end (04:00) after 3 s of
+        # wall time, which starting two Python processes can take on a loaded machine.
         fg = subprocess.Popen([*IMPCTL, "trigger", "--kind", "normal", "--setpoint", "22",
-                               "--now", "--foreground", "--config", str(config)],
+                               "--now", "--force", "--foreground", "--config", str(config)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                               cwd=ROOT)
         try:

@@ -10,7 +10,10 @@ Each fault of :data:`NIGHT_FAULTS` hits a constrained night from 15 simulated mi
 window's end until 15 minutes after it, so it spans ≥ 5 polls *and* the end-of-night restore:
 the restore has to wait for the link and complete once the fault is gone. The rigs run side
 by side in one event loop (each keeps its own logs, see ``reliability_fixtures.RIG``); the
-clock runs 600× (one poll per simulated minute = 0.1 s of wall time).
+clock runs 600× the loop's time (one poll per simulated minute = 0.1 s), on a virtual-time
+loop (``reliability_fixtures.VirtualTimeLoop``): link timeouts, back-offs and the proxy's
+stall count in the same loop seconds, and however loaded the machine, computation takes no
+simulated time, so the rigs never fall behind their clock.
 
 "One clear line per incident" is checked on what the journal would show at ``log_level =
 info``: at WARNING and above exactly the line naming the incident when it starts (and, when
@@ -28,8 +31,7 @@ from dataclasses import dataclass, field
 from datetime import timedelta
 
 from impctl_sim.faults import DEFAULT_GREETING
-from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig
-from sim_fixtures import run
+from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig, loop_wall, run_virtual
 
 SPEED = 600.0
 #: Test-sized link timings (wall clock): a failed try costs 2 simulated minutes at 600×.
@@ -84,7 +86,7 @@ def _greeting_and_reconnect(rig: DaemonRig) -> None:
 _PASS = _proxy("pass")
 NIGHT_FAULTS = [
     Fault("drop mid-read", _proxy("drop-read"), _PASS, (LINK_LOST, RESTORE_WAITS), "link lost"),
-    # 5 s of wall-clock silence (25 link timeouts; 50 simulated minutes at 600×); it ends by
+    # 5 s of silence (25 link timeouts; 50 simulated minutes at 600×); it ends by
     # itself, so the restore may get through before the switch back.
     Fault("5 s stall", _proxy("stall", stall_s=5.0), _PASS, (LINK_LOST, RESTORE_WAITS),
           "link lost", minutes=70.0, blocks_restore=False),
@@ -171,7 +173,7 @@ def _run_side_by_side(tmp_path, scenarios: dict[str, Callable], timeout_s: float
         results = await asyncio.gather(*(scenarios[n]() for n in names),
                                        return_exceptions=True)
         return {n: r for n, r in zip(names, results, strict=True) if r is not None}
-    failures = run(body(), timeout_s)
+    failures = run_virtual(body(), timeout_s)
     assert not failures, "\n".join(f"{n}: {type(e).__name__}: {e}" for n, e in failures.items())
 
 
@@ -181,7 +183,7 @@ def test_link_faults_and_exception_codes_across_the_end_of_a_night(tmp_path):
 
 
 def test_gateway_exceptions_across_the_end_of_a_night(tmp_path):
-    run(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
+    run_virtual(_night_with_fault(tmp_path, GATEWAY_EXCEPTIONS), 60)
 
 
 async def _link_down_30_min(tmp_path) -> None:
@@ -303,7 +305,7 @@ def test_a_store_that_cannot_write_mid_night_does_not_keep_the_heating_off(tmp_p
     from impctl.store import Store
 
     async def body():
-        clock = VirtualClock(EPOCH, 7200.0)
+        clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())
         cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0))
         async with simulator(cfg) as sim, client(sim, budget=budget(tmp_path)) as hp:
             with Store(tmp_path / "impctl.db") as store:
@@ -325,7 +327,7 @@ def test_a_store_that_cannot_write_mid_night_does_not_keep_the_heating_off(tmp_p
                 assert len(store.journal_pending()) == 2  # restored, but not yet recorded
                 assert await restore_all(hp, store, clock=clock, timeout_s=60) == []
                 assert dict(sim.stats.writes) == writes  # nothing written twice
-    run(body(), 60)
+    run_virtual(body(), 60)
 
 
 def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
@@ -342,7 +344,7 @@ def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
     from impctl.store import Store
 
     async def body():
-        clock = VirtualClock(EPOCH, 7200.0)
+        clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())
         cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0))
         async with simulator(cfg) as sim, client(sim, budget=budget(tmp_path)) as hp:
             with Store(tmp_path / "impctl.db") as store, captured_logs(clock) as logs:
@@ -365,4 +367,4 @@ def test_a_night_without_its_indoor_temperature_is_not_run_blind(tmp_path):
                 assert len(warnings) == 2, warnings  # the incident, then the abort
                 assert "readings missing: t_air_c missing" in warnings[0]
                 assert "night aborted: no indoor temperature" in warnings[1]
-    run(body(), 60)
+    run_virtual(body(), 60)

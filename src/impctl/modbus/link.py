@@ -42,6 +42,21 @@ from .errors import TRANSIENT_EXCEPTIONS, ModbusDeviceError, ModbusLinkError
 _LOG = logging.getLogger(__name__)
 
 
+def _loop_s() -> float:
+    """The event loop's clock [s]: what its timeouts and sleeps run on (``time.monotonic`` on
+    a standard loop); deadlines measured on it stay consistent with them on any loop."""
+    return asyncio.get_running_loop().time()
+
+
+def _honour_cancel() -> None:
+    """Raise the cancellation that Python 3.11's ``wait_for`` (inside pymodbus' connect) drops
+    when it arrives as a refused connection completes (CPython gh-86296): the task still
+    counts the request, so a stop (SIGTERM) is not left waiting for the connect deadline."""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError("cancelled while connecting")
+
+
 class _Unattributable(ModbusLinkError):
     """An answer that cannot be shown to be the answer to its own request."""
 
@@ -154,14 +169,15 @@ class ModbusLink:
         """
         first, most = self.config.connect_backoff_s
         delay = first
-        deadline = None if max_wait_s is None else time.monotonic() + max_wait_s
+        deadline = None if max_wait_s is None else _loop_s() + max_wait_s
         while True:
             self.close()
             self._client = self._make_client()
             self.attribution.draining = True
             if await self._client.connect():
                 break
-            left = None if deadline is None else deadline - time.monotonic()
+            _honour_cancel()
+            left = None if deadline is None else deadline - _loop_s()
             if left is not None and left <= 0:
                 self.close()
                 raise ModbusLinkError(f"cannot connect to {self.config.describe()} "
@@ -218,7 +234,7 @@ class ModbusLink:
         transaction ids, or without them one connection per set of distinguishable
         requests.)"""
         if self.config.transport == "rtu":
-            left = 2 * self.config.timeout_s - (time.monotonic() - self._last_request)
+            left = 2 * self.config.timeout_s - (_loop_s() - self._last_request)
             await asyncio.sleep(max(left, self.config.settle_s))
 
     async def read(self, address: int, count: int, device_id: int | None = None) -> list[int]:
@@ -305,7 +321,7 @@ class ModbusLink:
                 self.close()
             if not self.connected:
                 await self.connect(max_wait_s=self.config.timeout_s)
-            gap = self.config.request_gap_s - (time.monotonic() - self._last_request)
+            gap = self.config.request_gap_s - (_loop_s() - self._last_request)
             if gap > 0:
                 await asyncio.sleep(gap)
             client = self._client
@@ -323,7 +339,7 @@ class ModbusLink:
                 self.reset(exc)  # a late answer must never reach a later request
                 raise ModbusLinkError(str(exc)) from exc
             finally:
-                self._last_request = time.monotonic()
+                self._last_request = _loop_s()
             error = rr.isError()
             if self.config.transport == "rtu" and self.config.settle_s:
                 await asyncio.sleep(self.config.settle_s)
