@@ -2,6 +2,7 @@
 
 Run:  .venv/bin/python bench/classify_compare.py [--seed 0] [--campaigns 5] [--plant realistic]
           [--a '{"constrained_per_day": 1}'] [--b '{"constrained_per_day": 3}'] [--cross]
+          [--score-on own|a|b] [--features-a NAME,...] [--features-b NAME,...]
 
 ``--a`` / ``--b`` are :class:`impctl.population.virtual_imp.ImpSimConfig` keyword arguments (JSON).
 Each population is generated (900 households, same seed: same households and test split) and
@@ -35,15 +36,30 @@ from impctl.population.dataset import generate_dataset
 from impctl.population.ranges import bin_values
 from impctl.population.virtual_imp import ImpSimConfig
 
+_DATASETS: dict[str, object] = {}
 
-def _score(kw: dict, args, trained: tuple | None = None) -> tuple[dict, np.ndarray, tuple]:
+
+def _dataset(kw: dict, args):
+    """Population ``kw`` (generated once per run)."""
+    key = json.dumps(kw, sort_keys=True)
+    if key not in _DATASETS:
+        _DATASETS[key] = generate_dataset(args.households, args.seed, plant=args.plant,
+                                          imp=ImpSimConfig(**kw))
+    return _DATASETS[key]
+
+
+def _train(kw: dict, args, features: str | None) -> tuple:
+    """(models, reports) of the classifiers trained on population ``kw`` as ``impctl train``
+    does; ``features``: comma-separated campaign features they use (None: all)."""
+    features = None if features is None else tuple(features.split(","))
+    return train_classifiers(_dataset(kw, args), TrainConfig(features=features), args.seed,
+                             with_baselines=False)
+
+
+def _score(kw: dict, args, trained: tuple) -> tuple[dict, np.ndarray]:
     """Per test household and parameter: mean Brier, accuracy and majority hit over campaigns
-    of population ``kw``'s nights, scored by ``trained`` = (models, reports) if given, else by
-    classifiers trained on that population (returned as the third item)."""
-    dataset = generate_dataset(args.households, args.seed, plant=args.plant,
-                               imp=ImpSimConfig(**kw))
-    if trained is None:
-        trained = train_classifiers(dataset, TrainConfig(), args.seed, with_baselines=False)
+    of population ``kw``'s nights, scored by ``trained`` = (models, reports)."""
+    dataset = _dataset(kw, args)
     models, reports = trained
     values, ids = night_cube(dataset.nights[dataset.nights["replay"] == 0])
     test = np.array(next(iter(reports.values())).test_households)
@@ -58,14 +74,16 @@ def _score(kw: dict, args, trained: tuple | None = None) -> tuple[dict, np.ndarr
     out = {}
     for name, model in models.items():
         y = bin_values(truth.loc[np.repeat(test, k), name].to_numpy(float), model.ranges)
-        majority = np.bincount(bin_values(truth.loc[train, name].to_numpy(float),
-                                          model.ranges)).argmax()
-        p = model.predict_proba(rows)
-        brier = np.sum((p - np.eye(p.shape[1])[y]) ** 2, axis=1)
+        counts = np.bincount(bin_values(truth.loc[train, name].to_numpy(float),
+                                        model.ranges), minlength=len(model.ranges))
+        p = model.predict_proba(rows[list(model.feature_names_in_)])
+        onehot = np.eye(p.shape[1])[y]
+        brier = np.sum((p - onehot) ** 2, axis=1)
+        prior = np.sum((counts / counts.sum() - onehot) ** 2, axis=1)
         out[name] = tuple(v.reshape(-1, k).mean(axis=1) for v in
                           (brier, (p.argmax(axis=1) == y).astype(float),
-                           (y == majority).astype(float)))
-    return out, test, trained
+                           (y == counts.argmax()).astype(float), prior))
+    return out, test
 
 
 def main() -> None:
@@ -79,10 +97,25 @@ def main() -> None:
     ap.add_argument("--cross", action="store_true",
                     help="score B's nights with the classifiers trained on A (e.g. A the "
                          "population, B its nights stopped at T_min as the gateway's are)")
+    ap.add_argument("--score-on", choices=("own", "a", "b"), default="own",
+                    help="whose nights the test households are scored on: each population's "
+                         "own (default), or both classifiers on A's or on B's nights (e.g. "
+                         "both on nights stopped at T_min, as the gateway records them)")
+    ap.add_argument("--features-a", default=None,
+                    help="comma-separated campaign features A's forests use (default all)")
+    ap.add_argument("--features-b", default=None,
+                    help="comma-separated campaign features B's forests use (default all)")
     args = ap.parse_args()
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
-    a, test_a, trained_a = _score(json.loads(args.a), args)
-    b, test_b, _ = _score(json.loads(args.b), args, trained_a if args.cross else None)
+    kw_a, kw_b = json.loads(args.a), json.loads(args.b)
+    if args.cross and args.score_on != "own":
+        ap.error("--cross and --score-on exclude each other")
+    trained_a = _train(kw_a, args, args.features_a)
+    trained_b = trained_a if args.cross else _train(kw_b, args, args.features_b)
+    nights_a = {"own": kw_a, "a": kw_a, "b": kw_b}[args.score_on]
+    nights_b = {"own": kw_b, "a": kw_a, "b": kw_b}[args.score_on]
+    a, test_a = _score(nights_a, args, trained_a)
+    b, test_b = _score(nights_b, args, trained_b)
     assert (test_a == test_b).all()
     boot = np.random.default_rng(0).integers(0, len(test_a), (4000, len(test_a)))
 
@@ -91,17 +124,22 @@ def main() -> None:
         lo, hi = np.percentile(m, [2.5, 97.5])
         return f"{v.mean() * scale:{fmt}} [{lo:{fmt}}, {hi:{fmt}}]"
 
-    print(f"A = {args.a}; B = {args.b}{' scored by the classifiers of A' if args.cross else ''}; "
+    on = {"own": "", "a": "; both scored on A's nights", "b": "; both scored on B's nights"}
+    feats = "".join(f"; {side} uses {f}" for side, f in (("A", args.features_a),
+                                                          ("B", args.features_b)) if f)
+    by_a = " scored by the classifiers of A" if args.cross else ""
+    print(f"A = {args.a}; B = {args.b}{feats}{by_a}{on[args.score_on]}; "
           f"{len(test_a)} test households × {args.campaigns} "
           "campaigns of 2 + 6 nights; 95 % bootstrap intervals over households\n")
     print("| parameter | accuracy A / B % | majority % | Brier A / B | Brier B − A | "
-          "margin over majority A / B (points) |")
-    print("|---|---|---|---|---|---|")
+          "margin over majority A / B (points) | Brier prior | Brier B − prior |")
+    print("|---|---|---|---|---|---|---|---|")
     for name in a:
-        (ba, aa, ma), (bb, ab, _) = a[name], b[name]
+        (ba, aa, ma, _), (bb, ab, _, pb) = a[name], b[name]
         print(f"| {name} | {aa.mean() * 100:.1f} / {ab.mean() * 100:.1f} | {ma.mean() * 100:.1f} "
               f"| {ba.mean():.3f} / {bb.mean():.3f} | {ci(bb - ba)} | "
-              f"{ci(aa - ma, 100, '+.1f')} / {ci(ab - ma, 100, '+.1f')} |")
+              f"{ci(aa - ma, 100, '+.1f')} / {ci(ab - ma, 100, '+.1f')} | {pb.mean():.3f} | "
+              f"{ci(bb - pb)} |")
 
 
 if __name__ == "__main__":

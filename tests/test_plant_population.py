@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from impctl.night_protocol import DEFAULT_BAND_K
 from impctl.plant import RADIATORS, UNDERFLOOR
 from impctl.plant.params import SECTIONS
 from impctl.population import ImpSimConfig, generate_dataset, sample_households
@@ -56,6 +57,26 @@ def test_generate_dataset_realistic_is_reproducible():
     assert iso.households[same].equals(a.households[same])
     assert not np.allclose(iso.nights["decay_rate_per_h"].fillna(0),
                            a.nights["decay_rate_per_h"].fillna(0))
+
+
+def test_default_population_records_nights_as_the_gateway_does():
+    """Without an explicit config the population runs the nights the gateway records: on the
+    realistic plant its constrained nights stop at T_min (and the manifest says so, so trained
+    models carry it); on the ideal 5R1C they cool to the window's end (its massless air node
+    would end them at the lag)."""
+    assert ImpSimConfig.for_plant("realistic", days=3).stop_at_t_min
+    assert not ImpSimConfig.for_plant("iso").stop_at_t_min
+    assert ImpSimConfig.for_plant("realistic", stop_at_t_min=False).stop_at_t_min is False
+    lag_h = ImpSimConfig().emitter_lag_h
+    for plant, stops in (("realistic", True), ("iso", False)):
+        data = generate_dataset(4, seed=6, plant=plant)
+        assert data.manifest["imp"]["stop_at_t_min"] is stops
+        assert data.manifest["imp"]["band_k"] == DEFAULT_BAND_K
+        cons = data.nights[data.nights["kind"] == "constrained"]
+        # a night cooling to 05:00 has its last sample one 10-min step before the end
+        short = cons["cooling_time_h"] < cons["duration_h"] - lag_h - 1 / 6 - 1e-6
+        assert short.any() if stops else not short.any(), plant
+        assert cons["decay_rate_early_per_h"].notna().mean() > 0.9
 
 
 def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():

@@ -41,6 +41,9 @@ class TrainConfig:
     n_estimators: int = 300
     min_samples_leaf: int = 5
     n_jobs: int = -1
+    #: campaign features the forests use (:data:`~.campaign.CAMPAIGN_FEATURE_NAMES` order);
+    #: None: all of them. For measuring what a feature adds (bench/classify_compare.py).
+    features: tuple[str, ...] | None = None
 
 
 @dataclass
@@ -170,8 +173,13 @@ def train_classifiers(
                              n_normal=cfg.small_campaign[1])
     x_small = aggregate_nights(values[test], small)
 
+    unknown = set(cfg.features or ()) - set(CAMPAIGN_FEATURE_NAMES)
+    if unknown:
+        raise ValueError(f"unknown campaign features: {sorted(unknown)}")
+    used = [f for f in CAMPAIGN_FEATURE_NAMES if cfg.features is None or f in cfg.features]
+
     def frame(x):
-        return pd.DataFrame(x, columns=list(CAMPAIGN_FEATURE_NAMES))
+        return pd.DataFrame(x, columns=list(CAMPAIGN_FEATURE_NAMES))[used]
 
     models: dict[str, RangeClassifier] = {}
     reports: dict[str, ParameterReport] = {}

@@ -74,7 +74,9 @@ class ImpSimConfig:
     T_set drawn uniformly within ``constrained_jitter_k`` [K] of ``constrained_setpoint_c``
     (domain randomisation: a gateway's owner may configure it). Default one, at the gateway's
     T_set: three replays a day measured no better on realistic held-out houses (README
-    "Accuracy", branch h14r).
+    "Accuracy", branch h14r). ``stop_at_t_min``: constrained nights end at T_min = T_set −
+    ``band_k`` (the gateway's controller does); :meth:`for_plant` sets it as the gateway
+    records nights on each plant.
     """
 
     days: int = 15
@@ -110,6 +112,20 @@ class ImpSimConfig:
         if self.constrained_per_day < 1 or self.constrained_jitter_k < 0:
             raise InputError("constrained_per_day must be >= 1 and constrained_jitter_k >= 0",
                              place="constrained_per_day")
+
+    @classmethod
+    def for_plant(cls, plant: str, **kw) -> ImpSimConfig:
+        """The population's nights as the gateway records them on ``plant`` ("realistic" or
+        "iso"); ``kw`` as the constructor's.
+
+        Realistic plant: constrained nights stop at T_min (``stop_at_t_min``), as the gateway's
+        controller ends them. Classifiers trained so score better on such nights than those
+        trained on nights cooling to the window's end (c_f Brier −0.06 / −0.08 on two seeds,
+        bench/RESULTS.md "Issue 14: classes on stopped nights", branch h14x). Ideal 5R1C: they
+        cool to the window's end; its massless air node drops at switch-off and would end them
+        right after the lag (module docstring), an artefact no real house shows.
+        """
+        return cls(**{"stop_at_t_min": plant == "realistic", **kw})
 
     def plans(self) -> list[NightPlan]:
         """The night plans run on every weather day (before the T_set draw)."""
