@@ -3,16 +3,19 @@
 Run:  .venv/bin/python bench/classify_compare.py [--seed 0] [--campaigns 5] [--plant realistic]
           [--a '{"constrained_per_day": 1}'] [--b '{"constrained_per_day": 3}'] [--cross]
           [--score-on own|a|b] [--features-a NAME,...] [--features-b NAME,...]
+          [--campaigns-as gateway|random]
 
 ``--a`` / ``--b`` are :class:`impctl.population.virtual_imp.ImpSimConfig` keyword arguments (JSON).
 Each population is generated (900 households, same seed: same households and test split) and
 the classifiers trained on it as ``impctl train`` does. Every test household is then scored on
 ``--campaigns`` random campaigns of 2 constrained + 6 normal nights drawn from its nights with
-``replay == 0`` (one constrained night per date, as a real household has), the same draws for
-both populations: one campaign per household, as ``bench/classify.py`` reports, moves the c_f
-accuracy by a few points and its Brier score by ~0.02 from draw to draw. Prints per parameter
-accuracy, the majority class, the Brier score and 95 % bootstrap intervals (over test
-households) of the B − A Brier difference and of each population's margin over the majority.
+``replay == 0`` (one constrained night per date, as a real household has) — the constrained
+ones as the gateway gets them (``--campaigns-as gateway``: valid ones only, giving up after 3
+invalid, so a campaign may hold fewer) — the same draws for both populations: one campaign
+per household, as ``bench/classify.py`` reports, moves the c_f accuracy by a few points and
+its Brier score by ~0.02 from draw to draw. Prints per parameter accuracy, the majority class,
+the Brier scores and 95 % bootstrap intervals (over test households) of the B − A Brier
+difference, of each population's margin over the majority and of B's Brier over the prior's.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from impctl.classifiers.campaign import (
     random_campaigns,
 )
 from impctl.classifiers.training import TrainConfig, train_classifiers
+from impctl.imp import NIGHT_FEATURE_NAMES
 from impctl.population.dataset import generate_dataset
 from impctl.population.ranges import bin_values
 from impctl.population.virtual_imp import ImpSimConfig
@@ -56,6 +60,28 @@ def _train(kw: dict, args, features: str | None) -> tuple:
                              with_baselines=False)
 
 
+def _gateway_constrained(cube: np.ndarray, masks: np.ndarray, rng: np.random.Generator,
+                         n_constrained: int = 2, max_invalid: int = 3) -> np.ndarray:
+    """``masks`` with their constrained nights replaced as the gateway's fixed campaign gets
+    them: the household's constrained nights in random order, each kept if valid (the
+    population gives an invalid one — too short after the emitter lag — NaN features), until
+    ``n_constrained`` are valid or ``max_invalid`` were not (campaign.max_invalid_nights)."""
+    ix = list(NIGHT_FEATURE_NAMES).index("cooling_time_h")
+    cons = cube[0, :, 0] == 1.0
+    out = masks & ~cons
+    for row in range(len(cube)):
+        kept, bad = 0, 0
+        for night in rng.permutation(np.flatnonzero(cons)):
+            if np.isfinite(cube[row, night, ix]):
+                out[row, night] = True
+                kept += 1
+            else:
+                bad += 1
+            if kept == n_constrained or bad == max_invalid:
+                break
+    return out
+
+
 def _score(kw: dict, args, trained: tuple) -> tuple[dict, np.ndarray]:
     """Per test household and parameter: mean Brier, accuracy and majority hit over campaigns
     of population ``kw``'s nights, scored by ``trained`` = (models, reports)."""
@@ -64,11 +90,19 @@ def _score(kw: dict, args, trained: tuple) -> tuple[dict, np.ndarray]:
     values, ids = night_cube(dataset.nights[dataset.nights["replay"] == 0])
     test = np.array(next(iter(reports.values())).test_households)
     k = args.campaigns
-    masks = random_campaigns(values[0, :, 0] == 1.0, len(test) * k,
-                             np.random.default_rng(args.seed + 12345), n_constrained=2,
+    cube = np.repeat(values[np.searchsorted(ids, test)], k, 0)
+    rng = np.random.default_rng(args.seed + 12345)
+    masks = random_campaigns(values[0, :, 0] == 1.0, len(test) * k, rng, n_constrained=2,
                              n_normal=6)
-    rows = pd.DataFrame(aggregate_nights(np.repeat(values[np.searchsorted(ids, test)], k, 0),
-                                         masks), columns=list(CAMPAIGN_FEATURE_NAMES))
+    if args.campaigns_as == "gateway":
+        masks = _gateway_constrained(cube, masks, rng)
+    n_cons = (masks & (cube[..., 0] == 1.0)).sum(axis=1)
+    ix = list(NIGHT_FEATURE_NAMES).index("cooling_time_h")
+    invalid = np.isnan(cube[:, cube[0, :, 0] == 1.0, ix]).mean()
+    print(f"{json.dumps(kw)}: {invalid:.0%} of the test households' constrained nights invalid; "
+          "test campaigns with 0 / 1 / 2 constrained nights: "
+          + " / ".join(f"{np.mean(n_cons == c):.0%}" for c in (0, 1, 2)))
+    rows = pd.DataFrame(aggregate_nights(cube, masks), columns=list(CAMPAIGN_FEATURE_NAMES))
     truth = dataset.households.set_index("household")
     train = np.setdiff1d(truth.index.to_numpy(), test)
     out = {}
@@ -101,6 +135,10 @@ def main() -> None:
                     help="whose nights the test households are scored on: each population's "
                          "own (default), or both classifiers on A's or on B's nights (e.g. "
                          "both on nights stopped at T_min, as the gateway records them)")
+    ap.add_argument("--campaigns-as", choices=("gateway", "random"), default="gateway",
+                    help="test campaigns' constrained nights: as the gateway's fixed campaign "
+                         "gets them (valid ones until 2, giving up after 3 invalid; default) "
+                         "or 2 at random, valid or not (before branch h14x)")
     ap.add_argument("--features-a", default=None,
                     help="comma-separated campaign features A's forests use (default all)")
     ap.add_argument("--features-b", default=None,

@@ -76,7 +76,12 @@ class ImpSimConfig:
     T_set: three replays a day measured no better on realistic held-out houses (README
     "Accuracy", branch h14r). ``stop_at_t_min``: constrained nights end at T_min = T_set −
     ``band_k`` (the gateway's controller does); :meth:`for_plant` sets it as the gateway
-    records nights on each plant.
+    records nights on each plant. On the realistic plant they end as the gateway's controller
+    ends them — T_air ≤ T_min, or its trend over ``trend_window_s`` [s] reaching T_min within
+    ``anticipate_s`` [s] while within ``anticipate_within_k`` [K] of it (``[night]``'s
+    defaults) — and one with less than ``min_usable_h`` [h] after the emitter lag is invalid
+    as the gateway judges it: its features are NaN (never classified); the ideal 5R1C stops
+    at T_min after the lag only.
     """
 
     days: int = 15
@@ -96,6 +101,10 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
+    anticipate_s: float = 1800.0
+    anticipate_within_k: float = 1.0
+    trend_window_s: float = 1800.0
+    min_usable_h: float = 3.0
     constrained_per_day: int = 1
     constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ
