@@ -8,24 +8,20 @@ output fixes the scale). The forest then classifies that row: nights are combine
 classification, not by voting.
 
 Constrained nights enter through their decay rate (≈ 1/τ), the decay rate of their first 2 h
-after the cut, their cooling time and mean T_out. The gateway ends a constrained night at T_min,
-so the whole-night decay rate is censored where the night stops; the early decay rate reads the
-same span on every night, and the cooling time (to T_min, or to the window's end when the house
-never got there) says how far the night got. Both measured on realistic held-out houses with
-their nights stopped at T_min: c_f's Brier score −0.023 [−0.043, −0.004] and −0.025 [−0.050,
-−0.001] on two seeds, most of it from the cooling time (bench/RESULTS.md "Issue 14: classes on
-stopped nights", branch h14x). Their temperature drop, cooling rate and indoor–outdoor
-difference at the cut are left out: with T_max fixed by the plan, each of them (alone or with
-the decay rate) reveals how far T_air fell during the emitter lag, and in the 5R1C that fall is
-the massless air node's switch-off drop, which scales with 1/A_f and does not exist in real data
+after the cut and their mean T_out. The gateway ends a constrained night at T_min, so the
+whole-night decay rate is censored where the night stops; the early decay rate reads the same
+span on every night (on the gateway's nights: u_walls Brier −0.002 / −0.009 on two seeds,
+c_f and floor area unchanged; bench/RESULTS.md "Issue 14: classes on stopped nights", branch
+h14x). Their cooling time, temperature drop, cooling rate and indoor–outdoor difference at
+the cut are left out. With T_max fixed by the plan, each of them (alone or with the decay
+rate) reveals how far T_air fell during the emitter lag, and in the 5R1C that fall is the
+massless air node's switch-off drop, which scales with 1/A_f and does not exist in real data
 (identifiability.md §11.2). On a 2000-household development population (seed 1, not the
 reported seed) keeping them raised the floor-area accuracy from 70 % to 84 % — information a
-real house would not give. A night stopped at T_min carries that drop too on the ideal 5R1C
-(stopping them there raised floor area from 72 to 78 % and cut c_f from 85 to 77 %), which is
-why the ideal population's constrained nights cool to the window's end
-(:meth:`impctl.population.ImpSimConfig.for_plant`); on the realistic plant, whose air and
-furniture hold heat, leaving the cooling time out moves floor area by less than 0.01 in Brier
-score.
+real house would not give. The cooling time was measured again on the realistic plant (h14x):
+it adds nothing on the nights the gateway keeps (valid: ≥ 3 h after the lag), and helps c_f
+only on nights that stop at T_min sampled every 10 min after the lag, which the gateway does
+not record.
 
 Missing kinds give NaN features; the forests handle NaN (scikit-learn ≥ 1.4), and they are
 trained on campaigns of random sizes, including campaigns with only one kind of night.
@@ -48,8 +44,6 @@ CAMPAIGN_FEATURES: tuple[tuple[str, str, str], ...] = (
     ("c_t_out_mean_c", "°C", "median t_out_mean_c of the constrained nights"),
     ("c_decay_rate_early_per_h", "1/h", "median decay_rate_early_per_h of the constrained "
                                         "nights (their first 2 h after the cut)"),
-    ("c_cooling_time_h", "h", "median cooling_time_h of the constrained nights (to T_min or "
-                              "the window's end)"),
     ("n_hlc_w_per_k", "W/K", "normal nights: least-squares slope through the origin of "
                              "q_hc_mean_w on (t_set_c − t_out_mean_c), the heat-loss coefficient"),
     ("n_q_slope_w_per_h", "W/h", "median q_slope_w_per_h of the normal nights"),
@@ -63,7 +57,6 @@ CAMPAIGN_FEATURE_NAMES: tuple[str, ...] = tuple(f[0] for f in CAMPAIGN_FEATURES)
 _MEDIAN_OF = {
     "c_decay_rate_per_h": "decay_rate_per_h",
     "c_decay_rate_early_per_h": "decay_rate_early_per_h",
-    "c_cooling_time_h": "cooling_time_h",
     "n_q_slope_w_per_h": "q_slope_w_per_h",
     "n_q_per_t_out_w_per_k": "q_per_t_out_w_per_k",
 }
