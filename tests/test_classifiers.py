@@ -234,3 +234,22 @@ def test_importing_the_pipeline_packages_loads_neither_torch_nor_scikit_learn():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_forests_on_a_subset_of_features_are_for_benches_not_for_saving(envelope_dataset,
+                                                                        tmp_path):
+    """``TrainConfig(features=...)`` (bench/classify_compare.py measures what a feature adds)
+    trains on those columns only; such models are refused by save_models, since
+    classification computes every campaign feature."""
+    from dataclasses import replace
+
+    subset = ("n_hlc_w_per_k", "tau_h")
+    models, reports = train_classifiers(envelope_dataset, replace(FAST, features=subset), seed=11,
+                                        with_baselines=False)
+    assert list(models["u_walls"].feature_names_in_) == list(subset)
+    assert reports["u_walls"].test_accuracy > reports["u_walls"].majority_accuracy
+    with pytest.raises(ValueError, match="not trained on all campaign features"):
+        save_models(models, tmp_path, seed=11, n_households=60, emission_lag_h=1.0)
+    assert not (tmp_path / "models.json").exists()
+    with pytest.raises(ValueError, match="unknown campaign features"):
+        train_classifiers(envelope_dataset, replace(FAST, features=("nope",)), seed=11)
