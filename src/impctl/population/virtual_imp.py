@@ -128,11 +128,12 @@ class ImpSimConfig:
         "iso"); ``kw`` as the constructor's.
 
         Realistic plant: constrained nights stop at T_min (``stop_at_t_min``), as the gateway's
-        controller ends them. Classifiers trained so score better on such nights than those
-        trained on nights cooling to the window's end (c_f Brier −0.06 / −0.08 on two seeds,
-        bench/RESULTS.md "Issue 14: classes on stopped nights", branch h14x). Ideal 5R1C: they
-        cool to the window's end; its massless air node drops at switch-off and would end them
-        right after the lag (module docstring), an artefact no real house shows.
+        controller ends them. Classifiers trained so score better than or equal to those
+        trained on nights cooling to the window's end, on the gateway's nights (Brier −0.015…
+        +0.004 per class on two seeds; bench/RESULTS.md "Issue 14: classes on stopped nights",
+        branch h14x). Ideal 5R1C: they cool to the window's end; its massless air node drops at
+        switch-off and would end them right after the lag (module docstring), an artefact no
+        real house shows.
         """
         return cls(**{"stop_at_t_min": plant == "realistic", **kw})
 

@@ -12,9 +12,11 @@ night-time internal gains and the afternoon's sun stored in the mass, and imperf
    with day/night internal gains and solar gains (a random clearness per day).
 2. **Pre-heat** (``preheat_h``) and **window** at 60 s with the real controller: pre-heat at
    T_max (constrained) or T_set (normal); in the window a constrained night switches the heating
-   loop off, a normal night holds T_set. With ``stop_at_t_min`` a constrained night ends at the
-   first sample after the emission lag whose sensed T_air is below T_min; the loop then resumes
-   at T_min, as the device's comfort floor does.
+   loop off, a normal night holds T_set. With ``stop_at_t_min`` a constrained night ends where
+   the gateway's controller ends it (:class:`_GatewayStop`: polled every plant step from the
+   switch-off, sensed T_air ≤ T_min or its trend anticipated there), the night's samples end
+   with that poll and the owner's day setpoint is restored; a night with less than
+   ``min_usable_h`` after the emission lag is invalid, as the gateway judges it (NaN features).
 
 Observed samples every ``step_s``: the room sensor's T_air and the outdoor sensor's T_out at the
 sample instant, and the heat meter's mean power over the sample interval (an energy counter
