@@ -31,6 +31,7 @@ import pandas as pd
 from impctl.classifiers.campaign import (
     CAMPAIGN_FEATURE_NAMES,
     aggregate_nights,
+    gateway_campaigns,
     night_cube,
     random_campaigns,
 )
@@ -60,28 +61,6 @@ def _train(kw: dict, args, features: str | None) -> tuple:
                              with_baselines=False)
 
 
-def _gateway_constrained(cube: np.ndarray, masks: np.ndarray, rng: np.random.Generator,
-                         n_constrained: int = 2, max_invalid: int = 3) -> np.ndarray:
-    """``masks`` with their constrained nights replaced as the gateway's fixed campaign gets
-    them: the household's constrained nights in random order, each kept if valid (the
-    population gives an invalid one — too short after the emitter lag — NaN features), until
-    ``n_constrained`` are valid or ``max_invalid`` were not (campaign.max_invalid_nights)."""
-    ix = list(NIGHT_FEATURE_NAMES).index("cooling_time_h")
-    cons = cube[0, :, 0] == 1.0
-    out = masks & ~cons
-    for row in range(len(cube)):
-        kept, bad = 0, 0
-        for night in rng.permutation(np.flatnonzero(cons)):
-            if np.isfinite(cube[row, night, ix]):
-                out[row, night] = True
-                kept += 1
-            else:
-                bad += 1
-            if kept == n_constrained or bad == max_invalid:
-                break
-    return out
-
-
 def _score(kw: dict, args, trained: tuple) -> tuple[dict, np.ndarray]:
     """Per test household and parameter: mean Brier, accuracy and majority hit over campaigns
     of population ``kw``'s nights, scored by ``trained`` = (models, reports)."""
@@ -92,10 +71,11 @@ def _score(kw: dict, args, trained: tuple) -> tuple[dict, np.ndarray]:
     k = args.campaigns
     cube = np.repeat(values[np.searchsorted(ids, test)], k, 0)
     rng = np.random.default_rng(args.seed + 12345)
-    masks = random_campaigns(values[0, :, 0] == 1.0, len(test) * k, rng, n_constrained=2,
-                             n_normal=6)
     if args.campaigns_as == "gateway":
-        masks = _gateway_constrained(cube, masks, rng)
+        masks = gateway_campaigns(cube, rng, n_constrained=2, n_normal=6)
+    else:
+        masks = random_campaigns(values[0, :, 0] == 1.0, len(test) * k, rng, n_constrained=2,
+                                 n_normal=6)
     n_cons = (masks & (cube[..., 0] == 1.0)).sum(axis=1)
     ix = list(NIGHT_FEATURE_NAMES).index("cooling_time_h")
     invalid = np.isnan(cube[:, cube[0, :, 0] == 1.0, ix]).mean()

@@ -178,3 +178,46 @@ def random_campaigns(
         rank = np.argsort(np.argsort(np.where(kind, keys, np.inf), axis=1), axis=1)
         out |= kind & (rank < k[:, None])
     return out
+
+
+def gateway_campaigns(
+    values: NDArray,
+    rng: np.random.Generator,
+    n_constrained: int = 2,
+    n_normal: int = 6,
+    max_invalid: int = 3,
+) -> NDArray[np.bool_]:
+    """Masks of the campaigns the gateway's fixed campaign delivers, one per row of ``values``.
+
+    ``n_normal`` normal nights at random; the constrained nights in random order, each kept if
+    valid, until ``n_constrained`` are valid or ``max_invalid`` were not (the gateway gives up:
+    ``campaign.max_invalid_nights``), so a campaign may hold fewer. A constrained night is
+    invalid when its ``cooling_time_h`` is NaN (the population's verdict: too short after the
+    emitter lag, :class:`impctl.population.ImpSimConfig` ``min_usable_h``); invalid nights are
+    not in the mask (the gateway neither exports nor classifies them).
+
+    Parameters
+    ----------
+    values : array (n_rows, n_nights, n_night_features)
+        Night features in :data:`impctl.imp.NIGHT_FEATURE_NAMES` order, one household per row,
+        all rows with the same night layout.
+    rng : Generator
+
+    Returns
+    -------
+    bool array (n_rows, n_nights)
+    """
+    cons = values[0, :, _IX["is_constrained"]] == 1.0
+    out = random_campaigns(cons, len(values), rng, n_constrained=0, n_normal=n_normal)
+    valid = np.isfinite(values[..., _IX["cooling_time_h"]])
+    for row in range(len(values)):
+        kept = bad = 0
+        for night in rng.permutation(np.flatnonzero(cons)):
+            if kept == n_constrained or bad == max_invalid:
+                break
+            if valid[row, night]:
+                out[row, night] = True
+                kept += 1
+            else:
+                bad += 1
+    return out
