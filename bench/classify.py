@@ -2,7 +2,7 @@
 
 Run:  .venv/bin/python bench/classify.py [--households 900] [--seed 0] [--repeat 3]
           [--plant iso|realistic] [--constrained-setpoint C|cycle] [--constrained-per-day N]
-          [--constrained-jitter-k K]
+          [--constrained-jitter-k K] [--stop-at-t-min yes|no]
 
 ``--plant realistic`` draws the households' realism (emitters, heat pumps, gains, sensors) and
 runs their nights on :mod:`impctl.plant` (60 s steps; the ≤ 5 s target is for the ideal 5R1C).
@@ -46,6 +46,10 @@ def main() -> None:
                         help="constrained replays per weather day (default ImpSimConfig's 1)")
     parser.add_argument("--constrained-jitter-k", type=float, default=None, metavar="K",
                         help="draw each constrained night's T_set within ±K of its setpoint")
+    parser.add_argument("--stop-at-t-min", choices=("yes", "no"), default=None,
+                        help="constrained nights stop at T_min (default: as the gateway records "
+                             "them on the plant, ImpSimConfig.for_plant: yes on the realistic "
+                             "plant, no on the ideal 5R1C)")
     parser.add_argument("--figure", default=None,
                         help="write the reliability diagram (calibrated vs vote shares) here")
     args = parser.parse_args()
@@ -61,7 +65,10 @@ def main() -> None:
         kw["constrained_per_day"] = args.constrained_per_day
     if args.constrained_jitter_k is not None:
         kw["constrained_jitter_k"] = args.constrained_jitter_k
-    imp = ImpSimConfig(**kw)
+    if args.stop_at_t_min is not None:
+        kw["stop_at_t_min"] = args.stop_at_t_min == "yes"
+    imp = ImpSimConfig.for_plant(args.plant, **kw)
+    print(f"constrained nights stop at T_min: {imp.stop_at_t_min} (band {imp.band_k:g} K)")
     gen_s = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()

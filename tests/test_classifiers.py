@@ -234,3 +234,44 @@ def test_importing_the_pipeline_packages_loads_neither_torch_nor_scikit_learn():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_forests_on_a_subset_of_features_are_for_benches_not_for_saving(envelope_dataset,
+                                                                        tmp_path):
+    """``TrainConfig(features=...)`` (bench/classify_compare.py measures what a feature adds)
+    trains on those columns only; such models are refused by save_models, since
+    classification computes every campaign feature."""
+    from dataclasses import replace
+
+    subset = ("n_hlc_w_per_k", "tau_h")
+    models, reports = train_classifiers(envelope_dataset, replace(FAST, features=subset), seed=11,
+                                        with_baselines=False)
+    assert list(models["u_walls"].feature_names_in_) == list(subset)
+    assert reports["u_walls"].test_accuracy > reports["u_walls"].majority_accuracy
+    with pytest.raises(ValueError, match="not trained on all campaign features"):
+        save_models(models, tmp_path, seed=11, n_households=60, emission_lag_h=1.0)
+    assert not (tmp_path / "models.json").exists()
+    with pytest.raises(ValueError, match="unknown campaign features"):
+        train_classifiers(envelope_dataset, replace(FAST, features=("nope",)), seed=11)
+
+
+def test_gateway_campaigns_keep_valid_constrained_nights_and_give_up_after_three():
+    """The 2+6 campaign as the gateway delivers it: invalid constrained nights (NaN features)
+    are retried with another night, never used, and after 3 invalid ones the household has
+    what it has."""
+    from impctl.classifiers.campaign import gateway_campaigns
+
+    n_rows, cons = 300, np.array([True] * 5 + [False] * 8)
+    values = np.ones((n_rows, cons.size, len(NIGHT_FEATURE_NAMES)))
+    values[:, :, NIGHT_FEATURE_NAMES.index("is_constrained")] = cons
+    cool = NIGHT_FEATURE_NAMES.index("cooling_time_h")
+    values[100:200, [0, 1, 2, 3], cool] = np.nan       # one valid constrained night of five
+    values[200:, :5, cool] = np.nan                       # none valid
+    masks = gateway_campaigns(values, np.random.default_rng(0))
+    assert (masks[:, ~cons].sum(axis=1) == 6).all()
+    n_cons = masks[:, cons].sum(axis=1)
+    assert (n_cons[:100] == 2).all() and (n_cons[200:] == 0).all()
+    assert not masks[100:200, :4].any()                   # the invalid nights are never used
+    # The valid night comes before the third invalid one in 3 of 5 orders.
+    assert set(n_cons[100:200]) == {0, 1} and 0.45 < n_cons[100:200].mean() < 0.75
+    assert gateway_campaigns(values, np.random.default_rng(0)).tolist() == masks.tolist()

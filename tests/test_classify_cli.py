@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from impctl.imp import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C, write_nights
@@ -51,6 +52,13 @@ def test_train_writes_models_dataset_and_report(model_dir):
     assert report["c_f"]["n_test_households"] == 4 and report["c_f"]["paper_test_accuracy"] == 0.78
     meta = json.loads((model_dir / "models.json").read_text())
     assert meta["seed"] == 4 and meta["dataset"]["n_households"] == 20
+    # The models carry the protocol of their population: the realistic plant's constrained
+    # nights stopped at T_min, as the gateway records them (ImpSimConfig.for_plant).
+    imp = meta["dataset"]["imp"]
+    assert imp["stop_at_t_min"] is True and imp["band_k"] == ImpSimConfig().band_k
+    nights = pd.read_parquet(model_dir / "dataset" / "nights.parquet")
+    cons = nights[nights["kind"] == "constrained"]
+    assert (cons["cooling_time_h"] < cons["duration_h"] - 1.2).any()   # some stopped at T_min
 
 
 def test_classify_prints_table_and_json(model_dir, nights_csv):
@@ -125,3 +133,17 @@ def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
     meta["dataset"]["imp"]["constrained_setpoint_c"] = DEFAULT_CONSTRAINED_SETPOINT_C + 1.0
     (old / "models.json").write_text(json.dumps(meta))
     assert not _models_ok(old)
+    # Since h14x the population's constrained nights stop at T_min as the gateway's do: models
+    # of nights cooled to the window's end (stop_at_t_min false, or a manifest without the key,
+    # from before h14r) are retrained.
+    meta["dataset"]["imp"]["constrained_setpoint_c"] = DEFAULT_CONSTRAINED_SETPOINT_C
+    for stale in (False, None):
+        if stale is None:
+            del meta["dataset"]["imp"]["stop_at_t_min"]
+        else:
+            meta["dataset"]["imp"]["stop_at_t_min"] = stale
+        (old / "models.json").write_text(json.dumps(meta))
+        assert not _models_ok(old)
+    meta["dataset"]["imp"]["stop_at_t_min"] = True
+    (old / "models.json").write_text(json.dumps(meta))
+    assert _models_ok(old)

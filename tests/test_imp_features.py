@@ -23,6 +23,7 @@ from impctl.imp import (
     imp_plans,
     night_features,
 )
+from impctl.imp.features import EARLY_SPAN_H
 
 TZ = "Europe/Ljubljana"
 
@@ -139,6 +140,26 @@ def test_constrained_night_ends_where_the_heating_resumes():
     assert f["decay_rate_per_h"] == pytest.approx(0.05, rel=0.03)
 
 
+def test_early_decay_rate_is_the_same_whether_the_night_stops_at_t_min_or_not():
+    """The early decay rate reads the first EARLY_SPAN_H after the cut on every night: a night
+    stopped at T_min (the gateway's) and the same night cooled to 05:00 give the same value,
+    while the whole-night decay rate of a two-speed cooling curve depends on where it stops."""
+    hours = np.arange(42) / 6.0
+    # Fast part (emitter, air, furniture) over a slow mass decay, both towards T_out = 0 °C.
+    t_air = 3.0 * np.exp(-hours / 0.8) + 21.0 * np.exp(-hours * 0.02)
+    q = np.zeros_like(t_air)
+    stopped = q.copy()
+    stopped[22:] = 2500.0                 # T_min at 3 h 40 min: heating back on
+    whole = night_features(_night("constrained", t_air, 0.0, q))
+    cut = night_features(_night("constrained", t_air, 0.0, stopped))
+    rows = (hours >= EMISSION_LAG_H) & (hours < EMISSION_LAG_H + EARLY_SPAN_H - 1e-9)
+    assert rows.sum() == EARLY_SPAN_H * 6
+    assert cut["decay_rate_early_per_h"] == whole["decay_rate_early_per_h"]
+    assert cut["decay_rate_early_per_h"] > cut["decay_rate_per_h"] > whole["decay_rate_per_h"]
+    assert whole["decay_rate_per_h"] == pytest.approx(0.02, rel=0.5)
+    assert np.isnan(night_features(_night("normal", t_air, 0.0, 3000.0))["decay_rate_early_per_h"])
+
+
 def test_normal_night_heat_loss_features():
     hours = np.arange(42) / 6.0
     t_out = 2.0 - 0.5 * hours + 0.3 * np.sin(hours * 3.0)
@@ -194,7 +215,8 @@ def test_features_follow_temperature_shifts_and_power_scaling(shift, scale, k):
         moved = night_features(_night(kind, t_air + shift, te + shift, qq * scale,
                                       setpoint=23.0 + shift))
         assert moved["t_out_mean_c"] == pytest.approx(base["t_out_mean_c"] + shift, abs=1e-9)
-        for name in ("decay_rate_per_h", "cooling_time_h", "delta_t_air_k"):
+        for name in ("decay_rate_per_h", "decay_rate_early_per_h", "cooling_time_h",
+                     "delta_t_air_k"):
             assert moved[name] == pytest.approx(base[name], rel=1e-6, abs=1e-9, nan_ok=True)
         for name in ("q_hc_mean_w", "q_per_k_w_per_k", "q_slope_w_per_h", "q_per_t_out_w_per_k"):
             assert moved[name] == pytest.approx(scale * base[name], rel=1e-6, abs=1e-6,

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from impctl.night_protocol import DEFAULT_BAND_K
 from impctl.plant import RADIATORS, UNDERFLOOR
 from impctl.plant.params import SECTIONS
 from impctl.population import ImpSimConfig, generate_dataset, sample_households
@@ -58,27 +61,67 @@ def test_generate_dataset_realistic_is_reproducible():
                            a.nights["decay_rate_per_h"].fillna(0))
 
 
+def test_default_population_records_nights_as_the_gateway_does():
+    """Without an explicit config the population runs the nights the gateway records: on the
+    realistic plant its constrained nights stop at T_min (and the manifest says so, so trained
+    models carry it); on the ideal 5R1C they cool to the window's end (its massless air node
+    would end them at the lag)."""
+    assert ImpSimConfig.for_plant("realistic", days=3).stop_at_t_min
+    assert not ImpSimConfig.for_plant("iso").stop_at_t_min
+    assert ImpSimConfig.for_plant("realistic", stop_at_t_min=False).stop_at_t_min is False
+    lag_h = ImpSimConfig().emitter_lag_h
+    for plant, stops in (("realistic", True), ("iso", False)):
+        data = generate_dataset(4, seed=6, plant=plant)
+        assert data.manifest["imp"]["stop_at_t_min"] is stops
+        assert data.manifest["imp"]["band_k"] == DEFAULT_BAND_K
+        cons = data.nights[data.nights["kind"] == "constrained"]
+        cooling = cons["cooling_time_h"]
+        # a night cooling to 05:00 has its last sample one 10-min step before the end
+        full = cons["duration_h"] - lag_h - 1 / 6
+        if stops:
+            # too short after the lag (< 3 h, the gateway's verdict): NaN, never classified
+            assert cooling.isna().any() and (cooling.dropna() >= 3.0 - 1 / 6 - 1e-9).all()
+            assert (cooling < full - 1e-6).any()        # valid nights that stopped at T_min
+            assert cons.loc[cooling.isna(), "decay_rate_early_per_h"].isna().all()
+        else:
+            np.testing.assert_allclose(cooling, full)
+        assert cons.loc[cooling.notna(), "decay_rate_early_per_h"].notna().all()
+
+
 def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():
-    """With stop_at_t_min a constrained night's samples end at the first sensed T_air below
-    T_min after the emission lag, and the heating resumes there."""
+    """With stop_at_t_min a constrained night ends as the gateway's controller ends it, polled
+    every minute from the switch-off: at the first sensed T_air ≤ T_min (or, with anticipation,
+    when its trend gets there within anticipate_s); the owner's setpoint is restored after it,
+    and a night with less than min_usable_h after the lag is invalid (NaN features)."""
     houses = sample_households(6, seed=7)
     cfg = ImpSimConfig(days=2, setpoints_c=(22.0,), constrained_setpoint_c=22.0, band_k=0.5,
-                       stop_at_t_min=True)
+                       stop_at_t_min=True, anticipate_s=0.0)
     res = simulate_imp_plant(houses, sample_params(6, 7), config=cfg, seed=1)
-    cons = np.flatnonzero((res.nights["kind"] == "constrained").to_numpy())
-    lag = int(np.ceil(cfg.emitter_lag_h * 3600 / cfg.step_s))
-    stopped = 0
+    nights = res.nights
+    cons = np.flatnonzero((nights["kind"] == "constrained").to_numpy())
+    stopped = short = 0
     for i in cons:
         t_air, valid = res.t_air_c[:, i], res.valid[:, i]
         last = int(np.flatnonzero(valid)[-1])
-        below = np.flatnonzero(t_air[lag:] < 22.0 - 0.5) + lag
-        if below.size and below[0] < len(t_air) - 1:
+        n_rows = int(round(nights["duration_h"].iloc[i] * 6))
+        assert valid[:last + 1].all()
+        assert (t_air[:last] > 22.0 - 0.5).all()           # every earlier poll above T_min
+        if last < n_rows - 1:
             stopped += 1
-            assert last == below[0]
-            assert res.q_hc_w[last + 1:, i].max() > 0      # heating resumed after the stop
-        else:
-            assert valid[:int(res.nights["duration_h"].iloc[i] * 6)].all()
-    assert stopped >= 1
+            assert res.q_hc_w[last + 1:n_rows, i].max() > 0   # heating back after the stop
+        usable_h = (last + 1) / 6 - cfg.emitter_lag_h        # the stop is within the next row
+        if usable_h < cfg.min_usable_h - 1 / 6:
+            short += 1
+            assert np.isnan(nights["decay_rate_per_h"].iloc[i])
+            assert np.isnan(nights["cooling_time_h"].iloc[i])
+        elif usable_h >= cfg.min_usable_h:
+            assert np.isfinite(nights["cooling_time_h"].iloc[i])
+    assert stopped >= 1 and short >= 1
+    # Anticipation ends nights earlier, never later.
+    early = simulate_imp_plant(houses, sample_params(6, 7),
+                               config=replace(cfg, anticipate_s=1800.0), seed=1)
+    assert (early.valid[:, cons].sum(axis=0) <= res.valid[:, cons].sum(axis=0)).all()
+    assert (early.valid[:, cons].sum(axis=0) < res.valid[:, cons].sum(axis=0)).any()
 
 
 def test_schedule_without_gains_keeps_every_other_draw():

@@ -7,13 +7,21 @@ kinds into τ and C_m estimates, which no single night can give (temperature alo
 output fixes the scale). The forest then classifies that row: nights are combined *before*
 classification, not by voting.
 
-Constrained nights enter only through their decay rate (≈ 1/τ) and mean T_out. Their cooling
-time, temperature drop, cooling rate and indoor–outdoor difference at the cut are left out: with
-T_max fixed by the plan, each of them (alone or with the decay rate) reveals how far T_air fell
-during the emitter lag, and in the 5R1C that fall is the massless air node's switch-off drop,
-which scales with 1/A_f and does not exist in real data (identifiability.md §11.2). On a
-2000-household development population (seed 1, not the reported seed) keeping them raised the
-floor-area accuracy from 70 % to 84 % — information a real house would not give.
+Constrained nights enter through their decay rate (≈ 1/τ), the decay rate of their first 2 h
+after the cut and their mean T_out. The gateway ends a constrained night at T_min, so the
+whole-night decay rate is censored where the night stops; the early decay rate reads the same
+span on every night (on the gateway's nights: u_walls Brier −0.002 / −0.009 on two seeds,
+c_f and floor area unchanged; bench/RESULTS.md "Issue 14: classes on stopped nights", branch
+h14x). Their cooling time, temperature drop, cooling rate and indoor–outdoor difference at
+the cut are left out. With T_max fixed by the plan, each of them (alone or with the decay
+rate) reveals how far T_air fell during the emitter lag, and in the 5R1C that fall is the
+massless air node's switch-off drop, which scales with 1/A_f and does not exist in real data
+(identifiability.md §11.2). On a 2000-household development population (seed 1, not the
+reported seed) keeping them raised the floor-area accuracy from 70 % to 84 % — information a
+real house would not give. The cooling time was measured again on the realistic plant (h14x):
+it adds nothing on the nights the gateway keeps (valid: ≥ 3 h after the lag), and helps c_f
+only on nights that stop at T_min sampled every 10 min after the lag, which the gateway does
+not record.
 
 Missing kinds give NaN features; the forests handle NaN (scikit-learn ≥ 1.4), and they are
 trained on campaigns of random sizes, including campaigns with only one kind of night.
@@ -34,6 +42,8 @@ from ..imp import NIGHT_FEATURE_NAMES
 CAMPAIGN_FEATURES: tuple[tuple[str, str, str], ...] = (
     ("c_decay_rate_per_h", "1/h", "median decay_rate_per_h of the constrained nights"),
     ("c_t_out_mean_c", "°C", "median t_out_mean_c of the constrained nights"),
+    ("c_decay_rate_early_per_h", "1/h", "median decay_rate_early_per_h of the constrained "
+                                        "nights (their first 2 h after the cut)"),
     ("n_hlc_w_per_k", "W/K", "normal nights: least-squares slope through the origin of "
                              "q_hc_mean_w on (t_set_c − t_out_mean_c), the heat-loss coefficient"),
     ("n_q_slope_w_per_h", "W/h", "median q_slope_w_per_h of the normal nights"),
@@ -46,6 +56,7 @@ CAMPAIGN_FEATURE_NAMES: tuple[str, ...] = tuple(f[0] for f in CAMPAIGN_FEATURES)
 
 _MEDIAN_OF = {
     "c_decay_rate_per_h": "decay_rate_per_h",
+    "c_decay_rate_early_per_h": "decay_rate_early_per_h",
     "n_q_slope_w_per_h": "q_slope_w_per_h",
     "n_q_per_t_out_w_per_k": "q_per_t_out_w_per_k",
 }
@@ -166,4 +177,47 @@ def random_campaigns(
     for kind, k in ((cons, k_c), (~cons, k_n)):
         rank = np.argsort(np.argsort(np.where(kind, keys, np.inf), axis=1), axis=1)
         out |= kind & (rank < k[:, None])
+    return out
+
+
+def gateway_campaigns(
+    values: NDArray,
+    rng: np.random.Generator,
+    n_constrained: int = 2,
+    n_normal: int = 6,
+    max_invalid: int = 3,
+) -> NDArray[np.bool_]:
+    """Masks of the campaigns the gateway's fixed campaign delivers, one per row of ``values``.
+
+    ``n_normal`` normal nights at random; the constrained nights in random order, each kept if
+    valid, until ``n_constrained`` are valid or ``max_invalid`` were not (the gateway gives up:
+    ``campaign.max_invalid_nights``), so a campaign may hold fewer. A constrained night is
+    invalid when its ``cooling_time_h`` is NaN (the population's verdict: too short after the
+    emitter lag, :class:`impctl.population.ImpSimConfig` ``min_usable_h``); invalid nights are
+    not in the mask (the gateway neither exports nor classifies them).
+
+    Parameters
+    ----------
+    values : array (n_rows, n_nights, n_night_features)
+        Night features in :data:`impctl.imp.NIGHT_FEATURE_NAMES` order, one household per row,
+        all rows with the same night layout.
+    rng : Generator
+
+    Returns
+    -------
+    bool array (n_rows, n_nights)
+    """
+    cons = values[0, :, _IX["is_constrained"]] == 1.0
+    out = random_campaigns(cons, len(values), rng, n_constrained=0, n_normal=n_normal)
+    valid = np.isfinite(values[..., _IX["cooling_time_h"]])
+    for row in range(len(values)):
+        kept = bad = 0
+        for night in rng.permutation(np.flatnonzero(cons)):
+            if kept == n_constrained or bad == max_invalid:
+                break
+            if valid[row, night]:
+                out[row, night] = True
+                kept += 1
+            else:
+                bad += 1
     return out

@@ -52,7 +52,9 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
         "",
         "train: training households, all nights (in-sample); test: each test household with all",
         f"its nights combined; test {small[0]}+{small[1]}: {small[0]} constrained + {small[1]} "
-        "normal nights per test household;",
+        "normal nights per test household,",
+        "the constrained ones as the gateway gets them (invalid ones retried, at most 3, so",
+        "a household may have fewer);",
         "majority: always the training set's most frequent range; shuffled: the same forest",
         "trained on labels shuffled across households (what the features add beyond the prior).",
     ]

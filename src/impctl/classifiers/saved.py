@@ -86,9 +86,15 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
     """Write ``models`` (parameter → fitted RangeClassifier) and ``models.json`` into ``directory``.
 
     Files are written under temporary names and renamed, so a reader never sees half a model.
+    Raises ValueError for a model trained on a subset of the campaign features (a bench's
+    ``TrainConfig(features=...)``): classification computes them all.
     """
     import joblib
 
+    for name, model in models.items():
+        if list(getattr(model, "feature_names_in_", CAMPAIGN_FEATURE_NAMES)) != list(
+                CAMPAIGN_FEATURE_NAMES):
+            raise ValueError(f"model {name!r} was not trained on all campaign features")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     params = {}

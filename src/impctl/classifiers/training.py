@@ -7,7 +7,9 @@
   0…``max_normal`` normal nights (:func:`~.campaign.random_campaigns`), so the forests also know
   the few-night campaigns a real house delivers.
 * Test rows: each test household once with all its nights ("household level"), and once with a
-  realistic campaign of ``small_campaign`` = (2 constrained, 6 normal) nights.
+  realistic campaign of ``small_campaign`` = (2 constrained, 6 normal) nights, its constrained
+  nights as the gateway's fixed campaign gets them (:func:`~.campaign.gateway_campaigns`:
+  invalid ones retried, at most 3; a household may end with fewer).
 * Baselines: the training majority class, and the same forest trained on labels shuffled across
   training households (what the features add beyond the class priors).
 * Probabilities: calibrated on held-out training households (:class:`RangeClassifier`); the
@@ -25,7 +27,13 @@ import pandas as pd
 
 from ..population.dataset import Dataset
 from ..population.ranges import PAPER_TABLE_III, bin_values, labels_of, validate_ranges
-from .campaign import CAMPAIGN_FEATURE_NAMES, aggregate_nights, night_cube, random_campaigns
+from .campaign import (
+    CAMPAIGN_FEATURE_NAMES,
+    aggregate_nights,
+    gateway_campaigns,
+    night_cube,
+    random_campaigns,
+)
 from .estimator import RangeClassifier
 
 
@@ -41,6 +49,9 @@ class TrainConfig:
     n_estimators: int = 300
     min_samples_leaf: int = 5
     n_jobs: int = -1
+    #: campaign features the forests use (:data:`~.campaign.CAMPAIGN_FEATURE_NAMES` order);
+    #: None: all of them. For measuring what a feature adds (bench/classify_compare.py).
+    features: tuple[str, ...] | None = None
 
 
 @dataclass
@@ -166,12 +177,18 @@ def train_classifiers(
     x_train = aggregate_nights(values[rows], masks)
     x_train_full = x_train[: len(train)]
     x_test = aggregate_nights(values[test], np.ones((len(test), layout.shape[1]), bool))
-    small = random_campaigns(layout[0], len(test), rng, n_constrained=cfg.small_campaign[0],
-                             n_normal=cfg.small_campaign[1])
+    # The small campaign as the gateway delivers it: invalid constrained nights retried.
+    small = gateway_campaigns(values[test], rng, n_constrained=cfg.small_campaign[0],
+                              n_normal=cfg.small_campaign[1])
     x_small = aggregate_nights(values[test], small)
 
+    unknown = set(cfg.features or ()) - set(CAMPAIGN_FEATURE_NAMES)
+    if unknown:
+        raise ValueError(f"unknown campaign features: {sorted(unknown)}")
+    used = [f for f in CAMPAIGN_FEATURE_NAMES if cfg.features is None or f in cfg.features]
+
     def frame(x):
-        return pd.DataFrame(x, columns=list(CAMPAIGN_FEATURE_NAMES))
+        return pd.DataFrame(x, columns=list(CAMPAIGN_FEATURE_NAMES))[used]
 
     models: dict[str, RangeClassifier] = {}
     reports: dict[str, ParameterReport] = {}

@@ -33,7 +33,11 @@ def _cmd(*args: str) -> list[str]:
 
 
 #: What a cached model's population must share with the demo's nights to be reused.
-_PROTOCOL_KEYS = ("setpoints_c", "constrained_setpoint_c", "band_k", "preheat_h")
+_PROTOCOL_KEYS = ("setpoints_c", "constrained_setpoint_c", "band_k", "preheat_h",
+                  "stop_at_t_min")
+#: The value of a key a model's manifest predates (populations before branch h14r cooled
+#: every constrained night to the window's end).
+_PROTOCOL_MISSING = {"stop_at_t_min": False}
 
 
 def _models_ok(model_dir: Path) -> bool:
@@ -47,8 +51,8 @@ def _models_ok(model_dir: Path) -> bool:
     except (InputError, OSError):
         return False
     imp = (meta.get("dataset") or {}).get("imp") or {}
-    want = ImpSimConfig().as_dict()
-    return all(imp.get(k) == want[k] for k in _PROTOCOL_KEYS)
+    want = ImpSimConfig.for_plant("realistic").as_dict()  # `impctl train`'s default plant
+    return all(imp.get(k, _PROTOCOL_MISSING.get(k)) == want[k] for k in _PROTOCOL_KEYS)
 
 
 def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):

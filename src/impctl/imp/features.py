@@ -30,6 +30,10 @@ from .plan import EMISSION_LAG_H
 Q_ON_W = 100.0
 #: Fewest samples a mean, slope or decay fit is computed from.
 MIN_SAMPLES = 3
+#: Span [h] after the cut of the early decay rate: the same span on every constrained night
+#: that lasts that long, whether it stops at T_min or at the window's end (the whole-night
+#: decay rate and cooling time are censored by where the night stops).
+EARLY_SPAN_H = 2.0
 
 #: (name, unit, meaning) of every night feature, in column order.
 NIGHT_FEATURES: tuple[tuple[str, str, str], ...] = (
@@ -43,6 +47,8 @@ NIGHT_FEATURES: tuple[tuple[str, str, str], ...] = (
     ("dtheta_start_k", "K", "constrained: T_air − T_out at the cut"),
     ("decay_rate_per_h", "1/h", "constrained: k of dT_air/dt = −k·(T_air − T_out), fitted by "
                                 "least squares of T_air on ∫(T_air − T_out)dt (≈ 1/τ)"),
+    ("decay_rate_early_per_h", "1/h", "constrained: decay_rate_per_h over the first EARLY_SPAN_H "
+                                      "(2 h) after the cut only"),
     ("t_set_c", "°C", "normal: T_set (the median T_air when the setpoint is unknown)"),
     ("q_hc_mean_w", "W", "normal: mean heat output Q_HC"),
     ("q_per_k_w_per_k", "W/K", "normal: mean Q_HC / mean (T_air − T_out), a one-night HLC"),
@@ -141,6 +147,8 @@ def features_from_arrays(
         step_kh = np.where(pair, 0.5 * (dtheta[:-1] + dtheta[1:]) * np.diff(time, axis=0), 0.0)
         exposure_kh = np.concatenate([np.zeros((1, shape[1])), np.cumsum(step_kh, 0)]) / 3600.0
         decay = -_masked_slope(exposure_kh, t_air, use)
+        early = use & (time < (emission_lag_h + EARLY_SPAN_H) * 3600.0 - 1e-6)
+        decay_early = -_masked_slope(exposure_kh, t_air, early)
         q_mean = _masked_mean(q, use, n)
         q_per_k = q_mean / _masked_mean(dtheta, use, n)
         rate = delta_air / span_h
@@ -158,6 +166,7 @@ def features_from_arrays(
         "cooling_rate_k_per_h": np.where(c_ok & (span_h > 0), rate, nan),
         "dtheta_start_k": np.where(cons & (n > 0), dtheta[first, cols], nan),
         "decay_rate_per_h": np.where(cons, decay, nan),
+        "decay_rate_early_per_h": np.where(cons, decay_early, nan),
         "t_set_c": np.where(~cons, np.where(np.isfinite(sp), sp, median_air), nan),
         "q_hc_mean_w": np.where(n_ok, q_mean, nan),
         "q_per_k_w_per_k": np.where(n_ok, q_per_k, nan),

@@ -109,6 +109,7 @@ def generate_dataset(
     population : PopulationConfig, optional
         Default :meth:`PopulationConfig.for_ranges` of ``ranges``.
     imp : ImpSimConfig, optional
+        Default :meth:`ImpSimConfig.for_plant` of ``plant`` (the nights the gateway records).
     progress : callable, optional
         Called with the number of households finished after each block.
     plant : {"iso", "realistic"}
@@ -124,11 +125,11 @@ def generate_dataset(
     """
     ranges = validate_ranges(ranges)
     pop_cfg = population or PopulationConfig.for_ranges(ranges)
-    imp_cfg = imp or ImpSimConfig()
-    if weather is None:
-        weather = default_weather(seed, imp_cfg.tz)
     if plant not in PLANTS:
         raise ValueError(f"plant must be one of {PLANTS}, got {plant!r}")
+    imp_cfg = imp or ImpSimConfig.for_plant(plant)
+    if weather is None:
+        weather = default_weather(seed, imp_cfg.tz)
     households = sample_population(n_households, seed, pop_cfg)
     realism = None
     if plant == "realistic":

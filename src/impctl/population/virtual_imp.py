@@ -74,7 +74,14 @@ class ImpSimConfig:
     T_set drawn uniformly within ``constrained_jitter_k`` [K] of ``constrained_setpoint_c``
     (domain randomisation: a gateway's owner may configure it). Default one, at the gateway's
     T_set: three replays a day measured no better on realistic held-out houses (README
-    "Accuracy", branch h14r).
+    "Accuracy", branch h14r). ``stop_at_t_min``: constrained nights end at T_min = T_set −
+    ``band_k`` (the gateway's controller does); :meth:`for_plant` sets it as the gateway
+    records nights on each plant. On the realistic plant they end as the gateway's controller
+    ends them — T_air ≤ T_min, or its trend over ``trend_window_s`` [s] reaching T_min within
+    ``anticipate_s`` [s] while within ``anticipate_within_k`` [K] of it (``[night]``'s
+    defaults) — and one with less than ``min_usable_h`` [h] after the emitter lag is invalid
+    as the gateway judges it: its features are NaN (never classified); the ideal 5R1C stops
+    at T_min after the lag only.
     """
 
     days: int = 15
@@ -94,6 +101,10 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
+    anticipate_s: float = 1800.0
+    anticipate_within_k: float = 1.0
+    trend_window_s: float = 1800.0
+    min_usable_h: float = 3.0
     constrained_per_day: int = 1
     constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ
@@ -110,6 +121,21 @@ class ImpSimConfig:
         if self.constrained_per_day < 1 or self.constrained_jitter_k < 0:
             raise InputError("constrained_per_day must be >= 1 and constrained_jitter_k >= 0",
                              place="constrained_per_day")
+
+    @classmethod
+    def for_plant(cls, plant: str, **kw) -> ImpSimConfig:
+        """The population's nights as the gateway records them on ``plant`` ("realistic" or
+        "iso"); ``kw`` as the constructor's.
+
+        Realistic plant: constrained nights stop at T_min (``stop_at_t_min``), as the gateway's
+        controller ends them. Classifiers trained so score better than or equal to those
+        trained on nights cooling to the window's end, on the gateway's nights (Brier −0.015…
+        +0.004 per class on two seeds; bench/RESULTS.md "Issue 14: classes on stopped nights",
+        branch h14x). Ideal 5R1C: they cool to the window's end; its massless air node drops at
+        switch-off and would end them right after the lag (module docstring), an artefact no
+        real house shows.
+        """
+        return cls(**{"stop_at_t_min": plant == "realistic", **kw})
 
     def plans(self) -> list[NightPlan]:
         """The night plans run on every weather day (before the T_set draw)."""

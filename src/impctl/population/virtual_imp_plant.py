@@ -12,9 +12,11 @@ night-time internal gains and the afternoon's sun stored in the mass, and imperf
    with day/night internal gains and solar gains (a random clearness per day).
 2. **Pre-heat** (``preheat_h``) and **window** at 60 s with the real controller: pre-heat at
    T_max (constrained) or T_set (normal); in the window a constrained night switches the heating
-   loop off, a normal night holds T_set. With ``stop_at_t_min`` a constrained night ends at the
-   first sample after the emission lag whose sensed T_air is below T_min; the loop then resumes
-   at T_min, as the device's comfort floor does.
+   loop off, a normal night holds T_set. With ``stop_at_t_min`` a constrained night ends where
+   the gateway's controller ends it (:class:`_GatewayStop`: polled every plant step from the
+   switch-off, sensed T_air ≤ T_min or its trend anticipated there), the night's samples end
+   with that poll and the owner's day setpoint is restored; a night with less than
+   ``min_usable_h`` after the emission lag is invalid, as the gateway judges it (NaN features).
 
 Observed samples every ``step_s``: the room sensor's T_air and the outdoor sensor's T_out at the
 sample instant, and the heat meter's mean power over the sample interval (an energy counter
@@ -49,6 +51,9 @@ from .virtual_imp import (
 #: Steps of the realistic plant [s]: spin-up (ideal control) and pre-heat + window.
 SPINUP_STEP_S = 900.0
 PLANT_STEP_S = 60.0
+#: The gateway's anticipated end needs a T_air trend over at least this span [s]
+#: (impctl.controller.plan.MIN_TREND_SPAN_S; not imported: the device side stays apart).
+_MIN_TREND_SPAN_S = 600.0
 
 
 def _local_hours(epoch_s: np.ndarray, tz: str) -> tuple[np.ndarray, np.ndarray]:
@@ -58,6 +63,44 @@ def _local_hours(epoch_s: np.ndarray, tz: str) -> tuple[np.ndarray, np.ndarray]:
     hours = (flat.hour + flat.minute / 60.0 + flat.second / 3600.0).to_numpy()
     days = (flat.normalize().tz_localize(None).asi8 // 86_400_000_000_000).astype(np.int64)
     return hours.reshape(epoch_s.shape), days.reshape(epoch_s.shape)
+
+
+class _GatewayStop:
+    """Where the gateway's controller ends each constrained night (impctl.controller: "reached
+    T_min", "T_min anticipated"), polled every plant step from the switch-off.
+
+    A night ends at the first poll whose sensed T_air is ≤ T_min, or whose least-squares trend
+    over the last ``trend_window_s`` (at least :data:`_MIN_TREND_SPAN_S`) reaches T_min within
+    ``anticipate_s`` while T_air is within ``anticipate_within_k`` of T_min.
+    """
+
+    def __init__(self, active: np.ndarray, t_min: np.ndarray, cfg: ImpSimConfig):
+        self.active, self.t_min, self.cfg = active, t_min, cfg
+        n_trend = int(round(cfg.trend_window_s / PLANT_STEP_S)) + 1
+        self._trend = np.empty((n_trend, active.size))
+        self.stopped = np.zeros(active.size, bool)
+        self.at_step = np.full(active.size, -1)
+
+    def poll(self, j: int, sensed_air: np.ndarray) -> None:
+        """Poll ``j`` plant steps after the switch-off, reading ``sensed_air`` [°C]."""
+        if not self.active.any():
+            return
+        trend, cfg = self._trend, self.cfg
+        trend[j % len(trend)] = sensed_air
+        ended = sensed_air <= self.t_min
+        count = min(j + 1, len(trend))
+        if cfg.anticipate_s > 0 and (count - 1) * PLANT_STEP_S >= _MIN_TREND_SPAN_S:
+            rows = trend if count == len(trend) else trend[:count]
+            order = (np.arange(count) - (j + 1)) % len(trend) if count == len(trend) \
+                else np.arange(count)
+            t = order * PLANT_STEP_S   # ring-buffer rows' times, up to a shared offset
+            t = t - t.mean()
+            slope = (t @ (rows - rows.mean(axis=0))) / (t @ t)   # K/s
+            ended |= ((sensed_air <= self.t_min + cfg.anticipate_within_k) & (slope < 0)
+                      & (sensed_air + slope * cfg.anticipate_s <= self.t_min))
+        new = ended & self.active & ~self.stopped
+        self.stopped |= new
+        self.at_step[new] = j
 
 
 def simulate_imp_plant(
@@ -153,8 +196,8 @@ def simulate_imp_plant(
     sp_pre = np.tile([p.preheat_setpoint_c for p in plans], n * days) + shift
     sp_night = np.tile([p.setpoint_c for p in plans], n * days) + shift
     t_min = sp_night - cfg.band_k
-    lag_samples = int(ceil(cfg.emitter_lag_h * 3600.0 / cfg.step_s))
-    resumed = np.zeros(n_cols, bool)
+    stop = _GatewayStop(cons & cfg.stop_at_t_min, t_min, cfg)
+    owner_sp = np.repeat(day_sp, n_p)
     t_air = np.empty((n_w, n_cols))
     t_out = np.empty((n_w, n_cols))
     q_obs = np.zeros((n_w, n_cols))
@@ -169,10 +212,11 @@ def simulate_imp_plant(
         else:
             if r == 0:
                 t_air[k], t_out[k] = sensed_air, sensed_out
-                if cfg.stop_at_t_min and k >= lag_samples:
-                    resumed |= cons & (sensed_air < t_min)
-            sp = np.where(cons, t_min, sp_night)
-            enabled = ~cons | resumed
+            stop.poll(i - n_ph, sensed_air)
+            # Heating off on constrained nights until the stop; then the owner's setpoint is
+            # restored, as the gateway does.
+            sp = np.where(cons, owner_sp, sp_night)
+            enabled = ~cons | stop.stopped
         out = core.step(PLANT_STEP_S, te[i], sp, enabled, g_int[i], g_sol[i], no_dhw, None,
                         want)
         sensed_air, sensed_out = out["t_air_sensed_c"], out["t_out_sensed_c"]
@@ -180,15 +224,20 @@ def simulate_imp_plant(
             q_obs[k] += out["heat_meter_w"] / stride
 
     time_s = np.arange(n_w) * cfg.step_s
-    valid = time_s[:, None] < np.repeat(duration_s, n_p)[None, :]
-    if cfg.stop_at_t_min:
-        # Constrained nights end with the first sample below T_min (the heating resumes).
-        below = (t_air < t_min[None, :]) & cons[None, :]
-        below[:lag_samples] = False
-        first = np.where(below.any(axis=0), below.argmax(axis=0), n_w)
-        valid &= np.arange(n_w)[:, None] <= first[None, :]
+    night_s = np.repeat(duration_s, n_p)
+    # The night's last sample is the one that ended it (the gateway stores it, then restores).
+    end_s = np.where(stop.stopped, stop.at_step * PLANT_STEP_S, night_s)
+    valid = (time_s[:, None] < night_s[None, :]) & (time_s[:, None] <= end_s[None, :])
     feats = features_from_arrays(time_s, t_air, t_out, q_obs, constrained=cons,
                                  setpoint_c=sp_night, valid=valid,
                                  emission_lag_h=cfg.emitter_lag_h)
+    if cfg.stop_at_t_min:
+        # The gateway's verdict (impctl.controller.assess): a constrained night with less than
+        # min_usable_h after the emission lag is invalid — never exported, never classified.
+        usable_h = np.minimum(end_s, night_s) / 3600.0 - cfg.emitter_lag_h
+        short = cons & (usable_h < cfg.min_usable_h - 1e-9)
+        for name, values in feats.items():
+            if name != "is_constrained":
+                values[short] = np.nan
     return night_result(pick, cand, plans, n, days, sp_night, duration_s, feats,
                         (time_s, t_air, t_out, q_obs, valid) if keep_samples else None)

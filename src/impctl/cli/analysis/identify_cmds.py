@@ -51,7 +51,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
 
     if households < MIN_HOUSEHOLDS:
         raise InputError(f"--households must be >= {MIN_HOUSEHOLDS}, got {households}")
-    imp = ImpSimConfig()
+    imp = ImpSimConfig.for_plant(plant)  # the nights the gateway records on that plant
     weather = None
     if weather_path is not None:
         weather = read_weather(weather_path, imp.tz)
