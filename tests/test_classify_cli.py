@@ -147,3 +147,36 @@ def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
     meta["dataset"]["imp"]["stop_at_t_min"] = True
     (old / "models.json").write_text(json.dumps(meta))
     assert _models_ok(old)
+
+
+def _with_setpoint(src: Path, dst: Path, night_ids, setpoint_c: float) -> Path:
+    table = pd.read_csv(src)
+    table.loc[table["night"].isin(night_ids), "setpoint"] = setpoint_c
+    table.to_csv(dst, index=False)
+    return dst
+
+
+def test_classify_leaves_out_nights_at_setpoints_never_trained_on(model_dir, nights_csv,
+                                                                  tmp_path):
+    # A normal night at 20 °C is not a night of the classifiers' population: its features
+    # would put the house into a class for the wrong reason, so it is left out and named.
+    table = pd.read_csv(nights_csv)
+    normal = table.loc[table["kind"] == "normal", "night"].unique()
+    moved = _with_setpoint(nights_csv, tmp_path / "moved.csv", normal[:1], 20.0)
+    done = run_cli("classify", "--nights", str(moved), "--model-dir", str(model_dir), "--json")
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    left = data["classes"]["c_f"]["nights_left_out"]
+    assert len(left) == 1 and "normal at 20 °C" in left[0]
+    table_done = run_cli("classify", "--nights", str(moved), "--model-dir", str(model_dir))
+    assert "left out (setpoint the classifiers were never trained on)" in table_done.stdout
+    # The unchanged export leaves nothing out.
+    plain = json.loads(run_cli("classify", "--nights", str(nights_csv), "--model-dir",
+                               str(model_dir), "--json").stdout)
+    assert "nights_left_out" not in plain["classes"]["c_f"]
+    # Every night off the protocol: one line, exit 2, nothing classified.
+    every = _with_setpoint(nights_csv, tmp_path / "every.csv", table["night"].unique(), 19.0)
+    line = _one_error_line(run_cli("classify", "--nights", str(every), "--model-dir",
+                                   str(model_dir)), "no night ran at a setpoint")
+    assert f"normal nights at {'/'.join(f'{s:g}' for s in DEFAULT_SETPOINTS_C)} °C" in line
+    assert f"constrained nights at {DEFAULT_CONSTRAINED_SETPOINT_C:g} °C" in line

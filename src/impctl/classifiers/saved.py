@@ -72,12 +72,18 @@ class ClassResult:
     probability: float
     probabilities: dict[str, float] = field(default_factory=dict)
     calibrated: bool = False
+    nights_left_out: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …}``."""
-        return {"range": list(self.range), "label": self.label,
-                "probability": self.probability, "probabilities": dict(self.probabilities),
-                "calibrated": self.calibrated}
+        """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …}``
+        (and ``"nights_left_out"``: the nights not classified because they ran at a setpoint
+        the classifiers' population never ran, when there are any)."""
+        out = {"range": list(self.range), "label": self.label,
+               "probability": self.probability, "probabilities": dict(self.probabilities),
+               "calibrated": self.calibrated}
+        if self.nights_left_out:
+            out["nights_left_out"] = list(self.nights_left_out)
+        return out
 
 
 def save_models(models: dict, directory: str | Path, *, seed: int, n_households: int,
@@ -252,6 +258,12 @@ def classify_with(nights: list[NightSamples], models: dict, meta: dict
     worker loads them once)."""
     if not nights:
         raise InputError("no nights to classify")
+    off = off_protocol(nights, meta)
+    if off:
+        nights = [n for n in nights if n.night_id not in off]
+        if not nights:
+            raise InputError("no night ran at a setpoint the classifiers were trained on ("
+                             + _protocol_text(meta) + "): " + "; ".join(off.values()))
     lag = float(meta.get("emission_lag_h", 1.0))
     row = campaign_features([night_features(n, lag) for n in nights])
     x = pd.DataFrame([row], columns=list(CAMPAIGN_FEATURE_NAMES))
@@ -266,5 +278,42 @@ def classify_with(nights: list[NightSamples], models: dict, meta: dict
             probability=float(proba[best]),
             probabilities={str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)},
             calibrated=bool(getattr(model, "calibrated_", False)),
+            nights_left_out=tuple(off.values()),
         )
     return out
+
+
+#: Two setpoints closer than this are the same night plan [K] (setpoints are written in 0.1 K).
+_SETPOINT_TOL_K = 0.05
+
+
+def off_protocol(nights: list[NightSamples], meta: dict) -> dict[str, str]:
+    """Nights that ran at a setpoint the classifiers' population never ran: night id → why.
+
+    The forests learnt what a night at 21 °C (constrained) or 22/23/24 °C (normal) looks like
+    (``models.json`` → ``dataset.imp``); the same house at another setpoint gives other
+    features, and a class read from them would be a number nobody can stand behind. Nights
+    without a known setpoint, and models that record no protocol, are kept as they are.
+    """
+    imp = (meta.get("dataset") or {}).get("imp") or {}
+    normal = [float(s) for s in imp.get("setpoints_c") or []]
+    cons = imp.get("constrained_setpoint_c")
+    cons = normal if cons is None else [float(cons)]   # None: the population cycled them
+    allowed = {"normal": (normal, _SETPOINT_TOL_K),
+               "constrained": (cons, _SETPOINT_TOL_K + float(imp.get("constrained_jitter_k", 0)))}
+    out = {}
+    for n in nights:
+        ok, tol = allowed.get(n.kind, ([], 0.0))
+        sp = float(n.setpoint_c)
+        if not ok or not np.isfinite(sp) or any(abs(sp - s) < tol for s in ok):
+            continue
+        out[n.night_id] = f"{n.night_id} ({n.kind} at {sp:g} °C)"
+    return out
+
+
+def _protocol_text(meta: dict) -> str:
+    imp = (meta.get("dataset") or {}).get("imp") or {}
+    normal = "/".join(f"{float(s):g}" for s in imp.get("setpoints_c") or [])
+    cons = imp.get("constrained_setpoint_c")
+    return (f"constrained nights at {float(cons):g} °C, " if cons is not None else "") + \
+        f"normal nights at {normal} °C"

@@ -206,4 +206,8 @@ def _classes(nights, model_dir):
         return classes, {n: c["range"] for n, c in classes.items()}, [note]
     classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier"}
                for name, r in results.items()}
-    return classes, {n: c["range"] for n, c in classes.items()}, []
+    left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
+    notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "
+             f"were never trained on: {'; '.join(left_out)} (the fit uses them)"
+             ] if left_out else []
+    return classes, {n: c["range"] for n, c in classes.items()}, notes

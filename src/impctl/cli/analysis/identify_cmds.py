@@ -123,6 +123,10 @@ def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) 
         click.echo(f"gap: {g.describe()}")
     click.echo(f"{len(nights)} nights: {kinds['constrained']} constrained, "
                f"{kinds['normal']} normal")
+    left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
+    if left_out:
+        click.echo(f"left out (setpoint the classifiers were never trained on): "
+                   f"{'; '.join(left_out)}")
     click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}{'probability':>11}")
     for name, r in results.items():
         rng = f"{r.range[0]:g} – {r.range[1]:g}"
