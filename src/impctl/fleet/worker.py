@@ -184,7 +184,10 @@ def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None]:
         return {}, None
     from ..classifiers.saved import classify_with
 
-    result = classify_with(nights, *models(settings.model_dir))
+    try:
+        result = classify_with(nights, *models(settings.model_dir))
+    except InputError:   # no night at a setpoint the classifiers know: the prior, as impctl fit
+        return {}, None
     return ({k: r.label for k, r in result.items()},
             {k: tuple(r.range) for k, r in result.items()})
 
