@@ -24,6 +24,10 @@ DEFAULT_BAND_K = 2.5
 #: Time [h] the night's pre-window setpoint (T_max or T_set) is held before the window.
 DEFAULT_PREHEAT_H = 2.0
 
+#: Heat output above which the heating counts as running [W]: a constrained night's data end
+#: where it resumes (the fit's cut and the gateway's validity read the same number).
+Q_ON_W = 100.0
+
 #: Hours of data a night needs to be valid [h] — for a constrained night counted after the
 #: switch-off plus the emission lag (the part the fit uses). The gateway's assessment
 #: (:func:`impctl.controller.assess.assess_night`), the fit's shortest night

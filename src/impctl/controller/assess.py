@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..night_protocol import MIN_NIGHT_H
+from ..night_protocol import MIN_NIGHT_H, Q_ON_W
 from ..store import Store
 from .heat_output import heat_output_problems
 from .plan import NightPolicy
@@ -35,9 +35,12 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     expected = span_s / policy.sample_interval_s
     # The fit uses a constrained night only from switch-off + emission lag, and needs
     # MIN_NIGHT_H of it; a night that reached T_min sooner is complete but carries too little
-    # cooling.
-    usable_s = span_s - (policy.emission_lag_h * 3600 if night.kind == "constrained" else 0)
-    if usable_s < MIN_NIGHT_H * 3600:
+    # cooling. Measured as the fit measures it (fit.nights.data.prepare_nights): the span of
+    # the complete samples from the night's first one + the lag, so a night valid here is
+    # never one the fit then skips.
+    usable_s = _usable_s([s for s in samples if s.ts <= end], night.kind,
+                         policy.emission_lag_h)
+    if usable_s < MIN_NIGHT_H * 3600 - 1e-6:
         after = " after the emission lag" if night.kind == "constrained" else ""
         reasons.append(f"only {max(usable_s, 0) / 3600:.1f} h of data{after} "
                        f"(< {MIN_NIGHT_H:g} h)")
@@ -67,3 +70,22 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
             reasons.append(f"{label} missing in {frac:.0%} of samples")
     reasons.extend(heat_output_problems(samples))
     return not reasons, reasons
+
+
+def _usable_s(samples: list, kind: str, emission_lag_h: float) -> float:
+    """Seconds between the first and the last sample the fit keeps: T_air, T_out and Q_HC all
+    present; on a constrained night at least ``emission_lag_h`` [h] after the first sample
+    (time 0 of the exported night) and before the heating resumed (Q_HC > Q_ON_W)."""
+    if not samples:
+        return 0.0
+    t0 = samples[0].ts
+    constrained = kind == "constrained"
+    lag_s = emission_lag_h * 3600.0 if constrained else 0.0
+    kept = []
+    for s in samples:
+        if None in (s.t_air_c, s.t_out_c, s.q_hc_w) or (s.ts - t0).total_seconds() < lag_s - 1e-6:
+            continue
+        if constrained and s.q_hc_w > Q_ON_W:
+            break
+        kept.append(s.ts)
+    return (kept[-1] - kept[0]).total_seconds() if len(kept) >= 2 else 0.0

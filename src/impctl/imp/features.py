@@ -23,11 +23,11 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..night_protocol import Q_ON_W
 from .night import NightSamples
 from .plan import EMISSION_LAG_H
 
-#: Heat output above which the heating counts as running [W].
-Q_ON_W = 100.0
+__all__ = ["Q_ON_W"]  # re-exported: Q_ON_W lives with the protocol (the gateway reads it too)
 #: Fewest samples a mean, slope or decay fit is computed from.
 MIN_SAMPLES = 3
 #: Span [h] after the cut of the early decay rate: the same span on every constrained night
