@@ -57,6 +57,7 @@ from ..imp import (
 )
 from ..model import HouseParameters, simulate
 from ..model.continuous import mass_derivative
+from ..night_protocol import ANTICIPATE_S, ANTICIPATE_WITHIN_K, MIN_NIGHT_H, TREND_WINDOW_S
 from ..weather import DEFAULT_TZ, winter_weather
 
 
@@ -101,10 +102,10 @@ class ImpSimConfig:
     max_t_out_c: float = 12.0
     day_setpoint_c: tuple[float, float] = (20.0, 22.0)
     stop_at_t_min: bool = False
-    anticipate_s: float = 1800.0
-    anticipate_within_k: float = 1.0
-    trend_window_s: float = 1800.0
-    min_usable_h: float = 3.0
+    anticipate_s: float = ANTICIPATE_S
+    anticipate_within_k: float = ANTICIPATE_WITHIN_K
+    trend_window_s: float = TREND_WINDOW_S
+    min_usable_h: float = MIN_NIGHT_H
     constrained_per_day: int = 1
     constrained_jitter_k: float = 0.0
     tz: str = DEFAULT_TZ

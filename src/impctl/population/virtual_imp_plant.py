@@ -34,6 +34,7 @@ import pandas as pd
 from ..errors import InputError
 from ..imp import features_from_arrays
 from ..model import HouseParameters
+from ..night_protocol import MIN_TREND_SPAN_S
 from ..plant import PlantCore, PlantParams
 from ..plant.building.envelope import NodeState
 from ..plant.building.gains import internal_gains_w, solar_gains_w
@@ -51,9 +52,9 @@ from .virtual_imp import (
 #: Steps of the realistic plant [s]: spin-up (ideal control) and pre-heat + window.
 SPINUP_STEP_S = 900.0
 PLANT_STEP_S = 60.0
-#: The gateway's anticipated end needs a T_air trend over at least this span [s]
-#: (impctl.controller.plan.MIN_TREND_SPAN_S; not imported: the device side stays apart).
-_MIN_TREND_SPAN_S = 600.0
+#: The gateway's anticipated end needs a T_air trend over at least this span [s] (the
+#: protocol's constant, which impctl.controller.plan reads too).
+_MIN_TREND_SPAN_S = MIN_TREND_SPAN_S
 
 
 def _local_hours(epoch_s: np.ndarray, tz: str) -> tuple[np.ndarray, np.ndarray]:
