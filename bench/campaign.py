@@ -14,8 +14,8 @@ validation population of ``bench/fit.py``), class ranges the true classes (as th
 rows of the README's fit table). Each household gets its own winter weather. For every night
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
 the gateway's constrained setpoint and normal at each of its normal setpoints
-(``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 22.5 °C,
-and 22, 23, 24 °C today), each with the gateway's 2 h
+(``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 23.5 °C
+(ΔT 2.5 K), and 22, 23, 24 °C today), each with the gateway's 2 h
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
@@ -52,11 +52,21 @@ between strategies and targets):
 
 Forecast of a night: the mean outdoor temperature of the previous night (persistence: the
 daemon's own history); a night whose forecast is outside the band −25…8 °C is skipped, one
-whose first outdoor reading is outside it is run but invalid. The plant is simulated once in
-the parent; the campaigns run in ``--processes`` forked workers (households interleaved), one
-torch thread each. Reported per strategy and target: nights run (median, P90), share whose
-final fit meets the target, final-interval coverage of the true HLC and τ, median |error|,
-median final half-widths, stop reasons.
+whose first outdoor reading is outside it is run but invalid.
+
+Constrained nights as the gateway runs them (h18f; ``--cool-to-window-end``: the nights before,
+cooling to 05:00, all valid): ended at T_min = T_set − ΔT or the gateway's anticipated end, not
+switched off after a short pre-heat (h14w's ``stop_at_t_min``), cut there, and invalid with
+< ``night_protocol.MIN_NIGHT_H`` after the 1 h lag (``bench/_fit_protocol.short_constrained``).
+An invalid night is repeated (the policy's rule; the fixed plan's); the fixed plan gives up
+after ``campaign.max_invalid_nights`` invalid nights (``daemon.schedule.gave_up``) and is
+fitted on the valid nights it has, if they hold both kinds. Reported per strategy: constrained
+nights run, short, invalid on the band, households with no valid constrained night.
+
+The plant is simulated once in the parent; the campaigns run in ``--processes`` forked
+workers (households interleaved), one torch thread each. Reported per strategy and target:
+nights run (median, P90), share whose final fit meets the target, final-interval coverage of
+the true HLC and τ, median |error|, median final half-widths, stop reasons.
 """
 
 from __future__ import annotations
@@ -83,6 +93,7 @@ from impctl.campaign import (  # noqa: E402
     policy,
 )
 from impctl.campaign.design import Protocol, predict  # noqa: E402
+from impctl.config import CampaignConfig  # noqa: E402
 from impctl.fit.optim.batch import fit_households  # noqa: E402
 from impctl.fit.result.report import fit_to_dict  # noqa: E402
 from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
@@ -95,8 +106,16 @@ from impctl.population.synth_nights import (  # noqa: E402
 )
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from _fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)
 from campaign_nights import fixed_plan, variant_schedule, variants  # noqa: E402
-from campaign_report import STRATEGIES, by_night_set, paired, summarise, trajectories  # noqa: E402
+from campaign_report import (  # noqa: E402
+    STRATEGIES,
+    by_night_set,
+    invalid_nights,
+    paired,
+    summarise,
+    trajectories,
+)
 from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validation setup)
 
 SEED = 20260
@@ -123,6 +142,8 @@ PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
     ("normal", sp) for sp in sorted(NORMAL_SETPOINTS, reverse=True))
 #: policy constants a strategy runs with (set around its decisions only)
 POLICY_RULES = {"min3": {"MIN_FLOOR_NIGHTS": 3}}
+#: the fixed plan stops after this many invalid scheduled nights (``daemon.schedule.gave_up``)
+MAX_INVALID = CampaignConfig().max_invalid_nights
 
 
 def base(strategy: str) -> str:
@@ -147,20 +168,30 @@ class Progress:
             print(f"  [{now - self.t0:6.0f} s]{self.prefix} {text}", flush=True)
 
 
-def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progress):
-    """nights[v][i][j], forecast[i][j] [°C], first outdoor reading[v][i][j] [°C]."""
+def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progress,
+                      gateway_stop: bool = True):
+    """nights[v][i][j], forecast[i][j] [°C], first outdoor reading[v][i][j] [°C],
+    short[v][i][j] (a constrained night the gateway counts invalid: < MIN_NIGHT_H after the
+    1 h lag).
+
+    ``gateway_stop``: the constrained nights end as the gateway ends them (at T_min or its
+    anticipated end, not switched off after a short pre-heat; issue 14, h14w's
+    ``stop_at_t_min``) and are cut there; else they cool to the window's end (before h18f)."""
     houses = sample_households(n, seed=SEED)
     params = sample_params(n, SEED) if plant == "realistic" else None
-    nights, first_t_out = [], []
+    nights, first_t_out, short = [], [], []
     forecast = None
     for kind, sp in VARIANTS:
         sched = variant_schedule(n, k, kind, sp, SEED)
+        stop = gateway_stop and kind == "constrained"
         if plant == "realistic":
-            sim, spc = run_schedule_plant(houses, sched, params, seed=SEED)
+            sim, spc = run_schedule_plant(houses, sched, params, seed=SEED, stop_at_t_min=stop)
             t_out, noise = sim.t_out_c, 0.0
         else:
-            sim, spc = run_schedule(houses, sched)
+            sim, spc = run_schedule(houses, sched, stop_at_t_min=stop)
             t_out, noise = sched.t_out_c, 0.05
+        short.append(short_constrained(spc, sched).T if kind == "constrained"
+                     else np.zeros((n, k), bool))
         per_day = int(round(86400 / sched.dt_s))
         if forecast is None:   # persistence: last night's mean outdoor temperature
             forecast = np.array([[float(np.mean(t_out[w0 - per_day:w1 - per_day, i]))
@@ -169,8 +200,10 @@ def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progr
                                      for i in range(n)]))
         nights.append([sample_nights(sim, spc, sched, i, sample_step_s=step_s, quantise_k=0.1,
                                      power_noise=noise, seed=SEED + i) for i in range(n)])
-        progress(f"simulated variant {kind} {sp:g} °C for {n} households", force=True)
-    return houses, nights, forecast, first_t_out
+        progress(f"simulated variant {kind} {sp:g} °C for {n} households"
+                 + (f" ({int(short[-1].sum())} of {short[-1].size} nights short)"
+                    if kind == "constrained" else ""), force=True)
+    return houses, nights, forecast, first_t_out, short
 
 
 class Fits:
@@ -234,14 +267,19 @@ class Campaign:
         #: per fit: what else its JSON says (per-night lumped values, adequacy, model-error
         #: group), for stop rules tried offline
         self.extras: list[dict] = []
+        #: constrained nights run that the gateway ended too early to be valid
+        self.short = 0
 
     def fit_key(self) -> tuple | None:
         kinds = {VARIANTS[v][0] for _, v in self.chosen}
         return (self.i, tuple(self.chosen)) if len(kinds) == 2 else None
 
 
-def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) -> int | None:
-    """Decide night j for campaign c; returns the variant run or None."""
+def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
+         short: list | None = None) -> int | None:
+    """Decide night j for campaign c; returns the variant run or None. A night is invalid
+    when its first outdoor reading is outside the band or (``short[v][i][j]``) it is a
+    constrained night the gateway ended with < MIN_NIGHT_H after the lag."""
     if c.done:
         return None
     name = base(c.strategy)
@@ -285,25 +323,32 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list) ->
         c.predicted = next(((x.hlc_rel_pred, x.tau_rel_pred) for x in cands
                             if (x.kind, x.setpoint_c) == (d.kind, d.setpoint_c)), None)
     valid = BAND_C[0] <= first_t_out[v][c.i][j] <= BAND_C[1]
+    if short is not None and short[v][c.i][j]:
+        valid = False
+        c.short += 1
     if not valid:
         c.predicted = None
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
         c.chosen.append((j, v))
+    elif name == "fixed" and sum(not x.valid for x in c.history) >= MAX_INVALID:
+        c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
     return v
 
 
 def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: list[int],
-        strategies: list[str]) -> list:
+        strategies: list[str], short: list | None = None) -> list:
     camps = [Campaign(i, s, replace(target, max_nights=max_nights_of(s, target.max_nights)))
              for s in strategies for i in households]
     for j in range(k):
-        ran = [c for c in camps if step(c, j, fits, float(forecast[c.i][j]), first_t_out)
+        ran = [c for c in camps if step(c, j, fits, float(forecast[c.i][j]), first_t_out, short)
                is not None]
         keys = [c.fit_key() for c in ran]
+        # the fixed plan fits once: complete, or given up (what valid nights it has)
         need = [key for c, key in zip(ran, keys, strict=True)
-                if key is not None and c.chosen and c.chosen[-1][0] == j
-                and (base(c.strategy) != "fixed" or len(c.chosen) == len(FIXED))]
+                if key is not None and c.chosen
+                and (c.chosen[-1][0] == j if base(c.strategy) != "fixed"
+                     else len(c.chosen) == len(FIXED) or c.done)]
         fits.ensure(need)
         for c in ran:
             key = c.fit_key()
@@ -355,7 +400,7 @@ def _record(c: Campaign) -> tuple:
     nights = tuple((n.kind, n.setpoint_c) for n in c.history)
     fitted = tuple(VARIANTS[v] for _, v in c.chosen) if final is not None else ()
     return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
-            nights, fitted, c.seen, tuple(c.history), c.extras)
+            nights, fitted, c.seen, tuple(c.history), c.extras, c.short)
 
 
 #: Set in the parent before the workers fork (copy-on-write: the simulated nights are not
@@ -375,7 +420,7 @@ def _worker(w: int) -> tuple[list, int, float]:
     out = []
     for target in sh["targets"]:
         camps = run(target, fits, sh["forecast"], sh["first_t_out"], sh["k"], households,
-                    sh["strategies"])
+                    sh["strategies"], sh["short"])
         out.append([_record(c) for c in camps])
     return out, fits.count, fits.seconds
 
@@ -407,6 +452,9 @@ def main() -> None:
     ap.add_argument("--dump", default=None,
                     help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
                          "here (to try stop rules offline)")
+    ap.add_argument("--cool-to-window-end", action="store_true",
+                    help="constrained nights cool to 05:00 and are all valid (the nights before "
+                         "h18f), not ended at T_min as the gateway ends them")
     ap.add_argument("--trajectories", action="store_true",
                     help="print every campaign's fits, floors, errors and stop reason")
     args = ap.parse_args()
@@ -441,8 +489,9 @@ def main() -> None:
           f"{args.processes} processes, seed {SEED}, {platform.processor() or platform.machine()}, "
           f"load "
           f"{os.getloadavg()[0]:.1f}", flush=True)
-    houses, nights, forecast, first_t_out = simulate_variants(n, k, args.plant, args.step_s,
-                                                              progress)
+    gateway_stop = not args.cool_to_window_end
+    houses, nights, forecast, first_t_out, short = simulate_variants(
+        n, k, args.plant, args.step_s, progress, gateway_stop)
     t_sim = time.perf_counter() - t0
     targets = []
     for pair in args.targets.split(","):
@@ -450,7 +499,8 @@ def main() -> None:
         targets.append(Target(hlc_rel=hlc, tau_rel=tau, max_nights=args.max_nights,
                               **overrides))
     _SHARED.update(n=n, k=k, houses=houses, nights=nights, forecast=forecast,
-                   first_t_out=first_t_out, step_s=args.step_s, targets=targets,
+                   first_t_out=first_t_out, short=short if gateway_stop else None,
+                   step_s=args.step_s, targets=targets,
                    strategies=strategies, processes=max(1, args.processes))
     if args.processes > 1:
         with multiprocessing.get_context("fork").Pool(args.processes) as pool:
@@ -462,6 +512,7 @@ def main() -> None:
         summarise(records, houses, target, strategies)
         paired(records, houses, strategies, args.bootstrap)
         by_night_set(records, houses, strategies)
+        invalid_nights(records, strategies)
         if args.trajectories:
             for s in strategies:
                 trajectories(records, houses, s)

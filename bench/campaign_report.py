@@ -4,7 +4,8 @@ the fixed plan (bootstrap over households) and each campaign's trajectory.
 A record is the tuple ``bench/campaign.py``'s workers return per campaign: (strategy,
 household, nights run, final FitSummary or None, stop label, fits, stop reason, prediction
 checks, ((kind, setpoint °C) of each night run), ((kind, setpoint °C) of each night the final fit
-used)).
+used), decision inputs, the nights run (NightRecord), fit extras, constrained nights ended too
+early to be valid).
 """
 
 from __future__ import annotations
@@ -188,3 +189,21 @@ def by_night_set(records: list, houses, strategies: list[str], top: int = 6) -> 
             print(f"  {label(s):<32} {group}: " + "; ".join(
                 f"{k} n={len(v)} {100 * np.mean([a for a, _ in v]):.0f}/"
                 f"{100 * np.mean([b for _, b in v]):.0f} %" for k, v in ranked))
+
+
+def invalid_nights(records: list, strategies: list[str]) -> None:
+    """Per strategy: constrained nights run, how many the gateway ended too early to be valid
+    (< MIN_NIGHT_H after the lag: record[13]), how many were invalid on the outdoor band, and
+    the households that ended with no valid constrained night (no fit of both kinds)."""
+    print("\nconstrained nights per strategy (the gateway's validity: ≥ 3 h after the 1 h lag)")
+    print(f"{'strategy':<40} {'run':>5} {'short':>6} {'band':>5} {'households w/o valid c':>23}")
+    for s in strategies:
+        sub = [r for r in records if r[0] == s]
+        hist = [n for r in sub for n in r[11] if n.kind == "constrained"]
+        short = sum(r[13] for r in sub)
+        bad = sum(not n.valid for n in hist)
+        none = sum(not any(n.kind == "constrained" and n.valid for n in r[11]) for r in sub)
+        print(f"{label(s):<40} {len(hist):>5d} {short:>6d} {bad - short:>5d} "
+              f"{none:>10d} of {len(sub):<4d}")
+        print(f"markdown: | {label(s)} | {len(hist)} | {short} | {bad - short} | "
+              f"{none} / {len(sub)} |")
