@@ -337,3 +337,39 @@ def test_fixed_campaign_stops_repeating_nights_the_house_cannot_make_valid(tmp_p
                           "campaign.max_invalid_nights = 2; the last, a constrained night, "
                           "because: cooled to T_min 1.4 h")
     assert "night.comfort_band_k" in why
+
+
+def test_adaptive_campaign_stops_after_invalid_nights_too(tmp_path):
+    """The adaptive campaign has the fixed plan's protection: a house whose constrained nights
+    keep ending invalid stops after ``max_invalid_nights`` scheduled ones instead of paying
+    every night up to ``max_nights`` for no fit; status and Home Assistant say why."""
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "adaptive", "max_invalid_nights": 2, "max_nights": 5}})
+    act = T0 + timedelta(days=10)
+    short = "only 1.4 h of data after the emission lag (< 3 h)"
+
+    def failed(day: int, source: str) -> None:
+        start = T0 + timedelta(days=day)
+        nid = store.create_night("constrained", 21.0, start, start + timedelta(hours=7),
+                                 source=source)
+        store.set_night_state(nid, "done", ended=start + timedelta(hours=3))
+        store.assess_night(nid, False, [short])
+
+    with Store(cfg.db_path) as store:
+        failed(0, "schedule")
+        failed(1, "trigger")   # a manual night is not the campaign's
+        decision, _ = adaptive.decide_now(store, cfg)
+        assert decision.action == "run"
+        req, _ = peek_next_night(store, cfg, act)
+        assert req is not None and req.source == "schedule"
+        failed(2, "schedule")
+        decision, _ = adaptive.decide_now(store, cfg)
+        assert decision.action == "stop" and not decision.reached
+        assert decision.reason.startswith("Campaign stopped: 2 scheduled nights were not valid")
+        assert "only 1.4 h of data" in decision.reason
+        assert peek_next_night(store, cfg, act) == (None, None)
+        assert why_no_night(store, cfg) == decision.reason
+        adaptive.record(store, decision, adaptive.forecast(store, cfg), act)
+        state = adaptive.campaign_state(store, cfg)
+    assert state.status == "stopped: too many invalid nights (max_invalid_nights)"
+    assert state.reason == decision.reason

@@ -41,7 +41,13 @@ from ..campaign import (
 from ..config import Config
 from ..controller import NightRequest
 from ..store import Store
-from .schedule import RUN_STATES, drop_expired_requests, peek_next_night, window_after_act
+from .schedule import (
+    RUN_STATES,
+    drop_expired_requests,
+    gave_up,
+    peek_next_night,
+    window_after_act,
+)
 
 if TYPE_CHECKING:
     from ..store import CampaignDecision
@@ -109,8 +115,17 @@ def forecast(store: Store, cfg: Config) -> Forecast:
 
 
 def decide_now(store: Store, cfg: Config) -> tuple[Decision, Forecast]:
-    """The policy's decision for the next night from what the store holds now."""
+    """The policy's decision for the next night from what the store holds now.
+
+    Before the policy: after ``campaign.max_invalid_nights`` scheduled nights ended invalid the
+    campaign stops, as the fixed plan does (:func:`.schedule.gave_up`): a house whose
+    constrained nights keep reaching T_min too early would otherwise pay every night up to
+    ``max_nights`` for no fit (bench/RESULTS.md, "Issue 18: the campaign on the gateway's
+    nights")."""
     fc = forecast(store, cfg)
+    stopped = gave_up(store, cfg)
+    if stopped is not None:
+        return Decision("stop", None, None, stopped[0].upper() + stopped[1:] + "."), fc
     camp = cfg.campaign
     candidates, outlook = latest_candidates(store)
     decision = decide(night_history(store), fit_history(store), candidates,
@@ -243,6 +258,8 @@ def campaign_state(store: Store, cfg: Config) -> CampaignState:
             status = "running: last night skipped"
         elif decision.reached:
             status = f"finished: precision reached after {run} nights"
+        elif reason.startswith("Campaign stopped:"):   # schedule.gave_up
+            status = "stopped: too many invalid nights (max_invalid_nights)"
         elif run >= cfg.campaign.max_nights:
             status = f"stopped: {run} nights, the most allowed (max_nights)"
         elif "precision limited" in reason:

@@ -134,9 +134,10 @@ def why_no_night(store: Store, cfg: Config) -> str:
 
 
 def gave_up(store: Store, cfg: Config) -> str | None:
-    """Why the fixed campaign stopped repeating nights (None while it goes on): a house whose
-    scheduled nights keep ending invalid (a constrained night that reaches T_min before 3 h of
-    cooling, every night) would otherwise cost the household a cold night, night after night."""
+    """Why the campaign (fixed or adaptive) stopped repeating nights (None while it goes on): a
+    house whose scheduled nights keep ending invalid (a constrained night that reaches T_min
+    before 3 h of cooling, every night) would otherwise cost the household a cold night, night
+    after night."""
     invalid = [n for n in store.nights(states=RUN_STATES, valid=False) if n.source == "schedule"]
     limit = cfg.campaign.max_invalid_nights
     if len(invalid) < limit:
