@@ -331,7 +331,8 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
         c.chosen.append((j, v))
-    elif name == "fixed" and sum(not x.valid for x in c.history) >= MAX_INVALID:
+    elif name != "full" and sum(not x.valid for x in c.history) >= MAX_INVALID:
+        # both modes give up as the daemon does (daemon.schedule.gave_up); "full" runs on
         c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
     return v
 
