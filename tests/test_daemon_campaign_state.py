@@ -308,6 +308,15 @@ def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
             "interval: too few nights yet: model-based") in text
 
 
+def _short_night(store: Store, day: int, source: str, reason: str, state: str) -> None:
+    """A constrained night of ``source`` that ended after 3 h, invalid for ``reason``."""
+    start = T0 + timedelta(days=day)
+    nid = store.create_night("constrained", 21.0, start, start + timedelta(hours=7),
+                             source=source)
+    store.set_night_state(nid, state, ended=start + timedelta(hours=3))
+    store.assess_night(nid, False, [reason])
+
+
 def test_fixed_campaign_stops_repeating_nights_the_house_cannot_make_valid(tmp_path):
     """A house that reaches T_min too early every constrained night: the fixed plan repeats the
     night until ``max_invalid_nights`` scheduled nights were invalid, then stops and says why.
@@ -317,15 +326,12 @@ def test_fixed_campaign_stops_repeating_nights_the_house_cannot_make_valid(tmp_p
     act = T0 + timedelta(days=10)
     short = "cooled to T_min 1.4 h after the emission lag (needs 3 h)"
 
-    def failed(day: int, source: str) -> None:
-        start = T0 + timedelta(days=day)
-        nid = store.create_night("constrained", 21.0, start, start + timedelta(hours=7),
-                                 source=source)
-        store.set_night_state(nid, "aborted", ended=start + timedelta(hours=3))
-        store.assess_night(nid, False, [short])
-
     with Store(cfg.db_path) as store:
         store.set_campaign(campaign_plan(cfg))
+
+        def failed(day: int, source: str) -> None:
+            _short_night(store, day, source, short, "aborted")
+
         failed(0, "schedule")
         failed(1, "trigger")
         req, _ = peek_next_night(store, cfg, act)
@@ -348,14 +354,11 @@ def test_adaptive_campaign_stops_after_invalid_nights_too(tmp_path):
     act = T0 + timedelta(days=10)
     short = "only 1.4 h of data after the emission lag (< 3 h)"
 
-    def failed(day: int, source: str) -> None:
-        start = T0 + timedelta(days=day)
-        nid = store.create_night("constrained", 21.0, start, start + timedelta(hours=7),
-                                 source=source)
-        store.set_night_state(nid, "done", ended=start + timedelta(hours=3))
-        store.assess_night(nid, False, [short])
-
     with Store(cfg.db_path) as store:
+
+        def failed(day: int, source: str) -> None:
+            _short_night(store, day, source, short, "done")
+
         failed(0, "schedule")
         failed(1, "trigger")   # a manual night is not the campaign's
         decision, _ = adaptive.decide_now(store, cfg)
