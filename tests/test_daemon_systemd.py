@@ -82,10 +82,11 @@ def test_ready_status_watchdog_and_stopping(tmp_path):
         # one wall-clock-driven clock, so each poll (12 Modbus reads) must fit in its sample
         # interval even on a loaded machine, or the night misses its 80 % coverage: 600 s at
         # 3600× leaves 167 ms per poll (it takes 20–70 ms with both cores busy; 120 s at
-        # 7200× left 17 ms). The 3 h window lasts 3 s.
+        # 7200× left 17 ms). The 3.5 h window lasts 3.5 s: a valid night needs 3 h between
+        # its first and last complete sample, as the fit measures it.
         with sim_process(tmp_path, EPOCH, 3600.0, plant="iso") as sim:
             mapping = daemon_mapping(tmp_path / "state", sim.port, sim.clock,
-                                     night={"window": "22:00-01:00", "preheat_h": 0.5,
+                                     night={"window": "22:00-01:30", "preheat_h": 0.5,
                                             "sample_interval_s": 600})
             config = write_config(tmp_path / "config.toml", mapping)
             d = start_daemon(config, tmp_path / "state" / "impctl.db", tmp_path / "daemon.log",
