@@ -37,6 +37,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from ..imp import NIGHT_FEATURE_NAMES
+from ..population.gateway_nights import campaign_runs
 
 #: (name, unit, meaning) of every campaign feature, in column order.
 CAMPAIGN_FEATURES: tuple[tuple[str, str, str], ...] = (
@@ -211,13 +212,7 @@ def gateway_campaigns(
     out = random_campaigns(cons, len(values), rng, n_constrained=0, n_normal=n_normal)
     valid = np.isfinite(values[..., _IX["cooling_time_h"]])
     for row in range(len(values)):
-        kept = bad = 0
-        for night in rng.permutation(np.flatnonzero(cons)):
-            if kept == n_constrained or bad == max_invalid:
-                break
-            if valid[row, night]:
-                out[row, night] = True
-                kept += 1
-            else:
-                bad += 1
+        order = rng.permutation(np.flatnonzero(cons))
+        ok = valid[row, order]
+        out[row, order[campaign_runs(ok, n_constrained, max_invalid) & ok]] = True
     return out

@@ -128,11 +128,20 @@ def gateway_constrained_nights(sp: np.ndarray, sched: SynthSchedule, n_needed: i
         usable.append(span_h - lag_h)
     usable_h = np.array(usable)
     valid = usable_h >= need_h - 1e-9
+    run = campaign_runs(valid, n_needed, max_invalid)
+    return {"usable_h": usable_h, "run": run, "used": run & valid, "paid": run.sum(axis=0)}
+
+
+def campaign_runs(valid: np.ndarray, n_needed: int = 2, max_invalid: int = 3) -> np.ndarray:
+    """Which nights a gateway's campaign runs, taking them in order (axis 0): until
+    ``n_needed`` were valid or ``max_invalid`` were not (``campaign.max_invalid_nights``).
+    ``valid``: bool (n_nights, ...) — each night's verdict had it been run."""
+    valid = np.asarray(valid, bool)
     run = np.zeros_like(valid)
-    n_valid = np.zeros(valid.shape[1], int)
-    n_bad = np.zeros(valid.shape[1], int)
+    n_valid = np.zeros(valid.shape[1:], int)
+    n_bad = np.zeros(valid.shape[1:], int)
     for j in range(valid.shape[0]):
         run[j] = (n_valid < n_needed) & (n_bad < max_invalid)
         n_valid += run[j] & valid[j]
         n_bad += run[j] & ~valid[j]
-    return {"usable_h": usable_h, "run": run, "used": run & valid, "paid": run.sum(axis=0)}
+    return run
