@@ -52,9 +52,6 @@ from .virtual_imp import (
 #: Steps of the realistic plant [s]: spin-up (ideal control) and pre-heat + window.
 SPINUP_STEP_S = 900.0
 PLANT_STEP_S = 60.0
-#: The gateway's anticipated end needs a T_air trend over at least this span [s] (the
-#: protocol's constant, which impctl.controller.plan reads too).
-_MIN_TREND_SPAN_S = MIN_TREND_SPAN_S
 
 
 def _local_hours(epoch_s: np.ndarray, tz: str) -> tuple[np.ndarray, np.ndarray]:
@@ -71,8 +68,8 @@ class _GatewayStop:
     T_min", "T_min anticipated"), polled every plant step from the switch-off.
 
     A night ends at the first poll whose sensed T_air is ≤ T_min, or whose least-squares trend
-    over the last ``trend_window_s`` (at least :data:`_MIN_TREND_SPAN_S`) reaches T_min within
-    ``anticipate_s`` while T_air is within ``anticipate_within_k`` of T_min.
+    over the last ``trend_window_s`` (at least :data:`impctl.night_protocol.MIN_TREND_SPAN_S`)
+    reaches T_min within ``anticipate_s`` while T_air is within ``anticipate_within_k`` of T_min.
     """
 
     def __init__(self, active: np.ndarray, t_min: np.ndarray, cfg: ImpSimConfig):
@@ -90,7 +87,7 @@ class _GatewayStop:
         trend[j % len(trend)] = sensed_air
         ended = sensed_air <= self.t_min
         count = min(j + 1, len(trend))
-        if cfg.anticipate_s > 0 and (count - 1) * PLANT_STEP_S >= _MIN_TREND_SPAN_S:
+        if cfg.anticipate_s > 0 and (count - 1) * PLANT_STEP_S >= MIN_TREND_SPAN_S:
             rows = trend if count == len(trend) else trend[:count]
             order = (np.arange(count) - (j + 1)) % len(trend) if count == len(trend) \
                 else np.arange(count)
