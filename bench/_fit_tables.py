@@ -322,6 +322,15 @@ def dump(res: dict, path: str) -> None:
         est = [f.lumped_[k] for f in res["fit"]]
         out[f"{k}_err_pct"] = [float(x) for x in rel([e.value for e in est], t)]
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
+        out[f"{k}_halfwidth_pct"] = [50.0 * float(np.log(e.high / e.low))
+                                     for e in est]
+    priors = [getattr(f, "prior_", None) for f in res["fit"]]
+    if any(p is not None for p in priors):   # the population prior (h14z)
+        for k in ("hlc", "c_m", "tau"):
+            said = [(p or {}).get("parameters", {}).get(k) for p in priors]
+            if any(x is not None for x in said):
+                out[f"{k}_prior_ratio"] = [None if x is None else x["posterior_to_prior_sd"]
+                                           for x in said]
     gate = res.get("gateway")
     if gate is not None:
         n = len(truth)

@@ -207,7 +207,8 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance, **night_gain(args), min_night_h=valid_h,
-                       model_error="default" if args.model_error else None).fit(nights, ranges)
+                       model_error="default" if args.model_error else None,
+                       prior=bench_prior(args)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -323,6 +324,12 @@ def main() -> None:
     ap.add_argument("--dump", default=None, metavar="PREFIX",
                     help="write each run's per-household errors to PREFIX-STEP-RANGES.json "
                          "(for paired comparisons between runs)")
+    ap.add_argument("--prior", default="none", metavar="Q[,Q]",
+                    help="population prior inside the class ranges on these lumped quantities "
+                         "(c_m, tau, hlc; NightFit(prior=PopulationPrior(...)), issue 14 h14z); "
+                         "'none' (default): no prior")
+    ap.add_argument("--prior-weight", type=float, default=1.0,
+                    help="multiplies the prior's precision (PopulationPrior(weight))")
     ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
                     help="stop exactly at T_min, not where the gateway anticipates it")
     args = ap.parse_args()
@@ -361,6 +368,15 @@ def main() -> None:
 
 
 RANGE_SOURCES = ("classifier", "true", "prior")
+
+
+def bench_prior(args):
+    """The fit's population prior from ``--prior`` / ``--prior-weight`` (None: off)."""
+    if args.prior == "none":
+        return None
+    from impctl.fit.prior import PopulationPrior
+
+    return PopulationPrior(quantities=tuple(args.prior.split(",")), weight=args.prior_weight)
 
 
 def _classifier_source(model_dir) -> str:

@@ -54,6 +54,7 @@ from .ode.packing import pack_nights
 from .ode.parameters import PARAM_NAMES, bounds_tensor, to_physical
 from .ode.solver import METHODS
 from .optim import lm
+from .prior import PopulationPrior, prior_statement
 from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
 from .validation import in_sample_validation, per_night_fits
 
@@ -154,6 +155,14 @@ class NightFit:
         SD [W] of that assumption (default 300/√12 ≈ 87 W, the 100–400 W range as a uniform),
         added to the intervals as the share night_gain_sd_w/(HLC·mean ΔT) when no gain term
         is fitted (see :func:`.uncertainty.offset_allowance`).
+    prior : {None, "population"} or PopulationPrior
+        A population prior inside the class ranges (:mod:`.prior`): "population" puts the
+        virtual population's ln C_m distribution inside the search box (seed 0, the
+        classifiers' population) into the objective as a penalty residual, so the fit is a MAP
+        estimate and its intervals are posterior intervals; a
+        :class:`~impctl.fit.prior.PopulationPrior` chooses the quantities, the population or
+        the class probabilities of a mixture. None (default): no prior. Reported in
+        ``prior_`` (centre, SD, posterior/prior SD ratio, prior-dominated).
     model_error : str or None
         Model-error share calibrated on the realistic virtual population, added to the
         intervals in quadrature (:mod:`.model_error`): "default" (the packaged calibration), a
@@ -180,6 +189,8 @@ class NightFit:
                                     (:mod:`.nights.quality`)
     night_gain_ : dict              the night gain used [W]: value_w, sd_w, assumed (True:
                                     pinned to ``night_gain_w``, not measured), statement
+    prior_ : dict or None           the prior used: per quantity its centre, prior and
+                                    posterior SD (log) and whether it is prior-dominated
     adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
                                     the model describes the data well enough for its intervals
     loss_, n_iter_, fit_time_s_ : float, int, float
@@ -199,7 +210,8 @@ class NightFit:
                  night_gain_sd_w: float = NIGHT_GAIN_SD_W,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
                  emitter_lag: bool = False, settle_until_held: bool = False,
-                 model_error: str | None = "default"):
+                 model_error: str | None = "default",
+                 prior: str | PopulationPrior | None = None):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
         self.ach_vent = ach_vent
@@ -230,6 +242,7 @@ class NightFit:
         self.emitter_lag = emitter_lag
         self.settle_until_held = settle_until_held
         self.model_error = model_error
+        self.prior = prior
 
     def fit(self, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None = None) -> NightFit:
@@ -246,6 +259,9 @@ class NightFit:
             raise ValueError("optimizer must be 'lm' or 'adam'")
         if self.solver not in METHODS:
             raise ValueError(f"solver must be one of {METHODS}")
+        if not (self.prior is None or self.prior == "population"
+                or isinstance(self.prior, PopulationPrior)):
+            raise ValueError("prior must be None, 'population' or a PopulationPrior")
         started = time.perf_counter()
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # the per-household target is for one core
@@ -284,7 +300,9 @@ class NightFit:
                                             smooth_out_s=3600.0 * self.smooth_out_h,
                                             power_ok=power_ok)
         packed.emitter_lag = bool(self.emitter_lag and self.emitter_state)
-        self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver)
+        prior = PopulationPrior() if self.prior == "population" else self.prior
+        self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver,
+                               prior)
         self._row_type_n, self._phi_n, self._phi_in_n, self._group_n = night_rows(
             packed, self.normal_model)
         self.sigma_ = noise_levels(kept)
@@ -347,6 +365,11 @@ class NightFit:
         self.range_fraction_sd_ = est["range_fraction_sd"]
         self.residual_autocorrelation_ = est["autocorrelation"]
         self.cov_u_ = est["cov_u"]
+        self.prior_ = None
+        if prior is not None:
+            self.lumped_, self.prior_ = prior_statement(
+                prior, self.lumped_, self._u, self._sub.box[0], self.cov_u_, self.ach_vent,
+                self.ach_infl)
         self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
         self.night_gain_ = gain_statement(self._u, self._sub.box[0], self.night_gain_sd_w)
         if self.night_gain_["assumed"]:

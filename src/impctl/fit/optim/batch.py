@@ -113,7 +113,7 @@ def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
 
 
 def _settings(p: _Problem) -> tuple:
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.prior, p.ctx.solver, p.max_iter,
             p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
             p.ctx.packed.power_ok is None, p.ctx.packed.emitter_lag)
@@ -163,7 +163,8 @@ def _solve_group(group: list[_Problem]) -> None:
     packed = _merge_packed([p.ctx.packed for p in group])
     k = packed.grid_s.shape[1]
     first = group[0].ctx
-    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver)
+    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver,
+                     first.prior)
     problem, night, groups, units = [], [], [], []
     p_off = n_off = g_off = u_off = 0
     for p in group:

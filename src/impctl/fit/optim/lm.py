@@ -29,6 +29,7 @@ import torch
 
 from ..ode.node import ROW_DEMAND
 from ..ode.parameters import DTYPE
+from ..prior import penalty as prior_penalty
 from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7
@@ -87,14 +88,28 @@ class RowTerms:
         """(model − measured) in data units, (R, K): what :func:`~.problem.raw_residuals` gives."""
         return self.r / self.scale[:, None]
 
-    def normal(self, rows: Rows, u: torch.Tensor, ridge: float) -> _Normal:
+    def normal(self, rows: Rows, u: torch.Tensor, ctx: Context) -> _Normal:
         """:func:`_normal_equations` of ``rows`` (these rows, at ``rows.scale``) at ``u``."""
         f = (rows.scale / self.scale) ** 2
         jtj, g_rows = self.jtj * f[:, None, None], self.g * f[:, None]
-        loss = sum_rows((self.r ** 2).sum(1) * f, rows) + ridge * (u ** 2).sum(1)
-        h = sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
-        return _Normal(loss, h, sum_rows(g_rows, rows) + ridge * u, self.c * f[:, None],
+        p_loss, p_h, p_g = penalty(ctx, u, rows.box)
+        loss = sum_rows((self.r ** 2).sum(1) * f, rows) + p_loss
+        h = sum_rows(jtj, rows) + p_h
+        return _Normal(loss, h, sum_rows(g_rows, rows) + p_g, self.c * f[:, None],
                        self.d * f, self.gm * f, g_rows)
+
+
+def penalty(ctx: Context, u: torch.Tensor, box: torch.Tensor):
+    """The loss terms that are not rows, per problem: the ridge (a weak prior at the centre
+    of each range) and the population prior's residuals when ``ctx.prior`` is set
+    (:mod:`..prior`): (loss (P,), Hessian share (P, n, n), gradient share (P, n))."""
+    n = u.shape[1]
+    loss, h, g = (ctx.ridge * (u ** 2).sum(1),
+                  ctx.ridge * torch.eye(n, dtype=DTYPE).expand(len(u), n, n), ctx.ridge * u)
+    extra = prior_penalty(ctx.prior, u, box, ctx.ach_vent, ctx.ach_infl)
+    if extra is not None:
+        loss, h, g = loss + extra[0], h + extra[1], g + extra[2]
+    return loss, h, g
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
@@ -110,10 +125,10 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
         order = torch.argsort(torch.cat(idx))
         terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
     loss_rows, jtj, g_rows, c, d, gm, r0 = terms
-    ridge = ctx.ridge
-    loss = sum_rows(loss_rows, rows) + ridge * (u ** 2).sum(1)
-    h = sum_rows(jtj, rows) + ridge * torch.eye(u.shape[1], dtype=DTYPE)
-    g = sum_rows(g_rows, rows) + ridge * u
+    p_loss, p_h, p_g = penalty(ctx, u, rows.box)
+    loss = sum_rows(loss_rows, rows) + p_loss
+    h = sum_rows(jtj, rows) + p_h
+    g = sum_rows(g_rows, rows) + p_g
     return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
 
 
@@ -310,7 +325,7 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
                     stopped = _units_done(group_done, units)[units[groups]]
         s, _, _ = schur(ne, rows)
         cov = torch.linalg.pinv(s, hermitian=True)
-        fisher = s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE)
+        fisher = s - penalty(ctx, u, rows.box)[1]
     terms = RowTerms(ne.r, ne.jtj, ne.g_rows, ne.c, ne.d, ne.gm, rows.scale.clone())
     return LMResult(u, t_m0, ne.loss, cov, fisher, n_iter, done, history, iterations, terms)
 
@@ -330,7 +345,7 @@ def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_ite
     for _ in range(n_iter):
         opt.zero_grad()
         r = residuals(ctx, rows, u, m)
-        loss = (r ** 2).sum() + ctx.ridge * (u ** 2).sum()
+        loss = (r ** 2).sum() + ctx.ridge * (u ** 2).sum() + _prior_loss(ctx, rows, u)
         loss.backward()
         opt.step()
         history.append(float(loss.detach()))
@@ -338,7 +353,7 @@ def adam(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor, *, n_ite
         ne = _normal_equations(ctx, rows, u.detach(), m.detach())
         s, _, _ = schur(ne, rows)
     return LMResult(u.detach(), m.detach(), ne.loss, torch.linalg.pinv(s, hermitian=True),
-                    s - ctx.ridge * torch.eye(u.shape[1], dtype=DTYPE), n_iter,
+                    s - penalty(ctx, u.detach(), rows.box)[1], n_iter,
                     torch.zeros(rows.n_problems, dtype=torch.bool), history)
 
 
@@ -347,6 +362,13 @@ def loss_gradient(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor)
     u = u.clone().requires_grad_(True)
     m = t_m0.clone().requires_grad_(True)
     r = residuals(ctx, rows, u, m)
-    loss = (r ** 2).sum() + ctx.ridge * (u ** 2).sum()
+    loss = (r ** 2).sum() + ctx.ridge * (u ** 2).sum() + _prior_loss(ctx, rows, u)
     gu, gm = torch.autograd.grad(loss, [u, m])
     return loss.detach(), gu, gm
+
+
+def _prior_loss(ctx: Context, rows: Rows, u: torch.Tensor) -> torch.Tensor | float:
+    """The population prior's Σr², differentiable (0 without a prior)."""
+    if ctx.prior is None:
+        return 0.0
+    return (ctx.prior.residuals(u, rows.box, ctx.ach_vent, ctx.ach_infl) ** 2).sum()

@@ -81,6 +81,7 @@ class Context:
     ach_infl: float
     ridge: float = 1e-2
     solver: str = "exact"   # NightODE method: "exact" or "rk4" (torchdiffeq)
+    prior: object = None    # a ..prior.PopulationPrior: its residuals join the ridge (MAP)
 
 
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:

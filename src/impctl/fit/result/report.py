@@ -164,6 +164,13 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     if getattr(fit, "interval_basis_", None) is not None:
         out["fit"]["interval_basis"] = fit.interval_basis_
     out["fit"]["model_error"] = getattr(fit, "model_error_", None)
+    # the population prior (issue 14, h14z): what came from it and what from the data
+    out["prior"] = getattr(fit, "prior_", None)
+    for name, p in (out["prior"] or {}).get("parameters", {}).items():
+        if p["prior_dominated"]:
+            notes.append(f"{name} is prior-dominated (posterior/prior SD "
+                         f"{p['posterior_to_prior_sd']:.2f}): the population prior inside the "
+                         "class ranges, not the nights, sets it — not a measured value")
     if getattr(fit, "nuisance_check_", None) is not None:
         out["fit"]["nuisance_check"] = fit.nuisance_check_
     if getattr(fit, "night_gain_", None) is not None:
