@@ -105,24 +105,12 @@ class PopulationPrior:
     def moments(self, box: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ, σ) of ln q for each problem's box (P, n, 2) → two (P, m) tensors, q in
         :attr:`quantities` order; the whole population where a box holds no household."""
-        x, q = _population(self.n_households, self.seed)
-        cols = [QUANTITIES.index(n) for n in self.quantities]
-        w_all = self._household_weights()
         keys = box[:, _CLASSIFIED_COLUMNS, :].reshape(len(box), -1)
         uniq, inverse = torch.unique(keys, dim=0, return_inverse=True)
-        mu, sd = [], []
-        for k in uniq.view(-1, len(CLASSIFIED), 2).numpy():
-            inside = np.all((x >= k[:, 0]) & (x <= k[:, 1]), axis=1)
-            w = w_all * inside
-            if w.sum() <= 0:
-                w = w_all if w_all.sum() > 0 else np.ones(len(x))
-            w = w / w.sum()
-            m = w @ q[:, cols]
-            mu.append(m)
-            sd.append(np.sqrt(np.maximum(w @ (q[:, cols] - m) ** 2, 1e-8)))
-        mu_t = torch.as_tensor(np.array(mu), dtype=DTYPE)[inverse]
-        sd_t = torch.as_tensor(np.array(sd), dtype=DTYPE)[inverse]
-        return mu_t, sd_t / float(np.sqrt(self.weight))
+        both = [_box_moments(self, tuple(k.tolist())) for k in uniq]
+        mu = torch.as_tensor(np.array([m for m, _ in both]), dtype=DTYPE)[inverse]
+        sd = torch.as_tensor(np.array([s for _, s in both]), dtype=DTYPE)[inverse]
+        return mu, sd / float(np.sqrt(self.weight))
 
     def residuals(self, u: torch.Tensor, box: torch.Tensor, ach_vent: float,
                   ach_infl: float) -> torch.Tensor:
@@ -138,6 +126,22 @@ class PopulationPrior:
                 "class_probabilities": (None if self.probabilities is None else
                                         {n: [[lo, hi, p] for lo, hi, p in rows]
                                          for n, rows in self.probabilities})}
+
+
+@lru_cache(maxsize=64)
+def _box_moments(prior: PopulationPrior, key: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean and SD of ln q over the population inside one box (``key``: lo, hi of
+    each classified parameter); the optimiser asks for the same few boxes every iteration."""
+    x, q = _population(prior.n_households, prior.seed)
+    cols = [QUANTITIES.index(n) for n in prior.quantities]
+    k = np.asarray(key).reshape(len(CLASSIFIED), 2)
+    w_all = prior._household_weights()
+    w = w_all * np.all((x >= k[:, 0]) & (x <= k[:, 1]), axis=1)
+    if w.sum() <= 0:
+        w = w_all if w_all.sum() > 0 else np.ones(len(x))
+    w = w / w.sum()
+    m = w @ q[:, cols]
+    return m, np.sqrt(np.maximum(w @ (q[:, cols] - m) ** 2, 1e-8))
 
 
 def penalty(prior: PopulationPrior | None, u: torch.Tensor, box: torch.Tensor,
