@@ -324,6 +324,8 @@ def dump(res: dict, path: str) -> None:
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
         out[f"{k}_halfwidth_pct"] = [50.0 * float(np.log(e.high / e.low))
                                      for e in est]
+    out["inflation"] = [max([(1 + r) / (1 - r) for r in f.residual_autocorrelation_.values()]
+                            or [1.0]) for f in res["fit"]]
     priors = [getattr(f, "prior_", None) for f in res["fit"]]
     if any(p is not None for p in priors):   # the population prior (h14z)
         for k in ("hlc", "c_m", "tau"):

@@ -208,7 +208,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
                        ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance, **night_gain(args), min_night_h=valid_h,
                        model_error="default" if args.model_error else None,
-                       prior=bench_prior(args)).fit(nights, ranges)
+                       **bench_prior(args)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -324,10 +324,10 @@ def main() -> None:
     ap.add_argument("--dump", default=None, metavar="PREFIX",
                     help="write each run's per-household errors to PREFIX-STEP-RANGES.json "
                          "(for paired comparisons between runs)")
-    ap.add_argument("--prior", default="none", metavar="Q[,Q]",
+    ap.add_argument("--prior", default="default", metavar="Q[,Q]",
                     help="population prior inside the class ranges on these lumped quantities "
                          "(c_m, tau, hlc; NightFit(prior=PopulationPrior(...)), issue 14 h14z); "
-                         "'none' (default): no prior")
+                         "'default': the fit's (C_m); 'none': no prior (the fit before h14z)")
     ap.add_argument("--prior-weight", type=float, default=1.0,
                     help="multiplies the prior's precision (PopulationPrior(weight))")
     ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
@@ -370,13 +370,16 @@ def main() -> None:
 RANGE_SOURCES = ("classifier", "true", "prior")
 
 
-def bench_prior(args):
-    """The fit's population prior from ``--prior`` / ``--prior-weight`` (None: off)."""
+def bench_prior(args) -> dict:
+    """NightFit's ``prior`` from ``--prior`` / ``--prior-weight`` ({}: the fit's default)."""
+    if args.prior == "default" and args.prior_weight == 1.0:
+        return {}
     if args.prior == "none":
-        return None
+        return {"prior": None}
     from impctl.fit.prior import PopulationPrior
 
-    return PopulationPrior(quantities=tuple(args.prior.split(",")), weight=args.prior_weight)
+    names = ("c_m",) if args.prior == "default" else tuple(args.prior.split(","))
+    return {"prior": PopulationPrior(quantities=names, weight=args.prior_weight)}
 
 
 def _classifier_source(model_dir) -> str:

@@ -78,7 +78,7 @@ def test_nights_without_c_m_give_the_prior_centre_and_say_so(nights):
     prior = PopulationPrior(n_households=4000)
     centre = float(torch.exp(prior.moments(_box(RANGES))[0][0, 0]))
     with_prior = NightFit(**IDEAL, n_starts=2, per_night=False, prior=prior).fit(cons, RANGES)
-    without = NightFit(**IDEAL, n_starts=2, per_night=False).fit(cons, RANGES)
+    without = NightFit(**IDEAL, n_starts=2, per_night=False, prior=None).fit(cons, RANGES)
     c_m = with_prior.lumped_["c_m"].value
     assert abs(np.log(c_m / centre)) < 0.02
     assert abs(np.log(without.lumped_["c_m"].value / centre)) > 0.04
@@ -96,7 +96,7 @@ def test_nights_without_c_m_give_the_prior_centre_and_say_so(nights):
 
 
 def test_nights_that_carry_c_m_are_not_prior_dominated(nights):
-    fit = NightFit(**IDEAL, n_starts=2, per_night=False, prior="population").fit(nights, RANGES)
+    fit = NightFit(**IDEAL, n_starts=2, per_night=False).fit(nights, RANGES)   # the default
     said = fit.prior_["parameters"]["c_m"]
     assert not said["prior_dominated"]
     assert said["posterior_to_prior_sd"] < 0.5

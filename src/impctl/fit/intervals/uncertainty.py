@@ -136,6 +136,16 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     return out
 
 
+def inflation(ctx: lm.Context, rows: lm.Rows, result: lm.LMResult, best: int,
+              group_n: torch.Tensor) -> float:
+    """The largest autocorrelation variance-inflation factor of problem ``best``'s residual
+    groups, as :func:`laplace` applies it to the data."""
+    sel = rows.problem == best
+    terms = None if result.terms is None else result.terms.take(sel)
+    return float(laplace(ctx, rows.subset(sel), result.u[best], result.t_m0[sel], group_n,
+                         has_power=True, summary_only=True, terms=terms)["inflation"])
+
+
 def offset_allowance(lumped_in: dict, nights, sensor_offsets_k,
                      meter_error: float = 0.0, gain_sd_w: float = 0.0) -> tuple[dict, dict]:
     """Widen the log-space 95 % intervals by the share of uncalibrated sensor offsets and of
