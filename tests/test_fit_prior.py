@@ -52,6 +52,10 @@ def test_the_prior_is_the_populations_distribution_inside_the_box():
         {"floor_area": [((60.0, 100.0), 0.0), ((100.0, 200.0), 1.0), ((200.0, 300.0), 0.0)],
          "c_f": [((0.8, 1.65), 1.0), ((1.65, 3.7), 0.0)],
          "u_walls": [((0.2, 1.0), 1.0), ((1.0, 2.0), 0.0)]}, n_households=4000)
+    assert sure == PopulationPrior.of_labels(      # the classifiers' form
+        {"floor_area": {"60-100": 0.0, "100-200": 1.0, "200-300": 0.0},
+         "c_f": {"0.8-1.65": 1.0, "1.65-3.7": 0.0}, "u_walls": {"0.2-1": 1.0, "1-2": 0.0}},
+        n_households=4000)
     mu_mix, sd_mix = sure.moments(_box(None))
     assert float(mu_mix[0, 0]) == pytest.approx(float(mu[0, 0]), abs=1e-9)
     assert float(sd_mix[0, 0]) == pytest.approx(float(sd[0, 0]), abs=1e-9)

@@ -91,6 +91,14 @@ class PopulationPrior:
                              for name, rows in classes.items()))
         return PopulationPrior(probabilities=probs, **kw)
 
+    @staticmethod
+    def of_labels(probabilities: dict[str, dict[str, float]], **kw) -> PopulationPrior:
+        """:meth:`of_classes` from the classifiers' ``{name: {"lo-hi": p}}``
+        (:attr:`impctl.classifiers.saved.ClassResult.probabilities`)."""
+        return PopulationPrior.of_classes(
+            {name: [(tuple(float(v) for v in label.split("-")), p) for label, p in rows.items()]
+             for name, rows in probabilities.items()}, **kw)
+
     def _household_weights(self) -> np.ndarray:
         x, _ = _population(self.n_households, self.seed)
         w = np.ones(len(x))

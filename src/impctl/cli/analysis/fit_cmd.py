@@ -143,6 +143,12 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         notes.append(limit_note)
     click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
                f"constrained) …", err=True)
+    probabilities = {n: c["probabilities"] for n, c in classes.items() if c.get("probabilities")}
+    if estimator.prior == "population" and probabilities:
+        from ...fit.prior import PopulationPrior
+
+        # the population prior mixes the classes by the classifiers' probabilities
+        estimator.prior = PopulationPrior.of_labels(probabilities)
     with _ticking("fitting"):
         estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)
@@ -204,7 +210,8 @@ def _classes(nights, model_dir):
         note = (f"no classification ({exc.problem}); floor_area, c_f and u_walls were searched "
                 "over their whole prior ranges, so the fit rests on the nights alone")
         return classes, {n: c["range"] for n, c in classes.items()}, [note]
-    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier"}
+    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
+                      "probabilities": dict(r.probabilities)}
                for name, r in results.items()}
     left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
     notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "
