@@ -113,3 +113,13 @@ def test_an_unknown_prior_is_refused(nights):
         NightFit(prior="flat").fit(nights, RANGES)
     with pytest.raises(ValueError, match="quantities"):
         PopulationPrior(quantities=("u_walls",))
+
+
+def test_the_table_says_where_c_m_comes_from(nights):
+    from impctl.fit.result.table import format_table
+
+    cons = [n for n in nights if n.kind == "constrained"]
+    fit = NightFit(**IDEAL, n_starts=2, per_night=False).fit(cons, RANGES)
+    text = format_table(fit_to_dict(fit))
+    assert "prior on c_m: population inside the class ranges" in text
+    assert "prior-dominated, not measured" in text

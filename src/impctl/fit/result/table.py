@@ -81,6 +81,13 @@ def format_table(summary: dict) -> str:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
                           (("hlc", "HLC"), ("c_m", "C_m"), ("tau", "τ")))
         lines.append(f"  intervals: {me['method']} (log SD {sizes})")
+    for name, p in ((summary.get("prior") or {}).get("parameters") or {}).items():
+        scale = 1e6 if p["unit"] == "J/K" else 1.0
+        lines.append(
+            f"  prior on {name}: population inside the class ranges, {p['centre'] / scale:.3g} "
+            f"{'MJ/K' if scale > 1 else p['unit']} ± {100 * p['prior_sd_log']:.0f} % (log SD); "
+            f"posterior/prior SD {p['posterior_to_prior_sd']:.2f} — "
+            + ("prior-dominated, not measured" if p["prior_dominated"] else "mostly the nights"))
     lines.append("")
     lines.append("Physical parameters (Table IV)       joint  per-night   search range "
                  "value comes from")
