@@ -38,10 +38,16 @@ def true_ranges(house: HouseParameters) -> dict[str, tuple[float, float]]:
     return out
 
 
-def classifier_ranges(nights, model_dir):
+def classifier_ranges(nights, model_dir, probabilities: bool = False):
+    """The classified ranges; with ``probabilities`` also {name: {label: p}} (the fit's
+    population prior mixes the classes by them, as ``impctl fit`` does)."""
     from impctl.classifiers import classify_nights
 
-    return {k: tuple(v.range) for k, v in classify_nights(nights, model_dir).items()}
+    res = classify_nights(nights, model_dir)
+    ranges = {k: tuple(v.range) for k, v in res.items()}
+    if probabilities:
+        return ranges, {k: dict(v.probabilities) for k, v in res.items()}
+    return ranges
 
 
 def house_from(params: dict[str, float]) -> HouseParameters:

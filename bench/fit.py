@@ -197,10 +197,11 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
             # first two), never an invalid or a spare not run; the normal nights all.
             used = iter(gate["used"][:, i])
             nights = [x for x in nights if x.kind != "constrained" or next(used)]
+        probs = None
         if range_source == "true":
             ranges = true_ranges(house)
         elif range_source == "classifier":
-            ranges = classifier_ranges(nights, args.model_dir)
+            ranges, probs = classifier_ranges(nights, args.model_dir, probabilities=True)
         else:
             ranges = None
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
@@ -208,7 +209,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
                        ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance, **night_gain(args), min_night_h=valid_h,
                        model_error="default" if args.model_error else None,
-                       **bench_prior(args)).fit(nights, ranges)
+                       **bench_prior(args, probs)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
         t0 = time.perf_counter()
@@ -370,16 +371,20 @@ def main() -> None:
 RANGE_SOURCES = ("classifier", "true", "prior")
 
 
-def bench_prior(args) -> dict:
-    """NightFit's ``prior`` from ``--prior`` / ``--prior-weight`` ({}: the fit's default)."""
-    if args.prior == "default" and args.prior_weight == 1.0:
-        return {}
+def bench_prior(args, probabilities: dict | None = None) -> dict:
+    """NightFit's ``prior`` from ``--prior`` / ``--prior-weight`` ({}: the fit's default),
+    mixing the classes by the classifiers' ``probabilities`` when given (as ``impctl fit``)."""
     if args.prior == "none":
         return {"prior": None}
+    if args.prior == "default" and args.prior_weight == 1.0 and not probabilities:
+        return {}
     from impctl.fit.prior import PopulationPrior
 
     names = ("c_m",) if args.prior == "default" else tuple(args.prior.split(","))
-    return {"prior": PopulationPrior(quantities=names, weight=args.prior_weight)}
+    kw = {"quantities": names, "weight": args.prior_weight}
+    if probabilities:
+        return {"prior": PopulationPrior.of_labels(probabilities, **kw)}
+    return {"prior": PopulationPrior(**kw)}
 
 
 def _classifier_source(model_dir) -> str:
