@@ -38,10 +38,11 @@ def _nights(kind: str, setpoint_c: float) -> tuple[list, float]:
 
 
 def _fit(nights) -> dict:
-    # No type-B shares (sensor offsets, meter, night gains, structure, model error): the test
-    # is about the information of the data.
+    # No type-B shares (sensor offsets, meter, night gains, structure, model error) and no
+    # population prior: the test is about the information of the data.
     fit = NightFit(ach_vent=0.0, ach_infl=0.01, sensor_offsets_k=(0.0, 0.0), meter_error=0.0,
-                   night_gain_sd_w=0.0, structure_share=False, model_error=None).fit(nights)
+                   night_gain_sd_w=0.0, structure_share=False, model_error=None,
+                   prior=None).fit(nights)
     return fit_to_dict(fit)
 
 
