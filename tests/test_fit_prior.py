@@ -85,7 +85,7 @@ def test_nights_without_c_m_give_the_prior_centre_and_say_so(nights):
     without = NightFit(**IDEAL, n_starts=2, per_night=False, prior=None).fit(cons, RANGES)
     c_m = with_prior.lumped_["c_m"].value
     assert abs(np.log(c_m / centre)) < 0.02
-    assert abs(np.log(without.lumped_["c_m"].value / centre)) > 0.04
+    assert abs(np.log(without.lumped_["c_m"].value / centre)) > 0.1   # 0.32 here
     said = with_prior.prior_["parameters"]["c_m"]
     assert said["prior_dominated"]
     assert said["posterior_to_prior_sd"] > 0.9
