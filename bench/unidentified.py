@@ -60,7 +60,13 @@ def constrained_nights(sim, sp, sched) -> dict[str, np.ndarray]:
     outdoor temperature [°C]."""
     t_out = np.atleast_2d(np.asarray(sim.t_out_c).T).T
     wins = [(w0, w1) for _, kind, w0, w1, _ in sched.windows if kind == "constrained"]
-    return {"short": short_constrained(sp, sched),
+    before = []   # what the night before each constrained night was
+    for j, (_, kind, *_rest) in enumerate(sched.windows):
+        if kind == "constrained":
+            prev = sched.windows[j - 1] if j else None
+            before.append(f"{j + 1} (after " + ("the owner's 21 °C" if prev is None else
+                                                f"{prev[1][0]}{prev[4]:g}") + ")")
+    return {"short": short_constrained(sp, sched), "before": before,
             "first_t_out": np.array([t_out[w0] for w0, _ in wins]),
             "mean_t_out": np.array([t_out[w0:w1].mean(axis=0) for w0, w1 in wins])}
 
@@ -138,6 +144,26 @@ def main() -> None:
         print(f"| {name} | {proto} | {r['order']} | {pct(r['short'][:3])} / {pct(r['short'])} | "
               f"{pct(r['first_t_out'] > T_OUT_MAX_C)} | {np.median(r['mean_t_out']):.1f} | "
               f"{nv.sum()} of {n} ({pct(nv)}) | {nvb.sum()} of {n} ({pct(nvb)}) |")
+    print("\nToo short by night (night number in the bench's schedule, what ran the night "
+          "before), per population:")
+    for name, proto, r in rows:
+        print(f"  {name}, {proto}'s nights: " + "; ".join(
+            f"{b} {pct(x)}" for b, x in zip(r["before"], r["short"], strict=True)))
+    print("\nThe same nights tried in another order (no valid constrained night among the tries "
+          "the gateway's rule runs, short only): consecutive nights against nights three "
+          "days apart; and the outdoor temperature of short and valid nights:")
+    orders = {"campaign bench": {"consecutive 1, 2, 3, …": [0, 1, 2, 3, 4, 5, 6],
+                                 "three days apart 1, 4, 7": [0, 3, 6]},
+              "fit bench": {"plan then spares 2, 6, 9, 10, 11": [0, 1, 2, 3, 4],
+                            "spares only, consecutive 9, 10, 11": [2, 3, 4]}}
+    for name, proto, r in rows:
+        short, t_mean = r["short"], r["mean_t_out"]
+        lag1 = np.corrcoef(t_mean[:-1].ravel(), t_mean[1:].ravel())[0, 1]
+        print(f"  {name}, {proto}'s nights: " + "; ".join(
+            f"{label} {no_valid(short[idx]).sum()}" for label, idx in orders[proto].items())
+              + f"; mean T_out of short nights {np.median(t_mean[short]):.1f} °C, of valid "
+              f"{np.median(t_mean[~short]):.1f} °C (median); correlation of one constrained "
+              f"night's mean T_out with the next's {lag1:.2f}")
     print("\nPer τ band, both populations pooled (no valid, short only):")
     print("| τ band | fit bench's nights | campaign bench's nights |")
     print("|---|---|---|")
