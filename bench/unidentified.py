@@ -108,7 +108,7 @@ def pct(x) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--fit-households", type=int, default=50)
+    ap.add_argument("--fit-households", type=int, default=50, help="0: skip")
     ap.add_argument("--campaign-households", type=int, default=150)
     ap.add_argument("--nights", type=int, default=7,
                     help="the campaign bench's simulated nights (max_nights + 2)")
@@ -117,6 +117,7 @@ def main() -> None:
     t0 = time.perf_counter()
     pops = {f"fit bench's {args.fit_households}": args.fit_households,
             f"campaign bench's {args.campaign_households}": args.campaign_households}
+    pops = {k: v for k, v in pops.items() if v > 0}   # 0: skip that population
     rows, taus = [], {}
     for name, n in pops.items():
         houses, params = sample_households(n, seed=VAL_SEED), sample_params(n, VAL_SEED)
