@@ -1,6 +1,7 @@
 """Error budget of the night fit on the realistic plant: what each group of realism costs.
 
 Run:  .venv/bin/python bench/fit_budget.py [--households 50] [--rows none,only:air,...]
+          [--stops recorded|own] [--no-stop-at-t-min] [--night-gain-w W] [--gain-prior-w W]
 
 An ablation on exactly the households, weather, schedule, nights and seeds of
 ``bench/fit.py --households 50 --ranges true --plant realistic --steps 300 --no-lsq`` (the
@@ -51,7 +52,9 @@ capacity off the room's air node is massless, drops 1–5 K at switch-off and th
 end cuts most nights at the lag, as on the ideal 5R1C: the rows then also differ in their
 nights). ``--no-stop-at-t-min``: the nights before (cooling to 05:00, all fitted; the floor of
 README before hfloor). Households with no valid constrained night (not identified: τ and C_m
-from the class ranges) are counted in every figure and printed apart.
+from the class ranges) are counted in every figure and printed apart. A row without gains
+tells the fit 0 W of night gain (as ``bench/fit.py`` tells the ideal 5R1C) unless
+``--night-gain-w`` is given; rows with gains use the fit's assumed 250 W.
 """
 
 from __future__ import annotations
