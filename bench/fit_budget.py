@@ -1,6 +1,7 @@
 """Error budget of the night fit on the realistic plant: what each group of realism costs.
 
 Run:  .venv/bin/python bench/fit_budget.py [--households 50] [--rows none,only:air,...]
+          [--stops recorded|own] [--no-stop-at-t-min] [--night-gain-w W] [--gain-prior-w W]
 
 An ablation on exactly the households, weather, schedule, nights and seeds of
 ``bench/fit.py --households 50 --ranges true --plant realistic --steps 300 --no-lsq`` (the
@@ -38,6 +39,22 @@ intervals (calibrated model-error share included, as the bench's default); fit t
 
 ``--gain-prior-w W`` adds W to the metered power of every night before the fit: what a known
 constant night gain (e.g. the documented range's midpoint, 250 W) would buy.
+
+Nights (branch hfloor): the gateway's, as ``bench/fit.py``'s default since h14w — constrained
+nights at ΔT ``night_protocol.DEFAULT_BAND_K`` ended at T_min or the gateway's anticipated end,
+invalid with < ``night_protocol.MIN_NIGHT_H`` after the 1 h lag and repeated on spare nights
+(``population.gateway_nights`` through ``bench/fit.py``'s ``run_step``); the fit gets the valid
+ones. ``--stops recorded`` (default): every row's constrained nights end where the gateway ends
+them on the **full** realistic house (all groups on: the nights the gateway records on these
+houses), so the rows differ in the realism only, not in which nights are kept or how long they
+are; ``--stops own``: the gateway's rule on each row's own plant (with the air and furniture
+capacity off the room's air node is massless, drops 1–5 K at switch-off and the anticipated
+end cuts most nights at the lag, as on the ideal 5R1C: the rows then also differ in their
+nights). ``--no-stop-at-t-min``: the nights before (cooling to 05:00, all fitted; the floor of
+README before hfloor). Households with no valid constrained night (not identified: τ and C_m
+from the class ranges) are counted in every figure and printed apart. A row without gains
+tells the fit 0 W of night gain (as ``bench/fit.py`` tells the ideal 5R1C) unless
+``--night-gain-w`` is given; rows with gains use the fit's assumed 250 W.
 """
 
 from __future__ import annotations
@@ -45,7 +62,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -55,8 +72,10 @@ import torch
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
 import fit  # noqa: E402  (bench/fit.py's protocol)
-from fit import VAL_SEED, rel, run_step, stats  # noqa: E402
+from _fit_tables import rel, stats  # noqa: E402
+from fit import VAL_SEED, run_step  # noqa: E402
 
+from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H  # noqa: E402
 from impctl.plant.params import CONTROL_IDEAL, RADIATORS, PlantParams  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
@@ -114,13 +133,37 @@ def groups_on(row: str) -> set[str]:
 
 
 def fit_args(realism, night_gain_w: float | None = None,
-             night_gain_sd_w: float | None = None) -> SimpleNamespace:
+             night_gain_sd_w: float | None = None, stop_at_t_min: bool = True) -> SimpleNamespace:
     """``bench/fit.py``'s options for ``--ranges true --plant realistic --no-lsq`` (its
-    defaults otherwise), with the ablated realism."""
+    defaults otherwise: the gateway's nights unless ``stop_at_t_min`` is False), with the
+    ablated realism."""
     return SimpleNamespace(plant="realistic", normal_model="demand", starts=4, nuisance=True,
                            model_error=True, lsq=False, eps_truth="house", verbose=False,
                            model_dir=None, realism=realism, night_gain_w=night_gain_w,
-                           night_gain_sd_w=night_gain_sd_w)
+                           night_gain_sd_w=night_gain_sd_w, stop_at_t_min=stop_at_t_min,
+                           band_k=DEFAULT_BAND_K, valid_h=MIN_NIGHT_H, anticipate=True)
+
+
+@contextmanager
+def recorded_stops(full: PlantParams):
+    """``bench/fit.py``'s simulation with every constrained night ended where the gateway ends
+    it on the full realistic house (``full``: all groups on), whatever the row's realism: the
+    row's plant replays those setpoints open loop (module docstring, ``--stops recorded``)."""
+    simulate = fit.simulate_schedule
+
+    def replay(houses_arr, sched, plant, realism=None, stop_at_t_min=False, anticipate=True):
+        if not stop_at_t_min:
+            return simulate(houses_arr, sched, plant, realism, False, anticipate)
+        _, sp, _ = simulate(houses_arr, sched, plant, ("all", full, True), True, anticipate)
+        logged, _, heat = simulate(houses_arr, replace(sched, setpoint_c=sp), plant, realism,
+                                   False, anticipate)
+        return logged, sp, heat
+
+    fit.simulate_schedule = replay
+    try:
+        yield
+    finally:
+        fit.simulate_schedule = simulate
 
 
 @contextmanager
@@ -151,6 +194,15 @@ def row_figures(res: dict) -> dict:
                                            for e, v in zip(est, t, strict=True)])
     out["eps"] = stats(res["eps_fit"])
     out["time"] = float(np.median(res["time"]))
+    gate = res.get("gateway")
+    ident = (np.ones(len(truth), bool) if gate is None
+             else gate["used"][:, :len(truth)].any(axis=0))
+    out["n_ident"] = int(ident.sum())
+    for k, t in true.items():
+        est = [f.lumped_[k] for f, keep in zip(res["fit"], ident, strict=True) if keep]
+        err = rel([e.value for e in est], np.asarray(t)[ident])
+        out[f"ident_{k}"] = (*stats(err), float(np.nanmedian(err)) if len(err) else np.nan)
+    out["ident_eps"] = stats(np.asarray(res["eps_fit"])[ident])
     return out
 
 
@@ -163,9 +215,16 @@ def main() -> None:
                     help="add W to the metered power of every night (a known constant night "
                          "gain; the realism's night gains are drawn over 100–400 W)")
     ap.add_argument("--night-gain-w", type=float, default=None, metavar="W",
-                    help="the fit's assumed night gain [W] (default the fit's, 250 W)")
+                    help="the fit's assumed night gain [W] (default the fit's, 250 W, and 0 W "
+                         "on rows without gains)")
     ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
                     help="SD of that assumption [W] (default the fit's, ≈ 87 W)")
+    ap.add_argument("--no-stop-at-t-min", dest="stop_at_t_min", action="store_false",
+                    help="constrained nights cool to 05:00 and are all fitted (the nights "
+                         "before branch hfloor), not the gateway's")
+    ap.add_argument("--stops", choices=("recorded", "own"), default="recorded",
+                    help="where the gateway's constrained nights end: as on the full realistic "
+                         "house, every row (default), or by the rule on each row's own plant")
     args = ap.parse_args()
     torch.set_num_threads(1)
     rows = args.rows.split(",")
@@ -175,25 +234,38 @@ def main() -> None:
     n = args.households
     houses = sample_households(n, seed=VAL_SEED)
     full = sample_params(n, VAL_SEED)
-    print(f"{n} households of bench/fit.py --ranges true --plant realistic, 5-min rows; "
-          "median / P90 of |error| (signed median) %; ε against the true house; 95 % coverage")
+    nights = (f"the gateway's nights (ΔT {DEFAULT_BAND_K:g} K, stopped at T_min or its "
+              f"anticipated end, valid ≥ {MIN_NIGHT_H:g} h after the lag; stops: {args.stops})"
+              if args.stop_at_t_min else "constrained nights cooling to 05:00, all fitted")
+    print(f"{n} households of bench/fit.py --ranges true --plant realistic, 5-min rows, "
+          f"{nights}; median / P90 of |error| (signed median) %; ε against the true house; "
+          "95 % coverage; identified: households with ≥ 1 valid constrained night, their "
+          "median |error| HLC / τ / C_m / ε % apart")
     print("groups: " + "; ".join(f"{g} = {d}" for g, d in GROUPS.items()))
-    print("| row | groups on | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % | fit s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| row | groups on | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % | identified | "
+          "identified: HLC / τ / C_m / ε % | fit s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    recorded = args.stop_at_t_min and args.stops == "recorded"
     for row in rows:
         on = groups_on(row)
         t0 = time.perf_counter()
         params, gains = ablate(full, set(GROUPS) - on)
-        with gain_prior(args.gain_prior_w):
-            res = run_step(houses, 300.0, "true", fit_args((row, params, gains),
-                                                         args.night_gain_w,
-                                                         args.night_gain_sd_w))
+        # A row without gains tells the fit so (0 W), as bench/fit.py tells the ideal 5R1C:
+        # else every such row carries the assumed 250 W's error (HLC +4 %, τ −6 % on "none").
+        gain_w = args.night_gain_w if args.night_gain_w is not None or gains else 0.0
+        with gain_prior(args.gain_prior_w), (recorded_stops(full) if recorded
+                                             else nullcontext()):
+            res = run_step(houses, 300.0, "true", fit_args((row, params, gains), gain_w,
+                                                         args.night_gain_sd_w,
+                                                         args.stop_at_t_min))
         f = row_figures(res)
         cells = [f"{f[k][0]:.1f} / {f[k][1]:.1f} ({f[k][2]:+.1f})" for k in ("hlc", "tau", "c_m")]
         names = "+".join(g for g in GROUPS if g in on) or "–"
         print(f"| {row} | {names} | " + " | ".join(cells)
               + f" | {f['eps'][0]:.1f} / {f['eps'][1]:.1f} | {f['cov_hlc']:.0f} / "
-              f"{f['cov_tau']:.0f} / {f['cov_c_m']:.0f} | {f['time']:.2f} |", flush=True)
+              f"{f['cov_tau']:.0f} / {f['cov_c_m']:.0f} | {f['n_ident']} of {n} | "
+              + " / ".join(f"{f['ident_' + k][0]:.1f}" for k in ("hlc", "tau", "c_m", "eps"))
+              + f" | {f['time']:.2f} |", flush=True)
         print(f"  ({row}: {time.perf_counter() - t0:.0f} s wall)", file=sys.stderr, flush=True)
 
 
