@@ -310,8 +310,10 @@ def gateway_types(gate: dict, n: int, valid_h: float) -> dict:
 
 
 def dump(res: dict, path: str) -> None:
-    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits and, on the
-    gateway's nights, the valid constrained nights used, those paid and the comfort cost."""
+    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits, the same
+    errors of the per-night average (``pn_*``, ``eps_pn_pct``), the household's types
+    (``type:…``) and, on the gateway's nights, the valid constrained nights used, those paid
+    and the comfort cost."""
     import json
 
     truth = res["truth"]
@@ -322,6 +324,13 @@ def dump(res: dict, path: str) -> None:
         est = [f.lumped_[k] for f in res["fit"]]
         out[f"{k}_err_pct"] = [float(x) for x in rel([e.value for e in est], t)]
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
+    # the paper's way (per-night fits averaged) of the same run, per household
+    out["eps_pn_pct"] = [float(x) for x in res["eps_pn"]]
+    for k, t in true.items():
+        out[f"pn_{k}_err_pct"] = [float(x) for x in rel(
+            [p["lumped"][k] for p in res["per_night_mean"]], t)]
+    for name, m in (res.get("types") or {}).items():
+        out[f"type:{name}"] = [bool(x) for x in np.asarray(m)[:len(truth)]]
     gate = res.get("gateway")
     if gate is not None:
         n = len(truth)
