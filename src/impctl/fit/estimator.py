@@ -167,9 +167,10 @@ class NightFit:
         (at most :data:`NOISE_PASSES` refits; iteratively reweighted least squares, whose
         fixed point is the maximum-likelihood fit with an unknown variance per night). A
         cycling heat pump's night, a night the model fits worse, or a night with a noisier
-        sensor then weighs less, and no kind of night dominates by its units. "kind": one σ
+        sensor then weighs less; at the fixed point every night's weighted residuals sum to
+        about its number of compared samples. "kind": one σ
         per residual kind (constrained T_air, normal T_air, normal power) — the fit before
-        branch h14y (README "Accuracy": HLC 15.9 → 12.8 %, τ 14.3 → 10.0 % median on the
+        branch h14y (bench/RESULTS.md, h14y: HLC 15.9 → 13.7 %, τ 14.3 → 12.1 % median on the
         realistic plant's gateway nights).
     model_error : str or None
         Model-error share calibrated on the realistic virtual population, added to the
