@@ -310,8 +310,10 @@ def gateway_types(gate: dict, n: int, valid_h: float) -> dict:
 
 
 def dump(res: dict, path: str) -> None:
-    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits and, on the
-    gateway's nights, the valid constrained nights used, those paid and the comfort cost."""
+    """Per household: signed errors [%] of HLC, τ, C_m, ε [%], interval hits, the same
+    errors of the per-night average (``pn_*``, ``eps_pn_pct``), the household's types
+    (``type:…``) and, on the gateway's nights, the valid constrained nights used, those paid
+    and the comfort cost."""
     import json
 
     truth = res["truth"]
@@ -333,6 +335,13 @@ def dump(res: dict, path: str) -> None:
             if any(x is not None for x in said):
                 out[f"{k}_prior_ratio"] = [None if x is None else x["posterior_to_prior_sd"]
                                            for x in said]
+    # the paper's way (per-night fits averaged) of the same run, per household
+    out["eps_pn_pct"] = [float(x) for x in res["eps_pn"]]
+    for k, t in true.items():
+        out[f"pn_{k}_err_pct"] = [float(x) for x in rel(
+            [p["lumped"][k] for p in res["per_night_mean"]], t)]
+    for name, m in (res.get("types") or {}).items():
+        out[f"type:{name}"] = [bool(x) for x in np.asarray(m)[:len(truth)]]
     gate = res.get("gateway")
     if gate is not None:
         n = len(truth)

@@ -1,11 +1,14 @@
 """Paired comparison of two ``bench/fit.py --dump`` runs on the same households.
 
 Run:  python bench/fit_paired.py A.json B.json [--only identified-in-both|all] [--resamples 2000]
+          [--a-per-night]
 
 For each of HLC, τ, C_m and ε: median |error| [%] in A and B and the difference B − A of the
 medians with a 95 % bootstrap interval over households (resampled together, so the pairing is
 kept); coverage of the 95 % intervals in each; on the gateway's nights also the households
-identified, the constrained nights paid and the comfort cost in each.
+identified, the constrained nights paid and the comfort cost in each. ``--a-per-night`` takes
+A's per-night average (the paper's way, ``pn_*`` in dumps since branch h14y) instead of A's
+joint fit (no coverage: the average has no interval).
 """
 
 from __future__ import annotations
@@ -27,8 +30,13 @@ def main() -> None:
     ap.add_argument("b")
     ap.add_argument("--only", choices=("all", "identified-in-both"), default="all")
     ap.add_argument("--resamples", type=int, default=2000)
+    ap.add_argument("--a-per-night", action="store_true")
     args = ap.parse_args()
     a, b = _load(args.a), _load(args.b)
+    if args.a_per_night:
+        a = {k: v for k, v in a.items() if not k.endswith("_covered")}
+        a.update({k[3:]: v for k, v in a.items() if k.startswith("pn_")},
+                 eps_pct=a["eps_pn_pct"])
     n = len(a["hlc_err_pct"])
     sel = np.ones(n, bool)
     if args.only == "identified-in-both":
@@ -46,7 +54,8 @@ def main() -> None:
         d = np.nanmedian(eb[boot], axis=1) - np.nanmedian(ea[boot], axis=1)
         lo, hi = np.percentile(d, [2.5, 97.5])
         cov = (f"{100 * a[f'{key}_covered'][idx].mean():.0f} / "
-               f"{100 * b[f'{key}_covered'][idx].mean():.0f}") if key else "–"
+               f"{100 * b[f'{key}_covered'][idx].mean():.0f}") if key and \
+            f"{key}_covered" in a else "–"
         print(f"| {q} | {np.nanmedian(ea):.1f} / {np.nanpercentile(ea, 90):.1f} | "
               f"{np.nanmedian(eb):.1f} / {np.nanpercentile(eb, 90):.1f} | "
               f"{np.nanmedian(eb) - np.nanmedian(ea):+.1f} ({lo:+.1f} … {hi:+.1f}) | {cov} |")

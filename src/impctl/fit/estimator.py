@@ -41,6 +41,7 @@ from .layout import (
     initial_mass,
     layout,
     night_rows,
+    night_sigma,
     nuisance_boxes,
     problem_rows,
     residual_sigma,
@@ -59,6 +60,11 @@ from .selection import assumed_gain, class_check, gain_statement, nuisance_check
 from .validation import in_sample_validation, per_night_fits
 
 NORMAL_MODELS = ("demand", "series", "mean")
+NOISE_MODELS = ("night", "kind")
+#: Most refits of the joint problems while the per-night σ settle (``noise="night"``), and
+#: the largest relative change of any night's σ at which they count as settled.
+NOISE_PASSES = 3
+NOISE_RTOL = 0.1
 
 
 class NightFit:
@@ -166,6 +172,18 @@ class NightFit:
         Measured (``bench/fit.py``, 50 realistic households, gateway's nights): C_m median
         error 21.1 → 14.5 %. Reported in ``prior_`` (centre, SD, posterior/prior SD ratio,
         prior-dominated).
+    noise : {"night", "kind"}
+        The noise model of the residuals, i.e. how the nights weigh against each other.
+        "night" (default): one noise SD per night, estimated in the likelihood — the joint
+        problems are refitted with each night's RMS residual as its σ until those settle
+        (at most :data:`NOISE_PASSES` refits; iteratively reweighted least squares, whose
+        fixed point is the maximum-likelihood fit with an unknown variance per night). A
+        cycling heat pump's night, a night the model fits worse, or a night with a noisier
+        sensor then weighs less; at the fixed point every night's weighted residuals sum to
+        about its number of compared samples. "kind": one σ
+        per residual kind (constrained T_air, normal T_air, normal power) — the fit before
+        branch h14y (bench/RESULTS.md, h14y: HLC 15.9 → 13.7 %, τ 14.3 → 12.1 % median on the
+        realistic plant's gateway nights).
     model_error : str or None
         Model-error share calibrated on the realistic virtual population, added to the
         intervals in quadrature (:mod:`.model_error`): "default" (the packaged calibration), a
@@ -184,6 +202,8 @@ class NightFit:
     validation_ : dict              heat demand on normal nights, T_air RMSE on constrained ones
     predictions_ : list[dict]       measured vs fitted series per night (for plots)
     sigma_ : dict[str, float]       residual standard deviation per group
+    sigma_night_ : dict[str, float] per used night, the σ its residuals were weighted with
+                                    (K on constrained nights, W on held nights; ``noise``)
     skipped_ : list[(night_id, reason)]
     gaps_ : list[impctl.imp.gaps.Gap]  gaps inside nights; each night was cut to one gap-free
                                        piece first (rule in :mod:`impctl.imp.gaps`)
@@ -213,7 +233,7 @@ class NightFit:
                  night_gain_sd_w: float = NIGHT_GAIN_SD_W,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
                  emitter_lag: bool = False, settle_until_held: bool = False,
-                 model_error: str | None = "default",
+                 noise: str = "night", model_error: str | None = "default",
                  prior: str | PopulationPrior | None = "population"):
         self.normal_model = normal_model
         self.emission_lag_h = emission_lag_h
@@ -244,6 +264,7 @@ class NightFit:
         self.structure_share = structure_share
         self.emitter_lag = emitter_lag
         self.settle_until_held = settle_until_held
+        self.noise = noise
         self.model_error = model_error
         self.prior = prior
 
@@ -265,6 +286,8 @@ class NightFit:
         if not (self.prior is None or self.prior == "population"
                 or isinstance(self.prior, PopulationPrior)):
             raise ValueError("prior must be None, 'population' or a PopulationPrior")
+        if self.noise not in NOISE_MODELS:
+            raise ValueError(f"noise must be one of {NOISE_MODELS}")
         started = time.perf_counter()
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # the per-household target is for one core
@@ -327,9 +350,9 @@ class NightFit:
         # the joint problems are refitted with the new weights.
         guess = self.noise_ = dict(self.sigma_)
         self._update_sigma(rows, result, best_of(result, lay, 0))
-        ratio = [self.sigma_[k] / guess[k] for k in guess]
-        refit = max(ratio) > 1.4 or min(ratio) < 0.7
+        self._sigma_n = None
         self._tempering = 1.0
+        refit = False
         if prior is not None:
             # weighted as the intervals weigh the data: the optimum is then the mode of
             # the posterior the Laplace intervals describe (PopulationPrior.tempered)
@@ -340,10 +363,19 @@ class NightFit:
                                   for g in ((0, 1) if lay["prior"] else (0,)))
             self._ctx.prior = prior.tempered(self._tempering)
             refit = True
-        if refit:
-            self._refit_joint(lay, result)
+        if self.noise == "night":
+            # the per-night weights' refits carry the tempered prior too
+            self._reweight_nights(lay, result)
+        else:
+            ratio = [self.sigma_[k] / guess[k] for k in guess]
+            if refit or max(ratio) > 1.4 or min(ratio) < 0.7:
+                self._refit_joint(lay, result)
         self._ctx.prior = prior   # the intervals divide the data by the inflation themselves
         rows = self._rows(lay)
+        sigma_n = (self._sigma_n if self._sigma_n is not None
+                   else torch.tensor([self.sigma_[k] for k in ("constrained_t_air_k",
+                                      "normal_t_air_k", "normal_power_w")])[self._group_n])
+        self.sigma_night_ = dict(zip(packed.night_ids, sigma_n.tolist(), strict=True))
 
         # First whether the data need the nuisance terms (inside the class box), then whether
         # they contradict the class box: testing the classes with a model that lacks terms
@@ -408,7 +440,20 @@ class NightFit:
 
     def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
         return problem_rows(lay, self.sigma_, self._row_type_n, self._phi_n, self._phi_in_n,
-                            self._group_n, only)
+                            self._group_n, only, getattr(self, "_sigma_n", None))
+
+    def _reweight_nights(self, lay: dict, result: lm.LMResult) -> None:
+        """``noise="night"``: refit the joint problems with each night weighted by its own RMS
+        residual (:func:`.layout.night_sigma`) until no night's σ moves by more than
+        :data:`NOISE_RTOL` (at most :data:`NOISE_PASSES` refits)."""
+        for _ in range(NOISE_PASSES):
+            new = night_sigma(self._ctx, self._rows(lay), result, best_of(result, lay, 0),
+                              self._group_n)
+            old = self._sigma_n
+            if old is not None and float((new / old - 1.0).abs().max()) < NOISE_RTOL:
+                break
+            self._sigma_n = new
+            self._refit_joint(lay, result)
 
     def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
         joint = lay["class"] + lay["simple"] + lay["prior"]

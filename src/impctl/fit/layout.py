@@ -11,7 +11,8 @@ and the rows the optimiser evaluates for them, weighted by the residual σ of ea
 * :func:`night_rows` — each night's row type, heat input and residual group;
 * :func:`problem_rows` — the optimiser's rows; :func:`air_input` — Φ_HC of the AIR rows;
 * :func:`initial_mass` — the mass temperature each row starts from (the start's parameters);
-* :func:`residual_sigma` — the residual σ per group, from a fit (the rows' weights).
+* :func:`residual_sigma` — the residual σ per group, from a fit (the rows' weights);
+  :func:`night_sigma` — the same per night (``NightFit(noise="night")``).
 """
 
 from __future__ import annotations
@@ -121,9 +122,11 @@ def best_of(result: lm.LMResult, lay: dict, group: int) -> int:
 
 
 def problem_rows(lay: dict, sigma: dict[str, float], row_type_n: torch.Tensor, phi_n: torch.Tensor,
-         phi_in_n: torch.Tensor, group_n: torch.Tensor, only: list[int] | None = None) -> lm.Rows:
+         phi_in_n: torch.Tensor, group_n: torch.Tensor, only: list[int] | None = None,
+         sigma_n: torch.Tensor | None = None) -> lm.Rows:
     """The optimiser's rows of the problems in ``lay`` (or only of the problems ``only``,
-    renumbered), each weighted by 1/σ of its night's residual group (``sigma``: K, K, W)."""
+    renumbered), each weighted by 1/σ of its night's residual group (``sigma``: K, K, W), or
+    by 1/σ of its own night when ``sigma_n`` (per packed night, K or W) is given."""
     sig = torch.tensor([sigma["constrained_t_air_k"], sigma["normal_t_air_k"],
                         sigma["normal_power_w"]], dtype=DTYPE)
     problem, night = lay["row_problem"], lay["row_night"]
@@ -134,8 +137,9 @@ def problem_rows(lay: dict, sigma: dict[str, float], row_type_n: torch.Tensor, p
         remap[torch.tensor(only)] = torch.arange(len(only))
         problem, night = remap[problem[keep]], night[keep]
         box, n_prob = box[torch.tensor(only)], len(only)
+    row_sigma = sig[group_n[night]] if sigma_n is None else sigma_n[night]
     return lm.Rows(problem, night, row_type_n[night], phi_n[night],
-                   phi_in_n[night], 1.0 / sig[group_n[night]], box, n_prob)
+                   phi_in_n[night], 1.0 / row_sigma, box, n_prob)
 
 
 def night_rows(packed, normal_model: str) -> tuple[torch.Tensor, ...]:
@@ -172,22 +176,49 @@ def initial_mass(packed, u_rows, night, box_rows, row_type_n, phi_n, ach_vent: f
     return mass_from_air(packed.t_air_c[night, 0], packed.t_out_c[night, 0], phi0, net)
 
 
+def _best_raw(ctx: lm.Context, rows: lm.Rows, result: lm.LMResult, best: int):
+    """(rows of the problem ``best``, their raw residuals (model − measured), data units)."""
+    sel = rows.problem == best
+    sub = rows.subset(sel)
+    if result.terms is not None:  # the optimiser's own last evaluation at this point
+        return sub, result.terms.take(sel).raw()
+    with torch.no_grad():
+        return sub, raw_residuals(ctx, sub, result.u[best][None], result.t_m0[sel])
+
+
+def night_sigma(ctx: lm.Context, rows: lm.Rows, result: lm.LMResult, best: int,
+                group_n: torch.Tensor) -> torch.Tensor:
+    """Per packed night the RMS residual (K or W) of the problem ``best`` — the maximum-
+    likelihood σ of that night given the fit — over the samples it compares, with its θ_m,0
+    and its share of the 7 parameters counted as degrees of freedom, floored as
+    :func:`residual_sigma` floors."""
+    sub, raw = _best_raw(ctx, rows, result, best)
+    packed = ctx.packed
+    m = torch.where((sub.row_type == ROW_DEMAND)[:, None], packed.demand_mask()[sub.night],
+                    packed.mask[sub.night])
+    n = m.sum(1).to(DTYPE)
+    dof = (n - 1.0 - 7.0 * n / n.sum().clamp_min(1.0)).clamp_min(1.0)
+    rms = ((raw * m).pow(2).sum(1) / dof).sqrt()
+    floors = torch.tensor(_SIGMA_FLOORS, dtype=DTYPE)[group_n[sub.night]]
+    out = torch.ones(len(group_n), dtype=DTYPE)
+    out[sub.night] = torch.maximum(rms, floors)
+    return out
+
+
+#: Floors of the residual σ per group (constrained T_air K, normal T_air K, power W).
+_SIGMA_FLOORS = (0.005, 0.005, 1.0)
+
+
 def residual_sigma(ctx: lm.Context, rows: lm.Rows, result: lm.LMResult, best: int,
                    mask: torch.Tensor, group_n: torch.Tensor,
                    sigma: dict[str, float]) -> dict[str, float]:
     """``sigma`` with each residual group's σ (K, K, W) replaced by the RMS residual of the
     problem ``best`` (degrees of freedom counted; floored), where that group has rows."""
     sigma = dict(sigma)
-    sel = rows.problem == best
-    sub = rows.subset(sel)
-    if result.terms is not None:  # the optimiser's own last evaluation at this point
-        raw = result.terms.take(sel).raw()
-    else:
-        with torch.no_grad():
-            raw = raw_residuals(ctx, sub, result.u[best][None], result.t_m0[sel])
+    sub, raw = _best_raw(ctx, rows, result, best)
     mask = mask[sub.night]
     groups = group_n[sub.night]
-    floors = (0.005, 0.005, 1.0)
+    floors = _SIGMA_FLOORS
     n_all = int(mask.sum())
     for g, key in enumerate(("constrained_t_air_k", "normal_t_air_k", "normal_power_w")):
         m = mask & (groups == g)[:, None]

@@ -151,6 +151,9 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
                 "settle_h": getattr(fit, "settle_h", 0.0), "starts": fit.n_starts,
                 "iterations": fit.n_iter_, "loss": fit.loss_, "sigma": fit.sigma_,
+                # the noise model and each night's σ (K constrained, W held): the weights
+                "noise": getattr(fit, "noise", "kind"),
+                "sigma_per_night": getattr(fit, "sigma_night_", None),
                 "time_s": fit.fit_time_s_},
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
         "gaps": [g.as_dict() for g in getattr(fit, "gaps_", [])],
