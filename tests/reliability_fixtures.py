@@ -718,12 +718,17 @@ def _check_after_restart(facts: dict, at_kill: dict, was_running: set[int],
 class _JumpingSelector(selectors.EpollSelector):
     """Polls the real sockets without waiting; when nothing is ready, advances the virtual
     time to the next timer instead of sleeping (loopback data between endpoints of the same
-    loop is already queued when ``send`` returns, so nothing in flight is skipped)."""
+    loop is already queued when ``send`` returns, so nothing in flight is skipped).
 
-    def __init__(self) -> None:
+    ``idle_s`` > 0: before each jump, wait up to that long in real time for I/O, so a loop
+    that waits for another process (a fit subprocess) leaves it the CPU instead of spinning
+    through virtual time at full speed."""
+
+    def __init__(self, idle_s: float = 0.0) -> None:
         super().__init__()
         self.now = 1_000_000.0
         self.jumps = 0
+        self.idle_s = idle_s
 
     def select(self, timeout: float | None = None):
         ready = super().select(0)
@@ -731,6 +736,10 @@ class _JumpingSelector(selectors.EpollSelector):
             return ready
         if timeout is None:  # no timer at all: only real I/O can wake the loop
             return super().select(None)
+        if self.idle_s > 0:
+            ready = super().select(min(timeout, self.idle_s))
+            if ready:  # it came at this virtual instant
+                return ready
         self.now += timeout
         self.jumps += 1
         return ready
@@ -740,19 +749,20 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     """An asyncio loop on virtual time (``loop.time()``): every sleep, timeout and timer takes
     no wall time, computation takes no virtual time. For one process's own simulator +
     controller on loopback sockets: the plant's dynamics against a controller that reacts
-    without processing delay (delays that matter — the read-back pause — stay configured)."""
+    without processing delay (delays that matter — the read-back pause — stay configured).
+    ``idle_s``: see :class:`_JumpingSelector`."""
 
-    def __init__(self) -> None:
-        self._jumping = _JumpingSelector()
+    def __init__(self, idle_s: float = 0.0) -> None:
+        self._jumping = _JumpingSelector(idle_s)
         super().__init__(self._jumping)
 
     def time(self) -> float:
         return self._jumping.now
 
 
-def run_virtual(coro, timeout_s: float = 86400.0):
+def run_virtual(coro, timeout_s: float = 86400.0, *, idle_s: float = 0.0):
     """Run ``coro`` on a fresh :class:`VirtualTimeLoop` (``timeout_s`` in virtual seconds)."""
-    loop = VirtualTimeLoop()
+    loop = VirtualTimeLoop(idle_s)
     try:
         return loop.run_until_complete(asyncio.wait_for(coro, timeout_s))
     finally:
