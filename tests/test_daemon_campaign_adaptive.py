@@ -1,13 +1,13 @@
 """An adaptive campaign run by the real daemon against the simulator, end to end (issue 18).
 
-In-process :class:`~impctl.daemon.service.Daemon` on the accelerated clock (on the virtual-time
-loop, see test_daemon_campaign), the in-process
-simulator on loopback Modbus TCP (the heavy house, 0 °C outdoors), a real SQLite file, and the
-fit after every valid night in real subprocesses (``impctl export`` → ``impctl fit`` →
-``impctl campaign next``). A loose target keeps it short: the campaign must stop by itself —
-at the target, or at ``max_nights`` — never run two constrained nights in a row, store each
-fit with its night count and predictions, run nothing after the stop, and leave the heat pump
-as the owner had it.
+In-process :class:`~impctl.daemon.service.Daemon` on the accelerated clock (on the
+virtual-time loop, see test_daemon_campaign), the in-process simulator on loopback Modbus TCP
+(the heavy house, 0 °C outdoors), a real SQLite file, and the fit after every valid night in
+real subprocesses (``impctl export`` → ``impctl fit`` → ``impctl campaign next``; not niced
+here, see :func:`test_daemon_campaign.unniced_fits`). A loose target keeps it short: the
+campaign must stop by itself — at the target, or at ``max_nights`` — never run two
+constrained nights in a row, store each fit with its night count and predictions, run nothing
+after the stop, and leave the heat pump as the owner had it.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from datetime import datetime
 
 from daemon_fixtures import OWNER_MODE, OWNER_SETPOINT_C
 from reliability_fixtures import run_virtual
-from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, IDLE_S, TZ, _campaign
+from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, IDLE_S, TZ, _campaign, unniced_fits
 
 from impctl.campaign import FitSummary, parse_candidates
 from impctl.cli.device.status import collect_status, format_status
@@ -64,7 +64,8 @@ async def _adaptive_campaign(tmp_path):
     return result["cfg"], result["watch"], result["plant"], result["after"]
 
 
-def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path):
+def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path, monkeypatch):
+    unniced_fits(monkeypatch)
     cfg, watch, plant, at_stop = run_virtual(_adaptive_campaign(tmp_path), idle_s=IDLE_S)
     with Store(cfg.db_path) as store:
         nights = store.nights()
