@@ -720,15 +720,17 @@ class _JumpingSelector(selectors.EpollSelector):
     time to the next timer instead of sleeping (loopback data between endpoints of the same
     loop is already queued when ``send`` returns, so nothing in flight is skipped).
 
-    ``idle_s`` > 0: before each jump, wait up to that long in real time for I/O, so a loop
-    that waits for another process (a fit subprocess) leaves it the CPU instead of spinning
-    through virtual time at full speed."""
+    ``max_rate`` (virtual seconds per real second): a jump that would take the virtual time
+    further ahead of the real time than that first waits in real time for I/O, so a loop that
+    waits for another process (a fit subprocess) leaves it the CPU instead of spinning through
+    virtual time; computation still takes no virtual time."""
 
-    def __init__(self, idle_s: float = 0.0) -> None:
+    def __init__(self, max_rate: float | None = None) -> None:
         super().__init__()
         self.now = 1_000_000.0
         self.jumps = 0
-        self.idle_s = idle_s
+        self.max_rate = max_rate
+        self._start = (time.monotonic(), self.now)
 
     def select(self, timeout: float | None = None):
         ready = super().select(0)
@@ -736,10 +738,13 @@ class _JumpingSelector(selectors.EpollSelector):
             return ready
         if timeout is None:  # no timer at all: only real I/O can wake the loop
             return super().select(None)
-        if self.idle_s > 0:
-            ready = super().select(min(timeout, self.idle_s))
-            if ready:  # it came at this virtual instant
-                return ready
+        if self.max_rate:
+            real0, virtual0 = self._start
+            ahead_s = real0 + (self.now + timeout - virtual0) / self.max_rate - time.monotonic()
+            if ahead_s > 0:
+                ready = super().select(ahead_s)
+                if ready:  # it came at this virtual instant
+                    return ready
         self.now += timeout
         self.jumps += 1
         return ready
@@ -750,19 +755,19 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     no wall time, computation takes no virtual time. For one process's own simulator +
     controller on loopback sockets: the plant's dynamics against a controller that reacts
     without processing delay (delays that matter — the read-back pause — stay configured).
-    ``idle_s``: see :class:`_JumpingSelector`."""
+    ``max_rate``: see :class:`_JumpingSelector`."""
 
-    def __init__(self, idle_s: float = 0.0) -> None:
-        self._jumping = _JumpingSelector(idle_s)
+    def __init__(self, max_rate: float | None = None) -> None:
+        self._jumping = _JumpingSelector(max_rate)
         super().__init__(self._jumping)
 
     def time(self) -> float:
         return self._jumping.now
 
 
-def run_virtual(coro, timeout_s: float = 86400.0, *, idle_s: float = 0.0):
+def run_virtual(coro, timeout_s: float = 86400.0, *, max_rate: float | None = None):
     """Run ``coro`` on a fresh :class:`VirtualTimeLoop` (``timeout_s`` in virtual seconds)."""
-    loop = VirtualTimeLoop(idle_s)
+    loop = VirtualTimeLoop(max_rate)
     try:
         return loop.run_until_complete(asyncio.wait_for(coro, timeout_s))
     finally:

@@ -43,9 +43,10 @@ TZ = ZoneInfo("Europe/Ljubljana")
 #: (≈ 35 s at 10800×; 53 s at 7200×). Samples every 5 simulated minutes = 36 per second.
 SPEED = 10800.0
 FINAL = ("done", "aborted", "refused", "interrupted")
-#: Real seconds the virtual-time loop waits for I/O before each jump: while a (niced) fit
-#: subprocess runs, the test's loop leaves it the CPU rather than spinning through time.
-IDLE_S = 0.001
+#: At most this many seconds of the virtual-time loop per real second: while a fit subprocess
+#: runs, the test's loop waits in real time (leaving it the CPU) rather than spinning through
+#: virtual time; the nights themselves run slower than that (~3 loop s per real s).
+MAX_RATE = 50.0
 #: Real time for a campaign with fits: the nights take ~15 s, each fit (export + fit, ~4 s of
 #: CPU) ~5 s on an idle machine, ~10–20 s on 2 cores saturated by other processes. A guard
 #: against a hang, not a deadline the product must meet.
@@ -157,7 +158,7 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path, monkeypatch):
         tmp_path, epoch, SPEED,
         {"mode": "fixed", "constrained_nights": 2, "constrained_setpoint_c": 21.0,
          "normal_setpoints_c": [21.0, 22.0, 23.0], "fit_when_complete": True},
-        until=until, timeout_s=FITS_TIMEOUT_S), idle_s=IDLE_S)
+        until=until, timeout_s=FITS_TIMEOUT_S), max_rate=MAX_RATE)
     with Store(result["cfg"].db_path) as store:
         fit = store.last_fit()
         fit_events = [m for _, _, m in store.events(50) if m.startswith("fit")][::-1]
@@ -223,7 +224,7 @@ def test_campaign_across_the_start_of_summer_time(tmp_path):
     result = run_virtual(_campaign(
         tmp_path, epoch, SPEED,
         {"mode": "fixed", "constrained_nights": 0, "normal_setpoints_c": [21.0, 22.0]},
-        until=until, timeout_s=60), idle_s=IDLE_S)
+        until=until, timeout_s=60), max_rate=MAX_RATE)
     with Store(result["cfg"].db_path) as store:
         nights = store.nights()
         last = [store.samples(n.id)[-1].ts for n in nights]

@@ -17,7 +17,7 @@ from datetime import datetime
 
 from daemon_fixtures import OWNER_MODE, OWNER_SETPOINT_C
 from reliability_fixtures import run_virtual
-from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, IDLE_S, TZ, _campaign, unniced_fits
+from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, MAX_RATE, TZ, _campaign, unniced_fits
 
 from impctl.campaign import FitSummary, parse_candidates
 from impctl.cli.device.status import collect_status, format_status
@@ -66,7 +66,7 @@ async def _adaptive_campaign(tmp_path):
 
 def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path, monkeypatch):
     unniced_fits(monkeypatch)
-    cfg, watch, plant, at_stop = run_virtual(_adaptive_campaign(tmp_path), idle_s=IDLE_S)
+    cfg, watch, plant, at_stop = run_virtual(_adaptive_campaign(tmp_path), max_rate=MAX_RATE)
     with Store(cfg.db_path) as store:
         nights = store.nights()
         fits = store.fits()
