@@ -718,12 +718,19 @@ def _check_after_restart(facts: dict, at_kill: dict, was_running: set[int],
 class _JumpingSelector(selectors.EpollSelector):
     """Polls the real sockets without waiting; when nothing is ready, advances the virtual
     time to the next timer instead of sleeping (loopback data between endpoints of the same
-    loop is already queued when ``send`` returns, so nothing in flight is skipped)."""
+    loop is already queued when ``send`` returns, so nothing in flight is skipped).
 
-    def __init__(self) -> None:
+    ``max_rate`` (virtual seconds per real second): a jump that would take the virtual time
+    further ahead of the real time than that first waits in real time for I/O, so a loop that
+    waits for another process (a fit subprocess) leaves it the CPU instead of spinning through
+    virtual time; computation still takes no virtual time."""
+
+    def __init__(self, max_rate: float | None = None) -> None:
         super().__init__()
         self.now = 1_000_000.0
         self.jumps = 0
+        self.max_rate = max_rate
+        self._start = (time.monotonic(), self.now)
 
     def select(self, timeout: float | None = None):
         ready = super().select(0)
@@ -731,6 +738,13 @@ class _JumpingSelector(selectors.EpollSelector):
             return ready
         if timeout is None:  # no timer at all: only real I/O can wake the loop
             return super().select(None)
+        if self.max_rate:
+            real0, virtual0 = self._start
+            ahead_s = real0 + (self.now + timeout - virtual0) / self.max_rate - time.monotonic()
+            if ahead_s > 0:
+                ready = super().select(ahead_s)
+                if ready:  # it came at this virtual instant
+                    return ready
         self.now += timeout
         self.jumps += 1
         return ready
@@ -740,19 +754,20 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     """An asyncio loop on virtual time (``loop.time()``): every sleep, timeout and timer takes
     no wall time, computation takes no virtual time. For one process's own simulator +
     controller on loopback sockets: the plant's dynamics against a controller that reacts
-    without processing delay (delays that matter — the read-back pause — stay configured)."""
+    without processing delay (delays that matter — the read-back pause — stay configured).
+    ``max_rate``: see :class:`_JumpingSelector`."""
 
-    def __init__(self) -> None:
-        self._jumping = _JumpingSelector()
+    def __init__(self, max_rate: float | None = None) -> None:
+        self._jumping = _JumpingSelector(max_rate)
         super().__init__(self._jumping)
 
     def time(self) -> float:
         return self._jumping.now
 
 
-def run_virtual(coro, timeout_s: float = 86400.0):
+def run_virtual(coro, timeout_s: float = 86400.0, *, max_rate: float | None = None):
     """Run ``coro`` on a fresh :class:`VirtualTimeLoop` (``timeout_s`` in virtual seconds)."""
-    loop = VirtualTimeLoop()
+    loop = VirtualTimeLoop(max_rate)
     try:
         return loop.run_until_complete(asyncio.wait_for(coro, timeout_s))
     finally:

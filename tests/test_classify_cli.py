@@ -119,20 +119,28 @@ def test_train_bad_input_writes_nothing(tmp_path):
 def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
     """The demo reuses cached classifiers only when their population ran the gateway's nights
     (since branch h14q: one constrained setpoint); models from the old population, whose
-    manifest has no constrained_setpoint_c, are retrained."""
+    manifest has no constrained_setpoint_c, are retrained; so are models of another plant's
+    population (or of an unrecorded one), with the mismatch named."""
     import shutil
 
-    from impctl.demo.run import _models_ok
+    from impctl.demo.run import _models_unfit
 
-    assert _models_ok(model_dir)
+    def ok(path: Path) -> bool:  # `impctl train`'s default population: the realistic plant's
+        return _models_unfit(path, "realistic") is None
+
+    assert ok(model_dir)
+    # Never for the other plant's demo: the mismatch is named.
+    assert _models_unfit(model_dir, "iso") == (
+        "they were trained for the realistic plant's population, the demo simulates the iso "
+        "plant")
     old = shutil.copytree(model_dir, tmp_path / "old")
     meta = json.loads((old / "models.json").read_text())
     del meta["dataset"]["imp"]["constrained_setpoint_c"]
     (old / "models.json").write_text(json.dumps(meta))
-    assert not _models_ok(old)
+    assert not ok(old)
     meta["dataset"]["imp"]["constrained_setpoint_c"] = DEFAULT_CONSTRAINED_SETPOINT_C + 1.0
     (old / "models.json").write_text(json.dumps(meta))
-    assert not _models_ok(old)
+    assert not ok(old)
     # Since h14x the population's constrained nights stop at T_min as the gateway's do: models
     # of nights cooled to the window's end (stop_at_t_min false, or a manifest without the key,
     # from before h14r) are retrained.
@@ -143,10 +151,16 @@ def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
         else:
             meta["dataset"]["imp"]["stop_at_t_min"] = stale
         (old / "models.json").write_text(json.dumps(meta))
-        assert not _models_ok(old)
+        assert not ok(old)
     meta["dataset"]["imp"]["stop_at_t_min"] = True
     (old / "models.json").write_text(json.dumps(meta))
-    assert _models_ok(old)
+    assert ok(old)
+    # A manifest that does not record its plant is not reused either.
+    del meta["dataset"]["plant"]
+    (old / "models.json").write_text(json.dumps(meta))
+    assert _models_unfit(old, "realistic") == (
+        "they were trained for the unrecorded plant's population, the demo simulates the "
+        "realistic plant")
 
 
 def _with_setpoint(src: Path, dst: Path, night_ids, setpoint_c: float) -> Path:

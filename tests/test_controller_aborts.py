@@ -22,6 +22,9 @@ from impctl.model import default_house
 from impctl.store import Store
 
 SPEED = 7200.0
+#: ΔT pinned at 1.5 K (T_min 19.5 °C, T_min − margin 19.0 °C for 21 °C): the assertions use
+#: those numbers, whatever the protocol's default band.
+BAND_K = 1.5
 
 
 class Rig:
@@ -33,7 +36,7 @@ class Rig:
     def request(self, kind: str, setpoint_c: float = 21.0, preheat_min: float = 31.0,
                 window_h: float = 4.0) -> NightRequest:
         start = self.clock.now() + timedelta(minutes=preheat_min)
-        return NightRequest(kind, setpoint_c, start, start + timedelta(hours=window_h))
+        return NightRequest(kind, setpoint_c, start, start + timedelta(hours=window_h), BAND_K)
 
     async def owner_state_back(self) -> None:
         assert (self.sim.plant.setpoint_c, self.sim.plant.loop_mode) == (OWNER_SETPOINT_C,

@@ -1,12 +1,13 @@
 """An adaptive campaign run by the real daemon against the simulator, end to end (issue 18).
 
-In-process :class:`~impctl.daemon.service.Daemon` on the accelerated clock, the in-process
-simulator on loopback Modbus TCP (the heavy house, 0 °C outdoors), a real SQLite file, and the
-fit after every valid night in real subprocesses (``impctl export`` → ``impctl fit`` →
-``impctl campaign next``). A loose target keeps it short: the campaign must stop by itself —
-at the target, or at ``max_nights`` — never run two constrained nights in a row, store each
-fit with its night count and predictions, run nothing after the stop, and leave the heat pump
-as the owner had it.
+In-process :class:`~impctl.daemon.service.Daemon` on the accelerated clock (on the
+virtual-time loop, see test_daemon_campaign), the in-process simulator on loopback Modbus TCP
+(the heavy house, 0 °C outdoors), a real SQLite file, and the fit after every valid night in
+real subprocesses (``impctl export`` → ``impctl fit`` → ``impctl campaign next``; not niced
+here, see :func:`test_daemon_campaign.unniced_fits`). A loose target keeps it short: the
+campaign must stop by itself — at the target, or at ``max_nights`` — never run two
+constrained nights in a row, store each fit with its night count and predictions, run nothing
+after the stop, and leave the heat pump as the owner had it.
 """
 
 from __future__ import annotations
@@ -15,17 +16,17 @@ import asyncio
 from datetime import datetime
 
 from daemon_fixtures import OWNER_MODE, OWNER_SETPOINT_C
-from sim_fixtures import run
-from test_daemon_campaign import FINAL, TZ, _campaign
+from reliability_fixtures import run_virtual
+from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, MAX_RATE, TZ, _campaign, unniced_fits
 
 from impctl.campaign import FitSummary, parse_candidates
 from impctl.cli.device.status import collect_status, format_status
 from impctl.daemon.schedule import next_act_time
 from impctl.store import Store
 
-#: A day of simulated time in 4 s of wall time; 10-min samples = 36 a second (the rate of the
-#: fixed-campaign tests: faster, a loaded machine misses samples and nights end invalid). A fit
-#: (three subprocesses) takes ~10–15 s: the daemon skips the nights that come before it is
+#: A day of simulated time in 4 s of the virtual-time loop (the nights take no real time, and
+#: miss no sample however loaded the machine). A fit (three subprocesses) takes ~10–15 s of
+#: real time, simulated days meanwhile: the daemon skips the nights that come before it is
 #: stored.
 SPEED = 21600.0
 TARGET = {"hlc": 0.30, "tau": 0.40}
@@ -58,12 +59,14 @@ async def _adaptive_campaign(tmp_path):
         tmp_path, datetime(2026, 1, 12, 19, 0, tzinfo=TZ), SPEED,
         {"mode": "adaptive", "target_rel_halfwidth": TARGET, "max_nights": MAX_NIGHTS,
          "constrained_setpoint_c": 21.0, "normal_setpoints_c": [21.0, 22.0]},
-        until=_stopped, timeout_s=75, night={"sample_interval_s": 600}, after=_after_the_stop)
+        until=_stopped, timeout_s=FITS_TIMEOUT_S, night={"sample_interval_s": 600},
+        after=_after_the_stop)
     return result["cfg"], result["watch"], result["plant"], result["after"]
 
 
-def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path):
-    cfg, watch, plant, at_stop = run(_adaptive_campaign(tmp_path), timeout_s=90)
+def test_adaptive_campaign_stops_by_itself_and_restores(tmp_path, monkeypatch):
+    unniced_fits(monkeypatch)
+    cfg, watch, plant, at_stop = run_virtual(_adaptive_campaign(tmp_path), max_rate=MAX_RATE)
     with Store(cfg.db_path) as store:
         nights = store.nights()
         fits = store.fits()

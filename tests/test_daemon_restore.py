@@ -1,6 +1,9 @@
 """The daemon keeps putting the owner's settings back after a night gave up restoring.
 
-In-process daemon and simulator (real Modbus TCP on loopback, real SQLite, accelerated clock).
+In-process daemon and simulator (real Modbus TCP on loopback, real SQLite, accelerated clock),
+on the virtual-time loop: the accelerated clock follows the loop's time, so the 0.25 s of the
+7200× clock before the night starts or the 3.5 s of its window do not pass while a loaded
+machine is busy elsewhere (timeouts below are virtual seconds).
 A constrained night loses the link after switching the heating off; the night aborts after
 the link-lost limit and its own restore retries until ``restore_timeout_s`` (an hour) and then
 stops, leaving the journal pending. The link comes back hours later: the daemon must restore
@@ -15,7 +18,8 @@ from zoneinfo import ZoneInfo
 
 from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, daemon_mapping
 from impctl_sim import SimConfig, constant_weather
-from sim_fixtures import run, simulator, wait_for
+from reliability_fixtures import loop_wall, run_virtual
+from sim_fixtures import simulator, wait_for
 
 from impctl.clock import VirtualClock
 from impctl.config import config_from_mapping
@@ -26,7 +30,7 @@ EPOCH = datetime(2026, 1, 12, 9, 0, tzinfo=ZoneInfo("Europe/Ljubljana"))
 
 def test_link_back_after_the_night_gave_up_restoring(tmp_path):
     async def body():
-        clock = VirtualClock(EPOCH, 7200.0)
+        clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())
         simcfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                            setpoint_c=OWNER_SETPOINT_C)
         async with simulator(simcfg) as sim:
@@ -40,6 +44,9 @@ def test_link_back_after_the_night_gave_up_restoring(tmp_path):
             try:
                 await wait_for(lambda: daemon.scheduler is not None, 10)
                 daemon.store.add_request("constrained", 21.0, "now")
+                # Taken now, as the 1 s trigger-poll job would (APScheduler times it on the
+                # wall clock, not on the loop's virtual time).
+                await daemon._poll_requests()
                 await wait_for(lambda: sim.plant.loop_mode == 0 and any(
                     s.loop_mode == 0 for s in daemon.store.samples(1)), 10)
                 sim.faults.drop = True
@@ -61,4 +68,4 @@ def test_link_back_after_the_night_gave_up_restoring(tmp_path):
             finally:
                 daemon.stop.set()
                 assert await task == 0
-    run(body(), timeout_s=60)
+    run_virtual(body(), timeout_s=600)

@@ -31,6 +31,10 @@ def test_short_demo_runs_end_to_end(demo):
     text = proc.stdout
     # Progress was visible, the heat pump was restored, the table was printed.
     assert "nights" in text and "classifiers:" in text
+    # The classifiers were trained for the plant the demo simulates, and say so.
+    assert "virtual households of the iso plant" in text
+    models = json.loads((out / "models" / "models.json").read_text())
+    assert models["dataset"]["plant"] == "iso"
     assert "simulator loop-1 setpoint back at 21.0 °C, mode 1" in text
     for word in ("Parameters (the paper's Table IV)", "hlc", "c_m", "tau", "ε =", "Wall time"):
         assert word in text
@@ -52,20 +56,27 @@ def test_short_demo_runs_end_to_end(demo):
 
 
 def test_demo_realistic_plant_is_the_default(demo, tmp_path):
-    """Without --plant the demo runs the realistic plant and says so (table and JSON); the
-    classifiers of the ideal run above are reused, so this costs one short campaign + fit."""
+    """Without --plant the demo runs the realistic plant and says so (table and JSON). The
+    classifiers of the ideal run above are not used for it: the mismatch is named and
+    classifiers of the realistic plant's population are trained (40 households: short)."""
     import shutil
 
     out_iso, proc_iso = demo
     assert proc_iso.returncode == 0
     shutil.copytree(out_iso / "models", tmp_path / "models")
     out = tmp_path / "demo"
-    proc = run_cli("demo", "--nights", "1+1", "--out", str(out), "--model-dir",
-                   str(tmp_path / "models"))
+    proc = run_cli("demo", "--nights", "1+1", "--households", "40", "--out", str(out),
+                   "--model-dir", str(tmp_path / "models"))
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "plant: realistic (radiators, weather curve" in proc.stdout
     assert "Plant: realistic (radiators, weather curve" in proc.stdout
-    assert "clock ×10000" in proc.stdout and "cached models reused" in proc.stdout
+    assert "clock ×10000" in proc.stdout and "cached models reused" not in proc.stdout
+    assert (f"classifiers: not reusing the models in {tmp_path / 'models'}: they were trained "
+            "for the iso plant's population, the demo simulates the realistic plant"
+            in proc.stdout)
+    assert "virtual households of the realistic plant" in proc.stdout
+    models = json.loads((tmp_path / "models" / "models.json").read_text())
+    assert models["dataset"]["plant"] == "realistic"
     assert "simulator loop-1 setpoint back at 21.0 °C, mode 1" in proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     plant = summary["plant"]
@@ -90,6 +101,7 @@ def test_demo_adaptive_campaign(demo, tmp_path):
                    "--plant", "iso", "--speed", "10000", "--out", str(out),
                    "--model-dir", str(tmp_path / "models"))
     assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "cached models reused" in proc.stdout  # the ideal plant's, for the ideal plant
     summary = json.loads((out / "summary.json").read_text())
     camp = summary["campaign"]
     assert camp["mode"] == "adaptive" and summary["nights_run"] == len(camp["nights"]) <= 3

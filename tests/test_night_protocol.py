@@ -3,12 +3,16 @@ setpoints (issue 14, branch h14q), and the default write clamp never cuts them."
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
+from datetime import UTC, datetime, timedelta
 
 import pytest
 
 from impctl.config import CampaignConfig, Config, ConfigError, NightConfig, config_from_mapping
+from impctl.controller import NightPolicy, NightRequest
 from impctl.daemon.schedule import campaign_plan
+from impctl.daemon.service import policy_from_config
 from impctl.heatpump import WritePolicy
 from impctl.imp import imp_plans
 from impctl.night_protocol import (
@@ -54,6 +58,22 @@ def test_gateway_bench_and_population_run_the_same_nights():
                                  | {("normal", sp): 1 for sp in DEFAULT_SETPOINTS_C})
     assert all(p.band_k == DEFAULT_BAND_K and p.preheat_h == DEFAULT_PREHEAT_H
                for p in ImpSimConfig().plans())
+
+
+def test_the_controller_defaults_are_the_protocol():
+    """A night asked of the controller without a band or a policy (a caller that has no
+    ``[night]`` section) runs the protocol's ΔT and pre-heat, as the gateway's config does: the
+    controller's defaults were a literal 1.5 K band."""
+    start = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
+    req = NightRequest("constrained", DEFAULT_CONSTRAINED_SETPOINT_C, start,
+                       start + timedelta(hours=7))
+    assert req.comfort_band_k == NightConfig().comfort_band_k == DEFAULT_BAND_K
+    assert (req.t_max_c, req.t_min_c) == (DEFAULT_CONSTRAINED_SETPOINT_C + DEFAULT_BAND_K,
+                                          DEFAULT_CONSTRAINED_SETPOINT_C - DEFAULT_BAND_K)
+    # Every rule of the controller's default policy is the config's default (preheat_h the
+    # protocol's), so a night run with NightPolicy() is the gateway's night.
+    assert dataclasses.asdict(NightPolicy()) == dataclasses.asdict(policy_from_config(Config()))
+    assert NightPolicy().preheat_h == DEFAULT_PREHEAT_H
 
 
 def test_the_default_clamp_never_cuts_the_default_protocol():

@@ -18,7 +18,8 @@ class NightRequest:
     setpoint_c : T_set [°C]; a constrained night runs from T_max = T_set + ΔT to T_min = T_set − ΔT
     window_start, window_end : absolute instants (time zone-aware); the window's length is
         real elapsed time, so a night across a DST change lasts 6 or 8 hours of wall clock
-    comfort_band_k : ΔT [K]
+    comfort_band_k : ΔT [K]; default the protocol's band
+        (:data:`impctl.night_protocol.DEFAULT_BAND_K`), as in the gateway's ``[night]``
     source : "schedule" or "trigger"
     campaign_seq : the campaign plan entry the night serves, if any
     """
@@ -27,7 +28,7 @@ class NightRequest:
     setpoint_c: float
     window_start: datetime
     window_end: datetime
-    comfort_band_k: float = 1.5
+    comfort_band_k: float = _protocol.DEFAULT_BAND_K
     source: str = "schedule"
     campaign_seq: int | None = None
 
@@ -97,7 +98,7 @@ class NightPolicy:
     t_out_max_c: float = 8.0
     constrained_action: str = "loop_off"
     setpoint_floor_c: float = 18.0
-    preheat_h: float = 2.0
+    preheat_h: float = _protocol.DEFAULT_PREHEAT_H
     start_grace_s: float = 1800.0
     deadline_grace_s: float = 600.0
     min_coverage: float = 0.8

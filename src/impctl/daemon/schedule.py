@@ -7,7 +7,9 @@ across a DST change lasts 6 or 8 hours).
 
 from __future__ import annotations
 
+import asyncio
 import logging
+from collections.abc import Awaitable, Callable
 from datetime import datetime, timedelta
 from zoneinfo import ZoneInfo
 
@@ -66,10 +68,37 @@ def window_after_act(act: datetime, cfg: Config) -> tuple[datetime, datetime]:
     return window_for(local.date(), cfg)
 
 
-def wall_time(clock: VirtualClock, sim: datetime) -> datetime:
-    """The wall-clock instant at which ``clock`` shows ``sim`` (identity for real time)."""
-    wall_s = clock.wall_epoch_s + (sim.timestamp() - clock.epoch_s) / clock.factor
-    return datetime.fromtimestamp(wall_s, sim.tzinfo)
+async def sleep_until(clock: VirtualClock, when: datetime) -> float:
+    """Sleep on the running event loop until ``clock`` shows ``when``; returns how late it
+    woke [simulated s]. The loop's sleeps and ``clock`` may drift apart (a clock on
+    ``time.time``, sleeps on the monotonic clock): it sleeps again until the clock agrees."""
+    while (ahead_s := when.timestamp() - clock.now_s()) > 0:
+        await asyncio.sleep(clock.wall_seconds(ahead_s))
+    return clock.now_s() - when.timestamp()
+
+
+async def accelerated_nights(cfg: Config, clock: VirtualClock,
+                             night_job: Callable[[datetime], Awaitable[None]]) -> None:
+    """Simulated time: the nights' cron rule, evaluated and waited for on the daemon's clock,
+    ``night_job(act)`` at each preheat start, until cancelled. Not an APScheduler job:
+    APScheduler times jobs on the wall clock, which a late or virtual-time event loop lets
+    drift from the simulated one (a night starts hours late or never). A night more than
+    ``misfire_grace_s`` (at least 1 s of wall time) late is skipped with a warning, as
+    APScheduler would."""
+    grace_wall_s = max(1, int(cfg.campaign.misfire_grace_s / clock.factor))
+    while True:
+        act = next_act_time(cfg, clock.now() + timedelta(seconds=1))
+        _LOG.info("next night job at %s (daemon's clock)", act)
+        late_s = await sleep_until(clock, act)
+        if clock.wall_seconds(late_s) > grace_wall_s:
+            _LOG.warning("night job at %s missed by %.0f s (daemon's clock)", act, late_s)
+            continue
+        # Its own task: cancelling this loop (at shutdown, once the night has restored the
+        # heat pump) never cancels a night.
+        job = asyncio.create_task(night_job(act), name="night job")
+        await asyncio.wait({job})
+        if not job.cancelled() and job.exception() is not None:  # as APScheduler logs it
+            _LOG.error("night job at %s failed", act, exc_info=job.exception())
 
 
 def drop_expired_requests(store: Store, now: datetime) -> list[int]:

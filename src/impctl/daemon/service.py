@@ -13,7 +13,6 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 from apscheduler.schedulers.asyncio import AsyncIOScheduler
-from apscheduler.triggers.date import DateTrigger
 
 from ..clock import VirtualClock
 from ..config import Config
@@ -27,12 +26,11 @@ from .fitting import fit_ready, needs_fit, run_fit
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .schedule import (
+    accelerated_nights,
     act_trigger,
     campaign_plan,
     drop_expired_requests,
-    next_act_time,
     next_campaign_night,
-    wall_time,
 )
 from .systemd import Notifier
 
@@ -102,8 +100,8 @@ class Daemon:
         self.scheduler: AsyncIOScheduler | None = None
         self._night_task: asyncio.Task | None = None
         self._fit_task: asyncio.Task | None = None
+        self._accelerated_task: asyncio.Task | None = None  # nights on a simulated clock
         self._connected = asyncio.Event()
-        self._accelerated = False
         # Held by a night and by the background restore: never both at once (a restore
         # marking an entry done while a night re-journals it would lose the owner's value).
         self._heat_pump_lock = asyncio.Lock()
@@ -221,6 +219,9 @@ class Daemon:
                               retry_s=1.0)
         if self.scheduler is not None and self.scheduler.running:
             self.scheduler.shutdown(wait=False)
+        if self._accelerated_task is not None:  # after the night above has finished
+            self._accelerated_task.cancel()
+            await asyncio.gather(self._accelerated_task, return_exceptions=True)
         if self._fit_task is not None:  # kill the fit subprocess and reap it
             self._fit_task.cancel()
             await asyncio.gather(self._fit_task, return_exceptions=True)
@@ -295,14 +296,12 @@ class Daemon:
     def _start_scheduler(self) -> None:
         self.scheduler = AsyncIOScheduler(timezone=self.cfg.timezone)
         grace = int(self.cfg.campaign.misfire_grace_s)
-        self._accelerated = not (self.clock.factor == 1.0
-                                 and abs(self.clock.epoch_s - self.clock.wall_epoch_s) < 1)
-        if not self._accelerated:
+        accelerated = not (self.clock.factor == 1.0
+                           and abs(self.clock.epoch_s - self.clock.wall_epoch_s) < 1)
+        if not accelerated:
             self.scheduler.add_job(self._night_job, act_trigger(self.cfg), id="imp-night",
                                    replace_existing=True, misfire_grace_time=grace,
                                    coalesce=True, max_instances=1)
-        else:
-            self._schedule_accelerated()
         self.scheduler.add_job(self._poll_requests, "interval", seconds=1.0,
                                id="trigger-poll", replace_existing=True, coalesce=True,
                                max_instances=1)
@@ -311,39 +310,30 @@ class Daemon:
                                id="command-poll", replace_existing=True, coalesce=True,
                                max_instances=1)
         self.scheduler.start()
-        job = self.scheduler.get_job("imp-night")
-        _LOG.info("next night job at %s (wall clock)", job.next_run_time if job else None)
-
-    def _schedule_accelerated(self) -> None:
-        """Simulated time: the same cron rule, evaluated on the virtual clock and mapped to
-        the wall-clock instant at which the virtual clock reaches it."""
-        act = next_act_time(self.cfg, self.clock.now() + timedelta(seconds=1))
-        self.scheduler.add_job(self._night_job, DateTrigger(run_date=wall_time(self.clock, act)),
-                               id="imp-night", replace_existing=True,
-                               misfire_grace_time=max(1, int(self.cfg.campaign.misfire_grace_s
-                                                             / self.clock.factor)),
-                               kwargs={"act": act})
+        if accelerated:
+            self._accelerated_task = asyncio.create_task(accelerated_nights(
+                self.cfg, self.clock, self._night_job), name="accelerated nights")
+            self._accelerated_task.add_done_callback(_log_crash)
+        else:
+            job = self.scheduler.get_job("imp-night")
+            _LOG.info("next night job at %s (wall clock)", job.next_run_time)
 
     async def _night_job(self, act: datetime | None = None) -> None:
-        try:
-            if self._night_task is not None and not self._night_task.done():
-                _LOG.warning("night job skipped: a night is still running")
-                return
-            if skip_tonight(self):  # a household's skip_tonight (issue 17)
-                self._status(self._idle_status() + "; tonight skipped on request")
-                return
-            act = act or self.clock.now()
-            if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
-                req = adaptive.tonight(self, act)
-            else:
-                req = next_campaign_night(self.store, self.cfg, act)
-            if req is None:
-                self._status(self._idle_status() + "; nothing to run tonight")
-                return
-            await self._run_night(req)
-        finally:
-            if self._accelerated and self.scheduler is not None and not self.stop.is_set():
-                self._schedule_accelerated()
+        if self._night_task is not None and not self._night_task.done():
+            _LOG.warning("night job skipped: a night is still running")
+            return
+        if skip_tonight(self):  # a household's skip_tonight (issue 17)
+            self._status(self._idle_status() + "; tonight skipped on request")
+            return
+        act = act or self.clock.now()
+        if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
+            req = adaptive.tonight(self, act)
+        else:
+            req = next_campaign_night(self.store, self.cfg, act)
+        if req is None:
+            self._status(self._idle_status() + "; nothing to run tonight")
+            return
+        await self._run_night(req)
 
     async def _poll_requests(self) -> None:
         if self.stop.is_set() or (self._night_task is not None and not self._night_task.done()):

@@ -40,34 +40,46 @@ _PROTOCOL_KEYS = ("setpoints_c", "constrained_setpoint_c", "band_k", "preheat_h"
 _PROTOCOL_MISSING = {"stop_at_t_min": False}
 
 
-def _models_ok(model_dir: Path) -> bool:
-    """Loadable models trained on the nights the gateway runs (bench/RESULTS.md "Issue 14:
-    one protocol"): models from a population of another protocol are retrained, not reused."""
+def _models_unfit(model_dir: Path, plant: str) -> str | None:
+    """Why the classifiers in ``model_dir`` cannot serve a demo on ``plant`` (None: reuse
+    them): models are reused only when trained on the population of the plant the demo
+    simulates (their dataset manifest's ``plant``), on the nights the gateway runs there
+    (bench/RESULTS.md "Issue 14: one protocol")."""
     try:
         from ..classifiers.saved import load_models
         from ..population.virtual_imp import ImpSimConfig
 
         _, meta = load_models(model_dir)
     except (InputError, OSError):
-        return False
-    imp = (meta.get("dataset") or {}).get("imp") or {}
-    want = ImpSimConfig.for_plant("realistic").as_dict()  # `impctl train`'s default plant
-    return all(imp.get(k, _PROTOCOL_MISSING.get(k)) == want[k] for k in _PROTOCOL_KEYS)
+        return "no loadable models"
+    dataset = meta.get("dataset") or {}
+    trained_for = dataset.get("plant")
+    if trained_for != plant:
+        return (f"they were trained for the {trained_for or 'unrecorded'} plant's population, "
+                f"the demo simulates the {plant} plant")
+    imp = dataset.get("imp") or {}
+    want = ImpSimConfig.for_plant(plant).as_dict()  # `impctl train --plant`'s nights
+    if not all(imp.get(k, _PROTOCOL_MISSING.get(k)) == want[k] for k in _PROTOCOL_KEYS):
+        return "they were trained on another night protocol"
+    return None
 
 
 def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):
     """Reuse cached classifiers if compatible, else train in a subprocess (other core)."""
-    if _models_ok(model_dir):
+    why = _models_unfit(model_dir, opts.plant)
+    if why is None:
         progress.train_state = "cached models reused"
         progress.line(f"classifiers: reusing the compatible models in {model_dir}")
         return None
+    if why != "no loadable models":  # never used silently: say why they are replaced
+        progress.line(f"classifiers: not reusing the models in {model_dir}: {why}")
     progress.train_state = "training"
     progress.line(f"classifiers: training on {opts.households} virtual households "
-                  f"(in a subprocess) → {model_dir}")
+                  f"of the {opts.plant} plant (in a subprocess) → {model_dir}")
     log = open(opts.out / "train.log", "w")  # noqa: SIM115 - closed when the process ends
     return subprocess.Popen(
         _cmd("train", "--households", str(opts.households), "--seed", str(opts.seed),
-             "--out", str(model_dir)),
+             "--plant", opts.plant, "--out", str(model_dir)),
         stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "OMP_NUM_THREADS": "1"})
 
 
@@ -104,6 +116,10 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     from ..classifiers.saved import default_model_dir
 
     model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
+    if not opts.model_dir and opts.plant != "realistic":
+        # Beside the default models (the realistic plant's, those `impctl fit` reads by
+        # default): an ideal-plant demo never replaces them.
+        model_dir = model_dir.with_name(f"{model_dir.name}-{opts.plant}")
     trainer = _start_training(opts, model_dir, progress)
     weather = demo_weather(opts)
     if opts.adaptive:

@@ -42,7 +42,9 @@ def _nights(text: str) -> tuple[int, int]:
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the weather and of the classifier training.")
 @click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Classifier cache [default: the per-user data dir].")
+              help="Classifier cache; models trained for another plant are named and "
+                   "retrained [default: the per-user data dir; models-iso beside it for "
+                   "--plant iso].")
 @click.option("--households", type=int, default=900, show_default=True,
               help="Virtual households for training when no cached models fit.")
 @click.option("--plant", type=click.Choice(["realistic", "iso"]), default="realistic",
