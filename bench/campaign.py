@@ -49,6 +49,10 @@ between strategies and targets):
   ``adaptive@8`` runs the plan continued for the houses whose intervals are still wide;
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
+  Since h18g, as ``daemon.schedule.retry_waits``: after an invalid constrained night the
+  plan's next normal night without a valid night runs first, the constrained retry after it
+  (on that date's simulated constrained night);
+* **fixed_next** — the fixed plan before h18g: an invalid night is repeated the next night.
 
 Forecast of a night: the mean outdoor temperature of the previous night (persistence: the
 daemon's own history); a night whose forecast is outside the band −25…8 °C is skipped, one
@@ -144,6 +148,8 @@ PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
 POLICY_RULES = {"min3": {"MIN_FLOOR_NIGHTS": 3}}
 #: the fixed plan stops after this many invalid scheduled nights (``daemon.schedule.gave_up``)
 MAX_INVALID = CampaignConfig().max_invalid_nights
+#: the fixed plan as the daemon runs it, and as it ran before h18g (retry the next night)
+FIXED_NAMES = ("fixed", "fixed_next")
 
 
 def base(strategy: str) -> str:
@@ -269,6 +275,8 @@ class Campaign:
         self.extras: list[dict] = []
         #: constrained nights run that the gateway ended too early to be valid
         self.short = 0
+        #: the fixed plan's entries (indices into FIXED) with a valid night
+        self.filled: set[int] = set()
 
     def fit_key(self) -> tuple | None:
         kinds = {VARIANTS[v][0] for _, v in self.chosen}
@@ -283,12 +291,18 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
     if c.done:
         return None
     name = base(c.strategy)
-    if name == "fixed":
-        n_valid = len(c.chosen)
-        if n_valid >= len(FIXED):
+    entry = None
+    if name in FIXED_NAMES:
+        todo = [e for e in range(len(FIXED)) if e not in c.filled]
+        if not todo:
             c.done, c.reason = True, "plan complete"
             return None
-        v = FIXED[n_valid]
+        if (name == "fixed" and c.history and c.history[-1].kind == "constrained"
+                and not c.history[-1].valid):
+            # daemon.schedule.retry_waits: the plan's next normal night first (stable sort)
+            todo.sort(key=lambda e: VARIANTS[FIXED[e]][0] != "normal")
+        entry = todo[0]
+        v = FIXED[entry]
     else:
         cands, outlook = [], None
         setpoints = (max(NORMAL_SETPOINTS),) if name == "warmest" else NORMAL_SETPOINTS
@@ -331,6 +345,8 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
         c.chosen.append((j, v))
+        if entry is not None:
+            c.filled.add(entry)
     elif name != "full" and sum(not x.valid for x in c.history) >= MAX_INVALID:
         # both modes give up as the daemon does (daemon.schedule.gave_up); "full" runs on
         c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
@@ -348,7 +364,7 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
         # the fixed plan fits once: complete, or given up (what valid nights it has)
         need = [key for c, key in zip(ran, keys, strict=True)
                 if key is not None and c.chosen
-                and (c.chosen[-1][0] == j if base(c.strategy) != "fixed"
+                and (c.chosen[-1][0] == j if base(c.strategy) not in FIXED_NAMES
                      else len(c.chosen) == len(FIXED) or c.done)]
         fits.ensure(need)
         for c in ran:
@@ -368,7 +384,7 @@ def run(target: Target, fits: Fits, forecast, first_t_out, k: int, households: l
                       f"{sum(not c.done for c in camps)} campaigns running", force=True)
     for c in camps:
         if not c.done:
-            c.reason = ("plan complete" if base(c.strategy) == "fixed"
+            c.reason = ("plan complete" if base(c.strategy) in FIXED_NAMES
                         and len(c.chosen) >= len(FIXED)
                         else "ran out of simulated nights")
     return camps

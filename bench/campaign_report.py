@@ -26,7 +26,8 @@ STRATEGIES = {"adaptive": "adaptive", "unreachable": "adaptive, stop when unreac
               "full": "plan continued, no early stop",
               "normal_after": "adaptive, plan then normal nights",
               "min3": "adaptive, precision limited from 3 nights",
-              "fixed": "fixed 2 + 3"}
+              "fixed": "fixed 2 + 3",
+              "fixed_next": "fixed 2 + 3, retry the next night"}
 
 
 def label(strategy: str) -> str:

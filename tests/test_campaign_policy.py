@@ -331,6 +331,11 @@ def test_plan_criterion_runs_a_prefix_of_the_fixed_plan():
     assert (d.kind, d.setpoint_c) == ("normal", 23.0) and "in a row" in d.reason
     d = decide([C, n22, bad_c, n23], [fit(3, 0.6, 0.6)], cands, Target(), **kw)
     assert (d.kind, d.setpoint_c) == ("constrained", 21.0)
+    # also when the first night was an invalid constrained one (no fit, every kind short),
+    # and after two in a row (the daemon's fixed plan since h18g waits the same way)
+    for history in ([bad_c], [bad_c, bad_c], [NightRecord("normal", 24.0, True), bad_c]):
+        d = decide(history, [], cands, Target(), **kw)
+        assert (d.action, d.kind) == ("run", "normal"), history
     # a kind short of min_each goes first
     d = decide([C, n22, n23], [fit(3, 0.04, 0.07)], cands, Target(min_each=2), **kw)
     assert (d.action, d.kind) == ("run", "constrained")

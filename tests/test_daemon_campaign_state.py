@@ -335,7 +335,8 @@ def test_fixed_campaign_stops_repeating_nights_the_house_cannot_make_valid(tmp_p
         failed(0, "schedule")
         failed(1, "trigger")
         req, _ = peek_next_night(store, cfg, act)
-        assert (req.kind, req.setpoint_c) == ("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)
+        # not stopped (one scheduled failure); the constrained retry waits for a normal night
+        assert (req.kind, req.setpoint_c) == ("normal", DEFAULT_SETPOINTS_C[0])
         failed(2, "schedule")
         assert peek_next_night(store, cfg, act) == (None, None)
         why = why_no_night(store, cfg)
@@ -376,3 +377,87 @@ def test_adaptive_campaign_stops_after_invalid_nights_too(tmp_path):
         state = adaptive.campaign_state(store, cfg)
     assert state.status == "stopped: too many invalid nights (max_invalid_nights)"
     assert state.reason == decision.reason
+
+
+def test_fixed_plan_retries_an_invalid_constrained_night_after_a_normal_one(tmp_path):
+    """Consecutive nights share the weather, so a constrained night that ended too short is not
+    retried the next night: the plan's next normal night without a valid night runs first,
+    then the retry. Otherwise the plan's order (its two constrained nights in a row), the
+    give-up rule and manual triggers are unchanged; status names the waiting retry."""
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text(f'state_dir = "{tmp_path}"\n[heatpump]\nhost = "192.168.1.50"\n'
+                        '[campaign]\nmode = "fixed"\nmax_invalid_nights = 3\n')
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "fixed", "max_invalid_nights": 3}})
+    act = T0 + timedelta(days=20)
+    c21 = DEFAULT_CONSTRAINED_SETPOINT_C
+    normals = [("normal", sp) for sp in DEFAULT_SETPOINTS_C]
+
+    def ran(store: Store, req, day: int, valid: bool) -> None:
+        """Run ``req`` as the daemon does: a night linked to its plan entry, then assessed."""
+        start = T0 + timedelta(days=day)
+        nid = store.create_night(req.kind, req.setpoint_c, start, start + timedelta(hours=7),
+                                 source="schedule")
+        store.set_night_state(nid, "done", ended=start + timedelta(hours=7 if valid else 3))
+        store.assess_night(nid, valid, [] if valid else
+                           ["only 1.4 h of data after the emission lag (< 3 h)"])
+        store.link_campaign(req.campaign_seq, nid)
+
+    def nxt(store: Store):
+        req, request_id = peek_next_night(store, cfg, act)
+        assert request_id is None and req.source == "schedule"
+        return req
+
+    with Store(cfg.db_path) as store:
+        store.set_campaign(campaign_plan(cfg))
+        first = nxt(store)
+        assert (first.kind, first.setpoint_c, first.campaign_seq) == ("constrained", c21, 0)
+        ran(store, first, 0, valid=False)
+        # not the same cold spell again: the first normal night of the plan comes first
+        second = nxt(store)
+        assert (second.kind, second.setpoint_c, second.campaign_seq) == (*normals[0], 2)
+        status = json.loads(run_cli("status", "--json", "--config", str(cfg_path),
+                                    timeout_s=30).stdout)
+        assert status["next_night"]["kind"] == "normal"
+        assert status["next_night"]["retry_waits"] is True
+        assert [e["valid"] for e in status["campaign"]["entries"]] == [False] + [None] * 4
+        text = run_cli("status", "--config", str(cfg_path), timeout_s=30).stdout
+        assert ("next:      normal night (held at 22 °C, campaign; the invalid constrained "
+                "night is retried after a normal one)") in text
+        # a manual --tonight request still comes first
+        store.add_request("constrained", None, "tonight")
+        req, request_id = peek_next_night(store, cfg, act)
+        assert req.source == "trigger" and request_id is not None
+        store.close_request(request_id, "cancelled")
+        ran(store, second, 1, valid=True)
+        # after the normal night: the retry, then the plan's second constrained night in a row
+        # (two valid constrained nights in a row are the plan's order, unchanged)
+        third = nxt(store)
+        assert (third.kind, third.campaign_seq) == ("constrained", 0)
+        ran(store, third, 2, valid=True)
+        fourth = nxt(store)
+        assert (fourth.kind, fourth.campaign_seq) == ("constrained", 1)
+        ran(store, fourth, 3, valid=False)
+        fifth = nxt(store)
+        assert (fifth.kind, fifth.setpoint_c, fifth.campaign_seq) == (*normals[1], 3)
+        ran(store, fifth, 4, valid=True)
+        sixth = nxt(store)   # after the normal night: the constrained retry
+        assert (sixth.kind, sixth.campaign_seq) == ("constrained", 1)
+        # the give-up rule still counts every invalid scheduled night: this is the third
+        ran(store, sixth, 5, valid=False)
+        assert peek_next_night(store, cfg, act) == (None, None)
+        assert why_no_night(store, cfg).startswith("campaign stopped: 3 scheduled nights")
+
+
+def test_fixed_plan_retries_at_once_when_no_normal_night_is_left(tmp_path):
+    """With every normal night of the plan valid, an invalid constrained night is retried the
+    next night (the plan cannot wait for a normal night it no longer has)."""
+    cfg = config_from_mapping({**BASE, "state_dir": str(tmp_path), "campaign": {
+        "mode": "fixed", "constrained_nights": 1, "normal_setpoints_c": [22.0]}})
+    act = T0 + timedelta(days=20)
+    with Store(cfg.db_path) as store:
+        store.set_campaign(campaign_plan(cfg))
+        store.link_campaign(1, _night(store, "normal", 0, -2.0))
+        _short_night(store, 1, "schedule", "only 1.4 h of data after the emission lag", "done")
+        req, _ = peek_next_night(store, cfg, act)
+        assert (req.kind, req.campaign_seq) == ("constrained", 0)

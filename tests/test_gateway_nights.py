@@ -131,3 +131,18 @@ def test_a_campaign_repeats_invalid_constrained_nights_and_keeps_the_first_two_v
     assert len(nights[0].time_s) == 0                  # no samples: never switched off
     kept, _, skipped = prepare_nights(nights[:3], min_hours=MIN_NIGHT_H)
     assert not kept and len(skipped) == 3
+
+
+def test_a_schedule_in_a_campaign_s_own_order_keeps_each_date_s_weather():
+    """``imp_schedule(order=...)``: the nights in the order given (a campaign's own, e.g. its
+    constrained retries after normal nights), each date with the weather it has in any other
+    order of the same length; an order that does not hold the counts is refused."""
+    order = ["constrained", "normal", "constrained", "normal", "constrained"]
+    alt = imp_schedule(3, seed=4, n_constrained=3, n_normal=2, order=order)
+    every = imp_schedule(3, seed=4, n_constrained=5, n_normal=0, order=["constrained"] * 5)
+    assert [w[1] for w in alt.windows] == order
+    assert [w[4] for w in alt.windows if w[1] == "normal"] == [22.0, 23.0]
+    assert np.array_equal(alt.t_out_c, every.t_out_c)
+    assert [w[2:4] for w in alt.windows] == [w[2:4] for w in every.windows]
+    with pytest.raises(ValueError, match="does not hold 2 constrained"):
+        imp_schedule(3, seed=4, n_constrained=2, n_normal=2, order=order[:4] + ["normal"])

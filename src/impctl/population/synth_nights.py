@@ -23,6 +23,7 @@ power sample × (1 + ``power_noise``·N(0, 1)).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,6 +95,7 @@ def imp_schedule(
     constrained_preheat_h: float = DEFAULT_PREHEAT_H,
     normal_preheat_h: float = DEFAULT_PREHEAT_H,
     n_spare_constrained: int = 0,
+    order: Sequence[str] | None = None,
 ) -> SynthSchedule:
     """Weather and setpoints for ``n_houses`` houses (own weather per house, seeded).
 
@@ -111,8 +113,17 @@ def imp_schedule(
 
     ``n_spare_constrained``: that many more constrained nights after the plan (the gateway
     repeats an invalid constrained night; the planned nights and their weather are unchanged).
+
+    ``order``: the nights' kinds in night order instead (e.g. a campaign's own order;
+    ``n_constrained`` and ``n_normal`` must count them). Night j's weather is the same date's
+    in any order: only the schedule's length changes the daily amplitudes.
     """
-    kinds = night_plan(n_constrained, n_normal) + ["constrained"] * n_spare_constrained
+    kinds = (list(order) if order is not None
+             else night_plan(n_constrained, n_normal) + ["constrained"] * n_spare_constrained)
+    if order is not None and (kinds.count("constrained"), kinds.count("normal")) != (
+            n_constrained, n_normal) or set(kinds) - {"constrained", "normal"}:
+        raise ValueError(f"order {kinds!r} does not hold {n_constrained} constrained and "
+                         f"{n_normal} normal nights")
     days = spinup_days + len(kinds) + 1
     series = [winter_weather(start, days, sim_step_s, seed=seed * 1000 + h, tz=tz)
               for h in range(n_houses)]

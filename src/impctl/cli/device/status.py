@@ -112,7 +112,7 @@ def _finite(x: float) -> float | None:
 
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
-    from ...daemon.schedule import next_act_time, peek_next_night, why_no_night
+    from ...daemon.schedule import next_act_time, peek_next_night, retry_waits, why_no_night
     from ...daemon.service import clock_from_config
 
     act = next_act_time(cfg, clock_from_config(cfg).now())
@@ -122,7 +122,8 @@ def _next_night(store, cfg) -> dict | None:
     return {"preheat_start": act, "kind": req.kind, "setpoint_c": req.setpoint_c,
             "t_min_c": req.t_min_c, "t_max_c": req.t_max_c, "window_start": req.window_start,
             "window_end": req.window_end, "source": req.source, "request": request_id,
-            "campaign_seq": req.campaign_seq}
+            "campaign_seq": req.campaign_seq,
+            "retry_waits": req.source == "schedule" and retry_waits(store)}
 
 
 def _value(v: float | None, unit: str, spec: str = ".1f") -> str:
@@ -215,6 +216,8 @@ def format_status(st: dict, tz: str = "UTC") -> str:
             what = (f"T_max {nxt['t_max_c']:g} → T_min {nxt['t_min_c']:g} °C"
                     if nxt["kind"] == "constrained" else f"held at {nxt['setpoint_c']:g} °C")
             origin = (f"manual request {nxt['request']}" if nxt["request"] is not None
+                      else "campaign; the invalid constrained night is retried after a "
+                      "normal one" if nxt.get("retry_waits") and nxt["kind"] == "normal"
                       else "campaign")
             lines.append(f"next:      {nxt['kind']} night ({what}, {origin}), window "
                          f"{nxt['window_start'].astimezone(zone):%Y-%m-%d %H:%M}–"
