@@ -77,4 +77,10 @@ def test_the_weights_are_in_the_json(fits):
     pair, noisy_id, _ = fits[0]
     out = fit_to_dict(pair["night"])["fit"]
     assert out["noise"] == "night"
-    assert out["sigma_per_night"][noisy_id] == pytest.approx(pair["night"].sigma_night_[noisy_id])
+    # the noisy night is a held one: its σ is a power [W], named so
+    assert out["sigma_per_night_w"][noisy_id] == pytest.approx(
+        pair["night"].sigma_night_[noisy_id])
+    assert noisy_id not in out["sigma_per_night_k"]
+    kinds = {n.night_id: n.kind for n in pair["night"].nights_}
+    assert set(out["sigma_per_night_k"]) == {i for i, k in kinds.items() if k == "constrained"}
+    assert set(out["sigma_per_night_w"]) == {i for i, k in kinds.items() if k != "constrained"}

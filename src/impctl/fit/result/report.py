@@ -151,9 +151,10 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
                 "timestamps": fit.timestamps, "emission_lag_h": fit.emission_lag_h,
                 "settle_h": getattr(fit, "settle_h", 0.0), "starts": fit.n_starts,
                 "iterations": fit.n_iter_, "loss": fit.loss_, "sigma": fit.sigma_,
-                # the noise model and each night's σ (K constrained, W held): the weights
+                # the noise model and each night's σ, the weights: a unit per key, so K on
+                # constrained nights and W on held nights are never read as one column
                 "noise": getattr(fit, "noise", "kind"),
-                "sigma_per_night": getattr(fit, "sigma_night_", None),
+                **_sigma_per_night(fit),
                 "time_s": fit.fit_time_s_},
         "skipped": [{"night_id": i, "reason": r} for i, r in fit.skipped_],
         "gaps": [g.as_dict() for g in getattr(fit, "gaps_", [])],
@@ -228,3 +229,12 @@ def flexibility_block(summary: dict) -> dict:
         return flexibility_of_fit(summary).block()
     except InputError:
         return dict.fromkeys(BLOCK_KEYS)
+
+
+def _sigma_per_night(fit) -> dict:
+    """``sigma_per_night_k`` (constrained nights, T_air residuals [K]) and
+    ``sigma_per_night_w`` (held nights, heat-power residuals [W])."""
+    sigma = getattr(fit, "sigma_night_", None) or {}
+    kinds = {n.night_id: n.kind for n in fit.nights_}
+    return {"sigma_per_night_k": {i: v for i, v in sigma.items() if kinds.get(i) == "constrained"},
+            "sigma_per_night_w": {i: v for i, v in sigma.items() if kinds.get(i) != "constrained"}}
