@@ -87,3 +87,33 @@ def test_an_unused_group_label_does_not_keep_the_optimiser_going():
     # a household of a merged batch stops when all its groups are done, the others go on
     units = torch.tensor([0, 0, 1])
     assert lm._units_done(torch.tensor([True, True, False]), units).tolist() == [True, False]
+
+
+def test_households_with_their_own_priors_still_share_every_call(fleet, monkeypatch):
+    """Each household's population prior is tempered by its own residual autocorrelation, so
+    no two are equal: the merged call carries one prior per household (prior.PriorSlices), and
+    every optimiser round of the two 15-min households is one call — as many calls as the
+    household that needs the most makes alone — with each household's single-fit numbers."""
+    nights, ranges = fleet
+    calls = []
+    real = lm.levenberg_marquardt
+
+    def counted(ctx, rows, *a, **kw):
+        calls.append(rows.n_problems)
+        return real(ctx, rows, *a, **kw)
+
+    monkeypatch.setattr(lm, "levenberg_marquardt", counted)
+    alone, per_house = [], []
+    for n, r in zip(nights[:2], ranges[:2], strict=True):
+        calls.clear()
+        alone.append(NightFit(**PARAMS).fit(n, r))
+        per_house.append(len(calls))
+    assert alone[0].prior_["tempering"] != alone[1].prior_["tempering"]
+    calls.clear()
+    results, stats = fit_households(nights[:2], ranges[:2], **PARAMS)
+    assert stats.merged_calls == len(calls) == max(per_house)
+    for a, b in zip(alone, results, strict=True):
+        for key in ("hlc", "c_m", "tau"):
+            assert b.lumped_[key].value == pytest.approx(a.lumped_[key].value, rel=1e-4)
+        assert b.prior_["parameters"]["c_m"]["posterior_to_prior_sd"] == pytest.approx(
+            a.prior_["parameters"]["c_m"]["posterior_to_prior_sd"], rel=1e-3)

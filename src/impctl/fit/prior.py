@@ -160,13 +160,52 @@ def _box_moments(prior: PopulationPrior, key: tuple[float, ...]) -> tuple[np.nda
     return m, np.sqrt(np.maximum(w @ (q[:, cols] - m) ** 2, 1e-8))
 
 
-def penalty(prior: PopulationPrior | None, u: torch.Tensor, box: torch.Tensor,
+@dataclass(frozen=True)
+class PriorSlices:
+    """The priors of several households' problems merged into one optimiser call (the fleet's
+    batches, :mod:`.optim.batch`): ``priors`` holds each household's prior (or None) and
+    ``owner`` (P,) the household of each problem of the merged call. Each household's prior is
+    tempered by its own residual autocorrelation, so equal priors are the exception: without
+    this, every refit of a batch would be solved household by household."""
+
+    priors: tuple[PopulationPrior | None, ...]
+    owner: torch.Tensor
+
+    def take(self, problems: torch.Tensor) -> PriorSlices:
+        """The priors of the problems ``problems`` (ids), renumbered 0… as the optimiser does
+        when it evaluates only the problems still running."""
+        return PriorSlices(self.priors, self.owner[problems])
+
+    def _parts(self):
+        for j, p in enumerate(self.priors):
+            sel = (self.owner == j).nonzero()[:, 0]
+            if p is not None and len(sel):
+                yield p, sel
+
+    def residuals(self, u: torch.Tensor, box: torch.Tensor, ach_vent: float,
+                  ach_infl: float) -> torch.Tensor:
+        """As :meth:`PopulationPrior.residuals`; zero for problems without a prior."""
+        m = max((len(p.quantities) for p in self.priors if p is not None), default=0)
+        out = torch.zeros(len(u), m, dtype=u.dtype)
+        for p, sel in self._parts():
+            out[sel, :len(p.quantities)] = p.residuals(u[sel], box[sel], ach_vent, ach_infl)
+        return out
+
+
+def penalty(prior: PopulationPrior | PriorSlices | None, u: torch.Tensor, box: torch.Tensor,
             ach_vent: float, ach_infl: float
             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
     """The prior's share of the Gauss–Newton normal equations at ``u`` (P, n):
     (loss Σr² (P,), Jᵀ J (P, n, n), Jᵀ r (P, n)); None without a prior."""
     if prior is None:
         return None
+    if isinstance(prior, PriorSlices):
+        n = u.shape[1]
+        loss, h, g = (torch.zeros(len(u), dtype=u.dtype), torch.zeros(len(u), n, n, dtype=u.dtype),
+                      torch.zeros(len(u), n, dtype=u.dtype))
+        for p, sel in prior._parts():
+            loss[sel], h[sel], g[sel] = penalty(p, u[sel], box[sel], ach_vent, ach_infl)
+        return loss, h, g
     with torch.enable_grad():
         uu = u.detach().clone().requires_grad_(True)
         r = prior.residuals(uu, box, ach_vent, ach_infl)

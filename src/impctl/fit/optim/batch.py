@@ -32,6 +32,7 @@ import torch
 from ...imp.night import NightSamples
 from ..estimator import NightFit, stop_units
 from ..ode.packing import PackedNights
+from ..prior import PriorSlices
 from . import lm
 from ._alloc import retain_freed_memory
 
@@ -113,7 +114,8 @@ def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
 
 
 def _settings(p: _Problem) -> tuple:
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.prior, p.ctx.solver, p.max_iter,
+    # not the prior: each problem keeps its own in the merged call (prior.PriorSlices)
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
             p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
             p.ctx.packed.power_ok is None, p.ctx.packed.emitter_lag)
@@ -163,11 +165,10 @@ def _solve_group(group: list[_Problem]) -> None:
     packed = _merge_packed([p.ctx.packed for p in group])
     k = packed.grid_s.shape[1]
     first = group[0].ctx
-    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver,
-                     first.prior)
-    problem, night, groups, units = [], [], [], []
+    problem, night, groups, units, owner = [], [], [], [], []
     p_off = n_off = g_off = u_off = 0
-    for p in group:
+    for i, p in enumerate(group):
+        owner.append(torch.full((p.rows.n_problems,), i, dtype=torch.long))
         problem.append(p.rows.problem + p_off)
         night.append(p.rows.night + n_off)
         groups.append(p.groups + g_off)
@@ -176,6 +177,9 @@ def _solve_group(group: list[_Problem]) -> None:
         p_off += p.rows.n_problems
         n_off += p.ctx.packed.n_nights
         g_off += int(p.groups.max()) + 1
+    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver,
+                     PriorSlices(tuple(p.ctx.prior for p in group), torch.cat(owner))
+                     if any(p.ctx.prior is not None for p in group) else None)
     rows = lm.Rows(
         torch.cat(problem), torch.cat(night), torch.cat([p.rows.row_type for p in group]),
         torch.cat([_pad(p.rows.phi_w, k) for p in group]),

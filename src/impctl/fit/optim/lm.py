@@ -23,7 +23,7 @@ their rows and their residuals: :mod:`.problem`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import torch
 
@@ -183,6 +183,8 @@ def _evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
     if not bool(active.any()):
         return out
     sub, pk, rk = _take(rows, active)
+    if hasattr(ctx.prior, "take"):   # a merged batch's per-problem priors follow the renumbering
+        ctx = replace(ctx, prior=ctx.prior.take(pk))
     new = _normal_equations(ctx, sub, u[pk], t_m0[rk])
     out.loss[pk], out.h[pk], out.g[pk] = new.loss, new.h, new.g
     out.c[rk], out.d[rk], out.gm[rk] = new.c, new.d, new.gm
