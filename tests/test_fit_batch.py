@@ -117,3 +117,23 @@ def test_households_with_their_own_priors_still_share_every_call(fleet, monkeypa
             assert b.lumped_[key].value == pytest.approx(a.lumped_[key].value, rel=1e-4)
         assert b.prior_["parameters"]["c_m"]["posterior_to_prior_sd"] == pytest.approx(
             a.prior_["parameters"]["c_m"]["posterior_to_prior_sd"], rel=1e-3)
+
+
+def test_each_households_class_probabilities_reach_its_prior(fleet):
+    """The fleet passes every household's class probabilities to its population prior, as
+    ``impctl fit`` does (prior.with_class_probabilities): a household fitted in a batch gets the
+    prior and the numbers of its single fit with that mixture, not the unweighted box's."""
+    from impctl.fit.prior import PopulationPrior
+
+    nights, _ = fleet
+    probs = {"c_f": {"0.8-1.65": 0.9, "1.65-3.7": 0.1}}
+    alone = NightFit(**PARAMS, prior=PopulationPrior.of_labels(probs)).fit(nights[1], None)
+    plain = NightFit(**PARAMS).fit(nights[1], None)
+    results, _ = fit_households([nights[1], nights[0]], [None, None], [probs, None], **PARAMS)
+    got, other = results
+    assert got.prior_["class_probabilities"] == {"c_f": [[0.8, 1.65, 0.9], [1.65, 3.7, 0.1]]}
+    assert other.prior_["class_probabilities"] is None
+    centre = {f: f.prior_["parameters"]["c_m"]["centre"] for f in (alone, plain, got)}
+    assert centre[got] == pytest.approx(centre[alone], rel=1e-9)
+    assert abs(centre[plain] / centre[alone] - 1) > 0.02   # the mixture moved the prior
+    assert got.lumped_["c_m"].value == pytest.approx(alone.lumped_["c_m"].value, rel=1e-4)

@@ -160,6 +160,16 @@ def _box_moments(prior: PopulationPrior, key: tuple[float, ...]) -> tuple[np.nda
     return m, np.sqrt(np.maximum(w @ (q[:, cols] - m) ** 2, 1e-8))
 
 
+def with_class_probabilities(prior, probabilities: dict | None):
+    """The estimator's ``prior`` setting for a household the classifiers gave class
+    probabilities ``{name: {"lo-hi": p}}``: "population" becomes the mixture
+    :meth:`PopulationPrior.of_labels`; anything else (None, a given prior) is kept. One rule
+    for ``impctl fit`` and the fleet, so a household gets the same prior from both."""
+    if prior == "population" and probabilities:
+        return PopulationPrior.of_labels(probabilities)
+    return prior
+
+
 @dataclass(frozen=True)
 class PriorSlices:
     """The priors of several households' problems merged into one optimiser call (the fleet's

@@ -137,9 +137,9 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
                        error=" and ".join(_NEEDS[k] for k in missing)
                        + (f" (skipped {why})" if why else ""))
             continue
-        classes, ranges = _classify(nights, settings)
+        classes, ranges, probabilities = _classify(nights, settings)
         row.update({f"{k}_class": v for k, v in classes.items()})
-        todo.append((household, nights, ranges, row))
+        todo.append((household, nights, ranges, probabilities, row))
     if todo:
         _fit_todo(todo, params)
     # The batched fit keeps its freed heap during the batch (fewer page faults); once its
@@ -160,13 +160,15 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     return [rows[s.household] for s in sources]
 
 
-def _fit_todo(todo: list[tuple[str, list, dict | None, dict]], params: dict) -> None:
+def _fit_todo(todo: list[tuple[str, list, dict | None, dict | None, dict]],
+              params: dict) -> None:
     """Fit the households of ``todo`` together and fill in their rows (nothing else is kept)."""
     from ..fit.optim.batch import fit_households
 
-    results, _ = fit_households([t[1] for t in todo], [t[2] for t in todo], **params)
+    results, _ = fit_households([t[1] for t in todo], [t[2] for t in todo],
+                                [t[3] for t in todo], **params)
     fitted = []
-    for (_, _, _, row), res in zip(todo, results, strict=True):
+    for (*_, row), res in zip(todo, results, strict=True):
         if isinstance(res, InputError):
             row.update(status="insufficient", reason="no usable night", error=str(res))
         elif isinstance(res, BaseException):
@@ -178,18 +180,20 @@ def _fit_todo(todo: list[tuple[str, list, dict | None, dict]], params: dict) -> 
     _flexibility(fitted)
 
 
-def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None]:
-    """Class labels and ranges (None: whole prior ranges, as ``impctl fit`` without models)."""
+def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None, dict | None]:
+    """Class labels, ranges (None: whole prior ranges, as ``impctl fit`` without models) and
+    the class probabilities the fit's population prior mixes (None without classes)."""
     if settings.model_dir == PRIOR:
-        return {}, None
+        return {}, None, None
     from ..classifiers.saved import classify_with
 
     try:
         result = classify_with(nights, *models(settings.model_dir))
     except InputError:   # no night at a setpoint the classifiers know: the prior, as impctl fit
-        return {}, None
+        return {}, None, None
     return ({k: r.label for k, r in result.items()},
-            {k: tuple(r.range) for k, r in result.items()})
+            {k: tuple(r.range) for k, r in result.items()},
+            {k: dict(r.probabilities) for k, r in result.items()})
 
 
 def _fill(row: dict, fit) -> None:

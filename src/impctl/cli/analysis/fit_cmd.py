@@ -144,11 +144,10 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
                f"constrained) …", err=True)
     probabilities = {n: c["probabilities"] for n, c in classes.items() if c.get("probabilities")}
-    if estimator.prior == "population" and probabilities:
-        from ...fit.prior import PopulationPrior
+    from ...fit.prior import with_class_probabilities
 
-        # the population prior mixes the classes by the classifiers' probabilities
-        estimator.prior = PopulationPrior.of_labels(probabilities)
+    # the population prior mixes the classes by the classifiers' probabilities
+    estimator.prior = with_class_probabilities(estimator.prior, probabilities)
     with _ticking("fitting"):
         estimator.fit(nights, ranges)
     summary = fit_to_dict(estimator, classes, notes)

@@ -32,7 +32,7 @@ import torch
 from ...imp.night import NightSamples
 from ..estimator import NightFit, stop_units
 from ..ode.packing import PackedNights
-from ..prior import PriorSlices
+from ..prior import PriorSlices, with_class_probabilities
 from . import lm
 from ._alloc import retain_freed_memory
 
@@ -226,6 +226,7 @@ class BatchStats:
 def fit_households(
     nights: Sequence[Sequence[NightSamples]],
     ranges: Sequence[dict[str, tuple[float, float]] | None],
+    probabilities: Sequence[dict | None] | None = None,
     **params,
 ) -> tuple[list[NightFit | BaseException], BatchStats]:
     """Fit many households together; per household the result of ``NightFit(**params).fit``.
@@ -234,6 +235,9 @@ def fit_households(
     ----------
     nights : per household, its nights (as for :meth:`NightFit.fit`)
     ranges : per household, the class ranges of floor_area, c_f, u_walls (or None: prior)
+    probabilities : per household, the classifiers' class probabilities (or None): the
+        population prior mixes the classes by them, as ``impctl fit`` does
+        (:func:`~impctl.fit.prior.with_class_probabilities`)
     **params : NightFit constructor parameters, the same for every household
 
     Returns
@@ -253,6 +257,8 @@ def fit_households(
 
     def run(i: int) -> None:
         est = _BatchFit(**params)
+        if probabilities is not None:
+            est.prior = with_class_probabilities(est.prior, probabilities[i])
         est._rendezvous = rendezvous
         try:
             results[i] = est.fit(nights[i], ranges[i])
