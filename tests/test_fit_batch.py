@@ -34,8 +34,9 @@ def fleet():
     return nights, ranges
 
 
-def test_batch_matches_single_fits_with_fewer_optimiser_calls(fleet, monkeypatch):
-    nights, ranges = fleet
+@pytest.fixture
+def lm_calls(monkeypatch):
+    """The problem count of every Levenberg–Marquardt call made while the test runs."""
     calls = []
     real = lm.levenberg_marquardt
 
@@ -44,6 +45,12 @@ def test_batch_matches_single_fits_with_fewer_optimiser_calls(fleet, monkeypatch
         return real(ctx, rows, *a, **kw)
 
     monkeypatch.setattr(lm, "levenberg_marquardt", counted)
+    return calls
+
+
+def test_batch_matches_single_fits_with_fewer_optimiser_calls(fleet, lm_calls):
+    nights, ranges = fleet
+    calls = lm_calls
     alone = [NightFit(**PARAMS).fit(n, r) for n, r in zip(nights, ranges, strict=True)]
     alone_calls, alone_largest = len(calls), max(calls)
     calls.clear()
@@ -89,20 +96,13 @@ def test_an_unused_group_label_does_not_keep_the_optimiser_going():
     assert lm._units_done(torch.tensor([True, True, False]), units).tolist() == [True, False]
 
 
-def test_households_with_their_own_priors_still_share_every_call(fleet, monkeypatch):
+def test_households_with_their_own_priors_still_share_every_call(fleet, lm_calls):
     """Each household's population prior is tempered by its own residual autocorrelation, so
     no two are equal: the merged call carries one prior per household (prior.PriorSlices), and
     every optimiser round of the two 15-min households is one call — as many calls as the
     household that needs the most makes alone — with each household's single-fit numbers."""
     nights, ranges = fleet
-    calls = []
-    real = lm.levenberg_marquardt
-
-    def counted(ctx, rows, *a, **kw):
-        calls.append(rows.n_problems)
-        return real(ctx, rows, *a, **kw)
-
-    monkeypatch.setattr(lm, "levenberg_marquardt", counted)
+    calls = lm_calls
     alone, per_house = [], []
     for n, r in zip(nights[:2], ranges[:2], strict=True):
         calls.clear()
