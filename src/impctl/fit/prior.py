@@ -176,7 +176,8 @@ class PriorSlices:
     batches, :mod:`.optim.batch`): ``priors`` holds each household's prior (or None) and
     ``owner`` (P,) the household of each problem of the merged call. Each household's prior is
     tempered by its own residual autocorrelation, so equal priors are the exception: without
-    this, every refit of a batch would be solved household by household."""
+    this, every refit of a batch would be solved household by household. Only the
+    Levenberg–Marquardt path takes it (:func:`penalty`); a batch's Adam fits run alone."""
 
     priors: tuple[PopulationPrior | None, ...]
     owner: torch.Tensor
@@ -191,15 +192,6 @@ class PriorSlices:
             sel = (self.owner == j).nonzero()[:, 0]
             if p is not None and len(sel):
                 yield p, sel
-
-    def residuals(self, u: torch.Tensor, box: torch.Tensor, ach_vent: float,
-                  ach_infl: float) -> torch.Tensor:
-        """As :meth:`PopulationPrior.residuals`; zero for problems without a prior."""
-        m = max((len(p.quantities) for p in self.priors if p is not None), default=0)
-        out = torch.zeros(len(u), m, dtype=u.dtype)
-        for p, sel in self._parts():
-            out[sel, :len(p.quantities)] = p.residuals(u[sel], box[sel], ach_vent, ach_infl)
-        return out
 
 
 def penalty(prior: PopulationPrior | PriorSlices | None, u: torch.Tensor, box: torch.Tensor,
