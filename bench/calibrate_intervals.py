@@ -1,10 +1,10 @@
 """Calibrate the fit's model-error share on the realistic virtual population (and explain misses).
 
-Run (regenerates ``src/impctl/fit/intervals/model_error.json``; 1,520 fits in about 5 min on
+Run (regenerates ``src/impctl/fit/intervals/model_error.json``; about 1,350 fits in about 5 min on
 one core, batched, a line per batch of 16)::
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/calibrate_intervals.py [--households 160]
-        [--seed 31415] [--steps 300:160,3600:80] [--sequences c.n0,c.n0.n-1,…]
+        [--seed 31415] [--steps 300:160,3600:160] [--sequences c.n0,c.n0.n-1,…]
 
 Households: ``sample_households(N, seed)`` with realism ``sample_params(N, seed)`` on the
 realistic plant, each with the bench's IMP protocol (2 constrained + 6 normal nights, 5-minute
@@ -295,7 +295,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=160)
     ap.add_argument("--seed", type=int, default=31415)
-    ap.add_argument("--steps", default="300:160,3600:80",
+    ap.add_argument("--steps", default="300:160,3600:160",
                     help="sample steps [s] and how many of the households each, STEP:N,…")
     ap.add_argument("--sequences", default=SEQUENCES,
                     help="campaign night sequences fitted too at the first step (the "
