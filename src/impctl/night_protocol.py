@@ -34,7 +34,7 @@ Q_ON_W = 100.0
 #: (``NightFit(min_night_h)``) and the bench's gateway nights read it (issue 14, branch h14w).
 MIN_NIGHT_H = 3.0
 #: How a constrained night ends on the gateway before T_min (:class:`impctl.controller.plan.
-#: NightPolicy`, mirrored by :func:`impctl.population.synth_nights.run_schedule_plant`): the
+#: NightPolicy`, mirrored by the simulations; the rule itself is :func:`anticipates_t_min`): the
 #: least-squares trend of T_air over the last TREND_WINDOW_S [s] (at least MIN_TREND_SPAN_S)
 #: reaches T_min within ANTICIPATE_S [s] while T_air is within ANTICIPATE_WITHIN_K [K] of it.
 ANTICIPATE_S = 1800.0
@@ -44,3 +44,17 @@ MIN_TREND_SPAN_S = 600.0
 #: A constrained night switches the heating off only if T_air is this far above T_min at the
 #: window's start [K]; otherwise the heating is left on and the night is not valid.
 SWITCH_OFF_MIN_K = 1.5
+
+
+def anticipates_t_min(t_air_c, slope_k_per_s, t_min_c, within_k=ANTICIPATE_WITHIN_K,
+                      ahead_s=ANTICIPATE_S):
+    """Whether a constrained night ends before T_min: T_air [°C] within ``within_k`` [K] of
+    T_min [°C] and its trend ``slope_k_per_s`` [K/s] reaching T_min within ``ahead_s`` [s].
+
+    The one rule for the gateway (:func:`impctl.controller.plan.anticipated_end`) and the
+    simulated nights (:func:`impctl.population.gateway_nights.gateway_end`, the virtual
+    population's plant); each computes the trend where it has its readings. Floats give a bool,
+    numpy arrays an element-wise array (hence ``&``, not ``and``).
+    """
+    return ((t_air_c <= t_min_c + within_k) & (slope_k_per_s < 0)
+            & (t_air_c + slope_k_per_s * ahead_s <= t_min_c))

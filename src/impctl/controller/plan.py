@@ -134,7 +134,8 @@ def anticipated_end(trend: list[tuple[float, float]], policy: NightPolicy,
     mean_v = sum(v for _, v in trend) / len(trend)
     slope = (sum((t - mean_t) * (v - mean_v) for t, v in trend)
              / sum((t - mean_t) ** 2 for t, _ in trend))  # K/s
-    if slope < 0 and t_air + slope * policy.anticipate_s <= t_min_c:
+    if _protocol.anticipates_t_min(t_air, slope, t_min_c, policy.anticipate_within_k,
+                                   policy.anticipate_s):
         return (f"T_min {t_min_c:.1f} °C anticipated: T_air {t_air:.1f} °C falling "
                 f"{-slope * 3600:.2f} K/h")
     return None

@@ -20,12 +20,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..night_protocol import (
-    ANTICIPATE_S,
-    ANTICIPATE_WITHIN_K,
     MIN_NIGHT_H,
     MIN_TREND_SPAN_S,
     SWITCH_OFF_MIN_K,
     TREND_WINDOW_S,
+    anticipates_t_min,
 )
 
 if TYPE_CHECKING:
@@ -68,8 +67,7 @@ def gateway_end(t_air_c: np.ndarray, dt_s: float, t_min_c: float, lag: int,
         den = s_tt - s_t * s_t / cnt
         with np.errstate(invalid="ignore", divide="ignore"):
             slope = np.where(den > 0, (s_tv - s_t * s_v / cnt) / den, 0.0) / dt_s   # K/s
-        end |= (((k - first) * dt_s >= MIN_TREND_SPAN_S) & (v <= t_min_c + ANTICIPATE_WITHIN_K)
-                & (slope < 0) & (v + slope * ANTICIPATE_S <= t_min_c))
+        end |= ((k - first) * dt_s >= MIN_TREND_SPAN_S) & anticipates_t_min(v, slope, t_min_c)
     end[:lag] = False
     stop = np.where(end.any(axis=0), end.argmax(axis=0), n)
     start = v[0] if t_start_c is None else np.asarray(t_start_c, float)

@@ -34,7 +34,7 @@ import pandas as pd
 from ..errors import InputError
 from ..imp import features_from_arrays
 from ..model import HouseParameters
-from ..night_protocol import MIN_TREND_SPAN_S
+from ..night_protocol import MIN_TREND_SPAN_S, anticipates_t_min
 from ..plant import PlantCore, PlantParams
 from ..plant.building.envelope import NodeState
 from ..plant.building.gains import internal_gains_w, solar_gains_w
@@ -94,8 +94,8 @@ class _GatewayStop:
             t = order * PLANT_STEP_S   # ring-buffer rows' times, up to a shared offset
             t = t - t.mean()
             slope = (t @ (rows - rows.mean(axis=0))) / (t @ t)   # K/s
-            ended |= ((sensed_air <= self.t_min + cfg.anticipate_within_k) & (slope < 0)
-                      & (sensed_air + slope * cfg.anticipate_s <= self.t_min))
+            ended |= anticipates_t_min(sensed_air, slope, self.t_min, cfg.anticipate_within_k,
+                                       cfg.anticipate_s)
         new = ended & self.active & ~self.stopped
         self.stopped |= new
         self.at_step[new] = j
