@@ -44,7 +44,7 @@ def classifier_ranges(nights, model_dir, probabilities: bool = False):
     from impctl.classifiers import classify_nights
 
     res = classify_nights(nights, model_dir)
-    ranges = {k: tuple(v.range) for k, v in res.items()}
+    ranges = {k: tuple(v.fit_range) for k, v in res.items()}   # as impctl fit searches
     if probabilities:
         return ranges, {k: dict(v.probabilities) for k, v in res.items()}
     return ranges

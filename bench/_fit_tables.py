@@ -248,7 +248,8 @@ def print_summary(rows: list[dict], args) -> None:
     print(f"\n### summary: NODE joint fit, plant {args.plant} (median / P90 of |error|; "
           "coverage of the 95 % intervals)")
     print("| rows | ranges | households | HLC % | τ % | C_m % | ε % | coverage HLC/τ/C_m % "
-          "| median ± half-width HLC/τ/C_m % | all three classes right % | time med / max s |")
+          "| median ± half-width HLC/τ/C_m % | truth in all three searched class ranges % "
+          "| time med / max s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         step = f"{r['step_s'] / 60:g}-min" if r["step_s"] < 3600 else f"{r['step_s'] / 3600:g}-h"

@@ -27,6 +27,7 @@ from impctl.classifiers.campaign import (
     campaign_features,
     random_campaigns,
 )
+from impctl.classifiers.saved import credible_hull
 from impctl.classifiers.training import TrainConfig, household_split
 from impctl.errors import InputError
 from impctl.imp import NIGHT_FEATURE_NAMES, night_features
@@ -181,6 +182,12 @@ def test_saved_models_round_trip_and_classify_measured_nights(trained, envelope_
     assert result.label == "1-2" and result.range == (1.0, 2.0)
     assert result.probability == max(result.probabilities.values())
     assert sum(result.probabilities.values()) == pytest.approx(1.0)
+    # the fit searches every class the probabilities do not rule out, the likeliest included
+    ranked = sorted(zip(result.probabilities.values(), U_RANGES["u_walls"], strict=True),
+                    reverse=True)
+    inside = ranked[:1] if ranked[0][0] >= 0.95 else ranked
+    assert result.fit_range == (min(r[0] for _, r in inside), max(r[1] for _, r in inside))
+    assert result.as_dict()["search_range"] == list(result.fit_range)
     row = campaign_features([night_features(n) for n in nights])
     x = pd.DataFrame([row], columns=list(CAMPAIGN_FEATURE_NAMES))
     np.testing.assert_allclose(loaded["u_walls"].predict_proba(x),
@@ -275,3 +282,14 @@ def test_gateway_campaigns_keep_valid_constrained_nights_and_give_up_after_three
     # The valid night comes before the third invalid one in 3 of 5 orders.
     assert set(n_cons[100:200]) == {0, 1} and 0.45 < n_cons[100:200].mean() < 0.75
     assert gateway_campaigns(values, np.random.default_rng(0)).tolist() == masks.tolist()
+
+
+@pytest.mark.parametrize("proba, hull", [
+    ((0.97, 0.02, 0.01), (60.0, 100.0)),    # one class is enough
+    ((0.70, 0.25, 0.05), (60.0, 200.0)),    # the two likeliest reach 95 %
+    ((0.60, 0.01, 0.39), (60.0, 300.0)),    # the middle class is inside the hull
+    ((0.05, 0.90, 0.05), (60.0, 300.0)),    # a tie at the edge of 95 %: both kept
+])
+def test_credible_hull_is_the_classes_up_to_95_percent(proba, hull):
+    ranges = ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0))
+    assert credible_hull(ranges, proba) == hull

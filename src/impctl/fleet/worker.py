@@ -192,7 +192,7 @@ def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None, 
     except InputError:   # no night at a setpoint the classifiers know: the prior, as impctl fit
         return {}, None, None
     return ({k: r.label for k, r in result.items()},
-            {k: tuple(r.range) for k, r in result.items()},
+            {k: tuple(r.fit_range) for k, r in result.items()},
             {k: dict(r.probabilities) for k, r in result.items()})
 
 

@@ -4,7 +4,8 @@ by :mod:`.plot`.
 JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, tau h::
 
     {"schema": "impctl-fit/1",
-     "classes": {"floor_area": {"range": [lo, hi], "probability": p | null, "source": s}, ...},
+     "classes": {"floor_area": {"range": [lo, hi], "probability": p | null, "source": s,
+                                "search_range": [lo, hi]  (classifier: classes up to 95 %)}, ...},
      "bounds": {name: [lo, hi]},                     # the search box of all seven
      "parameters": {name: value},                    # joint fit, the seven of Table IV
      "units": {name: unit},
@@ -88,7 +89,8 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     Parameters
     ----------
     classes : {name: {"range": (lo, hi), "probability": p, "source": str}}, optional
-        How the classified ranges were obtained; default: what the fit was given.
+        How the classified ranges were obtained; default: what the fit was given. A
+        ``"search_range"`` (the classes up to 95 % probability the fit searched) is kept.
     notes : extra lines for the reader (e.g. "classifiers not trained: prior ranges used")
     """
     if classes is None:
@@ -128,7 +130,9 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     out = {
         "schema": "impctl-fit/1",
         "classes": {n: {"range": list(c["range"]), "probability": c.get("probability"),
-                        "source": c.get("source"), "contradicted": bool(c.get("contradicted"))}
+                        "source": c.get("source"), "contradicted": bool(c.get("contradicted")),
+                        **({"search_range": list(c["search_range"])}
+                           if c.get("search_range") is not None else {})}
                     for n, c in classes.items()},
         "bounds": {n: list(v) for n, v in fit.bounds_.items()},
         "parameters": dict(fit.parameters_),

@@ -56,6 +56,9 @@ def format_table(summary: dict) -> str:
         ptxt = f"p = {p:.2f}" if p is not None else c["source"] or ""
         rng = f"{c['range'][0]:g}–{c['range'][1]:g}"
         flag = "  contradicted by the nights" if c.get("contradicted") else ""
+        wide = c.get("search_range")
+        if wide is not None and list(wide) != list(c["range"]):
+            flag += f"  (searched {wide[0]:g}–{wide[1]:g}: classes not ruled out)"
         lines.append(f"  {name:<11} {rng:<10} {PARAM_UNITS[name]:<12} {ptxt}{flag}")
     lines.append("")
     lines.append("What the data determines                value       95 % interval")
