@@ -111,7 +111,14 @@ from impctl.population.synth_nights import (  # noqa: E402
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from _fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)
-from campaign_nights import fixed_plan, variant_schedule, variants  # noqa: E402
+from campaign_nights import (  # noqa: E402
+    alternating_schedule,
+    fixed_plan,
+    night_sources,
+    source_of,
+    variant_schedule,
+    variants,
+)
 from campaign_report import (  # noqa: E402
     STRATEGIES,
     by_night_set,
@@ -127,6 +134,12 @@ VARIANTS = variants()   # (kind, setpoint °C): the constrained night first, the
 BAND_C = (-25.0, 8.0)
 PREHEAT_H = DEFAULT_PREHEAT_H   # imp_schedule's pre-heat (the gateway's)
 FIXED = fixed_plan()    # indices into VARIANTS
+#: what each replayed night was simulated after: (variant, previous variant or None)
+SOURCES = night_sources()
+#: (kind, setpoint °C) of each source
+SOURCE_NIGHT = tuple(VARIANTS[v] for v, _ in SOURCES)
+#: --after-same: every night replayed from its one-variant schedule (the replay before h18h)
+AFTER_SAME = False
 AHEAD = 2             # the outlook's nights
 CONSTRAINED_C = VARIANTS[0][1]
 #: the adaptive strategies' normal candidates (--normal)
@@ -175,40 +188,71 @@ class Progress:
 
 
 def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progress,
-                      gateway_stop: bool = True):
-    """nights[v][i][j], forecast[i][j] [°C], first outdoor reading[v][i][j] [°C],
-    short[v][i][j] (a constrained night the gateway counts invalid: < MIN_NIGHT_H after the
-    1 h lag).
+                      gateway_stop: bool = True, after_same: bool = False):
+    """nights[s][i][j], forecast[i][j] [°C], first outdoor reading[s][i][j] [°C],
+    short[s][i][j] (a constrained night the gateway counts invalid: < MIN_NIGHT_H after the
+    1 h lag), s indexing :data:`SOURCES`: night j of household i of each variant, after a night
+    of its own kind (one schedule per variant), and — unless ``after_same`` (the replay before
+    h18h) — a constrained night after a normal night at each setpoint and a normal night after
+    a constrained one (two alternating schedules per normal setpoint, one for each parity of
+    the dates: every date has both).
 
     ``gateway_stop``: the constrained nights end as the gateway ends them (at T_min or its
     anticipated end, not switched off after a short pre-heat; issue 14, h14w's
     ``stop_at_t_min``) and are cut there; else they cool to the window's end (before h18f)."""
     houses = sample_households(n, seed=SEED)
     params = sample_params(n, SEED) if plant == "realistic" else None
-    nights, first_t_out, short = [], [], []
     forecast = None
-    for kind, sp in VARIANTS:
-        sched = variant_schedule(n, k, kind, sp, SEED)
-        stop = gateway_stop and kind == "constrained"
+
+    def simulate(sched, label: str):
+        """Per date j: nights[i][j], first T_out [i, j] °C, short [i, j]."""
+        nonlocal forecast
+        kinds = [kind for _, kind, _, _, _ in sched.windows]
+        stop = gateway_stop and "constrained" in kinds
         if plant == "realistic":
             sim, spc = run_schedule_plant(houses, sched, params, seed=SEED, stop_at_t_min=stop)
             t_out, noise = sim.t_out_c, 0.0
         else:
             sim, spc = run_schedule(houses, sched, stop_at_t_min=stop)
             t_out, noise = sched.t_out_c, 0.05
-        short.append(short_constrained(spc, sched).T if kind == "constrained"
-                     else np.zeros((n, k), bool))
+        dates_short = np.zeros((n, k), bool)
+        c_dates = [j for j, kind in enumerate(kinds) if kind == "constrained"]
+        if c_dates:
+            dates_short[:, c_dates] = short_constrained(spc, sched).T
         per_day = int(round(86400 / sched.dt_s))
         if forecast is None:   # persistence: last night's mean outdoor temperature
             forecast = np.array([[float(np.mean(t_out[w0 - per_day:w1 - per_day, i]))
                                   for _, _, w0, w1, _ in sched.windows] for i in range(n)])
-        first_t_out.append(np.array([[float(t_out[w0, i]) for _, _, w0, _, _ in sched.windows]
-                                     for i in range(n)]))
-        nights.append([sample_nights(sim, spc, sched, i, sample_step_s=step_s, quantise_k=0.1,
-                                     power_noise=noise, seed=SEED + i) for i in range(n)])
-        progress(f"simulated variant {kind} {sp:g} °C for {n} households"
-                 + (f" ({int(short[-1].sum())} of {short[-1].size} nights short)"
-                    if kind == "constrained" else ""), force=True)
+        first = np.array([[float(t_out[w0, i]) for _, _, w0, _, _ in sched.windows]
+                          for i in range(n)])
+        nights = [sample_nights(sim, spc, sched, i, sample_step_s=step_s, quantise_k=0.1,
+                                power_noise=noise, seed=SEED + i) for i in range(n)]
+        progress(f"simulated {label} for {n} households"
+                 + (f" ({int(dates_short.sum())} of {n * len(c_dates)} constrained nights "
+                    f"short)" if c_dates else ""), force=True)
+        return nights, first, dates_short
+
+    base = [simulate(variant_schedule(n, k, kind, sp, SEED), f"variant {kind} {sp:g} °C")
+            for kind, sp in VARIANTS]
+    alternating = {}   # (normal variant, parity of the constrained dates) → simulated
+    if not after_same:
+        for p in range(1, len(VARIANTS)):
+            for parity in (0, 1):
+                alternating[p, parity] = simulate(
+                    alternating_schedule(n, k, CONSTRAINED_C, VARIANTS[p][1], parity, SEED),
+                    f"c{CONSTRAINED_C:g} / n{VARIANTS[p][1]:g} alternating, constrained on "
+                    f"{'even' if parity == 0 else 'odd'} dates")
+    nights, first_t_out, short = [], [], []
+    for v, prev in SOURCES:
+        if prev is None:
+            parts = [base[v]] * k
+        elif v == 0:   # constrained on date j after normal prev: the schedule with c on j
+            parts = [alternating.get((prev, j % 2), base[v]) for j in range(k)]
+        else:          # normal v on date j after constrained: the schedule with n on j
+            parts = [alternating.get((v, 1 - j % 2), base[v]) for j in range(k)]
+        nights.append([[parts[j][0][i][j] for j in range(k)] for i in range(n)])
+        first_t_out.append(np.array([[parts[j][1][i, j] for j in range(k)] for i in range(n)]))
+        short.append(np.array([[parts[j][2][i, j] for j in range(k)] for i in range(n)]))
     return houses, nights, forecast, first_t_out, short
 
 
@@ -262,7 +306,8 @@ class Campaign:
     def __init__(self, i: int, strategy: str, target: Target):
         self.i, self.strategy, self.target = i, strategy, target
         self.history: list[NightRecord] = []
-        self.chosen: list[tuple[int, int]] = []     # (night index, variant) of valid nights
+        self.chosen: list[tuple[int, int]] = []     # (night index, source) of valid nights
+        #: (night index, variant) of the last night run: what the house was left in
         self.fits: list[FitSummary] = []
         self.key: tuple | None = None
         self.done, self.reached, self.reason = False, False, ""
@@ -277,9 +322,10 @@ class Campaign:
         self.short = 0
         #: the fixed plan's entries (indices into FIXED) with a valid night
         self.filled: set[int] = set()
+        self.last: tuple[int, int] | None = None
 
     def fit_key(self) -> tuple | None:
-        kinds = {VARIANTS[v][0] for _, v in self.chosen}
+        kinds = {SOURCE_NIGHT[s][0] for _, s in self.chosen}
         return (self.i, tuple(self.chosen)) if len(kinds) == 2 else None
 
 
@@ -336,15 +382,20 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
         v = VARIANTS.index((d.kind, d.setpoint_c))
         c.predicted = next(((x.hlc_rel_pred, x.tau_rel_pred) for x in cands
                             if (x.kind, x.setpoint_c) == (d.kind, d.setpoint_c)), None)
-    valid = BAND_C[0] <= first_t_out[v][c.i][j] <= BAND_C[1]
-    if short is not None and short[v][c.i][j]:
+    # the simulated night that follows the night run the date before (a skipped night or a
+    # night of the same kind: the one-variant schedule)
+    prev = c.last[1] if c.last is not None and c.last[0] == j - 1 else None
+    s = source_of(v, None if AFTER_SAME else prev, SOURCES)
+    c.last = (j, v)
+    valid = BAND_C[0] <= first_t_out[s][c.i][j] <= BAND_C[1]
+    if short is not None and short[s][c.i][j]:
         valid = False
         c.short += 1
     if not valid:
         c.predicted = None
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
-        c.chosen.append((j, v))
+        c.chosen.append((j, s))
         if entry is not None:
             c.filled.add(entry)
     elif name != "full" and sum(not x.valid for x in c.history) >= MAX_INVALID:
@@ -415,7 +466,7 @@ def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
     nights = tuple((n.kind, n.setpoint_c) for n in c.history)
-    fitted = tuple(VARIANTS[v] for _, v in c.chosen) if final is not None else ()
+    fitted = tuple(SOURCE_NIGHT[s] for _, s in c.chosen) if final is not None else ()
     return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
             nights, fitted, c.seen, tuple(c.history), c.extras, c.short)
 
@@ -443,7 +494,7 @@ def _worker(w: int) -> tuple[list, int, float]:
 
 
 def main() -> None:
-    global SEED, NORMAL_SETPOINTS
+    global SEED, NORMAL_SETPOINTS, AFTER_SAME
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=100)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
@@ -469,6 +520,11 @@ def main() -> None:
     ap.add_argument("--dump", default=None,
                     help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
                          "here (to try stop rules offline)")
+    ap.add_argument("--after-same", action="store_true",
+                    help="replay every night from its one-variant schedule, so a constrained "
+                         "night is always one simulated after a constrained night and a normal "
+                         "one after a normal night (the replay before h18h); default: the night "
+                         "simulated after the kind of night the campaign ran the date before")
     ap.add_argument("--cool-to-window-end", action="store_true",
                     help="constrained nights cool to 05:00 and are all valid (the nights before "
                          "h18f), not ended at T_min as the gateway ends them")
@@ -507,8 +563,9 @@ def main() -> None:
           f"load "
           f"{os.getloadavg()[0]:.1f}", flush=True)
     gateway_stop = not args.cool_to_window_end
+    AFTER_SAME = args.after_same
     houses, nights, forecast, first_t_out, short = simulate_variants(
-        n, k, args.plant, args.step_s, progress, gateway_stop)
+        n, k, args.plant, args.step_s, progress, gateway_stop, AFTER_SAME)
     t_sim = time.perf_counter() - t0
     targets = []
     for pair in args.targets.split(","):

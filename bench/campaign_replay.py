@@ -32,7 +32,7 @@ import numpy as np
 from impctl.campaign import decide, policy
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from campaign import BAND_C, CONSTRAINED_C, NORMAL_SETPOINTS, PLANS  # noqa: E402
+from campaign import BAND_C, CONSTRAINED_C, MAX_INVALID, NORMAL_SETPOINTS, PLANS  # noqa: E402
 from campaign_report import paired_diff  # noqa: E402
 
 
@@ -121,6 +121,11 @@ def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, ob
             if h >= len(history):
                 break
             h += 1
+            if sum(not n.valid for n in history[:h]) >= MAX_INVALID:
+                # the give-up rule of the bench's campaigns (daemon.schedule.gave_up)
+                valid = sum(n.valid for n in history[:h])
+                done = [f for f in fits if f.nights <= valid]
+                return h, (done[-1] if done else None), f"gave up: {MAX_INVALID} invalid nights"
         return h, (fits[-1] if fits else None), "ran out of the full campaign's nights"
     finally:
         for k, value in saved.items():
