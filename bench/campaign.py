@@ -153,7 +153,16 @@ PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS, warmest_firs
          "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS)}
 #: strategies with the rules before h18d: the balanced choice, the floor rule at 1/2
 CRITERIA["h18c"] = "balanced"
-PREDICTED += ("h18c", "full", "normal_after", "min3")
+PREDICTED += ("h18c", "full", "normal_after", "min3", "nn", "full_nn")
+#: a normal night at a second setpoint before the second constrained night (h18h): c21 n24
+#: n22 c21 n23 — the two normal nights farthest apart in ΔT first
+PLANS["nn"] = PLANS["full_nn"] = tuple(
+    PLANS["plan_warm"][i] for i in (0, 1, 4, 2, 3)) if len(PLANS["plan_warm"]) == 5 else ()
+#: the second normal night the coolest (c21 n24 c21 n22 n23): after four nights the normal
+#: nights are 2 K apart instead of 1 K (h18h)
+PLANS["wide"] = PLANS["full_wide"] = tuple(
+    PLANS["plan_warm"][i] for i in (0, 1, 2, 4, 3)) if len(PLANS["plan_warm"]) == 5 else ()
+PREDICTED += ("wide", "full_wide")
 #: the plan continued past its five nights by normal nights only (warmest first)
 PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
     ("normal", sp) for sp in sorted(NORMAL_SETPOINTS, reverse=True))
@@ -359,18 +368,19 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
                   else replace(c.target, floor_dominance=0.5) if name == "h18c"
                   # no early stop: the floor rule never dominates, no stall, no predictions
                   else replace(c.target, floor_dominance=1.0, stall_nights=10 ** 6)
-                  if name == "full" else c.target)
+                  if name.startswith("full") else c.target)
         saved = {k: getattr(policy, k) for k in POLICY_RULES.get(name, {})}
         for k, value in POLICY_RULES.get(name, {}).items():
             setattr(policy, k, value)
         try:
-            d = decide(c.history, c.fits, [] if name == "full" else cands, target,
+            full = name.startswith("full")
+            d = decide(c.history, c.fits, [] if full else cands, target,
                        forecast_t_out_c=forecast, t_out_band_c=BAND_C,
                        constrained_setpoint_c=CONSTRAINED_C, normal_setpoints_c=setpoints,
-                       outlook=None if name == "full" else outlook,
-                       criterion=CRITERIA.get(name, "plan" if name in PLANS or name == "full"
+                       outlook=None if full else outlook,
+                       criterion=CRITERIA.get(name, "plan" if name in PLANS or full
                                               else None),
-                       plan=PLANS.get(name, PLANS["plan_warm"] if name == "full" else None))
+                       plan=PLANS.get(name, PLANS["plan_warm"] if full else None))
         finally:
             for k, value in saved.items():
                 setattr(policy, k, value)
@@ -398,7 +408,7 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
         c.chosen.append((j, s))
         if entry is not None:
             c.filled.add(entry)
-    elif name != "full" and sum(not x.valid for x in c.history) >= MAX_INVALID:
+    elif not name.startswith("full") and sum(not x.valid for x in c.history) >= MAX_INVALID:
         # both modes give up as the daemon does (daemon.schedule.gave_up); "full" runs on
         c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
     return v
@@ -511,7 +521,8 @@ def main() -> None:
                     help="the adaptive strategies' normal setpoints [°C], among the default's")
     ap.add_argument("--rule", action="append", default=[],
                     help="override a stop rule for the adaptive strategies, NAME=VALUE: "
-                         "min_gain, min_floor_nights, criterion (worst|balanced), stall_nights, "
+                         "min_gain, min_floor_nights, min_floor_setpoints, "
+                         "criterion (worst|balanced), stall_nights, "
                          "floor_dominance, "
                          "min_each "
                          "(repeatable)")
@@ -550,6 +561,8 @@ def main() -> None:
             policy.MIN_GAIN = float(value)     # before the workers fork
         elif name == "min_floor_nights":
             policy.MIN_FLOOR_NIGHTS = int(value)
+        elif name == "min_floor_setpoints":
+            policy.MIN_FLOOR_SETPOINTS = int(value)   # 1: the rules before h18h
         elif name == "criterion":
             policy.CRITERION = value
         elif name in ("stall_nights", "floor_dominance", "min_each"):
@@ -604,6 +617,7 @@ def main() -> None:
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
           f"{os.getloadavg()[0]:.1f}")
     print(f"rules: min_gain {policy.MIN_GAIN:g}, min_floor_nights {policy.MIN_FLOOR_NIGHTS}, "
+          f"min_floor_setpoints {policy.MIN_FLOOR_SETPOINTS}, "
           f"criterion {policy.CRITERION}, adaptive "
           f"normal setpoints "
           f"{NORMAL_SETPOINTS}, target overrides {overrides or 'none'}")

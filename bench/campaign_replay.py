@@ -94,9 +94,80 @@ for _n in (5, 6, 7, 8):
     RULES[f"stall2@{_n}"] = ({"max_nights": _n, "stall_nights": 2}, {}, None)
 
 
-def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, object, str]:
-    """(nights run, final FitSummary or None, stop reason) of one household under ``rule``."""
+def _setpoints(hist) -> int:
+    """Distinct normal setpoints among the valid nights."""
+    return len({n.setpoint_c for n in hist if n.valid and n.kind == "normal"})
+
+
+# h18h, on the fit of stop 24 (one σ per night, the C_m prior): the floor rule's threshold
+# again, and "precision limited" only once two normal setpoints were run (vetoes that take the
+# stop's reason)
+for _n in (5, 6, 8):
+    for _fd in (0.2, 0.3, 0.4, 0.45, 0.6, 0.7, 0.8):
+        RULES[f"floor{_fd:g}@{_n}"] = ({"max_nights": _n, "floor_dominance": _fd}, {}, None)
+    RULES[f"two_sp@{_n}"] = (
+        {"max_nights": _n}, {},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2))
+    RULES[f"two_sp_any@{_n}"] = (
+        {"max_nights": _n}, {}, (lambda fits, extras, hist, reason: _setpoints(hist) < 2))
+    for _fd in (0.25, 0.45, 0.5, 0.6):
+        RULES[f"two_sp_floor{_fd:g}@{_n}"] = (
+            {"max_nights": _n, "floor_dominance": _fd}, {},
+            (lambda fits, extras, hist, reason: "precision limited" in reason
+             and _setpoints(hist) < 2))
+    RULES[f"three_or_max@{_n}"] = (
+        {"max_nights": _n}, {}, (lambda fits, extras, hist: bool(fits) and (
+            fits[-1].nights < 3 or fits[-1].nights > 3)))
+
+
+def _group(extras: list) -> str | None:
+    """The latest fit's model-error group (``fit.model_error.group``)."""
+    return (extras[-1].get("model_error") or {}).get("group") if extras else None
+
+
+for _n in (5, 6, 8):
+    # "precision limited" waits for two normal setpoints only where the latest fit's
+    # model-error group is "plain" (the group whose two-night fits err most on the tuning
+    # population, h18h)
+    RULES[f"plain_two_sp@{_n}"] = (
+        {"max_nights": _n}, {},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2 and _group(extras) == "plain"))
+    RULES[f"two_sp_gain20@{_n}"] = (
+        {"max_nights": _n}, {"MIN_GAIN": 0.2},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2))
+
+
+for _n in (5, 6, 8):
+    # policy.MIN_FLOOR_SETPOINTS (h18h): the product form of two_sp (the gain rule still
+    # speaks from 3 nights)
+    RULES[f"msp2@{_n}"] = ({"max_nights": _n}, {"MIN_FLOOR_SETPOINTS": 2}, None)
+    for _fd in (0.25, 0.45, 0.5):
+        RULES[f"msp2_floor{_fd:g}@{_n}"] = ({"max_nights": _n, "floor_dominance": _fd},
+                                             {"MIN_FLOOR_SETPOINTS": 2}, None)
+    RULES[f"msp2_gain20@{_n}"] = ({"max_nights": _n},
+                                   {"MIN_FLOOR_SETPOINTS": 2, "MIN_GAIN": 0.2}, None)
+
+
+#: the policy constants a rule runs on unless it sets them (main before h18h)
+BEFORE_H18H = {"MIN_FLOOR_SETPOINTS": 1}
+
+
+def _veto(veto, fits, extras, hist, reason: str) -> bool:
+    if "reason" in veto.__code__.co_varnames[:veto.__code__.co_argcount]:
+        return bool(veto(fits, extras, hist, reason))
+    return bool(veto(fits, extras, hist))
+
+
+def replay(rec: tuple, rule: tuple[dict, dict, object], target,
+           plan: tuple = PLANS["plan_warm"]) -> tuple[int, object, str]:
+    """(nights run, final FitSummary or None, stop reason) of one household under ``rule``,
+    its nights in ``plan``'s order (the dump's ``full`` campaign's)."""
     overrides, constants, veto = rule
+    # every rule on the policy of main before h18h unless it says otherwise
+    constants = {**BEFORE_H18H, **constants}
     target = replace(target, **overrides)
     history, fits, seen, extras = rec[11], rec[5], rec[10], rec[12]
     saved = {k: getattr(policy, k) for k in constants}
@@ -108,10 +179,11 @@ def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, ob
             d = decide(history[:h], fits[:n_fits], cands, target, forecast_t_out_c=forecast,
                        t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
                        normal_setpoints_c=NORMAL_SETPOINTS, outlook=outlook,
-                       criterion="plan", plan=PLANS["plan_warm"])
+                       criterion="plan", plan=plan)
             if (d.action == "stop" and veto is not None and not d.reached
-                    and h < target.max_nights and veto(fits[:n_fits], extras[:n_fits],
-                                                       history[:h])):
+                    and h < target.max_nights and _veto(veto, fits[:n_fits],
+                                                        extras[:n_fits], history[:h],
+                                                        d.reason)):
                 d = replace(d, action="run" if BAND_C[0] <= forecast <= BAND_C[1]
                             else "skip")
             if d.action == "stop":
@@ -138,6 +210,12 @@ def main() -> None:
     ap.add_argument("--full", default="full@8", help="the dump's no-early-stop strategy")
     ap.add_argument("--bootstrap", type=int, default=2000)
     ap.add_argument("--rules", default=None, help="comma-separated names (default: all)")
+    ap.add_argument("--plan", default="plan_warm",
+                    help="the --full campaign's plan (bench/campaign.py PLANS): plan_warm "
+                         "(c21 n24 c21 n23 n22) or nn (c21 n24 n22 c21 n23)")
+    ap.add_argument("--online-as", default=None,
+                    help="the online strategy the replayed adaptive@5 must equal (default "
+                         "adaptive)")
     ap.add_argument("--online", default="",
                     help="also these strategies as the bench ran them (comma-separated), "
                          "e.g. normal_after@8, whose nights are not the continued plan's")
@@ -193,8 +271,8 @@ def main() -> None:
                           fits[-1] if fits else None, "")
             row(f"first {k} valid nights of the continued plan", out)
     for name in names:
-        out = {i: replay(rec, RULES[name], target) for i, rec in full.items()}
-        same = "adaptive" if name == "adaptive@5" else name
+        out = {i: replay(rec, RULES[name], target, PLANS[args.plan]) for i, rec in full.items()}
+        same = (args.online_as or "adaptive") if name == "adaptive@5" else name
         if same in online:   # the replay must equal the bench's own campaign
             diff = [i for i, (n, f, _) in out.items()
                     if (n, f) != (online[same][i][2], online[same][i][3])]
