@@ -155,6 +155,16 @@ for _n in (5, 6, 8):
 BEFORE_H18H = {"MIN_FLOOR_SETPOINTS": 1}
 
 
+def _stop_label(reason: str) -> str:
+    """A stop reason in a word or two (as ``bench/campaign.py``'s table)."""
+    for text, label in (("most this", "max nights"), ("precision limited", "precision limited"),
+                        ("would not help", "no gain"), ("cannot be", "cannot be identified"),
+                        ("gave up", "gave up"), ("Target reached", "reached")):
+        if text in (reason or ""):
+            return label
+    return reason or "–"
+
+
 def _veto(veto, fits, extras, hist, reason: str) -> bool:
     if "reason" in veto.__code__.co_varnames[:veto.__code__.co_argcount]:
         return bool(veto(fits, extras, hist, reason))
@@ -235,9 +245,9 @@ def main() -> None:
     names = args.rules.split(",") if args.rules else list(RULES)
     print(f"{len(full)} households ({args.full}), {len(fixed)} fixed fits; target "
           f"±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}")
-    print("| rule | nights median / P90 / max | truth inside HLC / τ | median abs. error HLC / τ"
-          " | paired − fixed HLC / τ, pp (95 % interval) |")
-    print("|---|---|---|---|---|")
+    print("| rule | nights median / P90 / max (mean) | truth inside HLC / τ | median abs. error "
+          "HLC / τ | paired − fixed HLC / τ, pp (95 % interval) | stopped by |")
+    print("|---|---|---|---|---|---|")
 
     def row(name: str, out: dict) -> None:
         nights = np.array([n for n, _, _ in out.values()])
@@ -253,10 +263,16 @@ def main() -> None:
         b = np.array([(abs(fixed[i][3].hlc_w_per_k / truth[i][0] - 1) * 100,
                        abs(fixed[i][3].tau_h / truth[i][1] - 1) * 100) for i in common])
         (dh, lh, hh), (dt, lt, ht) = paired_diff(a, b, args.bootstrap)
+        stops: dict[str, int] = {}
+        for _, _, reason in out.values():
+            label = _stop_label(reason)
+            stops[label] = stops.get(label, 0) + 1
         print(f"| {name} | {np.median(nights):g} / {np.percentile(nights, 90):g} / "
-              f"{nights.max()} | {cov[0]:.0f} / {cov[1]:.0f} % | {med[0]:.1f} / {med[1]:.1f} % | "
-              f"{dh:+.1f} ({lh:+.1f} … {hh:+.1f}) / {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) |",
-              flush=True)
+              f"{nights.max()} (mean {nights.mean():.1f}) | {cov[0]:.0f} / {cov[1]:.0f} % | "
+              f"{med[0]:.1f} / {med[1]:.1f} % | "
+              f"{dh:+.1f} ({lh:+.1f} … {hh:+.1f}) / {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) | "
+              + ", ".join(f"{k} {v}" for k, v in sorted(stops.items(), key=lambda x: -x[1]))
+              + " |", flush=True)
 
     row("fixed 2 + 3", {i: (r[2], r[3], r[6]) for i, r in fixed.items()})
     for name in filter(None, args.online.split(",")):
