@@ -19,7 +19,12 @@ the gateway's constrained setpoint and normal at each of its normal setpoints
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
-the variant it chooses. Logged: room and outdoor sensors, heat meter, 5-minute samples.
+the variant it chooses — since h18h the one simulated after the kind of night the campaign ran
+the date before (six more schedules alternate the constrained night with a normal night at
+each setpoint, one per parity of the dates: a constrained night after n24, as the adaptive
+order runs it, or a retry after a normal night, as the fixed plan runs it since h18g;
+``--after-same``: every night from its one-variant schedule, the replay before). Logged: room
+and outdoor sensors, heat meter, 5-minute samples.
 
 Strategies, each on every household (``--strategies``; fits of identical night sets are shared
 between strategies and targets):

@@ -14,9 +14,14 @@ replayed ``adaptive`` and ``adaptive@N`` rows equal ``bench/campaign.py``'s own)
 need more than the policy reads (``veto``: a stop is overruled, the plan's next night runs)
 try what the data suggest before any is built into the policy.
 
-Printed per rule: nights run median / P90 / max, truth inside the final HLC / τ interval, median
-|error|, and the paired difference of median |error| against the fixed plan (bootstrap 95 %
-interval over households).
+Every rule runs on the policy of main before h18h (``MIN_FLOOR_SETPOINTS`` 1) unless it sets
+the constant (``msp2@N``: the rule since h18h); ``--plan`` names the ``full`` campaign's order
+(``nn``, ``wide``: the orders tried in h18h). The bench's give-up rule (3 invalid nights) is
+applied as the bench applies it.
+
+Printed per rule: nights run median / P90 / max (mean), truth inside the final HLC / τ interval,
+median |error|, the paired difference of median |error| against the fixed plan (bootstrap 95 %
+interval over households) and what stopped the campaigns.
 """
 
 from __future__ import annotations
