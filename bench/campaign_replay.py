@@ -219,12 +219,35 @@ def replay(rec: tuple, rule: tuple[dict, dict, object], target,
             setattr(policy, k, value)
 
 
+def _compare(records: list, other_path: str, truth: list, n_boot: int) -> None:
+    """Each strategy in both dumps, paired: this dump's median |error| − the other's."""
+    with open(other_path, "rb") as fh:
+        other = pickle.load(fh)["records"][0]
+
+    def errors(recs, strategy):
+        return {r[1]: (abs(r[3].hlc_w_per_k / truth[r[1]][0] - 1) * 100,
+                       abs(r[3].tau_h / truth[r[1]][1] - 1) * 100)
+                for r in recs if r[0] == strategy and r[3] is not None}
+
+    for strategy in sorted({r[0] for r in records} & {r[0] for r in other}):
+        mine, theirs = errors(records, strategy), errors(other, strategy)
+        common = sorted(set(mine) & set(theirs))
+        (dh, lh, hh), (dt, lt, ht) = paired_diff(np.array([mine[i] for i in common]),
+                                                 np.array([theirs[i] for i in common]), n_boot)
+        print(f"{strategy}: fitted {len(mine)} here, {len(theirs)} there; paired on "
+              f"{len(common)} (here − there): HLC {dh:+.1f} ({lh:+.1f} … {hh:+.1f}), "
+              f"τ {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) points")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dump")
     ap.add_argument("--full", default="full@8", help="the dump's no-early-stop strategy")
     ap.add_argument("--bootstrap", type=int, default=2000)
     ap.add_argument("--rules", default=None, help="comma-separated names (default: all)")
+    ap.add_argument("--compare", default=None,
+                    help="another dump of the same households (e.g. --after-same): each "
+                         "strategy both ran, paired (this − that) on the households both fit")
     ap.add_argument("--plan", default="plan_warm",
                     help="the --full campaign's plan (bench/campaign.py PLANS): plan_warm "
                          "(c21 n24 c21 n23 n22) or nn (c21 n24 n22 c21 n23)")
@@ -247,6 +270,9 @@ def main() -> None:
     online = {}
     for r in records:
         online.setdefault(r[0], {})[r[1]] = r
+    if args.compare:
+        _compare(records, args.compare, truth, args.bootstrap)
+        return
     names = args.rules.split(",") if args.rules else list(RULES)
     print(f"{len(full)} households ({args.full}), {len(fixed)} fixed fits; target "
           f"±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}")
