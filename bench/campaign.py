@@ -19,7 +19,12 @@ the gateway's constrained setpoint and normal at each of its normal setpoints
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
-the variant it chooses. Logged: room and outdoor sensors, heat meter, 5-minute samples.
+the variant it chooses — since h18h the one simulated after the kind of night the campaign ran
+the date before (six more schedules alternate the constrained night with a normal night at
+each setpoint, one per parity of the dates: a constrained night after n24, as the adaptive
+order runs it, or a retry after a normal night, as the fixed plan runs it since h18g;
+``--after-same``: every night from its one-variant schedule, the replay before). Logged: room
+and outdoor sensors, heat meter, 5-minute samples.
 
 Strategies, each on every household (``--strategies``; fits of identical night sets are shared
 between strategies and targets):
@@ -85,7 +90,6 @@ from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")   # one thread per process, before numpy/torch
 
-import numpy as np  # noqa: E402
 
 from impctl.campaign import (  # noqa: E402
     Candidate,
@@ -101,17 +105,9 @@ from impctl.config import CampaignConfig  # noqa: E402
 from impctl.fit.optim.batch import fit_households  # noqa: E402
 from impctl.fit.result.report import fit_to_dict  # noqa: E402
 from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
-from impctl.population.households import sample_households  # noqa: E402
-from impctl.population.realism import sample_params  # noqa: E402
-from impctl.population.synth_nights import (  # noqa: E402
-    run_schedule,
-    run_schedule_plant,
-    sample_nights,
-)
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from _fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)
-from campaign_nights import fixed_plan, variant_schedule, variants  # noqa: E402
+from campaign_nights import fixed_plan, night_sources, source_of, variants  # noqa: E402
 from campaign_report import (  # noqa: E402
     STRATEGIES,
     by_night_set,
@@ -120,6 +116,7 @@ from campaign_report import (  # noqa: E402
     summarise,
     trajectories,
 )
+from campaign_sim import simulate_variants  # noqa: E402
 from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validation setup)
 
 SEED = 20260
@@ -127,6 +124,12 @@ VARIANTS = variants()   # (kind, setpoint °C): the constrained night first, the
 BAND_C = (-25.0, 8.0)
 PREHEAT_H = DEFAULT_PREHEAT_H   # imp_schedule's pre-heat (the gateway's)
 FIXED = fixed_plan()    # indices into VARIANTS
+#: what each replayed night was simulated after: (variant, previous variant or None)
+SOURCES = night_sources()
+#: (kind, setpoint °C) of each source
+SOURCE_NIGHT = tuple(VARIANTS[v] for v, _ in SOURCES)
+#: --after-same: every night replayed from its one-variant schedule (the replay before h18h)
+AFTER_SAME = False
 AHEAD = 2             # the outlook's nights
 CONSTRAINED_C = VARIANTS[0][1]
 #: the adaptive strategies' normal candidates (--normal)
@@ -140,7 +143,16 @@ PLANS = {"plan": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS, warmest_firs
          "plan_warm": policy.plan_order(CONSTRAINED_C, NORMAL_SETPOINTS)}
 #: strategies with the rules before h18d: the balanced choice, the floor rule at 1/2
 CRITERIA["h18c"] = "balanced"
-PREDICTED += ("h18c", "full", "normal_after", "min3")
+PREDICTED += ("h18c", "full", "normal_after", "min3", "nn", "full_nn")
+#: a normal night at a second setpoint before the second constrained night (h18h): c21 n24
+#: n22 c21 n23 — the two normal nights farthest apart in ΔT first
+PLANS["nn"] = PLANS["full_nn"] = tuple(
+    PLANS["plan_warm"][i] for i in (0, 1, 4, 2, 3)) if len(PLANS["plan_warm"]) == 5 else ()
+#: the second normal night the coolest (c21 n24 c21 n22 n23): after four nights the normal
+#: nights are 2 K apart instead of 1 K (h18h)
+PLANS["wide"] = PLANS["full_wide"] = tuple(
+    PLANS["plan_warm"][i] for i in (0, 1, 2, 4, 3)) if len(PLANS["plan_warm"]) == 5 else ()
+PREDICTED += ("wide", "full_wide")
 #: the plan continued past its five nights by normal nights only (warmest first)
 PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
     ("normal", sp) for sp in sorted(NORMAL_SETPOINTS, reverse=True))
@@ -172,44 +184,6 @@ class Progress:
         if force or now - self.last >= self.every_s:
             self.last = now
             print(f"  [{now - self.t0:6.0f} s]{self.prefix} {text}", flush=True)
-
-
-def simulate_variants(n: int, k: int, plant: str, step_s: float, progress: Progress,
-                      gateway_stop: bool = True):
-    """nights[v][i][j], forecast[i][j] [°C], first outdoor reading[v][i][j] [°C],
-    short[v][i][j] (a constrained night the gateway counts invalid: < MIN_NIGHT_H after the
-    1 h lag).
-
-    ``gateway_stop``: the constrained nights end as the gateway ends them (at T_min or its
-    anticipated end, not switched off after a short pre-heat; issue 14, h14w's
-    ``stop_at_t_min``) and are cut there; else they cool to the window's end (before h18f)."""
-    houses = sample_households(n, seed=SEED)
-    params = sample_params(n, SEED) if plant == "realistic" else None
-    nights, first_t_out, short = [], [], []
-    forecast = None
-    for kind, sp in VARIANTS:
-        sched = variant_schedule(n, k, kind, sp, SEED)
-        stop = gateway_stop and kind == "constrained"
-        if plant == "realistic":
-            sim, spc = run_schedule_plant(houses, sched, params, seed=SEED, stop_at_t_min=stop)
-            t_out, noise = sim.t_out_c, 0.0
-        else:
-            sim, spc = run_schedule(houses, sched, stop_at_t_min=stop)
-            t_out, noise = sched.t_out_c, 0.05
-        short.append(short_constrained(spc, sched).T if kind == "constrained"
-                     else np.zeros((n, k), bool))
-        per_day = int(round(86400 / sched.dt_s))
-        if forecast is None:   # persistence: last night's mean outdoor temperature
-            forecast = np.array([[float(np.mean(t_out[w0 - per_day:w1 - per_day, i]))
-                                  for _, _, w0, w1, _ in sched.windows] for i in range(n)])
-        first_t_out.append(np.array([[float(t_out[w0, i]) for _, _, w0, _, _ in sched.windows]
-                                     for i in range(n)]))
-        nights.append([sample_nights(sim, spc, sched, i, sample_step_s=step_s, quantise_k=0.1,
-                                     power_noise=noise, seed=SEED + i) for i in range(n)])
-        progress(f"simulated variant {kind} {sp:g} °C for {n} households"
-                 + (f" ({int(short[-1].sum())} of {short[-1].size} nights short)"
-                    if kind == "constrained" else ""), force=True)
-    return houses, nights, forecast, first_t_out, short
 
 
 class Fits:
@@ -262,7 +236,8 @@ class Campaign:
     def __init__(self, i: int, strategy: str, target: Target):
         self.i, self.strategy, self.target = i, strategy, target
         self.history: list[NightRecord] = []
-        self.chosen: list[tuple[int, int]] = []     # (night index, variant) of valid nights
+        self.chosen: list[tuple[int, int]] = []     # (night index, source) of valid nights
+        #: (night index, variant) of the last night run: what the house was left in
         self.fits: list[FitSummary] = []
         self.key: tuple | None = None
         self.done, self.reached, self.reason = False, False, ""
@@ -277,9 +252,10 @@ class Campaign:
         self.short = 0
         #: the fixed plan's entries (indices into FIXED) with a valid night
         self.filled: set[int] = set()
+        self.last: tuple[int, int] | None = None
 
     def fit_key(self) -> tuple | None:
-        kinds = {VARIANTS[v][0] for _, v in self.chosen}
+        kinds = {SOURCE_NIGHT[s][0] for _, s in self.chosen}
         return (self.i, tuple(self.chosen)) if len(kinds) == 2 else None
 
 
@@ -313,18 +289,19 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
                   else replace(c.target, floor_dominance=0.5) if name == "h18c"
                   # no early stop: the floor rule never dominates, no stall, no predictions
                   else replace(c.target, floor_dominance=1.0, stall_nights=10 ** 6)
-                  if name == "full" else c.target)
+                  if name.startswith("full") else c.target)
         saved = {k: getattr(policy, k) for k in POLICY_RULES.get(name, {})}
         for k, value in POLICY_RULES.get(name, {}).items():
             setattr(policy, k, value)
         try:
-            d = decide(c.history, c.fits, [] if name == "full" else cands, target,
+            full = name.startswith("full")
+            d = decide(c.history, c.fits, [] if full else cands, target,
                        forecast_t_out_c=forecast, t_out_band_c=BAND_C,
                        constrained_setpoint_c=CONSTRAINED_C, normal_setpoints_c=setpoints,
-                       outlook=None if name == "full" else outlook,
-                       criterion=CRITERIA.get(name, "plan" if name in PLANS or name == "full"
+                       outlook=None if full else outlook,
+                       criterion=CRITERIA.get(name, "plan" if name in PLANS or full
                                               else None),
-                       plan=PLANS.get(name, PLANS["plan_warm"] if name == "full" else None))
+                       plan=PLANS.get(name, PLANS["plan_warm"] if full else None))
         finally:
             for k, value in saved.items():
                 setattr(policy, k, value)
@@ -336,18 +313,23 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
         v = VARIANTS.index((d.kind, d.setpoint_c))
         c.predicted = next(((x.hlc_rel_pred, x.tau_rel_pred) for x in cands
                             if (x.kind, x.setpoint_c) == (d.kind, d.setpoint_c)), None)
-    valid = BAND_C[0] <= first_t_out[v][c.i][j] <= BAND_C[1]
-    if short is not None and short[v][c.i][j]:
+    # the simulated night that follows the night run the date before (a skipped night or a
+    # night of the same kind: the one-variant schedule)
+    prev = c.last[1] if c.last is not None and c.last[0] == j - 1 else None
+    s = source_of(v, None if AFTER_SAME else prev, SOURCES)
+    c.last = (j, v)
+    valid = BAND_C[0] <= first_t_out[s][c.i][j] <= BAND_C[1]
+    if short is not None and short[s][c.i][j]:
         valid = False
         c.short += 1
     if not valid:
         c.predicted = None
     c.history.append(NightRecord(*VARIANTS[v], valid))
     if valid:
-        c.chosen.append((j, v))
+        c.chosen.append((j, s))
         if entry is not None:
             c.filled.add(entry)
-    elif name != "full" and sum(not x.valid for x in c.history) >= MAX_INVALID:
+    elif not name.startswith("full") and sum(not x.valid for x in c.history) >= MAX_INVALID:
         # both modes give up as the daemon does (daemon.schedule.gave_up); "full" runs on
         c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
     return v
@@ -415,7 +397,7 @@ def _record(c: Campaign) -> tuple:
     """What the parent needs of a finished campaign (picklable)."""
     final = c.fits[-1] if c.key is not None and c.fits else None
     nights = tuple((n.kind, n.setpoint_c) for n in c.history)
-    fitted = tuple(VARIANTS[v] for _, v in c.chosen) if final is not None else ()
+    fitted = tuple(SOURCE_NIGHT[s] for _, s in c.chosen) if final is not None else ()
     return (c.strategy, c.i, len(c.history), final, _label(c), c.fits, c.reason, c.checks,
             nights, fitted, c.seen, tuple(c.history), c.extras, c.short)
 
@@ -443,7 +425,7 @@ def _worker(w: int) -> tuple[list, int, float]:
 
 
 def main() -> None:
-    global SEED, NORMAL_SETPOINTS
+    global SEED, NORMAL_SETPOINTS, AFTER_SAME
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=100)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
@@ -460,7 +442,8 @@ def main() -> None:
                     help="the adaptive strategies' normal setpoints [°C], among the default's")
     ap.add_argument("--rule", action="append", default=[],
                     help="override a stop rule for the adaptive strategies, NAME=VALUE: "
-                         "min_gain, min_floor_nights, criterion (worst|balanced), stall_nights, "
+                         "min_gain, min_floor_nights, min_floor_setpoints, "
+                         "criterion (worst|balanced), stall_nights, "
                          "floor_dominance, "
                          "min_each "
                          "(repeatable)")
@@ -469,6 +452,11 @@ def main() -> None:
     ap.add_argument("--dump", default=None,
                     help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
                          "here (to try stop rules offline)")
+    ap.add_argument("--after-same", action="store_true",
+                    help="replay every night from its one-variant schedule, so a constrained "
+                         "night is always one simulated after a constrained night and a normal "
+                         "one after a normal night (the replay before h18h); default: the night "
+                         "simulated after the kind of night the campaign ran the date before")
     ap.add_argument("--cool-to-window-end", action="store_true",
                     help="constrained nights cool to 05:00 and are all valid (the nights before "
                          "h18f), not ended at T_min as the gateway ends them")
@@ -494,6 +482,8 @@ def main() -> None:
             policy.MIN_GAIN = float(value)     # before the workers fork
         elif name == "min_floor_nights":
             policy.MIN_FLOOR_NIGHTS = int(value)
+        elif name == "min_floor_setpoints":
+            policy.MIN_FLOOR_SETPOINTS = int(value)   # 1: the rules before h18h
         elif name == "criterion":
             policy.CRITERION = value
         elif name in ("stall_nights", "floor_dominance", "min_each"):
@@ -507,8 +497,9 @@ def main() -> None:
           f"load "
           f"{os.getloadavg()[0]:.1f}", flush=True)
     gateway_stop = not args.cool_to_window_end
+    AFTER_SAME = args.after_same
     houses, nights, forecast, first_t_out, short = simulate_variants(
-        n, k, args.plant, args.step_s, progress, gateway_stop)
+        n, k, args.plant, args.step_s, progress, SEED, gateway_stop, AFTER_SAME)
     t_sim = time.perf_counter() - t0
     targets = []
     for pair in args.targets.split(","):
@@ -547,6 +538,7 @@ def main() -> None:
           f"{t_sim:.0f} s, {time.perf_counter() - t0:.0f} s in all, load at the end "
           f"{os.getloadavg()[0]:.1f}")
     print(f"rules: min_gain {policy.MIN_GAIN:g}, min_floor_nights {policy.MIN_FLOOR_NIGHTS}, "
+          f"min_floor_setpoints {policy.MIN_FLOOR_SETPOINTS}, "
           f"criterion {policy.CRITERION}, adaptive "
           f"normal setpoints "
           f"{NORMAL_SETPOINTS}, target overrides {overrides or 'none'}")

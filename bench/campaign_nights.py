@@ -60,3 +60,34 @@ def label(sequence: tuple[int, ...], cfg: CampaignConfig | None = None) -> str:
     """"c21 n21 n23": the kinds and setpoints [°C] of a sequence."""
     v = variants(cfg)
     return " ".join(f"{v[i][0][0]}{v[i][1]:g}" for i in sequence)
+
+
+def night_sources(cfg: CampaignConfig | None = None) -> tuple[tuple[int, int | None], ...]:
+    """What a replayed night was simulated after, as (variant, previous variant or None), indices
+    into :func:`variants`: first each variant after a night of its own kind (``None``: the
+    pre-simulated schedules of one variant, every night of the same kind), then a constrained
+    night after a normal night at each normal setpoint, then a normal night at each normal
+    setpoint after a constrained night (:func:`alternating_schedule`)."""
+    n = len(variants(cfg))
+    return (tuple((v, None) for v in range(n)) + tuple((0, p) for p in range(1, n))
+            + tuple((p, 0) for p in range(1, n)))
+
+
+def source_of(v: int, previous: int | None, sources: tuple) -> int:
+    """The index in ``sources`` (:func:`night_sources`) of variant ``v`` run the night after
+    variant ``previous`` (None: no night the date before). A night after one of its own kind,
+    or after no night, replays the one-variant schedule: the house state a normal night at
+    another setpoint leaves differs by ±1 K of held temperature, not by a night of cooling."""
+    key = (v, previous) if (v, previous) in sources else (v, None)
+    return sources.index(key)
+
+
+def alternating_schedule(n: int, k: int, constrained_c: float, normal_c: float,
+                         constrained_parity: int, seed: int):
+    """``k`` nights alternating constrained (on the dates whose index has parity
+    ``constrained_parity``) and normal at ``normal_c`` [°C], the seed's weather (the same dates'
+    as :func:`variant_schedule`'s: the same length, so the same outdoor temperatures)."""
+    order = ["constrained" if j % 2 == constrained_parity else "normal" for j in range(k)]
+    return imp_schedule(n, n_constrained=order.count("constrained"),
+                        n_normal=order.count("normal"), setpoints_c=(normal_c,),
+                        constrained_setpoint_c=constrained_c, seed=seed, order=order)

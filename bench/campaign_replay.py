@@ -14,9 +14,14 @@ replayed ``adaptive`` and ``adaptive@N`` rows equal ``bench/campaign.py``'s own)
 need more than the policy reads (``veto``: a stop is overruled, the plan's next night runs)
 try what the data suggest before any is built into the policy.
 
-Printed per rule: nights run median / P90 / max, truth inside the final HLC / τ interval, median
-|error|, and the paired difference of median |error| against the fixed plan (bootstrap 95 %
-interval over households).
+Every rule runs on the policy of main before h18h (``MIN_FLOOR_SETPOINTS`` 1) unless it sets
+the constant (``msp2@N``: the rule since h18h); ``--plan`` names the ``full`` campaign's order
+(``nn``, ``wide``: the orders tried in h18h). The bench's give-up rule (3 invalid nights) is
+applied as the bench applies it.
+
+Printed per rule: nights run median / P90 / max (mean), truth inside the final HLC / τ interval,
+median |error|, the paired difference of median |error| against the fixed plan (bootstrap 95 %
+interval over households) and what stopped the campaigns.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ import numpy as np
 from impctl.campaign import decide, policy
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from campaign import BAND_C, CONSTRAINED_C, NORMAL_SETPOINTS, PLANS  # noqa: E402
+from campaign import BAND_C, CONSTRAINED_C, MAX_INVALID, NORMAL_SETPOINTS, PLANS  # noqa: E402
 from campaign_report import paired_diff  # noqa: E402
 
 
@@ -94,9 +99,90 @@ for _n in (5, 6, 7, 8):
     RULES[f"stall2@{_n}"] = ({"max_nights": _n, "stall_nights": 2}, {}, None)
 
 
-def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, object, str]:
-    """(nights run, final FitSummary or None, stop reason) of one household under ``rule``."""
+def _setpoints(hist) -> int:
+    """Distinct normal setpoints among the valid nights."""
+    return len({n.setpoint_c for n in hist if n.valid and n.kind == "normal"})
+
+
+# h18h, on the fit of stop 24 (one σ per night, the C_m prior): the floor rule's threshold
+# again, and "precision limited" only once two normal setpoints were run (vetoes that take the
+# stop's reason)
+for _n in (5, 6, 8):
+    for _fd in (0.2, 0.3, 0.4, 0.45, 0.6, 0.7, 0.8):
+        RULES[f"floor{_fd:g}@{_n}"] = ({"max_nights": _n, "floor_dominance": _fd}, {}, None)
+    RULES[f"two_sp@{_n}"] = (
+        {"max_nights": _n}, {},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2))
+    RULES[f"two_sp_any@{_n}"] = (
+        {"max_nights": _n}, {}, (lambda fits, extras, hist, reason: _setpoints(hist) < 2))
+    for _fd in (0.25, 0.45, 0.5, 0.6):
+        RULES[f"two_sp_floor{_fd:g}@{_n}"] = (
+            {"max_nights": _n, "floor_dominance": _fd}, {},
+            (lambda fits, extras, hist, reason: "precision limited" in reason
+             and _setpoints(hist) < 2))
+    RULES[f"three_or_max@{_n}"] = (
+        {"max_nights": _n}, {}, (lambda fits, extras, hist: bool(fits) and (
+            fits[-1].nights < 3 or fits[-1].nights > 3)))
+
+
+def _group(extras: list) -> str | None:
+    """The latest fit's model-error group (``fit.model_error.group``)."""
+    return (extras[-1].get("model_error") or {}).get("group") if extras else None
+
+
+for _n in (5, 6, 8):
+    # "precision limited" waits for two normal setpoints only where the latest fit's
+    # model-error group is "plain" (the group whose two-night fits err most on the tuning
+    # population, h18h)
+    RULES[f"plain_two_sp@{_n}"] = (
+        {"max_nights": _n}, {},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2 and _group(extras) == "plain"))
+    RULES[f"two_sp_gain20@{_n}"] = (
+        {"max_nights": _n}, {"MIN_GAIN": 0.2},
+        (lambda fits, extras, hist, reason: "precision limited" in reason
+         and _setpoints(hist) < 2))
+
+
+for _n in (5, 6, 8):
+    # policy.MIN_FLOOR_SETPOINTS (h18h): the product form of two_sp (the gain rule still
+    # speaks from 3 nights)
+    RULES[f"msp2@{_n}"] = ({"max_nights": _n}, {"MIN_FLOOR_SETPOINTS": 2}, None)
+    for _fd in (0.25, 0.45, 0.5):
+        RULES[f"msp2_floor{_fd:g}@{_n}"] = ({"max_nights": _n, "floor_dominance": _fd},
+                                             {"MIN_FLOOR_SETPOINTS": 2}, None)
+    RULES[f"msp2_gain20@{_n}"] = ({"max_nights": _n},
+                                   {"MIN_FLOOR_SETPOINTS": 2, "MIN_GAIN": 0.2}, None)
+
+
+#: the policy constants a rule runs on unless it sets them (main before h18h)
+BEFORE_H18H = {"MIN_FLOOR_SETPOINTS": 1}
+
+
+def _stop_label(reason: str) -> str:
+    """A stop reason in a word or two (as ``bench/campaign.py``'s table)."""
+    for text, label in (("most this", "max nights"), ("precision limited", "precision limited"),
+                        ("would not help", "no gain"), ("cannot be", "cannot be identified"),
+                        ("gave up", "gave up"), ("Target reached", "reached")):
+        if text in (reason or ""):
+            return label
+    return reason or "–"
+
+
+def _veto(veto, fits, extras, hist, reason: str) -> bool:
+    if "reason" in veto.__code__.co_varnames[:veto.__code__.co_argcount]:
+        return bool(veto(fits, extras, hist, reason))
+    return bool(veto(fits, extras, hist))
+
+
+def replay(rec: tuple, rule: tuple[dict, dict, object], target,
+           plan: tuple = PLANS["plan_warm"]) -> tuple[int, object, str]:
+    """(nights run, final FitSummary or None, stop reason) of one household under ``rule``,
+    its nights in ``plan``'s order (the dump's ``full`` campaign's)."""
     overrides, constants, veto = rule
+    # every rule on the policy of main before h18h unless it says otherwise
+    constants = {**BEFORE_H18H, **constants}
     target = replace(target, **overrides)
     history, fits, seen, extras = rec[11], rec[5], rec[10], rec[12]
     saved = {k: getattr(policy, k) for k in constants}
@@ -108,10 +194,11 @@ def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, ob
             d = decide(history[:h], fits[:n_fits], cands, target, forecast_t_out_c=forecast,
                        t_out_band_c=BAND_C, constrained_setpoint_c=CONSTRAINED_C,
                        normal_setpoints_c=NORMAL_SETPOINTS, outlook=outlook,
-                       criterion="plan", plan=PLANS["plan_warm"])
+                       criterion="plan", plan=plan)
             if (d.action == "stop" and veto is not None and not d.reached
-                    and h < target.max_nights and veto(fits[:n_fits], extras[:n_fits],
-                                                       history[:h])):
+                    and h < target.max_nights and _veto(veto, fits[:n_fits],
+                                                        extras[:n_fits], history[:h],
+                                                        d.reason)):
                 d = replace(d, action="run" if BAND_C[0] <= forecast <= BAND_C[1]
                             else "skip")
             if d.action == "stop":
@@ -121,10 +208,35 @@ def replay(rec: tuple, rule: tuple[dict, dict, object], target) -> tuple[int, ob
             if h >= len(history):
                 break
             h += 1
+            if sum(not n.valid for n in history[:h]) >= MAX_INVALID:
+                # the give-up rule of the bench's campaigns (daemon.schedule.gave_up)
+                valid = sum(n.valid for n in history[:h])
+                done = [f for f in fits if f.nights <= valid]
+                return h, (done[-1] if done else None), f"gave up: {MAX_INVALID} invalid nights"
         return h, (fits[-1] if fits else None), "ran out of the full campaign's nights"
     finally:
         for k, value in saved.items():
             setattr(policy, k, value)
+
+
+def _compare(records: list, other_path: str, truth: list, n_boot: int) -> None:
+    """Each strategy in both dumps, paired: this dump's median |error| − the other's."""
+    with open(other_path, "rb") as fh:
+        other = pickle.load(fh)["records"][0]
+
+    def errors(recs, strategy):
+        return {r[1]: (abs(r[3].hlc_w_per_k / truth[r[1]][0] - 1) * 100,
+                       abs(r[3].tau_h / truth[r[1]][1] - 1) * 100)
+                for r in recs if r[0] == strategy and r[3] is not None}
+
+    for strategy in sorted({r[0] for r in records} & {r[0] for r in other}):
+        mine, theirs = errors(records, strategy), errors(other, strategy)
+        common = sorted(set(mine) & set(theirs))
+        (dh, lh, hh), (dt, lt, ht) = paired_diff(np.array([mine[i] for i in common]),
+                                                 np.array([theirs[i] for i in common]), n_boot)
+        print(f"{strategy}: fitted {len(mine)} here, {len(theirs)} there; paired on "
+              f"{len(common)} (here − there): HLC {dh:+.1f} ({lh:+.1f} … {hh:+.1f}), "
+              f"τ {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) points")
 
 
 def main() -> None:
@@ -133,6 +245,15 @@ def main() -> None:
     ap.add_argument("--full", default="full@8", help="the dump's no-early-stop strategy")
     ap.add_argument("--bootstrap", type=int, default=2000)
     ap.add_argument("--rules", default=None, help="comma-separated names (default: all)")
+    ap.add_argument("--compare", default=None,
+                    help="another dump of the same households (e.g. --after-same): each "
+                         "strategy both ran, paired (this − that) on the households both fit")
+    ap.add_argument("--plan", default="plan_warm",
+                    help="the --full campaign's plan (bench/campaign.py PLANS): plan_warm "
+                         "(c21 n24 c21 n23 n22) or nn (c21 n24 n22 c21 n23)")
+    ap.add_argument("--online-as", default=None,
+                    help="the online strategy the replayed adaptive@5 must equal (default "
+                         "adaptive)")
     ap.add_argument("--online", default="",
                     help="also these strategies as the bench ran them (comma-separated), "
                          "e.g. normal_after@8, whose nights are not the continued plan's")
@@ -149,12 +270,15 @@ def main() -> None:
     online = {}
     for r in records:
         online.setdefault(r[0], {})[r[1]] = r
+    if args.compare:
+        _compare(records, args.compare, truth, args.bootstrap)
+        return
     names = args.rules.split(",") if args.rules else list(RULES)
     print(f"{len(full)} households ({args.full}), {len(fixed)} fixed fits; target "
           f"±{target.hlc_rel:.0%} / ±{target.tau_rel:.0%}")
-    print("| rule | nights median / P90 / max | truth inside HLC / τ | median abs. error HLC / τ"
-          " | paired − fixed HLC / τ, pp (95 % interval) |")
-    print("|---|---|---|---|---|")
+    print("| rule | nights median / P90 / max (mean) | truth inside HLC / τ | median abs. error "
+          "HLC / τ | paired − fixed HLC / τ, pp (95 % interval) | stopped by |")
+    print("|---|---|---|---|---|---|")
 
     def row(name: str, out: dict) -> None:
         nights = np.array([n for n, _, _ in out.values()])
@@ -170,10 +294,16 @@ def main() -> None:
         b = np.array([(abs(fixed[i][3].hlc_w_per_k / truth[i][0] - 1) * 100,
                        abs(fixed[i][3].tau_h / truth[i][1] - 1) * 100) for i in common])
         (dh, lh, hh), (dt, lt, ht) = paired_diff(a, b, args.bootstrap)
+        stops: dict[str, int] = {}
+        for _, _, reason in out.values():
+            label = _stop_label(reason)
+            stops[label] = stops.get(label, 0) + 1
         print(f"| {name} | {np.median(nights):g} / {np.percentile(nights, 90):g} / "
-              f"{nights.max()} | {cov[0]:.0f} / {cov[1]:.0f} % | {med[0]:.1f} / {med[1]:.1f} % | "
-              f"{dh:+.1f} ({lh:+.1f} … {hh:+.1f}) / {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) |",
-              flush=True)
+              f"{nights.max()} (mean {nights.mean():.1f}) | {cov[0]:.0f} / {cov[1]:.0f} % | "
+              f"{med[0]:.1f} / {med[1]:.1f} % | "
+              f"{dh:+.1f} ({lh:+.1f} … {hh:+.1f}) / {dt:+.1f} ({lt:+.1f} … {ht:+.1f}) | "
+              + ", ".join(f"{k} {v}" for k, v in sorted(stops.items(), key=lambda x: -x[1]))
+              + " |", flush=True)
 
     row("fixed 2 + 3", {i: (r[2], r[3], r[6]) for i, r in fixed.items()})
     for name in filter(None, args.online.split(",")):
@@ -188,8 +318,8 @@ def main() -> None:
                           fits[-1] if fits else None, "")
             row(f"first {k} valid nights of the continued plan", out)
     for name in names:
-        out = {i: replay(rec, RULES[name], target) for i, rec in full.items()}
-        same = "adaptive" if name == "adaptive@5" else name
+        out = {i: replay(rec, RULES[name], target, PLANS[args.plan]) for i, rec in full.items()}
+        same = (args.online_as or "adaptive") if name == "adaptive@5" else name
         if same in online:   # the replay must equal the bench's own campaign
             diff = [i for i, (n, f, _) in out.items()
                     if (n, f) != (online[same][i][2], online[same][i][3])]

@@ -200,39 +200,41 @@ def test_stop_when_the_floor_makes_the_target_unreachable():
     # sensors/meter alone give HLC ±9 %, τ ±6 %: a ±5 % HLC target is out of reach, and the
     # interval (±11 %) is mostly that floor
     at_floor = fit(2, 0.11, 0.09, floor=(0.09, 0.06))
+    # normal nights at two setpoints: the floor rule waits for them (MIN_FLOOR_SETPOINTS)
+    TWO_SP = [C, N, NightRecord("normal", 22.0, True)]
     cands = [Candidate("constrained", 21.0, 0.105, 0.08), Candidate("normal", 22.0, 0.10, 0.085)]
     outlook = Outlook(2, 0.097, 0.075, 0.09, 0.06)
-    d = decide([C, N], [at_floor], cands, Target(), **KW, outlook=outlook)
+    d = decide(TWO_SP, [at_floor], cands, Target(), **KW, outlook=outlook)
     assert (d.action, d.reached) == ("stop", False)
     assert "precision limited by what more nights cannot reduce" in d.reason
     assert "HLC ±9.0%" in d.reason and "±5%" in d.reason
     # without an outlook the fit's own floor decides the same
-    assert "precision limited" in decide([C, N], [at_floor], cands, Target(), **KW).reason
+    assert "precision limited" in decide(TWO_SP, [at_floor], cands, Target(), **KW).reason
     # the same floor, but the interval is still mostly statistics (±40 %): nights still help,
     # the campaign goes on
     wide = fit(2, 0.40, 0.20, floor=(0.09, 0.06))
     helps = [Candidate("constrained", 21.0, 0.35, 0.12), Candidate("normal", 22.0, 0.30, 0.18)]
-    d = decide([C, N], [wide], helps, Target(), **KW,
+    d = decide(TWO_SP, [wide], helps, Target(), **KW,
                outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
     assert d.action == "run"
     # ... also when two more nights are predicted to bring it down to the floor: those are
     # the nights that get it there
-    d = decide([C, N], [wide], helps, Target(), **KW,
+    d = decide(TWO_SP, [wide], helps, Target(), **KW,
                outlook=Outlook(2, 0.10, 0.08, 0.09, 0.06))
     assert d.action == "run"
     # floor_dominance 0: stop as soon as the floor alone misses the target
-    d = decide([C, N], [wide], helps, Target(floor_dominance=0.0), **KW,
+    d = decide(TWO_SP, [wide], helps, Target(floor_dominance=0.0), **KW,
                outlook=Outlook(2, 0.25, 0.12, 0.09, 0.06))
     assert "precision limited" in d.reason
     with pytest.raises(ValueError, match="floor_dominance"):
         Target(floor_dominance=1.5)
     # a floor below the target never stops on precision: the target is reachable
     low_floor = fit(2, 0.11, 0.09, floor=(0.03, 0.04))
-    d = decide([C, N], [low_floor], [Candidate("normal", 22.0, 0.08, 0.07)], Target(), **KW,
+    d = decide(TWO_SP, [low_floor], [Candidate("normal", 22.0, 0.08, 0.07)], Target(), **KW,
                outlook=Outlook(2, 0.06, 0.06, 0.03, 0.04))
     assert d.action == "run"
     # a loose target the floor allows is not "limited" either
-    assert decide([C, N], [at_floor], cands, Target(hlc_rel=0.2, tau_rel=0.2), **KW,
+    assert decide(TWO_SP, [at_floor], cands, Target(hlc_rel=0.2, tau_rel=0.2), **KW,
                   outlook=outlook).reached
 
 
@@ -278,7 +280,8 @@ def test_floor_of_a_fit_json():
     # the reason names the largest share of the floor that misses the target most
     assert s.hlc_floor_by == "the room and outdoor sensors' offsets"
     assert s.tau_floor_by == "the model's error on houses like this one"
-    d = decide([C, N], [s], [], Target(hlc_rel=0.5, tau_rel=0.06), **KW)
+    d = decide([C, N, NightRecord("normal", 22.0, True)], [s], [],
+               Target(hlc_rel=0.5, tau_rel=0.06), **KW)
     assert d.reason.startswith("Stopped: precision limited by the model's error on houses "
                                "like this one: HLC ±")
     # an older fit states no shares: no floor, the rule never fires
@@ -404,3 +407,32 @@ def test_a_raised_max_nights_continues_the_plan_in_its_order():
         ("constrained", 21.0), ("normal", 24.0), ("normal", 24.0)]
     d = decide(history, [fit(7, 0.6, 0.6)], [], Target(max_nights=8), **kw)
     assert d.action == "stop" and "max_nights 8" in d.reason
+
+
+def test_precision_limited_waits_for_normal_nights_at_two_setpoints():
+    # h18h: a fit of one constrained and one normal night (c21 n24) is not trusted to say the
+    # target is out of reach — nights at a second indoor–outdoor difference separate HLC from
+    # the night gain; from the second normal setpoint on the floor rule speaks
+    assert policy.MIN_FLOOR_SETPOINTS == 2
+    kw = {**KW, "normal_setpoints_c": (22.0, 23.0, 24.0)}
+    n24, n23 = NightRecord("normal", 24.0, True), NightRecord("normal", 23.0, True)
+    at_floor = fit(2, 0.11, 0.09, floor=(0.09, 0.06))
+    # each night still predicted to help by more than 10 % (the gain rule stays quiet)
+    cands = [Candidate("constrained", 21.0, 0.09, 0.08), Candidate("normal", 22.0, 0.08, 0.085)]
+    outlook = Outlook(2, 0.097, 0.075, 0.09, 0.06)
+    d = decide([C, n24], [at_floor], cands, Target(), **kw, outlook=outlook)
+    assert (d.action, d.kind) == ("run", "constrained"), d.reason
+    # an invalid night at a second setpoint does not count
+    bad23 = NightRecord("normal", 23.0, False)
+    d = decide([C, n24, C, bad23], [fit(3, 0.11, 0.09, floor=(0.09, 0.06))], cands, Target(),
+               **kw, outlook=outlook)
+    assert (d.action, d.kind, d.setpoint_c) == ("run", "normal", 23.0), d.reason
+    d = decide([C, n24, C, n23], [fit(4, 0.11, 0.09, floor=(0.09, 0.06))], cands, Target(),
+               **kw, outlook=outlook)
+    assert d.action == "stop" and "precision limited" in d.reason
+    # a plan with one normal setpoint: one is all it can have
+    d = decide([C, n24], [at_floor], cands, Target(), **{**kw, "normal_setpoints_c": (24.0,)},
+               outlook=outlook)
+    assert d.action == "stop" and "precision limited" in d.reason
+    # the target reached still stops at once
+    assert decide([C, n24], [fit(2, 0.04, 0.07)], cands, Target(), **kw).reached

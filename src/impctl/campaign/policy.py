@@ -25,7 +25,11 @@ Rules, in order (:func:`decide`):
    Without predictions the latest fit's own floor and interval are used. Judged from fits of
    :data:`MIN_FLOOR_NIGHTS` valid nights (2; 3 — as rule 4 — was tried in h18c: it lifts the
    coverage of the campaigns that stopped at 2 nights but runs a median of 5 nights, README
-   "Adaptive campaign").
+   "Adaptive campaign") that include valid normal nights at :data:`MIN_FLOOR_SETPOINTS`
+   different setpoints (2 since h18h, fewer when the plan has fewer: on the fit of stop 24
+   most campaigns stopped after c21 n24, whose HLC was 4 points worse than the fixed plan's
+   on the tuning population; with the plan's order the rule first speaks after c21 n24 c21
+   n23).
 4. **more nights would not help** — with predictions and a fit of at least 3 valid nights,
    stop when the best candidate night is predicted to shrink the worst ratio by less than
    10 % (:data:`MIN_GAIN`). A fit of one night of each kind is too fragile (its sandwich has
@@ -80,6 +84,11 @@ MIN_GAIN = 0.10
 #: "Precision limited" judges only fits of at least this many valid nights (2: from the first
 #: fit of one night of each kind).
 MIN_FLOOR_NIGHTS = 2
+#: "Precision limited" also waits for valid normal nights at this many different setpoints
+#: (fewer when the plan has fewer): nights at different indoor–outdoor differences are what
+#: separate HLC from the night gain (h14q), and a fit of one normal setpoint judges its floor
+#: too soon (h18h).
+MIN_FLOOR_SETPOINTS = 2
 #: How the next night is chosen: "plan" — the fixed plan's next night in :func:`plan_order`
 #: (the default since h18d); "worst" — the candidate with the smallest predicted worst ratio
 #: max(±HLC/target, ±τ/target); "balanced" — the largest predicted joint shrink of the
@@ -179,7 +188,11 @@ def decide(history: Sequence[NightRecord], fits: Sequence[FitSummary],
         best_any = (min(usable, key=lambda c: (target.ratio(c.hlc_rel_pred, c.tau_rel_pred),
                                                c.kind != NORMAL, c.setpoint_c))
                     if usable else None)
-        limited = _floor_limited(latest, best_any, outlook, target)
+        setpoints = len({float(n.setpoint_c) for n in history
+                         if n.valid and n.kind == NORMAL})
+        limited = (_floor_limited(latest, best_any, outlook, target)
+                   if setpoints >= min(MIN_FLOOR_SETPOINTS, len(set(normal_setpoints_c)))
+                   else None)
         if limited is not None:
             return Decision("stop", None, None, limited)
         no_gain = _no_gain(latest, best_any, target)
