@@ -35,7 +35,6 @@ from ..ode.packing import PackedNights
 from ..prior import PriorSlices, with_class_probabilities
 from . import lm
 from ._alloc import retain_freed_memory
-from .priors import MergedPrior
 
 
 class _BatchFit(NightFit):
@@ -178,16 +177,14 @@ def _solve_group(group: list[_Problem]) -> None:
         p_off += p.rows.n_problems
         n_off += p.ctx.packed.n_nights
         g_off += int(p.groups.max()) + 1
-    box = torch.cat([p.rows.box for p in group])
-    prior = (MergedPrior.of(PriorSlices(tuple(p.ctx.prior for p in group), torch.cat(owner)),
-                            box)
-             if any(p.ctx.prior is not None for p in group) else None)
-    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver, prior)
+    ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver,
+                     PriorSlices(tuple(p.ctx.prior for p in group), torch.cat(owner))
+                     if any(p.ctx.prior is not None for p in group) else None)
     rows = lm.Rows(
         torch.cat(problem), torch.cat(night), torch.cat([p.rows.row_type for p in group]),
         torch.cat([_pad(p.rows.phi_w, k) for p in group]),
         torch.cat([_pad(p.rows.phi_in_w, k) for p in group]),
-        torch.cat([p.rows.scale for p in group]), box, p_off)
+        torch.cat([p.rows.scale for p in group]), torch.cat([p.rows.box for p in group]), p_off)
     try:
         res = lm.levenberg_marquardt(ctx, rows, torch.cat([p.u0 for p in group]),
                                      torch.cat([p.t_m0 for p in group]),

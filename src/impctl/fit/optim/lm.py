@@ -268,6 +268,8 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
     fleet batch): a unit whose groups are all done stops there, exactly where it would stop
     alone, while the others go on. Done and stopped problems are not evaluated any more.
     """
+    # the prior's moments depend only on the boxes: looked up once here, not per iteration
+    ctx = replace(ctx, prior=MergedPrior.of(ctx.prior, rows.box))
     with torch.no_grad():
         u, t_m0 = u.clone(), t_m0.clone()
         ne = _normal_equations(ctx, rows, u, t_m0)

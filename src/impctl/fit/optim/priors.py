@@ -1,4 +1,4 @@
-"""The population priors of a merged optimiser call as one penalty (torch, float64).
+"""The population priors of an optimiser call as one penalty (torch, float64).
 
 A fleet batch merges many households into one Levenberg–Marquardt call, and each household
 carries its own tempered prior (:class:`~impctl.fit.prior.PriorSlices`). Evaluated household
@@ -6,7 +6,8 @@ by household, the prior's share of the normal equations cost one autograd pass a
 of the prior's moments per household per iteration — a quarter of a batch's optimiser time
 (``bench/fleet.py --profile``). :class:`MergedPrior` looks the moments up once per call (they
 depend only on each problem's box, which a call never changes) and differentiates all problems'
-residuals in one pass. The arithmetic per problem is the same as
+residuals in one pass; :func:`.lm.levenberg_marquardt` makes one of every prior it is given, a
+single fit's too. The arithmetic per problem is the same as
 :func:`impctl.fit.prior.penalty`'s, element by element, so the numbers are identical.
 """
 
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 import torch
 
 from ..ode.parameters import lumped, to_physical
-from ..prior import QUANTITIES, PriorSlices
+from ..prior import QUANTITIES, PopulationPrior, PriorSlices
 
 
 @dataclass(frozen=True)
@@ -31,19 +32,26 @@ class MergedPrior:
     columns: tuple[int, ...]   # the quantities' columns of :func:`~..ode.parameters.lumped`
 
     @staticmethod
-    def of(slices: PriorSlices, box: torch.Tensor) -> MergedPrior | PriorSlices:
-        """The merged form of ``slices`` for problems with boxes ``box`` (P, n, 2); the slices
-        themselves when their priors hold different quantities (then no one residual vector
+    def of(prior: PopulationPrior | PriorSlices | None, box: torch.Tensor):
+        """The merged form of ``prior`` (one household's prior, or the slices of a merged
+        call) for problems with boxes ``box`` (P, n, 2); ``prior`` itself when it is None or
+        when its households' priors hold different quantities (then no one residual vector
         fits them all)."""
-        quantities = {p.quantities for p in slices.priors if p is not None}
+        if isinstance(prior, PopulationPrior):
+            mu, sd = prior.moments(box)
+            return MergedPrior(mu, sd, torch.ones(len(box), dtype=torch.bool),
+                               tuple(QUANTITIES.index(q) for q in prior.quantities))
+        if not isinstance(prior, PriorSlices):
+            return prior
+        quantities = {p.quantities for p in prior.priors if p is not None}
         if len(quantities) != 1:
-            return slices
+            return prior
         (names,) = quantities
-        n_prob = len(slices.owner)
+        n_prob = len(prior.owner)
         mu = torch.zeros(n_prob, len(names), dtype=box.dtype)
         sd = torch.ones(n_prob, len(names), dtype=box.dtype)
         live = torch.zeros(n_prob, dtype=torch.bool)
-        for p, sel in slices._parts():
+        for p, sel in prior._parts():
             mu[sel], sd[sel] = p.moments(box[sel])
             live[sel] = True
         return MergedPrior(mu, sd, live, tuple(QUANTITIES.index(q) for q in names))
