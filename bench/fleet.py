@@ -206,14 +206,16 @@ def profile(data: Path, n: int) -> None:
 
     def lm_call() -> str:
         calls["lm"] += 1
-        return ("merged LM: 1st call (all starts, with and without the nuisance terms)"
-                if calls["lm"] % 2 else "merged LM: 2nd call (joint refit with fitted σ)")
+        return {1: "merged LM: 1st call (all starts, with and without the nuisance terms)",
+                2: "merged LM: 2nd call (joint refit with fitted σ and tempered prior)"}.get(
+            calls["lm"], "merged LM: later refits (households whose nights' σ still moved)")
 
     timed(worker, "read_sources", "read the households' rows (pyarrow/pandas → nights)")
     timed(worker, "_classify", "classifiers")
     timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
     timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
+    timed(lm, "penalty", "    of which the ridge and the population priors (also in the intervals)")
     timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
