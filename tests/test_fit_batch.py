@@ -204,3 +204,23 @@ def test_a_merged_call_evaluates_its_priors_once_not_per_household(fleet, monkey
     assert all(isinstance(r, NightFit) for r in results)
     assert any(merged_calls)
     assert per_household == []
+
+
+def test_merged_calls_hold_their_households_in_batch_order(fleet, monkeypatch):
+    """A merged call packs its households in batch order, not in the order their threads
+    reached the rendezvous: a problem's place in the merged tensors can change the last bit
+    of its rounding, so thread timing made a batch's numbers differ from run to run."""
+    from impctl.fit.optim import batch
+
+    orders = []
+    real = batch._solve_group
+
+    def recorded(group):
+        orders.append([p.household for p in group])
+        return real(group)
+
+    monkeypatch.setattr(batch, "_solve_group", recorded)
+    nights, ranges = fleet
+    fit_households(nights[:2] * 2, ranges[:2] * 2, **PARAMS)
+    assert any(len(o) > 1 for o in orders)
+    assert all(o == sorted(o) for o in orders)
