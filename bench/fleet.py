@@ -4,6 +4,7 @@ batch vs alone, memory per worker, and where a batch's CPU goes.
 Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
           [--alone 16] [--batch-size 16] [--plant realistic|iso] [--profile 16]
           [--skip-full | --full-only]
+      .venv/bin/python bench/fleet.py --sample 10 [--ranges true] [--dump F] [--against F]
 
 (``--throughput`` households are cut into batches of at most ``--batch-size``, at least two per
 worker.)
@@ -32,7 +33,12 @@ Measured:
    median and last batch — flat means no growth over the run;
 5. ``--profile N``: one worker's batch of N households run in this process
    (:func:`impctl.fleet.worker.fit_batch`), its CPU split by phase (thread CPU time of each
-   phase, nested phases inside their parents).
+   phase, nested phases inside their parents);
+6. ``--sample B``: B batches spread over the whole fleet fitted in this process
+   (``fit_households``, as a worker fits them, without Dask): CPU-s per household, with the
+   whole prior ranges or each house's true classes (``--ranges true``, the path with
+   classifiers: a third more problems and the class check); ``--dump``/``--against`` compare
+   every fitted number with another commit's run.
 No classifiers are used (the whole prior ranges, as without ``impctl train``), so the figures
 are the fit's; classification adds ~1 ms per household.
 """
@@ -173,6 +179,60 @@ def batch_vs_alone(data: Path, n: int) -> None:
           f"difference of HLC/C_m/τ {diff:.1e}")
 
 
+def sample(data: Path, n_batches: int, batch: int, ranges: str, dump: Path | None,
+           against: Path | None) -> None:
+    """``n_batches`` batches spread over the fleet, fitted in this process as a worker fits
+    them (``fit_households``, ``per_night=False``, one thread): CPU-s per household, optimiser
+    calls; ``--dump`` writes every household's numbers, ``--against``
+    compares them with an earlier dump (same command on another commit)."""
+    import json
+
+    import torch
+
+    from impctl.fit.optim.batch import fit_households
+    from impctl.fleet.inputs import discover, read_sources
+
+    torch.set_num_threads(1)
+    sources = discover(data)
+    houses = None
+    if ranges == "true":
+        from _fit_protocol import true_ranges
+
+        from impctl.population.households import sample_households
+
+        houses = sample_households(len(sources), seed=SEED)
+    step = max(batch, len(sources) // n_batches)
+    out, cpu, calls, n = {}, 0.0, 0, 0
+    for lo in range(0, step * n_batches, step):
+        nights = read_sources(sources[lo:lo + batch], "Europe/Ljubljana")
+        keys = list(nights)
+        box = [None if houses is None else true_ranges(houses.take(int(k[1:]))) for k in keys]
+        c0 = time.process_time()
+        fits, stats = fit_households([nights[k] for k in keys], box, per_night=False)
+        cpu += time.process_time() - c0
+        calls += stats.merged_calls
+        n += len(keys)
+        for k, f in zip(keys, fits, strict=True):
+            out[k] = None if isinstance(f, BaseException) else {
+                "lumped": {q: [e.value, e.low, e.high] for q, e in f.lumped_.items()},
+                "parameters": f.parameters_, "sigma_night": f.sigma_night_, "loss": f.loss_,
+                "n_iter": f.n_iter_}
+    print(f"  {n} households ({n_batches} batches of {batch}, ranges: {ranges}): "
+          f"{cpu / n:.3f} CPU-s per household, {calls} merged optimiser calls "
+          f"(load average now {os.getloadavg()[0]:.1f})")
+    if dump:
+        dump.write_text(json.dumps(out))
+    if against:
+        old = json.loads(against.read_text())
+        flat = lambda d: (np.concatenate([flat(v) for v in d.values()]) if isinstance(d, dict)  # noqa: E731
+                          else np.asarray(d, float).ravel())
+        diff = max(float(np.max(np.abs(flat(out[k]) - flat(old[k]))
+                                / np.maximum(np.abs(flat(old[k])), 1e-300)))
+                   for k in out if out[k] is not None)
+        print(f"  against {against.name}: largest relative difference of any fitted number "
+              f"(HLC/C_m/τ and intervals, parameters, σ per night, loss, iterations) {diff:.1e}")
+
+
 def profile(data: Path, n: int) -> None:
     """One worker's batch of ``n`` households in this process, its CPU split by phase."""
     import threading
@@ -206,14 +266,16 @@ def profile(data: Path, n: int) -> None:
 
     def lm_call() -> str:
         calls["lm"] += 1
-        return ("merged LM: 1st call (all starts, with and without the nuisance terms)"
-                if calls["lm"] % 2 else "merged LM: 2nd call (joint refit with fitted σ)")
+        return {1: "merged LM: 1st call (all starts, with and without the nuisance terms)",
+                2: "merged LM: 2nd call (joint refit with fitted σ and tempered prior)"}.get(
+            calls["lm"], "merged LM: later refits (households whose nights' σ still moved)")
 
     timed(worker, "read_sources", "read the households' rows (pyarrow/pandas → nights)")
     timed(worker, "_classify", "classifiers")
     timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
     timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
+    timed(lm, "penalty", "    of which the ridge and the population priors (also in the intervals)")
     timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
@@ -255,6 +317,12 @@ def main() -> None:
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
     ap.add_argument("--profile", type=int, default=0, metavar="N",
                     help="split one batch of N households' CPU by phase, then stop")
+    ap.add_argument("--sample", type=int, default=0, metavar="BATCHES",
+                    help="fit BATCHES batches spread over the fleet in this process, then stop")
+    ap.add_argument("--ranges", choices=("prior", "true"), default="prior",
+                    help="--sample: whole prior ranges, or each house's true classes")
+    ap.add_argument("--dump", type=Path, help="--sample: write every household's numbers")
+    ap.add_argument("--against", type=Path, help="--sample: compare with an earlier --dump")
     ap.add_argument("--skip-full", action="store_true")
     ap.add_argument("--full-only", action="store_true")
     args = ap.parse_args()
@@ -264,6 +332,10 @@ def main() -> None:
     print(f"plant: {args.plant}; 8 nights (2 constrained + 6 normal) of 5-minute rows per "
           "household; no classifiers (prior ranges)")
     data = make_fleet(args.households, args.data, args.plant)
+    if args.sample:
+        print(f"\n6. {args.sample} batches across the fleet, in this process (one thread)")
+        sample(data, args.sample, args.batch_size, args.ranges, args.dump, args.against)
+        return
     if args.profile:
         print(f"\n5. where one batch's CPU goes ({args.profile} households, one thread)")
         profile(data, args.profile)

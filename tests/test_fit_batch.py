@@ -137,3 +137,90 @@ def test_each_households_class_probabilities_reach_its_prior(fleet):
     assert centre[got] == pytest.approx(centre[alone], rel=1e-9)
     assert abs(centre[plain] / centre[alone] - 1) > 0.02   # the mixture moved the prior
     assert got.lumped_["c_m"].value == pytest.approx(alone.lumped_["c_m"].value, rel=1e-4)
+
+
+def test_merged_priors_are_one_penalty_equal_to_the_households_own():
+    """A merged call's priors (optim.priors.MergedPrior: moments looked up once per call, one
+    autograd pass for every problem) give exactly the per-household penalty of
+    prior.PriorSlices — households with different tempering, boxes, and one without a prior —
+    also for the running problems the optimiser takes."""
+    import torch
+
+    from impctl.fit.layout import nuisance_boxes
+    from impctl.fit.nights.data import search_bounds
+    from impctl.fit.ode.parameters import bounds_tensor
+    from impctl.fit.optim.priors import MergedPrior
+    from impctl.fit.prior import PopulationPrior, PriorSlices, penalty
+
+    nuisance, _ = nuisance_boxes(False, True, True, False, 250.0)
+    wide = bounds_tensor(search_bounds(None, None), nuisance)
+    narrow = bounds_tensor(search_bounds({"c_f": (0.8, 1.65)}, None), nuisance)
+    priors = tuple(PopulationPrior().tempered(1.0 + 0.4 * i) for i in range(3)) + (None,)
+    owner = torch.arange(4).repeat_interleave(5)
+    box = torch.stack([narrow if i % 3 else wide for i in range(20)])
+    u = torch.randn(20, box.shape[1], generator=torch.Generator().manual_seed(1),
+                    dtype=torch.float64)
+    slices = PriorSlices(priors, owner)
+    merged = MergedPrior.of(slices, box)
+    for got, want in zip(merged.penalty(u, box, 0.0, 0.01), penalty(slices, u, box, 0.0, 0.01),
+                         strict=True):
+        assert torch.equal(got, want)
+    assert not bool(merged.penalty(u, box, 0.0, 0.01)[0][owner == 3].any())  # no prior
+    keep = torch.tensor([0, 6, 7, 13, 19])
+    for got, want in zip(merged.take(keep).penalty(u[keep], box[keep], 0.0, 0.01),
+                         penalty(slices.take(keep), u[keep], box[keep], 0.0, 0.01), strict=True):
+        assert torch.equal(got, want)
+
+
+def test_a_merged_call_evaluates_its_priors_once_not_per_household(fleet, monkeypatch):
+    """The merged calls of a batch evaluate every household's prior in one pass per
+    iteration: the per-household prior penalty (prior.penalty, one autograd pass and one
+    moments lookup per household per iteration — a quarter of a fleet batch's optimiser time
+    before) is never called inside them."""
+    from impctl.fit import prior as prior_module
+
+    nights, ranges = fleet
+    merged_calls, inside, per_household = [], [False], []
+    real_lm, real_penalty = lm.levenberg_marquardt, prior_module.penalty
+
+    def counted_lm(ctx, rows, *a, **kw):
+        # more nights than either household has: both households' problems in one call
+        merged = ctx.packed.n_nights > max(len(n) for n in nights[:2])
+        merged_calls.append(merged)
+        inside[0] = merged
+        try:
+            return real_lm(ctx, rows, *a, **kw)
+        finally:
+            inside[0] = False
+
+    def counted_penalty(*a, **kw):
+        if inside[0]:
+            per_household.append(1)
+        return real_penalty(*a, **kw)
+
+    monkeypatch.setattr(lm, "levenberg_marquardt", counted_lm)
+    monkeypatch.setattr(lm, "prior_penalty", counted_penalty)
+    results, stats = fit_households(nights[:2], ranges[:2], **PARAMS)
+    assert all(isinstance(r, NightFit) for r in results)
+    assert any(merged_calls)
+    assert per_household == []
+
+
+def test_merged_calls_hold_their_households_in_batch_order(fleet, monkeypatch):
+    """A merged call packs its households in batch order, not in the order their threads
+    reached the rendezvous: a problem's place in the merged tensors can change the last bit
+    of its rounding, so thread timing made a batch's numbers differ from run to run."""
+    from impctl.fit.optim import batch
+
+    orders = []
+    real = batch._solve_group
+
+    def recorded(group):
+        orders.append([p.household for p in group])
+        return real(group)
+
+    monkeypatch.setattr(batch, "_solve_group", recorded)
+    nights, ranges = fleet
+    fit_households(nights[:2] * 2, ranges[:2] * 2, **PARAMS)
+    assert any(len(o) > 1 for o in orders)
+    assert all(o == sorted(o) for o in orders)

@@ -41,11 +41,13 @@ class _BatchFit(NightFit):
     """A NightFit whose Levenberg–Marquardt calls go through a shared rendezvous."""
 
     _rendezvous: _Rendezvous | None = None
+    _household = 0   # position in the batch: the merged call's order
 
     def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer != "lm" or self._rendezvous is None:
             return super()._optimise(rows, u0, t_m0, groups)
-        return self._rendezvous.solve(_Problem(self._ctx, rows, u0, t_m0, groups, self.max_iter))
+        return self._rendezvous.solve(_Problem(self._ctx, rows, u0, t_m0, groups, self.max_iter,
+                                               self._household))
 
 
 @dataclass
@@ -56,6 +58,7 @@ class _Problem:
     t_m0: torch.Tensor
     groups: torch.Tensor
     max_iter: int
+    household: int = 0
     result: lm.LMResult | None = None
     error: BaseException | None = None
     done: bool = False
@@ -93,6 +96,10 @@ class _Rendezvous:
                 if self._running == 0:
                     return
                 batch, self._pending = self._pending, []
+            # in household order, not in the order the threads arrived: where a problem sits
+            # in the merged tensors can change the last bit of its rounding, and a household
+            # on a flat loss surface carries that further (run to run up to 1e-2 before)
+            batch.sort(key=lambda p: p.household)
             for group in _compatible_groups(batch):
                 _solve_group(group)
                 self.merged_calls += 1
@@ -260,6 +267,7 @@ def fit_households(
         if probabilities is not None:
             est.prior = with_class_probabilities(est.prior, probabilities[i])
         est._rendezvous = rendezvous
+        est._household = i
         try:
             results[i] = est.fit(nights[i], ranges[i])
         except BaseException as exc:  # noqa: BLE001 — reported per household

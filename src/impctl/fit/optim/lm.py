@@ -30,6 +30,7 @@ import torch
 from ..ode.node import ROW_DEMAND
 from ..ode.parameters import DTYPE
 from ..prior import penalty as prior_penalty
+from .priors import MergedPrior
 from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7
@@ -106,7 +107,9 @@ def penalty(ctx: Context, u: torch.Tensor, box: torch.Tensor):
     n = u.shape[1]
     loss, h, g = (ctx.ridge * (u ** 2).sum(1),
                   ctx.ridge * torch.eye(n, dtype=DTYPE).expand(len(u), n, n), ctx.ridge * u)
-    extra = prior_penalty(ctx.prior, u, box, ctx.ach_vent, ctx.ach_infl)
+    extra = (ctx.prior.penalty(u, box, ctx.ach_vent, ctx.ach_infl)
+             if isinstance(ctx.prior, MergedPrior)
+             else prior_penalty(ctx.prior, u, box, ctx.ach_vent, ctx.ach_infl))
     if extra is not None:
         loss, h, g = loss + extra[0], h + extra[1], g + extra[2]
     return loss, h, g
@@ -265,6 +268,8 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
     fleet batch): a unit whose groups are all done stops there, exactly where it would stop
     alone, while the others go on. Done and stopped problems are not evaluated any more.
     """
+    # the prior's moments depend only on the boxes: looked up once here, not per iteration
+    ctx = replace(ctx, prior=MergedPrior.of(ctx.prior, rows.box))
     with torch.no_grad():
         u, t_m0 = u.clone(), t_m0.clone()
         ne = _normal_equations(ctx, rows, u, t_m0)
