@@ -19,6 +19,7 @@ Seconds per variant instead of a full bench: a ranking on 20 households, not a m
 from __future__ import annotations
 
 import argparse
+import os
 import pickle
 import sys
 from pathlib import Path
@@ -37,7 +38,7 @@ from impctl.fit.estimator import NightFit  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 
-OUT = Path("/tmp/h14e")
+OUT = Path(os.environ.get("H14E_DIAG_DIR", "/tmp/h14e"))
 
 
 def _path(row: str) -> Path:
