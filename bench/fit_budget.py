@@ -141,7 +141,8 @@ def fit_args(realism, night_gain_w: float | None = None,
                            model_error=True, lsq=False, eps_truth="house", verbose=False,
                            model_dir=None, realism=realism, night_gain_w=night_gain_w,
                            night_gain_sd_w=night_gain_sd_w, stop_at_t_min=stop_at_t_min,
-                           band_k=DEFAULT_BAND_K, valid_h=MIN_NIGHT_H, anticipate=True)
+                           band_k=DEFAULT_BAND_K, valid_h=MIN_NIGHT_H, anticipate=True,
+                           prior="default", prior_weight=1.0)
 
 
 @contextmanager
