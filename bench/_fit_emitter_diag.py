@@ -118,17 +118,6 @@ def _switches(kw: dict) -> None:
             u[0, 7:] = float(np.log(low / (1 - low)))
             return u
         lay_mod.starts = low_starts
-    lay_mod.SPLIT_LAG = bool(kw.pop("split_lag", True))
-    lay_mod.LAG_IN_SIMPLE = False   # the diagnosis's lag_simple switch decides it
-    if kw.pop("lag_simple", False):
-        # the held nights' lag (lag_tau_h alone) also in the model without the release terms:
-        # the likelihood-ratio test then decides only the release, the lag stays
-        def boxes(*a, **k):
-            nuisance, plain = _ORIGINAL_BOXES(*a, **k)
-            return nuisance, plain | {"lag_tau_h": nuisance["lag_tau_h"]}
-        est.nuisance_boxes = boxes
-    else:
-        est.nuisance_boxes = _ORIGINAL_BOXES
     if kw.pop("force_nuisance", False):
         def forced(result, lay, best_simple, n_nuisance):
             _, check = selection.nuisance_check(result, lay, best_simple, n_nuisance)
@@ -146,7 +135,6 @@ def _originals():
 
 
 _BOUNDS, _ORIGINAL = _originals()
-_ORIGINAL_BOXES = __import__("impctl.fit.estimator", fromlist=["x"]).nuisance_boxes
 
 
 def refit(row: str, variant: str, verbose: bool, only: list[int] | None,
@@ -178,7 +166,7 @@ def refit(row: str, variant: str, verbose: bool, only: list[int] | None,
                   f"C_m {e[2]:+6.1f} | kept {f.nuisance_check_.get('selected')} "
                   f"em {nu.get('emitter_w', 0):5.0f} W {nu.get('emitter_tau_h', 0):4.2f} h "
                   f"fur {nu.get('furniture_j_per_m2k', 0):6.0f} "
-                  f"sh {nu.get('emitter_share', 0):.2f} lag {nu.get('lag_tau_h', 0):4.2f} h "
+                  f"sh {nu.get('emitter_share', 0):.2f} "
                   f"χ² {f.nuisance_check_.get('chi2', 0):7.1f} | cons h "
                   + " ".join(f"{c:.1f}" for c in cons), flush=True)
     a = np.asarray(errs, float)

@@ -255,39 +255,3 @@ def test_emitter_lag_gives_the_metered_power_of_a_house_with_a_screed():
     with_lag, without = predicted(True), predicted(False)
     assert np.max(np.abs(with_lag - meas)) < 0.02 * np.max(meas)
     assert np.max(np.abs(without - meas)) > 0.2 * np.max(meas)
-
-
-def test_held_nights_lag_has_its_own_time_constant():
-    """With ``lag_tau_h`` in the row, the held nights' meter lag uses it, whatever the
-    constrained nights' release time constant (``emitter_tau_h``) says: the same screed as
-    above, its release constant set far off (0.3 h), gives the metered power only through
-    ``lag_tau_h`` (h14f)."""
-    share, h_e = 0.4, 800.0
-    params = _params()
-    net = network(params, *ACH)
-    c_m = float(net.c_m_j_per_k[0])
-    tau_e_h = share * c_m / h_e / 3600.0
-    t = np.arange(0.0, 8 * 3600.0 + 1.0, 300.0)
-    t_air = np.full(len(t), 21.0)
-    q = 2000.0 + 1000.0 * t / t[-1]                     # a demand rising through the night
-    night = _night("normal", t, t_air, np.full(len(t), 0.0), q)
-    packed = pack_nights([night], [0.0])
-    packed.emitter_lag = True
-
-    def lag_share(nuisance):
-        row = torch.cat([params, torch.tensor([nuisance], dtype=DTYPE)], dim=1)
-        rows = build_rows(packed, row, torch.tensor([18.0], dtype=DTYPE), torch.tensor([0]),
-                          torch.tensor([ROW_DEMAND]), packed.q_w, packed.q_in_w, *ACH)
-        plain = build_rows(packed, params, torch.tensor([18.0], dtype=DTYPE),
-                           torch.tensor([0]), torch.tensor([ROW_DEMAND]), packed.q_w,
-                           packed.q_in_w, *ACH)
-        m = rows.mask[0]
-        return (rows.predict()[0] - plain.predict()[0])[m].numpy(), plain.predict()[0][m]
-
-    own, p = lag_share([0.0, 0.0, 0.3, 0.0, share, tau_e_h])
-    shared, _ = lag_share([0.0, 0.0, tau_e_h, 0.0, share])
-    # the lag term τ_e·dP/dt: the same whether τ_e comes from lag_tau_h or (no sixth
-    # term) from emitter_tau_h, and not the one the 0.3 h release constant would give
-    assert np.allclose(own, shared, rtol=1e-9, atol=1e-9)
-    short, _ = lag_share([0.0, 0.0, 0.3, 0.0, share])
-    assert np.max(np.abs(own - short)) > 0.1 * np.max(np.abs(own))

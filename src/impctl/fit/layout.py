@@ -35,13 +35,6 @@ from .optim.problem import raw_residuals
 
 _FIRST_NIGHT_GROUP = 3
 
-#: The held nights' lag gets its own time constant (lag_tau_h) instead of sharing
-#: emitter_tau_h with the constrained nights' release.
-SPLIT_LAG = True
-
-#: The lag (lag_tau_h alone) is part of the "simple" model too (h14f; measured).
-LAG_IN_SIMPLE = False
-
 
 def stop_units(groups: torch.Tensor) -> torch.Tensor:
     """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
@@ -58,11 +51,9 @@ def terms_of(result: lm.LMResult, sel: torch.Tensor) -> lm.RowTerms | None:
 def starts(s: int, seed: int) -> torch.Tensor:
     """``s`` starts in the unbounded coordinates: the centre of the box, then random ones."""
     rng = np.random.default_rng(seed)
-    # emitter_share and lag_tau_h (added last) draw after the others, one column at a time:
-    # the earlier starts stay the same
-    frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES) - 2))
-    frac = np.concatenate([frac] + [rng.uniform(0.15, 0.85, size=(s, 1)) for _ in range(2)],
-                          axis=1)
+    # emitter_share (added last) draws after the others: the earlier starts stay the same
+    frac = rng.uniform(0.15, 0.85, size=(s, len(PARAM_NAMES) + len(NUISANCE_NAMES) - 1))
+    frac = np.concatenate([frac, rng.uniform(0.15, 0.85, size=(s, 1))], axis=1)
     u = torch.logit(torch.as_tensor(frac, dtype=DTYPE))
     u[0] = 0.0
     return u
@@ -73,19 +64,14 @@ def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
     """Bounds of the nuisance terms (:data:`~.ode.parameters.NUISANCE_NAMES`) with the terms
     switched on as asked, and with all of them off (``plain``); (0, 0) is off. A night gain
     that is not fitted is pinned to ``night_gain_w`` [W] in both."""
-    lag = emitter_state and emitter_lag
     nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
-        NUISANCE_NAMES, (night_gain, emitter_state, emitter_state, furniture_state, lag,
-                         lag and SPLIT_LAG), strict=True)}
+        NUISANCE_NAMES, (night_gain, emitter_state, emitter_state, furniture_state,
+                         emitter_state and emitter_lag), strict=True)}
     # a gain not fitted is pinned to the assumed one (an occupied house never has 0 W)
     pinned = (float(night_gain_w),) * 2
     if not night_gain:
         nuisance["night_gain_w"] = pinned
     plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
-    if LAG_IN_SIMPLE:
-        # the held nights' lag stays in the model without the release terms too: the
-        # likelihood-ratio test then decides the release alone, not the lag with it
-        plain["lag_tau_h"] = nuisance["lag_tau_h"]
     return nuisance, plain
 
 

@@ -45,7 +45,7 @@ import torch
 from ...model.continuous import air_derivative, air_temperature
 from ...model.house import H_MS
 from .packing import PackedNights
-from .parameters import EMC_COLUMN, FUR_COLUMN, LAG_COLUMN, PARAM_NAMES, network
+from .parameters import EMC_COLUMN, FUR_COLUMN, PARAM_NAMES, network
 from .solver import (
     NightODE,  # the integrator (re-exported: tests and readers find it here)
     exact_chain,
@@ -257,11 +257,7 @@ def build_rows(
         # switch-off (one constant for both kinds of night); switched off with that term.
         lag_next = packed.next_node[night_index]
         h = torch.gather(grid, 1, lag_next) - grid
-        # its own time constant when the row has one (a box (0, 0) falls back to the release's)
-        tau_h = params[:, len(PARAM_NAMES) + 2]
-        if params.shape[-1] > LAG_COLUMN:
-            tau_h = torch.where(params[:, LAG_COLUMN] > 0, params[:, LAG_COLUMN], tau_h)
-        tau_s = torch.where(demand, tau_h * 3600.0, 0.0)
+        tau_s = torch.where(demand, params[:, len(PARAM_NAMES) + 2] * 3600.0, 0.0)
         lag_rate = torch.where(h > 0, tau_s[:, None] / h.clamp_min(1e-9), 0.0)
         if cap_e is not None:
             lag_extra = torch.where(demand, cap_e, 0.0)[:, None] * ta_s

@@ -46,11 +46,8 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
 #: water and metal, buffer) between the heat meter and the air node, with the time constant
 #: emitter_tau_h (``NightFit(emitter_lag=True)``, :func:`build_rows`); the mass node keeps
 #: the rest, so C_m and τ stay the house's whole (as the classes and the plant define them).
-#: The last, lag_tau_h, is the emitter's time constant in the held nights' meter lag
-#: (P_meter = P + lag_tau_h·dP/dt + C_e·dT_air/dt): a term of its own so that the noisy
-#: constrained nights' release (emitter_tau_h) cannot pull it (issue 14, branch h14f).
 NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per_m2k",
-                  "emitter_share", "lag_tau_h")
+                  "emitter_share")
 
 #: When no gain is fitted (``night_gain`` off, or not kept by the likelihood-ratio test) the
 #: night_gain_w column is pinned to an assumed value (``NightFit(night_gain_w=…)``, default
@@ -65,7 +62,6 @@ NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     "furniture_j_per_m2k": (0.0, 40000.0),
     # screed 130–250 kJ/(m²K) of heated floor (real-houses.md §2): up to about half of C_m
     "emitter_share": (0.0, 0.6),
-    "lag_tau_h": (0.2, 8.0),
 }
 
 #: Furniture–air time constant [s]: 1/0.00022 s ≈ 76 min (real-houses.md §1, the Japanese
@@ -75,8 +71,6 @@ FURNITURE_TAU_S = 1.0 / 0.00022
 FUR_COLUMN = len(PARAM_NAMES) + 3   # column of furniture_j_per_m2k in a parameter row
 
 EMC_COLUMN = len(PARAM_NAMES) + 4   # column of emitter_share
-
-LAG_COLUMN = len(PARAM_NAMES) + 5   # column of lag_tau_h
 
 
 def bounds_tensor(bounds: dict[str, tuple[float, float]],
