@@ -208,9 +208,16 @@ def penalty(prior: PopulationPrior | PriorSlices | None, u: torch.Tensor, box: t
         for p, sel in prior._parts():
             loss[sel], h[sel], g[sel] = penalty(p, u[sel], box[sel], ach_vent, ach_infl)
         return loss, h, g
+    return gauss_newton(lambda uu: prior.residuals(uu, box, ach_vent, ach_infl), u)
+
+
+def gauss_newton(residuals, u: torch.Tensor
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(Σr² (P,), JᵀJ (P, n, n), Jᵀr (P, n)) of penalty residuals ``residuals(u)`` (P, m) at
+    ``u`` (P, n), J by autograd, one pass per residual column (m is 1–3 here)."""
     with torch.enable_grad():
         uu = u.detach().clone().requires_grad_(True)
-        r = prior.residuals(uu, box, ach_vent, ach_infl)
+        r = residuals(uu)
         jac = torch.stack([torch.autograd.grad(r[:, j].sum(), uu, retain_graph=True)[0]
                            for j in range(r.shape[1])], dim=1)              # (P, m, n)
     r = r.detach()

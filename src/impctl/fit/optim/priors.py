@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import torch
 
 from ..ode.parameters import lumped, to_physical
-from ..prior import QUANTITIES, PopulationPrior, PriorSlices
+from ..prior import QUANTITIES, PopulationPrior, PriorSlices, gauss_newton
 
 
 @dataclass(frozen=True)
@@ -76,15 +76,11 @@ class MergedPrior:
         sel = self.live.nonzero()[:, 0]
         if not len(sel):
             return loss, h, g
-        mu, sd = self.mu[sel], self.sd[sel]
-        with torch.enable_grad():
-            uu = u[sel].detach().clone().requires_grad_(True)
-            q = lumped(to_physical(uu, box[sel]), ach_vent, ach_infl)
-            r = (torch.log(q[:, list(self.columns)]) - mu) / sd
-            jac = torch.stack([torch.autograd.grad(r[:, j].sum(), uu, retain_graph=True)[0]
-                               for j in range(r.shape[1])], dim=1)          # (P, m, n)
-        r = r.detach()
-        loss[sel] = (r ** 2).sum(1)
-        h[sel] = jac.transpose(1, 2) @ jac
-        g[sel] = (jac.transpose(1, 2) @ r[:, :, None])[:, :, 0]
+        mu, sd, cols, live_box = self.mu[sel], self.sd[sel], list(self.columns), box[sel]
+
+        def residuals(uu):
+            q = lumped(to_physical(uu, live_box), ach_vent, ach_infl)
+            return (torch.log(q[:, cols]) - mu) / sd
+
+        loss[sel], h[sel], g[sel] = gauss_newton(residuals, u[sel])
         return loss, h, g
