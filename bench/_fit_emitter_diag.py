@@ -93,7 +93,7 @@ def _switches(kw: dict) -> None:
     likelihood-ratio test says), ``no_lag_extra=1`` (drop C_e·dT_air/dt from the held
     nights' emitter lag), ``low_start=f`` (the first start's nuisance terms at fraction f of
     their boxes instead of the centre). Popped from ``kw``."""
-    import impctl.fit.estimator as est
+    import impctl.fit._statement as stmt
     import impctl.fit.layout as lay_mod
     import impctl.fit.ode.node as node
     import impctl.fit.optim.problem as prob
@@ -101,7 +101,7 @@ def _switches(kw: dict) -> None:
     from impctl.fit.ode.parameters import NUISANCE_BOUNDS
 
     NUISANCE_BOUNDS.update(_BOUNDS)
-    est.nuisance_check, prob.build_rows, lay_mod.starts = _ORIGINAL
+    stmt.nuisance_check, prob.build_rows, lay_mod.starts = _ORIGINAL
     for k in [k for k in kw if k.startswith("bound_")]:
         lo, hi = str(kw.pop(k)).split(":")
         NUISANCE_BOUNDS[k[6:]] = (float(lo), float(hi))
@@ -122,16 +122,16 @@ def _switches(kw: dict) -> None:
         def forced(result, lay, best_simple, n_nuisance):
             _, check = selection.nuisance_check(result, lay, best_simple, n_nuisance)
             return selection.best_of(result, lay, 0), check | {"selected": True}
-        est.nuisance_check = forced
+        stmt.nuisance_check = forced
 
 
 def _originals():
-    import impctl.fit.estimator as est
+    import impctl.fit._statement as stmt
     import impctl.fit.layout as lay_mod
     import impctl.fit.optim.problem as prob
     from impctl.fit.ode.parameters import NUISANCE_BOUNDS
 
-    return dict(NUISANCE_BOUNDS), (est.nuisance_check, prob.build_rows, lay_mod.starts)
+    return dict(NUISANCE_BOUNDS), (stmt.nuisance_check, prob.build_rows, lay_mod.starts)
 
 
 _BOUNDS, _ORIGINAL = _originals()

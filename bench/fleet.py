@@ -239,7 +239,7 @@ def profile(data: Path, n: int) -> None:
 
     import torch
 
-    from impctl.fit import estimator, selection
+    from impctl.fit import _problems, _statement, _weights, selection
     from impctl.fit.nights import data as fit_data
     from impctl.fit.ode import solver
     from impctl.fit.optim import batch, lm, problem
@@ -278,13 +278,13 @@ def profile(data: Path, n: int) -> None:
     timed(lm, "penalty", "    of which the ridge and the population priors (also in the intervals)")
     timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
-    timed(estimator, "laplace", "Laplace + sandwich intervals, class-check inflation")
+    timed(_statement, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")
-    timed(estimator, "in_sample_validation", "validation / predictions (two row sets)")
-    timed(estimator, "used_nights_quality", "night quality")
-    timed(estimator.NightFit, "_update_sigma", "residual σ update")
-    timed(estimator, "pack_nights", "pack nights into tensors")
-    timed(estimator, "coarsen", "coarsen to 5-min blocks")
+    timed(_statement, "in_sample_validation", "validation / predictions (two row sets)")
+    timed(_statement, "used_nights_quality", "night quality")
+    timed(_weights, "residual_sigma", "residual σ update")
+    timed(_problems, "pack_nights", "pack nights into tensors")
+    timed(_problems, "coarsen", "coarsen to 5-min blocks")
     timed(worker, "_flexibility", "flexibility (coast_h, rebound_kwh)")
     sources = discover(data)[:n]
     settings = worker.Settings(model_dir=worker.PRIOR)

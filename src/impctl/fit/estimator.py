@@ -17,8 +17,11 @@ therefore run twice in the same batch — inside the class ranges and inside the
 ranges — and a likelihood-ratio test decides: if the data fit clearly better outside the class
 ranges, the classification is reported as contradicted and the prior-range fit is used.
 
-Here is the procedure; its pieces live by concern: :mod:`.layout` (the problems of the one
-optimiser call), :mod:`.selection` (the likelihood-ratio tests), :mod:`.validation`.
+Here is the estimator and its procedure in a few steps; the steps live by concern:
+:mod:`._problems` (the nights prepared, the problems laid out: :mod:`.layout`), :mod:`._weights`
+(the noise weights and the refits they ask for), :mod:`._statement` (the problem reported, by
+the likelihood-ratio tests of :mod:`.selection`, and every fitted attribute, with
+:mod:`.intervals` and :mod:`.validation`).
 """
 
 from __future__ import annotations
@@ -28,43 +31,26 @@ from collections.abc import Sequence
 
 import torch
 
-from ..errors import InputError
 from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from ..night_protocol import MIN_NIGHT_H
+from ._problems import prepare
+from ._statement import choose, statement
+from ._weights import NOISE_PASSES, NOISE_RTOL, Weights, settle
 from .intervals import model_error
-from .intervals.uncertainty import inflation, laplace, nuisance_intervals, offset_allowance
-from .layout import (
-    best_of,
-    initial_mass,
-    layout,
-    night_rows,
-    night_sigma,
-    nuisance_boxes,
-    problem_rows,
-    residual_sigma,
-    stop_units,
-    terms_of,
-)
-from .nights.data import compared_power, noise_levels, prepare_nights, search_bounds
-from .nights.quality import adequacy, used_nights_quality
-from .nights.resample import coarsen
-from .ode.packing import pack_nights
-from .ode.parameters import PARAM_NAMES, bounds_tensor, to_physical
+from .layout import stop_units
 from .ode.solver import METHODS
 from .optim import lm
-from .prior import PopulationPrior, prior_statement
-from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
-from .validation import in_sample_validation, per_night_fits
+from .prior import PopulationPrior
+
+# NOISE_PASSES and NOISE_RTOL live with the noise weights (:mod:`._weights`); named here too, as
+# the ``noise`` option's documentation names them
+__all__ = ["NOISE_MODELS", "NOISE_PASSES", "NOISE_RTOL", "NORMAL_MODELS", "NightFit"]
 
 NORMAL_MODELS = ("demand", "series", "mean")
 NOISE_MODELS = ("night", "kind")
-#: Most refits of the joint problems while the per-night σ settle (``noise="night"``), and
-#: the largest relative change of any night's σ at which they count as settled.
-NOISE_PASSES = 3
-NOISE_RTOL = 0.1
 
 
 class NightFit:
@@ -300,184 +286,27 @@ class NightFit:
 
     # ------------------------------------------------------------------ fit
     def _fit(self, nights, ranges) -> None:
-        from ..imp.gaps import cut_at_gaps
-
         # a broken calibration file is named before any work is done
         cal = (None if self.model_error is None else model_error.load_calibration(
             None if self.model_error == "default" else str(self.model_error)))
-
-        nights, self.gaps_ = cut_at_gaps(nights, self.emission_lag_h)
-        kept, offsets, self.skipped_ = prepare_nights(
-            nights, self.emission_lag_h, self.min_night_h, self.resume_threshold_w)
-        if not kept:
-            why = "; ".join(f"{i}: {r}" for i, r in self.skipped_) or "no nights given"
-            raise InputError(f"no usable night to fit ({why})")
-        if self.timestamps == "instant":
-            kept = [coarsen(n, self.fit_step_s) for n in kept]
-        class_box = search_bounds(ranges, self.physical_bounds)
-        prior_box = search_bounds(None, self.physical_bounds)
-        with_prior = class_box != prior_box
-        self.classified_ = sorted(ranges or {})
-        self.nights_ = kept
-        power_ok = compared_power(kept, self.resume_threshold_w, self.settle_h,
-                                  self.settle_until_held)
-        packed = self._packed = pack_nights(kept, offsets, timestamps=self.timestamps,
-                                            smooth_air_s=3600.0 * self.smooth_air_h,
-                                            smooth_out_s=3600.0 * self.smooth_out_h,
-                                            power_ok=power_ok)
-        packed.emitter_lag = bool(self.emitter_lag and self.emitter_state)
-        prior = PopulationPrior() if self.prior == "population" else self.prior
-        self._ctx = lm.Context(packed, self.ach_vent, self.ach_infl, self.ridge, self.solver,
-                               prior)
-        self._row_type_n, self._phi_n, self._phi_in_n, self._group_n = night_rows(
-            packed, self.normal_model)
-        self.sigma_ = noise_levels(kept)
-
-        nuisance, plain = nuisance_boxes(self.night_gain, self.emitter_state,
-                                         self.furniture_state, self.emitter_lag, self.night_gain_w)
-        self._n_nuisance = sum(hi > lo for lo, hi in nuisance.values())
-        lay = layout(packed.n_nights, with_prior, bounds_tensor(class_box, nuisance),
-                     bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
-                     n_starts=self.n_starts, seed=self.seed, per_night=self.per_night)
-        rows = self._rows(lay)
-        t_m0 = initial_mass(packed, lay["u0"][lay["row_problem"]], lay["row_night"],
-                            lay["box"][lay["row_problem"]], self._row_type_n, self._phi_n,
-                            self.ach_vent, self.ach_infl)
-        result = self._optimise(rows, lay["u0"], t_m0, lay["group"])
-        self.n_iter_ = result.n_iter
-        # The residual σ per group, now from the fit itself, scales the intervals. When it is
-        # far from the data-only guess (eq. 5 rows, whose residuals carry the power noise),
-        # the joint problems are refitted with the new weights.
-        guess = self.noise_ = dict(self.sigma_)
-        self._update_sigma(rows, result, best_of(result, lay, 0))
-        self._sigma_n = None
-        self._tempering = 1.0
-        refit = False
-        if prior is not None:
-            # weighted as the intervals weigh the data: the optimum is then the mode of
-            # the posterior the Laplace intervals describe (PopulationPrior.tempered)
-            # (the lower of the class and the prior box: a box the data contradict leaves
-            # a misfit whose autocorrelation is not the noise's)
-            self._tempering = min(inflation(self._ctx, self._rows(lay), result,
-                                            best_of(result, lay, g), self._group_n)
-                                  for g in ((0, 1) if lay["prior"] else (0,)))
-            self._ctx.prior = prior.tempered(self._tempering)
-            refit = True
-        if self.noise == "night":
-            # the per-night weights' refits carry the tempered prior too
-            self._reweight_nights(lay, result)
-        else:
-            ratio = [self.sigma_[k] / guess[k] for k in guess]
-            if refit or max(ratio) > 1.4 or min(ratio) < 0.7:
-                self._refit_joint(lay, result)
-        self._ctx.prior = prior   # the intervals divide the data by the inflation themselves
-        rows = self._rows(lay)
-        sigma_n = (self._sigma_n if self._sigma_n is not None
-                   else torch.tensor([self.sigma_[k] for k in ("constrained_t_air_k",
-                                      "normal_t_air_k", "normal_power_w")])[self._group_n])
-        self.sigma_night_ = dict(zip(packed.night_ids, sigma_n.tolist(), strict=True))
-
-        # First whether the data need the nuisance terms (inside the class box), then whether
-        # they contradict the class box: testing the classes with a model that lacks terms
-        # the data need rejects right classes (the prior box then absorbs the misfit).
-        best = best_of(result, lay, 2 if lay["simple"] else 0)
-        self.nuisance_check_ = {"applied": bool(lay["simple"]), "selected": False}
-        if lay["simple"]:
-            best, self.nuisance_check_ = nuisance_check(result, lay, best, self._n_nuisance)
-        self.class_check_ = {"applied": with_prior, "rejected": False}
-        if with_prior:
-            best, self.class_check_ = class_check(self._ctx, rows, result, lay, best, ranges,
-                                                  self._group_n, self._n_nuisance)
-        self.bounds_ = class_box if best not in lay["prior"] else prior_box
-        sel = rows.problem == best
-        self._sub = rows.subset(sel)
-        self._u = result.u[best]
-        self._t_m0 = result.t_m0[sel]
-        self.loss_ = float(result.loss[best])
-        self.t_m0_c_ = dict(zip(packed.night_ids, self._t_m0.tolist(), strict=True))
-        x = to_physical(self._u, self._sub.box[0])[:len(PARAM_NAMES)]
-        self.parameters_ = dict(zip(PARAM_NAMES, x.tolist(), strict=True))
-        est = laplace(self._ctx, self._sub, self._u, self._t_m0, self._group_n,
-                      has_power=bool((~packed.constrained).any()), terms=terms_of(result, sel))
-        self.lumped_, self.offset_allowance_ = offset_allowance(
-            est["lumped"], kept, self.sensor_offsets_k, self.meter_error,
-            0.0 if self.nuisance_check_.get("selected") and self.night_gain
-            else self.night_gain_sd_w)
-        self.structure_share_ = None
-        if self.structure_share and lay["simple"]:
-            self.lumped_, self.structure_share_ = structure_share(
-                result, lay, self.lumped_, self.ach_vent, self.ach_infl)
-            self.offset_allowance_["structure_relative_sd"] = self.structure_share_
-        self.interval_source_ = est["interval_source"]
-        self.determined_ = est["determined"]
-        self.range_fraction_sd_ = est["range_fraction_sd"]
-        self.residual_autocorrelation_ = est["autocorrelation"]
-        self.cov_u_ = est["cov_u"]
-        self.prior_ = None
-        if prior is not None:
-            self.lumped_, self.prior_ = prior_statement(
-                prior, self.lumped_, self._u, self._sub.box[0], self.cov_u_, self.ach_vent,
-                self.ach_infl)
-            self.prior_["tempering"] = self._tempering
-        self.nuisance_ = nuisance_intervals(self._u, self._sub.box[0], self.cov_u_)
-        self.night_gain_ = gain_statement(self._u, self._sub.box[0], self.night_gain_sd_w)
-        if self.night_gain_["assumed"]:
-            self.nuisance_["night_gain_w"] = assumed_gain(self.night_gain_)
-        self.per_night_, self.per_night_mean_ = per_night_fits(result, lay, packed, self.ach_vent,
-                                                               self.ach_infl)
-        self.validation_, self.predictions_ = in_sample_validation(
-            packed, kept, self._u, self._sub.box[0], self._t_m0, self._phi_n, self._phi_in_n,
-            ach_vent=self.ach_vent, ach_infl=self.ach_infl, solver=self.solver,
-            normal_model=self.normal_model)
-        self.adequacy_ = adequacy(self.sigma_, self.noise_, self.residual_autocorrelation_)
-        self.night_quality_ = used_nights_quality(nights, kept, self.skipped_,
-                                                  self.resume_threshold_w, self.nuisance_)
-        self.interval_basis_ = est["interval_basis"]
-        self.model_error_ = None
-        if cal is not None:
-            self.lumped_, self.model_error_ = model_error.widen(
-                self.lumped_, model_error.diagnostics(self), cal)
-
-    def _rows(self, lay: dict, only: list[int] | None = None) -> lm.Rows:
-        return problem_rows(lay, self.sigma_, self._row_type_n, self._phi_n, self._phi_in_n,
-                            self._group_n, only, getattr(self, "_sigma_n", None))
-
-    def _reweight_nights(self, lay: dict, result: lm.LMResult) -> None:
-        """``noise="night"``: refit the joint problems with each night weighted by its own RMS
-        residual (:func:`.layout.night_sigma`) until no night's σ moves by more than
-        :data:`NOISE_RTOL` (at most :data:`NOISE_PASSES` refits)."""
-        for _ in range(NOISE_PASSES):
-            new = night_sigma(self._ctx, self._rows(lay), result, best_of(result, lay, 0),
-                              self._group_n)
-            old = self._sigma_n
-            if old is not None and float((new / old - 1.0).abs().max()) < NOISE_RTOL:
-                break
-            self._sigma_n = new
-            self._refit_joint(lay, result)
-
-    def _refit_joint(self, lay: dict, result: lm.LMResult) -> None:
-        joint = lay["class"] + lay["simple"] + lay["prior"]
-        rows = self._rows(lay, joint)
-        sel = torch.isin(lay["row_problem"], torch.tensor(joint))
-        second = self._optimise(rows, result.u[joint], result.t_m0[sel], lay["group"][joint])
-        result.u[joint], result.t_m0[sel], result.loss[joint] = second.u, second.t_m0, \
-            second.loss
-        if result.terms is not None and second.terms is not None:
-            result.terms.put(sel, second.terms)
-        else:
-            result.terms = None
-        self.n_iter_ += second.n_iter
-        self._update_sigma(rows, second, int(torch.argmin(second.loss[:len(lay["class"])])))
+        problems = prepare(self, nights, ranges)
+        self._ctx, self._group_n = problems.ctx, problems.group_n   # (_optimise needs _ctx)
+        weights = Weights.guessed(problems)
+        rows = weights.rows(problems)
+        result = self._optimise(rows, problems.lay["u0"],
+                                problems.initial_mass(self.ach_vent, self.ach_infl),
+                                problems.lay["group"])
+        weights = settle(problems, weights, rows, result, self._optimise, self.noise)
+        choice = choose(problems, weights.rows(problems), result)
+        vars(self).update(statement(self, problems, weights, result, choice, cal))
+        # the reported problem's rows and optimum, which its intervals can be recomputed from
+        self._sub, self._u, self._t_m0 = choice.sub, choice.u, choice.t_m0
 
     def _optimise(self, rows, u0, t_m0, groups) -> lm.LMResult:
         if self.optimizer == "adam":
             return lm.adam(self._ctx, rows, u0, t_m0, n_iter=10 * self.max_iter)
         return lm.levenberg_marquardt(self._ctx, rows, u0, t_m0, groups=groups,
                                       units=stop_units(groups), max_iter=self.max_iter)
-
-    def _update_sigma(self, rows, result, best) -> None:
-        self.sigma_ = residual_sigma(self._ctx, rows, result, best, self._packed.mask,
-                                     self._group_n, self.sigma_)
 
     def to_dict(self) -> dict:
         """JSON-ready summary (see :mod:`.result.report`)."""
