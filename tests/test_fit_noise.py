@@ -84,3 +84,16 @@ def test_the_weights_are_in_the_json(fits):
     kinds = {n.night_id: n.kind for n in pair["night"].nights_}
     assert set(out["sigma_per_night_k"]) == {i for i, k in kinds.items() if k == "constrained"}
     assert set(out["sigma_per_night_w"]) == {i for i, k in kinds.items() if k != "constrained"}
+
+
+def test_a_second_fit_of_the_same_estimator_equals_a_fresh_fit():
+    # The per-night σ of one fit must not weight the next fit's first optimisation (they
+    # did while the σ lived on the estimator between fits: branch h14s).
+    first, _, _ = _nights(SEEDS[0])
+    second, _, _ = _nights(SEEDS[1])
+    est = NightFit(**IDEAL, n_starts=2, per_night=False, model_error=None).fit(first, RANGES)
+    again = est.fit(second, RANGES)
+    fresh = NightFit(**IDEAL, n_starts=2, per_night=False, model_error=None).fit(second, RANGES)
+    assert again.loss_ == fresh.loss_ and again.n_iter_ == fresh.n_iter_
+    assert again.sigma_night_ == fresh.sigma_night_
+    assert again.lumped_ == fresh.lumped_
