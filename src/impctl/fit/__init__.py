@@ -26,9 +26,12 @@ Inside, by concern:
   adequacy);
 * :mod:`.result` — the result (no torch): :mod:`.result.report` (the JSON),
   :mod:`.result.table` (its printed form), :mod:`.result.plot` (the figure);
-* here: :mod:`.estimator` (the procedure), :mod:`.layout` (the problems one fit solves in one
-  optimiser call: starts, boxes, groups, rows), :mod:`.selection` (which problem is reported:
-  the likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
+* here: :mod:`.estimator` (the estimator and its procedure, whose steps are
+  :mod:`._problems` — the nights prepared, the problems laid out —, :mod:`._weights` — the
+  noise weights and their refits — and :mod:`._statement` — the problem reported and every
+  fitted attribute), :mod:`.layout` (the problems one fit solves in one optimiser call:
+  starts, boxes, groups, rows), :mod:`.selection` (which problem is reported: the
+  likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
   :mod:`.baselines` (the methods the fit is compared with).
 """
 

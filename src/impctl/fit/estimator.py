@@ -290,7 +290,8 @@ class NightFit:
         cal = (None if self.model_error is None else model_error.load_calibration(
             None if self.model_error == "default" else str(self.model_error)))
         problems = prepare(self, nights, ranges)
-        self._ctx, self._group_n = problems.ctx, problems.group_n   # (_optimise needs _ctx)
+        # the optimiser step reads the context here (also the fleet's batched one, .optim.batch)
+        self._ctx, self._group_n = problems.ctx, problems.group_n
         weights = Weights.guessed(problems)
         rows = weights.rows(problems)
         result = self._optimise(rows, problems.lay["u0"],
