@@ -453,6 +453,10 @@ def main() -> None:
                          "(repeatable)")
     ap.add_argument("--bootstrap", type=int, default=2000,
                     help="bootstrap resamples of the paired comparison")
+    ap.add_argument("--margin", type=float, default=1.0,
+                    help="non-inferiority margin of the paired comparison [percentage points]: "
+                         "a strategy is at least as accurate as the fixed plan when the 95 %% "
+                         "upper bound of its median |error| difference is at most this")
     ap.add_argument("--dump", default=None,
                     help="also pickle every campaign's record and the true HLC [W/K] and τ [h] "
                          "here (to try stop rules offline)")
@@ -526,7 +530,7 @@ def main() -> None:
     for t, target in enumerate(targets):
         records = [r for part, _, _ in parts for r in part[t]]
         summarise(records, houses, target, strategies)
-        paired(records, houses, strategies, args.bootstrap)
+        paired(records, houses, strategies, args.bootstrap, margin=args.margin)
         by_night_set(records, houses, strategies)
         invalid_nights(records, strategies)
         if args.trajectories:

@@ -51,10 +51,15 @@ def _errors(records: list, houses, strategy: str) -> dict[int, tuple[float, floa
     return out
 
 
-def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int = 1) -> None:
+def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int = 1,
+           margin: float = 1.0) -> None:
     """Each strategy against the fixed plan on the same households: the difference of median
     |error| [percentage points] with a bootstrap 95 % interval (households resampled, pairs
-    kept), and the nights each ran."""
+    kept), and the nights each ran.
+
+    "At least the same accuracy" (issue 18) is judged as non-inferiority: the interval's upper
+    bound at most ``margin`` points on HLC and on τ. Two campaigns that are equally accurate
+    can never show an upper bound ≤ 0, whatever the number of households."""
     print("\nwhat nights each strategy ran (kind at setpoint °C: share of all nights run)")
     for s in strategies:
         count: dict[str, int] = {}
@@ -88,6 +93,9 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
         dn = np.median(a[:, 2]) - np.median(b[:, 2])
         print(f"  {label(s):<40} n={len(common)}: " + "; ".join(cells)
               + f"; nights median {dn:+g}")
+        ok = [hi <= margin for _, _, hi in paired_diff(a, b, n_boot, seed)]
+        print(f"  {'':<40} non-inferior within {margin:g} points (upper bound ≤ margin): "
+              f"HLC {'yes' if ok[0] else 'no'}, τ {'yes' if ok[1] else 'no'}")
 
 
 def paired_diff(a: np.ndarray, b: np.ndarray, n_boot: int, seed: int = 1
