@@ -67,7 +67,8 @@ def compare(houses_arr: HouseParameters, args) -> None:
 def virtual_imp_check(n: int, args) -> None:
     """The fit on the classifiers' own IMP simulator: steady normal nights (spun up at T_set),
     an emitter ramp during the lag, constrained nights cut at T_min, "interval" stamps."""
-    from impctl.population.virtual_imp import ImpSimConfig, simulate_imp
+    from impctl.population.imp_setup import ImpSimConfig
+    from impctl.population.virtual_imp import simulate_imp
 
     houses = sample_households(n, seed=VAL_SEED + 1)
     cfg = ImpSimConfig(days=2, step_s=600.0, noise_t_air_k=0.0, noise_q_rel=0.05)

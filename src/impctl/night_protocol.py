@@ -3,7 +3,7 @@
 The gateway's ``[campaign]`` / ``[night]`` defaults (:mod:`impctl.config`), the night plans
 (:mod:`impctl.imp.plan`), the bench's and the interval calibration's nights
 (:func:`impctl.population.synth_nights.imp_schedule`) and the classifiers' virtual population
-(:class:`impctl.population.virtual_imp.ImpSimConfig`) all read them, so the product is measured
+(:class:`impctl.population.imp_setup.ImpSimConfig`) all read them, so the product is measured
 on the protocol it runs (bench/RESULTS.md, issue 14: "one protocol", branch h14q). Pure
 constants: imported by the daemon's config, so no numpy or pandas here.
 """

@@ -6,7 +6,9 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 
 * :func:`sample_households`, :func:`sample_population`, :class:`PopulationConfig`
   (:mod:`.households`)
-* :func:`simulate_imp`, :class:`ImpSimConfig`, :class:`ImpResult` (:mod:`.virtual_imp`)
+* :class:`ImpSimConfig` (:mod:`.imp_setup`): how the IMP is run on virtual households, and
+  :func:`~.imp_setup.usable_nights`, the weather's nights it runs on
+* :func:`simulate_imp`, :class:`ImpResult` (:mod:`.virtual_imp`)
 * :func:`simulate_imp_plant` (:mod:`.virtual_imp_plant`): the same nights on the realistic plant
   (:mod:`impctl.plant`); :func:`sample_params` (:mod:`.realism`): every household's realism
   options drawn over their documented ranges
@@ -25,7 +27,8 @@ from .ranges import DEFAULT_RANGES
 # Resolved on first use (impctl._lazy), so that importing the package stays light.
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "households": ["PopulationConfig", "sample_households", "sample_population"],
-    "virtual_imp": ["ImpResult", "ImpSimConfig", "simulate_imp"],
+    "imp_setup": ["ImpSimConfig"],
+    "virtual_imp": ["ImpResult", "simulate_imp"],
     "virtual_imp_plant": ["simulate_imp_plant"],
     "realism": ["sample_params"],
     "dataset": ["Dataset", "generate_dataset"],

@@ -23,8 +23,9 @@ import pandas as pd
 
 from ..imp import NIGHT_FEATURES
 from .households import PopulationConfig, households_from_table, sample_population
+from .imp_setup import ImpSimConfig, default_weather
 from .ranges import DEFAULT_RANGES, Ranges, validate_ranges
-from .virtual_imp import ImpSimConfig, default_weather, simulate_imp
+from .virtual_imp import simulate_imp
 
 #: Households simulated per vectorised block: bounds memory (~30 MB of samples per block) and
 #: paces the progress bar. Fixed, so a seed gives the same dataset whatever the machine.

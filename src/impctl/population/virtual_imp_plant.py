@@ -38,16 +38,9 @@ from ..night_protocol import MIN_TREND_SPAN_S, anticipates_t_min
 from ..plant import PlantCore, PlantParams
 from ..plant.building.envelope import NodeState
 from ..plant.building.gains import internal_gains_w, solar_gains_w
+from .imp_setup import ImpSimConfig, _epoch_s, default_weather, usable_nights
 from .realism import take_params
-from .virtual_imp import (
-    ImpResult,
-    ImpSimConfig,
-    _epoch_s,
-    _repeat,
-    default_weather,
-    night_result,
-    usable_nights,
-)
+from .virtual_imp import ImpResult, _repeat, night_result
 
 #: Steps of the realistic plant [s]: spin-up (ideal control) and pre-heat + window.
 SPINUP_STEP_S = 900.0
