@@ -12,14 +12,14 @@ from impctl.config import CampaignConfig
 from impctl.fit.ode.parameters import PARAM_NAMES
 from impctl.model import HouseParameters
 from impctl.night_protocol import MIN_NIGHT_H
-from impctl.population.gateway_nights import gateway_constrained_nights
-from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
+from impctl.population.imp_run.gateway import gateway_constrained_nights
+from impctl.population.imp_run.synth import (
     PlantSchedule,
     imp_schedule,
     run_schedule,
     run_schedule_plant,
 )
+from impctl.population.realism import sample_params
 
 VAL_SEED = 20260
 CLASS_RANGES = {
@@ -195,7 +195,7 @@ def _safe_house(params):
 
 def gateway_campaign(sp, sched, need_h: float = MIN_NIGHT_H) -> dict:
     """The constrained nights a gateway runs and keeps, per household
-    (:func:`impctl.population.gateway_nights.gateway_constrained_nights` with the gateway's
+    (:func:`impctl.population.imp_run.gateway.gateway_constrained_nights` with the gateway's
     ``[campaign]`` defaults: 2 valid constrained nights wanted, at most
     ``campaign.max_invalid_nights`` invalid ones; valid = ≥ ``need_h`` [h] after the 1 h lag)."""
     cfg = CampaignConfig()

@@ -11,7 +11,7 @@ from _fit_protocol import VAL_SEED, true_ranges
 
 from impctl.fit.estimator import NightFit
 from impctl.population.households import sample_households
-from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
 
 
 def speed(args) -> None:

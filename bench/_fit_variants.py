@@ -19,7 +19,7 @@ from _fit_tables import rel, stats
 from impctl.fit.estimator import NightFit
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
-from impctl.population.synth_nights import sample_nights
+from impctl.population.imp_run.synth import sample_nights
 
 
 def compare(houses_arr: HouseParameters, args) -> None:
@@ -67,8 +67,8 @@ def compare(houses_arr: HouseParameters, args) -> None:
 def virtual_imp_check(n: int, args) -> None:
     """The fit on the classifiers' own IMP simulator: steady normal nights (spun up at T_set),
     an emitter ramp during the lag, constrained nights cut at T_min, "interval" stamps."""
-    from impctl.population.imp_setup import ImpSimConfig
-    from impctl.population.virtual_imp import simulate_imp
+    from impctl.population.imp_run.ideal import simulate_imp
+    from impctl.population.imp_run.setup import ImpSimConfig
 
     houses = sample_households(n, seed=VAL_SEED + 1)
     cfg = ImpSimConfig(days=2, step_s=600.0, noise_t_air_k=0.0, noise_q_rel=0.05)
@@ -91,7 +91,7 @@ def virtual_imp_check(n: int, args) -> None:
             errs[k].append(rel(e.value, t))
             cover[k].append(e.low <= t <= e.high)
         times.append(fit.fit_time_s_)
-    print(f"\n### cross-check on impctl.population.virtual_imp ({n} households, 10-min samples, "
+    print(f"\n### cross-check on impctl.population.imp_run.ideal ({n} households, 10-min samples, "
           "interval stamps, 2 constrained + 6 normal nights, true class ranges)")
     print(f"constrained nights still ≥ 3 h after the lag: {np.mean(kept) / 2 * 100:.0f} %")
     print("| HLC med / P90 % | τ med / P90 % | C_m med / P90 % | coverage HLC/τ/C_m % "

@@ -54,13 +54,13 @@ from impctl.fit.optim.batch import fit_households
 from impctl.model import HouseParameters
 from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
-from impctl.population.realism import sample_params, take_params
-from impctl.population.synth_nights import (
+from impctl.population.imp_run.synth import (
     imp_schedule,
     run_schedule,
     run_schedule_plant,
     sample_nights,
 )
+from impctl.population.realism import sample_params, take_params
 
 TRAIN_SEEDS = (0,)
 #: The few-nights band's campaign night sequences (``--sequences``): the endings of the

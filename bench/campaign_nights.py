@@ -9,7 +9,7 @@ protocol there reaches the campaign bench and the few-nights calibration alike.
 from __future__ import annotations
 
 from impctl.config import CampaignConfig
-from impctl.population.synth_nights import imp_schedule
+from impctl.population.imp_run.synth import imp_schedule
 
 
 def variants(cfg: CampaignConfig | None = None) -> tuple[tuple[str, float], ...]:

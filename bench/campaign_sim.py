@@ -11,8 +11,8 @@ import sys
 import numpy as np
 
 from impctl.population.households import sample_households
+from impctl.population.imp_run.synth import run_schedule, run_schedule_plant, sample_nights
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import run_schedule, run_schedule_plant, sample_nights
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from _fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)

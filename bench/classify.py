@@ -29,7 +29,7 @@ import numpy as np
 from impctl.classifiers.report import format_report
 from impctl.classifiers.training import TrainConfig, train_classifiers
 from impctl.population.dataset import generate_dataset
-from impctl.population.imp_setup import ImpSimConfig
+from impctl.population.imp_run.setup import ImpSimConfig
 
 
 def main() -> None:

@@ -5,7 +5,8 @@ Run:  .venv/bin/python bench/classify_compare.py [--seed 0] [--campaigns 5] [--p
           [--score-on own|a|b] [--features-a NAME,...] [--features-b NAME,...]
           [--campaigns-as gateway|random]
 
-``--a`` / ``--b`` are :class:`impctl.population.imp_setup.ImpSimConfig` keyword arguments (JSON).
+``--a`` / ``--b`` are :class:`impctl.population.imp_run.setup.ImpSimConfig` keyword arguments
+(JSON).
 Each population is generated (900 households, same seed: same households and test split) and
 the classifiers trained on it as ``impctl train`` does. Every test household is then scored on
 ``--campaigns`` random campaigns of 2 constrained + 6 normal nights drawn from its nights with
@@ -38,7 +39,7 @@ from impctl.classifiers.campaign import (
 from impctl.classifiers.training import TrainConfig, train_classifiers
 from impctl.imp import NIGHT_FEATURE_NAMES
 from impctl.population.dataset import generate_dataset
-from impctl.population.imp_setup import ImpSimConfig
+from impctl.population.imp_run.setup import ImpSimConfig
 from impctl.population.ranges import bin_values
 
 _DATASETS: dict[str, object] = {}

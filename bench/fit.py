@@ -14,7 +14,7 @@ heat meter's interval mean (no extra noise); the demand truth is the true heat-p
 
 Validation population: ``impctl.population.households.sample_households`` with seed 20260 (the
 classifiers are trained with other seeds, so they never saw these houses). Each household runs
-the IMP protocol of ``impctl.population.synth_nights`` on its own seeded winter weather, simulated
+the IMP protocol of ``impctl.population.imp_run.synth`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
 21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
 :mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + ΔT and cool from
@@ -136,8 +136,8 @@ from impctl.fit.nights.data import prepare_nights, search_bounds
 from impctl.model import HouseParameters
 from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
+from impctl.population.imp_run.synth import run_schedule, sample_nights
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import run_schedule, sample_nights
 
 
 def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args,
@@ -285,7 +285,7 @@ def main() -> None:
     ap.add_argument("--demo-csv", default=None,
                     help="the demo's export (impctl demo --out D writes D/nights.csv) for --speed")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
-                    help="also fit N households simulated by impctl.population.virtual_imp")
+                    help="also fit N households simulated by impctl.population.imp_run.ideal")
     ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
                     help="validation houses on the ideal 5R1C (iso) or on the realistic plant "
                          "(impctl.plant, realism drawn with seed 20260)")

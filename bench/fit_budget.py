@@ -43,7 +43,7 @@ constant night gain (e.g. the documented range's midpoint, 250 W) would buy.
 Nights (branch hfloor): the gateway's, as ``bench/fit.py``'s default since h14w — constrained
 nights at ΔT ``night_protocol.DEFAULT_BAND_K`` ended at T_min or the gateway's anticipated end,
 invalid with < ``night_protocol.MIN_NIGHT_H`` after the 1 h lag and repeated on spare nights
-(``population.gateway_nights`` through ``bench/fit.py``'s ``run_step``); the fit gets the valid
+(``population.imp_run.gateway`` through ``bench/fit.py``'s ``run_step``); the fit gets the valid
 ones. ``--stops recorded`` (default): every row's constrained nights end where the gateway ends
 them on the **full** realistic house (all groups on: the nights the gateway records on these
 houses), so the rows differ in the realism only, not in which nights are kept or how long they

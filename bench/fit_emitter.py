@@ -31,8 +31,8 @@ from fit import ACH, VAL_SEED, rel, simulate_schedule, true_ranges, val_schedule
 
 from impctl.fit.estimator import NightFit  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.imp_run.synth import sample_nights  # noqa: E402
 from impctl.population.realism import params_table, sample_params  # noqa: E402
-from impctl.population.synth_nights import sample_nights  # noqa: E402
 
 #: Realism draws the diagnosis correlates with (``params_table`` columns).
 FACTORS = ("emitter.kind", "emitter.screed_j_per_m2k", "emitter.ufh_area_share",

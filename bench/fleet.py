@@ -12,7 +12,7 @@ worker.)
 Fleet input (``--plant realistic``, the default): every household on the **realistic plant**
 (:mod:`impctl.plant`, as ``bench/fit.py --plant realistic``): ``sample_households(seed=20260)``
 with realism options from ``impctl.population.realism.sample_params``, the IMP schedule of
-``impctl.population.synth_nights`` (two spin-up days, 2 constrained + 6 normal nights,
+``impctl.population.imp_run.synth`` (two spin-up days, 2 constrained + 6 normal nights,
 simulated at 60 s), logged as the gateway logs it — room and outdoor sensors (lag, noise,
 offsets, quantisation), the heat meter's interval means — cut into 5-minute rows, T quantised
 to 0.1 °C. ``--plant iso`` uses the ideal 5R1C with 5 % power noise instead (the bench before
@@ -63,13 +63,13 @@ SEED = 20260
 def make_fleet(n: int, path: Path, plant: str = "realistic") -> Path:
     """n households' nights as one Parquet dataset (cached)."""
     from impctl.population.households import sample_households
-    from impctl.population.realism import sample_params
-    from impctl.population.synth_nights import (
+    from impctl.population.imp_run.synth import (
         imp_schedule,
         run_schedule,
         run_schedule_plant,
         sample_nights,
     )
+    from impctl.population.realism import sample_params
 
     target = path / f"fleet-{plant}-{n}.parquet"
     if target.exists():

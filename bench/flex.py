@@ -46,8 +46,8 @@ from impctl.flex import flexibility_many, flexibility_of_fit, house_from_fit
 from impctl.model import HouseParameters
 from impctl.plant import simulate_plant
 from impctl.population.households import sample_households
+from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant, sample_nights
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
 
 sys.path.insert(0, str(Path(__file__).parent))
 from fit import ACH, VAL_SEED, true_ranges  # noqa: E402  (bench/fit.py: the same validation houses)

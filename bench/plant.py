@@ -8,7 +8,7 @@ Run:  .venv/bin/python bench/plant.py [--houses 900] [--repeat 3] [--no-dataset]
    second, next to the ideal 5R1C (``impctl.model.simulate``) on the same houses, weather and
    setpoints in the same run.
 2. **The realistic IMP dataset**: every house through the IMP schedule of
-   ``impctl.population.synth_nights`` (2 spin-up days, 2 constrained + 6 normal nights with the
+   ``impctl.population.imp_run.synth`` (2 spin-up days, 2 constrained + 6 normal nights with the
    days between, 11 days at 60 s, each house its own weather) on the realistic plant, logged as
    the gateway logs it (room sensor, outdoor sensor, heat meter) and cut into 5-min night
    samples. Target ≤ 10 s for 900 households (simulation + sampling; the weather generator is
@@ -33,13 +33,13 @@ import numpy as np
 from impctl.model import simulate
 from impctl.plant import Emitter, HeatPump, PlantParams, simulate_plant
 from impctl.population.households import sample_households
-from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
+from impctl.population.imp_run.synth import (
     imp_schedule,
     run_schedule,
     run_schedule_plant,
     sample_nights,
 )
+from impctl.population.realism import sample_params
 from impctl.weather import winter_weather
 
 LOGGED = ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w")

@@ -36,8 +36,8 @@ from unidentified import no_valid  # noqa: E402
 
 from impctl.night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
-from impctl.population.synth_nights import imp_schedule, run_schedule_plant  # noqa: E402
 
 PATTERNS = {"1, 2, 3 (main: the next night)": [0, 1, 2], "1, 3, 5 (h18g's dates)":
             [0, 2, 4], "1, 4, 7": [0, 3, 6], "1, 5, 9": [0, 4, 8]}

@@ -26,7 +26,7 @@ constrained nights (ΔT 2.5 K, 2 h pre-heat, ended at T_min or the anticipated e
 
 Per population and protocol: constrained nights too short (of those a campaign runs and of all
 simulated), households with no valid constrained night among the first tries the gateway's
-rule runs (``population.gateway_nights.campaign_runs``: until 2 valid or 3 invalid), with and
+rule runs (``population.imp_run.gateway.campaign_runs``: until 2 valid or 3 invalid), with and
 without the outdoor band; the outdoor temperatures of those nights; and the households' τ.
 """
 
@@ -45,10 +45,10 @@ from campaign_nights import variant_schedule  # noqa: E402
 
 from impctl.config import CampaignConfig, NightConfig  # noqa: E402
 from impctl.night_protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
-from impctl.population.gateway_nights import campaign_runs  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.imp_run.gateway import campaign_runs  # noqa: E402
+from impctl.population.imp_run.synth import run_schedule_plant  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
-from impctl.population.synth_nights import run_schedule_plant  # noqa: E402
 
 T_OUT_MAX_C = NightConfig().t_out_max_c
 CFG = CampaignConfig()

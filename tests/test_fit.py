@@ -18,7 +18,7 @@ from impctl.fit.result.report import fit_to_dict
 from impctl.fit.result.table import format_table
 from impctl.model import HouseParameters
 from impctl.model.house import H_MS, am_factor
-from impctl.population.synth_nights import synth_nights
+from impctl.population.imp_run.synth import synth_nights
 
 HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
                         c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)
@@ -358,7 +358,7 @@ def test_torchdiffeq_rk4_and_the_exact_discretisation_give_the_same_fit(fitted, 
 def gain_nights():
     """An ideal 5R1C house with sleepers and base load: a constant 300 W every night."""
     from impctl.model import simulate
-    from impctl.population.synth_nights import imp_schedule, sample_nights
+    from impctl.population.imp_run.synth import imp_schedule, sample_nights
 
     sched = imp_schedule(1, seed=4, n_normal=4)
     sim = simulate(HOUSE, sched.t_out_c, sched.dt_s, setpoint_c=sched.setpoint_c,

@@ -11,7 +11,7 @@ from impctl.fit.estimator import NightFit
 from impctl.fit.optim import lm
 from impctl.fit.optim.batch import fit_households
 from impctl.model import HouseParameters
-from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
 
 HOUSES = HouseParameters(
     floor_area=np.array([110.0, 180.0, 140.0]), wall_height=np.array([2.6, 2.7, 2.5]),

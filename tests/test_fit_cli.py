@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from impctl.model import HouseParameters
-from impctl.population.synth_nights import synth_nights
+from impctl.population.imp_run.synth import synth_nights
 
 HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, windows_area=25.0,
                         c_f=2.2, u_walls=0.5, u_windows=1.3, ach_vent=0.0, ach_infl=0.01)

@@ -17,13 +17,13 @@ from impctl.fit.result.report import fit_to_dict
 from impctl.fit.result.table import format_table
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
-from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
+from impctl.population.imp_run.synth import (
     imp_schedule,
     run_schedule_plant,
     sample_nights,
     synth_nights,
 )
+from impctl.population.realism import sample_params
 
 HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
                         c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)

@@ -13,7 +13,7 @@ import pytest
 from test_fit import HOUSE, IDEAL, RANGES
 
 from impctl.fit.estimator import NightFit
-from impctl.population.synth_nights import synth_nights
+from impctl.population.imp_run.synth import synth_nights
 
 SEEDS = range(4, 10)
 #: SD of the extra power noise on the first held night, as a share of its mean power

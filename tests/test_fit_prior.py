@@ -17,7 +17,7 @@ from impctl.fit.prior import PopulationPrior
 from impctl.fit.result.report import fit_to_dict
 from impctl.model import HouseParameters
 from impctl.population.households import sample_population
-from impctl.population.synth_nights import synth_nights
+from impctl.population.imp_run.synth import synth_nights
 
 HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, windows_area=30.0,
                         c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)

@@ -11,8 +11,8 @@ from impctl.fit.estimator import NightFit
 from impctl.fit.intervals.uncertainty import laplace
 from impctl.fit.optim import lm
 from impctl.population.households import sample_households
+from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant, sample_nights
 from impctl.population.realism import sample_params
-from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
 
 SEED, N, HOUSE = 8, 10, 6   # a realistic house whose joint fit used to move with per_night
 

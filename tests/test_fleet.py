@@ -19,7 +19,7 @@ import pytest
 
 from impctl.imp import write_nights
 from impctl.model import HouseParameters
-from impctl.population.synth_nights import imp_schedule, run_schedule, sample_nights
+from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
 
 HOUSES = HouseParameters(
     floor_area=np.array([120.0, 170.0]), wall_height=np.array([2.6, 2.7]),

@@ -229,8 +229,8 @@ def test_coast_on_realistic_houses_is_closer_to_the_plants_own():
     from impctl.fit.result.report import fit_to_dict
     from impctl.flex import house_from_fit
     from impctl.population.households import sample_households
+    from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant, sample_nights
     from impctl.population.realism import sample_params
-    from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
 
     n, seed = 4, 11
     houses, params = sample_households(n, seed=seed), sample_params(n, seed)

@@ -13,15 +13,15 @@ import pytest
 from impctl.controller.plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from impctl.fit.nights.data import prepare_nights
 from impctl.night_protocol import MIN_NIGHT_H
-from impctl.population.gateway_nights import gateway_constrained_nights, gateway_end
 from impctl.population.households import sample_households
-from impctl.population.realism import sample_params
-from impctl.population.synth_nights import (
+from impctl.population.imp_run.gateway import gateway_constrained_nights, gateway_end
+from impctl.population.imp_run.synth import (
     imp_schedule,
     run_schedule,
     run_schedule_plant,
     sample_nights,
 )
+from impctl.population.realism import sample_params
 
 
 def _controller_end(readings, t_start_c, req: NightRequest, lag: int, dt_s: float) -> int:

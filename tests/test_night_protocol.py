@@ -21,8 +21,8 @@ from impctl.night_protocol import (
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
-from impctl.population.imp_setup import ImpSimConfig
-from impctl.population.synth_nights import imp_schedule
+from impctl.population.imp_run.setup import ImpSimConfig
+from impctl.population.imp_run.synth import imp_schedule
 
 
 def _plan_setpoints(plans) -> Counter:

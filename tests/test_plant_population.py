@@ -10,8 +10,8 @@ from impctl.night_protocol import DEFAULT_BAND_K
 from impctl.plant import RADIATORS, UNDERFLOOR
 from impctl.plant.params import SECTIONS
 from impctl.population import ImpSimConfig, generate_dataset, sample_households
+from impctl.population.imp_run.realistic import simulate_imp_plant
 from impctl.population.realism import params_from_table, params_table, sample_params
-from impctl.population.virtual_imp_plant import simulate_imp_plant
 
 
 def test_sample_params_cover_documented_ranges_and_repeat():
@@ -127,7 +127,7 @@ def test_constrained_nights_stop_at_t_min_on_the_realistic_plant():
 def test_schedule_without_gains_keeps_every_other_draw():
     """``run_schedule_plant(gains=False)`` (the error budget's ideal limit of the gains): no
     gains reach the house, the heat pump makes up for them, the sensors read the same noise."""
-    from impctl.population.synth_nights import imp_schedule, run_schedule_plant
+    from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant
 
     houses, params = sample_households(2, seed=4), sample_params(2, 4)
     sched = imp_schedule(2, seed=4)
@@ -159,7 +159,7 @@ def test_constrained_replays_on_the_realistic_plant():
 
 
 def test_plant_schedule_stops_constrained_nights_at_t_min_as_the_gateway():
-    from impctl.population.synth_nights import imp_schedule, run_schedule_plant, sample_nights
+    from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant, sample_nights
 
     n, seed = 6, 20260
     houses = sample_households(n, seed=seed)

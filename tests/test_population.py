@@ -18,7 +18,7 @@ from impctl.population import (
     simulate_imp,
 )
 from impctl.population.dataset import Dataset
-from impctl.population.imp_setup import usable_nights
+from impctl.population.imp_run.setup import usable_nights
 from impctl.weather import winter_weather
 
 TZ = "Europe/Ljubljana"

@@ -6,7 +6,7 @@ import pandas as pd
 from impctl.config import NightConfig
 from impctl.controller.plan import NightPolicy
 from impctl.imp.plan import DEFAULT_PREHEAT_H
-from impctl.population.synth_nights import imp_schedule
+from impctl.population.imp_run.synth import imp_schedule
 
 
 def _raised_from(sched, w0: int) -> pd.Timestamp:

@@ -14,7 +14,7 @@ def attach(package: str, submod_attrs: dict[str, list[str]]
     """Module-level ``__getattr__``, ``__dir__`` and the lazy names of ``package``.
 
     ``submod_attrs`` maps a submodule to the names it provides. A resolved name is stored in
-    the package's namespace, so a function named like its submodule (``synth_nights``) stays
+    the package's namespace, so a function named like a submodule stays
     the function after the submodule is imported.
     """
     where = {name: mod for mod, names in submod_attrs.items() for name in names}

@@ -2,8 +2,8 @@
 
 The gateway's ``[campaign]`` / ``[night]`` defaults (:mod:`impctl.config`), the night plans
 (:mod:`impctl.imp.plan`), the bench's and the interval calibration's nights
-(:func:`impctl.population.synth_nights.imp_schedule`) and the classifiers' virtual population
-(:class:`impctl.population.imp_setup.ImpSimConfig`) all read them, so the product is measured
+(:func:`impctl.population.imp_run.synth.imp_schedule`) and the classifiers' virtual population
+(:class:`impctl.population.imp_run.setup.ImpSimConfig`) all read them, so the product is measured
 on the protocol it runs (bench/RESULTS.md, issue 14: "one protocol", branch h14q). Pure
 constants: imported by the daemon's config, so no numpy or pandas here.
 """
@@ -52,7 +52,7 @@ def anticipates_t_min(t_air_c, slope_k_per_s, t_min_c, within_k=ANTICIPATE_WITHI
     T_min [°C] and its trend ``slope_k_per_s`` [K/s] reaching T_min within ``ahead_s`` [s].
 
     The one rule for the gateway (:func:`impctl.controller.plan.anticipated_end`) and the
-    simulated nights (:func:`impctl.population.gateway_nights.gateway_end`, the virtual
+    simulated nights (:func:`impctl.population.imp_run.gateway.gateway_end`, the virtual
     population's plant); each computes the trend where it has its readings. Floats give a bool,
     numpy arrays an element-wise array (hence ``&``, not ``and``).
     """

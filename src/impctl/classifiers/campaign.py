@@ -37,7 +37,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from ..imp import NIGHT_FEATURE_NAMES
-from ..population.gateway_nights import campaign_runs
+from ..population.imp_run.gateway import campaign_runs
 
 #: (name, unit, meaning) of every campaign feature, in column order.
 CAMPAIGN_FEATURES: tuple[tuple[str, str, str], ...] = (

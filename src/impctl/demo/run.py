@@ -47,7 +47,7 @@ def _models_unfit(model_dir: Path, plant: str) -> str | None:
     (bench/RESULTS.md "Issue 14: one protocol")."""
     try:
         from ..classifiers.saved import load_models
-        from ..population.imp_setup import ImpSimConfig
+        from ..population.imp_run.setup import ImpSimConfig
 
         _, meta = load_models(model_dir)
     except (InputError, OSError):

@@ -6,14 +6,14 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 
 * :func:`sample_households`, :func:`sample_population`, :class:`PopulationConfig`
   (:mod:`.households`)
-* :class:`ImpSimConfig` (:mod:`.imp_setup`): how the IMP is run on virtual households, and
-  :func:`~.imp_setup.usable_nights`, the weather's nights it runs on
-* :func:`simulate_imp`, :class:`ImpResult` (:mod:`.virtual_imp`)
-* :func:`simulate_imp_plant` (:mod:`.virtual_imp_plant`): the same nights on the realistic plant
+* :class:`ImpSimConfig` (:mod:`.imp_run.setup`): how the IMP is run on virtual households, and
+  :func:`~.imp_run.setup.usable_nights`, the weather's nights it runs on
+* :func:`simulate_imp`, :class:`ImpResult` (:mod:`.imp_run.ideal`)
+* :func:`simulate_imp_plant` (:mod:`.imp_run.realistic`): the same nights on the realistic plant
   (:mod:`impctl.plant`); :func:`sample_params` (:mod:`.realism`): every household's realism
   options drawn over their documented ranges
 * :func:`generate_dataset`, :class:`Dataset` (:mod:`.dataset`)
-* :func:`synth_nights` (:mod:`.synth_nights`): fine-step simulated nights for the fit's tests
+* :func:`synth_nights` (:mod:`.imp_run.synth`): fine-step simulated nights for the fit's tests
   and benches
 * :data:`DEFAULT_RANGES` (:mod:`.ranges`): the parameter ranges (the paper's Table III) the
   population is drawn over and the classifiers put a house into
@@ -27,11 +27,11 @@ from .ranges import DEFAULT_RANGES
 # Resolved on first use (impctl._lazy), so that importing the package stays light.
 __getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
     "households": ["PopulationConfig", "sample_households", "sample_population"],
-    "imp_setup": ["ImpSimConfig"],
-    "virtual_imp": ["ImpResult", "simulate_imp"],
-    "virtual_imp_plant": ["simulate_imp_plant"],
+    "imp_run.setup": ["ImpSimConfig"],
+    "imp_run.ideal": ["ImpResult", "simulate_imp"],
+    "imp_run.realistic": ["simulate_imp_plant"],
     "realism": ["sample_params"],
     "dataset": ["Dataset", "generate_dataset"],
-    "synth_nights": ["synth_nights"],
+    "imp_run.synth": ["synth_nights"],
 })
 __all__ = ["DEFAULT_RANGES", *_LAZY_NAMES]

@@ -3,7 +3,7 @@
 Files in a dataset directory:
 
 * ``households.parquet`` — one row per household (:func:`~.households.sample_population`);
-* ``nights.parquet`` — one row per night (:class:`~.virtual_imp.ImpResult` ``nights``);
+* ``nights.parquet`` — one row per night (:class:`~.imp_run.ideal.ImpResult` ``nights``);
 * ``manifest.json`` — seed, sizes, population and IMP settings, ranges, feature names and units,
   weather source, package versions, creation time.
 """
@@ -23,9 +23,9 @@ import pandas as pd
 
 from ..imp import NIGHT_FEATURES
 from .households import PopulationConfig, households_from_table, sample_population
-from .imp_setup import ImpSimConfig, default_weather
+from .imp_run.ideal import simulate_imp
+from .imp_run.setup import ImpSimConfig, default_weather
 from .ranges import DEFAULT_RANGES, Ranges, validate_ranges
-from .virtual_imp import simulate_imp
 
 #: Households simulated per vectorised block: bounds memory (~30 MB of samples per block) and
 #: paces the progress bar. Fixed, so a seed gives the same dataset whatever the machine.
@@ -114,10 +114,10 @@ def generate_dataset(
     progress : callable, optional
         Called with the number of households finished after each block.
     plant : {"iso", "realistic"}
-        ``iso``: the ideal 5R1C (:func:`~.virtual_imp.simulate_imp`); ``realistic``: every
+        ``iso``: the ideal 5R1C (:func:`~.imp_run.ideal.simulate_imp`); ``realistic``: every
         household on the realistic plant with its realism options drawn over their documented
         ranges (:func:`impctl.population.realism.sample_params`, same seed → same options;
-        :func:`~.virtual_imp_plant.simulate_imp_plant`); the options are extra
+        :func:`~.imp_run.realistic.simulate_imp_plant`); the options are extra
         ``<section>.<field>`` columns (``emitter.kind`` …) of the households table.
 
     Returns
@@ -147,7 +147,7 @@ def generate_dataset(
         if realism is None:
             result = simulate_imp(chunk, weather, imp_cfg, stream, keep_samples=False)
         else:
-            from .virtual_imp_plant import simulate_imp_plant
+            from .imp_run.realistic import simulate_imp_plant
 
             result = simulate_imp_plant(chunk, take_params(realism, np.arange(lo, hi),
                                                            n_households),

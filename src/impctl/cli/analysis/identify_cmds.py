@@ -46,7 +46,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     from ...classifiers.saved import default_model_dir, save_models
     from ...classifiers.training import TrainConfig, train_classifiers
     from ...population.dataset import generate_dataset
-    from ...population.imp_setup import ImpSimConfig, usable_nights
+    from ...population.imp_run.setup import ImpSimConfig, usable_nights
     from ...weather import read_weather
 
     if households < MIN_HOUSEHOLDS:

@@ -3,7 +3,7 @@
 :class:`ImpSimConfig` holds the protocol (plans, band, window, pre-heat, spin-up, sampling,
 noise); :func:`usable_nights` picks the weather's nights that fit it and need heating. Both
 simulations of the virtual population read them: the ideal 5R1C
-(:mod:`.virtual_imp`) and the realistic plant (:mod:`.virtual_imp_plant`).
+(:mod:`.ideal`) and the realistic plant (:mod:`.realistic`).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from ..imp import (
+from ...errors import InputError
+from ...imp import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
@@ -26,8 +26,8 @@ from ..imp import (
     NightPlan,
     imp_plans,
 )
-from ..night_protocol import ANTICIPATE_S, ANTICIPATE_WITHIN_K, MIN_NIGHT_H, TREND_WINDOW_S
-from ..weather import DEFAULT_TZ, winter_weather
+from ...night_protocol import ANTICIPATE_S, ANTICIPATE_WITHIN_K, MIN_NIGHT_H, TREND_WINDOW_S
+from ...weather import DEFAULT_TZ, winter_weather
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ and the virtual population's (:data:`impctl.imp.plan.DEFAULT_PREHEAT_H`): days h
 *constrained* night (T_set = the gateway's constrained setpoint, 21 °C) heats to T_max = T_set +
 ΔT ``constrained_preheat_h`` before the window (default 2 h), switches off
 at 22:00 and cools until 05:00 (the paper's case study: a predefined period).
-With ``stop_at_t_min`` it ends as the gateway ends it (:mod:`.gateway_nights`): at T_min = T_set −
+With ``stop_at_t_min`` it ends as the gateway ends it (:mod:`.gateway`): at T_min = T_set −
 ΔT, or earlier where the T_air trend reaches T_min within half an hour, then back at the day
 setpoint (the owner's, restored); not switched off at all where the pre-heat left T_air less
 than :data:`~impctl.night_protocol.SWITCH_OFF_MIN_K` above T_min. The T_min test waits for the
@@ -29,16 +29,16 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..imp.night import NightSamples
-from ..imp.plan import (
+from ...imp.night import NightSamples
+from ...imp.plan import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
-from ..model import HouseParameters, simulate
-from ..weather import DEFAULT_TZ, winter_weather
-from .gateway_nights import with_gateway_stops
+from ...model import HouseParameters, simulate
+from ...weather import DEFAULT_TZ, winter_weather
+from .gateway import with_gateway_stops
 
 
 @dataclass
@@ -56,7 +56,7 @@ class SynthSchedule:
     band_k : comfort band ΔT [K] of the constrained nights (T_max = T_set + ΔT for the pre-heat,
         T_min = T_set − ΔT for the stop)
     n_spare : the last ``n_spare`` windows are spare constrained nights, run by a gateway only
-        to repeat an invalid one (:func:`.gateway_nights.gateway_constrained_nights`)
+        to repeat an invalid one (:func:`.gateway.gateway_constrained_nights`)
     """
 
     index: pd.DatetimeIndex
@@ -211,14 +211,14 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     as with gains. ``stop_at_t_min``: a constrained night ends as the gateway ends it — at the
     first step after ``emission_lag_h`` [h] where the room sensor reads ≤ T_min = T_set −
     ΔT [°C] or (``anticipate``) its trend reaches T_min within half an hour
-    (:func:`.gateway_nights.gateway_end`); the setpoint is back at the day setpoint from there
+    (:func:`.gateway.gateway_end`); the setpoint is back at the day setpoint from there
     (nights in order, one re-simulation each: the plant and its noise are causal, so what
     precedes is unchanged). ΔT is the schedule's ``band_k``; the ``band_k`` argument [K] is kept for
     callers that pass it and must equal it.
     """
     _schedule_band(sched, band_k)
-    from ..plant import simulate_plant
-    from ..plant.building.gains import internal_gains_w, solar_gains_w
+    from ...plant import simulate_plant
+    from ...plant.building.gains import internal_gains_w, solar_gains_w
 
     n = sched.t_out_c.shape[1]
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x6A1]))

@@ -40,11 +40,11 @@ from math import ceil
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from ..imp import NightSamples, features_from_arrays
-from ..model import HouseParameters, simulate
-from ..model.continuous import mass_derivative
-from .imp_setup import ImpSimConfig, _epoch_s, default_weather, usable_nights
+from ...errors import InputError
+from ...imp import NightSamples, features_from_arrays
+from ...model import HouseParameters, simulate
+from ...model.continuous import mass_derivative
+from .setup import ImpSimConfig, _epoch_s, default_weather, usable_nights
 
 
 def _steady_mass_c(houses: HouseParameters, t_e: np.ndarray, t_air: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ the night valid with :data:`~impctl.night_protocol.MIN_NIGHT_H` of data after th
 ``campaign.max_invalid_nights``. The same rules on simulated nights, vectorised over houses, read
 from :mod:`impctl.night_protocol` as the controller's (issue 14, branch h14w):
 :func:`gateway_end`, :func:`with_gateway_stops` (used by
-:func:`impctl.population.synth_nights.run_schedule` and ``run_schedule_plant``) and
+:func:`impctl.population.imp_run.synth.run_schedule` and ``run_schedule_plant``) and
 :func:`gateway_constrained_nights`.
 """
 
@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..night_protocol import (
+from ...night_protocol import (
     MIN_NIGHT_H,
     MIN_TREND_SPAN_S,
     SWITCH_OFF_MIN_K,
@@ -28,7 +28,7 @@ from ..night_protocol import (
 )
 
 if TYPE_CHECKING:
-    from .synth_nights import SynthSchedule
+    from .synth import SynthSchedule
 
 
 def gateway_end(t_air_c: np.ndarray, dt_s: float, t_min_c: float, lag: int,

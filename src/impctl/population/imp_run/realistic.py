@@ -1,6 +1,6 @@
 """The IMP on virtual households living on the realistic plant (:mod:`impctl.plant`).
 
-Same nights, plans, weather days and outputs as :func:`~.virtual_imp.simulate_imp` (one column per
+Same nights, plans, weather days and outputs as :func:`~.ideal.simulate_imp` (one column per
 (household, weather day, plan), one Python loop over time steps), but each household is a real
 heat-pump house: its realism options (``plant_params``, drawn by
 :func:`impctl.population.realism.sample_params`) give it air and furniture capacity, radiators or
@@ -31,16 +31,16 @@ from math import ceil
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from ..imp import features_from_arrays
-from ..model import HouseParameters
-from ..night_protocol import MIN_TREND_SPAN_S, anticipates_t_min
-from ..plant import PlantCore, PlantParams
-from ..plant.building.envelope import NodeState
-from ..plant.building.gains import internal_gains_w, solar_gains_w
-from .imp_setup import ImpSimConfig, _epoch_s, default_weather, usable_nights
-from .realism import take_params
-from .virtual_imp import ImpResult, _repeat, night_result
+from ...errors import InputError
+from ...imp import features_from_arrays
+from ...model import HouseParameters
+from ...night_protocol import MIN_TREND_SPAN_S, anticipates_t_min
+from ...plant import PlantCore, PlantParams
+from ...plant.building.envelope import NodeState
+from ...plant.building.gains import internal_gains_w, solar_gains_w
+from ..realism import take_params
+from .ideal import ImpResult, _repeat, night_result
+from .setup import ImpSimConfig, _epoch_s, default_weather, usable_nights
 
 #: Steps of the realistic plant [s]: spin-up (ideal control) and pre-heat + window.
 SPINUP_STEP_S = 900.0
@@ -112,7 +112,7 @@ def simulate_imp_plant(
     plant_params : PlantParams
         Realism options, arrays over the same n households.
     weather, config, seed, keep_samples
-        As :func:`~.virtual_imp.simulate_imp`.
+        As :func:`~.ideal.simulate_imp`.
 
     Returns
     -------
