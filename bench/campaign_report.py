@@ -86,14 +86,14 @@ def paired(records: list, houses, strategies: list[str], n_boot: int, seed: int 
         a = np.array([mine[i] for i in common])
         b = np.array([base[i] for i in common])
         cells = []
-        for q, name, (d, lo, hi) in zip((0, 1), ("HLC", "τ"), paired_diff(a, b, n_boot, seed),
-                                        strict=True):
+        diffs = paired_diff(a, b, n_boot, seed)
+        for q, name, (d, lo, hi) in zip((0, 1), ("HLC", "τ"), diffs, strict=True):
             wins = np.mean(a[:, q] <= b[:, q]) * 100
             cells.append(f"{name} {d:+.1f} ({lo:+.1f} … {hi:+.1f}), no worse in {wins:.0f} %")
         dn = np.median(a[:, 2]) - np.median(b[:, 2])
         print(f"  {label(s):<40} n={len(common)}: " + "; ".join(cells)
               + f"; nights median {dn:+g}")
-        ok = [hi <= margin for _, _, hi in paired_diff(a, b, n_boot, seed)]
+        ok = [hi <= margin for _, _, hi in diffs]
         print(f"  {'':<40} non-inferior within {margin:g} points (upper bound ≤ margin): "
               f"HLC {'yes' if ok[0] else 'no'}, τ {'yes' if ok[1] else 'no'}")
 
