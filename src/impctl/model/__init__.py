@@ -12,7 +12,6 @@ from .continuous import (
     surface_temperature,
 )
 from .house import (
-    PARAMETER_UNITS,
     TABLE_IV,
     Conductances,
     HouseParameters,
@@ -23,6 +22,7 @@ from .house import (
     load_house,
     read_toml,
 )
+from .house_limits import PARAMETER_UNITS
 
 __all__ = [
     "PARAMETER_UNITS",

@@ -162,12 +162,6 @@ def conductances(
 #: The seven physical parameters the fit estimates (the paper's Table IV), in this order.
 TABLE_IV = ("floor_area", "wall_height", "walls_area", "windows_area", "c_f", "u_walls",
             "u_windows")
-#: Units of every house parameter (as in the house TOML).
-PARAMETER_UNITS = {
-    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
-    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)", "ach_vent": "1/h",
-    "ach_infl": "1/h", "heat_recovery": "-", "max_heating_power": "W",
-}
 
 _REQUIRED = (
     "floor_area",

@@ -3,7 +3,7 @@
 The bounds are wide limits for a dwelling (a flat … a large villa, passive house … solid
 stone), well outside anything the population, the fit's search box or the demo use; a value
 outside them is a typo or a wrong unit (mm for m, W/K for W/(m²K), % for 0–1), not a house.
-Units as in :data:`impctl.model.house.PARAMETER_UNITS`.
+Units as in :data:`PARAMETER_UNITS`.
 """
 
 from __future__ import annotations
@@ -47,6 +47,14 @@ class HouseFileError(InputError):
         return HouseFileError([p.at(source, place) for p in self.problems])
 
 
+#: Units of every house parameter (as in the house TOML).
+PARAMETER_UNITS = {
+    "floor_area": "m²", "wall_height": "m", "walls_area": "m²", "windows_area": "m²",
+    "c_f": "1e5 J/(m²K)", "u_walls": "W/(m²K)", "u_windows": "W/(m²K)", "ach_vent": "1/h",
+    "ach_infl": "1/h", "heat_recovery": "-", "max_heating_power": "W",
+}
+
+
 def limit_problem(key: str, value: float) -> str | None:
     """What is wrong with ``value`` for ``key`` (``None`` if it is inside the limits)."""
     lo, hi = HOUSE_LIMITS[key]
@@ -55,8 +63,6 @@ def limit_problem(key: str, value: float) -> str | None:
     low_ok = value > lo if key in OPEN_LOW else value >= lo
     if math.isfinite(value) and low_ok and value <= hi:
         return None
-    from .house import PARAMETER_UNITS
-
     unit = PARAMETER_UNITS.get(key, "")
     unit = "" if unit in ("", "-") else f" {unit}"
     if not math.isfinite(value):

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import torch
 
-from ...model.house import H_MS, PARAMETER_UNITS, TABLE_IV, am_factor, conductances
+from ...model.house import H_MS, TABLE_IV, am_factor, conductances
+from ...model.house_limits import PARAMETER_UNITS
 
 DTYPE = torch.float64
 

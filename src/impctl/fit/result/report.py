@@ -50,7 +50,8 @@ from typing import Any
 
 import numpy as np
 
-from ...model.house import PARAMETER_UNITS, TABLE_IV
+from ...model.house import TABLE_IV
+from ...model.house_limits import PARAMETER_UNITS
 
 # From the model, not from .node, so that reading a result needs no torch.
 PARAM_NAMES = TABLE_IV

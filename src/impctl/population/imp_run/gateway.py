@@ -28,7 +28,7 @@ from ...night_protocol import (
 )
 
 if TYPE_CHECKING:
-    from .synth import SynthSchedule
+    from .setup import SynthSchedule
 
 
 def gateway_end(t_air_c: np.ndarray, dt_s: float, t_min_c: float, lag: int,

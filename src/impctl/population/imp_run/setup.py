@@ -174,3 +174,31 @@ def usable_nights(weather: pd.Series, config: ImpSimConfig) -> pd.DataFrame:
         if mean < config.max_t_out_c:
             rows.append((day.strftime("%Y-%m-%d"), start, s0, s1 - s0, mean))
     return pd.DataFrame(rows, columns=["date", "start", "start_s", "duration_s", "t_out_mean_c"])
+
+
+@dataclass
+class SynthSchedule:
+    """The simulated schedule, kept so a fitted house can be replayed on the same inputs.
+
+    Attributes
+    ----------
+    index : DatetimeIndex of the simulation steps
+    dt_s : simulation step [s]
+    t_out_c : (n_steps, n_houses) outdoor temperature [°C]
+    setpoint_c : (n_steps, n_houses) heating setpoint [°C], NaN = off
+    windows : per night (night_id, kind, first step, end step (exclusive), T_set)
+    t_m_init_c : mass temperature before the first step [°C]; also the day setpoint
+    band_k : comfort band ΔT [K] of the constrained nights (T_max = T_set + ΔT for the pre-heat,
+        T_min = T_set − ΔT for the stop)
+    n_spare : the last ``n_spare`` windows are spare constrained nights, run by a gateway only
+        to repeat an invalid one (:func:`.gateway.gateway_constrained_nights`)
+    """
+
+    index: pd.DatetimeIndex
+    dt_s: float
+    t_out_c: np.ndarray
+    setpoint_c: np.ndarray
+    windows: list[tuple[str, str, int, int, float]]
+    t_m_init_c: float
+    band_k: float = DEFAULT_BAND_K
+    n_spare: int = 0
