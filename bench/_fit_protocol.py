@@ -10,8 +10,8 @@ import numpy as np
 
 from impctl.config import CampaignConfig
 from impctl.fit.ode.parameters import PARAM_NAMES
+from impctl.imp.protocol import MIN_NIGHT_H
 from impctl.model import HouseParameters
-from impctl.night_protocol import MIN_NIGHT_H
 from impctl.population.imp_run.gateway import gateway_constrained_nights
 from impctl.population.imp_run.synth import (
     PlantSchedule,

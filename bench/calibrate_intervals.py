@@ -51,8 +51,8 @@ from fit import (  # bench/fit.py: the same protocol
 from impctl.config import CampaignConfig
 from impctl.fit.intervals import model_error
 from impctl.fit.optim.batch import fit_households
+from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.model import HouseParameters
-from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
 from impctl.population.imp_run.synth import (
     imp_schedule,

@@ -40,7 +40,7 @@ def main() -> None:
     parser.add_argument("--plant", choices=("iso", "realistic"), default="iso")
     parser.add_argument("--constrained-setpoint", default=None, metavar="C",
                         help="T_set of the population's constrained nights [°C] (default the "
-                             "gateway's, impctl.night_protocol); 'cycle': every kind at every "
+                             "gateway's, impctl.imp.protocol); 'cycle': every kind at every "
                              "normal setpoint (the population before branch h14q)")
     parser.add_argument("--constrained-per-day", type=int, default=None, metavar="N",
                         help="constrained replays per weather day (default ImpSimConfig's 1)")

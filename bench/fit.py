@@ -17,7 +17,7 @@ classifiers are trained with other seeds, so they never saw these houses). Each 
 the IMP protocol of ``impctl.population.imp_run.synth`` on its own seeded winter weather, simulated
 with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
 21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
-:mod:`impctl.night_protocol`); constrained nights pre-heat to T_set + ΔT and cool from
+:mod:`impctl.imp.protocol`); constrained nights pre-heat to T_set + ΔT and cool from
 22:00 until the gateway ends them (below), normal nights step up from the 21 °C day; both 2 h before
 the window, as the gateway. Measurements: T_air and T_out rounded to 0.1 °C, each heat-power
 sample × (1 + 0.05·N(0,1)); samples every ``--steps`` seconds (temperatures are readings, power
@@ -133,8 +133,8 @@ from _fit_variants import compare, virtual_imp_check
 from impctl.fit import baselines
 from impctl.fit.estimator import NightFit
 from impctl.fit.nights.data import prepare_nights, search_bounds
+from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.model import HouseParameters
-from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.population.households import sample_households
 from impctl.population.imp_run.synth import run_schedule, sample_nights
 from impctl.population.realism import sample_params

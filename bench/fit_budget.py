@@ -75,7 +75,7 @@ import fit  # noqa: E402  (bench/fit.py's protocol)
 from _fit_tables import rel, stats  # noqa: E402
 from fit import VAL_SEED, run_step  # noqa: E402
 
-from impctl.night_protocol import DEFAULT_BAND_K, MIN_NIGHT_H  # noqa: E402
+from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H  # noqa: E402
 from impctl.plant.params import CONTROL_IDEAL, RADIATORS, PlantParams  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402

@@ -34,7 +34,7 @@ sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from _fit_protocol import VAL_SEED, short_constrained  # noqa: E402
 from unidentified import no_valid  # noqa: E402
 
-from impctl.night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
+from impctl.imp.protocol import DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402

@@ -44,7 +44,7 @@ from _fit_protocol import VAL_SEED, gateway_campaign, short_constrained, val_sch
 from campaign_nights import variant_schedule  # noqa: E402
 
 from impctl.config import CampaignConfig, NightConfig  # noqa: E402
-from impctl.night_protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
+from impctl.imp.protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.imp_run.gateway import campaign_runs  # noqa: E402
 from impctl.population.imp_run.synth import run_schedule_plant  # noqa: E402

@@ -16,9 +16,9 @@ from impctl.config import config_from_mapping
 from impctl.daemon import adaptive
 from impctl.daemon.schedule import campaign_plan, peek_next_night, why_no_night
 from impctl.errors import InputError
+from impctl.imp.protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from impctl.mqtt.discovery import entities
 from impctl.mqtt.payloads import LiveState
-from impctl.night_protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from impctl.store import SCHEMA_VERSION, Sample, Store
 
 T0 = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
@@ -36,7 +36,7 @@ def test_fixed_is_the_default_and_adaptive_is_opted_into():
     camp = cfg.campaign
     # Fixed by default: on realistic houses the adaptive campaign did not beat it.
     assert camp.mode == "fixed" and not camp.adaptive
-    # the gateway's protocol (impctl.night_protocol): 2 constrained, one normal per setpoint
+    # the gateway's protocol (impctl.imp.protocol): 2 constrained, one normal per setpoint
     assert campaign_plan(cfg) == [("constrained", DEFAULT_CONSTRAINED_SETPOINT_C)] * 2 + [
         ("normal", sp) for sp in DEFAULT_SETPOINTS_C]
     adaptive_cfg = config_from_mapping({**BASE, "campaign": {"mode": "adaptive"}})

@@ -24,7 +24,7 @@ HOUSE = HouseParameters(floor_area=150.0, wall_height=2.6, walls_area=200.0, win
                         c_f=1.65, u_walls=0.6, u_windows=1.4, ach_vent=0.0, ach_infl=0.01)
 RANGES = {"floor_area": (100.0, 200.0), "c_f": (0.8, 1.65), "u_walls": (0.2, 1.0)}
 #: The synthetic houses (the ideal 5R1C) have no internal gains: the fit is told so (its
-#: default assumes an occupied house's 250 W, impctl.night_gain).
+#: default assumes an occupied house's 250 W, impctl.imp.gain).
 IDEAL = {"night_gain_w": 0.0}
 
 

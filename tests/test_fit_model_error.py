@@ -132,7 +132,7 @@ def test_the_calibration_ran_the_gateways_constrained_nights():
     # stale-file check (issue 14, h14w): the share is calibrated on constrained nights that end
     # as the gateway ends them, at the default band; after a change of DEFAULT_BAND_K
     # regenerate model_error.json with bench/calibrate_intervals.py
-    from impctl.night_protocol import DEFAULT_BAND_K
+    from impctl.imp.protocol import DEFAULT_BAND_K
 
     protocol = model_error.load_calibration()["bands"]["few"]["protocol"]
     assert protocol.get("band_k") == DEFAULT_BAND_K

@@ -12,7 +12,7 @@ import pytest
 
 from impctl.controller.plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from impctl.fit.nights.data import prepare_nights
-from impctl.night_protocol import MIN_NIGHT_H
+from impctl.imp.protocol import MIN_NIGHT_H
 from impctl.population.households import sample_households
 from impctl.population.imp_run.gateway import gateway_constrained_nights, gateway_end
 from impctl.population.imp_run.synth import (

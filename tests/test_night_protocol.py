@@ -15,7 +15,7 @@ from impctl.daemon.schedule import campaign_plan
 from impctl.daemon.service import policy_from_config
 from impctl.heatpump import WritePolicy
 from impctl.imp import imp_plans
-from impctl.night_protocol import (
+from impctl.imp.protocol import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,

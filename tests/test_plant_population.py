@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from impctl.night_protocol import DEFAULT_BAND_K
+from impctl.imp.protocol import DEFAULT_BAND_K
 from impctl.plant import RADIATORS, UNDERFLOOR
 from impctl.plant.params import SECTIONS
 from impctl.population import ImpSimConfig, generate_dataset, sample_households

@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError
+from .imp.tables import read_table, step_seconds
 from .model import HouseParameters, simulate
-from .tables import read_table, step_seconds
 
 _NUMERIC = ("t_out", "setpoint", "phi_hc", "internal_gains", "solar_gains")
 _MAY_BE_EMPTY = ("setpoint", "phi_hc")

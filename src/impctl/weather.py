@@ -125,7 +125,7 @@ def read_weather(path: str | Path, tz: str = DEFAULT_TZ) -> pd.Series:
         raise InputError("file not found", path)
     if path.suffix.lower() == ".epw":
         return _read_epw(path, tz)
-    from .tables import read_table
+    from .imp.tables import read_table
 
     table = read_table(path, required=("timestamp", "t_out"), numeric=("t_out",), tz=tz)
     return pd.Series(table["t_out"].to_numpy(), index=table["timestamp"], name="t_out")

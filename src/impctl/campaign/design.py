@@ -54,8 +54,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..imp.protocol import DEFAULT_BAND_K, DEFAULT_PREHEAT_H
 from ..model import HouseParameters, simulate
-from ..night_protocol import DEFAULT_BAND_K, DEFAULT_PREHEAT_H
 from .records import CONSTRAINED, NORMAL, Candidate, Outlook, type_b_shares
 
 Z95 = 1.959964

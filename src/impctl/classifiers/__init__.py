@@ -15,11 +15,12 @@ so ``import impctl.classifiers`` stays light (the CLI imports it).
 
 from __future__ import annotations
 
-from .._lazy import attach
+import lazy_loader
+
 from ..population.ranges import DEFAULT_RANGES
 
-# Resolved on first use (impctl._lazy), so that importing the package stays light.
-__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+# Resolved on first use (lazy_loader), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = lazy_loader.attach(__name__, submod_attrs={
     "saved": ["ClassResult", "classify_nights", "default_model_dir", "load_models", "save_models"],
     "training": ["TrainConfig", "train_classifiers"],
     "report": ["format_report"],

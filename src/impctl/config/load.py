@@ -13,8 +13,8 @@ from typing import Any
 
 from ..errors import InputError
 from ..heatpump import config_from_mapping as heatpump_from_mapping
+from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..mqtt.config import mqtt_from_mapping
-from ..night_gain import NIGHT_GAIN_LIMITS_W
 from .sections import (
     CampaignConfig,
     ClockConfig,

@@ -11,14 +11,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..heatpump import HeatPumpConfig
-from ..mqtt.config import MqttConfig
-from ..night_gain import NIGHT_GAIN_W
-from ..night_protocol import (
+from ..imp.gain import NIGHT_GAIN_W
+from ..imp.protocol import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
+from ..mqtt.config import MqttConfig
 
 
 @dataclass(frozen=True)

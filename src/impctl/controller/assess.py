@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..night_protocol import MIN_NIGHT_H, Q_ON_W
+from ..imp.protocol import MIN_NIGHT_H, Q_ON_W
 from ..store import Store
 from .heat_output import heat_output_problems
 from .plan import NightPolicy
@@ -18,7 +18,7 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     -------
     (valid, reasons) — reasons say why a night is not valid, and note minor issues of a
     valid one. Thresholds: coverage ≥ ``policy.min_coverage`` of the expected samples up to the
-    night's end; at least :data:`~impctl.night_protocol.MIN_NIGHT_H` (3 h) of data (for
+    night's end; at least :data:`~impctl.imp.protocol.MIN_NIGHT_H` (3 h) of data (for
     constrained nights: after switch-off plus the emission lag, which is what the fit uses);
     defrost and DHW each ≤ 10 % of the samples;
     no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples; Q_HC

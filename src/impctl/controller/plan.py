@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime
 
-from .. import night_protocol as _protocol
+from ..imp import protocol as _protocol
 
 
 @dataclass(frozen=True)
@@ -19,7 +19,7 @@ class NightRequest:
     window_start, window_end : absolute instants (time zone-aware); the window's length is
         real elapsed time, so a night across a DST change lasts 6 or 8 hours of wall clock
     comfort_band_k : ΔT [K]; default the protocol's band
-        (:data:`impctl.night_protocol.DEFAULT_BAND_K`), as in the gateway's ``[night]``
+        (:data:`impctl.imp.protocol.DEFAULT_BAND_K`), as in the gateway's ``[night]``
     source : "schedule" or "trigger"
     campaign_seq : the campaign plan entry the night serves, if any
     """

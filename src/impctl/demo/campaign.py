@@ -12,8 +12,8 @@ from zoneinfo import ZoneInfo
 
 from ..clock import VirtualClock
 from ..config import config_from_mapping
+from ..imp.protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from ..model import HouseParameters
-from ..night_protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from ..store import Store
 from .options import FIT_WAIT_S, TZ, DemoOptions, Progress, fit_night_gain_w, plant_summary
 

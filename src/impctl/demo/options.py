@@ -7,8 +7,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..imp.gain import NIGHT_GAIN_W
 from ..model import HouseParameters
-from ..night_gain import NIGHT_GAIN_W
 
 TZ = "Europe/Ljubljana"
 #: Default clock speed per plant: the realistic plant's steps cost ~0.3 ms (vs µs), and the
@@ -108,6 +108,6 @@ class Progress:
 
 def fit_night_gain_w(opts: DemoOptions) -> float:
     """The night gain the demo's fit assumes [W]: the ideal 5R1C has none (told the truth);
-    on the realistic plant the installer's default (:mod:`impctl.night_gain`), as on a house
+    on the realistic plant the installer's default (:mod:`impctl.imp.gain`), as on a house
     whose household nobody described."""
     return 0.0 if opts.plant == "iso" else NIGHT_GAIN_W

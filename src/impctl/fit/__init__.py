@@ -37,10 +37,10 @@ Inside, by concern:
 
 from __future__ import annotations
 
-from .._lazy import attach
+import lazy_loader
 
-# Resolved on first use (impctl._lazy), so that importing the package stays light.
-__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+# Resolved on first use (lazy_loader), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = lazy_loader.attach(__name__, submod_attrs={
     "estimator": ["NightFit"],
     "nights.data": ["prepare_nights"],
     "result.report": ["fit_to_dict"],

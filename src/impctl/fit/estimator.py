@@ -32,10 +32,10 @@ from collections.abc import Sequence
 import torch
 
 from ..imp.features import Q_ON_W
+from ..imp.gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
-from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
-from ..night_protocol import MIN_NIGHT_H
+from ..imp.protocol import MIN_NIGHT_H
 from ._problems import prepare
 from ._statement import choose, statement
 from ._weights import NOISE_PASSES, NOISE_RTOL, Weights, settle
@@ -140,7 +140,7 @@ class NightFit:
         constant internal gain in the model (split over the air, surface and mass nodes as
         ISO 13790 C.1–C.3 splits Φ_int) on every night of both kinds whenever no gain term
         is fitted (``night_gain`` off, or not kept by the likelihood-ratio test). Default the
-        documented population's centre, :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W,
+        documented population's centre, :data:`impctl.imp.gain.NIGHT_GAIN_W` (250 W,
         real-houses.md §4); 0 on the ideal 5R1C, which has no gains. Reported as assumed,
         not measured (``night_gain_``).
     night_gain_sd_w : float

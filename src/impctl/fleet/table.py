@@ -19,7 +19,7 @@ parameters (``floor_area_m2`` … ``u_windows_w_per_m2k``) and the fixed ``ach_v
 ``ach_infl_per_h`` (enough to re-simulate the house, e.g. ``impctl flex``); the fit's
 switch-off terms ``night_gain_w, emitter_tau_h, furniture_j_per_m2k`` each with ``_low``,
 ``_high`` (empty when the fit did not keep them; :mod:`impctl.flex.switch_off`) and
-``night_gain_assumed`` (the gain is the fit's assumption, :mod:`impctl.night_gain`, not fitted);
+``night_gain_assumed`` (the gain is the fit's assumption, :mod:`impctl.imp.gain`, not fitted);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and

@@ -16,7 +16,7 @@ switch-off terms the fit kept (:mod:`.switch_off`):
    (~1–3 K) and the drop is counted from just after that jump (the fit found no release after
    its emission lag, so the pure-5R1C house it describes coasts on its mass).
    ``coast_method`` names what was used; ``coast_gain_w`` the gain assumed: the fit's own (its
-   fitted gain, or the gain it assumed, :mod:`impctl.night_gain`, 250 W unless the installer
+   fitted gain, or the gain it assumed, :mod:`impctl.imp.gain`, 250 W unless the installer
    set it) — 0 W only for an older fit that assumed none (its HLC then carries the gains).
 3. **Rebound** (``rebound_kwh`` [kWh]): heating back on at T_set from the state at the end of
    the coast (Annex C demand, C.13, capped at the house's ``max_heating_power``, uncapped by

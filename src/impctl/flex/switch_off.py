@@ -88,7 +88,7 @@ def _triple(entry: Any, name: str) -> tuple[float, float, float, tuple[float, fl
 def switch_off_from_fit(summary: dict) -> SwitchOff:
     """The coast's switch-off terms from an ``impctl fit`` summary's ``"nuisance"`` block (the
     module docstring's rules). A term the fit did not keep (null there) is NaN here. A night
-    gain the fit assumed (``"assumed": true``, :mod:`impctl.night_gain`) is used as the fit
+    gain the fit assumed (``"assumed": true``, :mod:`impctl.imp.gain`) is used as the fit
     used it, with the assumption's interval, and named in ``documented``."""
     nuis = summary.get("nuisance") or {}
     if not isinstance(nuis, dict):
@@ -97,7 +97,7 @@ def switch_off_from_fit(summary: dict) -> SwitchOff:
     for name in SWITCH_OFF_TERMS:
         value, low, high, (lo_b, hi_b) = _triple(nuis.get(name), name)
         if np.isfinite(value) and (nuis.get(name) or {}).get("assumed"):
-            documented.append(name)   # the fit's assumed gain (impctl.night_gain), not fitted
+            documented.append(name)   # the fit's assumed gain (impctl.imp.gain), not fitted
         if np.isfinite(value):
             low = value if not np.isfinite(low) else low
             high = value if not np.isfinite(high) else high
@@ -120,7 +120,7 @@ def switch_off_from_fit(summary: dict) -> SwitchOff:
 #: them (before the rules above): a fleet row re-simulates like the fit JSON.
 COLUMNS = tuple(f"{k}{s}" for k in SWITCH_OFF_TERMS for s in ("", "_low", "_high"))
 #: FLEET.parquet column: True when ``night_gain_w`` is the gain the fit assumed
-#: (:mod:`impctl.night_gain`), not one it fitted; empty when no gain was used.
+#: (:mod:`impctl.imp.gain`), not one it fitted; empty when no gain was used.
 ASSUMED_COLUMN = "night_gain_assumed"
 
 

@@ -86,7 +86,7 @@ class WritePolicy:
     Attributes
     ----------
     loop1_setpoint_c : (min, max) clamp for 2187 [°C]; the default top, 24 °C, is the IMP's
-        highest normal-night setpoint (:mod:`impctl.night_protocol`), so the default campaign is
+        highest normal-night setpoint (:mod:`impctl.imp.protocol`), so the default campaign is
         never clamped.
     loop2_setpoint_c : (min, max) clamp for 2049 [°C]; ``None`` = loop 2 not writable.
     correction_k : (min, max) clamp for 2014 [K], within −4…4; ``None`` = not writable.

@@ -23,9 +23,9 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..night_protocol import Q_ON_W
 from .night import NightSamples
 from .plan import EMISSION_LAG_H
+from .protocol import Q_ON_W
 
 __all__ = ["Q_ON_W"]  # re-exported: Q_ON_W lives with the protocol (the gateway reads it too)
 #: Fewest samples a mean, slope or decay fit is computed from.

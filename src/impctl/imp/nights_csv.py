@@ -29,10 +29,10 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..tables import frame_table, read_table
 from .features import Q_ON_W
 from .night import NightSamples
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
+from .tables import frame_table, read_table
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 #: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).

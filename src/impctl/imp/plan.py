@@ -28,18 +28,18 @@ from dataclasses import dataclass
 import pandas as pd
 
 from ..errors import InputError
-from ..night_protocol import (
+from .night import NightKind
+from .protocol import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
-from .night import NightKind
 
 #: Emitter lag [h]: emitters give no heat from this long after switch-off (paper §III-A).
 EMISSION_LAG_H = 1.0
 # DEFAULT_BAND_K, DEFAULT_SETPOINTS_C, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_PREHEAT_H: the
-# protocol's defaults live in impctl.night_protocol (the daemon's config reads them without
+# protocol's defaults live in impctl.imp.protocol (the daemon's config reads them without
 # pandas); they are names of this module too.
 #: Local window start and end (paper: 22:00–05:00, space heating only, no hot water).
 DEFAULT_WINDOW = (dt.time(22, 0), dt.time(5, 0))

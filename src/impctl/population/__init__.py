@@ -21,11 +21,12 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 
 from __future__ import annotations
 
-from .._lazy import attach
+import lazy_loader
+
 from .ranges import DEFAULT_RANGES
 
-# Resolved on first use (impctl._lazy), so that importing the package stays light.
-__getattr__, __dir__, _LAZY_NAMES = attach(__name__, submod_attrs={
+# Resolved on first use (lazy_loader), so that importing the package stays light.
+__getattr__, __dir__, _LAZY_NAMES = lazy_loader.attach(__name__, submod_attrs={
     "households": ["PopulationConfig", "sample_households", "sample_population"],
     "imp_run.setup": ["ImpSimConfig"],
     "imp_run.ideal": ["ImpResult", "simulate_imp"],

@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
-from ...night_protocol import (
+from ...imp.protocol import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
     DEFAULT_PREHEAT_H,

@@ -16,7 +16,7 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
-from ...night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
+from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
 from .. import cli
 from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
 

@@ -56,9 +56,9 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     import pandas as pd
 
     from ...drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
+    from ...imp.tables import step_seconds
     from ...model import default_house, load_house
     from ...store.export import refuse_database
-    from ...tables import step_seconds
     from ...weather import read_weather, winter_weather
 
     refuse_database(out_path, "--out")

@@ -52,7 +52,7 @@ NUISANCE_NAMES = ("night_gain_w", "emitter_w", "emitter_tau_h", "furniture_j_per
 
 #: When no gain is fitted (``night_gain`` off, or not kept by the likelihood-ratio test) the
 #: night_gain_w column is pinned to an assumed value (``NightFit(night_gain_w=…)``, default
-#: :data:`impctl.night_gain.NIGHT_GAIN_W`) by the box (g, g), not to 0 W.
+#: :data:`impctl.imp.gain.NIGHT_GAIN_W`) by the box (g, g), not to 0 W.
 NUISANCE_BOUNDS: dict[str, tuple[float, float]] = {
     # sleepers and base load, ≈ 150–400 W (real-houses.md §4). Not wide enough to absorb the
     # intercept sensor offsets make (HLC·(offset_in − offset_out)): with that much freedom the

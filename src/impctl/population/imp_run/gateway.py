@@ -4,10 +4,10 @@ The gateway (:mod:`impctl.controller`) ends a constrained night when the room se
 T_min = T_set − ΔT, or earlier when the T_air trend reaches T_min within half an hour
 (:func:`impctl.controller.plan.anticipated_end`), never switches off when the pre-heat fell
 short (:func:`impctl.controller.plan.preheat_short`), restores the owner's setpoint, and counts
-the night valid with :data:`~impctl.night_protocol.MIN_NIGHT_H` of data after the emission lag
+the night valid with :data:`~impctl.imp.protocol.MIN_NIGHT_H` of data after the emission lag
 (:func:`impctl.controller.assess.assess_night`); an invalid one is repeated, up to
 ``campaign.max_invalid_nights``. The same rules on simulated nights, vectorised over houses, read
-from :mod:`impctl.night_protocol` as the controller's (issue 14, branch h14w):
+from :mod:`impctl.imp.protocol` as the controller's (issue 14, branch h14w):
 :func:`gateway_end`, :func:`with_gateway_stops` (used by
 :func:`impctl.population.imp_run.synth.run_schedule` and ``run_schedule_plant``) and
 :func:`gateway_constrained_nights`.
@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...night_protocol import (
+from ...imp.protocol import (
     MIN_NIGHT_H,
     MIN_TREND_SPAN_S,
     SWITCH_OFF_MIN_K,
@@ -39,12 +39,12 @@ def gateway_end(t_air_c: np.ndarray, dt_s: float, t_min_c: float, lag: int,
     ``t_air_c`` (n_steps, n_houses) [°C]: the room sensor from the window's start, one reading
     per step of ``dt_s`` [s] (the gateway reads once a minute). The night ends at the first step
     after ``lag`` steps where T_air ≤ ``t_min_c`` or, with ``anticipate``, where T_air is within
-    :data:`~impctl.night_protocol.ANTICIPATE_WITHIN_K` of T_min and the least-squares trend
-    since switch-off, over the last :data:`~impctl.night_protocol.TREND_WINDOW_S` (at least
-    :data:`~impctl.night_protocol.MIN_TREND_SPAN_S`), reaches it within
-    :data:`~impctl.night_protocol.ANTICIPATE_S` (:func:`impctl.controller.plan.anticipated_end`).
+    :data:`~impctl.imp.protocol.ANTICIPATE_WITHIN_K` of T_min and the least-squares trend
+    since switch-off, over the last :data:`~impctl.imp.protocol.TREND_WINDOW_S` (at least
+    :data:`~impctl.imp.protocol.MIN_TREND_SPAN_S`), reaches it within
+    :data:`~impctl.imp.protocol.ANTICIPATE_S` (:func:`impctl.controller.plan.anticipated_end`).
     At step 0 where T_air at the window's start (``t_start_c``, default the first reading) is
-    < T_min + :data:`~impctl.night_protocol.SWITCH_OFF_MIN_K`: the gateway never switches off
+    < T_min + :data:`~impctl.imp.protocol.SWITCH_OFF_MIN_K`: the gateway never switches off
     (:func:`impctl.controller.plan.preheat_short`).
     """
     v = np.atleast_2d(np.asarray(t_air_c, float).T).T

@@ -33,8 +33,8 @@ import pandas as pd
 
 from ...errors import InputError
 from ...imp import features_from_arrays
+from ...imp.protocol import MIN_TREND_SPAN_S, anticipates_t_min
 from ...model import HouseParameters
-from ...night_protocol import MIN_TREND_SPAN_S, anticipates_t_min
 from ...plant import PlantCore, PlantParams
 from ...plant.building.envelope import NodeState
 from ...plant.building.gains import internal_gains_w, solar_gains_w
@@ -61,7 +61,7 @@ class _GatewayStop:
     T_min", "T_min anticipated"), polled every plant step from the switch-off.
 
     A night ends at the first poll whose sensed T_air is ≤ T_min, or whose least-squares trend
-    over the last ``trend_window_s`` (at least :data:`impctl.night_protocol.MIN_TREND_SPAN_S`)
+    over the last ``trend_window_s`` (at least :data:`impctl.imp.protocol.MIN_TREND_SPAN_S`)
     reaches T_min within ``anticipate_s`` while T_air is within ``anticipate_within_k`` of T_min.
     """
 

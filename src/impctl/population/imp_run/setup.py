@@ -26,7 +26,7 @@ from ...imp import (
     NightPlan,
     imp_plans,
 )
-from ...night_protocol import ANTICIPATE_S, ANTICIPATE_WITHIN_K, MIN_NIGHT_H, TREND_WINDOW_S
+from ...imp.protocol import ANTICIPATE_S, ANTICIPATE_WITHIN_K, MIN_NIGHT_H, TREND_WINDOW_S
 from ...weather import DEFAULT_TZ, winter_weather
 
 

@@ -10,7 +10,7 @@ at 22:00 and cools until 05:00 (the paper's case study: a predefined period).
 With ``stop_at_t_min`` it ends as the gateway ends it (:mod:`.gateway`): at T_min = T_set −
 ΔT, or earlier where the T_air trend reaches T_min within half an hour, then back at the day
 setpoint (the owner's, restored); not switched off at all where the pre-heat left T_air less
-than :data:`~impctl.night_protocol.SWITCH_OFF_MIN_K` above T_min. The T_min test waits for the
+than :data:`~impctl.imp.protocol.SWITCH_OFF_MIN_K` above T_min. The T_min test waits for the
 emission lag because the 5R1C air node is massless: T_air drops 2–5 K the instant the heating
 stops, which would end most nights at once (identifiability.md §11.2); a night that ends within
 the lag is too short to be valid either way. The schedule carries its comfort band

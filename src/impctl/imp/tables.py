@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import InputError
+from ..errors import InputError
 
 _OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
 
