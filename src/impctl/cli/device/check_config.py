@@ -11,7 +11,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
-from .commands import _config_option
+from .options import config_option
 
 
 def state_dir_problem(state_dir: str | Path) -> str | None:
@@ -108,7 +108,7 @@ def _campaign_line(camp) -> str:
 
 
 @cli.command("check-config")
-@_config_option
+@config_option
 def check_config_command(config_path: Path) -> None:
     """Check a configuration: every problem at once (exit 2), else what the daemon would do
     at the next night. Touches nothing: no heat pump, no store created."""

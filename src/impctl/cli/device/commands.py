@@ -19,11 +19,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
-
-DEFAULT_CONFIG = "/etc/impctl/config.toml"
-_config_option = click.option(
-    "--config", "config_path", type=click.Path(path_type=Path), default=DEFAULT_CONFIG,
-    show_default=True, help="Daemon configuration (TOML).")
+from .options import config_option
 
 
 def _load(config_path: Path):
@@ -61,7 +57,7 @@ def _setup_logging(level: str, timezone: str = "UTC") -> None:
 
 
 @cli.command("daemon")
-@_config_option
+@config_option
 def daemon_command(config_path: Path) -> None:
     """Run the impctl service (systemd Type=notify): schedule and run IMP nights."""
     from ...daemon.service import Daemon
@@ -72,7 +68,7 @@ def daemon_command(config_path: Path) -> None:
 
 
 @cli.command("trigger")
-@_config_option
+@config_option
 @click.option("--kind", type=click.Choice(["constrained", "normal"]), default=None,
               help="Heating off (constrained) or held at the setpoint (normal). Required "
                    "unless --cancel.")
@@ -209,7 +205,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
 
 
 @cli.command("restore")
-@_config_option
+@config_option
 @click.option("--timeout", "timeout_s", type=float, default=60.0, show_default=True,
               help="Keep retrying a lost link this long [s].")
 def restore_command(config_path: Path, timeout_s: float) -> None:
@@ -254,7 +250,7 @@ async def _restore(cfg, store, timeout_s: float):
 
 
 @cli.command("status")
-@_config_option
+@config_option
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 def status_command(config_path: Path, as_json: bool) -> None:
     """Current night and live values, campaign progress, last fit, link health, writes."""
@@ -267,7 +263,7 @@ def status_command(config_path: Path, as_json: bool) -> None:
 
 
 @cli.command("nights")
-@_config_option
+@config_option
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 def nights_command(config_path: Path, as_json: bool) -> None:
     """List the stored nights with their validity and reasons."""
@@ -296,7 +292,7 @@ def nights_command(config_path: Path, as_json: bool) -> None:
 
 
 @cli.command("export")
-@_config_option
+@config_option
 @click.option("--db", "db_path", type=click.Path(path_type=Path), default=None,
               help="Store file (default: impctl.db in the config's state_dir).")
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv",
@@ -333,7 +329,3 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
                           force=force)
     click.echo(f"wrote {n} samples to {out_path}")
-
-
-# `impctl check-config` lives in its own module; importing it registers the command.
-from . import check_config  # noqa: E402, F401
