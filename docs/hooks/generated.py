@@ -52,6 +52,21 @@ def on_page_markdown(markdown: str, page, config, files, **kwargs) -> str:
     return markdown
 
 
+_BRACKET_NOTE = re.compile(
+    r'<autoref (?=[^>]*identifier="(?P<id>[^"]*\s[^"]*)")[^>]*>(?P<title>.*?)</autoref>', re.S)
+
+
+def on_page_content(html: str, page, config, files, **kwargs) -> str:
+    """Docstrings mark sources in brackets ("[-] [own choice]", "[RH §2]"): Markdown reads
+    "[a] [b]" as a reference link, and autorefs would look for a page section "own choice".
+    An identifier with a space is never a Python object: put the brackets back as text."""
+    def text(m: re.Match) -> str:
+        title, ident = m["title"], m["id"]
+        return f"[{ident}]" if title == ident else f"[{title}] [{ident}]"
+
+    return _BRACKET_NOTE.sub(text, html)
+
+
 # -- the configuration ------------------------------------------------------------------------
 
 def _dataclasses_in(hint) -> list[type]:
@@ -59,8 +74,9 @@ def _dataclasses_in(hint) -> list[type]:
     return [a for a in args if isinstance(a, type) and is_dataclass(a)]
 
 
-def _tables(cls: type, table: str, out: dict[str, list]) -> None:
-    """Walk the configuration's dataclasses: table name → [(key, field, hint)]."""
+def _tables(cls: type, table: str, out: dict[str, list], parents: dict[str, tuple]) -> None:
+    """Walk the configuration's dataclasses: table name → [(key, field, hint, class)];
+    ``parents``: sub-table → (the class and field that hold it)."""
     hints = typing.get_type_hints(cls)
     rows = out.setdefault(table, [])
     for f in fields(cls):
@@ -69,17 +85,44 @@ def _tables(cls: type, table: str, out: dict[str, list]) -> None:
         inner = _dataclasses_in(hints[f.name])
         if inner and f.name == "link":
             if table == "heatpump":      # the heat pump's own link: its keys sit in [heatpump]
-                _tables(inner[0], table, out)
+                _tables(inner[0], table, out, parents)
             else:
-                rows.append((f.name, f, "table"))
+                rows.append((f.name, f, "table", cls))
             continue
         if inner:
             sub = f"{table}.{f.name}" if table else f.name
-            _tables(inner[0], sub, out)
+            parents[sub] = (cls, f.name)
+            _tables(inner[0], sub, out, parents)
             if len(typing.get_args(hints[f.name])) > 1 and not _optional_only(hints[f.name]):
-                rows.append((f.name, f, hints[f.name]))  # a name or a table (room_sensor)
+                rows.append((f.name, f, hints[f.name], cls))  # a name or a table (room_sensor)
             continue
-        rows.append((f.name, f, hints[f.name]))
+        rows.append((f.name, f, hints[f.name], cls))
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """The numpy-style ``Attributes`` section of a dataclass's docstring: name → text."""
+    doc = (cls.__doc__ or "").split("\n")
+    out: dict[str, str] = {}
+    names: list[str] = []
+    inside = False
+    for line in doc:
+        text = line.strip()
+        if text == "Attributes":
+            inside = True
+            continue
+        if not inside or set(text) <= {"-"}:
+            continue
+        m = re.match(r"^([a-z_][\w, ]*?)\s*:\s*(.*)$", text)
+        if m and not line.startswith(" " * 8):
+            names = [n.strip() for n in m[1].split(",")]
+            for n in names:
+                out[n] = m[2].strip()
+        elif text and names:
+            for n in names:
+                out[n] = f"{out[n]} {text}"
+        elif not text:
+            names = []
+    return {k: _NOTE_REF.sub("", v).strip() for k, v in out.items()}
 
 
 def _optional_only(hint) -> bool:
@@ -129,7 +172,9 @@ def _set(mapping: dict, path: list[str], value: object) -> dict:
     return out
 
 
-def _probes(default: object) -> list[object]:
+def _probes(default: object, hint: object = None) -> list[object]:
+    if default is MISSING and hint in (int, float, str):
+        default = hint()
     if isinstance(default, bool):
         return []
     if isinstance(default, int):
@@ -145,7 +190,7 @@ def _probes(default: object) -> list[object]:
     return []
 
 
-def _accepted(table: str, key: str, default: object) -> str:
+def _accepted(table: str, key: str, default: object, hint: object = None) -> str:
     """What the validator answers to out-of-range values of this key, one line each."""
     from impctl.config import ConfigError, config_from_mapping
     from impctl.errors import InputError
@@ -156,7 +201,7 @@ def _accepted(table: str, key: str, default: object) -> str:
     for base in _BASES:
         if table.startswith("heatpump.heat_meter") or table.startswith("heatpump.room_sensor"):
             base = _set(base, path[:2], {"device_id": 30, "address": 0})
-        for value in _probes(default):
+        for value in _probes(default, hint):
             try:
                 config_from_mapping(_set(base, path, value))
             except ConfigError as exc:
@@ -167,6 +212,7 @@ def _accepted(table: str, key: str, default: object) -> str:
                     where = f"{m['table']}.{m['key']}" if m["table"] else m["key"]
                     msg = re.sub(r",? got .*$", "", m["msg"])  # the probe, not the rule
                     msg = msg.replace("\u00bfnot a valid value?", "…")
+                    msg = re.sub(r"-?(?:1e\+09|1000000000)(?:\.0)?", "…", msg)
                     if where == full and msg not in messages:
                         messages.append(msg)
             except (InputError, Exception):  # noqa: BLE001 - a page must still build
@@ -178,15 +224,19 @@ def _escape(text: str) -> str:
     return text.replace("|", "\\|").replace("<", "&lt;")
 
 
-def _example_comments() -> dict[str, str]:
-    """``table.key`` → its comment in deploy/config.example.toml (commented-out keys too)."""
+def _example_comments() -> tuple[dict[str, str], set[str]]:
+    """``table.key`` → its comment in deploy/config.example.toml (commented-out keys too), and
+    the tables whose header is not commented out there."""
     out: dict[str, str] = {}
+    live = {""}
     table, last = "", None
     for raw in EXAMPLE.read_text(encoding="utf-8").splitlines():
         line = raw.strip()
         m = re.match(r"^#?\s*\[([\w.]+)\]\s*(?:#\s*(.*))?$", line)
         if m:
             table, last = m[1], None
+            if not line.startswith("#"):
+                live.add(table)
             if m[2]:
                 out[table] = m[2].strip()
             continue
@@ -200,7 +250,7 @@ def _example_comments() -> dict[str, str]:
             out[last] = f"{out[last]} {m[1].strip()}".strip()
         elif not line:
             last = None
-    return {k: _NOTE_REF.sub("", v).strip().rstrip(";,") for k, v in out.items()}
+    return {k: _NOTE_REF.sub("", v).strip().rstrip(";,") for k, v in out.items()}, live
 
 
 def configuration_md() -> str:
@@ -208,28 +258,35 @@ def configuration_md() -> str:
     from impctl.config import Config
 
     tables: dict[str, list] = {}
-    _tables(Config, "", tables)
-    comments = _example_comments()
+    parents: dict[str, tuple] = {}
+    _tables(Config, "", tables, parents)
+    comments, live = _example_comments()
     parts = []
     for table, rows in tables.items():
         if not rows:
             continue
         title = f"`[{table}]`" if table else "Top level"
         parts.append(f"### {title}\n")
-        if comments.get(table):
-            parts.append(_escape(comments[table]) + "\n")
+        about = comments.get(table, "")
+        if table in parents and (table not in live or not about):
+            holder, name = parents[table]
+            about = _attribute_docs(holder).get(name, about)
+        if about:
+            parts.append(_escape(about) + "\n")
         parts.append("| key | default | unit | accepted (the validator's own words) | meaning |")
         parts.append("|---|---|---|---|---|")
-        for key, f, hint in rows:
+        for key, f, hint, cls in rows:
             full = f"{table}.{key}" if table else key
             default = _default(f)
             if hint == "table":
                 shown, accepted = "not set", "a table with the keys of `[heatpump]`"
             else:
                 shown = "not set" if is_dataclass(default) else _fmt(default)
-                accepted = _accepted(table, key, default)
-            meaning = _escape(comments.get(full, ""))
-            parts.append(f"| `{key}` | {shown} | {_unit(key)} | {accepted} | {meaning} |")
+                accepted = _accepted(table, key, default, hint)
+            documented = _attribute_docs(cls).get(key, "")
+            example = comments.get(full, "")
+            meaning = (example or documented) if table in live else (documented or example)
+            parts.append(f"| `{key}` | {shown} | {_unit(key)} | {accepted} | {_escape(meaning)} |")
         parts.append("")
     return "\n".join(parts)
 
