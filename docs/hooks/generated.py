@@ -64,6 +64,8 @@ def on_page_content(html: str, page, config, files, **kwargs) -> str:
         title, ident = m["title"], m["id"]
         return f"[{ident}]" if title == ident else f"[{title}] [{ident}]"
 
+    # click ≥ 8.2 marks "no default" with a sentinel that mkdocs-click prints by its repr.
+    html = html.replace("<code>Sentinel.UNSET</code>", "–")
     return _BRACKET_NOTE.sub(text, html)
 
 
