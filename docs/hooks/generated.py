@@ -56,6 +56,9 @@ _BRACKET_NOTE = re.compile(
     r'<autoref (?=[^>]*identifier="(?P<id>[^"]*\s[^"]*)")[^>]*>(?P<title>.*?)</autoref>', re.S)
 
 
+_SPHINX_ROLE = re.compile(r":(?:func|class|mod|data|meth|attr|exc|obj):(<code>)~?")
+
+
 def on_page_content(html: str, page, config, files, **kwargs) -> str:
     """Docstrings mark sources in brackets ("[-] [own choice]", "[RH §2]"): Markdown reads
     "[a] [b]" as a reference link, and autorefs would look for a page section "own choice".
@@ -66,6 +69,8 @@ def on_page_content(html: str, page, config, files, **kwargs) -> str:
 
     # click ≥ 8.2 marks "no default" with a sentinel that mkdocs-click prints by its repr.
     html = html.replace("<code>Sentinel.UNSET</code>", "–")
+    # Sphinx roles in docstrings (":func:`~a.b`") read as code here.
+    html = _SPHINX_ROLE.sub(r"\1", html)
     return _BRACKET_NOTE.sub(text, html)
 
 
