@@ -173,8 +173,9 @@ class MqttBridge:
                     # outage (logged then) from a takeover (named above once it repeats).
                     self._set_connected(False, watch.reason if watch.clash else str(exc))
                     quiet = True
-                else:
+                else:  # an outage (also after a short session): its lines as usual
                     self._set_connected(False, str(exc))
+                    quiet = False
                 if short is None and down_since is None:  # one line per outage, not per retry
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
                                  "to %g s)", where, exc, self.cfg.reconnect_max_s)
