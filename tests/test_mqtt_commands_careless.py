@@ -144,6 +144,7 @@ def test_a_waiting_skip_is_shown_and_cancellable(rig):
     [skip] = store_query(rig.db, lambda s: s.pending_commands("skip_tonight"))
     st, text = _status(rig.config)
     assert [(s["id"], s["source"]) for s in st["skip_tonight"]] == [(skip.id, "mqtt")]
+    assert st["next_night"]["skipped_by"] == skip.id
     assert (f"skip:      the next night is skipped on request (skip {skip.id} from mqtt"
             in text), text
     ha.press(f"{BASE}/cmd/skip_tonight", "PRESS")  # pressed again: still one skip
@@ -155,7 +156,8 @@ def test_a_waiting_skip_is_shown_and_cancellable(rig):
     assert f"cancelled skip {skip.id} (mqtt): the next night runs as planned" in cancel.stdout
     assert store_query(rig.db, lambda s: s.pending_commands()) == []
     st, text = _status(rig.config)
-    assert st["skip_tonight"] == [] and "skip:" not in text
+    assert st["skip_tonight"] == [] and st["next_night"]["skipped_by"] is None
+    assert "skip:" not in text and "skipped on request" not in text
     nothing = run_cli("trigger", "--cancel", "--config", str(rig.config))
     assert "nothing to cancel" in nothing.stdout
 
@@ -219,3 +221,22 @@ def test_command_entities_are_the_ones_withdrawn():
     assert on - off == set(COMMAND_ENTITIES)
     assert [f"homeassistant/{c}/gw1/{k}/config" for c, k in COMMAND_ENTITIES] == COMMAND_CONFIGS
     assert withdrawn_topics(MqttConfig(host="h", client_id="x", commands=True)) == []
+
+
+def test_an_mqtt5_session_taken_over_is_a_clash_at_once():
+    import aiomqtt
+    from paho.mqtt.packettypes import PacketTypes
+    from paho.mqtt.reasoncodes import ReasonCode
+
+    from impctl.mqtt.takeover import TakeoverWatch
+
+    watch = TakeoverWatch("gw1")
+    watch.started()
+    taken = aiomqtt.MqttCodeError(ReasonCode(PacketTypes.DISCONNECT, identifier=0x8E))
+    assert watch.ended(taken) == "new" and watch.clash
+    lost = aiomqtt.MqttCodeError(7, "Unexpected disconnection")
+    watch.started()
+    assert watch.ended(lost) == "ongoing"
+    # A connect that fails (no session began) is an outage, and ends the clash.
+    assert watch.ended(aiomqtt.MqttError("[Errno 111] Connection refused")) is None
+    assert not watch.clash

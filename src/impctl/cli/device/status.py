@@ -58,6 +58,9 @@ def collect_status(cfg) -> dict:
         out["pending_requests"] = len(store.pending_requests())
         out["skip_tonight"] = _skips(store)
         out["next_night"] = _next_night(store, cfg)
+        if out["next_night"] is not None:  # the night job honours a waiting skip first
+            out["next_night"]["skipped_by"] = (out["skip_tonight"][0]["id"]
+                                               if out["skip_tonight"] else None)
     out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.service import clock_from_config
@@ -256,7 +259,8 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                       else "campaign; the invalid constrained night is retried after a "
                       "normal one" if nxt.get("retry_waits") and nxt["kind"] == "normal"
                       else "campaign")
-            lines.append(f"next:      {nxt['kind']} night ({what}, {origin}), window "
+            skipped = "skipped on request: " if nxt.get("skipped_by") is not None else ""
+            lines.append(f"next:      {skipped}{nxt['kind']} night ({what}, {origin}), window "
                          f"{nxt['window_start'].astimezone(zone):%Y-%m-%d %H:%M}–"
                          f"{nxt['window_end'].astimezone(zone):%H:%M %Z}, preheat from "
                          f"{act:%H:%M}")
