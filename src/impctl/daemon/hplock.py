@@ -109,11 +109,11 @@ class HeatPumpLock:
                                  f"{exc.strerror}; {fix}", folder) from None
         try:
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        except PermissionError:  # another user's lock file: flock works on a read-only fd
+        except PermissionError as denied:  # another user's file: flock works read-only too
             try:
                 return os.open(self.path, os.O_RDONLY), False
-            except OSError as exc:
-                raise InputError(f"cannot open the heat-pump lock: {exc.strerror}; {fix}",
+            except OSError:
+                raise InputError(f"cannot open the heat-pump lock: {denied.strerror}; {fix}",
                                  self.path) from None
         except OSError as exc:
             raise InputError(f"cannot open the heat-pump lock: {exc.strerror}; {fix}",
