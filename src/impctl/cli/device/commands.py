@@ -94,7 +94,11 @@ def daemon_command(config_path: Path) -> None:
 def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
                     tonight: bool, now: bool, expires_h: float | None, force: bool,
                     cancel: bool, foreground: bool) -> None:
-    """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
+    """Queue a manual IMP night for the running daemon (or run one in the foreground).
+
+    A request identical to one already waiting (kind, setpoint, --now/--tonight) is not
+    queued twice: the waiting one stands.
+    """
     from ...daemon.lock import DaemonLock, probe
     from ...daemon.schedule import request_expiry
     from ...daemon.service import clock_from_config
