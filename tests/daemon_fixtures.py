@@ -26,6 +26,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping
 from datetime import datetime
@@ -37,6 +38,9 @@ from impctl.model import HouseParameters, default_house
 from impctl.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
+# The machine-wide heat-pump locks of the daemons these tests start: one directory per test
+# session, inherited by its subprocesses, instead of the machine's /run/lock/impctl.
+os.environ.setdefault("IMPCTL_LOCK_DIR", tempfile.mkdtemp(prefix="impctl-locks-"))
 PYTHON = sys.executable
 #: The daemon exactly as systemd starts it (``impctl daemon``), without relying on PATH.
 IMPCTL = [PYTHON, "-c", "from impctl.cli import main; main()"]

@@ -26,7 +26,7 @@ def _parse(name: str, payload: str | bytes, kind="constrained", sp=21.0):
 def test_commands_parse_what_buttons_and_people_send():
     assert _parse("abort", "abort").name == "abort"
     assert _parse("abort", "PRESS").name == "abort"  # Home Assistant's default payload
-    assert _parse("skip_tonight", "").name == "skip_tonight"
+    assert _parse("skip_tonight", "skip_tonight").name == "skip_tonight"
     t = _parse("trigger", "tonight", kind="normal", sp=22.0)
     assert (t.kind, t.setpoint_c, t.when) == ("normal", 22.0, "tonight")
     t = _parse("trigger", json.dumps({"kind": "constrained", "setpoint_c": 20.5,
@@ -38,6 +38,11 @@ def test_commands_parse_what_buttons_and_people_send():
 
 @pytest.mark.parametrize(("name", "payload", "why"), [
     ("abort", "yes please", "expected 'abort' or PRESS"),
+    # An empty payload clears a retained message (mosquitto_pub -r -n): never a press.
+    ("abort", "", "empty payload: not a command"),
+    ("skip_tonight", "", "empty payload: not a command"),
+    ("trigger", "  ", "empty payload: not a command"),
+    ("night_kind", "", "empty payload: not a command"),
     ("abort", b"\xff\xfe", "not UTF-8"),
     ("abort", "x" * 300, "too long"),
     ("trigger", "{not json", "expected tonight, now or a JSON object"),

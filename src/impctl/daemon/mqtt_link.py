@@ -19,6 +19,7 @@ from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from .adaptive import campaign_state
 from .schedule import daytime_reason, request_expiry
+from .waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
 
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
@@ -29,8 +30,6 @@ if TYPE_CHECKING:
 
 _LOG = logging.getLogger("impctl.daemon")
 _RUNNING = ("preparing", "active", "restoring")
-#: A skip request older than this is stale (it was for a night that has passed) [h].
-SKIP_VALID_H = 24.0
 _TASKS: set[asyncio.Task] = set()
 try:
     _VERSION = metadata.version("impctl")
@@ -97,7 +96,7 @@ class MqttLink:
             day = d.clock.now().date()
             state.writes = {str(ma): f"{budget.used(ma, day)}/{budget.limit(ma)}"
                             for ma in (2187, 2042)}
-        state.skip_tonight = bool(store.pending_commands("skip_tonight"))
+        state.skip_tonight = bool(waiting_skips(store))
         state.restore_pending = [e.register for e in store.journal_pending()]
         return state
 
@@ -131,10 +130,14 @@ class MqttLink:
                 raise BadCommand(f"{daytime}: a 'now' night would run in daytime; send "
                                  "'tonight' instead")
             expires = request_expiry(self.daemon.cfg, self.daemon.clock, command.when)
-            rid = store.add_request(command.kind, command.setpoint_c, command.when,
-                                    expires=expires)
-            return (f"queued request {rid}: {command.kind} night at {command.setpoint_c:g} °C "
-                    f"({command.when})")
+            rid, joined = queue_night(store, command.kind, command.setpoint_c, command.when,
+                                      expires)
+            return describe_queued(rid, joined, command.kind, command.setpoint_c,
+                                   command.when)
+        if command.name == "skip_tonight":  # pressed again: the waiting skip stands
+            cid, joined = queue_skip(store, "mqtt")
+            return f"command {cid} (skip_tonight) " + ("already waiting" if joined
+                                                       else "queued")
         cid = store.add_command(command.name, "mqtt")
         return f"queued command {cid} ({command.name})"
 

@@ -23,6 +23,7 @@ from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from . import adaptive
 from .fitting import fit_ready, needs_fit, run_fit
+from .hplock import HeatPumpLock
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .schedule import (
@@ -120,6 +121,12 @@ class Daemon:
         except BaseException:
             self.store.close()
             raise
+        try:  # one daemon per heat pump, whatever its state directory
+            hp_lock = HeatPumpLock(self.cfg.heatpump.link, self.cfg.state_dir).acquire()
+        except BaseException:
+            self._lock.release()
+            self.store.close()
+            raise
         try:
             self.client = open_client(self.cfg, self.clock)
             self.controller = NightController(
@@ -129,6 +136,7 @@ class Daemon:
                 self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)
         except BaseException:  # e.g. a store that cannot write: never keep the lock
+            hp_lock.release()
             self._lock.release()
             self.store.close()
             raise
@@ -156,6 +164,7 @@ class Daemon:
             restorer.cancel()
             await self._shutdown()
             watchdog.cancel()
+            hp_lock.release()
             self._lock.release()
         return 0
 

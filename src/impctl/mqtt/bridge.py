@@ -23,8 +23,16 @@ import aiomqtt
 
 from .commands import BadCommand, Command, parse_command
 from .config import MqttConfig
-from .discovery import OFFLINE, ONLINE, DeviceIdentity, Limits, discovery_messages
+from .discovery import (
+    OFFLINE,
+    ONLINE,
+    DeviceIdentity,
+    Limits,
+    discovery_messages,
+    withdrawn_topics,
+)
 from .payloads import LiveState, fit_payloads
+from .takeover import TakeoverWatch
 
 _LOG = logging.getLogger("impctl.mqtt")
 #: A publish or subscribe the broker does not acknowledge in this time counts as an outage [s].
@@ -134,25 +142,46 @@ class MqttBridge:
     async def _run(self) -> None:
         delay, down_since = 1.0, None
         where = f"{self.cfg.host}:{self.cfg.port}"
+        watch = TakeoverWatch(self.cfg.client_id)
+        quiet = False  # reconnecting after a short session: no line (see takeover.py)
         while True:
             try:
                 async with self._client() as client:
                     self._set_connected(True)
-                    if down_since is None:
+                    watch.started()
+                    asyncio.get_running_loop().call_later(
+                        watch.short_s + 0.2, self._held, watch, where)
+                    if quiet:
+                        pass
+                    elif down_since is None:
                         _LOG.info("MQTT connected to %s as %s (topics %s/…)", where,
                                   self.cfg.client_id, self.cfg.topic)
                     else:
                         _LOG.info("MQTT broker %s back after %.0f s", where,
                                   time.monotonic() - down_since)
-                    delay, down_since = 1.0, None
+                    if not watch.clash:  # in a clash, back off: fewer takeovers
+                        delay = 1.0
+                    down_since, quiet = None, False
                     await self._session(client)
             except aiomqtt.MqttError as exc:
-                self._set_connected(False, str(exc))
-                if down_since is None:  # one line per outage, not one per retry
+                short = watch.ended(exc)
+                if short == "new":
+                    _LOG.warning("MQTT %s: %s (retrying with back-off up to %g s)", where,
+                                 watch.reason, self.cfg.reconnect_max_s)
+                if short is not None:
+                    # Ended by the broker right after it began: the next connect tells an
+                    # outage (logged then) from a takeover (named above once it repeats).
+                    self._set_connected(False, watch.reason if watch.clash else str(exc))
+                    quiet = True
+                else:  # an outage (also after a short session): its lines as usual
+                    self._set_connected(False, str(exc))
+                    quiet = False
+                if short is None and down_since is None:  # one line per outage, not per retry
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
                                  "to %g s)", where, exc, self.cfg.reconnect_max_s)
                     down_since = time.monotonic()
             except Exception as exc:  # noqa: BLE001 - MQTT must never take the daemon down
+                quiet = False
                 self._set_connected(False, f"bridge failed: {exc}")
                 if down_since is None:
                     _LOG.exception("MQTT bridge failed; reconnecting with back-off")
@@ -162,11 +191,16 @@ class MqttBridge:
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
             delay = min(delay * 2, self.cfg.reconnect_max_s)
 
+    def _held(self, watch: TakeoverWatch, where: str) -> None:
+        if watch.held():
+            _LOG.info("MQTT %s: the session has held for %.0f s; client id '%s' is no longer "
+                      "contested", where, watch.short_s, self.cfg.client_id)
+
     async def _session(self, client: aiomqtt.Client) -> None:
         base = self.cfg.topic
         # Subscribe first: once Home Assistant sees the buttons, pressing them must work.
-        if self.cfg.commands:
-            await client.subscribe(f"{base}/cmd/+", qos=1)
+        # Also with commands off, so that a command sent anyway is logged as refused.
+        await client.subscribe(f"{base}/cmd/+", qos=1)
         # Home Assistant says "online" here when it (re)starts: announce again then.
         await client.subscribe(f"{self.cfg.discovery_prefix}/status")
         await self._announce(client)
@@ -194,6 +228,8 @@ class MqttBridge:
         self._device = self.source.identity()
         for topic, payload in discovery_messages(self.cfg, self._device, self.limits):
             await client.publish(topic, payload, qos=1, retain=True)
+        for topic in withdrawn_topics(self.cfg):  # commands off: no dead buttons in HA
+            await client.publish(topic, b"", qos=1, retain=True)
         await client.publish(f"{self.cfg.topic}/availability", ONLINE, qos=1, retain=True)
         await self._publish_settings(client)
         self._fit_sent = _UNSENT
@@ -256,6 +292,10 @@ class MqttBridge:
                                  "commands", topic)
                 continue
             name = topic[len(prefix):]
+            if not self.cfg.commands:
+                _LOG.warning("MQTT command %s ignored: commands are off (mqtt.commands = "
+                             "false in the configuration)", topic)
+                continue
             try:
                 cmd = parse_command(name, payload, self.limits, self.kind, self.setpoint_c)
             except BadCommand as exc:

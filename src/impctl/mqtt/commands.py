@@ -20,7 +20,9 @@ from dataclasses import dataclass
 from .discovery import Limits
 
 #: Payloads a button may send (Home Assistant's default is PRESS; ours name the command).
-_PRESS = {"", "press", "1", "on", "true"}
+#: Never the empty payload: that is how a retained message is cleared (``mosquitto_pub -r -n``),
+#: and a person tidying the broker must not switch the heating off.
+_PRESS = {"press", "1", "on", "true"}
 _MAX_PAYLOAD = 256
 
 
@@ -78,6 +80,9 @@ def parse_command(name: str, payload: bytes, limits: Limits, kind: str,
         text = payload.decode("utf-8").strip()
     except UnicodeDecodeError:
         raise BadCommand("payload is not UTF-8 text") from None
+    if not text:
+        raise BadCommand("empty payload: not a command (an empty message only clears a "
+                         "retained one)")
     low = text.lower()
     if name in ("abort", "skip_tonight"):
         if low in _PRESS or low == name:

@@ -176,6 +176,21 @@ def entities(cfg: MqttConfig, limits: Limits) -> list[tuple[str, str, dict]]:
     return out
 
 
+#: The command entities (component, key): announced with ``commands = true`` only.
+COMMAND_ENTITIES = (("button", "abort"), ("button", "skip_tonight"), ("button", "trigger"),
+                    ("select", "night_kind_setting"), ("number", "night_setpoint_setting"))
+
+
+def withdrawn_topics(cfg: MqttConfig) -> list[str]:
+    """Retained topics to clear (empty retained message) when commands are off: the command
+    entities' config messages, so Home Assistant removes buttons a configuration with
+    ``commands = true`` left behind, and the trigger's settings topic."""
+    if cfg.commands:
+        return []
+    return [f"{cfg.discovery_prefix}/{component}/{cfg.client_id}/{key}/config"
+            for component, key in COMMAND_ENTITIES] + [f"{cfg.topic}/settings"]
+
+
 def discovery_messages(cfg: MqttConfig, device: DeviceIdentity,
                        limits: Limits) -> list[tuple[str, str]]:
     """(topic, JSON payload) of every retained discovery config message."""

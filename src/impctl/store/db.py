@@ -225,6 +225,38 @@ class Store(CampaignTables):
             (kind, setpoint_c, when, _iso(_now()), _iso(expires)))
         return int(cur.lastrowid)
 
+    def queue_request(self, kind: str, setpoint_c: float | None, when: str, *,
+                      expires: datetime | None = None) -> tuple[int, bool]:
+        """Queue a manual night unless an identical one (kind, setpoint, when) is waiting.
+
+        Returns (request id, joined): ``joined`` is True when the waiting request was kept
+        (its expiry moved to the later of the two) instead of a new one being added, so a
+        hundred presses of one button are one request, not a hundred.
+        """
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            row = self._db.execute(
+                "SELECT id, expires FROM requests WHERE taken IS NULL AND kind = ? AND"
+                " run_when = ? AND setpoint_c IS ? ORDER BY id LIMIT 1",
+                (kind, when, setpoint_c)).fetchone()
+            if row is None:
+                cur = self._db.execute(
+                    "INSERT INTO requests (kind, setpoint_c, run_when, created, expires)"
+                    " VALUES (?, ?, ?, ?, ?)",
+                    (kind, setpoint_c, when, _iso(_now()), _iso(expires)))
+                out = (int(cur.lastrowid), False)
+            else:
+                old = _dt(row["expires"])
+                if old is not None and (expires is None or expires > old):
+                    self._db.execute("UPDATE requests SET expires = ? WHERE id = ?",
+                                     (_iso(expires), row["id"]))
+                out = (int(row["id"]), True)
+            self._db.execute("COMMIT")
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        return out
+
     def pending_requests(self) -> list[TriggerRequest]:
         """Requests not yet taken, cancelled or expired by the daemon, oldest first."""
         rows = self._db.execute("SELECT * FROM requests WHERE taken IS NULL ORDER BY id")
@@ -252,6 +284,30 @@ class Store(CampaignTables):
             "INSERT INTO commands (name, source, created) VALUES (?, ?, ?)",
             (name, source, _iso(_now())))
         return int(cur.lastrowid)
+
+    def queue_command(self, name: str, source: str, *,
+                      join_since: datetime | None = None) -> tuple[int, bool]:
+        """Queue a command, or keep a waiting one of the same name created at or after
+        ``join_since`` (None: always a new one). Returns (command id, joined)."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            row = None
+            if join_since is not None:  # (ISO text does not compare as instants: in Python)
+                row = next((r for r in self._db.execute(
+                    "SELECT id, created FROM commands WHERE taken IS NULL AND name = ?"
+                    " ORDER BY id", (name,)) if _dt(r["created"]) >= join_since), None)
+            if row is None:
+                cur = self._db.execute(
+                    "INSERT INTO commands (name, source, created) VALUES (?, ?, ?)",
+                    (name, source, _iso(_now())))
+                out = (int(cur.lastrowid), False)
+            else:
+                out = (int(row["id"]), True)
+            self._db.execute("COMMIT")
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        return out
 
     def pending_commands(self, name: str | None = None) -> list[Command]:
         """Commands not yet taken, oldest first (only ``name`` when given)."""

@@ -82,13 +82,19 @@ def daemon_command(config_path: Path) -> None:
               help="Drop the request unstarted after this many hours of real time [h] "
                    "(default: 1 h for --now; the end of the next night for --tonight).")
 @click.option("--force", is_flag=True, help="Allow a --now night in daytime.")
-@click.option("--cancel", is_flag=True, help="Cancel every request not yet started.")
+@click.option("--cancel", is_flag=True,
+              help="Cancel every request not yet started, and a waiting skip of the next "
+                   "night.")
 @click.option("--foreground", is_flag=True,
               help="Run one night in this process, without a daemon (Ctrl-C restores).")
 def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
                     tonight: bool, now: bool, expires_h: float | None, force: bool,
                     cancel: bool, foreground: bool) -> None:
-    """Queue a manual IMP night for the running daemon (or run one in the foreground)."""
+    """Queue a manual IMP night for the running daemon (or run one in the foreground).
+
+    A request identical to one already waiting (kind, setpoint, --now/--tonight) is not
+    queued twice: the waiting one stands.
+    """
     from ...daemon.lock import DaemonLock, probe
     from ...daemon.schedule import request_expiry
     from ...daemon.service import clock_from_config
@@ -126,13 +132,22 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         _setup_logging(cfg.log_level, cfg.timezone)
         with Store(cfg.db_path):  # creates the state directory, or one clear line
             pass
-        with DaemonLock(cfg.state_dir, role="trigger --foreground") as lock:
+        from ...daemon.hplock import HeatPumpLock
+
+        role = "trigger --foreground"
+        with DaemonLock(cfg.state_dir, role=role) as lock, \
+                HeatPumpLock(cfg.heatpump.link, cfg.state_dir, role=role):
             sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
+    from ...daemon.waiting import describe_queued, queue_night
+
     expires = request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
-        rid = store.add_request(kind, sp, when, expires=expires)
+        rid, joined = queue_night(store, kind, sp, when, expires)
+        if joined:  # the waiting request's expiry, maybe later than this one's
+            expires = next((r.expires for r in store.pending_requests() if r.id == rid),
+                           None) or expires
     tz = ZoneInfo(cfg.timezone)
-    click.echo(f"queued request {rid}: {kind} night at {sp:g} °C ({when}) for the daemon; "
+    click.echo(f"{describe_queued(rid, joined, kind, sp, when)} for the daemon; "
                f"expires unstarted at {expires.astimezone(tz):%Y-%m-%d %H:%M %Z}")
     info = probe(cfg.state_dir)
     if not info.running or info.stale:
@@ -147,16 +162,18 @@ def _cancel_requests(cfg) -> None:
     if not cfg.db_path.exists():
         click.echo("nothing to cancel (no store yet)")
         return
+    from ...daemon.waiting import cancel_waiting
+
     with Store(cfg.db_path) as store:
-        done = [r for r in store.pending_requests() if store.close_request(r.id, "cancelled")]
-        for r in done:
-            store.add_event("info", f"request {r.id} cancelled")
-    if not done:
-        click.echo("nothing to cancel: no request is waiting (a night already running is "
-                   "stopped with systemctl restart impctl, which restores)")
+        done, skips = cancel_waiting(store)
+    if not done and not skips:
+        click.echo("nothing to cancel: no request or skip is waiting (a night already running "
+                   "is stopped with systemctl restart impctl, which restores)")
         return
     for r in done:
         click.echo(f"cancelled request {r.id}: {r.kind} night ({r.when})")
+    for c in skips:
+        click.echo(f"cancelled skip {c.id} ({c.source}): the next night runs as planned")
 
 
 async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:

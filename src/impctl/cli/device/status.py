@@ -54,8 +54,13 @@ def collect_status(cfg) -> dict:
             "lumped": fit[2].get("lumped") if isinstance(fit[2], dict) else None}
         out["events"] = [{"ts": t, "level": lvl, "message": m} for t, lvl, m in store.events(8)]
         out["pending_restore"] = [e.register for e in store.journal_pending()]
+        out["restore"] = _restore_state(out["pending_restore"], out["current_night"], info)
         out["pending_requests"] = len(store.pending_requests())
+        out["skip_tonight"] = _skips(store)
         out["next_night"] = _next_night(store, cfg)
+        if out["next_night"] is not None:  # the night job honours a waiting skip first
+            out["next_night"]["skipped_by"] = (out["skip_tonight"][0]["id"]
+                                               if out["skip_tonight"] else None)
     out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.service import clock_from_config
@@ -70,6 +75,41 @@ def collect_status(cfg) -> dict:
     else:
         out["writes_today"] = {}
     return out
+
+
+def _restore_state(pending: list[str], night: dict | None, info) -> dict | None:
+    """Who puts the owner's settings back: ``state`` is "night" (a supervised night will
+    restore them at its end), "daemon" (no night runs; the live daemon retries the restore)
+    or "unsupervised" (no live process holds the lock: nothing will, until one starts)."""
+    if not pending:
+        return None
+    alive = info.running and not info.stale
+    state = ("unsupervised" if not alive else "night" if night is not None else "daemon")
+    return {"registers": pending, "state": state, "pid": info.pid if alive else None,
+            "role": info.role if alive else None}
+
+
+def _skips(store) -> list[dict]:
+    """The household's waiting skips of the next night (what the night job will honour)."""
+    from ...daemon.waiting import waiting_skips
+
+    return [{"id": c.id, "source": c.source, "created": c.created}
+            for c in waiting_skips(store)]
+
+
+def _restore_lines(rs: dict | None) -> list[str]:
+    if rs is None:
+        return []
+    regs = ", ".join(rs["registers"])
+    who = f"{rs['role'] or 'daemon'} PID {rs['pid']}"
+    if rs["state"] == "night":
+        return [f"restore:   night in progress, supervised by {who}; the heat pump will be "
+                f"restored at its end ({regs})"]
+    if rs["state"] == "daemon":
+        return [f"restore:   pending ({regs}); {who} restores them as soon as the heat pump "
+                "answers"]
+    return [f"RESTORE PENDING: {regs}: nothing supervises the heat pump; start the daemon "
+            "(it restores first) or run impctl restore"]
 
 
 def _campaign(store, cfg) -> dict:
@@ -219,12 +259,17 @@ def format_status(st: dict, tz: str = "UTC") -> str:
                       else "campaign; the invalid constrained night is retried after a "
                       "normal one" if nxt.get("retry_waits") and nxt["kind"] == "normal"
                       else "campaign")
-            lines.append(f"next:      {nxt['kind']} night ({what}, {origin}), window "
+            skipped = "skipped on request: " if nxt.get("skipped_by") is not None else ""
+            lines.append(f"next:      {skipped}{nxt['kind']} night ({what}, {origin}), window "
                          f"{nxt['window_start'].astimezone(zone):%Y-%m-%d %H:%M}–"
                          f"{nxt['window_end'].astimezone(zone):%H:%M %Z}, preheat from "
                          f"{act:%H:%M}")
     if st.get("pending_requests"):
         lines.append(f"requests:  {st['pending_requests']} waiting")
+    for skip in st.get("skip_tonight") or []:
+        lines.append(f"skip:      the next night is skipped on request (skip {skip['id']} from "
+                     f"{skip['source']}, {skip['created'].astimezone(zone):%Y-%m-%d %H:%M}); "
+                     "impctl trigger --cancel takes it back")
     lines.extend(_campaign_lines(st["campaign"], zone))
     fit = st["last_fit"]
     if fit is None:
@@ -237,8 +282,7 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     link = next((e for e in st["events"] if "link" in e["message"]), None)
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
-    if st["pending_restore"]:
-        lines.append("RESTORE PENDING: " + ", ".join(st["pending_restore"]))
+    lines.extend(_restore_lines(st.get("restore")))
     writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
                        for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
