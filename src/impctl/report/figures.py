@@ -87,7 +87,10 @@ def heat_demand(validation: dict, path: Path) -> Path:
 
 
 def class_probabilities(fit: dict, path: Path) -> Path:
-    """The classified range of floor area, mass class and wall U with its probability."""
+    """The classified range of floor area, mass class and wall U with its probability, each
+    bar saying what that probability is: calibrated, or the forest's vote share."""
+    from ..fit.result.report import probability_kind
+
     plt = _plt()
     classes = fit.get("classes", {})
     fig, ax = plt.subplots(figsize=(6.5, 2.4))
@@ -98,9 +101,18 @@ def class_probabilities(fit: dict, path: Path) -> Path:
         lo, hi = classes[n]["range"]
         labels.append(f"{n}\n{lo:g}–{hi:g}\n({classes[n].get('source', '')})")
     ax.barh(range(len(names)), probs, color="tab:green")
+    for i, n in enumerate(names):
+        if classes[n].get("probability") is not None:
+            inside = probs[i] > 0.7  # the words fit inside a long bar, beside a short one
+            ax.text(probs[i] + (-0.01 if inside else 0.01), i,
+                    f"{probs[i]:.2f} {probability_kind(classes[n])}",
+                    ha="right" if inside else "left", va="center", fontsize=7,
+                    color="white" if inside else "0.2")
     ax.set_yticks(range(len(names)), labels, fontsize=7)
     ax.set_xlim(0, 1)
-    ax.set_xlabel("probability of the chosen range (forest vote share)")
+    kinds = {probability_kind(c) for c in classes.values() if c.get("probability") is not None}
+    what = kinds.pop() if len(kinds) == 1 else "per bar"
+    ax.set_xlabel(f"probability of the chosen range ({what})")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -210,7 +210,8 @@ def _classes(nights, model_dir):
                 "over their whole prior ranges, so the fit rests on the nights alone")
         return classes, {n: c["range"] for n, c in classes.items()}, [note]
     classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
-                      "probabilities": dict(r.probabilities), "search_range": r.fit_range}
+                      "calibrated": r.calibrated, "probabilities": dict(r.probabilities),
+                      "search_range": r.fit_range}
                for name, r in results.items()}
     left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
     notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "
