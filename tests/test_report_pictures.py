@@ -120,3 +120,25 @@ def test_heat_loss_rows_carry_the_interval():
     rows = heat_loss_rows({"value": 106.0, "low": 100.0, "high": 112.0})
     assert [round(r["loss_w"]) for r in rows] == [3286, 2226, 1484]
     assert rows[0]["low_w"] == pytest.approx(3100.0) and rows[0]["high_w"] == pytest.approx(3472.0)
+
+
+# -- what a class probability is ---------------------------------------------------------------
+@pytest.mark.parametrize("calibrated, words", [(True, "calibrated"),
+                                               (False, "forest vote share"),
+                                               (None, "calibration not recorded")])
+def test_the_classes_figure_says_what_the_probability_is(fitted, calibrated, words):
+    import matplotlib.pyplot as plt
+
+    from impctl.fit.result.table import format_table
+    from impctl.report.figures import class_figure
+
+    _, fit = fitted
+    classes = {name: {**c, "probability": 0.8, "calibrated": calibrated, "source": "classifier"}
+               for name, c in fit["classes"].items()}
+    fig = class_figure({**fit, "classes": classes})
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == f"probability of the chosen range ({words})"
+    assert [t.get_text() for t in ax.texts] == [f"0.80 {words}"] * len(classes)
+    plt.close(fig)
+    table = format_table({**fit, "classes": classes})
+    assert table.count(f"p = 0.80 ({words})") == len(classes)

@@ -59,6 +59,15 @@ def heat_demand(validation: dict, path: Path) -> Path:
 def class_probabilities(fit: dict, path: Path) -> Path:
     """The classified range of floor area, mass class and wall U with its probability, each
     bar saying what that probability is: calibrated, or the forest's vote share."""
+    plt = _plt()
+    fig = class_figure(fit)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def class_figure(fit: dict):
+    """The figure of :func:`class_probabilities` (matplotlib Figure, not saved)."""
     from ..fit.result.report import probability_kind
 
     plt = _plt()
@@ -84,9 +93,7 @@ def class_probabilities(fit: dict, path: Path) -> Path:
     what = kinds.pop() if len(kinds) == 1 else "per bar"
     ax.set_xlabel(f"probability of the chosen range ({what})")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def parameter_ranges(fit: dict, path: Path, truth=None) -> Path:
