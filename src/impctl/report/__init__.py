@@ -242,7 +242,8 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
           "its error over the mean indoor–outdoor difference)</p>"
           for g in [(fit.get("fit") or {}).get("night_gain")] if g and g.get("assumed")],
         *_flexibility_section(fit),
-        "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
+        "<h2>Measured vs fitted, night by night (T_air with the heating off, heat power "
+        "where T_air was held)</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),
         f"<p>ε = {_fmt(val.get('eps_pct'), '.1f')} %, ΔQ_total = "
         f"{_fmt(val.get('dq_total_kwh'), '.2f')} kWh, ΔQ_power = "

@@ -143,7 +143,8 @@ def household_html(s: dict) -> str:
     """The opening section of the report (HTML) from :func:`household_summary`."""
     e = html.escape
     hlc, lo, hi = s["hlc_w_per_k"], s["hlc_low"], s["hlc_high"]
-    iv = f" (95 % interval {lo:.0f}–{hi:.0f} W)" if lo is not None and hi is not None else ""
+    iv = (f" (95 % interval {lo:.0f}–{hi:.0f} W per degree)" if lo is not None and hi is not None
+          else "")
     cold = s["heat_loss"][0]
     parts = ["<h2>In short: what the nights found out about your house</h2>",
              f"<p class='lead'>Your house loses an estimated <b>{hlc:.0f} W per degree</b> of "
