@@ -15,14 +15,10 @@ from typing import Any
 import pytest
 from daemon_fixtures import run_cli
 
-from impctl.config import ClockConfig, NightConfig, config_from_mapping, config_warnings
+from impctl.config import ClockConfig, NightConfig, config_from_mapping
 from impctl.config.sections import CampaignConfig, FitConfig, TargetHalfwidth
 from impctl.errors import InputError
-from impctl.heatpump.config import (
-    WRITES_PER_DAY_MAX,
-    ExternalRegister,
-    WritePolicy,
-)
+from impctl.heatpump.config import ExternalRegister, WritePolicy
 from impctl.modbus.config import LinkConfig
 from impctl.mqtt.config import MqttConfig
 
@@ -69,6 +65,8 @@ max_nights = 1000000
 
 
 def test_the_eeprom_budget_bound_is_derived_from_the_endurance():
+    from impctl.heatpump.config import WRITES_PER_DAY_MAX
+
     # 100,000 writes over 15 years of daily spending: 18 per register per day.
     assert WRITES_PER_DAY_MAX == 18
     WritePolicy(daily_budget=16, restore_reserve=2)
@@ -186,7 +184,7 @@ def test_a_password_file_others_can_read_is_a_warning(tmp_path):
     result = run_cli("status", "--config", str(cfg), timeout_s=30)
     assert f"impctl: warning: {pw}: the MQTT password file is readable" in result.stderr
     os.chmod(pw, 0o600)
-    from impctl.config import load_config
+    from impctl.config import config_warnings, load_config
 
     assert config_warnings(load_config(cfg)) == []
     result = run_cli("check-config", "--config", str(cfg), timeout_s=30)

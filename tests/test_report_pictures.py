@@ -13,11 +13,9 @@ from datetime import timedelta
 import numpy as np
 import pytest
 
-from impctl.fit.result.plot import MAX_COLUMNS, draw_nights, grid_shape
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import synth_nights
 from impctl.report import write_report
-from impctl.report.household import COOL_C, heat_loss_rows
 from impctl.store import Sample, Store
 
 HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, windows_area=25.0,
@@ -26,6 +24,8 @@ HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, win
 
 @pytest.mark.parametrize("n", [1, 2, 4, 5, 8, 9, 27, 60])
 def test_the_grid_wraps_at_four_columns(n):
+    from impctl.fit.result.plot import MAX_COLUMNS, grid_shape
+
     rows, cols = grid_shape(n)
     assert cols <= MAX_COLUMNS and rows * cols >= n and rows * cols - n < cols
     assert (rows, cols) == ((1, n) if n <= MAX_COLUMNS else (-(-n // 4), 4))
@@ -42,6 +42,8 @@ def _pred(i: int, kind: str) -> dict:
 
 
 def test_27_nights_make_a_readable_grid_with_a_legend_and_honest_axes():
+    from impctl.fit.result.plot import draw_nights
+
     preds = [_pred(i, "normal" if i % 3 else "constrained") for i in range(27)]
     fig = draw_nights(preds, "title", dpi=110)
     width_px, height_px = fig.get_size_inches() * fig.dpi
@@ -95,6 +97,8 @@ def _hours_below(nights, threshold) -> float:
 
 
 def test_the_report_opens_with_the_household_summary(tmp_path, fitted):
+    from impctl.report.household import COOL_C
+
     nights, fit = fitted
     page = write_report(_store(tmp_path, nights), tmp_path / "rep", fit=fit).read_text()
     text = html.unescape(re.sub(r"<[^>]+>", "", page))
@@ -117,6 +121,8 @@ def test_the_report_opens_with_the_household_summary(tmp_path, fitted):
 
 
 def test_heat_loss_rows_carry_the_interval():
+    from impctl.report.household import heat_loss_rows
+
     rows = heat_loss_rows({"value": 106.0, "low": 100.0, "high": 112.0})
     assert [round(r["loss_w"]) for r in rows] == [3286, 2226, 1484]
     assert rows[0]["low_w"] == pytest.approx(3100.0) and rows[0]["high_w"] == pytest.approx(3472.0)
