@@ -56,7 +56,9 @@ def _write_json(path: Path, data: dict) -> None:
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Write the full result as JSON here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Draw measured vs fitted T_air and heat power (PNG).")
+              default=None,
+              help="Draw each night, measured vs fitted: T_air where the heating was off, heat "
+                   "power where T_air was held (PNG; a grid of at most four columns).")
 @click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 @click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
