@@ -15,7 +15,6 @@ from ..errors import InputError
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..mqtt.config import mqtt_from_mapping
 from ..night_gain import NIGHT_GAIN_LIMITS_W
-from .bounds import bound_problems
 from .sections import (
     CampaignConfig,
     ClockConfig,
@@ -217,6 +216,8 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     if camp.constrained_nights < 0 or camp.normal_nights_per_setpoint < 0:
         bad("campaign.constrained_nights", "night counts must be >= 0")
     _check_adaptive(camp, bad)
+    from .bounds import bound_problems  # the upper bounds, each with its reason
+
     bound_problems(cfg, window, bad)
     if cfg.clock.speed <= 0:
         bad("clock.speed", "must be > 0")

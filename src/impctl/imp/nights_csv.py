@@ -30,7 +30,6 @@ import pandas as pd
 
 from ..errors import InputError
 from ..tables import frame_table, read_table
-from .csv_hints import layout_problem, order_problem
 from .features import Q_ON_W
 from .night import NightSamples
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
@@ -84,6 +83,8 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if "night" in table:  # labelled nights may overlap (e.g. simulated); each must increase
         back &= (table["night"] == table["night"].shift()).to_numpy()
     if back.any():
+        from .csv_hints import order_problem  # only on the failure path
+
         text, i = order_problem(table["timestamp"], back)
         raise InputError(text, path, _row(i))
 
@@ -148,6 +149,8 @@ def read_nights(
         table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_TEXT,
                            may_be_empty=("setpoint",), tz=tz)
     except InputError:
+        from .csv_hints import layout_problem
+
         cause = layout_problem(path, REQUIRED_COLUMNS)  # ';' separators, decimal commas
         if cause is None:
             raise

@@ -56,13 +56,15 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
     import pandas as pd
 
     from ...drivers import parse_window, read_drivers, run_drivers, summary, write_atomically
-    from ...model import default_house
+    from ...model import default_house, load_house
     from ...store.export import refuse_database
     from ...tables import step_seconds
     from ...weather import read_weather, winter_weather
 
     refuse_database(out_path, "--out")
-    house = _house(house_path) if house_path else default_house()
+    house = load_house(house_path) if house_path else default_house()
+    if house_path:
+        _check_plant_tables(house_path)
     label = str(house_path) if house_path else "built-in default (150 m², medium)"
     window = parse_window(heating_off) if heating_off else None
     if drivers_path and weather_path:
@@ -92,16 +94,15 @@ def simulate_command(house_path, drivers_path, weather_path, out_path, setpoint,
         click.echo(f"wrote {len(out)} rows to {out_path}")
 
 
-def _house(path: Path):
-    """The house file's 5R1C parameters; its ``[plant.*]`` tables are checked as everywhere
-    else (a bad one is one line, exit 2) and said to be unused here."""
+def _check_plant_tables(path: Path) -> None:
+    """The house file's ``[plant.*]`` tables checked as everywhere else (a bad one is one line,
+    exit 2), and said to be unused here: this command runs the ideal 5R1C model."""
     from ...model import read_toml
-    from ...plant.housefile import load_plant
+    from ...plant.housefile import plant_params_from_mapping
 
-    house, _ = load_plant(path)
-    tables = read_toml(path).get("plant") or {}
+    tables = read_toml(path).get("plant")
+    plant_params_from_mapping(tables, path)
     if tables:
         names = ", ".join(f"[plant.{name}]" for name in tables)
         click.echo(f"note: {path}: {names} checked but not used: impctl simulate runs the "
                    "ideal 5R1C model (impctl demo --house runs the realistic plant)", err=True)
-    return house
