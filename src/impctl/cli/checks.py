@@ -17,6 +17,11 @@ from ..errors import InputError
 #: Setpoints a room can be heated to [°C]: a room thermostat's span, as the NIGHTS.csv and
 #: DRIVERS.csv ``setpoint`` column (impctl.imp.nights_csv.PLAUSIBLE).
 SETPOINT_C = (5.0, 35.0)
+#: Outdoor temperatures an analysis accepts [°C] (any winter night anywhere people heat).
+T_OUT_C = (-50.0, 40.0)
+#: The coast's T_air drop of ``impctl flex`` [K]: more than 10 K below the setpoint is no
+#: longer a home.
+FLEX_DROP_K = (0.0, 10.0)
 #: Initial mass temperature of a simulation [°C]: anything a building's structure can hold.
 T_M_INIT_C = (-40.0, 60.0)
 #: Length of the built-in weather of ``impctl simulate`` [days] (10 years at most).

@@ -12,6 +12,7 @@ from .load import (
     MIN_COVERAGE_LOW,
     ConfigError,
     config_from_mapping,
+    config_warnings,
     load_config,
     read_config_toml,
 )
@@ -26,4 +27,4 @@ from .sections import (
 
 __all__ = ["COMFORT_BAND_MAX_K", "LINK_LOST_LIMIT_MAX_S", "MIN_COVERAGE_LOW", "CampaignConfig",
            "ClockConfig", "Config", "ConfigError", "FitConfig", "NightConfig", "TargetHalfwidth",
-           "config_from_mapping", "load_config", "read_config_toml"]
+           "config_from_mapping", "config_warnings", "load_config", "read_config_toml"]

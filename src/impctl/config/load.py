@@ -140,9 +140,10 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
             f"sleeper + base load), got {cfg.fit.night_gain_w:g}")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
+    window = None
     try:
-        start, end = _window(night.window)
-        if start == end:
+        window = _window(night.window)
+        if window[0] == window[1]:
             bad("night.window", "start and end are the same")
     except ValueError:
         bad("night.window", f"expected HH:MM-HH:MM, got {night.window!r}")
@@ -173,8 +174,6 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
                                   "than half its samples is not data")
     if night.t_out_min_c >= night.t_out_max_c:
         bad("night.t_out_max_c", "must be above night.t_out_min_c")
-    if not 0 <= night.preheat_h <= 12:
-        bad("night.preheat_h", "must lie in 0–12 h")
     if not 0 <= night.emission_lag_h <= 6:
         bad("night.emission_lag_h", "must lie in 0–6 h")
     if camp.misfire_grace_s < 0:
@@ -217,6 +216,9 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     if camp.constrained_nights < 0 or camp.normal_nights_per_setpoint < 0:
         bad("campaign.constrained_nights", "night counts must be >= 0")
     _check_adaptive(camp, bad)
+    from .bounds import bound_problems  # the upper bounds, each with its reason
+
+    bound_problems(cfg, window, bad)
     if cfg.clock.speed <= 0:
         bad("clock.speed", "must be > 0")
     if cfg.log_level.lower() not in ("debug", "info", "warning", "error"):
@@ -287,6 +289,13 @@ def read_config_toml(path: str | Path) -> dict:
         return tomllib.loads(raw.decode("utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML: {exc}", path) from None
+
+
+def config_warnings(cfg: Config) -> list[str]:
+    """What a valid configuration allows but should not (one line each, for the log and
+    ``impctl check-config``): an MQTT password file other users can read."""
+    warning = cfg.mqtt.password_file_warning() if cfg.mqtt is not None else None
+    return [warning] if warning else []
 
 
 def load_config(path: str | Path) -> Config:

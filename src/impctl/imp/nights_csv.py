@@ -83,8 +83,10 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if "night" in table:  # labelled nights may overlap (e.g. simulated); each must increase
         back &= (table["night"] == table["night"].shift()).to_numpy()
     if back.any():
-        i = int(np.argmax(back))
-        raise InputError("timestamps must strictly increase", path, _row(i))
+        from .csv_hints import order_problem  # only on the failure path
+
+        text, i = order_problem(table["timestamp"], back)
+        raise InputError(text, path, _row(i))
 
 
 def _window_ids(
@@ -143,8 +145,16 @@ def read_nights(
         ``kind``, a labelled night with fewer than two samples, no night at all.
     """
     path = Path(path)
-    table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_TEXT,
-                       may_be_empty=("setpoint",), tz=tz)
+    try:
+        table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_TEXT,
+                           may_be_empty=("setpoint",), tz=tz)
+    except InputError:
+        from .csv_hints import layout_problem
+
+        cause = layout_problem(path, REQUIRED_COLUMNS)  # ';' separators, decimal commas
+        if cause is None:
+            raise
+        raise InputError(cause[0], path, cause[1]) from None
     return nights_from_table(table, path, tz, window=window)
 
 

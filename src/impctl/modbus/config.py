@@ -89,7 +89,7 @@ def link_problems(c: Any) -> list[Problem]:
         out.append(("host", "must not be empty (the gateway's IP address or name)"))
     if c.transport == "rtu" and not c.serial_port:
         out.append(("serial_port", "rtu needs serial_port"))
-    if c.transport == "rtu" and c.baudrate not in BAUD_RATES:
+    if c.baudrate not in BAUD_RATES:  # checked on tcp too: a typo there is a typo
         out.append(("baudrate", f"must be one of {BAUD_RATES}"))
     if not 1 <= c.device_id <= 247:
         out.append(("device_id", "must be 1–247"))
@@ -97,16 +97,22 @@ def link_problems(c: Any) -> list[Problem]:
         out.append(("port", "must be 1–65535"))
     if not 0 < c.timeout_s <= 60:
         out.append(("timeout_s", "must lie in (0, 60] s"))
-    if c.retries < 0:
-        out.append(("retries", "must be >= 0"))
-    if c.attempts < 1:
-        out.append(("attempts", "must be >= 1"))
+    # A read that needs more than 10 tries (with doubling pauses: minutes) is a lost link,
+    # which the night's link-lost limit handles.
+    if not 0 <= c.retries <= 10:
+        out.append(("retries", "must lie in 0–10"))
+    if not 1 <= c.attempts <= 10:
+        out.append(("attempts", "must lie in 1–10"))
     lo, hi = c.connect_backoff_s
-    if not 0 < lo <= hi:
-        out.append(("connect_backoff_s", "must be (first, max) with 0 < first <= max"))
-    for key in ("drain_s", "request_gap_s", "retry_delay_s"):
-        if getattr(c, key) < 0:
-            out.append((key, "must be >= 0"))
+    if not 0 < lo <= hi <= 3600:  # an hour: the longest a night may run without readings
+        out.append(("connect_backoff_s",
+                    "must be (first, max) with 0 < first <= max <= 3600 s"))
+    # Upper bounds: the pause between tries (60 s) and the drain after a connect (10 s) are
+    # generous for any gateway; a poll makes 10–20 requests, so 1 s between them already
+    # takes up to 20 s of a sample interval.
+    for key, top in (("drain_s", 10.0), ("request_gap_s", 1.0), ("retry_delay_s", 60.0)):
+        if not 0 <= getattr(c, key) <= top:
+            out.append((key, f"must lie in 0–{top:g} s"))
     if not 0 <= c.settle_s <= 10:
         out.append(("settle_s", "must be 0–10 s"))
     return out

@@ -10,9 +10,12 @@ import math
 import os
 import re
 import socket
+import stat
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
+
+from ..errors import InputError
 
 #: Name of the systemd credential that holds the password when password_file is empty.
 CREDENTIAL = "mqtt.password"
@@ -74,8 +77,25 @@ class MqttConfig:
             if not creds or not (Path(creds) / CREDENTIAL).is_file():
                 return None
             path = str(Path(creds) / CREDENTIAL)
-        lines = Path(path).read_text().splitlines()
+        try:
+            lines = Path(path).read_text(encoding="utf-8").splitlines()
+        except UnicodeDecodeError as exc:
+            raise InputError(f"not UTF-8 text (byte {exc.start + 1}): write the password as "
+                             "plain text on the first line", path, "password file") from None
         return lines[0] if lines else ""
+
+    def password_file_warning(self) -> str | None:
+        """Why the password file is too open (group- or world-readable), or None."""
+        if not self.password_file:
+            return None
+        try:
+            mode = Path(self.password_file).stat().st_mode
+        except OSError:
+            return None  # the reader names the problem
+        if mode & (stat.S_IRGRP | stat.S_IROTH | stat.S_IWGRP | stat.S_IWOTH):
+            return (f"{self.password_file}: the MQTT password file is readable by other users "
+                    f"(mode {stat.S_IMODE(mode):04o}): chmod 600 {self.password_file}")
+        return None
 
 
 def _typed(value: Any, default: Any, where: str, problems: list[str]) -> Any:
@@ -138,6 +158,8 @@ def mqtt_from_mapping(data: dict, problems: list[str], prefix: str = "mqtt.") ->
             cfg.password()
         except OSError as exc:
             bad("password_file", f"cannot read it: {exc.strerror or exc}")
+        except InputError as exc:
+            bad("password_file", f"{cfg.password_file}: {exc.problem}")
     if cfg.ca_file:
         if not cfg.tls:
             bad("ca_file", "only used with mqtt.tls = true")

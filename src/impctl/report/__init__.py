@@ -20,6 +20,7 @@ from ..model import HouseParameters
 from ..store import Store
 from . import figures
 from .fit_json import fit_problem
+from .household import household_html, household_summary, night_comfort
 from .summary import demo_summary, format_summary
 
 __all__ = ["demo_summary", "format_summary", "write_report"]
@@ -109,7 +110,9 @@ def _flexibility_section(fit: dict) -> list[str]:
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:14px}td,th{border:1px solid #ccc;
 padding:3px 8px;text-align:left}th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}
-.note{background:#fff8e0;border-left:4px solid #e0b000;padding:.5em 1em}pre{background:#f6f6f6;
+.note{background:#fff8e0;border-left:4px solid #e0b000;padding:.5em 1em}
+.household{background:#eef6ee;border-left:4px solid #3a8a3a;padding:.2em 1.2em;margin:1em 0}
+.lead{font-size:1.2em}pre{background:#f6f6f6;
 padding:1em;overflow-x:auto}"""
 
 
@@ -145,6 +148,10 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
             raise InputError(f"not a fit result: {why}", source)
         nights_html = _nights_table(store, tz)
         campaign = _campaign_rows(store, tz)
+        zone = ZoneInfo(tz)
+        comfort = [night_comfort(n, store.samples(n.id),
+                                 f"{n.window_start.astimezone(zone):%Y-%m-%d}")
+                   for n in store.nights()]
     # Drawn into a temporary directory beside OUT and moved in only when everything is
     # written: a failure leaves no half report (and no stray PNGs).
     if not out.parent.is_dir():
@@ -154,7 +161,8 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     os.umask(umask)
     tmp.chmod(0o777 & ~umask)  # mkdtemp makes it 0700; OUT gets the usual permissions
     try:
-        _render(tmp, fit, truth, summary, demand, nights_html, campaign)
+        _render(tmp, fit, truth, summary, demand, nights_html, campaign,
+                household_html(household_summary(fit, comfort)))
         if out.exists():
             for item in tmp.iterdir():
                 os.replace(item, out / item.name)
@@ -209,7 +217,8 @@ def _campaign_section(out: Path, campaign: tuple[list[dict], list[list[str]]]) -
 
 def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict | None,
             demand: dict | None, nights_html: str,
-            campaign: tuple[list[dict], list[list[str]]] = ([], [])) -> None:
+            campaign: tuple[list[dict], list[list[str]]] = ([], []),
+            household: str = "") -> None:
     figs = [
         figures.night_fits(fit, out / "fig_nights.png"),
         figures.heat_demand(demand or fit.get("validation", {}), out / "fig_heat_demand.png"),
@@ -225,13 +234,16 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         "<!doctype html><html><head><meta charset='utf-8'><title>impctl report</title>",
         f"<style>{_CSS}</style></head><body>",
         "<h1>impctl: house identification report</h1>",
+        f"<div class='household'>{household}</div>" if household else "",
+        "<p><i>Below: the engineer's tables and figures.</i></p>" if household else "",
         "<h2>What the nights determine</h2>", _lumped_table(fit),
         f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",
         *[f"<p>{html.escape(g['statement'])} (sleepers and base load; it moves the HLC by "
           "its error over the mean indoor–outdoor difference)</p>"
           for g in [(fit.get("fit") or {}).get("night_gain")] if g and g.get("assumed")],
         *_flexibility_section(fit),
-        "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
+        "<h2>Measured vs fitted, night by night (T_air with the heating off, heat power "
+        "where T_air was held)</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),
         f"<p>ε = {_fmt(val.get('eps_pct'), '.1f')} %, ΔQ_total = "
         f"{_fmt(val.get('dq_total_kwh'), '.2f')} kWh, ΔQ_power = "

@@ -16,46 +16,16 @@ def _plt():
     return plt
 
 
-_COLORS = {"constrained": "tab:blue", "normal": "tab:red"}
-
-
 def night_fits(fit: dict, path: Path) -> Path:
     """Measured vs fitted T_air per constrained night (the paper's Fig. 5, blue) and measured
-    vs predicted heat power per normal night, where T_air is held and the model's input (red)."""
+    vs predicted heat power per normal night, where T_air is held and the model's input (red):
+    a grid of at most four columns, a legend, power axes from 0 kW
+    (:func:`impctl.fit.result.plot.draw_nights`)."""
+    from ..fit.result.plot import draw_nights
+
     plt = _plt()
-    preds = fit.get("predictions") or []
-    n = max(1, len(preds))
-    cols = min(4, n)
-    rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
-    for ax in axes.flat[len(preds):]:
-        ax.axis("off")
-    if not preds:
-        axes[0, 0].text(0.5, 0.5, "no fitted curves in this result", ha="center")
-    for ax, p in zip(axes.flat, preds, strict=False):
-        t_h = np.asarray(p["time_s"], dtype=float) / 3600.0
-        color = _COLORS.get(p["kind"], "k")
-        if p.get("t_air_model_c") is None and p.get("q_model_w") is not None:
-            # Held nights: T_air is the model's input; the fit predicts the heat power.
-            ax.plot(t_h, np.asarray(p["q_measured_w"]) / 1e3, ".", ms=2.5, color="0.35",
-                    label="measured")
-            ax.plot(t_h, np.asarray(p["q_model_w"]) / 1e3, "-", lw=1.4, color=color,
-                    label="fitted")
-            ax.set_ylabel("heat power [kW]", fontsize=7)
-            ax.set_title(f"night {p['night_id']} · normal (T_air held)", fontsize=8,
-                         color=color)
-        else:
-            ax.plot(t_h, p["t_air_measured_c"], ".", ms=2.5, color="0.35", label="measured")
-            if p.get("t_air_model_c") is not None:
-                ax.plot(t_h, p["t_air_model_c"], "-", lw=1.4, color=color, label="fitted")
-            ax.set_ylabel("T_air [°C]", fontsize=7)
-            ax.set_title(f"night {p['night_id']} · {p['kind']}", fontsize=8, color=color)
-        ax.set_xlabel("h since window start", fontsize=7)
-        ax.tick_params(labelsize=7)
-    if preds:
-        axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig = draw_nights(fit.get("predictions") or [], dpi=100)
+    fig.savefig(path)
     plt.close(fig)
     return path
 
@@ -87,7 +57,19 @@ def heat_demand(validation: dict, path: Path) -> Path:
 
 
 def class_probabilities(fit: dict, path: Path) -> Path:
-    """The classified range of floor area, mass class and wall U with its probability."""
+    """The classified range of floor area, mass class and wall U with its probability, each
+    bar saying what that probability is: calibrated, or the forest's vote share."""
+    plt = _plt()
+    fig = class_figure(fit)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def class_figure(fit: dict):
+    """The figure of :func:`class_probabilities` (matplotlib Figure, not saved)."""
+    from ..fit.result.report import probability_kind
+
     plt = _plt()
     classes = fit.get("classes", {})
     fig, ax = plt.subplots(figsize=(6.5, 2.4))
@@ -98,13 +80,20 @@ def class_probabilities(fit: dict, path: Path) -> Path:
         lo, hi = classes[n]["range"]
         labels.append(f"{n}\n{lo:g}–{hi:g}\n({classes[n].get('source', '')})")
     ax.barh(range(len(names)), probs, color="tab:green")
+    for i, n in enumerate(names):
+        if classes[n].get("probability") is not None:
+            inside = probs[i] > 0.7  # the words fit inside a long bar, beside a short one
+            ax.text(probs[i] + (-0.01 if inside else 0.01), i,
+                    f"{probs[i]:.2f} {probability_kind(classes[n])}",
+                    ha="right" if inside else "left", va="center", fontsize=7,
+                    color="white" if inside else "0.2")
     ax.set_yticks(range(len(names)), labels, fontsize=7)
     ax.set_xlim(0, 1)
-    ax.set_xlabel("probability of the chosen range (forest vote share)")
+    kinds = {probability_kind(c) for c in classes.values() if c.get("probability") is not None}
+    what = kinds.pop() if len(kinds) == 1 else "per bar"
+    ax.set_xlabel(f"probability of the chosen range ({what})")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def parameter_ranges(fit: dict, path: Path, truth=None) -> Path:

@@ -20,10 +20,7 @@ from ...imp.protocol import (
     DEFAULT_SETPOINTS_C,
 )
 from .. import cli
-from ..checks import MAX_FILE_MB, SETPOINT_C, in_range, refuse_large_file, time_zone
-
-#: Forecast outdoor temperatures accepted [°C] (any winter night anywhere people heat).
-T_OUT_C = (-50.0, 40.0)
+from ..checks import MAX_FILE_MB, SETPOINT_C, T_OUT_C, in_range, refuse_large_file, time_zone
 
 
 @cli.group("campaign")

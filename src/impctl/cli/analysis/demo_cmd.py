@@ -61,7 +61,7 @@ def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, s
     """
     from ...demo import DemoOptions, run_demo
 
-    if speed is not None and (speed <= 0 or speed > 30000):
+    if speed is not None and not 0 < speed <= 30000:  # NaN too
         raise InputError("must lie in (0, 30000] (the Modbus polling keeps up to ~20000)",
                          place="--speed")
     if adaptive and nights is not None:

@@ -56,7 +56,9 @@ def _write_json(path: Path, data: dict) -> None:
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Write the full result as JSON here.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Draw measured vs fitted T_air and heat power (PNG).")
+              default=None,
+              help="Draw each night, measured vs fitted: T_air where the heating was off, heat "
+                   "power where T_air was held (PNG; a grid of at most four columns).")
 @click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 @click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
@@ -210,7 +212,8 @@ def _classes(nights, model_dir):
                 "over their whole prior ranges, so the fit rests on the nights alone")
         return classes, {n: c["range"] for n, c in classes.items()}, [note]
     classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
-                      "probabilities": dict(r.probabilities), "search_range": r.fit_range}
+                      "calibrated": r.calibrated, "probabilities": dict(r.probabilities),
+                      "search_range": r.fit_range}
                for name, r in results.items()}
     left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
     notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "

@@ -12,6 +12,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
+from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded
 
 
 @cli.group("fleet")
@@ -75,11 +76,15 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
 @click.option("--household", "households", multiple=True,
               help="With a FLEET.parquet SOURCE: these households [default: all fitted].")
 @click.option("--t-set", "t_set_c", default=21.0, show_default=True, type=float,
-              help="Indoor setpoint of the steady state [°C].")
+              callback=bounded(SETPOINT_C, "°C"),
+              help=f"Indoor setpoint of the steady state [°C]; {SETPOINT_C[0]:g}–"
+                   f"{SETPOINT_C[1]:g}.")
 @click.option("--t-out", "t_out_c", default=0.0, show_default=True, type=float,
-              help="Outdoor temperature, held [°C].")
+              callback=bounded(T_OUT_C, "°C"),
+              help=f"Outdoor temperature, held [°C]; {T_OUT_C[0]:g}–{T_OUT_C[1]:g}.")
 @click.option("--drop", "drop_k", default=1.0, show_default=True, type=float,
-              help="T_air drop that ends the coast [K].")
+              callback=bounded(FLEX_DROP_K, "K", low_open=True),
+              help=f"T_air drop that ends the coast [K]; above 0, at most {FLEX_DROP_K[1]:g}.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: float,
          drop_k: float, as_json: bool) -> None:

@@ -112,7 +112,7 @@ def _campaign_line(camp) -> str:
 def check_config_command(config_path: Path) -> None:
     """Check a configuration: every problem at once (exit 2), else what the daemon would do
     at the next night. Touches nothing: no heat pump, no store created."""
-    from ...config import ConfigError, load_config, read_config_toml
+    from ...config import ConfigError, config_warnings, load_config, read_config_toml
     from ...daemon.lock import probe
     from ...store import Store
 
@@ -137,6 +137,7 @@ def check_config_command(config_path: Path) -> None:
     if problems:
         raise ConfigError(problems)
     lines = [f"config:    {config_path}: no problem found", *_describe(cfg)]
+    lines += [f"warning:   {text}" for text in config_warnings(cfg)]
     lines.append(f"daemon:    {probe(cfg.state_dir).describe()}")
     if cfg.db_path.exists():
         with Store(cfg.db_path, create=False) as store:

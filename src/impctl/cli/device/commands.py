@@ -23,9 +23,12 @@ from .options import config_option
 
 
 def _load(config_path: Path):
-    from ...config import load_config
+    from ...config import config_warnings, load_config
 
-    return load_config(config_path)
+    cfg = load_config(config_path)
+    for text in config_warnings(cfg):
+        click.echo(f"impctl: warning: {text}", err=True)
+    return cfg
 
 
 def _setup_logging(level: str, timezone: str = "UTC") -> None:

@@ -5,6 +5,8 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
 
     {"schema": "impctl-fit/1",
      "classes": {"floor_area": {"range": [lo, hi], "probability": p | null, "source": s,
+                                "calibrated": bool | null (p calibrated on held-out households,
+                                or the forest's vote share),
                                 "search_range": [lo, hi]  (classifier: classes up to 95 %)}, ...},
      "bounds": {name: [lo, hi]},                     # the search box of all seven
      "parameters": {name: value},                    # joint fit, the seven of Table IV
@@ -84,6 +86,16 @@ def _f(x: Any) -> Any:
     return x
 
 
+def probability_kind(entry: dict) -> str:
+    """What a class's ``probability`` in a fit result is: "calibrated" (mapped from the
+    forest's votes on households it never saw), "forest vote share" (not calibrated), or
+    "calibration not recorded" (a result written before the flag was)."""
+    flag = entry.get("calibrated")
+    if flag is None:
+        return "calibration not recorded"
+    return "calibrated" if flag else "forest vote share"
+
+
 def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None) -> dict:
     """JSON-ready summary of a fitted :class:`~impctl.fit.NightFit` (module docstring).
 
@@ -132,6 +144,7 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         "schema": "impctl-fit/1",
         "classes": {n: {"range": list(c["range"]), "probability": c.get("probability"),
                         "source": c.get("source"), "contradicted": bool(c.get("contradicted")),
+                        "calibrated": c.get("calibrated"),
                         **({"search_range": list(c["search_range"])}
                            if c.get("search_range") is not None else {})}
                     for n, c in classes.items()},

@@ -9,7 +9,7 @@
 
 from __future__ import annotations
 
-from .report import PARAM_NAMES, PARAM_UNITS
+from .report import PARAM_NAMES, PARAM_UNITS, probability_kind
 
 _WHY_NOT = {
     "floor_area": "enters only through C_m = c_f·A_f and the large internal couplings",
@@ -53,7 +53,8 @@ def format_table(summary: dict) -> str:
     lines.append("Classes")
     for name, c in summary["classes"].items():
         p = c["probability"]
-        ptxt = f"p = {p:.2f}" if p is not None else c["source"] or ""
+        ptxt = (f"p = {p:.2f} ({probability_kind(c)})" if p is not None
+                else c["source"] or "")
         rng = f"{c['range'][0]:g}–{c['range'][1]:g}"
         flag = "  contradicted by the nights" if c.get("contradicted") else ""
         wide = c.get("search_range")
