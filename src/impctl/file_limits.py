@@ -41,8 +41,10 @@ def refuse_large_file(path: str | Path, max_mb: float = MAX_FILE_MB) -> None:
             + _WHAT_TO_DO, path)
 
 
-def refuse_many_rows(rows: int, source: str | Path, max_rows: int = MAX_ROWS) -> None:
-    """``rows`` rows of one household above ``max_rows`` are refused before they are read."""
+def refuse_many_rows(rows: int, source: str | Path, max_rows: int | None = None) -> None:
+    """``rows`` rows of one household above ``max_rows`` (default :data:`MAX_ROWS`) are
+    refused before they are read."""
+    max_rows = MAX_ROWS if max_rows is None else max_rows
     if rows > max_rows:
         raise InputError(f"{rows:,} rows are more than the {max_rows:,} read for one household "
                          "(about 25 MB of CSV; " + _WHAT_TO_DO, source)
