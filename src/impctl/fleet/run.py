@@ -4,8 +4,14 @@ The client discovers the households (:mod:`.inputs`), drops those already in FLE
 resuming, and submits one Dask task per batch (:func:`.worker.fit_batch`); workers read their
 own households' files, so INPUT and the model directory must be reachable under the same paths
 on every worker (a shared file system on a multi-machine cluster). As batches finish, the client
-writes each one as its own part of FLEET.parquet (:mod:`.table`) and updates a progress bar
-(households done, failed, rate).
+writes each one as its own part of FLEET.parquet (:mod:`.table`), updates the manifest
+(:mod:`.manifest`: households expected and done — an interrupted run reads as partial) and the
+progress bar (households done, failed, rate).
+
+Before anything starts, the places are checked: ``out`` must lie outside INPUT (and INPUT
+outside ``out``: parts written there would be households of the next run), be new, empty or —
+with ``resume`` — a FLEET dataset of the same INPUT and options; the scheduler address must
+read as one. Every refusal is one line and says what to do instead.
 
 Cluster: by default a ``distributed.LocalCluster`` of worker *processes* (one thread each —
 torch is pinned to one thread per process) on this machine, started and stopped with the run;
