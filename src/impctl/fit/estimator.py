@@ -275,17 +275,10 @@ class NightFit:
         if self.noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {NOISE_MODELS}")
         started = time.perf_counter()
-        from threadpoolctl import threadpool_limits
-
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # the per-household target is for one core
         try:
-            # numpy's BLAS on one core as well: the summation order, and so the last digits a
-            # flat loss surface carries on, then do not depend on the machine's cores — with
-            # two BLAS threads impctl fit's HLC differed from the same file's fleet row (whose
-            # Dask worker runs one) by 3e-5
-            with threadpool_limits(limits=1, user_api="blas"):
-                self._fit(nights, ranges)
+            self._fit(nights, ranges)
         finally:
             torch.set_num_threads(threads)
         self.fit_time_s_ = time.perf_counter() - started

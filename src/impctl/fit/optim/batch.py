@@ -276,15 +276,10 @@ def fit_households(
             est._rendezvous = None
             rendezvous.finished()
 
-    from threadpoolctl import threadpool_limits
-
     retain_freed_memory()
     threads_before = torch.get_num_threads()
     torch.set_num_threads(1)  # NightFit.fit saves and restores this per thread; keep it fixed
     workers = [threading.Thread(target=run, args=(i,), daemon=True) for i in range(len(nights))]
-    # the BLAS limit too (NightFit.fit sets and restores it, process-wide: with the batch's own
-    # limit around them, no household's restore lifts another's)
-    limits = threadpool_limits(limits=1, user_api="blas")
     try:
         for t in workers:
             t.start()
@@ -292,7 +287,6 @@ def fit_households(
         for t in workers:
             t.join()
     finally:
-        limits.restore_original_limits()
         torch.set_num_threads(threads_before)
     return results, BatchStats(len(nights), rendezvous.merged_calls,
                                time.perf_counter() - started)
