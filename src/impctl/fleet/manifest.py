@@ -111,5 +111,6 @@ def completeness(path: str | Path) -> str | None:
         return None
     manifest = read_manifest(path)
     if manifest is None:
-        return "completeness unknown: no manifest (written by an older impctl fleet fit)"
+        return (f"completeness unknown: no {MANIFEST_FILE} beside the parts (impctl fleet fit "
+                "writes one; a copy may have left it behind)")
     return None if manifest.complete else manifest.status(path)
