@@ -293,3 +293,12 @@ def test_resume_with_other_options_is_refused(tmp_path, nights):
     assert done.returncode == 2, done.stderr
     assert "max_nights 30" in done.stderr and "give a new --out" in done.stderr
     assert not list(out.glob("part-*"))
+
+
+def test_a_dataset_without_manifest_is_not_called_complete(tmp_path):
+    from impctl.fleet.manifest import completeness
+    from impctl.fleet.table import empty_row, write_part
+
+    write_part(tmp_path / "F", "abcd1234", 0, [empty_row("h0")])
+    line = completeness(tmp_path / "F")
+    assert line is not None and line.startswith("completeness unknown: no _manifest.json")
