@@ -302,3 +302,22 @@ def test_a_dataset_without_manifest_is_not_called_complete(tmp_path):
     write_part(tmp_path / "F", "abcd1234", 0, [empty_row("h0")])
     line = completeness(tmp_path / "F")
     assert line is not None and line.startswith("completeness unknown: no _manifest.json")
+
+
+def test_fleet_output_is_never_read_as_households(tmp_path, nights):
+    """Parts left in a folder of nights (or a FLEET dataset given as INPUT) would be phantom
+    households: refused with one line saying what to move."""
+    from impctl.errors import InputError
+    from impctl.fleet.inputs import discover
+    from impctl.fleet.table import empty_row, write_part
+
+    d = tmp_path / "in"
+    d.mkdir()
+    write_nights(nights[0], d / "h0.csv")
+    assert [s.household for s in discover(d)] == ["h0"]
+    write_part(d, "abcd1234", 0, [empty_row("h0")])
+    with pytest.raises(InputError, match="holds the output of impctl fleet fit"):
+        discover(d)
+    write_part(tmp_path / "F", "abcd1234", 0, [empty_row("h0")])
+    with pytest.raises(InputError, match="part-abcd1234-000000.parquet"):
+        discover(tmp_path / "F")

@@ -15,13 +15,17 @@ is refused before it is read (a CSV by its size, Parquet rows by the count in th
 
 from __future__ import annotations
 
+import re
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
+from .manifest import MANIFEST_FILE
 
 HOUSEHOLD_COLUMN = "household"
+#: The name of a FLEET part file (:func:`.table.write_part`).
+_PART = re.compile(r"part-[0-9a-f]{8}-\d{6}\.parquet")
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,8 @@ def discover(path: str | Path) -> list[Source]:
     path = Path(path)
     if not path.exists():
         raise InputError("no such file or folder", path)
+    if path.is_dir():
+        _refuse_fleet_output(path)
     if _is_dataset(path):
         try:
             table = ds.dataset(path, format="parquet", partitioning="hive").to_table(
@@ -89,6 +95,17 @@ def discover(path: str | Path) -> list[Source]:
                              path)
         seen[f.stem] = f
     return [Source(f.stem, str(f), f.suffix[1:]) for f in files]
+
+
+def _refuse_fleet_output(path: Path) -> None:
+    """A FLEET dataset (or a run's output written into a folder of nights) is no input: its
+    parts are results, and read as households they would be phantom ones."""
+    parts = sorted(p.name for p in path.iterdir() if _PART.fullmatch(p.name))
+    if parts or (path / MANIFEST_FILE).exists():
+        more = f" and {len(parts) - 1} more" if len(parts) > 1 else ""
+        raise InputError(f"holds the output of impctl fleet fit ({(parts or [MANIFEST_FILE])[0]}"
+                         f"{more}), not households' nights: give the folder of NIGHTS files, "
+                         "or move the FLEET files out of it", path)
 
 
 def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]:
