@@ -11,7 +11,7 @@ code). :class:`CompactForest` reproduces ``RangeClassifier.predict_proba`` from 
 Every export is checked against scikit-learn before it is written: probe rows around the trees'
 thresholds (and with missing features) must give the same probabilities to 1e-9, else no
 compact file is written and readers keep using the pickled forests (``load_compact`` returns
-None). The pickled forests stay the reference: training, reports and the fleet use them.
+None). The pickled forests stay the reference: training and the reports use them.
 """
 
 from __future__ import annotations

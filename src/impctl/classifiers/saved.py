@@ -255,6 +255,19 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
     InputError
         No nights, or no usable trained models (telling the user to run ``impctl train``).
     """
+    return classify_with(nights, *load_classifiers(model_dir))
+
+
+def load_classifiers(model_dir: str | Path | None = None) -> tuple[dict, dict]:
+    """What :func:`classify_with` takes — (models, metadata) — for ``impctl fit`` and every
+    fleet worker alike: the compact forests (:mod:`.compact`) when they hold every model with
+    its ranges, else the pickled ones (:func:`load_models`), set to predict in this thread.
+
+    Raises
+    ------
+    InputError
+        As :func:`load_models`.
+    """
     directory = Path(model_dir) if model_dir is not None else default_model_dir()
     meta = _metadata(directory)
     names = list(meta.get("parameters", {}))
@@ -262,14 +275,22 @@ def classify_nights(nights: list[NightSamples], model_dir: str | Path | None = N
     if compact is not None and all(
             [list(r) for r in compact[n].ranges] == meta["parameters"][n].get("ranges")
             for n in names):   # no scikit-learn, no unpickling: ~1.4 s less per impctl fit
-        return classify_with(nights, compact, meta)
-    return classify_with(nights, *load_models(directory))
+        return compact, meta
+    models, meta = load_models(directory)
+    for model in models.values():
+        # One campaign row walks the trees in milliseconds: a joblib pool (n_jobs=-1 from
+        # training) costs more than it saves, and inside a daemonic Dask worker joblib cannot
+        # start one — scikit-learn then warned on every prediction of every fleet batch.
+        forest = getattr(model, "forest_", None)
+        if forest is not None:
+            forest.set_params(n_jobs=1)
+    return models, meta
 
 
 def classify_with(nights: list[NightSamples], models: dict, meta: dict
                   ) -> dict[str, ClassResult]:
-    """:func:`classify_nights` with models already loaded by :func:`load_models` (a fleet
-    worker loads them once)."""
+    """:func:`classify_nights` with models already loaded by :func:`load_classifiers` (a
+    fleet worker loads them once)."""
     if not nights:
         raise InputError("no nights to classify")
     off = off_protocol(nights, meta)

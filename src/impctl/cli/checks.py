@@ -14,6 +14,9 @@ import click
 
 from ..errors import InputError
 
+# the size guard of every command that reads nights (and of each household of a fleet)
+from ..imp.file_limits import MAX_FILE_MB, file_mb, refuse_large_file  # noqa: F401
+
 #: Setpoints a room can be heated to [°C]: a room thermostat's span, as the NIGHTS.csv and
 #: DRIVERS.csv ``setpoint`` column (impctl.imp.nights_csv.PLAUSIBLE).
 SETPOINT_C = (5.0, 35.0)
@@ -28,10 +31,6 @@ T_M_INIT_C = (-40.0, 60.0)
 SIM_DAYS = (0.1, 3660.0)
 #: Time step of ``impctl simulate`` [s]: 1 s … 1 day.
 SIM_STEP_S = (1.0, 86400.0)
-#: Largest NIGHTS.csv that ``fit`` and ``classify`` read [MB] (~600,000 rows, 5.7 years of
-#: 5-minute data): 576,000 rows (24 MB) took 47 s and 531 MB peak RSS with 30 nights fitted
-#: (bench/fit_large.py); a gateway has 1–4 GB.
-MAX_FILE_MB = 25.0
 
 
 def _num(x: float) -> str:
@@ -78,24 +77,6 @@ def house_limit(key: str) -> Callable[[click.Context, click.Parameter, Any], Any
             raise InputError(why, place=max(param.opts, key=len))
         return value
     return callback
-
-
-def file_mb(path) -> float:
-    """Size of ``path`` [MB]; 0 when it cannot be read (the reader then names the problem)."""
-    try:
-        return path.stat().st_size / 1e6
-    except OSError:
-        return 0.0
-
-
-def refuse_large_file(path, max_mb: float) -> None:
-    """A file above ``max_mb`` is refused before it is read, with what to do instead."""
-    size_mb = file_mb(path)
-    if size_mb > max_mb:
-        raise InputError(
-            f"{size_mb:.0f} MB is more than the {max_mb:g} MB read here (about 600,000 rows; "
-            "a gateway has 1–4 GB of memory): keep the campaign's weeks only, e.g. the last "
-            "60 days", path)
 
 
 def time_zone(ctx: click.Context | None, param: click.Parameter | None, value: str) -> str:

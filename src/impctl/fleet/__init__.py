@@ -7,6 +7,7 @@ lazily), so ``import impctl.fleet`` stays light.
 * :func:`discover` (:mod:`.inputs`): the households of INPUT
 * :func:`fit_batch` (:mod:`.worker`): one batch of households on a worker
 * :func:`read_fleet`, :data:`COLUMNS` (:mod:`.table`): FLEET.parquet
+* :func:`read_manifest`, :func:`completeness` (:mod:`.manifest`): expected and done households
 * :func:`write_fleet_report` (:mod:`.report`): HTML + PNG
 * :func:`fleet_flexibility` (:mod:`.flex_rows`): ``impctl flex`` on FLEET rows
 """
@@ -22,6 +23,8 @@ _LAZY = {
     "fit_batch": "worker",
     "read_fleet": "table",
     "COLUMNS": "table",
+    "read_manifest": "manifest",
+    "completeness": "manifest",
     "write_fleet_report": "report",
     "fleet_flexibility": "flex_rows",
 }

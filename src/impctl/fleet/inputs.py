@@ -8,17 +8,24 @@
   allowed), with a ``household`` column next to the NIGHTS columns.
 
 Discovery runs on the client and reads only names (files) or the ``household`` column (dataset);
-each worker reads its own households' nights, so no sample crosses the scheduler.
+each worker reads its own households' nights, so no sample crosses the scheduler. Every household
+is read and checked as ``impctl fit`` reads its file (:mod:`impctl.fit.household`): one too large
+is refused before it is read (a CSV by its size, Parquet rows by the count in the metadata).
 """
 
 from __future__ import annotations
 
+import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
+from .manifest import MANIFEST_FILE
 
 HOUSEHOLD_COLUMN = "household"
+#: The name of a FLEET part file (:func:`.table.write_part`).
+_PART = re.compile(r"part-[0-9a-f]{8}-\d{6}\.parquet")
 
 
 @dataclass(frozen=True)
@@ -28,6 +35,7 @@ class Source:
     household: str
     path: str
     kind: str  # "csv" | "parquet" | "dataset"
+    rows: int | None = None  # a dataset household's rows (counted at discovery)
 
 
 def _is_dataset(path: Path) -> bool:
@@ -58,6 +66,8 @@ def discover(path: str | Path) -> list[Source]:
     path = Path(path)
     if not path.exists():
         raise InputError("no such file or folder", path)
+    if path.is_dir():
+        _refuse_fleet_output(path)
     if _is_dataset(path):
         try:
             table = ds.dataset(path, format="parquet", partitioning="hive").to_table(
@@ -66,11 +76,11 @@ def discover(path: str | Path) -> list[Source]:
             raise InputError(f"not a readable Parquet dataset ({exc})", path) from None
         except KeyError:
             raise InputError(f"no '{HOUSEHOLD_COLUMN}' column", path) from None
-        ids = sorted({str(x) for x in table.column(HOUSEHOLD_COLUMN).to_pylist()
-                      if x is not None})
-        if not ids:
+        counts = Counter(str(x) for x in table.column(HOUSEHOLD_COLUMN).to_pylist()
+                         if x is not None)
+        if not counts:
             raise InputError("no household in the dataset", path)
-        return [Source(h, str(path), "dataset") for h in ids]
+        return [Source(h, str(path), "dataset", counts[h]) for h in sorted(counts)]
     if not path.is_dir():
         raise InputError("neither a folder of NIGHTS files nor a Parquet file/dataset", path)
     files = sorted(p for p in path.iterdir()
@@ -87,29 +97,53 @@ def discover(path: str | Path) -> list[Source]:
     return [Source(f.stem, str(f), f.suffix[1:]) for f in files]
 
 
-def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]:
-    """Each household's nights (``impctl.imp.NightSamples``), or the InputError saying why not.
+def _refuse_fleet_output(path: Path) -> None:
+    """A FLEET dataset (or a run's output written into a folder of nights) is no input: its
+    parts are results, and read as households they would be phantom ones."""
+    parts = sorted(p.name for p in path.iterdir() if _PART.fullmatch(p.name))
+    if parts or (path / MANIFEST_FILE).exists():
+        more = f" and {len(parts) - 1} more" if len(parts) > 1 else ""
+        raise InputError(f"holds the output of impctl fleet fit ({(parts or [MANIFEST_FILE])[0]}"
+                         f"{more}), not households' nights: give the folder of NIGHTS files, "
+                         "or move the FLEET files out of it", path)
 
-    Households of one dataset are read in one pass, filtered on the ``household`` column.
+
+def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]:
+    """Each household's nights (``impctl.imp.NightSamples``), or the refusal saying why not
+    (an :class:`impctl.fit.household.Refusal`: the line ``impctl fit`` prints, and a reason).
+
+    Households of one dataset are read in one pass, filtered on the ``household`` column;
+    those with too many rows are left out of it.
     """
     import pandas as pd
 
-    from ..imp.nights_csv import read_nights, read_nights_frame
+    from ..fit.household import guard_household, read_household
 
     out: dict[str, list | InputError] = {}
-    by_dataset: dict[str, list[str]] = {}
+    by_dataset: dict[str, list[Source]] = {}
     for s in sources:
         if s.kind == "dataset":
-            by_dataset.setdefault(s.path, []).append(s.household)
+            by_dataset.setdefault(s.path, []).append(s)
             continue
         try:
             if s.kind == "csv":
-                out[s.household] = read_nights(s.path, tz)
+                out[s.household] = read_household(s.path, tz)
             else:
-                out[s.household] = read_nights_frame(_read_parquet(s.path), s.path, tz)
+                guard_household(s.path, _parquet_rows(s.path))
+                out[s.household] = read_household(
+                    s.path, tz, read_frame=lambda s=s: _read_parquet(s.path))
         except InputError as exc:
             out[s.household] = exc
-    for path, households in by_dataset.items():
+    for path, members in by_dataset.items():
+        households = []
+        for s in members:
+            try:
+                guard_household(_in_dataset(path, s.household), s.rows)
+                households.append(s.household)
+            except InputError as exc:
+                out[s.household] = exc
+        if not households:
+            continue
         try:
             frame = _read_parquet(path, households)
         except InputError as exc:
@@ -117,13 +151,32 @@ def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]
             continue
         frame[HOUSEHOLD_COLUMN] = frame[HOUSEHOLD_COLUMN].astype(str)
         groups = dict(tuple(frame.groupby(HOUSEHOLD_COLUMN, sort=False)))
+        columns = frame.columns
+        del frame
         for h in households:
-            part = groups.get(h, pd.DataFrame(columns=frame.columns))
+            part = groups.pop(h, None)
+            if part is None:
+                part = pd.DataFrame(columns=columns)
             try:
-                out[h] = read_nights_frame(part, f"{path} (household {h})", tz)
+                out[h] = read_household(_in_dataset(path, h), tz, read_frame=lambda p=part: p)
             except InputError as exc:
                 out[h] = exc
     return out
+
+
+def _in_dataset(path: str, household: str) -> str:
+    return f"{path} (household {household})"
+
+
+def _parquet_rows(path: str) -> int | None:
+    """Rows of a Parquet file from its footer (nothing else read); None when unreadable (the
+    reader then names the problem)."""
+    import pyarrow.parquet as pq
+
+    try:
+        return pq.ParquetFile(path).metadata.num_rows
+    except (OSError, ValueError):
+        return None
 
 
 def _read_parquet(path: str, households: list[str] | None = None):

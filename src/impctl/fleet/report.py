@@ -74,9 +74,12 @@ def _figures(ok, out: Path) -> list[Path]:
 
 def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
     """Write OUT/fleet_report.html and its PNG figures from the FLEET dataset ``fleet``."""
+    from .manifest import completeness
     from .table import read_fleet
 
     table = read_fleet(fleet)
+    # an interrupted run's distributions are those of the households it reached: said first
+    partial = completeness(fleet)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ok = table[table["status"] == "ok"]
@@ -116,6 +119,7 @@ def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
         "<!doctype html><html><head><meta charset='utf-8'><title>impctl fleet report</title>",
         f"<style>{_CSS}</style></head><body>",
         f"<h1>impctl: fleet report ({len(table)} households)</h1>",
+        f"<p><strong>{html.escape(partial)}</strong></p>" if partial else "",
         _table(["status", "households", "share"], status_rows),
         "<h2>Distributions over the fitted households</h2>",
         _table(["quantity", "unit", "P10", "median", "P90"], summary), _img(figs[0]),

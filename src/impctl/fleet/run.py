@@ -4,8 +4,14 @@ The client discovers the households (:mod:`.inputs`), drops those already in FLE
 resuming, and submits one Dask task per batch (:func:`.worker.fit_batch`); workers read their
 own households' files, so INPUT and the model directory must be reachable under the same paths
 on every worker (a shared file system on a multi-machine cluster). As batches finish, the client
-writes each one as its own part of FLEET.parquet (:mod:`.table`) and updates a progress bar
-(households done, failed, rate).
+writes each one as its own part of FLEET.parquet (:mod:`.table`), updates the manifest
+(:mod:`.manifest`: households expected and done — an interrupted run reads as partial) and the
+progress bar (households done, failed, rate).
+
+Before anything starts, the places are checked: ``out`` must lie outside INPUT (and INPUT
+outside ``out``: parts written there would be households of the next run), be new, empty or —
+with ``resume`` — a FLEET dataset of the same INPUT and options; the scheduler address must
+read as one. Every refusal is one line and says what to do instead.
 
 Cluster: by default a ``distributed.LocalCluster`` of worker *processes* (one thread each —
 torch is pinned to one thread per process) on this machine, started and stopped with the run;
@@ -25,7 +31,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from ..fit.household import FitOptions
 from .inputs import Source, discover
+from .manifest import MANIFEST_FILE, Manifest, read_manifest, write_manifest
 from .table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
 
@@ -55,13 +63,14 @@ def resolve_models(model_dir: str | Path | None) -> tuple[str, str | None]:
     An explicitly given directory that holds no usable classifiers is bad input; the default
     directory without them means "search the prior ranges", as ``impctl fit`` does.
     """
-    from ..classifiers.saved import default_model_dir, load_models
+    from ..classifiers.saved import default_model_dir, load_classifiers
 
+    # what the workers (and impctl fit) load: the compact forests, else the pickled ones
     if model_dir is not None:
-        load_models(model_dir)  # raises InputError naming the directory
+        load_classifiers(model_dir)  # raises InputError naming the directory
         return str(Path(model_dir).resolve()), None
     try:
-        load_models(None)
+        load_classifiers(None)
     except InputError as exc:
         return PRIOR, (f"no classification ({exc.problem}); floor_area, c_f and u_walls are "
                        "searched over their whole prior ranges")
@@ -77,8 +86,8 @@ def _client(scheduler: str | None, workers: int | None):
 
     if scheduler:
         try:
-            return Client(scheduler, timeout="20s"), None
-        except OSError as exc:
+            return Client(check_scheduler(scheduler), timeout="20s"), None
+        except (OSError, ValueError) as exc:
             raise InputError(f"cannot reach the Dask scheduler ({exc})",
                              place="--scheduler") from None
     # Two malloc arenas per worker: with glibc's default (8 per core) the worker's threads
@@ -100,6 +109,93 @@ def _chunks(items: list[Source], size: int) -> list[list[Source]]:
     return [items[i:i + size] for i in range(0, len(items), size)]
 
 
+def check_scheduler(address: str) -> str:
+    """``address`` if it reads as a Dask scheduler's (``tcp://HOST:PORT``, or tls/ws/wss/ucx),
+    else InputError naming ``--scheduler`` (before anything is started or written)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address, strict=True)
+        if scheme not in ("tcp", "tls", "ws", "wss", "ucx"):
+            raise ValueError(f"unknown scheme {scheme!r}")
+        host, port = parse_host_port(location)
+        if not host or not 0 < int(port) < 65536:
+            raise ValueError("no host, or a port outside 1–65535")
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"{address!r} is not a Dask scheduler address ({exc}); give "
+                         "tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786", place="--scheduler"
+                         ) from None
+    return address
+
+
+def _inside(inner: Path, outer: Path) -> bool:
+    return inner == outer or outer in inner.parents
+
+
+def check_places(input_path: str | Path, out: str | Path, report: str | Path | None = None
+                 ) -> None:
+    """Refuse an output folder that overlaps the input (parts written into it would be read
+    as households by the next run, and a run could read its own output) or the report folder
+    (its HTML and PNG files inside a FLEET dataset make it unreadable)."""
+    src, dst = Path(input_path).resolve(), Path(out).resolve()
+    if _inside(dst, src) or _inside(src, dst):
+        where = ("is INPUT itself" if src == dst else "is inside INPUT" if _inside(dst, src)
+                 else "contains INPUT")
+        raise InputError(f"{where} ({src}): the FLEET parts would be read as households by "
+                         f"the next run; give a folder outside it, e.g. --out "
+                         f"{src.parent / (src.stem + '-FLEET.parquet')}", out, "--out")
+    if report is not None:
+        rep = Path(report).resolve()
+        if _inside(rep, dst) or _inside(dst, rep):
+            raise InputError("overlaps --out: the report's files inside a FLEET dataset make "
+                             "it unreadable; give another folder", report, "--report")
+
+
+def _start_manifest(out: Path, input_path, sources: list[Source], done: set[str],
+                    options: dict, resume: bool) -> Manifest:
+    """The manifest of this run: a new one, or the one being resumed (same input, same
+    options — else the dataset would mix two different fits)."""
+    found = {s.household for s in sources}
+    source = str(Path(input_path).resolve())
+    old = read_manifest(out) if resume else None
+    if old is not None:
+        changed = sorted(k for k in {*options, *old.options}
+                         if options.get(k) != old.options.get(k))
+        if old.input != source or changed:
+            what = (f"input {old.input}" if old.input != source else
+                    ", ".join(f"{k} {old.options.get(k)!r}" for k in changed))
+            raise InputError(f"was fitted with {what}; resume it with the same input and "
+                             "options, or give a new --out", out)
+        old.households, old.done = len(found), len(found & done)
+        return old
+    return Manifest(input=source, options=options, households=len(found),
+                    done=len(found & done))
+
+
+def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
+    """``out`` must be new, empty, or — with ``resume`` — a FLEET dataset of this input. The
+    advice given never leads into a refusal: ``--resume`` is suggested only where it works."""
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a FLEET dataset folder", out)
+    if not out.exists() or not any(out.iterdir()):
+        return
+    foreign = [p.name for p in out.iterdir() if not (
+        p.name == MANIFEST_FILE or p.name.startswith(".")
+        or (p.name.startswith("part-") and p.suffix == ".parquet"))]
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise InputError(f"exists and is not a FLEET dataset (it holds {foreign[0]}{more}); "
+                         "give a new --out", out)
+    old = read_manifest(out)
+    if old is not None and old.input != str(Path(input_path).resolve()):
+        raise InputError(f"holds the FLEET dataset of another input ({old.input}); give a new "
+                         "--out, or remove it first", out)
+    if not resume:
+        status = f" ({old.status(out).split(' (')[0]})" if old is not None else ""
+        raise InputError(f"exists{status}: pass --resume to continue it, or remove it first",
+                         out)
+
+
 def fit_fleet(
     input_path: str | Path,
     out: str | Path,
@@ -108,7 +204,7 @@ def fit_fleet(
     scheduler: str | None = None,
     workers: int | None = None,
     tz: str = "Europe/Ljubljana",
-    timestamps: str = "instant",
+    options: FitOptions | None = None,
     resume: bool = False,
     batch_size: int = DEFAULT_BATCH,
     progress: bool = True,
@@ -117,21 +213,29 @@ def fit_fleet(
 ) -> FleetRun:
     """Fit every household of ``input_path`` into the FLEET dataset ``out`` (module docstring).
 
-    ``client``: an existing ``distributed.Client`` to run on (left open), instead of
-    ``scheduler`` or a local cluster.
+    ``options``: what decides a household's numbers, as ``impctl fit``'s options (default:
+    its defaults). ``client``: an existing ``distributed.Client`` to run on (left open),
+    instead of ``scheduler`` or a local cluster. ``out/_manifest.json`` says how many
+    households are expected and how many have a row (:mod:`.manifest`), after every batch.
 
     Raises
     ------
     InputError
-        Unreadable INPUT, ``out`` already there without ``resume``, unusable ``model_dir``,
-        unreachable scheduler. Households with bad data are rows, not errors.
+        Unreadable INPUT, ``out`` overlapping it, ``out`` already there without ``resume`` (or
+        not a FLEET dataset, or fitted from another input or with other options), unusable
+        ``model_dir``, a malformed or unreachable scheduler. Households with bad data are
+        rows, not errors.
+    KeyboardInterrupt
+        Ctrl-C: the batches written stay, the manifest says "partial" (a line says how to
+        resume).
     """
     started = time.perf_counter()
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a FLEET dataset folder", out)
-    if out.exists() and any(out.iterdir()) and not resume:
-        raise InputError("exists: pass --resume to continue it, or remove it first", out)
+    options = options if options is not None else FitOptions()
+    if scheduler:
+        check_scheduler(scheduler)
+    check_places(input_path, out)
+    _check_out(out, input_path, resume)
     if batch_size < 1:
         raise InputError("must be >= 1", place="batch size")
     sources = discover(input_path)
@@ -140,15 +244,18 @@ def fit_fleet(
     todo = [s for s in sources if s.household not in done]
     run.skipped = len(sources) - len(todo)
     resolved, note = resolve_models(model_dir)
+    manifest = _start_manifest(out, input_path, sources, done,
+                               {**options.as_dict(), "tz": tz, "model_dir": resolved}, resume)
     if note:
         run.notes.append(note)
         echo(f"note: {note}")
     if run.skipped:
         echo(f"resume: {run.skipped} of {len(sources)} households already in {out}")
     if not todo:
+        write_manifest(out, manifest)
         run.wall_s = time.perf_counter() - started
         return run
-    settings = Settings(model_dir=resolved, tz=tz, timestamps=timestamps)
+    settings = Settings(model_dir=resolved, tz=tz, options=options)
     own = client is None
     if own:
         client, cluster = _client(scheduler, workers)
@@ -157,6 +264,8 @@ def fit_fleet(
         client.register_plugin(Preload(settings.model_dir))
         run.workers = len(client.scheduler_info().get("workers", {}))
         run_id = new_run_id()
+        manifest.runs.append(run_id)
+        write_manifest(out, manifest)
         # A small fleet is cut finer, so that every worker gets about two batches.
         size = max(1, min(batch_size, -(-len(todo) // (2 * max(1, run.workers)))))
         batches = _chunks(todo, size)
@@ -164,10 +273,12 @@ def fit_fleet(
                                  key=f"impctl-fleet-{run_id}-{i}", priority=-i)
                    for i, b in enumerate(batches)]
         index = {f.key: i for i, f in enumerate(futures)}
-        _collect(futures, index, batches, out, run_id, run, progress)
+        _collect(futures, index, batches, out, run_id, run, progress, manifest)
     except KeyboardInterrupt:
         for f in futures:
             f.cancel()
+        if (out / MANIFEST_FILE).exists():
+            echo(f"interrupted: {manifest.status(out)}")
         raise
     finally:
         if own:
@@ -179,7 +290,7 @@ def fit_fleet(
 
 
 def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
-             progress: bool) -> None:
+             progress: bool, manifest: Manifest) -> None:
     from distributed import as_completed
     from tqdm import tqdm
 
@@ -198,6 +309,8 @@ def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
                     row.update(reason="worker failed", error=f"{type(exc).__name__}: {exc}")
                     rows.append(row)
             write_part(out, run_id, i, rows)
+            manifest.done += len(rows)
+            write_manifest(out, manifest)
             for row in rows:
                 run.counts[row["status"]] = run.counts.get(row["status"], 0) + 1
             future.release()

@@ -1,10 +1,17 @@
 """What a Dask worker runs: one batch of households → one block of FLEET rows.
 
-The classifiers (scikit-learn) and torch are loaded once per worker process — by the
-:class:`Preload` worker plugin when the worker joins, else at the first batch — and kept in a
-module-level cache; a batch never reloads them. Every household's outcome is a row: ``ok``,
-``insufficient`` (too few usable nights: the row says which kind is missing) or ``error``
-(unreadable file, failed fit: the row says why); nothing a household does stops the batch.
+Each household goes the way ``impctl fit`` takes its file (:mod:`impctl.fit.household`): the
+size guard before reading, the unit checks, the nights cut at gaps and chosen (``max_nights``),
+the classes, the fit with the same options, and the check of the finished fit — so a row's
+numbers and refusals are ``impctl fit``'s; only the optimiser calls of the batch's households
+are merged (:func:`impctl.fit.optim.batch.fit_households`).
+
+The classifiers and torch are loaded once per worker process — by the :class:`Preload` worker
+plugin when the worker joins, else at the first batch — and kept in a module-level cache; a
+batch never reloads them. Every household's outcome is a row: ``ok``, ``insufficient`` (too few
+usable nights: the row says which kind is missing) or ``error`` (too large, unreadable,
+implausible units or fit, failed fit: ``reason`` says which, ``error`` is the line
+``impctl fit`` prints); nothing a household does stops the batch.
 """
 
 from __future__ import annotations
@@ -13,11 +20,12 @@ import os
 import socket
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import InputError
+from ..fit.household import FitOptions
 from .inputs import Source, read_sources
 from .table import empty_row
 
@@ -38,19 +46,16 @@ class Settings:
 
     model_dir: str
     tz: str = "Europe/Ljubljana"
-    timestamps: str = "instant"
-    normal_model: str = "demand"
-    ach_vent: float = 0.0
-    ach_infl: float = 0.01
+    options: FitOptions = field(default_factory=FitOptions)
 
 
 def models(model_dir: str) -> tuple[dict, dict]:
     """The classifiers of ``model_dir``, loaded once per process (thread-safe)."""
     with _LOCK:
         if model_dir not in _MODELS:
-            from ..classifiers.saved import load_models
+            from ..classifiers.saved import load_classifiers
 
-            _MODELS[model_dir] = load_models(model_dir)
+            _MODELS[model_dir] = load_classifiers(model_dir)
             _LOADS["models"] += 1
         return _MODELS[model_dir]
 
@@ -106,40 +111,36 @@ _NEEDS = {"constrained": "no usable constrained night (it carries τ)",
 
 def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household."""
-    from ..fit.estimator import NightFit
-    from ..fit.nights.data import prepare_nights
+    from ..fit.household import choose_nights
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
     _LOADS["batches"] += 1
     # No FLEET column reads the paper's per-night fits, and the joint fit does not depend on
     # them (they stop on their own: fit.layout.stop_units): skipping them saves ~10 % of a batch.
-    params = {"normal_model": settings.normal_model, "timestamps": settings.timestamps,
-              "ach_vent": settings.ach_vent, "ach_infl": settings.ach_infl, "per_night": False}
-    probe = NightFit(**params)
+    params = {**settings.options.estimator_params(), "per_night": False}
     rows: dict[str, dict] = {}
-    todo: list[tuple[str, list, dict | None, dict]] = []
+    todo: list[tuple] = []
+    names = {s.household: _source_name(s) for s in sources}
     for household, nights in read_sources(sources, settings.tz).items():
         row = rows[household] = empty_row(household)
         if isinstance(nights, InputError):
-            row.update(status="error", reason="unreadable input", error=str(nights))
+            row.update(status="error", reason=getattr(nights, "reason", "unreadable input"),
+                       error=str(nights))
             continue
-        kept, _, skipped = prepare_nights(nights, probe.emission_lag_h, probe.min_night_h,
-                                          probe.resume_threshold_w)
-        row.update(nights_used=len(kept),
-                   nights_constrained=sum(n.kind == "constrained" for n in kept),
-                   nights_normal=sum(n.kind == "normal" for n in kept),
-                   nights_skipped=len(skipped))
-        missing = [k for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
-        if missing:
-            why = "; ".join(f"{i}: {r}" for i, r in skipped)
-            row.update(status="insufficient", reason=" and ".join(_NEEDS[k] for k in missing),
-                       error=" and ".join(_NEEDS[k] for k in missing)
-                       + (f" (skipped {why})" if why else ""))
+        chosen = choose_nights(nights, settings.options.max_nights)
+        row.update(nights_used=len(chosen.chosen),
+                   nights_constrained=sum(n.kind == "constrained" for n in chosen.chosen),
+                   nights_normal=sum(n.kind == "normal" for n in chosen.chosen),
+                   nights_skipped=len(chosen.skipped))
+        if chosen.missing:
+            row.update(status="insufficient",
+                       reason=" and ".join(_NEEDS[k] for k in chosen.missing),
+                       error=str(chosen.too_little(names[household])))
             continue
-        classes, ranges, probabilities = _classify(nights, settings)
-        row.update({f"{k}_class": v for k, v in classes.items()})
-        todo.append((household, nights, ranges, probabilities, row))
+        classes = _classify(chosen.cut, settings)
+        row.update({f"{k}_class": v for k, v in classes.labels.items()})
+        todo.append((chosen.nights, classes, names[household], row))
     if todo:
         _fit_todo(todo, params)
     # The batched fit keeps its freed heap during the batch (fewer page faults); once its
@@ -160,40 +161,42 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     return [rows[s.household] for s in sources]
 
 
-def _fit_todo(todo: list[tuple[str, list, dict | None, dict | None, dict]],
-              params: dict) -> None:
+def _classify(nights, settings: Settings):
+    """The household's classes (:func:`impctl.fit.household.household_classes`, with this
+    worker's classifiers), or the whole prior ranges without classifiers (as ``impctl fit``)."""
+    from ..fit.household import household_classes, prior_classes
+
+    if settings.model_dir == PRIOR:
+        return prior_classes("no classifiers")
+    return household_classes(nights, loaded=models(settings.model_dir))
+
+
+def _source_name(s: Source) -> str:
+    """The name errors give a household: its file, or its rows of a dataset."""
+    return s.path if s.kind != "dataset" else f"{s.path} (household {s.household})"
+
+
+def _fit_todo(todo: list[tuple], params: dict) -> None:
     """Fit the households of ``todo`` together and fill in their rows (nothing else is kept)."""
+    from ..fit.household import fit_refusal
     from ..fit.optim.batch import fit_households
 
-    results, _ = fit_households([t[1] for t in todo], [t[2] for t in todo],
-                                [t[3] for t in todo], **params)
+    results, _ = fit_households([t[0] for t in todo], [t[1].ranges for t in todo],
+                                [t[1].probabilities for t in todo], **params)
     fitted = []
-    for (*_, row), res in zip(todo, results, strict=True):
+    for (*_, name, row), res in zip(todo, results, strict=True):
         if isinstance(res, InputError):
             row.update(status="insufficient", reason="no usable night", error=str(res))
         elif isinstance(res, BaseException):
             row.update(status="error", reason=f"fit failed ({type(res).__name__})",
                        error=f"{type(res).__name__}: {res}")
+        elif (refusal := fit_refusal(res, name)) is not None:
+            # a fit no house gives: impctl fit refuses it, so no numbers here either
+            row.update(status="error", reason=refusal.reason, error=str(refusal))
         else:
             _fill(row, res)
             fitted.append((row, res))
     _flexibility(fitted)
-
-
-def _classify(nights, settings: Settings) -> tuple[dict[str, str], dict | None, dict | None]:
-    """Class labels, ranges (None: whole prior ranges, as ``impctl fit`` without models) and
-    the class probabilities the fit's population prior mixes (None without classes)."""
-    if settings.model_dir == PRIOR:
-        return {}, None, None
-    from ..classifiers.saved import classify_with
-
-    try:
-        result = classify_with(nights, *models(settings.model_dir))
-    except InputError:   # no night at a setpoint the classifiers know: the prior, as impctl fit
-        return {}, None, None
-    return ({k: r.label for k, r in result.items()},
-            {k: tuple(r.fit_range) for k, r in result.items()},
-            {k: dict(r.probabilities) for k, r in result.items()})
 
 
 def _fill(row: dict, fit) -> None:

@@ -16,21 +16,10 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
+from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
 from .. import cli
-from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
-
-#: Nights fitted by default / accepted by --max-nights: the fit's memory and time grow about
-#: linearly with the nights (bench/fit_large.py); an IMP campaign has 5–8.
-DEFAULT_MAX_NIGHTS = 30
-MAX_NIGHTS_RANGE = (2, 120)
-
-_NEEDS = {
-    "constrained": "a constrained night (heating off; at least {h:g} h of cooling after the "
-                   "{lag:g} h emission lag) — it carries the time constant τ",
-    "normal": "a normal night (setpoint held, heat power logged, at least {h:g} h) — it carries "
-              "the absolute scale: HLC and C_m",
-}
+from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, time_zone
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -97,13 +86,17 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     demand and T_air validation per night.
     """
     from ...fit.estimator import NightFit
-    from ...fit.nights.data import prepare_nights
+    from ...fit.household import (
+        FitOptions,
+        choose_nights,
+        fit_refusal,
+        household_classes,
+        read_household,
+    )
+    from ...fit.prior import with_class_probabilities
     from ...fit.result.plot import plot_fit
     from ...fit.result.report import fit_to_dict
     from ...fit.result.table import format_table
-    from ...imp import EMISSION_LAG_H, read_nights
-    from ...imp.gaps import cut_at_gaps
-    from ...imp.plausibility import check_units, fit_problem
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
@@ -111,53 +104,30 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
     refuse_database(json_path, "--json")
     refuse_database(plot_path, "--plot")
-    refuse_large_file(nights_path, MAX_FILE_MB)
-    if file_mb(nights_path) >= 1.0:  # ~25,000 rows: reading takes seconds
+    options = FitOptions(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
+                         ach_vent=ach_vent, max_nights=max_nights, night_gain_w=night_gain_w)
+    # the same path as every household of impctl fleet fit (impctl.fit.household)
+    if 1.0 <= file_mb(nights_path) <= MAX_FILE_MB:  # ~25,000 rows: reading takes seconds
         click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)
-    nights = read_nights(nights_path, tz)
-    check_units(nights, nights_path)
-    estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
-                         ach_vent=ach_vent, night_gain_w=night_gain_w)
-    cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
-    kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
-                                      estimator.resume_threshold_w)
-    chosen = _most_recent(kept, max_nights)
-    if len(chosen) < len(kept):
-        ids = {n.night_id for n in chosen}
-        nights = [n for n in nights if n.night_id in ids]
-        cut = [n for n in cut if n.night_id in ids]
-        first, last = chosen[0].night_id, chosen[-1].night_id
-        limit_note = (f"{len(kept)} usable nights in the file; the fit uses the {len(chosen)} "
-                      f"most recent ({first} … {last}; --max-nights {max_nights})")
-    else:
-        limit_note = None
-    missing = [_NEEDS[k].format(h=estimator.min_night_h, lag=EMISSION_LAG_H)
-               for k in ("constrained", "normal") if not any(n.kind == k for n in kept)]
-    if missing:
-        found = ", ".join(f"{n.night_id} ({n.kind})" for n in nights) or "none"
-        why = "; ".join(f"{i}: {r}" for i, r in skipped)
-        raise InputError(
-            "too little data to fit: missing " + " and ".join(missing)
-            + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
-
-    classes, ranges, notes = _classes(cut, model_dir)
-    if limit_note:
-        notes.append(limit_note)
-    click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
-               f"constrained) …", err=True)
-    probabilities = {n: c["probabilities"] for n, c in classes.items() if c.get("probabilities")}
-    from ...fit.prior import with_class_probabilities
-
+    nights = read_household(nights_path, tz)
+    chosen = choose_nights(nights, options.max_nights)
+    refusal = chosen.too_little(nights_path)
+    if refusal is not None:
+        raise refusal
+    classes = household_classes(chosen.cut, model_dir)
+    notes = [*classes.notes, *([chosen.note] if chosen.note else [])]
+    click.echo(f"fitting {len(chosen.chosen)} nights "
+               f"({sum(n.kind == 'constrained' for n in chosen.chosen)} constrained) …", err=True)
+    estimator = NightFit(**options.estimator_params())
     # the population prior mixes the classes by the classifiers' probabilities
-    estimator.prior = with_class_probabilities(estimator.prior, probabilities)
+    estimator.prior = with_class_probabilities(estimator.prior, classes.probabilities)
     with _ticking("fitting"):
-        estimator.fit(nights, ranges)
-    summary = fit_to_dict(estimator, classes, notes)
+        estimator.fit(chosen.nights, classes.ranges)
     # A fit no house gives is a unit or column problem: refuse it, write nothing.
-    why = fit_problem(summary["lumped"]["hlc"]["value"],
-                      (summary["validation"].get("mean") or {}).get("eps_pct"))
-    if why is not None:
-        raise InputError(why, nights_path)
+    refusal = fit_refusal(estimator, nights_path)
+    if refusal is not None:
+        raise refusal
+    summary = fit_to_dict(estimator, classes.classes, notes)
     click.echo(format_table(summary))
     if json_path is not None:
         _write_json(json_path, summary)
@@ -184,40 +154,3 @@ def _ticking(what: str, every_s: float = 5.0):
     finally:
         done.set()
         thread.join()
-
-
-def _most_recent(kept: list, max_nights: int) -> list:
-    """At most ``max_nights`` nights, the most recent; a third of them (at least one)
-    constrained when there are enough, the rest normal; in time order."""
-    cons = [n for n in kept if n.kind == "constrained"]
-    normal = [n for n in kept if n.kind == "normal"]
-    n_cons = min(len(cons), max(1, max_nights // 3))
-    n_normal = min(len(normal), max_nights - n_cons)
-    n_cons = min(len(cons), max_nights - n_normal)
-    chosen = cons[len(cons) - n_cons:] + normal[len(normal) - n_normal:]
-    return sorted(chosen, key=lambda n: n.start)
-
-
-def _classes(nights, model_dir):
-    """Classified ranges, or — without usable classifiers — the prior, said out loud."""
-    from ...classifiers.saved import classify_nights
-    from ...population.ranges import DEFAULT_RANGES
-
-    try:
-        results = classify_nights(nights, model_dir)
-    except InputError as exc:
-        classes = {name: {"range": (rs[0][0], rs[-1][1]), "probability": None,
-                          "source": "prior"} for name, rs in DEFAULT_RANGES.items()}
-        note = (f"no classification ({exc.problem}); floor_area, c_f and u_walls were searched "
-                "over their whole prior ranges, so the fit rests on the nights alone")
-        return classes, {n: c["range"] for n, c in classes.items()}, [note]
-    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
-                      "calibrated": r.calibrated, "probabilities": dict(r.probabilities),
-                      "search_range": r.fit_range}
-               for name, r in results.items()}
-    left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
-    notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "
-             f"were never trained on: {'; '.join(left_out)} (the fit uses them)"
-             ] if left_out else []
-    # the fit searches the classes up to SEARCH_LEVEL of probability, not the likeliest alone
-    return classes, {n: c["search_range"] for n, c in classes.items()}, notes

@@ -11,8 +11,9 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
+from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from .. import cli
-from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded
+from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded, time_zone
 
 
 @cli.group("fleet")
@@ -32,12 +33,17 @@ def fleet() -> None:
                    "cluster of worker processes on this machine].")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes of the local cluster [default: one per core].")
-@click.option("--tz", default="Europe/Ljubljana", show_default=True,
+@click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 @click.option("--timestamps", type=click.Choice(["instant", "interval"]), default="instant",
               show_default=True, help="Sample convention, as for impctl fit.")
+@click.option("--max-nights", default=DEFAULT_MAX_NIGHTS, show_default=True, type=int,
+              callback=bounded(MAX_NIGHTS_RANGE),
+              help="Fit at most this many nights per household, as impctl fit does "
+                   f"({MAX_NIGHTS_RANGE[0]}–{MAX_NIGHTS_RANGE[1]}).")
 @click.option("--resume", is_flag=True,
-              help="Continue an interrupted run: skip households already in --out.")
+              help="Continue an interrupted run: skip households already in --out (same "
+                   "INPUT and options).")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               default=None, help="Also write the fleet report (HTML + PNG) into this folder.")
 @click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True,
@@ -45,18 +51,24 @@ def fleet() -> None:
                    "task); a fleet smaller than two batches per worker is cut finer.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
-              workers: int | None, tz: str, timestamps: str, resume: bool,
+              workers: int | None, tz: str, timestamps: str, max_nights: int, resume: bool,
               report_dir: Path | None, batch_size: int, quiet: bool) -> None:
     """Fit every household's nights in INPUT; one row per household into --out.
 
     INPUT: a folder of NIGHTS files (*.csv, *.parquet; household id = file stem), or one
-    Parquet file / dataset with a 'household' column plus the NIGHTS columns. A household that
-    cannot be fitted (unreadable, too few nights, failed fit) gets a row saying why.
+    Parquet file / dataset with a 'household' column plus the NIGHTS columns. Each household
+    is read, checked and fitted as impctl fit takes its file, with the same numbers; one that
+    impctl fit would refuse (too large, implausible units or fit) or that cannot be fitted
+    (unreadable, too few nights, failed fit) gets a row saying why. --out (outside INPUT)
+    keeps a manifest: an interrupted run is marked partial.
     """
-    from ...fleet.run import fit_fleet
+    from ...fit.household import FitOptions
+    from ...fleet.run import check_places, fit_fleet
 
+    check_places(input_path, out, report_dir)
+    options = FitOptions(timestamps=timestamps, max_nights=max_nights)
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
-                    tz=tz, timestamps=timestamps, resume=resume, batch_size=batch_size,
+                    tz=tz, options=options, resume=resume, batch_size=batch_size,
                     progress=not quiet, echo=click.echo)
     rate = run.fitted / run.wall_s if run.wall_s > 0 else 0.0
     c = run.counts
@@ -116,8 +128,12 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
             raise exc.at(source) from None
     else:
         from ...fleet.flex_rows import fleet_flexibility
+        from ...fleet.manifest import completeness
 
         results = fleet_flexibility(source, list(households), **conditions)
+        partial = completeness(source)
+        if partial:  # said where it is read: on stderr beside JSON, first in the table
+            click.echo(f"{source}: {partial}", err=as_json)
     if as_json:
         click.echo(json.dumps({k: v.block() for k, v in results.items()}, indent=2))
         return
