@@ -11,11 +11,18 @@ from ..model import HouseParameters
 from ..night_gain import NIGHT_GAIN_W
 
 TZ = "Europe/Ljubljana"
-#: Default clock speed per plant: the realistic plant's steps cost ~0.3 ms (vs µs), and the
-#: daemon shares the simulator's event loop, so it runs at half the ideal plant's speed.
+#: Default clock speed per plant [simulated s per second of the loop's virtual time]: it
+#: scales the daemon's real-time pauses (Modbus timeouts, retry delays, poll intervals) into
+#: simulated time; the demo's wall time does not depend on it.
 DEFAULT_SPEED = {"realistic": 10000.0, "iso": 20000.0}
-#: How long the adaptive demo waits after the stop for the daemon's last fit [s].
-FIT_WAIT_S = 180.0
+#: How long the adaptive demo waits after the stop for the daemon's last fit [simulated s]:
+#: the fits take none (the clock waits for them), so only a failed fit runs into it.
+FIT_WAIT_S = 86400.0
+
+
+class DemoError(RuntimeError):
+    """The demo could not finish; the message says why in one line (``impctl demo`` prints
+    it and exits with status 1)."""
 
 
 @dataclass(frozen=True)

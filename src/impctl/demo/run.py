@@ -3,7 +3,6 @@ and fit, the report and the summary."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import logging
 import os
@@ -14,11 +13,13 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+from .. import vtime
 from ..errors import InputError
 from ..store import Store
 from .campaign import campaign_summary, run_campaign
 from .options import (
     DEFAULT_SPEED,
+    DemoError,
     DemoOptions,
     Progress,
     demo_weather,
@@ -26,6 +27,11 @@ from .options import (
     house_and_realism,
     plant_summary,
 )
+
+
+def _last_line(text: str) -> str:
+    lines = text.strip().splitlines()
+    return lines[-1] if lines else "no message"
 
 
 def _cmd(*args: str) -> list[str]:
@@ -88,7 +94,7 @@ def _wait_training(trainer, opts: DemoOptions, progress: Progress, why: str) -> 
         return
     progress.line(f"waiting for the classifier training to finish ({why})")
     if trainer.wait() != 0:
-        raise RuntimeError(f"training failed; see {opts.out / 'train.log'}")
+        raise DemoError(f"classifier training failed; see {opts.out / 'train.log'}")
     progress.train_state = "trained"
 
 
@@ -127,20 +133,22 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
         opts = replace(opts, model_dir=model_dir)
         _wait_training(trainer, opts, progress, "the adaptive campaign's fits use them")
         trainer = None
-    db_path = asyncio.run(run_campaign(opts, house, progress, trainer, weather, realism))
+    # Simulator and daemon on one virtual-time loop: the clock waits for both (see .campaign).
+    db_path = vtime.run(run_campaign(opts, house, progress, trainer, weather, realism))
     _wait_training(trainer, opts, progress, "the fit uses them")
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
     progress.line("exporting the valid nights" + ("" if opts.adaptive else
                                                   " and fitting (impctl fit)"))
-    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
-                        "--force"), check=True,
-                   capture_output=True)
+    export = subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
+                                 "--force"), capture_output=True, text=True)
+    if export.returncode != 0:
+        raise DemoError("impctl export failed: " + _last_line(export.stderr))
     if opts.adaptive:  # the daemon's last fit, on every valid night, is the result
         with Store(db_path) as store:
             last, decision = store.last_fit(), store.decisions(1)
         if last is None:
-            raise RuntimeError("demo: the adaptive campaign ended without a fit: "
+            raise DemoError("the adaptive campaign ended without a fit: "
                                + (decision[0].reason if decision else "no decision")
                                + " (see demo.log)")
         result = last[2]
@@ -150,7 +158,7 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
                                   "--model-dir", str(model_dir), "--night-gain-w",
                                   repr(fit_night_gain_w(opts))), capture_output=True, text=True)
         if fit.returncode != 0:
-            raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
+            raise DemoError("impctl fit failed: " + _last_line(fit.stderr))
         result = json.loads(fit_json.read_text())
         with Store(db_path) as store:
             store.add_fit([n.id for n in store.nights(valid=True)], result)
