@@ -177,8 +177,9 @@ def test_a_clock_on_the_loop_follows_its_time():
 
 
 def test_sleep_until_wakes_on_time_on_a_loop_clock():
-    """The daemon's sleeps to instants on a loop clock end on time to the millisecond (float
-    rounding of the clock never makes them spin), at any speed."""
+    """The daemon's sleeps to instants on a loop clock end on time — never early, late by at
+    most its shortest sleep (1 µs of the loop's time; float rounding of the clock never makes
+    them spin) — at any speed."""
     async def main(speed: float):
         clock = VirtualClock.on_loop(EPOCH, speed)
         lates = []
@@ -189,7 +190,8 @@ def test_sleep_until_wakes_on_time_on_a_loop_clock():
 
     for speed in (1.0, 600.0, 20000.0, 43200.0):
         lates = vtime.run(main(speed))
-        assert all(abs(late) <= 1e-3 for late in lates), (speed, max(map(abs, lates)))
+        assert all(0 <= late <= 1e-6 * speed + 1e-6 for late in lates), (
+            speed, min(lates), max(lates))
 
 
 def test_the_same_run_twice_is_the_same_trace():

@@ -68,17 +68,18 @@ def window_after_act(act: datetime, cfg: Config) -> tuple[datetime, datetime]:
     return window_for(local.date(), cfg)
 
 
-#: How early a sleep on the daemon's clock may end [simulated s]: a clock on the event loop's
-#: own (virtual) time wakes exactly, up to float rounding, which must not loop for ever.
-_SLEEP_TOLERANCE_S = 1e-3
+#: Shortest sleep of :func:`sleep_until` [s of the loop's time]: a clock on the event loop's
+#: own (virtual) time wakes on time up to float rounding, and a sleep shorter than the
+#: rounding would not move it, for ever.
+_MIN_SLEEP_S = 1e-6
 
 
 async def sleep_until(clock: VirtualClock, when: datetime) -> float:
     """Sleep on the running event loop until ``clock`` shows ``when``; returns how late it
-    woke [simulated s]. The loop's sleeps and ``clock`` may drift apart (a clock on
-    ``time.time``, sleeps on the monotonic clock): it sleeps again until the clock agrees."""
-    while (ahead_s := when.timestamp() - clock.now_s()) > _SLEEP_TOLERANCE_S:
-        await asyncio.sleep(clock.wall_seconds(ahead_s))
+    woke [simulated s], never early. The loop's sleeps and ``clock`` may drift apart (a clock
+    on ``time.time``, sleeps on the monotonic clock): it sleeps again until the clock agrees."""
+    while (ahead_s := when.timestamp() - clock.now_s()) > 0:
+        await asyncio.sleep(max(clock.wall_seconds(ahead_s), _MIN_SLEEP_S))
     return clock.now_s() - when.timestamp()
 
 
