@@ -15,8 +15,8 @@ import pytest
 from impctl_sim import KronotermSimulator, SimConfig
 
 from impctl import vtime
-from impctl.clock import VirtualClock
 from impctl.cli import main
+from impctl.clock import VirtualClock
 from impctl.config import config_from_mapping
 from impctl.demo import DemoError
 from impctl.demo.campaign import _watch
