@@ -172,9 +172,7 @@ async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
             now = clock.now().astimezone(ZoneInfo(TZ))
             what = (f"night {running[-1].id} {running[-1].kind} {running[-1].setpoint_c:g} °C "
                     f"{running[-1].state}" if running else "between nights")
-            train = progress.train_state
-            if trainer is not None and trainer.poll() is not None:
-                train = "trained" if trainer.returncode == 0 else "training FAILED"
+            train = progress.trainer_done(trainer)
             progress.line(f"nights {where} ({len(nights)} run) | "
                           f"sim {now:%a %d %b %H:%M} T_air {sim.plant.t_air_c:.1f} °C, "
                           f"T_out {sim.plant.t_out_c:.1f} °C | {what} | classifiers: {train}")

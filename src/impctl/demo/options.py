@@ -104,10 +104,24 @@ def demo_weather(opts: DemoOptions):
 
 
 class Progress:
+    """The console's progress lines (wall seconds since the start) and the phases' wall times."""
+
     def __init__(self, echo: Callable[[str], None]):
         self.t0 = time.perf_counter()
         self.echo = echo
         self.train_state = "not started"
+        self.train_t0: float | None = None  # when the training subprocess started
+        self.timing_s: dict[str, float | None] = {"training": None}
+
+    def trainer_done(self, trainer) -> str:
+        """The training subprocess's state, its wall time once it has ended (first seen)."""
+        if trainer is None or trainer.poll() is None:
+            return self.train_state
+        if self.timing_s["training"] is None and self.train_t0 is not None:
+            self.timing_s["training"] = time.perf_counter() - self.train_t0
+        if trainer.returncode != 0:
+            return "training FAILED"
+        return f"trained in {self.timing_s['training']:.0f} s"
 
     def line(self, text: str) -> None:
         self.echo(f"[{time.perf_counter() - self.t0:6.1f} s] {text}")

@@ -80,6 +80,7 @@ def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):
     if why != "no loadable models":  # never used silently: say why they are replaced
         progress.line(f"classifiers: not reusing the models in {model_dir}: {why}")
     progress.train_state = "training"
+    progress.train_t0 = time.perf_counter()
     progress.line(f"classifiers: training on {opts.households} virtual households "
                   f"of the {opts.plant} plant (in a subprocess) → {model_dir}")
     log = open(opts.out / "train.log", "w")  # noqa: SIM115 - closed when the process ends
@@ -95,7 +96,7 @@ def _wait_training(trainer, opts: DemoOptions, progress: Progress, why: str) -> 
     progress.line(f"waiting for the classifier training to finish ({why})")
     if trainer.wait() != 0:
         raise DemoError(f"classifier training failed; see {opts.out / 'train.log'}")
-    progress.train_state = "trained"
+    progress.train_state = progress.trainer_done(trainer)
 
 
 def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
@@ -134,8 +135,11 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
         _wait_training(trainer, opts, progress, "the adaptive campaign's fits use them")
         trainer = None
     # Simulator and daemon on one virtual-time loop: the clock waits for both (see .campaign).
+    started = time.perf_counter()
     db_path = vtime.run(run_campaign(opts, house, progress, trainer, weather, realism))
+    progress.timing_s["campaign"] = time.perf_counter() - started
     _wait_training(trainer, opts, progress, "the fit uses them")
+    started = time.perf_counter()
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
     progress.line("exporting the valid nights" + ("" if opts.adaptive else
@@ -167,8 +171,12 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
 
     with Store(db_path) as store:
         demand = heat_demand_check(fitted_house(result), store, weather)
+    progress.timing_s["export_fit"] = time.perf_counter() - started
     summary = demo_summary(house, result, demand, wall_s=time.perf_counter() - progress.t0,
                            train_state=progress.train_state, plant=plant)
+    # Wall seconds of the phases: the campaign (simulator + daemon on virtual time), export
+    # and fit, the classifier training (in a subprocess, beside the campaign; None: cached).
+    summary["timing_s"] = dict(progress.timing_s)
     with Store(db_path) as store:
         summary.update(campaign_summary(store, opts))
     progress.line("writing the report")
