@@ -16,6 +16,9 @@ standing still) until it has finished and its result is back in the loop:
   (``asyncio.create_subprocess_exec``), until they have exited: a fit in a subprocess takes
   no simulated time (``wait_for_processes=False`` lets the clock run on instead).
 
+A job held so must not itself wait for the loop's time to pass (a thread blocking on a
+coroutine that sleeps would wait for ever): it may only wait for I/O the loop serves.
+
 Loopback TCP between two endpoints of the same loop (Modbus client and server) needs no hold:
 on Linux the data is in the peer's receive queue when ``send`` returns, so the poll sees it
 before any jump. Anything else the loop cannot see — a thread started by hand, another process
