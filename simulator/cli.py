@@ -66,7 +66,9 @@ NOISE_K = (0.0, 5.0)
               default="extended", show_default=True, help="Register set exposed.")
 @click.option("--speed", default=1.0, show_default=True, type=float,
               callback=bounded(SPEED, low_open=True),
-              help="Simulated seconds per wall-clock second.")
+              help="Simulated seconds per wall-clock second. Above 1 the simulation is "
+                   "load-sensitive: simulated time runs on while a process waits for the CPU "
+                   "(a dry run; `impctl demo` runs on virtual time instead).")
 @click.option("--epoch", help="Simulated start time, ISO 8601 with zone (default: now).")
 @click.option("--wall-epoch", type=float, callback=bounded(WALL_EPOCH_S, "s"),
               help="Wall-clock anchor, POSIX s (default: now).")

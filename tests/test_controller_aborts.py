@@ -1,6 +1,8 @@
 """Every abort condition restores the owner's settings at once — checked on the simulator.
 
-Real simulator over loopback Modbus TCP, real SQLite store, accelerated clock. Each test starts
+Real simulator over loopback Modbus TCP, real SQLite store, an accelerated clock on a
+virtual-time event loop (simulated time passes only when the controller and the simulator
+wait: the same nights on a loaded machine). Each test starts
 a night, waits until it is under way (the heat pump changed), provokes one abort condition and
 then checks that the night ended ``aborted`` (not valid, with the reason) and that the
 simulator's own setpoint and loop mode are the owner's again, with nothing left in the journal.
@@ -14,7 +16,8 @@ from datetime import timedelta
 import pytest
 from daemon_fixtures import HEAVY_HOUSE, OWNER_MODE, OWNER_SETPOINT_C, OWNER_SETPOINT_RAW
 from impctl_sim import SimConfig, constant_weather
-from sim_fixtures import EPOCH, budget, client, link_config, run, simulator, wait_for
+from reliability_fixtures import loop_wall, run_virtual
+from sim_fixtures import EPOCH, budget, client, link_config, simulator, wait_for
 
 from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
@@ -49,7 +52,7 @@ class Rig:
 def _rig(tmp_path, body, *, house=HEAVY_HOUSE, timeout_s=60.0, link=None, t_out_c=0.0,
          plant_kind="realistic", **policy):
     async def outer():
-        clock = VirtualClock(EPOCH, SPEED)
+        clock = VirtualClock(EPOCH, SPEED, wall=loop_wall())
         cfg = SimConfig(clock=clock, house=house, weather=constant_weather(t_out_c),
                         setpoint_c=OWNER_SETPOINT_C, plant_kind=plant_kind)
         pol = NightPolicy(**{"sample_interval_s": 120.0, "preheat_h": 0.5, **policy})
@@ -58,7 +61,7 @@ def _rig(tmp_path, body, *, house=HEAVY_HOUSE, timeout_s=60.0, link=None, t_out_
                 link=link_config(sim.port, **(link or {}))) as hp:
             with Store(tmp_path / "impctl.db") as store:
                 await body(Rig(sim, hp, store, clock, NightController(hp, store, clock, pol)))
-    run(outer(), timeout_s)
+    run_virtual(outer(), timeout_s)
 
 
 def _switched_off(rig: Rig):

@@ -12,7 +12,8 @@ from datetime import timedelta
 
 from daemon_fixtures import HEAVY_HOUSE, OWNER_SETPOINT_C
 from impctl_sim import SimConfig, constant_weather
-from sim_fixtures import EPOCH, budget, client, run, simulator
+from reliability_fixtures import loop_wall, run_virtual
+from sim_fixtures import EPOCH, budget, client, simulator
 
 from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
@@ -21,7 +22,7 @@ from impctl.store import Store
 
 
 async def _night(tmp_path, setpoint_c: float):
-    clock = VirtualClock(EPOCH, 7200.0)
+    clock = VirtualClock(EPOCH, 7200.0, wall=loop_wall())  # on the virtual-time loop
     cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                     setpoint_c=OWNER_SETPOINT_C)
     policy = NightPolicy(sample_interval_s=300.0, preheat_h=1.0)
@@ -37,7 +38,7 @@ async def _night(tmp_path, setpoint_c: float):
 
 
 def test_normal_night_above_owner_setpoint_is_not_aborted(tmp_path):
-    night, pending, setpoint = run(_night(tmp_path, 24.0), timeout_s=60)
+    night, pending, setpoint = run_virtual(_night(tmp_path, 24.0), timeout_s=60)
     assert OWNER_SETPOINT_C < 24.0 - 2.0 - 0.5  # the old rule would have aborted at once
     assert night.state == "done", night.reasons
     assert night.reasons[0] == "window ended"

@@ -3,8 +3,8 @@
 In-process :class:`~impctl.daemon.service.Daemon` (its cron rule evaluated and waited for on
 the accelerated clock) and an in-process simulator on loopback Modbus TCP, real SQLite files,
 all on one virtual-time event loop (the accelerated clock follows the loop's time): however
-loaded the machine, a night starts at its preheat time and gets every sample; only the fit
-subprocesses take real time (meanwhile simulated days pass, as they would on a gateway). A
+loaded the machine, a night starts at its preheat time and gets every sample, and the fit
+subprocesses take no simulated time (the loop's clock waits for them). A
 watcher samples the simulated heat pump all the time: whenever no night is running, the
 owner's setpoint and mode must be on the heat pump.
 
@@ -43,10 +43,6 @@ TZ = ZoneInfo("Europe/Ljubljana")
 #: (≈ 35 s at 10800×; 53 s at 7200×). Samples every 5 simulated minutes = 36 per second.
 SPEED = 10800.0
 FINAL = ("done", "aborted", "refused", "interrupted")
-#: At most this many seconds of the virtual-time loop per real second: while a fit subprocess
-#: runs, the test's loop waits in real time (leaving it the CPU) rather than spinning through
-#: virtual time; the nights themselves run slower than that (~3 loop s per real s).
-MAX_RATE = 50.0
 #: Real time for a campaign with fits: the nights take ~15 s, each fit (export + fit, ~4 s of
 #: CPU) ~5 s on an idle machine, ~10–20 s on 2 cores saturated by other processes. A guard
 #: against a hang, not a deadline the product must meet.
@@ -158,7 +154,7 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path, monkeypatch):
         tmp_path, epoch, SPEED,
         {"mode": "fixed", "constrained_nights": 2, "constrained_setpoint_c": 21.0,
          "normal_setpoints_c": [21.0, 22.0, 23.0], "fit_when_complete": True},
-        until=until, timeout_s=FITS_TIMEOUT_S), max_rate=MAX_RATE)
+        until=until, timeout_s=FITS_TIMEOUT_S))
     with Store(result["cfg"].db_path) as store:
         fit = store.last_fit()
         fit_events = [m for _, _, m in store.events(50) if m.startswith("fit")][::-1]
@@ -224,7 +220,7 @@ def test_campaign_across_the_start_of_summer_time(tmp_path):
     result = run_virtual(_campaign(
         tmp_path, epoch, SPEED,
         {"mode": "fixed", "constrained_nights": 0, "normal_setpoints_c": [21.0, 22.0]},
-        until=until, timeout_s=60), max_rate=MAX_RATE)
+        until=until, timeout_s=60))
     with Store(result["cfg"].db_path) as store:
         nights = store.nights()
         last = [store.samples(n.id)[-1].ts for n in nights]

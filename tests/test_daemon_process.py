@@ -1,7 +1,10 @@
 """``impctl daemon`` as a real subprocess against an ``impctl-sim`` subprocess.
 
-The two processes share the accelerated clock: the simulator writes its clock spec to
-``--clock-file`` and the daemon's ``[clock]`` section is built from it. Signals are real
+The two processes share the accelerated wall clock: the simulator writes its clock spec to
+``--clock-file`` and the daemon's ``[clock]`` section is built from it. That clock is
+load-sensitive (simulated time runs on while a process waits for the CPU), so these tests keep
+their simulated spans short, their polls far apart in wall time, and wait on observable state
+(the heat pump's registers, the store) with generous guards, never on the clock. Signals are real
 (SIGTERM, SIGKILL), the store is a real SQLite file, and the heat pump's state is read straight
 from the simulator with a plain pymodbus client.
 """
@@ -37,6 +40,12 @@ TZ = ZoneInfo("Europe/Ljubljana")
 #: 3600×: a 7 h window lasts 7 s, time enough to signal the daemon mid-night even on a
 #: loaded machine (the waits poll the heat pump's state, they assert no timing).
 SPEED = 3600.0
+#: A night whose validity is asserted: 1800×, one 600 s poll per 0.33 s of wall time, which
+#: even 2 cores saturated by other processes leave it (a poll takes 20–70 ms then).
+VALID_NIGHT_SPEED = 1800.0
+#: Guard [s of wall time] for a wait on the daemon: generous, not a deadline it must meet (a
+#: daemon that misses its first preheat runs the night a simulated day, 24 s, later).
+GUARD_S = 120.0
 #: 18:30 local: the first night's preheat (21:00) is 2.5 s away (if the daemon were not up
 #: by then, the night would simply run a day later).
 EPOCH = datetime(2026, 1, 12, 18, 30, tzinfo=TZ)
@@ -47,9 +56,10 @@ OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)
 
 @contextlib.contextmanager
 def rig(tmp_path: Path, *, campaign: dict | None = None, night: dict | None = None,
-        epoch: datetime = EPOCH) -> Iterator[tuple[SimProcess, Path, Path]]:
+        epoch: datetime = EPOCH, speed: float = SPEED
+        ) -> Iterator[tuple[SimProcess, Path, Path]]:
     """A simulator subprocess and a daemon config for it: (sim, config path, db path)."""
-    with sim_process(tmp_path, epoch, SPEED) as sim:
+    with sim_process(tmp_path, epoch, speed) as sim:
         mapping = daemon_mapping(
             tmp_path / "state", sim.port, sim.clock,
             night={"window": "22:00-05:00", "preheat_h": 1.0, **(night or {})},
@@ -60,7 +70,7 @@ def rig(tmp_path: Path, *, campaign: dict | None = None, night: dict | None = No
 
 def _daemon(config: Path, db: Path, log: Path) -> DaemonProcess:
     d = start_daemon(config, db, log)
-    wait_until(lambda: "next night job at" in d.output(), 30, "the daemon to be ready",
+    wait_until(lambda: "next night job at" in d.output(), GUARD_S, "the daemon to be ready",
                proc=d.proc)
     return d
 
@@ -84,7 +94,7 @@ def test_sigterm_mid_night_restores_before_exit(tmp_path):
     with rig(tmp_path, campaign=ONE_CONSTRAINED) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
-            wait_until(_switched_off_with_samples(sim, db), 40, "the night to switch off",
+            wait_until(_switched_off_with_samples(sim, db), GUARD_S, "the night to switch off",
                        proc=d.proc)
             assert owner_state(sim.port) == (225, 0)  # T_max held, then loop 1 off
             d.proc.send_signal(signal.SIGTERM)
@@ -107,7 +117,8 @@ def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):
     with rig(tmp_path, campaign=ONE_CONSTRAINED) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
-            wait_until(_switched_off_with_samples(sim, db, 5), 40, "the night to switch off",
+            wait_until(_switched_off_with_samples(sim, db, 5), GUARD_S,
+                       "the night to switch off",
                        proc=d.proc)
             before = {s.ts for s in store_query(db, lambda st: st.samples(1))}
             d.proc.kill()
@@ -127,7 +138,8 @@ def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):
         # Restart: the orphan sweep marks the night interrupted and restores at once.
         d2 = _daemon(config, db, tmp_path / "daemon2.log")
         try:
-            wait_until(lambda: owner_state(sim.port) == OWNER, 30, "the restore", proc=d2.proc)
+            wait_until(lambda: owner_state(sim.port) == OWNER, GUARD_S, "the restore",
+                       proc=d2.proc)
             night = store_query(db, lambda s: s.night(1))
             assert night.state == "interrupted" and night.valid is False
             assert night.reasons == ("interrupted: impctl stopped during the night",)
@@ -144,10 +156,12 @@ def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):
 def test_trigger_now_then_status_nights_export_restore(tmp_path):
     from impctl.imp import read_nights
 
-    # One poll per 600 s: 167 ms of wall time at 3600×, which 12 reads from the simulator
-    # subprocess fit even on a loaded machine (120 s left 33 ms: coverage fell to 42 %).
-    with rig(tmp_path, night={"preheat_h": 0.5, "sample_interval_s": 600},
-             epoch=MORNING) as (sim, config, db):
+    # One poll per 600 s: 333 ms of wall time at 1800×, which 12 reads from the simulator
+    # subprocess fit even on a loaded machine (120 s at 3600× left 33 ms: coverage fell to
+    # 42 %); a 3.5 h window (a normal night's shortest valid one) keeps it to 8 s of wall time.
+    with rig(tmp_path, night={"preheat_h": 0.5, "sample_interval_s": 600,
+                              "window": "22:00-01:30"},
+             epoch=MORNING, speed=VALID_NIGHT_SPEED) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
             # --force: the daemon's start may take the simulated clock past 05:00 already.
@@ -156,14 +170,14 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             assert queued.returncode == 0, queued.stderr
             assert queued.stdout.startswith("queued request 1: normal night at 22 °C (now)")
             # The running daemon takes it up: the heat pump goes to 22 °C.
-            wait_until(lambda: owner_state(sim.port)[0] == 220, 20, "the triggered night",
+            wait_until(lambda: owner_state(sim.port)[0] == 220, GUARD_S, "the triggered night",
                        proc=d.proc)
             live = run_cli("status", "--config", str(config))
             assert live.returncode == 0, live.stderr
             assert "night:     1 normal T_set 22 °C, active" in live.stdout
             # issue 15: the generation and where it comes from (set in this config)
             assert "generation: extended (configured)" in live.stdout
-            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, 30,
+            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, GUARD_S,
                        "the night to finish and be assessed", proc=d.proc)
             assert owner_state(sim.port) == OWNER
             night = store_query(db, lambda s: s.night(1))
@@ -214,7 +228,7 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             # Simulated daytime by now: a --now night then needs --force.
             run_cli("trigger", "--kind", "constrained", "--now", "--force", "--config",
                     str(config))
-            wait_until(lambda: owner_state(sim.port) == (225, 0), 20,
+            wait_until(lambda: owner_state(sim.port) == (225, 0), GUARD_S,
                        "the constrained night to switch off", proc=d.proc)
             d.proc.kill()
             d.proc.wait(10)

@@ -3,7 +3,8 @@
 Exactly what the issue tried: switching heating back on (2042 → 1), changing the room setpoint
 (2187), or running ``impctl restore`` while the night runs. Each over real loopback Modbus TCP
 from a second, independent client (a thermostat app, the owner's own tool) against the real
-simulator, with a real SQLite store. The night must end at the next sample, keep the owner's
+simulator, with a real SQLite store, on a virtual-time event loop (simulated time passes only
+when the controller and the simulator wait). The night must end at the next sample, keep the owner's
 new value (not overwrite it with the restore), restore what the owner did not touch, be stored
 as not valid, and say why in one log line.
 """
@@ -25,6 +26,7 @@ from daemon_fixtures import (
     write_config,
 )
 from impctl_sim import SimConfig, constant_weather
+from reliability_fixtures import loop_wall, run_virtual
 from sim_fixtures import EPOCH, budget, client, simulator, wait_for
 
 from impctl.clock import VirtualClock
@@ -48,7 +50,7 @@ def modbus_write(port: int, ma: int, word: int, unit: int = 20) -> None:
 
 
 async def _night_with_owner(tmp_path, kind: str, setpoint_c: float, owner_action):
-    clock = VirtualClock(EPOCH, SPEED)
+    clock = VirtualClock(EPOCH, SPEED, wall=loop_wall())  # on the virtual-time loop
     cfg = SimConfig(clock=clock, house=HEAVY_HOUSE, weather=constant_weather(0.0),
                     setpoint_c=OWNER_SETPOINT_C)
     state = tmp_path / "state"
@@ -97,7 +99,7 @@ async def _impctl_restore(sim, state, clock):
 def test_owner_change_mid_night_ends_it_and_is_respected(tmp_path, caplog, kind, setpoint_c,
                                                          action, expected, changed):
     caplog.set_level(logging.INFO)
-    r = asyncio.run(asyncio.wait_for(_night_with_owner(tmp_path, kind, setpoint_c, action), 90))
+    r = run_virtual(_night_with_owner(tmp_path, kind, setpoint_c, action), 90)
     night = r["night"]
     # The night ended at the next sample, not at the window's end, and is not valid data.
     assert night.state == "aborted" and night.valid is False, night
@@ -120,8 +122,7 @@ def test_owner_change_mid_night_ends_it_and_is_respected(tmp_path, caplog, kind,
 
 def test_owner_value_kept_in_the_journal_record(tmp_path):
     """The journal entry of the changed register is closed as the owner's, not restored."""
-    r = asyncio.run(asyncio.wait_for(
-        _night_with_owner(tmp_path, "constrained", 21.0, _switch_heating_on), 90))
+    r = run_virtual(_night_with_owner(tmp_path, "constrained", 21.0, _switch_heating_on), 90)
     with Store(tmp_path / "state" / "impctl.db") as store:
         rows = store._db.execute("SELECT register, outcome FROM journal ORDER BY id").fetchall()
     assert dict(rows) == {"loop1_setpoint": "restored",

@@ -1,15 +1,15 @@
 """Soak: scheduled nights one after another at high speed — memory flat, no file-descriptor
 growth, the scheduler keeps its timing.
 
-Real processes: ``impctl daemon`` exactly as systemd starts it, with a campaign, against an
-``impctl-sim`` subprocess on the shared clock at 43 200× (a simulated day in 2 s). CI runs 6
-nights; ``bench/soak.py`` runs 30 and prints the table. Measured from outside the process
-(/proc/PID/status, /proc/PID/fd) after each night, once it is assessed and restored.
+The daemon (the :class:`~impctl.daemon.service.Daemon` of ``impctl daemon``, with its logging)
+with a campaign and the simulator, in one process of their own on a virtual-time event loop at
+43 200× (a simulated day in 2 s of the loop's time): simulated time passes only when both wait,
+so the run is the same on an idle and on a saturated machine. CI runs 6 nights;
+``bench/soak.py`` runs 30 and prints the table. After each night, once it is assessed and
+restored, the process records its VmRSS, open file descriptors and CPU time from /proc.
 
-"Keeps its timing" is checked on what matters at any speed: one night per simulated day, each
-at its configured local window (22:00, across the days), each started inside its own preheat
-(within the 2 h before the window; the lateness in simulated minutes is wall-clock latency ×
-43 200 and is printed, not asserted tightly).
+"Keeps its timing": one night per simulated day, each at its configured local window (22:00,
+across the days), each started inside its own preheat (within the 2 h before the window).
 """
 
 from __future__ import annotations

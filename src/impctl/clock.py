@@ -9,11 +9,18 @@ Simulated time is defined from three numbers only::
 :meth:`VirtualClock.spec`) compute the same simulated time, to the precision of their system
 clocks. With ``factor = 1`` and ``epoch = wall_epoch`` it is the real time.
 
+On the wall clock an accelerated clock is load-sensitive: simulated time runs on while a
+process waits for the CPU, so a busy machine (or a slow gateway) makes a simulated night miss
+samples. That mode is for a dry run on a field gateway (``[clock] speed``). A simulation that
+must not depend on the machine uses :meth:`VirtualClock.on_loop` on a
+:class:`~impctl.vtime.VirtualTimeLoop`, whose time advances only when everyone waits.
+
 This module imports nothing from the simulator or the model so the daemon can use it.
 """
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Callable
 from datetime import UTC, datetime
@@ -50,6 +57,7 @@ class VirtualClock:
         if epoch is not None and epoch.tzinfo is None:
             raise InputError("clock epoch must carry a time zone", place="clock")
         self._wall = wall
+        self.on_loop_time = False  # True: wall is an event loop's time (see on_loop)
         self.factor = float(factor)
         self.wall_epoch_s = float(wall() if wall_epoch_s is None else wall_epoch_s)
         self.epoch_s = self.wall_epoch_s if epoch is None else epoch.timestamp()
@@ -58,6 +66,23 @@ class VirtualClock:
     def real(cls) -> VirtualClock:
         """The real wall clock (factor 1, simulated time = wall time)."""
         return cls(None, 1.0, 0.0)
+
+    @classmethod
+    def on_loop(cls, epoch: datetime, factor: float = 1.0,
+                loop: asyncio.AbstractEventLoop | None = None) -> VirtualClock:
+        """Simulated time on an event loop's clock (default: the running loop's)::
+
+            sim_time = epoch + (loop.time() − loop.time() now) × factor
+
+        On a :class:`~impctl.vtime.VirtualTimeLoop` it advances only when every task of the
+        loop waits, so the simulation does not depend on the machine's load; ``factor`` then
+        scales the loop's own pauses (timeouts, retry delays, poll intervals) into simulated
+        time. Such a clock lives in its process: it has no :meth:`spec`.
+        """
+        loop = loop or asyncio.get_running_loop()
+        clock = cls(epoch, factor, loop.time(), wall=loop.time)
+        clock.on_loop_time = True
+        return clock
 
     @property
     def epoch(self) -> datetime:
@@ -81,7 +106,15 @@ class VirtualClock:
         return wall_s * self.factor
 
     def spec(self) -> str:
-        """A one-line description another process can pass to :meth:`from_spec`."""
+        """A one-line description another process can pass to :meth:`from_spec`.
+
+        Raises
+        ------
+        ValueError
+            For a clock on an event loop's time (:meth:`on_loop`): no other process shares it.
+        """
+        if self.on_loop_time:
+            raise ValueError("a clock on an event loop's time cannot be shared with a process")
         return (f"epoch={self.epoch.isoformat()},factor={self.factor!r},"
                 f"wall_epoch={self.wall_epoch_s!r}")
 
@@ -113,4 +146,7 @@ class VirtualClock:
         return cls(epoch, factor, wall_epoch, wall=wall)
 
     def __repr__(self) -> str:
+        if self.on_loop_time:
+            return (f"VirtualClock(epoch={self.epoch.isoformat()},factor={self.factor!r},"
+                    f"on the event loop's time)")
         return f"VirtualClock({self.spec()})"

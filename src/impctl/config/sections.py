@@ -99,7 +99,12 @@ class FitConfig:
 
 @dataclass(frozen=True)
 class ClockConfig:
-    """Simulated time for the demo and tests: ``speed`` × real time from ``epoch``."""
+    """Simulated time for a dry run: ``speed`` × real time from ``epoch``.
+
+    Load-sensitive: simulated time runs on while the daemon waits for the CPU, so on a busy
+    or slow gateway a night may start late or miss samples. The demo and the tests run on a
+    virtual-time event loop instead (:mod:`impctl.vtime`), where it cannot.
+    """
 
     epoch: str = ""                      # ISO 8601 instant; empty = real time
     speed: float = 1.0

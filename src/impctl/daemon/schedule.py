@@ -68,12 +68,18 @@ def window_after_act(act: datetime, cfg: Config) -> tuple[datetime, datetime]:
     return window_for(local.date(), cfg)
 
 
+#: Shortest sleep of :func:`sleep_until` [s of the loop's time]: a clock on the event loop's
+#: own (virtual) time wakes on time up to float rounding, and a sleep shorter than the
+#: rounding would not move it, for ever.
+_MIN_SLEEP_S = 1e-6
+
+
 async def sleep_until(clock: VirtualClock, when: datetime) -> float:
     """Sleep on the running event loop until ``clock`` shows ``when``; returns how late it
-    woke [simulated s]. The loop's sleeps and ``clock`` may drift apart (a clock on
-    ``time.time``, sleeps on the monotonic clock): it sleeps again until the clock agrees."""
+    woke [simulated s], never early. The loop's sleeps and ``clock`` may drift apart (a clock
+    on ``time.time``, sleeps on the monotonic clock): it sleeps again until the clock agrees."""
     while (ahead_s := when.timestamp() - clock.now_s()) > 0:
-        await asyncio.sleep(clock.wall_seconds(ahead_s))
+        await asyncio.sleep(max(clock.wall_seconds(ahead_s), _MIN_SLEEP_S))
     return clock.now_s() - when.timestamp()
 
 
@@ -83,8 +89,13 @@ async def accelerated_nights(cfg: Config, clock: VirtualClock,
     ``night_job(act)`` at each preheat start, until cancelled. Not an APScheduler job:
     APScheduler times jobs on the wall clock, which a late or virtual-time event loop lets
     drift from the simulated one (a night starts hours late or never). A night more than
-    ``misfire_grace_s`` (at least 1 s of wall time) late is skipped with a warning, as
-    APScheduler would."""
+    ``misfire_grace_s`` (at least 1 s of the loop's time) late is skipped with a warning, as
+    APScheduler would.
+
+    On an accelerated wall clock (``[clock] speed``, a dry run on a field gateway) the nights
+    are load-sensitive: while the process waits for the CPU simulated time runs on, so a busy
+    machine makes a night start late or miss samples. On a clock on a virtual-time loop
+    (:meth:`VirtualClock.on_loop`, the demo and the tests) it wakes exactly on time."""
     grace_wall_s = max(1, int(cfg.campaign.misfire_grace_s / clock.factor))
     while True:
         act = next_act_time(cfg, clock.now() + timedelta(seconds=1))

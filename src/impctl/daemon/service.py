@@ -41,7 +41,9 @@ _INTERRUPTED = ("planned", "preparing", "active", "restoring")
 
 
 def clock_from_config(cfg: Config) -> VirtualClock:
-    """Real time, or the accelerated clock shared with the simulator (``[clock]``)."""
+    """Real time, or the accelerated wall clock shared with a simulator process (``[clock]``,
+    a dry run on a field gateway; load-sensitive: simulated time runs on while the daemon
+    waits for the CPU)."""
     if not cfg.clock.epoch:
         return VirtualClock.real()
     epoch = datetime.fromisoformat(cfg.clock.epoch)

@@ -1,12 +1,16 @@
 """The demo's IMP campaign: the simulator serves the house, the daemon runs the nights against it
-on the accelerated clock until the campaign has its valid nights; then what the campaign did."""
+until the campaign has its valid nights; then what the campaign did.
+
+Both run in one process on a virtual-time event loop (:mod:`impctl.vtime`): the clock they
+share advances only when both wait, and stands still while the daemon's fit subprocesses run,
+so a campaign's nights and numbers depend on the seed, not on how busy the machine is."""
 
 from __future__ import annotations
 
 import asyncio
 import math
 import time
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -15,32 +19,47 @@ from ..config import config_from_mapping
 from ..imp.protocol import DEFAULT_BAND_K, DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from ..model import HouseParameters
 from ..store import Store
-from .options import FIT_WAIT_S, TZ, DemoOptions, Progress, fit_night_gain_w, plant_summary
+from .options import (
+    FIT_WAIT_S,
+    TZ,
+    DemoError,
+    DemoOptions,
+    Progress,
+    fit_night_gain_w,
+    plant_summary,
+)
 
 
 async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Progress,
                        trainer, weather, realism) -> Path:
-    """Simulator + daemon until the campaign has its valid nights; returns the db path."""
+    """Simulator + daemon until the campaign has its valid nights; returns the db path. Run
+    it on a :class:`~impctl.vtime.VirtualTimeLoop` (:func:`impctl.vtime.run`).
+
+    Raises
+    ------
+    DemoError
+        The campaign stopped, or the heat pump was not restored: why, in one line.
+    """
     from impctl_sim import KronotermSimulator, SimConfig
 
     from ..daemon.service import Daemon
 
     epoch = datetime.fromisoformat(opts.start).replace(tzinfo=ZoneInfo(TZ))
-    clock = VirtualClock(epoch, opts.speed)
+    clock = VirtualClock.on_loop(epoch, opts.speed)
     state = opts.out / "state"
     state.mkdir(parents=True, exist_ok=True)
     n_norm = opts.normal_nights
     setpoints = list(DEFAULT_SETPOINTS_C)  # the gateway's normal nights; the day is 21 °C
     per_sp = max(1, -(-n_norm // len(setpoints)))
     realistic = opts.plant == "realistic"
-    # The realistic plant costs more per step: 2-min steps keep it (and the daemon sharing its
-    # event loop) well ahead of the clock.
+    # The realistic plant costs more per step (≈ 0.3 ms): 2-min steps.
     simcfg = SimConfig(house=house, clock=clock, setpoint_c=21.0, weather=weather,
                        plant_kind=opts.plant, realism=realism, timezone=TZ,
                        step_s=120.0 if realistic else None)
     async with KronotermSimulator(simcfg) as sim:
         progress.line(f"simulator: demo house on Modbus TCP 127.0.0.1:{sim.port}, "
-                      f"clock ×{opts.speed:g} from {epoch:%Y-%m-%d %H:%M %Z}; plant "
+                      f"clock ×{opts.speed:g} on virtual time (advancing only when the "
+                      f"daemon and the simulator wait) from {epoch:%Y-%m-%d %H:%M %Z}; plant "
                       f"{plant_summary(opts, realism)['kind']}")
         cfg = config_from_mapping({
             "state_dir": str(state), "timezone": TZ, "log_level": "warning",
@@ -54,8 +73,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             "night": {"sample_interval_s": opts.sample_interval_s, "t_out_max_c": 12.0,
                       "comfort_band_k": max(DEFAULT_BAND_K, 2.0)},
             "campaign": _campaign_section(opts, setpoints, per_sp),
-            "clock": {"epoch": epoch.isoformat(), "speed": opts.speed,
-                      "wall_epoch_s": clock.wall_epoch_s},
+            "clock": {"epoch": epoch.isoformat(), "speed": opts.speed},
             "fit": {"night_gain_w": fit_night_gain_w(opts)},
         }, "demo config")
         daemon = Daemon(cfg, clock=clock)
@@ -64,12 +82,14 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             await _watch(cfg, clock, sim, progress, trainer, task)
         finally:
             daemon.stop.set()
-            await task
+            await asyncio.gather(task, return_exceptions=True)
+        if not task.cancelled() and task.exception() is not None:
+            raise DemoError(f"the daemon stopped: {task.exception()!r} (see demo.log)")
         with Store(cfg.db_path) as store:
             left = store.journal_pending()
         if left:
-            raise RuntimeError("demo: the heat pump was not restored: " +
-                               ", ".join(e.register for e in left))
+            raise DemoError("the heat pump was not restored: " +
+                            ", ".join(e.register for e in left))
         progress.line(f"campaign done; simulator loop-1 setpoint back at "
                       f"{sim.plant.setpoint_c:.1f} °C, mode {sim.plant.loop_mode}")
         return cfg.db_path
@@ -114,6 +134,8 @@ def _campaign_done(store: Store, adaptive: bool) -> tuple[bool, int, str]:
 
 
 async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
+    """Until the campaign is done: progress every 3 s of wall time, one line per night that
+    ends invalid (why), and the stop of a campaign that cannot finish (:class:`DemoError`)."""
     from ..daemon.schedule import campaign_plan, gave_up
 
     last = 0.0
@@ -121,21 +143,28 @@ async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
     # Adaptive: the policy stops at max_nights (refused nights do not count; a margin for them).
     limit = cfg.campaign.max_nights + 6 if adaptive else 3 * len(campaign_plan(cfg)) + 6
     stopped_at = None
+    told: set[int] = set()
     while not task.done():
-        await asyncio.sleep(0.5)
+        await asyncio.sleep(0.5)  # the loop's time: 0.5 × speed simulated seconds
         with Store(cfg.db_path) as store:
             finished, _, where = _campaign_done(store, adaptive)
             nights = store.nights()
+            stopped = None if adaptive else gave_up(store, cfg)
+        for n in nights:
+            if n.valid is False and n.id not in told:
+                told.add(n.id)
+                verdict = "refused" if n.state == "refused" else "not valid"
+                progress.line(f"night {n.id} ({n.kind}, {n.setpoint_c:g} °C) {verdict}: "
+                              + ("; ".join(n.reasons) or "no reason recorded"))
         if finished:
             return
-        if not adaptive:
-            with Store(cfg.db_path) as store:
-                stopped = gave_up(store, cfg)
-            if stopped is not None:
-                raise RuntimeError(f"demo: {stopped}")
+        if stopped is not None:
+            raise DemoError(stopped)
         if where.endswith("stopped"):
-            stopped_at = stopped_at or time.perf_counter()
-            if time.perf_counter() - stopped_at > FIT_WAIT_S:
+            # The daemon's fits take no simulated time (the clock waits for them): a stop
+            # without the fit of every valid night after a simulated day means it failed.
+            stopped_at = stopped_at or clock.now()
+            if clock.now() - stopped_at > timedelta(seconds=FIT_WAIT_S):
                 return  # the last fit failed (logged in demo.log): what there is, is shown
         if time.perf_counter() - last >= 3.0:
             last = time.perf_counter()
@@ -143,15 +172,13 @@ async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
             now = clock.now().astimezone(ZoneInfo(TZ))
             what = (f"night {running[-1].id} {running[-1].kind} {running[-1].setpoint_c:g} °C "
                     f"{running[-1].state}" if running else "between nights")
-            train = progress.train_state
-            if trainer is not None and trainer.poll() is not None:
-                train = "trained" if trainer.returncode == 0 else "training FAILED"
+            train = progress.trainer_done(trainer)
             progress.line(f"nights {where} ({len(nights)} run) | "
                           f"sim {now:%a %d %b %H:%M} T_air {sim.plant.t_air_c:.1f} °C, "
                           f"T_out {sim.plant.t_out_c:.1f} °C | {what} | classifiers: {train}")
         if len(nights) > limit:
-            raise RuntimeError("demo: too many invalid nights; see `impctl nights`")
-    task.result()
+            raise DemoError(f"{len(nights)} nights run and the campaign is not done "
+                            f"({where}); see `impctl nights --db {cfg.db_path}`")
 
 
 def _finite(x: float) -> float | None:

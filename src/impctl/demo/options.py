@@ -11,11 +11,18 @@ from ..imp.gain import NIGHT_GAIN_W
 from ..model import HouseParameters
 
 TZ = "Europe/Ljubljana"
-#: Default clock speed per plant: the realistic plant's steps cost ~0.3 ms (vs µs), and the
-#: daemon shares the simulator's event loop, so it runs at half the ideal plant's speed.
+#: Default clock speed per plant [simulated s per second of the loop's virtual time]: it
+#: scales the daemon's real-time pauses (Modbus timeouts, retry delays, poll intervals) into
+#: simulated time; the demo's wall time does not depend on it.
 DEFAULT_SPEED = {"realistic": 10000.0, "iso": 20000.0}
-#: How long the adaptive demo waits after the stop for the daemon's last fit [s].
-FIT_WAIT_S = 180.0
+#: How long the adaptive demo waits after the stop for the daemon's last fit [simulated s]:
+#: the fits take none (the clock waits for them), so only a failed fit runs into it.
+FIT_WAIT_S = 86400.0
+
+
+class DemoError(RuntimeError):
+    """The demo could not finish; the message says why in one line (``impctl demo`` prints
+    it and exits with status 1)."""
 
 
 @dataclass(frozen=True)
@@ -97,10 +104,24 @@ def demo_weather(opts: DemoOptions):
 
 
 class Progress:
+    """The console's progress lines (wall seconds since the start) and the phases' wall times."""
+
     def __init__(self, echo: Callable[[str], None]):
         self.t0 = time.perf_counter()
         self.echo = echo
         self.train_state = "not started"
+        self.train_t0: float | None = None  # when the training subprocess started
+        self.timing_s: dict[str, float | None] = {"training": None}
+
+    def trainer_done(self, trainer) -> str:
+        """The training subprocess's state, its wall time once it has ended (first seen)."""
+        if trainer is None or trainer.poll() is None:
+            return self.train_state
+        if self.timing_s["training"] is None and self.train_t0 is not None:
+            self.timing_s["training"] = time.perf_counter() - self.train_t0
+        if trainer.returncode != 0:
+            return "training FAILED"
+        return f"trained in {self.timing_s['training']:.0f} s"
 
     def line(self, text: str) -> None:
         self.echo(f"[{time.perf_counter() - self.t0:6.1f} s] {text}")

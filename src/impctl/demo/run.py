@@ -3,7 +3,6 @@ and fit, the report and the summary."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import logging
 import os
@@ -14,11 +13,13 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+from .. import vtime
 from ..errors import InputError
 from ..store import Store
 from .campaign import campaign_summary, run_campaign
 from .options import (
     DEFAULT_SPEED,
+    DemoError,
     DemoOptions,
     Progress,
     demo_weather,
@@ -26,6 +27,11 @@ from .options import (
     house_and_realism,
     plant_summary,
 )
+
+
+def _last_line(text: str) -> str:
+    lines = text.strip().splitlines()
+    return lines[-1] if lines else "no message"
 
 
 def _cmd(*args: str) -> list[str]:
@@ -74,6 +80,7 @@ def _start_training(opts: DemoOptions, model_dir: Path, progress: Progress):
     if why != "no loadable models":  # never used silently: say why they are replaced
         progress.line(f"classifiers: not reusing the models in {model_dir}: {why}")
     progress.train_state = "training"
+    progress.train_t0 = time.perf_counter()
     progress.line(f"classifiers: training on {opts.households} virtual households "
                   f"of the {opts.plant} plant (in a subprocess) → {model_dir}")
     log = open(opts.out / "train.log", "w")  # noqa: SIM115 - closed when the process ends
@@ -88,8 +95,8 @@ def _wait_training(trainer, opts: DemoOptions, progress: Progress, why: str) -> 
         return
     progress.line(f"waiting for the classifier training to finish ({why})")
     if trainer.wait() != 0:
-        raise RuntimeError(f"training failed; see {opts.out / 'train.log'}")
-    progress.train_state = "trained"
+        raise DemoError(f"classifier training failed; see {opts.out / 'train.log'}")
+    progress.train_state = progress.trainer_done(trainer)
 
 
 def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
@@ -127,20 +134,25 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
         opts = replace(opts, model_dir=model_dir)
         _wait_training(trainer, opts, progress, "the adaptive campaign's fits use them")
         trainer = None
-    db_path = asyncio.run(run_campaign(opts, house, progress, trainer, weather, realism))
+    # Simulator and daemon on one virtual-time loop: the clock waits for both (see .campaign).
+    started = time.perf_counter()
+    db_path = vtime.run(run_campaign(opts, house, progress, trainer, weather, realism))
+    progress.timing_s["campaign"] = time.perf_counter() - started
     _wait_training(trainer, opts, progress, "the fit uses them")
+    started = time.perf_counter()
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
     progress.line("exporting the valid nights" + ("" if opts.adaptive else
                                                   " and fitting (impctl fit)"))
-    subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
-                        "--force"), check=True,
-                   capture_output=True)
+    export = subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
+                                 "--force"), capture_output=True, text=True)
+    if export.returncode != 0:
+        raise DemoError("impctl export failed: " + _last_line(export.stderr))
     if opts.adaptive:  # the daemon's last fit, on every valid night, is the result
         with Store(db_path) as store:
             last, decision = store.last_fit(), store.decisions(1)
         if last is None:
-            raise RuntimeError("demo: the adaptive campaign ended without a fit: "
+            raise DemoError("the adaptive campaign ended without a fit: "
                                + (decision[0].reason if decision else "no decision")
                                + " (see demo.log)")
         result = last[2]
@@ -150,7 +162,7 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
                                   "--model-dir", str(model_dir), "--night-gain-w",
                                   repr(fit_night_gain_w(opts))), capture_output=True, text=True)
         if fit.returncode != 0:
-            raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
+            raise DemoError("impctl fit failed: " + _last_line(fit.stderr))
         result = json.loads(fit_json.read_text())
         with Store(db_path) as store:
             store.add_fit([n.id for n in store.nights(valid=True)], result)
@@ -159,8 +171,12 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
 
     with Store(db_path) as store:
         demand = heat_demand_check(fitted_house(result), store, weather)
+    progress.timing_s["export_fit"] = time.perf_counter() - started
     summary = demo_summary(house, result, demand, wall_s=time.perf_counter() - progress.t0,
                            train_state=progress.train_state, plant=plant)
+    # Wall seconds of the phases: the campaign (simulator + daemon on virtual time), export
+    # and fit, the classifier training (in a subprocess, beside the campaign; None: cached).
+    summary["timing_s"] = dict(progress.timing_s)
     with Store(db_path) as store:
         summary.update(campaign_summary(store, opts))
     progress.line("writing the report")

@@ -35,8 +35,11 @@ def _nights(text: str) -> tuple[int, int]:
 @click.option("--target", default="0.05,0.08", show_default=True,
               help="--adaptive: HLC,τ 95 % interval half-widths relative to the estimates.")
 @click.option("--speed", type=float, default=None,
-              help="Simulated seconds per wall-clock second [default: 10000 on the realistic "
-                   "plant, whose steps cost more, 20000 on the ideal one].")
+              help="Simulated seconds per second of the event loop's virtual time: how the "
+                   "daemon's real-time pauses (Modbus timeouts, retry delays) scale into "
+                   "simulated time. Simulated time advances only when the simulator and the "
+                   "daemon wait, so the results do not depend on the machine's load [default: "
+                   "10000 on the realistic plant, 20000 on the ideal one].")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               default=Path("impctl-demo"), show_default=True, help="Output directory.")
 @click.option("--seed", type=int, default=0, show_default=True,
@@ -56,23 +59,29 @@ def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, s
                  households, plant) -> None:
     """Run the whole product against a simulated heat pump and write the report.
 
-    Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on an accelerated clock →
+    Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on simulated time →
     classifiers (trained or cached) → Neural-ODE fit → report and a truth-vs-estimate table.
+    The same seed gives the same nights and numbers on any machine, busy or not: simulated
+    time advances only when the simulator and the daemon wait. A campaign that cannot finish
+    exits with status 1 and says why.
     """
-    from ...demo import DemoOptions, run_demo
+    from ...demo import DemoError, DemoOptions, run_demo
 
     if speed is not None and not 0 < speed <= 30000:  # NaN too
-        raise InputError("must lie in (0, 30000] (the Modbus polling keeps up to ~20000)",
-                         place="--speed")
+        raise InputError("must lie in (0, 30000] (the daemon's Modbus timeouts, a second, "
+                         "must stay short in simulated time)", place="--speed")
     if adaptive and nights is not None:
         raise InputError("is a fixed campaign; --adaptive chooses its nights (use --max-nights)",
                          place="--nights")
     c, n = _nights(nights or "2+6")
-    run_demo(DemoOptions(out=out, house_path=house_path, constrained_nights=c, normal_nights=n,
-                         speed=speed, seed=seed, model_dir=model_dir, households=households,
-                         plant=plant, adaptive=adaptive, max_nights=max_nights,
-                         target_rel=_target(target)),
-             echo=click.echo)
+    options = DemoOptions(out=out, house_path=house_path, constrained_nights=c,
+                          normal_nights=n, speed=speed, seed=seed, model_dir=model_dir,
+                          households=households, plant=plant, adaptive=adaptive,
+                          max_nights=max_nights, target_rel=_target(target))
+    try:
+        run_demo(options, echo=click.echo)
+    except DemoError as exc:  # one line and exit status 1, never a traceback
+        raise click.ClickException(f"demo: {exc}") from None
 
 
 def _target(text: str) -> tuple[float, float]:

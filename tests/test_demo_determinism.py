@@ -1,0 +1,48 @@
+"""The demo's campaign is the same on a quiet and on a busy machine: simulated time advances
+only when the simulator and the daemon both wait (the virtual-time loop), so the same seed
+stores the same nights and the same samples, bit for bit, beside CPU-burning processes.
+
+Real simulator on loopback Modbus TCP, the real daemon, real SQLite files; the busy run has
+two ``python -c 'while 1: pass'`` processes beside it (the machine's cores, and more).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import asdict
+
+from impctl import vtime
+from impctl.demo.campaign import run_campaign
+from impctl.demo.options import DemoOptions, Progress, demo_weather, house_and_realism
+from impctl.store import Store
+
+
+def _campaign(out, plant: str) -> tuple[list, list]:
+    opts = DemoOptions(out=out, plant=plant, speed=20000.0 if plant == "iso" else 10000.0,
+                       constrained_nights=1, normal_nights=1)
+    house, realism = house_and_realism(opts)
+    lines: list[str] = []
+    db = vtime.run(run_campaign(opts, house, Progress(lines.append), None, demo_weather(opts),
+                                realism))
+    with Store(db) as store:
+        nights = store.nights()
+        samples = [[asdict(s) for s in store.samples(n.id)] for n in nights]
+    return [(n.kind, n.setpoint_c, n.state, n.valid, n.started, n.ended, n.reasons)
+            for n in nights], samples
+
+
+def test_the_same_campaign_quiet_and_beside_cpu_burners(tmp_path):
+    quiet = _campaign(tmp_path / "quiet", "iso")
+    burners = [subprocess.Popen([sys.executable, "-c", "while 1: pass"]) for _ in range(2)]
+    try:
+        busy = _campaign(tmp_path / "busy", "iso")
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait()
+    nights, samples = quiet
+    assert [(n[0], n[2], n[3]) for n in nights] == [("constrained", "done", True),
+                                                    ("normal", "done", True)], nights
+    assert all(len(s) > 50 for s in samples)
+    assert busy == quiet
