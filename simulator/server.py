@@ -32,10 +32,10 @@ from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from impctl.clock import VirtualClock
+from impctl.clock.loop import on_virtual_time
 from impctl.errors import InputError
 from impctl.kronoterm.registers import Generation
 from impctl.modbus import to_int16
-from impctl.vtime import on_virtual_time
 
 from .config import SimConfig
 from .faults import parse_faults

@@ -50,8 +50,8 @@ from daemon_fixtures import HEAVY_HOUSE, OWNER_SETPOINT_C, daemon_mapping
 from impctl_sim import KronotermSimulator, SimConfig, constant_weather
 from sim_fixtures import wait_for
 
-from impctl import vtime
 from impctl.clock import VirtualClock
+from impctl.clock import loop as vtime
 from impctl.config import config_from_mapping
 from impctl.daemon.service import Daemon
 from impctl.model import HouseParameters
@@ -389,7 +389,7 @@ class DaemonRig:
 
 def loop_wall() -> Callable[[], float]:
     """POSIX seconds that advance with the running loop's clock: the wall time on a standard
-    loop; on a :class:`~impctl.vtime.VirtualTimeLoop` the simulated clock then follows the
+    loop; on a :class:`~impctl.clock.loop.VirtualTimeLoop` the simulated clock then follows the
     loop's virtual time, so however slow the machine, computation takes no simulated time."""
     loop = asyncio.get_running_loop()
     offset = time.time() - loop.time()
@@ -722,7 +722,7 @@ def _check_after_restart(facts: dict, at_kill: dict, was_running: set[int],
 
 # -- virtual time: an event loop whose clock jumps to the next timer when nothing else is due ------
 def run_virtual(coro, timeout_s: float = 86400.0):
-    """Run ``coro`` on a fresh :class:`~impctl.vtime.VirtualTimeLoop` (``timeout_s`` in virtual
+    """Run ``coro`` on a fresh :class:`~impctl.clock.loop.VirtualTimeLoop` (``timeout_s`` in virtual
     seconds: a guard). Executor jobs and subprocesses (the daemon's fits) hold its clock."""
     return vtime.run(asyncio.wait_for(coro, timeout_s))
 

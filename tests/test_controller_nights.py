@@ -24,7 +24,7 @@ from impctl.clock import VirtualClock
 from impctl.controller import NightController, NightPolicy, NightRequest
 from impctl.store import Store
 
-# 3600× on a virtual-time event loop (:class:`impctl.vtime.VirtualTimeLoop`): the
+# 3600× on a virtual-time event loop (:class:`impctl.clock.loop.VirtualTimeLoop`): the
 # clock follows the loop's time, which jumps to the next timer when nothing is ready, so a
 # simulated hour costs 1 s of loop time and computation none. A loaded machine makes the
 # night take longer in wall time but cannot make the clock outrun the sampler (at 3600× of

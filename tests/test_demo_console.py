@@ -14,9 +14,9 @@ from zoneinfo import ZoneInfo
 import pytest
 from impctl_sim import KronotermSimulator, SimConfig
 
-from impctl import vtime
 from impctl.cli import main
 from impctl.clock import VirtualClock
+from impctl.clock import loop as vtime
 from impctl.config import config_from_mapping
 from impctl.demo import DemoError
 from impctl.demo.campaign import _watch

@@ -12,7 +12,7 @@ import subprocess
 import sys
 from dataclasses import asdict
 
-from impctl import vtime
+from impctl.clock import loop as vtime
 from impctl.demo.campaign import run_campaign
 from impctl.demo.options import DemoOptions, Progress, demo_weather, house_and_realism
 from impctl.store import Store

@@ -31,7 +31,7 @@ How it stays cheap
 2. *The real thing, in CI:* the 10 houses with the largest predicted undershoot plus 4 random
    ones run the real :class:`~impctl.controller.NightController` against the real simulator
    over Modbus TCP and a real store, on a virtual-time event loop
-   (:class:`impctl.vtime.VirtualTimeLoop`: the clock jumps to the next timer, so a
+   (:class:`impctl.clock.loop.VirtualTimeLoop`: the clock jumps to the next timer, so a
    simulated night costs its computation only, ~1 s, and the controller's reaction is not
    stretched by a wall-clock acceleration). T_air is watched on the plant every 5 simulated s
    from the switch-off until 45 min after the restore.

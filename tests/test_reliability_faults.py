@@ -11,7 +11,7 @@ window's end until 15 minutes after it, so it spans ≥ 5 polls *and* the end-of
 the restore has to wait for the link and complete once the fault is gone. The rigs run side
 by side in one event loop (each keeps its own logs, see ``reliability_fixtures.RIG``); the
 clock runs 600× the loop's time (one poll per simulated minute = 0.1 s), on a virtual-time
-loop (:class:`impctl.vtime.VirtualTimeLoop`): link timeouts, back-offs and the proxy's
+loop (:class:`impctl.clock.loop.VirtualTimeLoop`): link timeouts, back-offs and the proxy's
 stall count in the same loop seconds, and however loaded the machine, computation takes no
 simulated time, so the rigs never fall behind their clock.
 

@@ -14,8 +14,8 @@ from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from impctl import vtime
 from impctl.clock import VirtualClock
+from impctl.clock import loop as vtime
 from impctl.daemon.schedule import sleep_until
 
 EPOCH = datetime(2026, 1, 12, 12, 0, tzinfo=UTC)

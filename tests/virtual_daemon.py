@@ -27,8 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from daemon_fixtures import HEAVY_HOUSE, OWNER_SETPOINT_C  # noqa: E402
 from impctl_sim import KronotermSimulator, SimConfig, constant_weather  # noqa: E402
 
-from impctl import vtime  # noqa: E402
 from impctl.clock import VirtualClock  # noqa: E402
+from impctl.clock import loop as vtime  # noqa: E402
 from impctl.config import config_from_mapping  # noqa: E402
 from impctl.daemon.service import Daemon  # noqa: E402
 from impctl.store import Store  # noqa: E402

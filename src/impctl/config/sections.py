@@ -103,7 +103,7 @@ class ClockConfig:
 
     Load-sensitive: simulated time runs on while the daemon waits for the CPU, so on a busy
     or slow gateway a night may start late or miss samples. The demo and the tests run on a
-    virtual-time event loop instead (:mod:`impctl.vtime`), where it cannot.
+    virtual-time event loop instead (:mod:`impctl.clock.loop`), where it cannot.
     """
 
     epoch: str = ""                      # ISO 8601 instant; empty = real time

@@ -1,7 +1,7 @@
 """The demo's IMP campaign: the simulator serves the house, the daemon runs the nights against it
 until the campaign has its valid nights; then what the campaign did.
 
-Both run in one process on a virtual-time event loop (:mod:`impctl.vtime`): the clock they
+Both run in one process on a virtual-time event loop (:mod:`impctl.clock.loop`): the clock they
 share advances only when both wait, and stands still while the daemon's fit subprocesses run,
 so a campaign's nights and numbers depend on the seed, not on how busy the machine is."""
 
@@ -33,7 +33,7 @@ from .options import (
 async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Progress,
                        trainer, weather, realism) -> Path:
     """Simulator + daemon until the campaign has its valid nights; returns the db path. Run
-    it on a :class:`~impctl.vtime.VirtualTimeLoop` (:func:`impctl.vtime.run`).
+    it on a :class:`~impctl.clock.loop.VirtualTimeLoop` (:func:`impctl.clock.loop.run`).
 
     Raises
     ------

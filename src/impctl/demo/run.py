@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-from .. import vtime
+from ..clock import loop as vtime
 from ..errors import InputError
 from ..store import Store
 from .campaign import campaign_summary, run_campaign

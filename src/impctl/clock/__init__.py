@@ -13,7 +13,7 @@ On the wall clock an accelerated clock is load-sensitive: simulated time runs on
 process waits for the CPU, so a busy machine (or a slow gateway) makes a simulated night miss
 samples. That mode is for a dry run on a field gateway (``[clock] speed``). A simulation that
 must not depend on the machine uses :meth:`VirtualClock.on_loop` on a
-:class:`~impctl.vtime.VirtualTimeLoop`, whose time advances only when everyone waits.
+:class:`~impctl.clock.loop.VirtualTimeLoop`, whose time advances only when everyone waits.
 
 This module imports nothing from the simulator or the model so the daemon can use it.
 """
@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 
-from .errors import InputError
+from ..errors import InputError
 
 
 class VirtualClock:
@@ -74,7 +74,7 @@ class VirtualClock:
 
             sim_time = epoch + (loop.time() − loop.time() now) × factor
 
-        On a :class:`~impctl.vtime.VirtualTimeLoop` it advances only when every task of the
+        On a :class:`~impctl.clock.loop.VirtualTimeLoop` it advances only when every task of the
         loop waits, so the simulation does not depend on the machine's load; ``factor`` then
         scales the loop's own pauses (timeouts, retry delays, poll intervals) into simulated
         time. Such a clock lives in its process: it has no :meth:`spec`.
