@@ -18,6 +18,7 @@ import torch
 
 from ._problems import Problems
 from ._weights import Weights
+from .gain import cross_checks
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import best_of, terms_of
@@ -85,7 +86,7 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                   has_power=bool((~packed.constrained).any()), terms=terms_of(result, c.sel))
     lumped, allowance = offset_allowance(
         est["lumped"], p.kept, o.sensor_offsets_k, o.meter_error,
-        0.0 if c.nuisance_check.get("selected") and o.night_gain else o.night_gain_sd_w)
+        0.0 if c.nuisance_check.get("selected") and o.night_gain else p.gain.sd_w)
     share = None
     if o.structure_share and p.lay["simple"]:
         lumped, share = structure_share(result, p.lay, lumped, o.ach_vent, o.ach_infl)
@@ -100,9 +101,10 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                                                 o.ach_vent, o.ach_infl)
         out["prior_"]["tempering"] = weights.tempering
     nuisance = out["nuisance_"] = nuisance_intervals(c.u, box, est["cov_u"])
-    gain = out["night_gain_"] = gain_statement(c.u, box, o.night_gain_sd_w)
-    if gain["assumed"]:
+    gain = out["night_gain_"] = gain_statement(c.u, box, p.gain)
+    if gain["source"] != "estimated":
         nuisance["night_gain_w"] = assumed_gain(gain)
+    out["cross_checks_"] = cross_checks(p.nights)
     out["per_night_"], out["per_night_mean_"] = per_night_fits(result, p.lay, packed,
                                                                o.ach_vent, o.ach_infl)
     out["validation_"], out["predictions_"] = in_sample_validation(

@@ -4,8 +4,9 @@ The problems of one fit (:mod:`.layout`) include the joint fit with and without 
 terms, and in the class box and the whole prior box. First the data decide whether they need the
 nuisance terms (:func:`nuisance_check`), then whether they contradict the class ranges
 (:func:`class_check`); :func:`structure_share` widens the intervals by how far the nuisance terms
-move the answer, and :func:`gain_statement` says whether the reported night gain was fitted or
-assumed (:func:`assumed_gain`: then with the interval of the assumption).
+move the answer, and :func:`gain_statement` says whether the reported night gain was
+estimated, or declared, measured or assumed (:func:`assumed_gain`: then with the interval of
+that source).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import torch
 from scipy.stats import chi2
 
+from .gain import GainSource
 from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
 from .layout import best_of, terms_of
 from .nights.data import Estimate
@@ -96,22 +98,32 @@ def structure_share(result: lm.LMResult, lay: dict, lumped_: dict[str, Estimate]
     return out, shares
 
 
-def gain_statement(u: torch.Tensor, box: torch.Tensor, night_gain_sd_w: float) -> dict:
-    """The night gain the reported fit (``u`` in ``box``) used [W]: fitted (the
-    likelihood-ratio test kept the term) or assumed (pinned to ``night_gain_w``, SD
-    ``night_gain_sd_w`` [W]), with the plain statement."""
+def gain_statement(u: torch.Tensor, box: torch.Tensor, gain: GainSource) -> dict:
+    """The night gain the reported fit (``u`` in ``box``) used [W] and where it came from:
+    estimated (the likelihood-ratio test kept the fitted term; its interval is in the
+    ``nuisance_`` entry) or ``gain``'s source — declared, measured or assumed, pinned to
+    its value with its SD [W] — with the plain statement."""
     lo, hi = (float(v) for v in box[len(PARAM_NAMES)])
     fitted = hi > lo   # the reported problem's box: pinned when (g, g)
     g = float(to_physical(u, box)[len(PARAM_NAMES)])
-    sd = 0.0 if fitted else float(night_gain_sd_w)
-    text = (f"night gain fitted {g:.0f} W" if fitted else
-            f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
-    return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
+    source = "estimated" if fitted else gain.source
+    sd = 0.0 if fitted else float(gain.sd_w)
+    text = (f"night gain estimated {g:.0f} W (fitted with the house)" if fitted
+            else gain.statement(g))
+    out = {"value_w": g, "sd_w": sd, "source": source, "assumed": source == "assumed",
+           "statement": text}
+    if gain.per_night_w and not fitted:
+        out["per_night_w"] = dict(gain.per_night_w)
+    if gain.detail and not fitted:
+        out["detail"] = gain.detail
+    return out
 
 
 def assumed_gain(statement: dict) -> dict:
-    """The ``nuisance_`` entry of an assumed night gain (:func:`gain_statement`): the pinned
-    value [W] with the 95 % interval of the assumption (what the flex coast uses)."""
+    """The ``nuisance_`` entry of a night gain not fitted (:func:`gain_statement`): the pinned
+    value [W] with the 95 % interval of its source (what the flex coast uses); ``assumed``
+    true only for an assumption, ``source`` says which."""
     g, sd = statement["value_w"], statement["sd_w"]
     return {"value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
-            "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
+            "bounds": list(NUISANCE_BOUNDS["night_gain_w"]),
+            "assumed": statement["source"] == "assumed", "source": statement["source"]}

@@ -227,9 +227,10 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         "<h1>impctl: house identification report</h1>",
         "<h2>What the nights determine</h2>", _lumped_table(fit),
         f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",
-        *[f"<p>{html.escape(g['statement'])} (sleepers and base load; it moves the HLC by "
-          "its error over the mean indoor–outdoor difference)</p>"
-          for g in [(fit.get("fit") or {}).get("night_gain")] if g and g.get("assumed")],
+        *[f"<p>{html.escape(g['statement'])} — source: {html.escape(g.get('source', 'assumed'))}"
+          " (sleepers and base load; its error moves the HLC by itself over the mean "
+          "indoor–outdoor difference)</p>"
+          for g in [(fit.get("fit") or {}).get("night_gain")] if g],
         *_flexibility_section(fit),
         "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),

@@ -146,6 +146,10 @@ def _merge_packed(parts: Sequence[PackedNights]) -> PackedNights:
             cols[name] = getattr(parts[0], name)
         elif name == "q_mean_w":
             cols[name] = torch.cat([p.q_mean_w for p in parts])
+        elif name == "gain_w":
+            cols[name] = (None if all(p.gain_w is None for p in parts) else torch.cat([
+                torch.zeros(p.n_nights, dtype=p.q_mean_w.dtype) if p.gain_w is None
+                else p.gain_w for p in parts]))
         elif name.endswith("_slope"):  # zero-length padded intervals have no slope
             cols[name] = torch.cat([torch.cat([getattr(p, name), torch.zeros(
                 p.n_nights, k - p.grid_s.shape[1], dtype=getattr(p, name).dtype)], 1)

@@ -76,9 +76,20 @@ def format_table(summary: dict) -> str:
         lines.append(f"  intervals: {basis}")
     gain = fit_block.get("night_gain")
     if gain:
-        why = (" (impctl fit --night-gain-w; ≈ 70–80 W per sleeper + base load): it moves "
-               "HLC by its error / mean ΔT" if gain["assumed"] else "")
-        lines.append(f"  {gain['statement']}{why}")
+        why = (" (declare it: impctl fit --night-gain-w, or log p_house_w; ≈ 75 W per "
+               "sleeper + base load): it moves HLC by its error / mean ΔT"
+               if gain.get("assumed") else "")
+        lines.append(f"  {gain['statement']}{why} [source: {gain.get('source', 'assumed')}]")
+        if gain.get("detail") and gain.get("source") != "measured":
+            lines.append(f"  ({gain['detail']})")
+    for key, check in (summary.get("cross_checks") or {}).items():
+        if key == "t_air_minus_rooms_k":
+            lines.append(f"  T_air from the room sensors (t_rooms_c) on {check['nights']} "
+                         f"nights; the controller's T_air reads {check['mean']:+.2f} K from it")
+        elif key == "t_out_minus_ref_k":
+            lines.append(check.get("statement") or (
+                f"  T_out − reference outdoor temperature {check['mean']:+.2f} K on "
+                f"{check['nights']} nights"))
     me = fit_block.get("model_error")
     if me:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
@@ -123,6 +134,7 @@ def format_table(summary: dict) -> str:
         for name, v in nuis.items():
             if v:
                 how = ("assumed, not measured" if v.get("assumed")
+                       else f"{v['source']}, not fitted" if v.get("source")
                        else f"bounds {v['bounds'][0]:g}–{v['bounds'][1]:g}")
                 lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
                              f"   ({how})")
