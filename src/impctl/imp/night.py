@@ -41,6 +41,9 @@ class NightSamples:
         ``t_air_c`` is the room sensors' mean; NaN when the controller's own T_air is used.
     t_out_offset_k : float
         Mean T_out − reference outdoor temperature (``t_out_ref_c``) [K]; NaN without one.
+    not_held : str
+        Why an auto-labelled night is neither a held nor a constrained night (heat pulses,
+        drift: :mod:`impctl.imp.held`); "" for an IMP night. The fit skips it with this reason.
     """
 
     night_id: str
@@ -55,6 +58,7 @@ class NightSamples:
     occupants: float = float("nan")
     t_air_offset_k: float = float("nan")
     t_out_offset_k: float = float("nan")
+    not_held: str = ""
 
     @property
     def duration_h(self) -> float:

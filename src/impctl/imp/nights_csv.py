@@ -20,7 +20,9 @@ Without ``night`` the samples are cut into the local windows 22:00–05:00 (end 
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
 ``kind`` a night is ``constrained`` when the heating is off (``heating`` = 0, or without that
 column Q_HC ≤ :data:`~impctl.imp.features.Q_ON_W`) in at least :data:`OFF_FRACTION` of its samples
-during the first hour, else ``normal``.
+during the first hour, else ``normal``; such a night on which the setpoint is not held (heat
+pulses, T_air drifting with the heating on: :mod:`.held`) carries the reason in ``not_held``
+and is not fitted.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import pandas as pd
 from ..errors import InputError
 from ..tables import frame_table, read_table
 from .features import Q_ON_W
+from .held import not_held
 from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, extra_columns, night_extras
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
@@ -233,10 +236,14 @@ def nights_from_table(
             kind = str(kinds[0])
         else:
             kind = _infer_kind(time_s, off[idx])
+            more_held = {"not_held": not_held(kind, time_s, values["t_air"][idx], off[idx],
+                                              "heating" in table)}
         setpoint = np.nan
         if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
             setpoint = float(np.nanmedian(setpoint_all[idx]))
         t_air, more = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
+        if kinds_all is None:
+            more |= more_held
         nights.append(NightSamples(
             night_id=str(night_id),
             kind=kind,  # type: ignore[arg-type]

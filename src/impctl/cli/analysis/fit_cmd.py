@@ -148,7 +148,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
             "too little data to fit: missing " + " and ".join(missing)
             + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
 
-    classes, ranges, notes = _classes(cut, model_dir)
+    # the classifiers see the IMP nights only (not an auto-cut night that is neither kind)
+    classes, ranges, notes = _classes([n for n in cut if not n.not_held], model_dir)
     if limit_note:
         notes.append(limit_note)
     click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "
