@@ -27,6 +27,7 @@ from .ode.parameters import PARAM_NAMES, to_physical
 from .optim import lm
 from .prior import prior_statement
 from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
+from .undetermined import mark_undetermined, nuisance_at_bound, table_iv
 from .validation import in_sample_validation, per_night_fits
 
 if TYPE_CHECKING:
@@ -105,6 +106,8 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
     if gain["source"] != "estimated":
         nuisance["night_gain_w"] = assumed_gain(gain)
     out["cross_checks_"] = cross_checks(p.nights)
+    # a term the bound set, not the nights, leaves what it trades against undetermined
+    out["nuisance_at_bound_"] = nuisance_at_bound(nuisance)
     out["per_night_"], out["per_night_mean_"] = per_night_fits(result, p.lay, packed,
                                                                o.ach_vent, o.ach_infl)
     out["validation_"], out["predictions_"] = in_sample_validation(
@@ -119,5 +122,6 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
         # the diagnostics read the statement as they would read the fitted estimator
         lumped, out["model_error_"] = model_error.widen(
             lumped, model_error.diagnostics(SimpleNamespace(**out)), cal)
-    out["lumped_"] = lumped
+    out["lumped_"] = mark_undetermined(lumped, out["nuisance_at_bound_"])
+    out["table_iv_"] = table_iv(out["parameters_"], est["determined"], c.bounds)
     return out

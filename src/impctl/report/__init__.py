@@ -70,10 +70,12 @@ def _param_table(fit: dict, truth: HouseParameters | None) -> str:
     true = truth.as_dict() if truth is not None else {}
     for name, value in fit["parameters"].items():
         rng = fit.get("bounds", {}).get(name)
+        # a parameter the data do not determine is shown as its prior (the range centre)
+        value = ((fit.get("table_iv") or {}).get(name) or {}).get("value", value)
         row = [name, fit.get("units", {}).get(name, ""), _fmt(value),
                "—" if not rng else f"{rng[0]:.3g} – {rng[1]:.3g}",
                "data" if fit.get("determined", {}).get(name) else
-               f"{fit.get('basis', {}).get(name, 'prior')} only"]
+               f"prior: {fit.get('basis', {}).get(name, 'prior')} centre"]
         if truth is not None:
             row.insert(3, _fmt(float(true[name])))
         rows.append(row)
@@ -231,6 +233,8 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
           " (sleepers and base load; its error moves the HLC by itself over the mean "
           "indoor–outdoor difference)</p>"
           for g in [(fit.get("fit") or {}).get("night_gain")] if g],
+        *[f"<p class='warn'>{html.escape(t['statement'])} (the bound, not the nights, "
+          "set it)</p>" for t in (fit.get("fit") or {}).get("nuisance_at_bound") or []],
         *_flexibility_section(fit),
         "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),

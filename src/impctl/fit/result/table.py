@@ -71,6 +71,8 @@ def format_table(summary: dict) -> str:
         lines.append(f"  {label:<28} {unit:<5} {q['value'] * k:>9.4g}   "
                      f"{q['low'] * k:.4g} – {q['high'] * k:.4g}{flag}")
     fit_block = summary.get("fit", {})
+    for term in fit_block.get("nuisance_at_bound") or []:
+        lines.append(f"  {term['statement']} (the bound, not the nights, set it)")
     basis = fit_block.get("interval_basis") or ""
     if basis.startswith("too few nights"):
         lines.append(f"  intervals: {basis}")
@@ -114,7 +116,12 @@ def format_table(summary: dict) -> str:
         else:
             src = f"{basis} only — {_WHY_NOT[name]}"
         rng = f"{_fmt(lo)}–{_fmt(hi)}"
-        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(summary['parameters'][name]):>8}"
+        # a parameter the data do not determine is shown as its prior, not as a fitted value
+        shown = ((summary.get("table_iv") or {}).get(name) or {}).get(
+            "value", summary["parameters"][name])
+        if basis != "data" and summary.get("table_iv"):
+            src = f"prior (range centre) — {basis} only; {_WHY_NOT[name]}"
+        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(shown):>8}"
                      f"  {_fmt(avg.get(name)):>9}   {rng:<12} {src}")
     val = summary["validation"]
     lines.append("")
