@@ -103,13 +103,17 @@ def prepare(options: NightFit, nights: Sequence[NightSamples],
         packed.gain_w = torch.tensor([gain.per_night_w.get(i, gain.value_w) - gain.value_w
                                       for i in packed.night_ids], dtype=packed.q_mean_w.dtype)
     prior = PopulationPrior() if o.prior == "population" else o.prior
-    ctx = lm.Context(packed, o.ach_vent, o.ach_infl, o.ridge, o.solver, prior)
+    # not declared, not measured: the gain is estimated under the assumption as its prior
+    estimate = o.night_gain == "prior" and gain.source == "assumed"
+    ctx = lm.Context(packed, o.ach_vent, o.ach_infl, o.ridge, o.solver, prior,
+                     gain_prior=(gain.value_w, gain.sd_w) if estimate else None)
     row_type_n, phi_n, phi_in_n, group_n = night_rows(packed, o.normal_model)
-    nuisance, plain = nuisance_boxes(o.night_gain, o.emitter_state, o.furniture_state,
-                                     o.emitter_lag, gain.value_w)
+    nuisance, plain = nuisance_boxes(o.night_gain is True, o.emitter_state, o.furniture_state,
+                                     o.emitter_lag, gain.value_w, estimate)
     lay = layout(packed.n_nights, class_box != prior_box, bounds_tensor(class_box, nuisance),
                  bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
                  n_starts=o.n_starts, seed=o.seed, per_night=o.per_night)
     return Problems(nights, gaps, skipped, kept, ranges, class_box, prior_box, packed, prior, ctx,
                     row_type_n, phi_n, phi_in_n, group_n,
-                    sum(hi > lo for lo, hi in nuisance.values()), lay, gain)
+                    sum(hi > lo for n, (lo, hi) in nuisance.items()
+                        if not (estimate and n == "night_gain_w")), lay, gain)

@@ -87,7 +87,9 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                   has_power=bool((~packed.constrained).any()), terms=terms_of(result, c.sel))
     lumped, allowance = offset_allowance(
         est["lumped"], p.kept, o.sensor_offsets_k, o.meter_error,
-        0.0 if c.nuisance_check.get("selected") and o.night_gain else p.gain.sd_w)
+        # a fitted gain's uncertainty is in the covariance already
+        0.0 if (c.nuisance_check.get("selected") and o.night_gain is True)
+        or p.ctx.gain_prior is not None else p.gain.sd_w)
     share = None
     if o.structure_share and p.lay["simple"]:
         lumped, share = structure_share(result, p.lay, lumped, o.ach_vent, o.ach_infl)
@@ -102,9 +104,12 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                                                 o.ach_vent, o.ach_infl)
         out["prior_"]["tempering"] = weights.tempering
     nuisance = out["nuisance_"] = nuisance_intervals(c.u, box, est["cov_u"])
-    gain = out["night_gain_"] = gain_statement(c.u, box, p.gain)
-    if gain["source"] != "estimated":
+    gain = out["night_gain_"] = gain_statement(c.u, box, p.gain, est["cov_u"],
+                                               p.ctx.gain_prior)
+    if not gain.get("fitted") and gain["source"] != "estimated":
         nuisance["night_gain_w"] = assumed_gain(gain)
+    elif gain.get("fitted") and nuisance.get("night_gain_w"):
+        nuisance["night_gain_w"]["source"] = gain["source"]   # fitted under its prior
     out["cross_checks_"] = cross_checks(p.nights)
     # a term the bound set, not the nights, leaves what it trades against undetermined
     out["nuisance_at_bound_"] = nuisance_at_bound(nuisance)

@@ -106,11 +106,18 @@ class NightFit:
         How the night ODE is integrated (:class:`~impctl.fit.ode.solver.NightODE`): "exact" (the
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
         they agree to rk4's error, "exact" is several times cheaper.
-    night_gain, emitter_state, furniture_state : bool
-        Nuisance terms of the night model (:data:`~.ode.parameters.NUISANCE_NAMES`): a constant
-        heat input per campaign; the emitter's release after switch-off (amplitude and time
-        constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
-        Kept only when a likelihood-ratio test says the data need them.
+    night_gain : {"prior", True, False}
+        The night gain when it is neither declared nor measured (``night_gain_w``): "prior"
+        (default) fits it in every joint problem under a Gaussian prior, the assumption
+        :data:`~impctl.night_gain.NIGHT_GAIN_W` ± :data:`~impctl.night_gain.NIGHT_GAIN_SD_W`
+        (a MAP estimate; its posterior SD enters the intervals) — reported *estimated* where
+        the nights shrink the prior's SD to ≤ 0.7 of it, else *assumed*; True: a term the
+        likelihood-ratio test keeps with the others; False: pinned to the assumption.
+    emitter_state, furniture_state : bool
+        Nuisance terms of the night model (:data:`~.ode.parameters.NUISANCE_NAMES`): the
+        emitter's release after switch-off (amplitude and time constant); air/furniture
+        capacity at the air node (counted in the reported C_m, τ). Kept only when a
+        likelihood-ratio test says the data need them.
     sensor_offsets_k : (float, float)
         Assumed SD of uncalibrated T_air and T_out offsets [K] (type-B interval share).
     meter_error : float
@@ -217,7 +224,7 @@ class NightFit:
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = MIN_NIGHT_H, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
-                 night_gain: bool = False, emitter_state: bool = True,
+                 night_gain: bool | str = "prior", emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
                  meter_error: float = 0.05, night_gain_w: float | None = None,

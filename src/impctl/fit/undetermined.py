@@ -24,7 +24,8 @@ _AFFECTS = {
     "emitter_tau_h": ("high", "emitter release time constant", ("c_m", "tau")),
     "furniture_j_per_m2k": ("high", "air/furniture capacity", ("c_m", "tau")),
     "emitter_share": ("high", "emitter share of C_m", ("c_m", "tau")),
-    "night_gain_w": ("both", "night gain", ("hlc", "c_m")),
+    # 0 W is a real gain (an empty house); 500 W is the box, not a household
+    "night_gain_w": ("high", "night gain", ("hlc", "c_m")),
 }
 _UNITS = {"emitter_w": (1e-3, "kW"), "emitter_tau_h": (1.0, "h"),
           "furniture_j_per_m2k": (1e-3, "kJ/(m²K)"), "emitter_share": (1.0, ""),
@@ -38,7 +39,7 @@ def nuisance_at_bound(nuisance: dict) -> list[dict]:
     and the plain statement."""
     out = []
     for name, entry in (nuisance or {}).items():
-        if not entry or name not in _AFFECTS or "source" in entry or entry.get("assumed"):
+        if not entry or name not in _AFFECTS or entry.get("pinned"):
             continue
         lo, hi = entry["bounds"]
         side, label, affects = _AFFECTS[name]

@@ -141,7 +141,9 @@ def format_table(summary: dict) -> str:
         for name, v in nuis.items():
             if v:
                 how = ("assumed, not measured" if v.get("assumed")
-                       else f"{v['source']}, not fitted" if v.get("source")
+                       else f"{v['source']}, not fitted" if v.get("pinned")
+                       else f"{v['source']} under its prior, bounds {v['bounds'][0]:g}–"
+                            f"{v['bounds'][1]:g}" if v.get("source")
                        else f"bounds {v['bounds'][0]:g}–{v['bounds'][1]:g}")
                 lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
                              f"   ({how})")
