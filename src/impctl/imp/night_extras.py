@@ -34,7 +34,7 @@ def extra_columns(table: pd.DataFrame) -> dict[str, np.ndarray]:
     for col, (lo, hi) in EXTRA_COLUMNS.items():
         if col not in table:
             continue
-        values = pd.to_numeric(table[col], errors="coerce").to_numpy(dtype=float)
+        values = np.array(pd.to_numeric(table[col], errors="coerce"), dtype=float)
         values[~np.isfinite(values) | (values < lo) | (values > hi)] = np.nan
         out[col] = values
     return out
