@@ -168,7 +168,9 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
     print("|---|---|---|---|---|")
     for name in PARAM_NAMES:
         tv = np.array([float(getattr(h, name)) for h in truth])
-        fv = np.array([f.parameters_[name] for f in fits])
+        # what the fit reports: the prior (range centre) where the data do not determine it
+        fv = np.array([(getattr(f, "table_iv_", None) or {}).get(name, {}).get(
+            "value", f.parameters_[name]) for f in fits])
         mv = np.array([m[name] for m in res["mid"]])
         det = 100.0 * np.mean([f.determined_[name] for f in fits])
         a, b = stats(rel(fv, tv))
