@@ -310,10 +310,12 @@ def main() -> None:
                     help="the fit's assumed night gain [W] (NightFit(night_gain_w)); default 0 "
                          "on --plant iso (the ideal 5R1C has no gains: the model-consistency "
                          "check), the fit's default (250 W) on the realistic plant")
-    ap.add_argument("--gain-mode", choices=GAIN_MODES, default="unknown",
+    ap.add_argument("--gain-mode", default="unknown", metavar="MODE[,MODE]",
                     help="realistic plant: the night gain unknown to the fit (default: "
                          "estimated or assumed), measured (the nights carry p_house_w through "
-                         "a household meter) or declared (the campaign's true mean, ± 0 W)")
+                         "a household meter), declared (the campaign's true mean, ± 0 W) or "
+                         "pinned (unknown, pinned to the assumption: the fit before the "
+                         "gain's sources); several comma-separated run on the same nights")
     ap.add_argument("--gain-term", choices=("prior", "lr", "pinned"), default="prior",
                     help="a gain neither declared nor measured: fitted under its prior "
                          "(default), a likelihood-ratio-selected term, or pinned to the "
@@ -370,15 +372,27 @@ def main() -> None:
     if args.virtual_imp:
         virtual_imp_check(args.virtual_imp, args)
     rows = []
+    modes, term = args.gain_mode.split(","), args.gain_term
+    for mode in modes:
+        if mode not in GAIN_MODES + ("pinned",):
+            ap.error(f"--gain-mode: {mode!r} is not one of {', '.join(GAIN_MODES)}, pinned")
     houses = sample_households(args.households, seed=VAL_SEED)
     for step in (float(s) for s in args.steps.split(",") if s):
         limit = args.fine_households if step < 300 and args.fine_households else None
         for source in sources:
-            res = run_step(houses, step, source, args, limit)
-            report(res, step, source, args)
-            if args.dump:
-                dump(res, f"{args.dump}-{step:g}-{source}.json")
-            rows.append(summary_row(res, step, source))
+            for mode in modes:
+                # the same simulated nights for every gain mode (simulate_schedule's cache)
+                args.gain_mode, args.gain_term = (("unknown", "pinned") if mode == "pinned"
+                                                  else (mode, term))
+                label = source if len(modes) == 1 else f"{source}, gain {mode}"
+                if len(modes) > 1:
+                    print(f"\n## gain mode {mode} (gain term {args.gain_term})")
+                res = run_step(houses, step, source, args, limit)
+                report(res, step, source, args)
+                if args.dump:
+                    tag = source if len(modes) == 1 else f"{source}-{mode}"
+                    dump(res, f"{args.dump}-{step:g}-{tag}.json")
+                rows.append(summary_row(res, step, label))
     print_summary(rows, args)
 
 
