@@ -329,6 +329,10 @@ def dump(res: dict, path: str) -> None:
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
         out[f"{k}_halfwidth_pct"] = [50.0 * float(np.log(e.high / e.low))
                                      for e in est]
+    # where each fit's night gain came from, and its value [W]
+    out["gain_source"] = [(getattr(f, "night_gain_", None) or {}).get("source")
+                          for f in res["fit"]]
+    out["gain_w"] = [(getattr(f, "night_gain_", None) or {}).get("value_w") for f in res["fit"]]
     out["inflation"] = [max([(1 + r) / (1 - r) for r in f.residual_autocorrelation_.values()]
                             or [1.0]) for f in res["fit"]]
     priors = [getattr(f, "prior_", None) for f in res["fit"]]
