@@ -76,6 +76,13 @@ def test_a_declared_gain_is_known_and_nothing_declared_is_assumed_last(tmp_path)
     assert (assumed.source, assumed.value_w, assumed.sd_w) == (
         "assumed", NIGHT_GAIN_W, NIGHT_GAIN_SD_W)
     assert "assumed" in assumed.statement() and "not measured" in assumed.statement()
+    # a fleet's per-household declaration: the nights' own night_gain_w column, night by night
+    column = read_nights(_csv(tmp_path / "c.csv", night_gain_w=lambda n: np.where(
+        np.arange(n) < n // 2, 100.0, 300.0), p_house_w=50.0), "UTC")
+    own = resolve(None, None, column)
+    assert (own.source, own.value_w, own.sd_w) == ("declared", 200.0, 0.0)
+    assert own.per_night_w == {"a": 100.0, "b": 300.0} and "p_house_w not used" in own.detail
+    assert resolve(0.0, None, column).value_w == 0.0   # the option wins over the column
 
 
 def test_room_sensors_replace_t_air_and_the_outdoor_reference_is_checked(tmp_path):

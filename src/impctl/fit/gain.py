@@ -49,7 +49,8 @@ class GainSource:
         g = self.value_w if value_w is None else value_w
         if self.source == "declared":
             return (f"night gain declared {g:.0f} W" + (f" ± {self.sd_w:.0f} W" if self.sd_w
-                                                         else " (known, ± 0 W)"))
+                                                         else " (known, ± 0 W)")
+                    + (f" ({self.detail})" if self.per_night_w else ""))
         if self.source == "measured":
             return f"night gain measured {g:.0f} ± {self.sd_w:.0f} W ({self.detail})"
         return (f"night gain assumed {g:.0f} ± {self.sd_w:.0f} W, not measured (the "
@@ -58,14 +59,21 @@ class GainSource:
 
 def resolve(night_gain_w: float | None, night_gain_sd_w: float | None,
             nights: Sequence[NightSamples]) -> GainSource:
-    """The gain a fit with these options uses on ``nights`` (the nights it fits)."""
+    """The gain a fit with these options uses on ``nights`` (the nights it fits): declared
+    by the options, else by the nights' ``night_gain_w`` column (each night its own), else
+    measured by their ``p_house_w``/``occupants``, else assumed (the fit may estimate it)."""
     measured = {n.night_id: (n.p_house_w, 0.0 if math.isnan(n.occupants) else n.occupants)
                 for n in nights if not math.isnan(n.p_house_w)}
+    sd = 0.0 if night_gain_sd_w is None else float(night_gain_sd_w)
     if night_gain_w is not None:
         note = ("p_house_w in the nights not used: the gain is declared" if measured else "")
-        return GainSource("declared", float(night_gain_w),
-                          0.0 if night_gain_sd_w is None else float(night_gain_sd_w),
-                          detail=note)
+        return GainSource("declared", float(night_gain_w), sd, detail=note)
+    declared = {n.night_id: n.night_gain_w for n in nights if not math.isnan(n.night_gain_w)}
+    if declared:   # the nights' own night_gain_w column: declared night by night
+        value = sum(declared.values()) / len(declared)
+        return GainSource("declared", value, sd, dict(declared),
+                          f"night_gain_w column on {len(declared)} of {len(nights)} nights"
+                          + ("; p_house_w not used" if measured else ""))
     if measured:
         per_night = {i: measured_gain_w(p, o) for i, (p, o) in measured.items()}
         p_mean = sum(p for p, _ in measured.values()) / len(measured)

@@ -36,6 +36,9 @@ class NightSamples:
         NIGHTS column ``p_house_w``); NaN if not measured.
     occupants : float
         Mean number of sleepers over the night (the column ``occupants``); NaN if not given.
+    night_gain_w : float
+        The night gain declared for the night [W] (the column ``night_gain_w``: known, e.g. a
+        fleet's per-household declaration); NaN if not declared.
     t_air_offset_k : float
         Mean controller T_air − mean of the room sensors (``t_rooms_c``) [K] on a night whose
         ``t_air_c`` is the room sensors' mean; NaN when the controller's own T_air is used.
@@ -56,6 +59,7 @@ class NightSamples:
     setpoint_c: float = float("nan")
     p_house_w: float = float("nan")
     occupants: float = float("nan")
+    night_gain_w: float = float("nan")
     t_air_offset_k: float = float("nan")
     t_out_offset_k: float = float("nan")
     not_held: str = ""

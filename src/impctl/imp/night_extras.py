@@ -6,7 +6,9 @@
 * ``t_rooms_c`` — mean of the room sensors [°C]: on a night where it is present it is the
   indoor temperature of the fit, the controller's own ``t_air`` kept as a cross-check;
 * ``t_out_ref_c`` — a reference outdoor temperature [°C] (a weather service, a second
-  sensor): the night's mean offset of ``t_out`` from it is reported.
+  sensor): the night's mean offset of ``t_out`` from it is reported;
+* ``night_gain_w`` — the night gain declared for the household [W] (known, as ``impctl fit
+  --night-gain-w``): a fleet's per-household declaration.
 
 A cell that is empty, not a number or outside its plausible range is missing (NaN), never a
 number: these columns inform the fit, they do not refuse a file whose series are sound.
@@ -23,6 +25,7 @@ EXTRA_COLUMNS: dict[str, tuple[float, float]] = {
     "occupants": (0.0, 20.0),
     "t_rooms_c": (-40.0, 60.0),
     "t_out_ref_c": (-60.0, 60.0),
+    "night_gain_w": (0.0, 2000.0),   # impctl.night_gain.NIGHT_GAIN_LIMITS_W
 }
 #: Share of a night's rows that must carry a value for the night to have it.
 PRESENT_FRACTION = 0.8
@@ -47,14 +50,14 @@ def _present(x: np.ndarray) -> bool:
 def night_extras(extras: dict[str, np.ndarray], idx: np.ndarray, t_air_c: np.ndarray,
                  t_out_c: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
     """The rows ``idx`` of one night: (its indoor temperature [°C], the NightSamples fields
-    ``p_house_w``, ``occupants``, ``t_air_offset_k``, ``t_out_offset_k``).
+    ``p_house_w``, ``occupants``, ``night_gain_w``, ``t_air_offset_k``, ``t_out_offset_k``).
 
     The indoor temperature is the room sensors' mean where ``t_rooms_c`` is present on the
     night (its missing rows filled with ``t_air_c`` less the night's mean offset), else the
     controller's ``t_air_c``. A column counts for a night only when at least
     :data:`PRESENT_FRACTION` of its rows carry a value."""
     fields: dict[str, float] = {}
-    for col in ("p_house_w", "occupants"):
+    for col in ("p_house_w", "occupants", "night_gain_w"):
         x = extras.get(col)
         if x is not None and _present(x[idx]):
             fields[col] = float(np.nanmean(x[idx]))

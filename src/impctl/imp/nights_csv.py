@@ -12,9 +12,10 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
 * ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
-* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c`` (optional) — household
-  electricity besides the heat pump [W], sleepers, mean of the room sensors and a reference
-  outdoor temperature [°C] (:mod:`.night_extras`: a bad cell there is missing, not refused).
+* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w`` (optional) —
+  household electricity besides the heat pump [W], sleepers, mean of the room sensors and a
+  reference outdoor temperature [°C], a declared night gain [W] (:mod:`.night_extras`: a bad
+  cell there is missing, not refused).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without

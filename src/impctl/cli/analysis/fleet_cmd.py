@@ -48,8 +48,9 @@ def fleet() -> None:
 @click.option("--night-gain-w", default=None, type=float,
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
               help="A night gain declared for every household [W], as for impctl fit. Not "
-                   "given: each household's p_house_w/occupants columns measure it, else it "
-                   "is estimated or assumed (the row's night_gain_source says which).")
+                   "given: a household's own night_gain_w column declares it, else its "
+                   "p_house_w/occupants columns measure it, else it is estimated or assumed "
+                   "(the row's night_gain_source says which).")
 @click.option("--night-gain-sd-w", default=None, type=float,
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
               help="SD of the declared night gain [W] (default 0: known exactly).")

@@ -82,7 +82,7 @@ def format_table(summary: dict) -> str:
                "sleeper + base load): it moves HLC by its error / mean ΔT"
                if gain.get("assumed") else "")
         lines.append(f"  {gain['statement']}{why} [source: {gain.get('source', 'assumed')}]")
-        if gain.get("detail") and gain.get("source") != "measured":
+        if gain.get("detail") and gain["detail"] not in gain["statement"]:
             lines.append(f"  ({gain['detail']})")
     for key, check in (summary.get("cross_checks") or {}).items():
         if key == "t_air_minus_rooms_k":
