@@ -117,7 +117,7 @@ def test_the_twin_houses_rolbs_nights_are_dropped_with_their_reason(tmp_path):
     held = ["2013-08-27", "2013-08-28"]
     for i in held:
         assert nights[i].kind == "normal" and nights[i].not_held == ""
-    assert "drifted" in nights["2013-08-30"].not_held          # 500 W, T_air falls
+    assert "fixed heat input" in nights["2013-08-30"].not_held  # 500 W, T_air falls
     assert "heat pulses" in nights["2013-08-31"].not_held      # the sequence's pulses
     assert "heat pulses" in nights["2013-09-01"].not_held
     assert nights["2013-08-29"].not_held                        # switched off mid-night

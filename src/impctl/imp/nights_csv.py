@@ -22,7 +22,7 @@ outside every window are ignored, and windows with fewer than two samples are dr
 ``kind`` a night is ``constrained`` when the heating is off (``heating`` = 0, or without that
 column Q_HC ≤ :data:`~impctl.imp.features.Q_ON_W`) in at least :data:`OFF_FRACTION` of its samples
 during the first hour, else ``normal``; such a night on which the setpoint is not held (heat
-pulses, T_air drifting with the heating on: :mod:`.held`) carries the reason in ``not_held``
+pulses, T_air falling under a fixed heat input: :mod:`.held`) carries the reason in ``not_held``
 and is not fitted.
 """
 
@@ -238,7 +238,7 @@ def nights_from_table(
         else:
             kind = _infer_kind(time_s, off[idx])
             more_held = {"not_held": not_held(kind, time_s, values["t_air"][idx], off[idx],
-                                              "heating" in table)}
+                                              "heating" in table, values["q_hc"][idx])}
         setpoint = np.nan
         if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
             setpoint = float(np.nanmedian(setpoint_all[idx]))
