@@ -74,7 +74,8 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
                       "comfort_band_k": max(DEFAULT_BAND_K, 2.0)},
             "campaign": _campaign_section(opts, setpoints, per_sp),
             "clock": {"epoch": epoch.isoformat(), "speed": opts.speed},
-            "fit": {"night_gain_w": fit_night_gain_w(opts)},
+            "fit": ({} if fit_night_gain_w(opts) is None
+                    else {"night_gain_w": fit_night_gain_w(opts)}),
         }, "demo config")
         daemon = Daemon(cfg, clock=clock)
         task = asyncio.create_task(daemon.run())

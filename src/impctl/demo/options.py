@@ -7,7 +7,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..imp.gain import NIGHT_GAIN_W
 from ..model import HouseParameters
 
 TZ = "Europe/Ljubljana"
@@ -127,8 +126,8 @@ class Progress:
         self.echo(f"[{time.perf_counter() - self.t0:6.1f} s] {text}")
 
 
-def fit_night_gain_w(opts: DemoOptions) -> float:
-    """The night gain the demo's fit assumes [W]: the ideal 5R1C has none (told the truth);
-    on the realistic plant the installer's default (:mod:`impctl.imp.gain`), as on a house
-    whose household nobody described."""
-    return 0.0 if opts.plant == "iso" else NIGHT_GAIN_W
+def fit_night_gain_w(opts: DemoOptions) -> float | None:
+    """The night gain the demo declares to its fit [W]: the ideal 5R1C has none (0 W, known);
+    on the realistic plant None — not declared, as on a house whose household nobody
+    described (the fit then estimates or assumes it, :mod:`impctl.imp.gain`, and says so)."""
+    return 0.0 if opts.plant == "iso" else None

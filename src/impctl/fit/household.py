@@ -31,7 +31,6 @@ from typing import Any
 
 from ..errors import InputError
 from ..imp.file_limits import refuse_large_file
-from ..imp.gain import NIGHT_GAIN_W
 from ..imp.protocol import MIN_NIGHT_H, Q_ON_W
 
 #: Nights fitted by default / accepted by ``--max-nights``: the fit's memory and time grow
@@ -56,13 +55,16 @@ class FitOptions:
     ach_infl: float = 0.01
     ach_vent: float = 0.0
     max_nights: int = DEFAULT_MAX_NIGHTS
-    night_gain_w: float = NIGHT_GAIN_W
+    #: declared night gain [W] and its SD [W]; None: not declared (measured from the nights'
+    #: columns, else estimated, else assumed — :mod:`impctl.fit.gain`)
+    night_gain_w: float | None = None
+    night_gain_sd_w: float | None = None
 
     def estimator_params(self) -> dict[str, Any]:
         """The :class:`~impctl.fit.NightFit` constructor parameters among these options."""
         return {"normal_model": self.normal_model, "timestamps": self.timestamps,
                 "ach_infl": self.ach_infl, "ach_vent": self.ach_vent,
-                "night_gain_w": self.night_gain_w}
+                "night_gain_w": self.night_gain_w, "night_gain_sd_w": self.night_gain_sd_w}
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (the fleet's manifest keeps them: a resumed run must use the same)."""
@@ -229,6 +231,9 @@ def household_classes(nights: Sequence, model_dir: str | Path | None = None, *,
     classifiers (or no night at a setpoint they know), the whole prior ranges, said so."""
     from ..classifiers.saved import classify_nights, classify_with
 
+    # the classifiers see the IMP nights only, not an auto-cut night on which the setpoint was
+    # not held (neither kind: :mod:`impctl.imp.held`)
+    nights = [n for n in nights if not getattr(n, "not_held", False)]
     try:
         results = (classify_with(list(nights), *loaded) if loaded is not None
                    else classify_nights(list(nights), model_dir))

@@ -214,9 +214,10 @@ def fit_fleet(
     """Fit every household of ``input_path`` into the FLEET dataset ``out`` (module docstring).
 
     ``options``: what decides a household's numbers, as ``impctl fit``'s options (default:
-    its defaults). ``client``: an existing ``distributed.Client`` to run on (left open),
-    instead of ``scheduler`` or a local cluster. ``out/_manifest.json`` says how many
-    households are expected and how many have a row (:mod:`.manifest`), after every batch.
+    its defaults; a night gain declared for every household among them). ``client``: an
+    existing ``distributed.Client`` to run on (left open), instead of ``scheduler`` or a local
+    cluster. ``out/_manifest.json`` says how many households are expected and how many have a
+    row (:mod:`.manifest`), after every batch.
 
     Raises
     ------

@@ -213,6 +213,7 @@ def _fill(row: dict, fit) -> None:
     from ..flex.switch_off import to_columns
 
     row.update(to_columns(getattr(fit, "nuisance_", None)))
+    row["night_gain_source"] = (getattr(fit, "night_gain_", None) or {}).get("source")
     row["class_contradicted"] = bool(fit.class_check_.get("rejected", False))
     row["needs_more_nights"] = not all(e.determined for e in fit.lumped_.values())
     row["loss"] = float(fit.loss_)

@@ -12,6 +12,7 @@ import click
 
 from ...errors import InputError
 from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
+from ...imp.gain import NIGHT_GAIN_LIMITS_W
 from .. import cli
 from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded, time_zone
 
@@ -50,9 +51,19 @@ def fleet() -> None:
               help="Households fitted together in one batched optimiser call (one Dask "
                    "task); a fleet smaller than two batches per worker is cut finer.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--night-gain-w", default=None, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="A night gain declared for every household [W], as for impctl fit. Not "
+                   "given: a household's own night_gain_w column declares it, else its "
+                   "p_house_w/occupants columns measure it, else it is estimated or assumed "
+                   "(the row's night_gain_source says which).")
+@click.option("--night-gain-sd-w", default=None, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="SD of the declared night gain [W] (default 0: known exactly).")
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
               workers: int | None, tz: str, timestamps: str, max_nights: int, resume: bool,
-              report_dir: Path | None, batch_size: int, quiet: bool) -> None:
+              report_dir: Path | None, batch_size: int, quiet: bool,
+              night_gain_w: float | None, night_gain_sd_w: float | None) -> None:
     """Fit every household's nights in INPUT; one row per household into --out.
 
     INPUT: a folder of NIGHTS files (*.csv, *.parquet; household id = file stem), or one
@@ -65,8 +76,12 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
     from ...fit.household import FitOptions
     from ...fleet.run import check_places, fit_fleet
 
+    if night_gain_sd_w is not None and night_gain_w is None:
+        raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
+                         "too")
     check_places(input_path, out, report_dir)
-    options = FitOptions(timestamps=timestamps, max_nights=max_nights)
+    options = FitOptions(timestamps=timestamps, max_nights=max_nights, night_gain_w=night_gain_w,
+                         night_gain_sd_w=night_gain_sd_w)
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
                     tz=tz, options=options, resume=resume, batch_size=batch_size,
                     progress=not quiet, echo=click.echo)
