@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 
 from ..errors import InputError
 from ..imp.gaps import Gap, cut_at_gaps
 from ..imp.night import NightSamples
+from ._params import FitParams
 from .gain import GainSource, resolve
 from .layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
 from .nights.data import compared_power, prepare_nights, search_bounds
@@ -26,9 +26,6 @@ from .ode.packing import PackedNights, pack_nights
 from .ode.parameters import bounds_tensor
 from .optim import lm
 from .prior import PopulationPrior
-
-if TYPE_CHECKING:
-    from .estimator import NightFit
 
 
 @dataclass(frozen=True)
@@ -72,7 +69,7 @@ class Problems:
                             ach_vent, ach_infl)
 
 
-def prepare(options: NightFit, nights: Sequence[NightSamples],
+def prepare(options: FitParams, nights: Sequence[NightSamples],
             ranges: dict[str, tuple[float, float]] | None) -> Problems:
     """The problems ``options`` (a NightFit's constructor parameters) solve on ``nights``.
 

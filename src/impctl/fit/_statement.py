@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import TYPE_CHECKING
 
 import torch
 
+from ._params import FitParams
 from ._problems import Problems
 from ._weights import Weights
 from .gain import cross_checks
@@ -29,9 +29,6 @@ from .prior import prior_statement
 from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
 from .undetermined import mark_undetermined, nuisance_at_bound, table_iv
 from .validation import in_sample_validation, per_night_fits
-
-if TYPE_CHECKING:
-    from .estimator import NightFit
 
 
 @dataclass(frozen=True)
@@ -67,7 +64,7 @@ def choose(problems: Problems, rows: lm.Rows, result: lm.LMResult) -> Choice:
                   classes, problems.class_box if best not in lay["prior"] else problems.prior_box)
 
 
-def statement(options: NightFit, problems: Problems, weights: Weights, result: lm.LMResult,
+def statement(options: FitParams, problems: Problems, weights: Weights, result: lm.LMResult,
               choice: Choice, cal: dict | None) -> dict[str, object]:
     """Every attribute a fitted NightFit reports (name → value), for the problem ``choice``;
     ``cal``: the model-error calibration (:func:`.intervals.model_error.load_calibration`)."""
