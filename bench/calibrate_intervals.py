@@ -40,6 +40,7 @@ from pathlib import Path
 
 import campaign_nights  # bench/campaign_nights.py: the gateway's nights, as bench/campaign.py
 import numpy as np
+from _fit_tables import interval_record, why_table
 from fit import (  # bench/fit.py: the same protocol
     ACH,
     VAL_SEED,
@@ -181,7 +182,7 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
                     print(f"  house {i:3d}, nights {label}: fit failed ({fit}); left out",
                           flush=True)
                     continue
-                records.append(_record(i, step_s, fit, _truth(houses.take(i)), kind[i],
+                records.append(interval_record(i, step_s, fit, _truth(houses.take(i)), kind[i],
                                        onoff[i], control[i]))
                 records[-1]["nights"] = label
             rec = records[-1]
@@ -197,19 +198,6 @@ def collect(n: int, seed: int, steps: dict[float, int], share_on: bool,
               f"{skipped['all']} 2 + 6 campaigns, {skipped['few']} campaign sequences",
               flush=True)
     return records
-
-
-def _record(i, step_s, fit, truth, kind, onoff, control) -> dict:
-    rec = {"index": i, "step_s": step_s, "diagnostics": model_error.diagnostics(fit),
-           "emitter": "underfloor" if kind == 1 else "radiators", "on_off": bool(onoff),
-           "control": "room thermostat" if control == 1 else "weather curve",
-           "log_error": {}, "sd": {}, "covered": {}}
-    for q in model_error.QUANTITIES:
-        e = fit.lumped_[q]
-        rec["log_error"][q] = float(np.log(e.value / truth[q]))
-        rec["sd"][q] = float(np.log(e.high / e.low) / (2 * model_error.Z95))
-        rec["covered"][q] = bool(e.low <= truth[q] <= e.high)
-    return rec
 
 
 def provenance(args, n: int) -> dict:
@@ -232,43 +220,6 @@ def provenance(args, n: int) -> dict:
             "command": "python bench/calibrate_intervals.py --households "
                        f"{args.households} --seed {args.seed} --steps {args.steps} --sequences "
                        f"{args.sequences}"}
-
-
-def why_table(records: list[dict]) -> None:
-    """What the fit could see, for the houses whose interval missed a truth (and for all)."""
-    print("\n### why intervals miss: what the fit could see for each missed house")
-    print("| house | emitter | control | on/off | group | missed | log error HLC/τ/C_m ×100 | "
-          "95 % half-width in log ×100 | ρ cons | ρ power | RMSE/noise cons | RMSE/noise power | "
-          "discharge h | adequate |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for r in records:
-        miss = [q for q in model_error.QUANTITIES if not r["covered"][q]]
-        if not miss:
-            continue
-        d = r["diagnostics"]
-        f = (lambda v: "–" if v is None else f"{v:.2f}")   # noqa: E731
-        print(f"| {r['index']} | {r['emitter']} | {r['control']} | {'yes' if r['on_off'] else 'no'}"
-              f" | {model_error.group_of(d)} | {','.join(miss)} | "
-              + "/".join(f"{100 * r['log_error'][q]:+.0f}" for q in ("hlc", "tau", "c_m"))
-              + " | " + "/".join(f"{100 * model_error.Z95 * r['sd'][q]:.0f}"
-                                 for q in ("hlc", "tau", "c_m"))
-              + f" | {f(d['rho_constrained'])} | {f(d['rho_power'])} | "
-              f"{f(d['rmse_over_noise_constrained'])} | {f(d['rmse_over_noise_power'])} | "
-              f"{f(d['emitter_discharge_h'])} | {d['adequate']} |")
-    print("\nmedians, missed (any quantity) vs covered (all three):")
-    keys = ("rho_constrained", "rho_power", "rmse_over_noise_constrained",
-            "rmse_over_noise_power", "emitter_discharge_h", "structure_share")
-    for label, sel in (("missed", lambda r: not all(r["covered"].values())),
-                       ("covered", lambda r: all(r["covered"].values()))):
-        rs = [r for r in records if sel(r)]
-        cells = []
-        for k in keys:
-            v = [r["diagnostics"][k] for r in rs if r["diagnostics"][k] is not None]
-            cells.append(f"{k} {np.median(v):.2f}" if v else f"{k} –")
-        ad = np.mean([r["diagnostics"]["adequate"] for r in rs]) if rs else float("nan")
-        nu = np.mean([r["diagnostics"]["nuisance_selected"] for r in rs]) if rs else float("nan")
-        print(f"  {label:8s} n={len(rs):3d}: " + ", ".join(cells)
-              + f", adequate {100 * ad:.0f} %, nuisance selected {100 * nu:.0f} %")
 
 
 def summary(records: list[dict], cal: dict | None) -> None:
