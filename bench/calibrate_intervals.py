@@ -38,9 +38,9 @@ import sys
 import time
 from pathlib import Path
 
-import campaign_nights  # bench/campaign_nights.py: the gateway's nights, as bench/campaign.py
 import numpy as np
-from _fit_tables import interval_record, why_table
+from benchlib import campaign_nights  # the gateway's nights, as bench/campaign.py
+from benchlib.fit_tables import interval_record, why_table
 from fit import (  # bench/fit.py: the same protocol
     ACH,
     VAL_SEED,

@@ -14,8 +14,8 @@ validation population of ``bench/fit.py``), class ranges the true classes (as th
 rows of the README's fit table). Each household gets its own winter weather. For every night
 index j (K = max_nights + 2, spares for skipped nights) every candidate night — constrained at
 the gateway's constrained setpoint and normal at each of its normal setpoints
-(``CampaignConfig()``'s defaults via ``bench/campaign_nights.py``; 21 °C, pre-heat to 23.5 °C
-(ΔT 2.5 K), and 22, 23, 24 °C today), each with the gateway's 2 h
+(``CampaignConfig()``'s defaults via ``bench/benchlib/campaign_nights.py``; 21 °C, pre-heat
+to 23.5 °C (ΔT 2.5 K), and 22, 23, 24 °C today), each with the gateway's 2 h
 pre-heat (``imp_schedule``'s default since h14p) — is pre-simulated on the same
 weather and gains (the four variants as four schedules of the same houses, every night of a
 schedule of one variant, days at 21 °C in between); a campaign then replays, night by night,
@@ -66,7 +66,7 @@ whose first outdoor reading is outside it is run but invalid.
 Constrained nights as the gateway runs them (h18f; ``--cool-to-window-end``: the nights before,
 cooling to 05:00, all valid): ended at T_min = T_set − ΔT or the gateway's anticipated end, not
 switched off after a short pre-heat (h14w's ``stop_at_t_min``), cut there, and invalid with
-< ``night_protocol.MIN_NIGHT_H`` after the 1 h lag (``bench/_fit_protocol.short_constrained``).
+< ``night_protocol.MIN_NIGHT_H`` after the 1 h lag (``bench/fit_protocol.short_constrained``).
 An invalid night is repeated (the policy's rule; the fixed plan's); the fixed plan gives up
 after ``campaign.max_invalid_nights`` invalid nights (``daemon.schedule.gave_up``) and is
 fitted on the valid nights it has, if they hold both kinds. Reported per strategy: constrained
@@ -107,8 +107,8 @@ from impctl.fit.result.report import fit_to_dict  # noqa: E402
 from impctl.imp.plan import DEFAULT_PREHEAT_H  # noqa: E402
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from campaign_nights import fixed_plan, night_sources, source_of, variants  # noqa: E402
-from campaign_report import (  # noqa: E402
+from benchlib.campaign_nights import fixed_plan, night_sources, source_of, variants  # noqa: E402
+from benchlib.campaign_report import (  # noqa: E402
     STRATEGIES,
     by_night_set,
     invalid_nights,
@@ -116,7 +116,7 @@ from campaign_report import (  # noqa: E402
     summarise,
     trajectories,
 )
-from campaign_sim import simulate_variants  # noqa: E402
+from benchlib.campaign_sim import simulate_variants  # noqa: E402
 from fit import ACH, true_ranges  # noqa: E402  (bench/fit.py: the same validation setup)
 
 SEED = 20260

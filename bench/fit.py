@@ -85,9 +85,9 @@ first N households at steps under 5 minutes. The issue-14 table, re-runnable as 
 
 Here: the runs (fit and baselines per household, the variants, the virtual-IMP cross-check) and
 the command line; the protocol (houses, schedule, simulation, demand truth) is in
-``bench/_fit_protocol.py``, the printed tables in ``bench/_fit_tables.py``, ``--speed`` in
-``bench/_fit_speed.py``, ``--compare`` and ``--virtual-imp`` in
-``bench/_fit_variants.py``. The other bench scripts import the protocol from here (``from
+``bench/benchlib/fit_protocol.py``, the printed tables in ``bench/benchlib/fit_tables.py``,
+``--speed`` in ``bench/benchlib/fit_speed.py``, ``--compare`` and ``--virtual-imp`` in
+``bench/benchlib/fit_variants.py``. The other bench scripts import the protocol from here (``from
 fit import ...``).
 """
 
@@ -101,7 +101,7 @@ from dataclasses import replace
 
 import numpy as np
 import torch
-from _fit_protocol import (  # also imported from here by the other bench scripts
+from benchlib.fit_protocol import (  # also imported from here by the other bench scripts
     ACH,
     VAL_SEED,
     _safe_house,
@@ -118,8 +118,8 @@ from _fit_protocol import (  # also imported from here by the other bench script
     val_schedule,
     window_energy,
 )
-from _fit_speed import speed
-from _fit_tables import (
+from benchlib.fit_speed import speed
+from benchlib.fit_tables import (
     dump,
     gateway_lines,
     gateway_types,
@@ -128,7 +128,7 @@ from _fit_tables import (
     report,
     summary_row,
 )
-from _fit_variants import compare, virtual_imp_check
+from benchlib.fit_variants import compare, virtual_imp_check
 
 from impctl.fit import baselines
 from impctl.fit.estimator import NightFit

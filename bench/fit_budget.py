@@ -72,7 +72,7 @@ import torch
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
 import fit  # noqa: E402  (bench/fit.py's protocol)
-from _fit_tables import rel, stats  # noqa: E402
+from benchlib.fit_tables import rel, stats  # noqa: E402
 from fit import VAL_SEED, run_step  # noqa: E402
 
 from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H  # noqa: E402

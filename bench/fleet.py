@@ -196,7 +196,7 @@ def sample(data: Path, n_batches: int, batch: int, ranges: str, dump: Path | Non
     sources = discover(data)
     houses = None
     if ranges == "true":
-        from _fit_protocol import true_ranges
+        from benchlib.fit_protocol import true_ranges
 
         from impctl.population.households import sample_households
 

@@ -6,8 +6,8 @@ they use (:func:`rel`, :func:`stats`, :func:`half_width`).
 from __future__ import annotations
 
 import numpy as np
-from _fit_protocol import house_from
 
+from benchlib.fit_protocol import house_from
 from impctl.fit.intervals import model_error
 from impctl.fit.ode.parameters import PARAM_NAMES
 

@@ -15,13 +15,13 @@ from impctl.population.imp_run.synth import run_schedule, run_schedule_plant, sa
 from impctl.population.realism import sample_params
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from _fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)
-from campaign_nights import (  # noqa: E402
+from benchlib.campaign_nights import (  # noqa: E402
     alternating_schedule,
     night_sources,
     variant_schedule,
     variants,
 )
+from benchlib.fit_protocol import short_constrained  # noqa: E402  (h14w: the gateway's validity rule)
 
 VARIANTS = variants()   # (kind, setpoint °C): the constrained night first, then each normal
 CONSTRAINED_C = VARIANTS[0][1]

@@ -7,8 +7,8 @@ import sys
 import time
 
 import numpy as np
-from _fit_protocol import VAL_SEED, true_ranges
 
+from benchlib.fit_protocol import VAL_SEED, true_ranges
 from impctl.fit.estimator import NightFit
 from impctl.population.households import sample_households
 from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights

@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import numpy as np
-from _fit_protocol import (
+
+from benchlib.fit_protocol import (
     VAL_SEED,
     _safe_house,
     demand_eps,
@@ -14,8 +15,7 @@ from _fit_protocol import (
     val_schedule,
     window_energy,
 )
-from _fit_tables import rel, stats
-
+from benchlib.fit_tables import rel, stats
 from impctl.fit.estimator import NightFit
 from impctl.model import HouseParameters
 from impctl.population.households import sample_households
