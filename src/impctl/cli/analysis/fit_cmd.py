@@ -209,8 +209,10 @@ def _classes(nights, model_dir):
         note = (f"no classification ({exc.problem}); floor_area, c_f and u_walls were searched "
                 "over their whole prior ranges, so the fit rests on the nights alone")
         return classes, {n: c["range"] for n, c in classes.items()}, [note]
-    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
-                      "probabilities": dict(r.probabilities), "search_range": r.fit_range}
+    # a parameter the nights do not determine: its prior, no class (ClassResult.source)
+    classes = {name: {"range": r.range, "probability": r.probability if r.determined else None,
+                      "source": r.source, "probabilities": dict(r.probabilities),
+                      "search_range": r.fit_range}
                for name, r in results.items()}
     left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())
     notes = [f"the classes leave out {len(left_out)} nights run at setpoints the classifiers "
