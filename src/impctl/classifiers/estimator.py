@@ -58,7 +58,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     random_state : int or None
     n_jobs : int or None
         Trees built in parallel (``-1``: all cores).
-    calibration : {"sigmoid", "isotonic"} or None, default "sigmoid"
+    calibration : {"sigmoid", "isotonic"} or None, default "isotonic"
         A forest's vote shares are not probabilities (they crowd towards the middle). With
         ``groups`` given to :meth:`fit` (at least :data:`MIN_CALIBRATION_GROUPS`), the groups
         (households) are split into ``cv`` folds; each fold's votes come from a forest trained
@@ -100,7 +100,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         max_features: str | int | float | None = "sqrt",
         random_state: int | None = None,
         n_jobs: int | None = None,
-        calibration: str | None = "sigmoid",
+        calibration: str | None = "isotonic",
         cv: int = 5,
         min_margin: float = MIN_MARGIN,
     ):
