@@ -98,8 +98,11 @@ def main() -> None:
         briers = " / ".join(f"{np.mean(np.sum((p - onehot) ** 2, axis=1)):.3f}"
                             for p in (p_out, p_cal, p_votes, p_prior))
         eces = " / ".join(f"{_ece(p, y):.3f}" for p in (p_out, p_cal, p_votes))
-        det = getattr(model, "determined_", True)
-        print(f"| {name} | {'yes' if det else 'no'} | {ci(hit_out)} | {ci(hit_cal)} | "
+        det = "yes" if getattr(model, "determined_", True) else "no"
+        if hasattr(model, "cv_margin_low_"):
+            det += (f" (out-of-fold {model.cv_accuracy_:.1%} vs {model.cv_majority_:.1%}, "
+                    f"margin ≥ {100 * model.cv_margin_low_:+.1f})")
+        print(f"| {name} | {det} | {ci(hit_out)} | {ci(hit_cal)} | "
               f"{major.mean() * 100:.1f} | {ci(hit_cal - major, fmt='+.1f')} | {briers} | "
               f"{eces} |")
 

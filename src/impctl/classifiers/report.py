@@ -83,12 +83,15 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
                      "training households mapped to")
         notes.append("class frequencies); votes: the forest's vote shares; prior: the "
                      "training class frequencies.")
-        undetermined = [(n, r) for n, r in reports.items() if not r.determined]
-        for n, r in undetermined:
-            notes.append(f"{n}: not determined by the nights — out-of-fold accuracy "
-                         f"{_pct(r.cv_accuracy)} against the majority's {_pct(r.cv_majority)} "
-                         "on the training households; reported as the prior (class "
-                         "frequencies).")
+        for n, r in reports.items():
+            if r.cv_accuracy is None:
+                continue
+            verdict = ("determined" if r.determined else
+                       "NOT DETERMINED by the nights: reported as the prior (class frequencies)")
+            notes.append(f"{n}: {verdict} — out-of-fold accuracy {100 * r.cv_accuracy:.0f} % "
+                         f"against the majority's {100 * r.cv_majority:.0f} % on the training "
+                         f"households' {small[0]}+{small[1]} campaigns, margin ≥ "
+                         f"{100 * r.cv_margin_low:+.1f} points (95 %)")
     missed = [n for n, r in reports.items() if n in GOALS and r.test_accuracy < GOALS[n]]
     if missed:
         notes += [f"Goal not reached for: {', '.join(missed)}. Night data fix HLC, τ and C_m;",

@@ -165,7 +165,8 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
                         "determined": bool(getattr(model, "determined_", True)),
                         "prior": [float(p) for p in getattr(model, "prior_", [])],
                         "cv_accuracy": _number(getattr(model, "cv_accuracy_", None)),
-                        "cv_majority": _number(getattr(model, "cv_majority_", None))}
+                        "cv_majority": _number(getattr(model, "cv_majority_", None)),
+                        "cv_margin_low": _number(getattr(model, "cv_margin_low_", None))}
     meta = {
         "format": MODEL_FORMAT,
         "parameters": params,

@@ -97,6 +97,7 @@ class ParameterReport:
     determined: bool = True
     cv_accuracy: float | None = None
     cv_majority: float | None = None
+    cv_margin_low: float | None = None
     #: small-campaign accuracy of the calibrated forest (whether or not determined), its 95 %
     #: bootstrap interval, the majority class's, and the margin's interval (fractions)
     forest_accuracy_small: float | None = None
@@ -304,6 +305,7 @@ def train_classifiers(
             determined=bool(model.determined_),
             cv_accuracy=_finite(model.cv_accuracy_),
             cv_majority=_finite(model.cv_majority_),
+            cv_margin_low=_finite(model.cv_margin_low_),
             forest_accuracy_small=float(hit_cal.mean()),
             forest_accuracy_small_ci=bootstrap_ci(hit_cal),
             majority_accuracy_small=float(hit_major.mean()),
