@@ -74,9 +74,9 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     min_margin : float, default :data:`MIN_MARGIN`
         The out-of-fold calibrated classes must beat the majority class by this much accuracy
         with 95 % confidence (on the rows ``score_rows`` of :meth:`fit`, bootstrapped over
-        groups); otherwise the parameter is *not
-        determined* by the features (``determined_`` False) and :meth:`predict_proba` returns
-        the training prior for every row.
+        groups); otherwise the parameter is *not determined* by the features
+        (``determined_`` False) and :meth:`predict_proba` returns the training prior for
+        every row.
 
     Attributes
     ----------
