@@ -1,7 +1,7 @@
 """Class accuracy and calibration on held-out households, as the product reports the classes.
 
 Run:  .venv/bin/python bench/classify_calibration.py [--plant realistic|iso] [--households 900]
-          [--seed 0] [--campaigns 5] [--calibration sigmoid|isotonic]
+          [--seed 0] [--campaigns 5] [--calibration sigmoid|isotonic] [--min-samples-leaf N]
 
 Generates the population (``impctl train``'s nights for the plant), trains the classifiers as
 ``impctl train`` does (80 % of the households, split by household) and scores each held-out
@@ -53,12 +53,18 @@ def main() -> None:
     ap.add_argument("--plant", choices=("iso", "realistic"), default="realistic")
     ap.add_argument("--calibration", default=None,
                     help="calibration map (default TrainConfig's)")
+    ap.add_argument("--min-samples-leaf", type=int, default=None,
+                    help="the forests' smallest leaf (default TrainConfig's)")
     args = ap.parse_args()
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
     dataset = generate_dataset(args.households, args.seed, plant=args.plant,
                                imp=ImpSimConfig.for_plant(args.plant))
-    cfg = TrainConfig() if args.calibration is None else TrainConfig(
-        calibration=None if args.calibration == "none" else args.calibration)
+    kw: dict = {}
+    if args.calibration is not None:
+        kw["calibration"] = None if args.calibration == "none" else args.calibration
+    if args.min_samples_leaf is not None:
+        kw["min_samples_leaf"] = args.min_samples_leaf
+    cfg = TrainConfig(**kw)
     models, reports = train_classifiers(dataset, cfg, args.seed, with_baselines=False)
     test = np.array(next(iter(reports.values())).test_households)
     values, ids = night_cube(dataset.nights[dataset.nights["replay"] == 0])
@@ -77,7 +83,9 @@ def main() -> None:
 
     print(f"plant {args.plant}, {args.households} households (seed {args.seed}), "
           f"{len(test)} held out × {k} gateway campaigns of 2 + 6 nights; 95 % bootstrap "
-          "intervals over test households\n")
+          "intervals over test households; the forests' nodes (the size of forests.npz): "
+          f"{sum(t.tree_.node_count for m in models.values() for t in m.forest_.estimators_):,}"
+          "\n")
     print("| parameter | determined | reported accuracy % | calibrated forest % | majority % | "
           "margin (points) | Brier reported / calibrated / votes / prior | "
           "ECE reported / calibrated / votes |")

@@ -55,8 +55,10 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     ranges : tuple of (low, high)
         Contiguous, increasing ranges of the parameter (its unit).
     n_estimators : int, default 300
-    min_samples_leaf : int, default 5
-        Larger leaves: smoother probabilities and a model a third the size.
+    min_samples_leaf : int, default 8
+        Larger leaves: smoother probabilities and a smaller model. 8 keeps the compact
+        forests the size they had when the forest saw 80 % of the households (5): on a
+        development population 30 % fewer nodes, Brier equal or better on every class.
     max_features : {"sqrt", "log2"}, int, float or None, default "sqrt"
     random_state : int or None
     n_jobs : int or None
@@ -103,7 +105,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         self,
         ranges: tuple[tuple[float, float], ...] = DEFAULT_RANGES["floor_area"],
         n_estimators: int = 300,
-        min_samples_leaf: int = 5,
+        min_samples_leaf: int = 8,
         max_features: str | int | float | None = "sqrt",
         random_state: int | None = None,
         n_jobs: int | None = None,
