@@ -128,12 +128,12 @@ def test_load_models_still_checks_the_pickles(models, tmp_path):
 def test_a_model_the_arrays_cannot_express_gets_no_compact_file(tmp_path):
     x, y = _data(1200, 4)
     groups = np.repeat(np.arange(300), 4)
-    isotonic = {"u_walls": RangeClassifier(RANGES["u_walls"], n_estimators=20, random_state=0,
-                                           calibration="isotonic").fit(x, y["u_walls"],
-                                                                       groups=groups)}
-    assert isotonic["u_walls"].calibrated_
+    temperature = {"u_walls": RangeClassifier(RANGES["u_walls"], n_estimators=20,
+                                              random_state=0, calibration="temperature").fit(
+        x, y["u_walls"], groups=groups)}
+    assert temperature["u_walls"].calibrated_
     (tmp_path / COMPACT_FILE).write_bytes(b"stale")
-    save_models(isotonic, tmp_path, seed=0, n_households=300, emission_lag_h=1.0)
+    save_models(temperature, tmp_path, seed=0, n_households=300, emission_lag_h=1.0)
     assert not (tmp_path / COMPACT_FILE).exists()
     assert "compact" not in json.loads((tmp_path / "models.json").read_text())
     houses = sample_households(1, seed=8)

@@ -4,9 +4,10 @@
 1.4 s of CPU — importing scikit-learn (and the scipy.stats it pulls in) and unpickling three
 ~25 MB forests — to walk 900 trees once. :func:`save_compact` stores each fitted forest as
 scikit-learn's own tree arrays (``tree_.feature``, ``threshold``, ``children_left/right``,
-``missing_go_to_left``, ``value``) and, for a calibrated model, the sigmoid ``a_``, ``b_`` of
-``CalibratedClassifierCV``, in one uncompressed ``forests.npz`` (no pickle: loading runs no
-code). :class:`CompactForest` reproduces ``RangeClassifier.predict_proba`` from them.
+``missing_go_to_left``, ``value``), for a calibrated model the calibration map of
+``CalibratedClassifierCV`` (sigmoid ``a_``, ``b_``, or isotonic thresholds), and the training
+prior with the determination verdict, in one uncompressed ``forests.npz`` (no pickle: loading
+runs no code). :class:`CompactForest` reproduces ``RangeClassifier.predict_proba`` from them.
 
 Every export is checked against scikit-learn before it is written: probe rows around the trees'
 thresholds (and with missing features) must give the same probabilities to 1e-9, else no
@@ -22,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 #: Bumped when the array layout changes; a reader refuses other formats (and falls back).
-COMPACT_FORMAT = 1
+COMPACT_FORMAT = 2
 COMPACT_FILE = "forests.npz"
 #: Largest |difference| between scikit-learn's and the arrays' probabilities accepted on export.
 EXPORT_TOLERANCE = 1e-9
@@ -33,14 +34,18 @@ class CompactForest:
     """One range classifier's forest (and calibration) as arrays.
 
     Attributes mirror :class:`~.estimator.RangeClassifier` where :func:`~.saved.classify_with`
-    reads them: ``classes_`` (range labels), ``ranges``, ``calibrated_``.
+    reads them: ``classes_`` (range labels), ``ranges``, ``calibrated_``, ``determined_``,
+    ``prior_``.
     """
 
     def __init__(self, arrays: dict[str, NDArray]):
         self._a = arrays
         self.classes_ = np.asarray(arrays["labels"]).astype(str)
         self.ranges = [tuple(float(v) for v in r) for r in arrays["ranges"]]
-        self.calibrated_ = bool(arrays["sigmoid_a"].size)
+        self.method = str(arrays["method"])
+        self.calibrated_ = self.method != "none"
+        self.determined_ = bool(arrays["determined"])
+        self.prior_ = np.asarray(arrays["prior"], dtype=np.float64)
 
     def votes(self, X: ArrayLike) -> NDArray[np.float64]:
         """The forest's vote shares over its own classes, shape (n_samples, n_forest_classes).
@@ -67,31 +72,49 @@ class CompactForest:
         return a["leaf_proba"][node].mean(axis=1)
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
-        """Probability of each range, shape (n_samples, n_ranges): the calibrated sigmoid of
-        the votes when the model was calibrated, else the vote shares."""
+        """Probability of each range, shape (n_samples, n_ranges), as
+        ``RangeClassifier.predict_proba``: the training prior when the parameter is not
+        determined, else :meth:`predict_calibrated`."""
+        if not self.determined_:
+            x = np.asarray(X)
+            return np.tile(self.prior_, (1 if x.ndim == 1 else x.shape[0], 1))
+        return self.predict_calibrated(X)
+
+    def predict_calibrated(self, X: ArrayLike) -> NDArray[np.float64]:
+        """The calibrated probabilities of the votes when the model was calibrated, else the
+        vote shares, shape (n_samples, n_ranges)."""
         a = self._a
         votes = self.votes(X)
-        forest_classes = a["forest_classes"]
         if self.calibrated_:
-            votes = _sigmoid_calibrated(votes, a["sigmoid_a"], a["sigmoid_b"])
+            votes = _calibrated(votes, self.method, a)
         out = np.zeros((votes.shape[0], len(self.classes_)))
-        out[:, forest_classes] = votes
+        out[:, a["forest_classes"]] = votes
         return out
 
 
-def _sigmoid_calibrated(votes: NDArray, a: NDArray, b: NDArray) -> NDArray[np.float64]:
-    """scikit-learn's ``_CalibratedClassifier.predict_proba`` (method "sigmoid", one
-    calibrated classifier): one-vs-rest sigmoids ``1/(1 + exp(a·p + b))``, normalised."""
+def _calibrated(votes: NDArray, method: str, a: dict[str, NDArray]) -> NDArray[np.float64]:
+    """scikit-learn's ``_CalibratedClassifier.predict_proba`` (one calibrated classifier,
+    method "sigmoid" or "isotonic"): one-vs-rest maps of the votes, normalised."""
     n = votes.shape[1]
-    if n == 2:   # one calibrator, on the second class's votes
-        p1 = 1.0 / (1.0 + np.exp(a[0] * votes[:, 1] + b[0]))
-        proba = np.column_stack([1.0 - p1, p1])
+    cols = [1] if n == 2 else range(n)   # binary: one map, on the second class's votes
+    maps = np.column_stack([_one_map(votes[:, c], i, method, a) for i, c in enumerate(cols)])
+    if n == 2:
+        proba = np.column_stack([1.0 - maps[:, 0], maps[:, 0]])
     else:
-        proba = 1.0 / (1.0 + np.exp(a[None, :] * votes + b[None, :]))
-        total = proba.sum(axis=1, keepdims=True)
-        proba = np.divide(proba, total, out=np.full_like(proba, 1.0 / n), where=total != 0)
+        total = maps.sum(axis=1, keepdims=True)
+        proba = np.divide(maps, total, out=np.full_like(maps, 1.0 / n), where=total != 0)
     proba[(proba > 1.0) & (proba <= 1.0 + 1e-5)] = 1.0
     return proba
+
+
+def _one_map(p: NDArray, i: int, method: str, a: dict[str, NDArray]) -> NDArray[np.float64]:
+    if method == "sigmoid":
+        return 1.0 / (1.0 + np.exp(a["sigmoid_a"][i] * p + a["sigmoid_b"][i]))
+    lo, hi = a["iso_offsets"][i], a["iso_offsets"][i + 1]
+    x, y = a["iso_x"][lo:hi], a["iso_y"][lo:hi]
+    if x.size == 1:
+        return np.full(p.shape, y[0])
+    return np.interp(np.clip(p, x[0], x[-1]), x, y)   # IsotonicRegression, out_of_bounds="clip"
 
 
 def export_arrays(model) -> dict[str, NDArray]:
@@ -121,16 +144,16 @@ def export_arrays(model) -> dict[str, NDArray]:
         norm[norm == 0.0] = 1.0   # as DecisionTreeClassifier.predict_proba
         proba.append(value / norm)
         offset += tree.node_count
-    sig_a = sig_b = np.zeros(0)
+    method, maps = "none", {}
     calibrator = getattr(model, "calibrator_", None)
     if calibrator is not None:
-        if calibrator.method != "sigmoid" or len(calibrator.calibrated_classifiers_) != 1:
-            raise ValueError("only one sigmoid-calibrated classifier is expressed")
+        method = calibrator.method
+        if method not in ("sigmoid", "isotonic") or len(calibrator.calibrated_classifiers_) != 1:
+            raise ValueError("only one sigmoid or isotonic calibrated classifier is expressed")
         cal = calibrator.calibrated_classifiers_[0]
         if list(cal.classes) != list(forest.classes_):
             raise ValueError("calibrator and forest classes differ")
-        sig_a = np.array([c.a_ for c in cal.calibrators], dtype=np.float64)
-        sig_b = np.array([c.b_ for c in cal.calibrators], dtype=np.float64)
+        maps = _calibration_arrays(method, cal.calibrators)
     return {
         "format": np.array(COMPACT_FORMAT), "labels": np.asarray(model.classes_).astype(str),
         "ranges": np.asarray(model.ranges, dtype=np.float64),
@@ -138,8 +161,25 @@ def export_arrays(model) -> dict[str, NDArray]:
         "roots": np.array(roots, dtype=np.int64), "feature": np.concatenate(feature),
         "threshold": np.concatenate(threshold), "left": np.concatenate(left),
         "right": np.concatenate(right), "missing_left": np.concatenate(missing),
-        "leaf_proba": np.concatenate(proba), "sigmoid_a": sig_a, "sigmoid_b": sig_b,
+        "leaf_proba": np.concatenate(proba), "method": np.array(method),
+        "determined": np.array(bool(getattr(model, "determined_", True))),
+        "prior": np.asarray(getattr(model, "prior_", np.full(len(model.classes_),
+                                                             1.0 / len(model.classes_))),
+                            dtype=np.float64),
+        **maps,
     }
+
+
+def _calibration_arrays(method: str, calibrators) -> dict[str, NDArray]:
+    """The one-vs-rest calibration maps as arrays: sigmoid (a, b) per map, or every isotonic
+    map's thresholds concatenated with their offsets."""
+    if method == "sigmoid":
+        return {"sigmoid_a": np.array([c.a_ for c in calibrators], dtype=np.float64),
+                "sigmoid_b": np.array([c.b_ for c in calibrators], dtype=np.float64)}
+    xs = [np.asarray(c.X_thresholds_, dtype=np.float64) for c in calibrators]
+    ys = [np.asarray(c.y_thresholds_, dtype=np.float64) for c in calibrators]
+    return {"iso_x": np.concatenate(xs), "iso_y": np.concatenate(ys),
+            "iso_offsets": np.cumsum([0] + [len(x) for x in xs]).astype(np.int64)}
 
 
 def probe_rows(arrays: dict[str, NDArray], n_features: int, n_rows: int = 300,
@@ -182,8 +222,10 @@ def save_compact(models: dict, directory: str | Path) -> Path | None:
                 rows_in = pd.DataFrame(rows, columns=list(names))
             else:
                 rows_in = rows
-            diff = np.abs(CompactForest(arrays).predict_proba(rows)
-                          - model.predict_proba(rows_in)).max()
+            compact = CompactForest(arrays)
+            diff = max(np.abs(compact.predict_proba(rows) - model.predict_proba(rows_in)).max(),
+                       np.abs(compact.predict_calibrated(rows)
+                              - model.predict_calibrated(rows_in)).max())
             if not diff <= EXPORT_TOLERANCE:
                 raise ValueError(f"{name}: arrays differ from scikit-learn by {diff:.2g}")
             payload.update({f"{name}/{k}": v for k, v in arrays.items()})

@@ -60,15 +60,38 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
     ]
     if any(r.brier is not None for r in reports.values()):
         notes += ["", f"Probabilities ({small[0]}+{small[1]} campaigns of the test households; "
-                  "Brier score, lower is better, 0 perfect):",
-                  f"{'parameter':<12}{'calibrated':>12}{'vote shares':>13}{'prior':>8}"]
+                  "Brier score and expected calibration error ECE, lower is better, 0 perfect):",
+                  f"{'parameter':<12}{'Brier cal.':>11}{'votes':>8}{'prior':>8}"
+                  f"{'ECE cal.':>10}{'votes':>8}   accuracy cal. [95 % CI]  margin over "
+                  "majority, points [95 % CI]"]
         for name, r in reports.items():
-            if r.brier is not None:
-                flag = "" if r.calibrated else "  (not calibrated: a class missing)"
-                notes.append(f"{name:<12}{r.brier:>12.3f}{r.brier_votes:>13.3f}"
-                             f"{r.brier_prior:>8.3f}{flag}")
-        notes.append("calibrated: the forest's votes mapped to probabilities on held-out "
-                     "training households (sigmoid); prior: the training class frequencies.")
+            if r.brier is None:
+                continue
+            flag = "" if r.calibrated else "  (not calibrated: too few households)"
+            acc = margin = ""
+            if r.forest_accuracy_small is not None and r.margin_small_ci is not None:
+                lo, hi = r.forest_accuracy_small_ci or (float("nan"),) * 2
+                acc = (f"{100 * r.forest_accuracy_small:5.1f} [{100 * lo:.1f}, "
+                       f"{100 * hi:.1f}]")
+                d = r.forest_accuracy_small - (r.majority_accuracy_small or 0.0)
+                margin = (f"{100 * d:+5.1f} [{100 * r.margin_small_ci[0]:+.1f}, "
+                          f"{100 * r.margin_small_ci[1]:+.1f}]")
+            ece = (f"{r.ece:>10.3f}{r.ece_votes:>8.3f}" if r.ece is not None else " " * 18)
+            notes.append(f"{name:<12}{r.brier:>11.3f}{r.brier_votes:>8.3f}{r.brier_prior:>8.3f}"
+                         f"{ece}   {acc:<24}{margin}{flag}")
+        notes.append("cal.: calibrated probabilities (the forest's out-of-fold votes of the "
+                     "training households mapped to")
+        notes.append("class frequencies); votes: the forest's vote shares; prior: the "
+                     "training class frequencies.")
+        for n, r in reports.items():
+            if r.cv_accuracy is None:
+                continue
+            verdict = ("determined" if r.determined else
+                       "NOT DETERMINED by the nights: reported as the prior (class frequencies)")
+            notes.append(f"{n}: {verdict} — out-of-fold accuracy {100 * r.cv_accuracy:.0f} % "
+                         f"against the majority's {100 * r.cv_majority:.0f} % on the training "
+                         f"households' {small[0]}+{small[1]} campaigns, margin ≥ "
+                         f"{100 * r.cv_margin_low:+.1f} points (95 %)")
     missed = [n for n, r in reports.items() if n in GOALS and r.test_accuracy < GOALS[n]]
     if missed:
         notes += [f"Goal not reached for: {', '.join(missed)}. Night data fix HLC, τ and C_m;",

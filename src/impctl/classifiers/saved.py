@@ -24,11 +24,13 @@ import pandas as pd
 from ..errors import InputError
 from ..imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
 from ..population.dataset import package_versions
-from ..population.ranges import labels_of
+from ..population.ranges import labels_of, range_label
 from .campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
 from .compact import COMPACT_FILE, load_compact, save_compact
 
-MODEL_FORMAT = 1
+#: 2: cross-validated calibration, the training prior and the determination verdict in the
+#: models (older model directories are refused and retrained).
+MODEL_FORMAT = 2
 METADATA_FILE = "models.json"
 RETRAIN = "run `impctl train` to train them"
 #: The fit searches the hull of the most probable classes whose probabilities add up to this:
@@ -36,6 +38,8 @@ RETRAIN = "run `impctl train` to train them"
 #: the fit at its edge with an interval that misses (issue 14, stop 25: C_m coverage 88 % with
 #: the most probable class's box on the bench's realistic houses).
 SEARCH_LEVEL = 0.95
+#: How a parameter the nights do not determine is reported (``ClassResult.source``).
+NOT_DETERMINED = "prior: not determined by the nights"
 
 
 def default_model_dir() -> Path:
@@ -61,14 +65,21 @@ class ClassResult:
     ----------
     parameter : str
     label : str
-        Most probable range label, e.g. ``"200-300"``.
+        Most probable range label, e.g. ``"200-300"``; when the parameter is not determined,
+        the label of the whole prior range (no class is reported).
     range : (float, float)
         That range, in the parameter's unit.
     probability : float
-        Its probability (0–1): calibrated on households the forest never saw when
-        ``calibrated`` (models from ``impctl train`` since issue 14), else the share of votes.
+        Its probability (0–1): calibrated (the forest's votes mapped to class frequencies of
+        households it never saw) when ``calibrated``, else the share of votes; 1 for the
+        whole prior range of a parameter not determined.
     probabilities : dict
-        Every range label → probability.
+        Every range label → probability; the training prior (class frequencies) when the
+        parameter is not determined.
+    determined : bool
+        False when the classifier's classes do not beat the majority class on held-out
+        training households (:data:`impctl.classifiers.estimator.MIN_MARGIN`): the nights do
+        not determine the parameter, and ``probabilities`` are the prior.
     """
 
     parameter: str
@@ -79,6 +90,20 @@ class ClassResult:
     calibrated: bool = False
     nights_left_out: tuple[str, ...] = ()
     search_range: tuple[float, float] | None = None
+    determined: bool = True
+
+    @property
+    def source(self) -> str:
+        """Where the class comes from: ``"classifier"``, or :data:`NOT_DETERMINED`."""
+        return "classifier" if self.determined else NOT_DETERMINED
+
+    @property
+    def probability_kind(self) -> str:
+        """What ``probabilities`` are: ``"calibrated probability"``, ``"vote share"`` (a
+        model too small to calibrate) or ``"prior class frequency"``."""
+        if not self.determined:
+            return "prior class frequency"
+        return "calibrated probability" if self.calibrated else "vote share"
 
     @property
     def fit_range(self) -> tuple[float, float]:
@@ -87,6 +112,15 @@ class ClassResult:
         own range when no probabilities were kept."""
         return self.search_range or self.range
 
+    def probability_text(self) -> str:
+        """One line for a table: ``"72 % (calibrated probability)"``, or for a parameter the
+        nights do not determine ``"not determined by the nights; prior 0.8-1.65 69 %,
+        1.65-3.7 31 %"``."""
+        if not self.determined:
+            prior = ", ".join(f"{k} {100 * p:.0f} %" for k, p in self.probabilities.items())
+            return f"not determined by the nights; prior {prior}"
+        return f"{100 * self.probability:.0f} % ({self.probability_kind})"
+
     def as_dict(self) -> dict[str, Any]:
         """JSON form: ``{"range": [lo, hi], "label": …, "probability": p, "probabilities": …,
         "search_range": [lo, hi]}``
@@ -94,7 +128,9 @@ class ClassResult:
         the classifiers' population never ran, when there are any)."""
         out = {"range": list(self.range), "label": self.label,
                "probability": self.probability, "probabilities": dict(self.probabilities),
-               "calibrated": self.calibrated, "search_range": list(self.fit_range)}
+               "calibrated": self.calibrated, "determined": self.determined,
+               "source": self.source, "probability_kind": self.probability_kind,
+               "search_range": list(self.fit_range)}
         if self.nights_left_out:
             out["nights_left_out"] = list(self.nights_left_out)
         return out
@@ -124,7 +160,13 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
         joblib.dump(model, tmp, compress=3)
         os.replace(tmp, target)
         params[name] = {"file": target.name, "ranges": [list(r) for r in model.ranges],
-                        "labels": labels_of(tuple(model.ranges))}
+                        "labels": labels_of(tuple(model.ranges)),
+                        "calibration": model.calibration if model.calibrated_ else None,
+                        "determined": bool(getattr(model, "determined_", True)),
+                        "prior": [float(p) for p in getattr(model, "prior_", [])],
+                        "cv_accuracy": _number(getattr(model, "cv_accuracy_", None)),
+                        "cv_majority": _number(getattr(model, "cv_majority_", None)),
+                        "cv_margin_low": _number(getattr(model, "cv_margin_low_", None))}
     meta = {
         "format": MODEL_FORMAT,
         "parameters": params,
@@ -146,6 +188,10 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
     tmp.write_text(json.dumps(meta, indent=2) + "\n")
     os.replace(tmp, directory / METADATA_FILE)
     return directory
+
+
+def _number(value) -> float | None:
+    return None if value is None or not np.isfinite(value) else float(value)
 
 
 def add_compact(model_dir: str | Path) -> bool:
@@ -305,16 +351,23 @@ def classify_with(nights: list[NightSamples], models: dict, meta: dict
     out = {}
     for name, model in models.items():
         proba = model.predict_proba(x)[0]
+        probabilities = {str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)}
+        common = {"parameter": name, "probabilities": probabilities,
+                  "calibrated": bool(getattr(model, "calibrated_", False)),
+                  "nights_left_out": tuple(off.values())}
+        if not getattr(model, "determined_", True):
+            # no class: the whole prior range, its classes weighted by their frequencies
+            hull = (float(model.ranges[0][0]), float(model.ranges[-1][1]))
+            out[name] = ClassResult(label=range_label(*hull), range=hull, probability=1.0,
+                                    search_range=hull, determined=False, **common)
+            continue
         best = int(np.argmax(proba))
         out[name] = ClassResult(
-            parameter=name,
             label=str(model.classes_[best]),
             range=tuple(float(v) for v in model.ranges[best]),  # type: ignore[arg-type]
             probability=float(proba[best]),
-            probabilities={str(c): float(p) for c, p in zip(model.classes_, proba, strict=True)},
-            calibrated=bool(getattr(model, "calibrated_", False)),
-            nights_left_out=tuple(off.values()),
             search_range=credible_hull(model.ranges, proba),
+            **common,
         )
     return out
 

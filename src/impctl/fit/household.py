@@ -239,8 +239,10 @@ def household_classes(nights: Sequence, model_dir: str | Path | None = None, *,
                    else classify_nights(list(nights), model_dir))
     except InputError as exc:
         return prior_classes(exc.problem)
-    classes = {name: {"range": r.range, "probability": r.probability, "source": "classifier",
-                      "calibrated": r.calibrated, "probabilities": dict(r.probabilities),
+    # a parameter the nights do not determine: its prior, no class (ClassResult.source)
+    classes = {name: {"range": r.range, "probability": r.probability if r.determined else None,
+                      "source": r.source, "calibrated": r.calibrated,
+                      "probabilities": dict(r.probabilities),
                       "search_range": r.fit_range}
                for name, r in results.items()}
     left_out = next((r.nights_left_out for r in results.values() if r.nights_left_out), ())

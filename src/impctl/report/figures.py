@@ -87,6 +87,9 @@ def class_figure(fit: dict):
                     f"{probs[i]:.2f} {probability_kind(classes[n])}",
                     ha="right" if inside else "left", va="center", fontsize=7,
                     color="white" if inside else "0.2")
+        else:  # no class: the nights do not determine it (or no classifier ran)
+            ax.text(0.01, i, "no class: the whole prior range", ha="left", va="center",
+                    fontsize=7, color="0.2")
     ax.set_yticks(range(len(names)), labels, fontsize=7)
     ax.set_xlim(0, 1)
     kinds = {probability_kind(c) for c in classes.values() if c.get("probability") is not None}

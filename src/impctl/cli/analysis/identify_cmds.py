@@ -127,9 +127,7 @@ def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) 
     if left_out:
         click.echo(f"left out (setpoint the classifiers were never trained on): "
                    f"{'; '.join(left_out)}")
-    click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}{'probability':>11}")
+    click.echo(f"{'parameter':<12}{'range':>16}  {'unit':<13}probability")
     for name, r in results.items():
         rng = f"{r.range[0]:g} – {r.range[1]:g}"
-        kind = "calibrated" if r.calibrated else "forest vote share"
-        click.echo(f"{name:<12}{rng:>16}  {UNITS.get(name, ''):<13}{100 * r.probability:>10.0f} %"
-                   f"  {kind}")
+        click.echo(f"{name:<12}{rng:>16}  {UNITS.get(name, ''):<13}{r.probability_text()}")
