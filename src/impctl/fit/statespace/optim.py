@@ -159,7 +159,8 @@ def bfgs(f: Callable[[torch.Tensor], torch.Tensor], u0: torch.Tensor, free: torc
         new_h = a @ hinv @ a.transpose(1, 2) + rho[:, None, None] * step[:, :, None] * step[:, None, :]
         hinv = torch.where(upd[:, None, None], new_h, hinv)
         moved = alpha > 0
-        conv = moved & (((fv - fv_new).abs() < tol) | (slope.abs() < tol))
+        # the Newton decrement gᵀH⁻¹g (= −slope of the quasi-Newton step) is small
+        conv = moved & (slope.abs() < tol)
         stuck = ~done & ~accepted
         u = torch.where(moved[:, None], u_new, u)
         fv = torch.where(moved, fv_new, fv)
