@@ -201,7 +201,7 @@ def main() -> None:
               score(ss, jobs, "with_meter", False), [r["time"] for r in ss], rng)
     adequacy_lines(ss, sc, "state-space")
     if args.verbose or args.plant == "twin":
-        for (nights, _, truth, g), r in zip(jobs, ss, strict=True):
+        for (_, _, truth, _), r in zip(jobs, ss, strict=True):
             q = r["lumped"]
             print("   ", "  ".join(
                 f"{k} {q[k].value:.4g} [{q[k].low:.4g}, {q[k].high:.4g}] ref {t:.4g}"

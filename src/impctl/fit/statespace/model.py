@@ -19,7 +19,8 @@ meter error). On a held night the controller sets the heat that keeps T_air at i
 a noisy metered power as a plain input would be errors in the variables (identifiability.md
 §11.3); as a measurement of a latent input the filter weighs it against what T_air says.
 
-Inputs u = (T_o, Q_HC, 1) of the continuous part (Q_HC is the latent Q_k); Φ_0 [W] is a constant heat input (unmetered night gain, and the
+Inputs u = (T_o, Q_HC, 1) of the continuous part (Q_HC is the latent Q_k); Φ_0 [W] is a
+constant heat input (unmetered night gain, and the
 intercept an indoor/outdoor sensor offset makes: HLC·offset), split between air and mass as the
 losses are (β the share of the HLC that bypasses the mass).
 

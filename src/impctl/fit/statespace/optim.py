@@ -156,7 +156,8 @@ def bfgs(f: Callable[[torch.Tensor], torch.Tensor], u0: torch.Tensor, free: torc
         rho = torch.where(upd, 1.0 / sy.clamp_min(1e-12), 0.0)
         eye = torch.eye(hp, dtype=u.dtype)
         a = eye - rho[:, None, None] * step[:, :, None] * yv[:, None, :]
-        new_h = a @ hinv @ a.transpose(1, 2) + rho[:, None, None] * step[:, :, None] * step[:, None, :]
+        new_h = (a @ hinv @ a.transpose(1, 2)
+                 + rho[:, None, None] * step[:, :, None] * step[:, None, :])
         hinv = torch.where(upd[:, None, None], new_h, hinv)
         moved = alpha > 0
         # the Newton decrement gᵀH⁻¹g (= −slope of the quasi-Newton step) is small
