@@ -59,6 +59,10 @@ SHARE_E_BOX = (1e-4, 0.5)
 TAU_E_BOX_H = (1.0 / 60.0, 12.0)
 BETA_BOX = (1e-3, 0.95)
 PHI0_SCALE_W = 100.0
+#: Log-box of the relative per-sample meter noise r_q [-]: a meter is never pure noise (without
+#: the box the fit can call the meter noise, lose the HLC's scale and collapse it; measured on
+#: the realistic plant, 3 of 10 houses). Class 2–3 meters, low-flow errors (real-houses.md §5).
+R_Q_BOX = (0.002, 0.15)
 #: Floor of a metered power sample's SD [W] (energy-counter quantisation, a standby reading).
 Q_FLOOR_W = 20.0
 
@@ -119,7 +123,7 @@ def physical(u: torch.Tensor) -> Physical:
                     phi0_w=PHI0_SCALE_W * u[..., IDX["phi0"]], sig_s=sig,
                     sig_y=torch.exp(u[..., IDX["ln_sig_y"]]),
                     sig_q=torch.exp(u[..., IDX["ln_sig_q"]]) / 60.0,
-                    r_q=torch.exp(u[..., IDX["ln_r_q"]]),
+                    r_q=_logbox(u[..., IDX["ln_r_q"]], R_Q_BOX),
                     sig_y_held=torch.exp(u[..., IDX["ln_sig_y_held"]]))
 
 
@@ -171,5 +175,5 @@ def unconstrained(hlc: float, c_m: float, h_a: float, h_im: float, *, share_i: f
            math.log(max(h_im / p - 1.0, 1e-9)), _logbox_inv(share_i, SHARE_I_BOX),
            _logbox_inv(share_e, SHARE_E_BOX), _logbox_inv(tau_e_h, TAU_E_BOX_H),
            phi0_w / PHI0_SCALE_W, *(math.log(s) for s in sig_k_per_sqrt_h), math.log(sig_y_k),
-           math.log(sig_q_w_per_sqrt_h), math.log(r_q), math.log(sig_y_k)]
+           math.log(sig_q_w_per_sqrt_h), _logbox_inv(r_q, R_Q_BOX), math.log(sig_y_k)]
     return torch.tensor(row, dtype=DTYPE)

@@ -41,7 +41,7 @@ LN_PRIORS = {
     "ln_sig_y": (math.log(0.05), 2.5),       # K
     "ln_sig_y_held": (math.log(0.05), 2.5),
     "ln_sig_q": (math.log(2000.0), 2.5),     # W/√h
-    "ln_r_q": (math.log(0.05), 1.5),         # class 2–3 meters, per-sample noise 0–10 %
+    "ln_r_q": (math.log(0.03), 1.0),         # class 2–3 meters, per-sample noise 0–10 %
 }
 
 #: Initial state: the mass about the first reading (SD, K); the emitter above it (mean, SD, K);
@@ -123,9 +123,9 @@ def neg_log_prior(u: torch.Tensor, pri: Priors) -> torch.Tensor:
     out = 0.5 * torch.einsum("hi,hij,hj->h", d, pri.precision, d)
     x = physical(u)
     for name, (mu, sd) in LN_PRIORS.items():
-        if name in ("share_i", "share_e", "tau_e"):
+        if name in ("share_i", "share_e", "tau_e", "ln_r_q"):
             v = {"share_i": x.c_i / x.c_m, "share_e": x.c_e / x.c_m,
-                 "tau_e": x.tau_e_s / 3600.0}[name]
+                 "tau_e": x.tau_e_s / 3600.0, "ln_r_q": x.r_q}[name]
             out = out + 0.5 * ((torch.log(v) - mu) / sd) ** 2
         else:
             out = out + 0.5 * ((u[:, IDX[name]] - mu) / sd) ** 2
