@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _fit_protocol import (  # noqa: E402
+from benchlib.fit_protocol import (  # noqa: E402
     ACH,
     VAL_SEED,
     gateway_campaign,
@@ -44,7 +44,7 @@ from _fit_protocol import (  # noqa: E402
 
 from impctl.fit.estimator import NightFit  # noqa: E402
 from impctl.fit.statespace.estimator import StateSpaceFit, fit_households  # noqa: E402
-from impctl.night_protocol import MIN_NIGHT_H  # noqa: E402
+from impctl.imp.protocol import MIN_NIGHT_H  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.imp_run.synth import sample_nights  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402

@@ -23,8 +23,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from ...imp.gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from ...imp.night import NightSamples
-from ...night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from ..nights.data import Estimate
 from . import model as ssm
 from .adequacy import adequacy
@@ -52,7 +52,7 @@ class StateSpaceFit:
     ----------
     night_gain_w : float or None
         Declared night gain [W] (known: pinned unless ``night_gain_sd_w`` > 0); None: estimated
-        as a constant term under the prior N(:data:`~impctl.night_gain.NIGHT_GAIN_W`,
+        as a constant term under the prior N(:data:`~impctl.imp.gain.NIGHT_GAIN_W`,
         NIGHT_GAIN_SD_W² + (HLC·offset SD)²).
     night_gain_sd_w : float
         SD of a declared gain [W] (0: known exactly).
