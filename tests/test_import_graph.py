@@ -153,3 +153,41 @@ def test_the_cli_audiences_stay_apart():
     for room, other in (("device", "analysis"), ("analysis", "device")):
         assert other not in rooms[room], f"cli.{room} imports cli.{other}"
     assert rooms["checks"] == set()
+
+
+def _modules() -> dict[str, set[str]]:
+    """Every module of impctl → the other impctl modules it imports (lazy and typing-only
+    imports included: a dependency is a dependency)."""
+    paths = {}
+    for path in SRC.rglob("*.py"):
+        parts = path.relative_to(SRC.parent).with_suffix("").parts
+        paths[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    edges: dict[str, set[str]] = defaultdict(set)
+    for module, path in paths.items():
+        for name in _imports(path, module):
+            # ``from .pkg import name`` may name a module of pkg: count the module, if any
+            for target in (name, name.rpartition(".")[0]):
+                if target in paths and target != module and not module.startswith(target + "."):
+                    edges[module].add(target)
+                    break
+    return edges
+
+
+def test_no_import_circles_between_modules():
+    """Not even inside a package: a circle of modules is one concern split in two, or two
+    concerns tangled; either way the layout stops telling which comes first."""
+    graph = _modules()
+    state: dict[str, int] = {}
+
+    def visit(node: str, path: list[str]) -> None:
+        if state.get(node) == 2:
+            return
+        assert state.get(node) != 1, "import circle: " + " → ".join(
+            [*path[path.index(node):], node])
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            visit(nxt, [*path, node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        visit(node, [])

@@ -39,19 +39,14 @@ from ..campaign import (
     plan_order,
 )
 from ..config import Config
-from ..controller import NightRequest
 from ..store import Store
 from .schedule import (
     RUN_STATES,
-    drop_expired_requests,
     gave_up,
-    peek_next_night,
-    window_after_act,
 )
 
 if TYPE_CHECKING:
     from ..store import CampaignDecision
-    from .service import Daemon
 
 _LOG = logging.getLogger("impctl.daemon")
 
@@ -169,33 +164,6 @@ def record(store: Store, decision: Decision, fc: Forecast, act: datetime) -> Non
     _LOG.log(level, "adaptive campaign: %s Forecast T_out %s.", decision.reason, forecast_text)
     store.add_event("info" if level == logging.INFO else "warning",
                     f"campaign {decision.action}: {decision.reason}")
-
-
-def tonight(daemon: Daemon, act: datetime) -> NightRequest | None:
-    """The night job in adaptive mode: a pending ``--tonight`` trigger first; else the policy
-    decides (stored, logged, shown). None when nothing runs tonight."""
-    store, cfg = daemon.store, daemon.cfg
-    drop_expired_requests(store, act)
-    while True:
-        req, request_id = peek_next_night(store, cfg, act)
-        if request_id is None:
-            break
-        if store.take_request(request_id):
-            return req
-    decision, fc = decide_now(store, cfg)
-    if daemon._fit_task is not None and not daemon._fit_task.done():
-        # Deciding on the previous fit would waste the night just run, or record a stop
-        # whose reason the last night's fit is about to change — a second, different stop
-        # later (never happens in real time: a fit takes minutes, the next act is ~15 h
-        # after a night's end).
-        decision = Decision("skip", None, None,
-                            "Skipping tonight: the fit of the last night is still running.")
-    record(store, decision, fc, act)
-    if decision.action != "run":
-        return None
-    start, end = window_after_act(act, cfg)
-    return NightRequest(decision.kind, decision.setpoint_c, start, end,
-                        cfg.night.comfort_band_k, source="schedule")
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""The daemon's side of MQTT (issue 17): what the bridge reads, and the household commands.
+"""The daemon's side of MQTT: what the bridge reads, and the household commands.
 
 Kept out of ``service.py`` so that the service only has small, named hooks:
 ``start_mqtt`` / ``MqttLink.stop`` / ``MqttLink.wake``, ``run_commands`` (the 1 s command
@@ -18,6 +18,7 @@ from ..clock import VirtualClock
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from .adaptive import campaign_state
+from .running import RunningDaemon
 from .schedule import daytime_reason, request_expiry
 from .waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
 
@@ -26,7 +27,6 @@ if TYPE_CHECKING:
     from ..mqtt.commands import Command
     from ..mqtt.discovery import DeviceIdentity
     from ..mqtt.payloads import LiveState
-    from .service import Daemon
 
 _LOG = logging.getLogger("impctl.daemon")
 _RUNNING = ("preparing", "active", "restoring")
@@ -40,7 +40,7 @@ except metadata.PackageNotFoundError:
 class MqttLink:
     """The :class:`~impctl.mqtt.bridge.StateSource` of a running daemon."""
 
-    def __init__(self, daemon: Daemon):
+    def __init__(self, daemon: RunningDaemon):
         self.daemon = daemon
         self._idle: Snapshot | None = None
         self._idle_ok = False
@@ -161,7 +161,7 @@ class MqttLink:
             await self.bridge.stop()
 
 
-def start_mqtt(daemon: Daemon) -> MqttLink | None:
+def start_mqtt(daemon: RunningDaemon) -> MqttLink | None:
     """Start the bridge when ``[mqtt]`` is configured; None otherwise (nothing imported)."""
     cfg = daemon.cfg
     if cfg.mqtt is None:
@@ -181,7 +181,7 @@ def start_mqtt(daemon: Daemon) -> MqttLink | None:
     return link
 
 
-async def run_commands(daemon: Daemon) -> None:
+async def run_commands(daemon: RunningDaemon) -> None:
     """Execute queued ``abort`` commands (the 1 s poll); ``skip_tonight`` waits for the
     night job (:func:`skip_tonight`)."""
     store = daemon.store
@@ -210,13 +210,13 @@ async def run_commands(daemon: Daemon) -> None:
             daemon.mqtt.wake()
 
 
-async def _restore(daemon: Daemon) -> None:
+async def _restore(daemon: RunningDaemon) -> None:
     async with daemon._heat_pump_lock:
         await restore_all(daemon.client, daemon.store, clock=VirtualClock.real(),
                           timeout_s=60.0, retry_s=1.0)
 
 
-def skip_tonight(daemon: Daemon) -> bool:
+def skip_tonight(daemon: RunningDaemon) -> bool:
     """True (and the request consumed) when a household asked to skip this night."""
     store = daemon.store
     now = datetime.now(UTC)  # commands are stamped in real time, whatever the night's clock

@@ -17,7 +17,6 @@ from apscheduler.triggers.cron import CronTrigger
 
 from ..clock import VirtualClock
 from ..config import Config
-from ..controller import NightRequest
 from ..store import Store
 
 _LOG = logging.getLogger("impctl.daemon")
@@ -126,46 +125,6 @@ def drop_expired_requests(store: Store, now: datetime) -> list[int]:
     return dropped
 
 
-def peek_next_night(store: Store, cfg: Config, act: datetime
-                    ) -> tuple[NightRequest | None, int | None]:
-    """What the night whose preheat starts at ``act`` would run, without taking anything:
-    (request, id of the manual request it comes from or None). A pending ``--tonight``
-    trigger (not expired by ``act``) comes first, then the adaptive campaign's decision or the
-    first fixed-plan entry without a valid night — a normal one first when the last night run
-    was an invalid constrained night (:func:`retry_waits`); (None, None) when there is
-    nothing to run."""
-    start, end = window_after_act(act, cfg)
-    band = cfg.night.comfort_band_k
-    for req in store.pending_requests():
-        if req.when == "tonight" and (req.expires is None or act < req.expires):
-            sp = req.setpoint_c if req.setpoint_c is not None else (
-                cfg.campaign.constrained_setpoint_c)
-            return NightRequest(req.kind, sp, start, end, band, source="trigger"), req.id
-    if not cfg.campaign.enabled:
-        return None, None
-    if cfg.campaign.adaptive:
-        from .adaptive import decide_now  # the policy: run, skip tonight or stop
-
-        decision, _ = decide_now(store, cfg)
-        if decision.action != "run":
-            return None, None
-        return NightRequest(decision.kind, decision.setpoint_c, start, end, band,
-                            source="schedule"), None
-    if gave_up(store, cfg) is not None:
-        return None, None
-    # Before the daemon first ran, the store has no plan yet: the configured one is what runs.
-    rows = store.campaign() or [(seq, kind, sp, None, None)
-                                for seq, (kind, sp) in enumerate(campaign_plan(cfg))]
-    todo = [(seq, kind, sp) for seq, kind, sp, _night_id, valid in rows if not valid]
-    if retry_waits(store):
-        todo.sort(key=lambda entry: entry[1] != "normal")   # stable: the plan's order within
-    if todo:
-        seq, kind, sp = todo[0]
-        return NightRequest(kind, sp, start, end, band, source="schedule",
-                            campaign_seq=seq), None
-    return None, None
-
-
 def retry_waits(store: Store) -> bool:
     """Whether the fixed plan's constrained nights wait for a normal night: the last night
     run (scheduled or manual) was a constrained night that ended invalid. A constrained night
@@ -175,18 +134,6 @@ def retry_waits(store: Store) -> bool:
     constrained night against 36 retried the next night (bench/RESULTS.md, branch h18g)."""
     last = store.nights(states=RUN_STATES)[-1:]
     return bool(last) and last[0].kind == "constrained" and last[0].valid is False
-
-
-def why_no_night(store: Store, cfg: Config) -> str:
-    """Why the next night runs nothing (when :func:`peek_next_night` gave None)."""
-    if not cfg.campaign.enabled:
-        return "campaign disabled and no manual request"
-    if cfg.campaign.adaptive:
-        from .adaptive import decide_now
-
-        return decide_now(store, cfg)[0].reason
-    stopped = gave_up(store, cfg)
-    return stopped if stopped is not None else "campaign complete"
 
 
 def gave_up(store: Store, cfg: Config) -> str | None:
@@ -204,17 +151,6 @@ def gave_up(store: Store, cfg: Config) -> str | None:
             f"campaign.max_invalid_nights = {limit}; the last, a {last.kind} night, because: "
             f"{why}). If constrained nights keep reaching T_min too early, a wider "
             f"night.comfort_band_k gives them room; raise the limit to go on")
-
-
-def next_campaign_night(store: Store, cfg: Config, act: datetime) -> NightRequest | None:
-    """The request for the night whose preheat starts at ``act``: a pending ``--tonight``
-    trigger first (taken, so it runs once), else the campaign's next night
-    (:func:`peek_next_night`); None when done."""
-    drop_expired_requests(store, act)
-    while True:
-        req, request_id = peek_next_night(store, cfg, act)
-        if request_id is None or store.take_request(request_id):
-            return req
 
 
 def campaign_complete(store: Store) -> bool:

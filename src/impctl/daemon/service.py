@@ -26,12 +26,12 @@ from .fitting import fit_ready, needs_fit, run_fit
 from .hplock import HeatPumpLock
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
+from .next_night import adaptive_tonight, next_campaign_night
 from .schedule import (
     accelerated_nights,
     act_trigger,
     campaign_plan,
     drop_expired_requests,
-    next_campaign_night,
 )
 from .systemd import Notifier
 
@@ -338,7 +338,8 @@ class Daemon:
             return
         act = act or self.clock.now()
         if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
-            req = adaptive.tonight(self, act)
+            fit_running = self._fit_task is not None and not self._fit_task.done()
+            req = adaptive_tonight(self.store, self.cfg, act, fit_running)
         else:
             req = next_campaign_night(self.store, self.cfg, act)
         if req is None:

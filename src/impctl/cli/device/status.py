@@ -152,7 +152,8 @@ def _finite(x: float) -> float | None:
 
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
-    from ...daemon.schedule import next_act_time, peek_next_night, retry_waits, why_no_night
+    from ...daemon.next_night import peek_next_night, why_no_night
+    from ...daemon.schedule import next_act_time, retry_waits
     from ...daemon.service import clock_from_config
 
     act = next_act_time(cfg, clock_from_config(cfg).now())

@@ -1,0 +1,34 @@
+"""What the daemon's hooks see of the running daemon (:class:`~impctl.daemon.service.Daemon`),
+as a typing protocol: the MQTT link reads and drives it without importing the service that
+starts it."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any, Protocol
+
+from ..clock import VirtualClock
+from ..config import Config
+from ..controller import NightController
+from ..heatpump import HeatPumpClient
+from ..store import Store
+from .lock import DaemonLock
+
+
+class RunningDaemon(Protocol):
+    """The parts of a running daemon its hooks use (typing only)."""
+
+    cfg: Config
+    clock: VirtualClock
+    stop: asyncio.Event
+    store: Store | None
+    client: HeatPumpClient | None
+    controller: NightController | None
+    #: the MQTT link (:class:`~impctl.daemon.mqtt_link.MqttLink`) when ``[mqtt]`` is configured
+    mqtt: Any
+    #: set while the heat pump answers
+    _connected: asyncio.Event
+    #: held by whatever drives the heat pump (a night, a restore, an idle read)
+    _heat_pump_lock: asyncio.Lock
+    #: the store's one-process lock (``daemon.lock``), None before it is taken
+    _lock: DaemonLock | None
