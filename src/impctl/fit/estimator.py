@@ -131,8 +131,8 @@ class NightFit:
         level it is held at (the median of the night's second half): while it climbs, the
         heat pump runs at capacity and the emitter charges (:func:`.data.settled`).
     emitter_lag : bool
-        The heat meter measures the heat into the emitter, not into the room (README
-        "Accuracy", issue 14): a share of C_m (``emitter_share``, 0–0.6) sits in an emitter
+        The heat meter measures the heat into the emitter, not into the room (the
+        accuracy page of the documentation): a share of C_m (``emitter_share``, 0–0.6) sits in an emitter
         node between the meter and the air with the time constant ``emitter_tau_h`` of the
         release after switch-off, one pair for both kinds of night. Held nights compare
         P + τ_e·dP/dt + C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room);
@@ -164,7 +164,7 @@ class NightFit:
         intervals weigh the data (:meth:`~impctl.fit.prior.PopulationPrior.tempered`), so
         the fit is a MAP estimate and its intervals are posterior intervals; a
         :class:`~impctl.fit.prior.PopulationPrior` chooses the quantities, the population or
-        the class probabilities of a mixture; None: no prior (the fit before issue 14 h14z).
+        the class probabilities of a mixture; None: no prior.
         Measured (``bench/fit.py``, 50 realistic households, gateway's nights): C_m median
         error 21.1 → 14.5 %. Reported in ``prior_`` (centre, SD, posterior/prior SD ratio,
         prior-dominated).
@@ -177,9 +177,9 @@ class NightFit:
         cycling heat pump's night, a night the model fits worse, or a night with a noisier
         sensor then weighs less; at the fixed point every night's weighted residuals sum to
         about its number of compared samples. "kind": one σ
-        per residual kind (constrained T_air, normal T_air, normal power) — the fit before
-        branch h14y (bench/RESULTS.md, h14y: HLC 15.9 → 13.7 %, τ 14.3 → 12.1 % median on the
-        realistic plant's gateway nights).
+        per residual kind (constrained T_air, normal T_air, normal power); "night" measured
+        HLC 15.9 → 13.7 %, τ 14.3 → 12.1 % median on the realistic plant's gateway nights
+        (decision record 0008).
     model_error : str or None
         Model-error share calibrated on the realistic virtual population, added to the
         intervals in quadrature (:mod:`.model_error`): "default" (the packaged calibration), a

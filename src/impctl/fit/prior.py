@@ -1,7 +1,7 @@
 """A population prior for the night fit: empirical Bayes inside the class ranges (MAP).
 
-The nights carry little about C_m once the constrained nights end at T_min (README "Accuracy",
-issue 14): inside its bounds the fit is pushed around by model error, and the class range's
+The nights carry little about C_m once the constrained nights end at T_min (the accuracy page of
+the documentation): inside its bounds the fit is pushed around by model error, and the class range's
 midpoint beats it. What is known before the data is the virtual population the classifiers
 are trained on: :class:`PopulationPrior` draws it (``impctl train``'s default seed 0, never the
 bench's held-out seed) and, for any search box, takes the distribution of ln C_m (and, if

@@ -1,4 +1,4 @@
-"""The realistic plant: a 5R1C house as real heat-pump houses are (issue 13).
+"""The realistic plant: a 5R1C house as real heat-pump houses are.
 
 Same conductances and the same total heat capacity as the house's ISO 13790 parameters, plus what
 real houses have: air and furniture capacity, a hydronic emitter with its own capacity and an

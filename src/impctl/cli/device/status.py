@@ -61,7 +61,7 @@ def collect_status(cfg) -> dict:
         if out["next_night"] is not None:  # the night job honours a waiting skip first
             out["next_night"]["skipped_by"] = (out["skip_tonight"][0]["id"]
                                                if out["skip_tonight"] else None)
-    out["heatpump"] = read_health(cfg.state_dir)  # issue 15: generation evidence, quirks
+    out["heatpump"] = read_health(cfg.state_dir)  # generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.service import clock_from_config
 
@@ -289,5 +289,5 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     lines.append(f"writes:    today {writes}")
     from ...heatpump.health import health_lines
 
-    lines.extend(health_lines(st.get("heatpump")))  # issue 15
+    lines.extend(health_lines(st.get("heatpump")))
     return "\n".join(lines)

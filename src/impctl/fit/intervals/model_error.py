@@ -34,7 +34,7 @@ import numpy as np
 from ...errors import InputError
 from ..nights.data import Estimate
 
-#: /3 (h18c): the few band is calibrated on the gateway's campaign nights and records their
+#: /3: the few band is calibrated on the gateway's campaign nights and records their
 #: setpoints (``bands.few.protocol``); a /2 file (the 2 + 6 protocol's first nights) is refused.
 SCHEMA = "impctl-model-error/3"
 #: The grouping rule's version: a calibration file made with another rule is refused.

@@ -11,7 +11,7 @@ single fit's too. The arithmetic per problem is :func:`impctl.fit.prior.penalty`
 fit's numbers are bit for bit the same; on a merged batch's larger tensors torch may round a
 last bit differently, which a household on a flat loss surface can carry a little further
 (``bench/fleet.py --sample --against``: 7 of 320 households moved, C_m by at most 0.27 % —
-as much as main's own batches moved from run to run, bench/RESULTS.md h16t).
+as much as main's own batches moved from run to run, decision record 0018).
 """
 
 from __future__ import annotations

@@ -194,7 +194,7 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
     if getattr(fit, "interval_basis_", None) is not None:
         out["fit"]["interval_basis"] = fit.interval_basis_
     out["fit"]["model_error"] = getattr(fit, "model_error_", None)
-    # the population prior (issue 14, h14z): what came from it and what from the data
+    # the population prior: what came from it and what from the data
     out["prior"] = getattr(fit, "prior_", None)
     for name, p in (out["prior"] or {}).get("parameters", {}).items():
         if p["prior_dominated"]:
