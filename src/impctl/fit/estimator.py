@@ -134,8 +134,8 @@ class NightFit:
         The heat meter measures the heat into the emitter, not into the room (the
         accuracy page of the documentation): a share of C_m (``emitter_share``, 0–0.6) sits
         in an emitter node between the meter and the air with the time constant
-        ``emitter_tau_h`` of the release after switch-off, one pair for both kinds of night. Held nights compare
-        P + τ_e·dP/dt + C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room);
+        ``emitter_tau_h`` of the release after switch-off, one pair for both kinds of night.
+        Held nights compare P + τ_e·dP/dt + C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room);
         constrained nights add the heat the emitter gives back while the room cools. A
         nuisance term like the others (needs ``emitter_state``; same likelihood-ratio test).
     structure_share : bool
