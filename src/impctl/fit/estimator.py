@@ -131,13 +131,13 @@ class NightFit:
         level it is held at (the median of the night's second half): while it climbs, the
         heat pump runs at capacity and the emitter charges (:func:`.data.settled`).
     emitter_lag : bool
-        The heat meter measures the heat into the emitter, not into the room (the
-        accuracy page of the documentation): a share of C_m (``emitter_share``, 0–0.6) sits
-        in an emitter node between the meter and the air with the time constant
-        ``emitter_tau_h`` of the release after switch-off, one pair for both kinds of night.
-        Held nights compare P + τ_e·dP/dt + C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room);
-        constrained nights add the heat the emitter gives back while the room cools. A
-        nuisance term like the others (needs ``emitter_state``; same likelihood-ratio test).
+        The heat meter measures the heat into the emitter, not into the room (the accuracy page of
+        the documentation): a share of C_m (``emitter_share``, 0–0.6) sits in an emitter node
+        between the meter and the air with the time constant ``emitter_tau_h`` of the release after
+        switch-off, one pair for both kinds of night. Held nights compare P + τ_e·dP/dt +
+        C_e·dT_air/dt with the metered power (P the 5R1C's heat to the room); constrained nights add
+        the heat the emitter gives back while the room cools. A nuisance term like the others (needs
+        ``emitter_state``; same likelihood-ratio test).
     structure_share : bool
         Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
         without the nuisance terms (a structural-sensitivity share).
