@@ -195,8 +195,8 @@ def _number(value) -> float | None:
 
 
 def add_compact(model_dir: str | Path) -> bool:
-    """Write the compact forests (:mod:`.compact`) for models saved without them (before
-    issue 14); True when the directory has them afterwards."""
+    """Write the compact forests (:mod:`.compact`) for models saved without them (older
+    models); True when the directory has them afterwards."""
     directory = Path(model_dir)
     models, meta = load_models(directory)
     if save_compact(models, directory) is None:

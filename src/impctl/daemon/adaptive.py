@@ -1,4 +1,4 @@
-"""The adaptive campaign on the device (issue 18): what the policy is told, what it decided.
+"""The adaptive campaign on the device: what the policy is told, what it decided.
 
 At each night's act time (``mode = "adaptive"``) the daemon asks
 :func:`impctl.campaign.decide` with

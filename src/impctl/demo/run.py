@@ -50,7 +50,7 @@ def _models_unfit(model_dir: Path, plant: str) -> str | None:
     """Why the classifiers in ``model_dir`` cannot serve a demo on ``plant`` (None: reuse
     them): models are reused only when trained on the population of the plant the demo
     simulates (their dataset manifest's ``plant``), on the nights the gateway runs there
-    (bench/RESULTS.md "Issue 14: one protocol")."""
+    (decision record 0005, one protocol)."""
     try:
         from ..classifiers.saved import load_models
         from ..population.imp_run.setup import ImpSimConfig
