@@ -100,8 +100,10 @@ def prepare(options: FitParams, nights: Sequence[NightSamples],
         packed.gain_w = torch.tensor([gain.per_night_w.get(i, gain.value_w) - gain.value_w
                                       for i in packed.night_ids], dtype=packed.q_mean_w.dtype)
     prior = PopulationPrior() if o.prior == "population" else o.prior
-    # not declared, not measured: the gain is estimated under the assumption as its prior
-    estimate = o.night_gain == "prior" and gain.source == "assumed"
+    # not declared, not measured: the gain is estimated under the assumption as its prior —
+    # unless that assumption is stated exact (SD 0): then there is nothing to estimate, and a
+    # zero-width prior would make the curvature singular
+    estimate = o.night_gain == "prior" and gain.source == "assumed" and gain.sd_w > 0
     ctx = lm.Context(packed, o.ach_vent, o.ach_infl, o.ridge, o.solver, prior,
                      gain_prior=(gain.value_w, gain.sd_w) if estimate else None)
     row_type_n, phi_n, phi_in_n, group_n = night_rows(packed, o.normal_model)
