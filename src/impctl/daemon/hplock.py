@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..modbus.config import LinkConfig
-from .lock import DaemonRunning
+from .lock import DaemonRunning, FlockHolder
 
 LOCK_DIR_ENV = "IMPCTL_LOCK_DIR"
 DEFAULT_LOCK_DIR = "/run/lock/impctl"
@@ -74,7 +74,7 @@ def _holder(path: Path) -> dict:
     return max(found, key=lambda d: str(d.get("started", "")), default={})
 
 
-class HeatPumpLock:
+class HeatPumpLock(FlockHolder):
     """The machine-wide lock of one heat pump, held for the life of the process.
 
     Parameters
@@ -159,16 +159,3 @@ class HeatPumpLock:
         self._fd = fd
         return self
 
-    def release(self) -> None:
-        """Drop the lock."""
-        if self._fd is not None:
-            with contextlib.suppress(OSError):
-                fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
-
-    def __enter__(self) -> HeatPumpLock:
-        return self.acquire()
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()

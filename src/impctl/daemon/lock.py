@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Self
 
 from ..errors import InputError
 
@@ -111,7 +112,32 @@ def probe(state_dir: str | Path) -> DaemonInfo:
         os.close(fd)
 
 
-class DaemonLock:
+class FlockHolder:
+    """A file held open under a kernel ``flock`` (released by the kernel even on ``kill -9``);
+    a context manager. Subclasses open and lock it in ``acquire`` and keep its descriptor in
+    ``_fd``."""
+
+    _fd: int | None = None
+
+    def acquire(self) -> Self:
+        raise NotImplementedError
+
+    def release(self) -> None:
+        """Drop the lock (the file stays, with what its holder wrote in it)."""
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> Self:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+class DaemonLock(FlockHolder):
     """The exclusive lock of one store's heat pump, held for the life of the process.
 
     Parameters
@@ -174,16 +200,3 @@ class DaemonLock:
         if self._fd is not None:
             os.utime(self._fd)
 
-    def release(self) -> None:
-        """Drop the lock (the file stays, with the last PID and heartbeat)."""
-        if self._fd is not None:
-            with contextlib.suppress(OSError):
-                fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
-
-    def __enter__(self) -> DaemonLock:
-        return self.acquire()
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
