@@ -3,10 +3,11 @@ daemon and CLI need."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sqlite3
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from datetime import datetime
 from pathlib import Path
 
@@ -167,6 +168,18 @@ class Store(CampaignTables):
         return int(self._db.execute(
             "SELECT COUNT(*) FROM samples WHERE night_id = ?", (night_id,)).fetchone()[0])
 
+    @contextlib.contextmanager
+    def _immediate(self) -> Iterator[None]:
+        """A write transaction that takes the write lock at once (``BEGIN IMMEDIATE``): of two
+        processes that check and then insert, only one inserts. Rolled back on any error."""
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
     # -- restore journal -------------------------------------------------------------------
     def journal_record(self, night_id: int | None, register: str, address: int,
                        raw_value: int) -> JournalEntry:
@@ -176,8 +189,7 @@ class Store(CampaignTables):
         complete), that entry is kept and returned: the owner's value is the one recorded
         before impctl ever touched the register, never a value impctl wrote itself.
         """
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
+        with self._immediate():
             row = self._db.execute(
                 "SELECT * FROM journal WHERE register = ? AND restored IS NULL",
                 (register,)).fetchone()
@@ -188,10 +200,6 @@ class Store(CampaignTables):
                     (night_id, register, address, raw_value, _iso(_now())))
                 row = self._db.execute("SELECT * FROM journal WHERE id = ?",
                                        (cur.lastrowid,)).fetchone()
-            self._db.execute("COMMIT")
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
         return _journal(row)
 
     def journal_pending(self) -> list[JournalEntry]:
@@ -233,8 +241,7 @@ class Store(CampaignTables):
         (its expiry moved to the later of the two) instead of a new one being added, so a
         hundred presses of one button are one request, not a hundred.
         """
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
+        with self._immediate():
             row = self._db.execute(
                 "SELECT id, expires FROM requests WHERE taken IS NULL AND kind = ? AND"
                 " run_when = ? AND setpoint_c IS ? ORDER BY id LIMIT 1",
@@ -251,10 +258,6 @@ class Store(CampaignTables):
                     self._db.execute("UPDATE requests SET expires = ? WHERE id = ?",
                                      (_iso(expires), row["id"]))
                 out = (int(row["id"]), True)
-            self._db.execute("COMMIT")
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
         return out
 
     def pending_requests(self) -> list[TriggerRequest]:
@@ -289,8 +292,7 @@ class Store(CampaignTables):
                       join_since: datetime | None = None) -> tuple[int, bool]:
         """Queue a command, or keep a waiting one of the same name created at or after
         ``join_since`` (None: always a new one). Returns (command id, joined)."""
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
+        with self._immediate():
             row = None
             if join_since is not None:  # (ISO text does not compare as instants: in Python)
                 row = next((r for r in self._db.execute(
@@ -303,10 +305,6 @@ class Store(CampaignTables):
                 out = (int(cur.lastrowid), False)
             else:
                 out = (int(row["id"]), True)
-            self._db.execute("COMMIT")
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
         return out
 
     def pending_commands(self, name: str | None = None) -> list[Command]:
