@@ -14,6 +14,7 @@ from typing import Any
 from ..errors import InputError
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..mqtt.config import mqtt_from_mapping
+from ..mqtt.inputs import inputs_from_mapping, own_topic
 from ..night_gain import NIGHT_GAIN_LIMITS_W
 from .sections import (
     CampaignConfig,
@@ -114,6 +115,13 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
             if _is_table(value, where, problems):
                 kwargs[key] = mqtt_from_mapping(value, problems)
             continue
+        if key == "inputs" and cls is Config:  # [inputs], parsed by impctl.mqtt.inputs
+            if _is_table(value, where, problems):
+                kwargs[key] = inputs_from_mapping(value, problems, own_topic(data.get("mqtt")))
+                if "mqtt" not in data:
+                    problems.append(f"{where}: needs [mqtt]: the inputs are read from that "
+                                    "broker")
+            continue
         if key in _SECTIONS and cls is Config:
             if _is_table(value, where, problems):
                 kwargs[key] = _build(_SECTIONS[key], value, f"{key}.", problems)
@@ -138,6 +146,11 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     if not gain_lo <= cfg.fit.night_gain_w <= gain_hi:
         bad("fit.night_gain_w", f"must lie in [{gain_lo:g}, {gain_hi:g}] W (≈ 70–80 W per "
             f"sleeper + base load), got {cfg.fit.night_gain_w:g}")
+    if (cfg.inputs is not None and cfg.inputs.house_power_includes_heat_pump
+            and cfg.heatpump.generation == "compact"):
+        bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "
+            "its electrical power (register 2129 is on extended controllers only), so impctl "
+            "cannot subtract it: give a meter that excludes the heat pump and set false")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
     try:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..heatpump import HeatPumpConfig
 from ..mqtt.config import MqttConfig
+from ..mqtt.inputs import InputsConfig
 from ..night_gain import NIGHT_GAIN_W
 from ..night_protocol import (
     DEFAULT_BAND_K,
@@ -120,6 +121,7 @@ class Config:
     clock: ClockConfig = field(default_factory=ClockConfig)
     fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
+    inputs: InputsConfig | None = None  # [inputs]: the house's own sensors over MQTT
     source: str = ""
 
     @property

@@ -80,6 +80,9 @@ class MqttBridge:
         self._task: asyncio.Task | None = None
         self._fit_sent: object = _UNSENT
         self._fit_checked = -1e9
+        #: ``[inputs]``: an object with ``topics`` (list of str) and ``receive(topic,
+        #: payload)`` (no I/O, must not raise), or None.
+        self.inputs = None
 
     # -- the daemon's side -----------------------------------------------------------------
     def start(self) -> None:
@@ -169,6 +172,9 @@ class MqttBridge:
             await client.subscribe(f"{base}/cmd/+", qos=1)
         # Home Assistant says "online" here when it (re)starts: announce again then.
         await client.subscribe(f"{self.cfg.discovery_prefix}/status")
+        # The house's own sensors; their retained values arrive at once.
+        for topic in (self.inputs.topics if self.inputs is not None else ()):
+            await client.subscribe(topic, qos=1)
         await self._announce(client)
         listener = asyncio.create_task(self._listen(client))
         try:
@@ -248,6 +254,9 @@ class MqttBridge:
                 if payload.strip().lower() == b"online":
                     self._rediscover.set()
                     self.wake()
+                continue
+            if self.inputs is not None and topic in self.inputs.names:
+                self.inputs.receive(topic, payload)
                 continue
             if not topic.startswith(prefix) or message.retain:
                 # A retained command would act again at every reconnect: ignore it.
