@@ -122,7 +122,7 @@ def test_example_config_loads_and_documents_every_key():
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "source", "fit"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit"}
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys

@@ -300,3 +300,24 @@ def test_heat_loss_in_plain_words_once_a_fit_exists():
     assert words.startswith("loses 106 W per °C") and "3.3 kW at −10 °C outside" in words
     undetermined = {"lumped": {"hlc": {"value": 106.0, "determined": False}}}
     assert "heat_loss" not in fit_payloads((T0, [1], undetermined))["hlc"]
+
+
+def test_example_config_documents_every_input_and_its_block_is_valid(tmp_path):
+    import tomllib
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "deploy" / "config.example.toml").read_text()
+    lines = text.splitlines()
+    start = lines.index(next(ln for ln in lines if ln.startswith("# [inputs]")))
+    block = []
+    for ln in lines[start:]:
+        if not ln.strip():
+            break
+        block.append(ln[2:])
+    section = tomllib.loads("\n".join(block))["inputs"]
+    assert set(section) == {f.name for f in fields(InputsConfig)}
+    cfg = config_from_mapping({"heatpump": {"host": "h", "generation": "extended"},
+                               "mqtt": {"host": "b"}, "inputs": section}).inputs
+    assert (cfg.max_age_s, cfg.occupants_max_age_s) == (InputsConfig.max_age_s,
+                                                         InputsConfig.occupants_max_age_s)
+    assert len(cfg.room_temperature_c) == 2 and cfg.house_power_includes_heat_pump is False
