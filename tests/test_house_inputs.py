@@ -177,6 +177,22 @@ def test_latest_values_with_their_age_and_stale_ones_missing():
     assert inputs.row(7, _snapshot(clock.now())).occupants is None
 
 
+def test_a_retained_value_redelivered_at_a_reconnect_keeps_its_age():
+    inputs, clock, wall = _inputs()
+    inputs.receive(POWER, b"840", retained=True)  # at start-up: counts from its arrival
+    wall.s += 500
+    inputs.receive(POWER, b"840", retained=True)  # the broker again, after a reconnect
+    row = inputs.row(1, _snapshot(clock.now()))
+    assert (row.house_power_w, row.house_power_age_s) == (840.0, 500.0)
+    wall.s += 200  # Home Assistant said nothing for 700 s > max_age_s = 600 s
+    assert inputs.row(1, _snapshot(clock.now())).house_power_w is None
+    inputs.receive(POWER, b"840")  # published now (the same value): fresh
+    assert inputs.row(1, _snapshot(clock.now())).house_power_age_s == 0.0
+    wall.s += 100
+    inputs.receive(POWER, b"900", retained=True)  # a different retained value: news
+    assert inputs.row(1, _snapshot(clock.now())).house_power_w == 900.0
+
+
 def test_malformed_payload_is_one_log_line_and_a_missing_value(caplog):
     inputs, clock, wall = _inputs()
     inputs.receive(POWER, b"840")

@@ -142,6 +142,9 @@ def test_a_night_records_the_houses_sensors_and_exports_them(tmp_path):
     assert len(warn) == 1 and "-2.5 K against the reference" in warn[0], check.stdout
     assert "persistent offset over 1.5 K" in warn[0]
     assert "2 room sensors" in check.stdout
+    text = run_cli("status", "--config", str(config)).stdout
+    assert "inputs:    household power minus the heat pump's own" in text, text
+    assert "outdoor ref 2.5 °C" in text and "persistent offset over 1.5 K" in text, text
     status = json.loads(run_cli("status", "--json", "--config", str(config)).stdout)
     off = status["inputs"]["t_out_offset"]
     assert off["persistent"] and off["offset_k"] == -2.5 and off["pairs"] >= len(rows)

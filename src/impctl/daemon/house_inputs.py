@@ -28,6 +28,7 @@ _LOG = logging.getLogger("impctl.inputs")
 class _Latest:
     value: float | None
     received: datetime
+    payload: bytes
 
 
 class HouseInputs:
@@ -52,10 +53,18 @@ class HouseInputs:
         """The topics to subscribe to."""
         return list(self.names)
 
-    def receive(self, topic: str, payload: bytes) -> None:
-        """A message on an input topic (retained or not): parse it, keep it as the latest."""
+    def receive(self, topic: str, payload: bytes, retained: bool = False) -> None:
+        """A message on an input topic: parse it, keep it as the latest.
+
+        ``retained``: delivered from the broker's retained store (at a (re)subscription), not
+        published now. The same payload again that way is no news: its age runs on from when
+        it first arrived (a Home Assistant gone quiet does not look fresh after a reconnect).
+        """
         name = self.names.get(topic)
         if name is None:
+            return
+        latest = self._latest.get(topic)
+        if retained and latest is not None and latest.payload == payload:
             return
         value, problem = parse_payload(name, payload)
         if problem is not None:
@@ -66,7 +75,7 @@ class HouseInputs:
         elif value is not None and topic in self._problem:
             _LOG.info("input %s (%s) back: %g", name.split(":")[0], topic, value)
             del self._problem[topic]
-        self._latest[topic] = _Latest(value, self.clock.now())
+        self._latest[topic] = _Latest(value, self.clock.now(), payload)
 
     def _fresh(self, topic: str, at: datetime, max_age_s: float) -> tuple[float | None,
                                                                          float | None]:

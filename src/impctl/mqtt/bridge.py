@@ -80,8 +80,8 @@ class MqttBridge:
         self._task: asyncio.Task | None = None
         self._fit_sent: object = _UNSENT
         self._fit_checked = -1e9
-        #: ``[inputs]``: an object with ``topics`` (list of str) and ``receive(topic,
-        #: payload)`` (no I/O, must not raise), or None.
+        #: ``[inputs]``: an object with ``topics`` (list of str), ``names`` (topic → input)
+        #: and ``receive(topic, payload, retained)`` (no I/O, must not raise), or None.
         self.inputs = None
 
     # -- the daemon's side -----------------------------------------------------------------
@@ -256,7 +256,7 @@ class MqttBridge:
                     self.wake()
                 continue
             if self.inputs is not None and topic in self.inputs.names:
-                self.inputs.receive(topic, payload)
+                self.inputs.receive(topic, payload, bool(message.retain))
                 continue
             if not topic.startswith(prefix) or message.retain:
                 # A retained command would act again at every reconnect: ignore it.
