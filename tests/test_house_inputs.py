@@ -337,3 +337,23 @@ def test_example_config_documents_every_input_and_its_block_is_valid(tmp_path):
     assert (cfg.max_age_s, cfg.occupants_max_age_s) == (InputsConfig.max_age_s,
                                                          InputsConfig.occupants_max_age_s)
     assert len(cfg.room_temperature_c) == 2 and cfg.house_power_includes_heat_pump is False
+
+
+def test_export_without_inputs_has_empty_numeric_columns(tmp_path):
+    import pandas as pd
+
+    from impctl.store.export import export_nights
+
+    with Store(tmp_path / "impctl.db") as store:
+        nid = store.create_night("normal", 22.0, T0, T0 + timedelta(hours=1))
+        store.assess_night(nid, True, [])
+        for i in range(3):
+            store.add_sample(Sample(nid, T0 + timedelta(minutes=5 * i), t_air_c=22.0,
+                                    t_out_c=1.0, q_hc_w=900.0))
+        export_nights(store, tmp_path / "n.parquet", "parquet")
+        export_nights(store, tmp_path / "n.csv", "csv")
+    frame = pd.read_parquet(tmp_path / "n.parquet")
+    for col in ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants"):
+        assert frame[col].dtype == float and frame[col].isna().all()
+    header = (tmp_path / "n.csv").read_text().splitlines()[0]
+    assert header.endswith(",p_house_w,t_rooms_c,t_out_ref_c,occupants")

@@ -113,6 +113,8 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
         raise InputError(f"nothing to export: {what} no usable samples (see impctl nights)",
                          store.path)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
+    # Numbers even when every cell is missing (a column of None would be text in Parquet).
+    df[list(HOUSE_COLUMNS)] = df[list(HOUSE_COLUMNS)].astype(float)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:
