@@ -93,6 +93,8 @@ def _errors(fit, house) -> dict:
         truth = float(getattr(house, attr))
         out[name] = 100.0 * abs(q.value - truth) / truth
         out[name + "_in"] = bool(q.low <= truth <= q.high)
+    # What the fit says it used (measured, declared, estimated, assumed), where it says so.
+    out["source"] = (getattr(fit, "night_gain_", None) or {}).get("source", "not reported")
     return out
 
 
@@ -158,6 +160,11 @@ def main() -> None:
     if not reads_column:
         print("p_house_w: this fit ignores the column (NightSamples carries no measured gain);"
               " the 'p_house_w' line needs the fit's measured-gain path")
+    for label, rows in res.items():
+        if rows:
+            kinds = pd.Series([r["source"] for r in rows]).value_counts()
+            print(f"night gain used by '{label}': "
+                  + ", ".join(f"{k} {v}" for k, v in kinds.items()))
     boot = np.random.default_rng(VAL_SEED + 11)
     print(f"\n{'fit':<11} {'quantity':<5} {'median |err| % [95 % CI]':>26} {'P90 %':>7} "
           f"{'coverage %':>11} {'better than assumed':>20}")
