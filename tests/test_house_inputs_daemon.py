@@ -125,6 +125,8 @@ def test_a_night_records_the_houses_sensors_and_exports_them(tmp_path):
     assert "input occupants" not in log  # stale is not malformed: no warning
     assert log.count("input house_power_w") == 1 and "0.7 looks like kW" in log
     assert "bedroom_t" not in log  # "unavailable" is Home Assistant's own: no warning
+    # The daemon says so itself, once, as soon as the evidence is there.
+    assert log.count("a persistent offset over 1.5 K") == 1, log
 
     # The export carries them as NIGHTS columns, row for row.
     out = tmp_path / "nights.csv"

@@ -22,6 +22,8 @@ from ..store import Store
 from ..store.house_inputs import HouseInputRow
 
 _LOG = logging.getLogger("impctl.inputs")
+#: How often the outdoor-sensor offset is re-evaluated [s, daemon's clock].
+OFFSET_CHECK_S = 3600.0
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,8 @@ class HouseInputs:
         self._latest: dict[str, _Latest] = {}
         self._problem: dict[str, str] = {}  # topic → the problem last logged
         self._no_p_el_logged = False
+        self._offset_checked: datetime | None = None
+        self._offset_warned = False
 
     @property
     def topics(self) -> list[str]:
@@ -138,5 +142,21 @@ class HouseInputs:
             return
         try:
             self.store.add_house_inputs(row)
+            if row.t_out_ref_c is not None and row.t_out_c is not None:
+                self._check_outdoor(row.ts)
         except Exception as exc:  # noqa: BLE001 - the night goes on without this row
             _LOG.error("could not store the house's inputs at %s: %s", row.ts, exc)
+
+    def _check_outdoor(self, at: datetime) -> None:
+        """Once an hour (daemon's clock): a persistent offset of the heat pump's outdoor
+        sensor against the reference is logged and kept as an event, once until it clears."""
+        if self._offset_checked is not None and (
+                at - self._offset_checked).total_seconds() < OFFSET_CHECK_S:
+            return
+        self._offset_checked = at
+        offset = self.store.outdoor_offset()
+        persistent = offset is not None and offset.persistent
+        if persistent and not self._offset_warned:
+            _LOG.warning("%s", offset.describe())
+            self.store.add_event("warning", offset.describe())
+        self._offset_warned = persistent
