@@ -168,7 +168,9 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
     print("|---|---|---|---|---|")
     for name in PARAM_NAMES:
         tv = np.array([float(getattr(h, name)) for h in truth])
-        fv = np.array([f.parameters_[name] for f in fits])
+        # what the fit reports: the prior (range centre) where the data do not determine it
+        fv = np.array([(getattr(f, "table_iv_", None) or {}).get(name, {}).get(
+            "value", f.parameters_[name]) for f in fits])
         mv = np.array([m[name] for m in res["mid"]])
         det = 100.0 * np.mean([f.determined_[name] for f in fits])
         a, b = stats(rel(fv, tv))
@@ -327,6 +329,10 @@ def dump(res: dict, path: str) -> None:
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
         out[f"{k}_halfwidth_pct"] = [50.0 * float(np.log(e.high / e.low))
                                      for e in est]
+    # where each fit's night gain came from, and its value [W]
+    out["gain_source"] = [(getattr(f, "night_gain_", None) or {}).get("source")
+                          for f in res["fit"]]
+    out["gain_w"] = [(getattr(f, "night_gain_", None) or {}).get("value_w") for f in res["fit"]]
     out["inflation"] = [max([(1 + r) / (1 - r) for r in f.residual_autocorrelation_.values()]
                             or [1.0]) for f in res["fit"]]
     priors = [getattr(f, "prior_", None) for f in res["fit"]]

@@ -190,8 +190,10 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         res.setdefault("types", {}).update(gateway_types(gate, n, valid_h))
     for i in range(n):
         house = houses_arr.take(i)
+        mode = getattr(args, "gain_mode", "unknown")
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
-                               power_noise=noise, seed=VAL_SEED + i)
+                               power_noise=noise, seed=VAL_SEED + i,
+                               p_house=mode in ("measured", "declared"))
         if stop:
             # The fit gets what the gateway keeps: the valid constrained nights it ran (the
             # first two), never an invalid or a spare not run; the normal nights all.
@@ -205,9 +207,12 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         else:
             ranges = None
         hit = {k: r[0] <= float(getattr(house, k)) <= r[1] for k, r in (ranges or {}).items()}
+        nights, gain_kw = gain_mode_nights(nights, mode, VAL_SEED + i, args)
+        gain_kw["night_gain"] = {"prior": "prior", "lr": True, "pinned": False}[
+            getattr(args, "gain_term", "prior")]
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
-                       emitter_state=args.nuisance, **night_gain(args), min_night_h=valid_h,
+                       emitter_state=args.nuisance, **gain_kw, min_night_h=valid_h,
                        model_error="default" if args.model_error else None,
                        **bench_prior(args, probs)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
@@ -305,6 +310,16 @@ def main() -> None:
                     help="the fit's assumed night gain [W] (NightFit(night_gain_w)); default 0 "
                          "on --plant iso (the ideal 5R1C has no gains: the model-consistency "
                          "check), the fit's default (250 W) on the realistic plant")
+    ap.add_argument("--gain-mode", default="unknown", metavar="MODE[,MODE]",
+                    help="realistic plant: the night gain unknown to the fit (default: "
+                         "estimated or assumed), measured (the nights carry p_house_w through "
+                         "a household meter), declared (the campaign's true mean, ± 0 W) or "
+                         "pinned (unknown, pinned to the assumption: the fit before the "
+                         "gain's sources); several comma-separated run on the same nights")
+    ap.add_argument("--gain-term", choices=("prior", "lr", "pinned"), default="prior",
+                    help="a gain neither declared nor measured: fitted under its prior "
+                         "(default), a likelihood-ratio-selected term, or pinned to the "
+                         "assumption (the fit before the gain's sources: 250 ± 87 W)")
     ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
                     help="SD of that assumption [W] (default the fit's, 300/√12 ≈ 87 W)")
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
@@ -338,7 +353,8 @@ def main() -> None:
         args.households, args.steps = 10, "300"
     torch.set_num_threads(1)
     print("command: " + " ".join(["python"] + sys.argv))
-    print(f"plant: {args.plant}; fit's night gain {night_gain(args) or 'default'}")
+    print(f"plant: {args.plant}; fit's night gain {night_gain(args) or 'default'}; "
+          f"gain mode {args.gain_mode}, gain term {args.gain_term}")
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
     if args.speed:
@@ -356,19 +372,51 @@ def main() -> None:
     if args.virtual_imp:
         virtual_imp_check(args.virtual_imp, args)
     rows = []
+    modes, term = args.gain_mode.split(","), args.gain_term
+    for mode in modes:
+        if mode not in GAIN_MODES + ("pinned",):
+            ap.error(f"--gain-mode: {mode!r} is not one of {', '.join(GAIN_MODES)}, pinned")
     houses = sample_households(args.households, seed=VAL_SEED)
     for step in (float(s) for s in args.steps.split(",") if s):
         limit = args.fine_households if step < 300 and args.fine_households else None
         for source in sources:
-            res = run_step(houses, step, source, args, limit)
-            report(res, step, source, args)
-            if args.dump:
-                dump(res, f"{args.dump}-{step:g}-{source}.json")
-            rows.append(summary_row(res, step, source))
+            for mode in modes:
+                # the same simulated nights for every gain mode (simulate_schedule's cache)
+                args.gain_mode, args.gain_term = (("unknown", "pinned") if mode == "pinned"
+                                                  else (mode, term))
+                label = source if len(modes) == 1 else f"{source}, gain {mode}"
+                if len(modes) > 1:
+                    print(f"\n## gain mode {mode} (gain term {args.gain_term})")
+                res = run_step(houses, step, source, args, limit)
+                report(res, step, source, args)
+                if args.dump:
+                    tag = source if len(modes) == 1 else f"{source}-{mode}"
+                    dump(res, f"{args.dump}-{step:g}-{tag}.json")
+                rows.append(summary_row(res, step, label))
     print_summary(rows, args)
 
 
 RANGE_SOURCES = ("classifier", "true", "prior")
+GAIN_MODES = ("unknown", "measured", "declared")
+
+
+def gain_mode_nights(nights: list, mode: str, seed: int, args) -> tuple[list, dict]:
+    """(nights, NightFit gain options) of ``--gain-mode``: "unknown" — no p_house_w, the
+    fit's options of ``--night-gain-w`` (none on the realistic plant: estimated or assumed);
+    "measured" — the nights carry p_house_w (the plant's internal gain through a household
+    meter, :func:`impctl.population.imp_run.synth.house_meter`); "declared" — the campaign's
+    true mean night gain over the fitted nights declared, ± 0 W, no p_house_w."""
+    from dataclasses import replace as _replace
+
+    from impctl.population.imp_run.synth import house_meter
+
+    if mode == "measured":
+        return nights, night_gain(args)
+    if mode == "declared":
+        true = [n.p_house_w / house_meter(seed) for n in nights if np.isfinite(n.p_house_w)]
+        stripped = [_replace(n, p_house_w=float("nan")) for n in nights]
+        return stripped, {"night_gain_w": float(np.mean(true)) if true else None}
+    return nights, night_gain(args)
 
 
 def bench_prior(args, probabilities: dict | None = None) -> dict:

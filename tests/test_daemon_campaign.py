@@ -202,7 +202,8 @@ def test_full_campaign_across_the_end_of_summer_time(tmp_path, monkeypatch):
     assert summary["fit"] and summary["lumped"]["hlc"]["unit"] == "W/K"
     # The data were the right ones: the heavy house's true HLC is found (±10 %), by a fit
     # told the configured night gain ([fit] night_gain_w reached the daemon's impctl fit).
-    assert summary["fit"]["night_gain"]["statement"] == "night gain assumed 0 ± 87 W, not measured"
+    assert summary["fit"]["night_gain"]["statement"] == "night gain declared 0 W (known, ± 0 W)"
+    assert summary["fit"]["night_gain"]["source"] == "declared"
     hlc = summary["lumped"]["hlc"]["value"]
     assert abs(hlc / float(HEAVY_HOUSE.hlc_w_per_k) - 1) < 0.10, hlc
 

@@ -371,11 +371,10 @@ def gain_nights():
 
 def test_a_known_night_gain_enters_the_model_and_an_unknown_one_is_stated(gain_nights):
     """The gain enters the model (split over air, surface and mass as ISO 13790 and the plant
-    do; both kinds of night), not the data: told the house's 300 W the fit recovers HLC and τ
-    within 1 %; told 0 W the heat pump's lower power reads as a smaller HLC. The
-    likelihood-ratio test does not keep a fitted gain (a constant is not separable from the
-    HLC by these nights): the default assumes 250 ± 87 W, says so, and its interval holds the
-    true HLC."""
+    do; both kinds of night), not the data: declared as the house's 300 W it is known (± 0 W)
+    and the fit recovers HLC and τ within 1 %; declared 0 W the heat pump's lower power reads
+    as a smaller HLC. Pinned to the assumption (``night_gain=False``) it is 250 ± 87 W, said
+    so, and its interval holds the true HLC."""
     def fit(**kw):
         # the gain alone (no population prior: on these exact nights the residuals' lag-1
         # autocorrelation is 0.95, the prior is tempered ×39 and moves C_m to its centre)
@@ -383,18 +382,19 @@ def test_a_known_night_gain_enters_the_model_and_an_unknown_one_is_stated(gain_n
                         model_error=None, prior=None, **kw).fit(gain_nights, RANGES)
 
     told = fit(night_gain_w=300.0)
-    assert told.night_gain_ == {"value_w": 300.0, "sd_w": pytest.approx(86.6, abs=0.1),
-                                "assumed": True,
-                                "statement": "night gain assumed 300 ± 87 W, not measured"}
+    assert told.night_gain_ == {"value_w": 300.0, "sd_w": 0.0, "source": "declared",
+                                "assumed": False,
+                                "statement": "night gain declared 300 W (known, ± 0 W)"}
+    assert told.offset_allowance_["night_gain_relative_sd"] == 0.0
     assert rel(told.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.01
     assert rel(told.lumped_["tau"].value, HOUSE.tau_h) < 0.01
     assert rel(told.lumped_["c_m"].value, HOUSE.c_m_j_per_k) < 0.01
     zero = fit(night_gain_w=0.0)
     assert zero.lumped_["hlc"].value < 0.95 * HOUSE.hlc_w_per_k
 
-    default = fit(night_gain=True)
-    assert not default.nuisance_check_["selected"] and default.nuisance_check_["chi2"] < 9.49
+    default = fit(night_gain=False)
     assert default.night_gain_["value_w"] == 250.0 and default.night_gain_["assumed"]
+    assert default.night_gain_["source"] == "assumed"
     e = default.lumped_["hlc"]
     assert e.low <= HOUSE.hlc_w_per_k <= e.high
     assert abs(e.value / HOUSE.hlc_w_per_k - 1) < abs(
@@ -403,7 +403,59 @@ def test_a_known_night_gain_enters_the_model_and_an_unknown_one_is_stated(gain_n
     summary = fit_to_dict(default)
     assert summary["nuisance"]["night_gain_w"]["assumed"] is True
     assert summary["nuisance"]["night_gain_w"]["value"] == 250.0
+    assert summary["fit"]["night_gain"]["source"] == "assumed"
     assert "night gain assumed 250 ± 87 W, not measured" in format_table(summary)
-    stat = fit(night_gain=True, night_gain_sd_w=0.0).lumped_["hlc"]
+    stat = fit(night_gain=False, night_gain_sd_w=0.0).lumped_["hlc"]
     assert e.high / e.low > 1.02 * stat.high / stat.low   # the assumption's share widens it
+
+
+def test_a_measured_night_gain_is_used_night_by_night(gain_nights):
+    """``p_house_w`` (+ 75 W per sleeper) measures the gain: the fit pins each night to its
+    own (:func:`impctl.night_gain.measured_gain_w`), says "measured" with the mean and the
+    measurement's SD, and recovers the HLC as when it is declared."""
+    from impctl.night_gain import measured_gain_w, measured_sd_w
+
+    share = measured_gain_w(1.0)   # the indoor share of household electricity
+    # 300 W: 150 W of electricity and two sleepers; one night logged without p_house_w
+    p_house = (300.0 - 2 * 75.0) / share
+    nights = [dataclasses.replace(n, p_house_w=p_house, occupants=2.0) if k else n
+              for k, n in enumerate(gain_nights)]
+    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0), meter_error=0.0, model_error=None,
+                   prior=None).fit(nights, RANGES)
+    gain = fit.night_gain_
+    assert gain["source"] == "measured" and not gain["assumed"]
+    assert gain["value_w"] == pytest.approx(300.0)
+    assert gain["sd_w"] == pytest.approx(measured_sd_w(p_house, 2.0))
+    assert set(gain["per_night_w"]) == {n.night_id for n in gain_nights[1:]}
+    assert "night gain measured 300 ±" in gain["statement"] and "sleepers" in gain["statement"]
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.01
+    assert fit.offset_allowance_["night_gain_relative_sd"] > 0   # the measurement's SD
+    # a night's own measured gain enters its rows: a night logged at 0 W moves the fit
+    low = [dataclasses.replace(n, p_house_w=0.0, occupants=0.0) if k == 1 else n
+           for k, n in enumerate(nights)]
+    moved = NightFit(n_starts=3, sensor_offsets_k=(0, 0), meter_error=0.0, model_error=None,
+                     prior=None).fit(low, RANGES)
+    assert moved.night_gain_["per_night_w"][gain_nights[1].night_id] == 0.0
+    assert moved.lumped_["hlc"].value != pytest.approx(fit.lumped_["hlc"].value, rel=1e-4)
+    # a declared gain wins over the measurement, and says the measurement was not used
+    declared = NightFit(n_starts=3, sensor_offsets_k=(0, 0), meter_error=0.0,
+                        model_error=None, prior=None, night_gain_w=300.0).fit(nights, RANGES)
+    assert declared.night_gain_["source"] == "declared"
+    assert "p_house_w" in declared.night_gain_["detail"]
+
+
+def test_an_unknown_gain_is_estimated_under_its_prior(gain_nights):
+    """Neither declared nor measured, the gain is fitted under the assumption as its prior
+    (the default ``night_gain="prior"``): the estimate, its source and its posterior SD are
+    stated, and the HLC interval holds the truth."""
+    fit = NightFit(n_starts=3, sensor_offsets_k=(0, 0), meter_error=0.0, model_error=None,
+                   prior=None).fit(gain_nights, RANGES)
+    gain = fit.night_gain_
+    assert gain["source"] in ("estimated", "assumed") and gain["fitted"]
+    assert gain["prior_w"] == [250.0, pytest.approx(86.6, abs=0.1)]
+    assert 0 < gain["sd_w"] < 87.0 and gain["statement"].startswith(
+        f"night gain {gain['source']} ")
+    e = fit.lumped_["hlc"]
+    assert e.low <= HOUSE.hlc_w_per_k <= e.high
+    assert fit.offset_allowance_["night_gain_relative_sd"] == 0.0   # in the covariance
 

@@ -130,31 +130,63 @@ def test_the_cli_module_imports_without_torch():
 
 def test_the_configured_night_gain_reaches_the_fit_and_is_stated(tmp_path, nights):
     """``[fit] night_gain_w`` of a real config file → the daemon's ``impctl fit`` arguments →
-    the fit: its JSON and table say the gain was assumed, with units; a bad value is one
-    clear line naming the key, and ``--night-gain-w`` out of range exits 2."""
+    the fit: declared, known (± 0 W), and its JSON and table say so; the key absent (the
+    example's default) declares nothing; a bad value is one clear line naming the key, and
+    ``--night-gain-w`` out of range exits 2."""
     from impctl.config import ConfigError, load_config
     from impctl.daemon.fitting import fit_arguments
 
     example = Path(__file__).parents[1] / "deploy" / "config.example.toml"
     text = example.read_text()
-    assert "night_gain_w = 250.0" in text
+    assert "# night_gain_w = 0.0" in text
     cfg_path = tmp_path / "impctl.toml"
-    cfg_path.write_text(text.replace("night_gain_w = 250.0", "night_gain_w = 120.0"))
-    cfg = load_config(cfg_path)
-    assert cfg.fit.night_gain_w == 120.0
+    cfg_path.write_text(text)
     csv, out = write_nights(tmp_path / "nights.csv", nights), tmp_path / "fit.json"
+    unset = fit_arguments(load_config(cfg_path), csv, out, str(tmp_path / "no-models"))
+    assert "--night-gain-w" not in unset   # not declared: not 250 W in disguise
+    cfg_path.write_text(text.replace("# night_gain_w = 0.0", "night_gain_w = 120.0"))
+    cfg = load_config(cfg_path)
+    assert cfg.fit.night_gain_w == 120.0 and cfg.fit.night_gain_sd_w is None
     args = fit_arguments(cfg, csv, out, str(tmp_path / "no-models"))
     res = run_cli(*args, env_model_dir=tmp_path / "no-models")
     assert res.returncode == 0, res.stderr
-    assert "night gain assumed 120 ± 87 W, not measured" in res.stdout
+    assert "night gain declared 120 W (known, ± 0 W) [source: declared]" in res.stdout
     data = json.loads(out.read_text())
-    assert data["fit"]["night_gain"]["value_w"] == 120.0 and data["fit"]["night_gain"]["assumed"]
+    gain = data["fit"]["night_gain"]
+    assert (gain["value_w"], gain["sd_w"], gain["source"], gain["assumed"]) == (
+        120.0, 0.0, "declared", False)
+    assert data["fit"]["offset_allowance"]["night_gain_relative_sd"] == 0.0
     assert data["nuisance"]["night_gain_w"]["value"] == 120.0
-    assert data["flexibility"]["coast_gain_w"] == 120.0   # the coast assumes the same gain
+    assert data["flexibility"]["coast_gain_w"] == 120.0   # the coast uses the same gain
 
-    cfg_path.write_text(text.replace("night_gain_w = 250.0", "night_gain_w = -5.0"))
+    cfg_path.write_text(text.replace("# night_gain_w = 0.0", "night_gain_w = -5.0"))
     with pytest.raises(ConfigError, match=r"fit\.night_gain_w.*W"):
+        load_config(cfg_path)
+    cfg_path.write_text(text.replace("# night_gain_sd_w = 0.0", "night_gain_sd_w = 30.0"))
+    with pytest.raises(ConfigError, match=r"fit\.night_gain_sd_w.*night_gain_w"):
         load_config(cfg_path)
     bad = run_cli("fit", "--nights", str(csv), "--night-gain-w", "5000",
                   env_model_dir=tmp_path / "no-models")
     assert bad.returncode == 2 and "--night-gain-w" in bad.stderr
+
+
+def test_declared_zero_gain_is_known_and_its_sd_only_when_given(tmp_path, nights):
+    """``--night-gain-w 0`` (an empty house) is 0 ± 0 W, declared — not 0 ± 87 W; with
+    ``--night-gain-sd-w`` the declared SD is carried into the intervals."""
+    csv = write_nights(tmp_path / "nights.csv", nights)
+    out = tmp_path / "fit.json"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0",
+                  env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "± 87" not in res.stdout and "night gain declared 0 W (known, ± 0 W)" in res.stdout
+    gain = json.loads(out.read_text())["fit"]["night_gain"]
+    assert (gain["value_w"], gain["sd_w"], gain["source"]) == (0.0, 0.0, "declared")
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0",
+                  "--night-gain-sd-w", "40", env_model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    data = json.loads(out.read_text())
+    assert data["fit"]["night_gain"]["sd_w"] == 40.0
+    assert data["fit"]["offset_allowance"]["night_gain_relative_sd"] > 0
+    alone = run_cli("fit", "--nights", str(csv), "--night-gain-sd-w", "40",
+                    env_model_dir=tmp_path / "no-models")
+    assert alone.returncode == 2 and "--night-gain-w" in alone.stderr

@@ -56,6 +56,8 @@ _HEATPUMP_FAILED = "\0heatpump"
 
 
 def _coerce(value: Any, default: Any, where: str, problems: list[str]) -> Any:
+    if default is None:   # an optional number: absent = not given
+        return _coerce(value, 0.0, where, problems) if value is not None else None
     if isinstance(default, bool):
         if isinstance(value, bool):
             return value
@@ -143,9 +145,13 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         problems.append(f"key '{key}': {text}")
 
     gain_lo, gain_hi = NIGHT_GAIN_LIMITS_W
-    if not gain_lo <= cfg.fit.night_gain_w <= gain_hi:
-        bad("fit.night_gain_w", f"must lie in [{gain_lo:g}, {gain_hi:g}] W (≈ 70–80 W per "
-            f"sleeper + base load), got {cfg.fit.night_gain_w:g}")
+    for key in ("night_gain_w", "night_gain_sd_w"):
+        value = getattr(cfg.fit, key)
+        if value is not None and not gain_lo <= value <= gain_hi:
+            bad(f"fit.{key}", f"must lie in [{gain_lo:g}, {gain_hi:g}] W (≈ 75 W per "
+                f"sleeper + base load), got {value:g}")
+    if cfg.fit.night_gain_sd_w is not None and cfg.fit.night_gain_w is None:
+        bad("fit.night_gain_sd_w", "is the SD of a declared gain: set fit.night_gain_w too")
     if (cfg.inputs is not None and cfg.inputs.house_power_includes_heat_pump
             and cfg.heatpump.generation == "compact"):
         bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "

@@ -13,7 +13,6 @@ from pathlib import Path
 from ..heatpump import HeatPumpConfig
 from ..mqtt.config import MqttConfig
 from ..mqtt.inputs import InputsConfig
-from ..night_gain import NIGHT_GAIN_W
 from ..night_protocol import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
@@ -94,8 +93,12 @@ class CampaignConfig:
 class FitConfig:
     """What the daemon's fit (``impctl fit`` in a subprocess) is told about the house."""
 
-    # assumed mean unmetered night gain [W]: ≈ 70–80 W per sleeper + base load
-    night_gain_w: float = NIGHT_GAIN_W
+    # the house's mean night gain [W] (≈ 75 W per sleeper + base load), declared: known.
+    # None (the key absent): not declared — the fit measures it from p_house_w, else
+    # estimates or assumes it (impctl.night_gain), and says which
+    night_gain_w: float | None = None
+    # SD of the declared gain [W]; None: 0 (known exactly)
+    night_gain_sd_w: float | None = None
 
 
 @dataclass(frozen=True)

@@ -56,9 +56,15 @@ async def _step(cmd: list[str]) -> tuple[int, str]:
 
 def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str) -> list[str]:
     """``impctl fit`` arguments of the daemon's fit: what the config tells it about the house
-    (``[fit] night_gain_w``, the assumed night gain [W])."""
-    return ["fit", "--nights", str(nights_csv), "--json", str(out_json), "--model-dir",
-            model_dir, "--night-gain-w", repr(cfg.fit.night_gain_w)]
+    (``[fit] night_gain_w`` and ``night_gain_sd_w``, a declared night gain [W]; not set: not
+    declared, the fit measures, estimates or assumes it and says which)."""
+    args = ["fit", "--nights", str(nights_csv), "--json", str(out_json), "--model-dir",
+            model_dir]
+    if cfg.fit.night_gain_w is not None:
+        args += ["--night-gain-w", repr(cfg.fit.night_gain_w)]
+        if cfg.fit.night_gain_sd_w is not None:
+            args += ["--night-gain-sd-w", repr(cfg.fit.night_gain_sd_w)]
+    return args
 
 
 async def run_fit(store: Store, cfg: Config) -> dict | None:

@@ -56,7 +56,8 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             "campaign": _campaign_section(opts, setpoints, per_sp),
             "clock": {"epoch": epoch.isoformat(), "speed": opts.speed,
                       "wall_epoch_s": clock.wall_epoch_s},
-            "fit": {"night_gain_w": fit_night_gain_w(opts)},
+            "fit": ({} if fit_night_gain_w(opts) is None
+                    else {"night_gain_w": fit_night_gain_w(opts)}),
         }, "demo config")
         daemon = Daemon(cfg, clock=clock)
         task = asyncio.create_task(daemon.run())

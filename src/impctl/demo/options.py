@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..model import HouseParameters
-from ..night_gain import NIGHT_GAIN_W
 
 TZ = "Europe/Ljubljana"
 #: Default clock speed per plant: the realistic plant's steps cost ~0.3 ms (vs µs), and the
@@ -106,8 +105,8 @@ class Progress:
         self.echo(f"[{time.perf_counter() - self.t0:6.1f} s] {text}")
 
 
-def fit_night_gain_w(opts: DemoOptions) -> float:
-    """The night gain the demo's fit assumes [W]: the ideal 5R1C has none (told the truth);
-    on the realistic plant the installer's default (:mod:`impctl.night_gain`), as on a house
-    whose household nobody described."""
-    return 0.0 if opts.plant == "iso" else NIGHT_GAIN_W
+def fit_night_gain_w(opts: DemoOptions) -> float | None:
+    """The night gain the demo declares to its fit [W]: the ideal 5R1C has none (0 W, known);
+    on the realistic plant None — not declared, as on a house whose household nobody
+    described (the fit then estimates or assumes it, :mod:`impctl.night_gain`, and says so)."""
+    return 0.0 if opts.plant == "iso" else None

@@ -146,9 +146,11 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
         result = last[2]
         fit_json.write_text(json.dumps(result, indent=2) + "\n")
     else:
+        gain = fit_night_gain_w(opts)
         fit = subprocess.run(_cmd("fit", "--nights", str(nights_csv), "--json", str(fit_json),
-                                  "--model-dir", str(model_dir), "--night-gain-w",
-                                  repr(fit_night_gain_w(opts))), capture_output=True, text=True)
+                                  "--model-dir", str(model_dir),
+                                  *(() if gain is None else ("--night-gain-w", repr(gain)))),
+                             capture_output=True, text=True)
         if fit.returncode != 0:
             raise RuntimeError(f"impctl fit failed: {fit.stderr.strip()}")
         result = json.loads(fit_json.read_text())

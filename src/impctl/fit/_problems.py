@@ -18,6 +18,7 @@ import torch
 from ..errors import InputError
 from ..imp.gaps import Gap, cut_at_gaps
 from ..imp.night import NightSamples
+from .gain import GainSource, resolve
 from .layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
 from .nights.data import compared_power, prepare_nights, search_bounds
 from .nights.resample import coarsen
@@ -50,6 +51,7 @@ class Problems:
     group_n: torch.Tensor             # and residual group (:func:`.layout.night_rows`)
     n_nuisance: int                   # nuisance terms switched on (the LR test's dof)
     lay: dict                         # :func:`.layout.layout`
+    gain: GainSource | None = None    # the gain pinned when no gain term is fitted
 
     @property
     def with_prior(self) -> bool:
@@ -95,14 +97,23 @@ def prepare(options: NightFit, nights: Sequence[NightSamples],
                          smooth_air_s=3600.0 * o.smooth_air_h,
                          smooth_out_s=3600.0 * o.smooth_out_h, power_ok=power_ok)
     packed.emitter_lag = bool(o.emitter_lag and o.emitter_state)
+    gain = resolve(o.night_gain_w, o.night_gain_sd_w, kept)
+    if gain.per_night_w:
+        # each measured night its own gain: the pinned campaign value plus its deviation
+        packed.gain_w = torch.tensor([gain.per_night_w.get(i, gain.value_w) - gain.value_w
+                                      for i in packed.night_ids], dtype=packed.q_mean_w.dtype)
     prior = PopulationPrior() if o.prior == "population" else o.prior
-    ctx = lm.Context(packed, o.ach_vent, o.ach_infl, o.ridge, o.solver, prior)
+    # not declared, not measured: the gain is estimated under the assumption as its prior
+    estimate = o.night_gain == "prior" and gain.source == "assumed"
+    ctx = lm.Context(packed, o.ach_vent, o.ach_infl, o.ridge, o.solver, prior,
+                     gain_prior=(gain.value_w, gain.sd_w) if estimate else None)
     row_type_n, phi_n, phi_in_n, group_n = night_rows(packed, o.normal_model)
-    nuisance, plain = nuisance_boxes(o.night_gain, o.emitter_state, o.furniture_state,
-                                     o.emitter_lag, o.night_gain_w)
+    nuisance, plain = nuisance_boxes(o.night_gain is True, o.emitter_state, o.furniture_state,
+                                     o.emitter_lag, gain.value_w, estimate)
     lay = layout(packed.n_nights, class_box != prior_box, bounds_tensor(class_box, nuisance),
                  bounds_tensor(class_box, plain), bounds_tensor(prior_box, nuisance),
                  n_starts=o.n_starts, seed=o.seed, per_night=o.per_night)
     return Problems(nights, gaps, skipped, kept, ranges, class_box, prior_box, packed, prior, ctx,
                     row_type_n, phi_n, phi_in_n, group_n,
-                    sum(hi > lo for lo, hi in nuisance.values()), lay)
+                    sum(hi > lo for n, (lo, hi) in nuisance.items()
+                        if not (estimate and n == "night_gain_w")), lay, gain)

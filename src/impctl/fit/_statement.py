@@ -18,6 +18,7 @@ import torch
 
 from ._problems import Problems
 from ._weights import Weights
+from .gain import cross_checks
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import best_of, terms_of
@@ -26,6 +27,7 @@ from .ode.parameters import PARAM_NAMES, to_physical
 from .optim import lm
 from .prior import prior_statement
 from .selection import assumed_gain, class_check, gain_statement, nuisance_check, structure_share
+from .undetermined import mark_undetermined, nuisance_at_bound, table_iv
 from .validation import in_sample_validation, per_night_fits
 
 if TYPE_CHECKING:
@@ -85,7 +87,9 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                   has_power=bool((~packed.constrained).any()), terms=terms_of(result, c.sel))
     lumped, allowance = offset_allowance(
         est["lumped"], p.kept, o.sensor_offsets_k, o.meter_error,
-        0.0 if c.nuisance_check.get("selected") and o.night_gain else o.night_gain_sd_w)
+        # a fitted gain's uncertainty is in the covariance already
+        0.0 if (c.nuisance_check.get("selected") and o.night_gain is True)
+        or p.ctx.gain_prior is not None else p.gain.sd_w)
     share = None
     if o.structure_share and p.lay["simple"]:
         lumped, share = structure_share(result, p.lay, lumped, o.ach_vent, o.ach_infl)
@@ -100,9 +104,15 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
                                                 o.ach_vent, o.ach_infl)
         out["prior_"]["tempering"] = weights.tempering
     nuisance = out["nuisance_"] = nuisance_intervals(c.u, box, est["cov_u"])
-    gain = out["night_gain_"] = gain_statement(c.u, box, o.night_gain_sd_w)
-    if gain["assumed"]:
+    gain = out["night_gain_"] = gain_statement(c.u, box, p.gain, est["cov_u"],
+                                               p.ctx.gain_prior)
+    if not gain.get("fitted") and gain["source"] != "estimated":
         nuisance["night_gain_w"] = assumed_gain(gain)
+    elif gain.get("fitted") and nuisance.get("night_gain_w"):
+        nuisance["night_gain_w"]["source"] = gain["source"]   # fitted under its prior
+    out["cross_checks_"] = cross_checks(p.nights)
+    # a term the bound set, not the nights, leaves what it trades against undetermined
+    out["nuisance_at_bound_"] = nuisance_at_bound(nuisance)
     out["per_night_"], out["per_night_mean_"] = per_night_fits(result, p.lay, packed,
                                                                o.ach_vent, o.ach_infl)
     out["validation_"], out["predictions_"] = in_sample_validation(
@@ -117,5 +127,6 @@ def statement(options: NightFit, problems: Problems, weights: Weights, result: l
         # the diagnostics read the statement as they would read the fitted estimator
         lumped, out["model_error_"] = model_error.widen(
             lumped, model_error.diagnostics(SimpleNamespace(**out)), cal)
-    out["lumped_"] = lumped
+    out["lumped_"] = mark_undetermined(lumped, out["nuisance_at_bound_"])
+    out["table_iv_"] = table_iv(out["parameters_"], est["determined"], c.bounds)
     return out

@@ -34,7 +34,6 @@ import torch
 from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
-from ..night_gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from ..night_protocol import MIN_NIGHT_H
 from ._problems import prepare
 from ._statement import choose, statement
@@ -107,11 +106,18 @@ class NightFit:
         How the night ODE is integrated (:class:`~impctl.fit.ode.solver.NightODE`): "exact" (the
         default; the closed-form solution per sample interval) or "rk4" (``torchdiffeq.odeint``);
         they agree to rk4's error, "exact" is several times cheaper.
-    night_gain, emitter_state, furniture_state : bool
-        Nuisance terms of the night model (:data:`~.ode.parameters.NUISANCE_NAMES`): a constant
-        heat input per campaign; the emitter's release after switch-off (amplitude and time
-        constant); air/furniture capacity at the air node (counted in the reported C_m, τ).
-        Kept only when a likelihood-ratio test says the data need them.
+    night_gain : {"prior", True, False}
+        The night gain when it is neither declared nor measured (``night_gain_w``): "prior"
+        (default) fits it in every joint problem under a Gaussian prior, the assumption
+        :data:`~impctl.night_gain.NIGHT_GAIN_W` ± :data:`~impctl.night_gain.NIGHT_GAIN_SD_W`
+        (a MAP estimate; its posterior SD enters the intervals) — reported *estimated* where
+        the nights shrink the prior's SD to ≤ 0.7 of it, else *assumed*; True: a term the
+        likelihood-ratio test keeps with the others; False: pinned to the assumption.
+    emitter_state, furniture_state : bool
+        Nuisance terms of the night model (:data:`~.ode.parameters.NUISANCE_NAMES`): the
+        emitter's release after switch-off (amplitude and time constant); air/furniture
+        capacity at the air node (counted in the reported C_m, τ). Kept only when a
+        likelihood-ratio test says the data need them.
     sensor_offsets_k : (float, float)
         Assumed SD of uncalibrated T_air and T_out offsets [K] (type-B interval share).
     meter_error : float
@@ -135,18 +141,22 @@ class NightFit:
     structure_share : bool
         Widen the intervals by half the log-difference of HLC, C_m, τ between the fits with and
         without the nuisance terms (a structural-sensitivity share).
-    night_gain_w : float
-        Assumed mean unmetered night gain [W] (sleepers ≈ 70–80 W each + base load), a
-        constant internal gain in the model (split over the air, surface and mass nodes as
-        ISO 13790 C.1–C.3 splits Φ_int) on every night of both kinds whenever no gain term
-        is fitted (``night_gain`` off, or not kept by the likelihood-ratio test). Default the
-        documented population's centre, :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W,
-        real-houses.md §4); 0 on the ideal 5R1C, which has no gains. Reported as assumed,
-        not measured (``night_gain_``).
-    night_gain_sd_w : float
-        SD [W] of that assumption (default 300/√12 ≈ 87 W, the 100–400 W range as a uniform),
-        added to the intervals as the share night_gain_sd_w/(HLC·mean ΔT) when no gain term
-        is fitted (see :func:`.uncertainty.offset_allowance`).
+    night_gain_w : float or None
+        The mean night gain [W] (sleepers ≈ 75 W each + base load), **declared**: known,
+        used as given (± ``night_gain_sd_w``, 0 W unless given) — 0 on an empty house or the
+        ideal 5R1C. None (default): not declared; the nights' ``p_house_w``/``occupants``
+        measure it (each night its own, :func:`impctl.night_gain.measured_gain_w`), else the
+        gain term estimates it (``night_gain``, when the likelihood-ratio test keeps it), else
+        it is **assumed**: :data:`impctl.night_gain.NIGHT_GAIN_W` (250 W, real-houses.md §4)
+        ± :data:`~impctl.night_gain.NIGHT_GAIN_SD_W`. A gain not fitted enters the model as
+        a constant internal gain (split over the air, surface and mass nodes as ISO 13790
+        C.1–C.3 splits Φ_int) on every night of both kinds; ``night_gain_`` says which
+        source was used (:mod:`.gain`).
+    night_gain_sd_w : float or None
+        SD [W] of a declared or assumed gain (default: 0 W declared, 300/√12 ≈ 87 W
+        assumed), added to the intervals as the share night_gain_sd_w/(HLC·mean ΔT) when no
+        gain term is fitted (see :func:`.uncertainty.offset_allowance`); a measured gain
+        carries its measurement's SD.
     prior : {"population", None} or PopulationPrior
         A population prior inside the class ranges (:mod:`.prior`): "population" (default)
         puts the virtual population's ln C_m distribution inside the search box (seed 0, the
@@ -196,8 +206,10 @@ class NightFit:
     night_quality_ : list[dict]     per given night: rows, cycles/h, interruptions, emitter
                                     discharge, T_air resolution, used/usable_h/reason
                                     (:mod:`.nights.quality`)
-    night_gain_ : dict              the night gain used [W]: value_w, sd_w, assumed (True:
-                                    pinned to ``night_gain_w``, not measured), statement
+    night_gain_ : dict              the night gain used [W]: value_w, sd_w, source
+                                    ("declared" | "measured" | "estimated" | "assumed"),
+                                    assumed (source "assumed"), statement
+    cross_checks_ : dict            the room sensors' and the outdoor reference's offsets
     prior_ : dict or None           the prior used: per quantity its centre, prior and
                                     posterior SD (log) and whether it is prior-dominated
     adequacy_ : dict                residual RMSE and autocorrelation per group, and whether
@@ -212,11 +224,11 @@ class NightFit:
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = MIN_NIGHT_H, ridge: float = 1e-2,
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
-                 night_gain: bool = False, emitter_state: bool = True,
+                 night_gain: bool | str = "prior", emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
-                 meter_error: float = 0.05, night_gain_w: float = NIGHT_GAIN_W,
-                 night_gain_sd_w: float = NIGHT_GAIN_SD_W,
+                 meter_error: float = 0.05, night_gain_w: float | None = None,
+                 night_gain_sd_w: float | None = None,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
                  emitter_lag: bool = False, settle_until_held: bool = False,
                  noise: str = "night", model_error: str | None = "default",

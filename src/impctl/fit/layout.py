@@ -60,10 +60,13 @@ def starts(s: int, seed: int) -> torch.Tensor:
 
 
 def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
-                   emitter_lag: bool, night_gain_w: float) -> tuple[dict, dict]:
+                   emitter_lag: bool, night_gain_w: float, estimate_gain: bool = False
+                   ) -> tuple[dict, dict]:
     """Bounds of the nuisance terms (:data:`~.ode.parameters.NUISANCE_NAMES`) with the terms
     switched on as asked, and with all of them off (``plain``); (0, 0) is off. A night gain
-    that is not fitted is pinned to ``night_gain_w`` [W] in both."""
+    that is not fitted is pinned to ``night_gain_w`` [W] in both; ``estimate_gain``: the gain
+    is free in both (under its Gaussian prior, :attr:`.optim.lm.Context.gain_prior`), so the
+    likelihood-ratio test is about the other terms alone."""
     nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
         NUISANCE_NAMES, (night_gain, emitter_state, emitter_state, furniture_state,
                          emitter_state and emitter_lag), strict=True)}
@@ -72,6 +75,8 @@ def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
     if not night_gain:
         nuisance["night_gain_w"] = pinned
     plain = {n: (0.0, 0.0) for n in NUISANCE_NAMES} | {"night_gain_w": pinned}
+    if estimate_gain:
+        nuisance["night_gain_w"] = plain["night_gain_w"] = NUISANCE_BOUNDS["night_gain_w"]
     return nuisance, plain
 
 

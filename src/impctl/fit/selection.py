@@ -4,8 +4,9 @@ The problems of one fit (:mod:`.layout`) include the joint fit with and without 
 terms, and in the class box and the whole prior box. First the data decide whether they need the
 nuisance terms (:func:`nuisance_check`), then whether they contradict the class ranges
 (:func:`class_check`); :func:`structure_share` widens the intervals by how far the nuisance terms
-move the answer, and :func:`gain_statement` says whether the reported night gain was fitted or
-assumed (:func:`assumed_gain`: then with the interval of the assumption).
+move the answer, and :func:`gain_statement` says whether the reported night gain was
+estimated, or declared, measured or assumed (:func:`assumed_gain`: then with the interval of
+that source).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import torch
 from scipy.stats import chi2
 
+from .gain import GainSource
 from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
 from .layout import best_of, terms_of
 from .nights.data import Estimate
@@ -96,22 +98,61 @@ def structure_share(result: lm.LMResult, lay: dict, lumped_: dict[str, Estimate]
     return out, shares
 
 
-def gain_statement(u: torch.Tensor, box: torch.Tensor, night_gain_sd_w: float) -> dict:
-    """The night gain the reported fit (``u`` in ``box``) used [W]: fitted (the
-    likelihood-ratio test kept the term) or assumed (pinned to ``night_gain_w``, SD
-    ``night_gain_sd_w`` [W]), with the plain statement."""
-    lo, hi = (float(v) for v in box[len(PARAM_NAMES)])
+#: A gain estimated under its prior is reported as estimated when the nights shrink the
+#: prior's SD at least to this share; above it the prior, not the nights, sets it: assumed.
+GAIN_INFORMED_RATIO = 0.7
+
+
+def gain_statement(u: torch.Tensor, box: torch.Tensor, gain: GainSource,
+                   cov_u: torch.Tensor | None = None,
+                   prior: tuple[float, float] | None = None) -> dict:
+    """The night gain the reported fit (``u`` in ``box``) used [W] and where it came from.
+
+    Pinned (the box (g, g)): ``gain``'s source — declared, measured or assumed — with its SD.
+    Fitted: under the Gaussian ``prior`` (mean, SD [W]) it is *estimated* with its posterior
+    SD (from ``cov_u``) when the nights shrink the prior's SD to at most
+    :data:`GAIN_INFORMED_RATIO` of it or move it more than one prior SD from the prior's
+    centre, else *assumed* (the prior sets it, said so); without a prior (the
+    likelihood-ratio-selected term) estimated."""
+    j = len(PARAM_NAMES)
+    lo, hi = (float(v) for v in box[j])
     fitted = hi > lo   # the reported problem's box: pinned when (g, g)
-    g = float(to_physical(u, box)[len(PARAM_NAMES)])
-    sd = 0.0 if fitted else float(night_gain_sd_w)
-    text = (f"night gain fitted {g:.0f} W" if fitted else
-            f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured")
-    return {"value_w": g, "sd_w": sd, "assumed": not fitted, "statement": text}
+    g = float(to_physical(u, box)[j])
+    if not fitted:
+        out = {"value_w": g, "sd_w": float(gain.sd_w), "source": gain.source,
+               "assumed": gain.source == "assumed", "statement": gain.statement(g)}
+        if gain.per_night_w:
+            out["per_night_w"] = dict(gain.per_night_w)
+        if gain.detail:
+            out["detail"] = gain.detail
+        return out
+    sd = float("nan")
+    if cov_u is not None:
+        sig = torch.sigmoid(u[j])
+        sd = float((hi - lo) * sig * (1 - sig) * cov_u[j, j].clamp_min(0).sqrt())
+    if prior is None:
+        return {"value_w": g, "sd_w": sd, "source": "estimated", "assumed": False,
+                "statement": f"night gain estimated {g:.0f} W (fitted with the house)"}
+    ratio = sd / prior[1]
+    # the nights inform it when they shrink the prior's SD, or pull the value a prior SD
+    # away from its centre (near the 0 W bound the curvature alone understates them)
+    informed = ratio <= GAIN_INFORMED_RATIO or abs(g - prior[0]) > prior[1]
+    text = (f"night gain estimated {g:.0f} ± {sd:.0f} W from the nights (prior "
+            f"{prior[0]:.0f} ± {prior[1]:.0f} W; posterior/prior SD {ratio:.2f})" if informed
+            else f"night gain assumed {g:.0f} ± {sd:.0f} W, not measured: the nights do not "
+                 f"determine it (posterior/prior SD {ratio:.2f}); the prior is the "
+                 f"population's {prior[0]:.0f} ± {prior[1]:.0f} W")
+    return {"value_w": g, "sd_w": sd, "source": "estimated" if informed else "assumed",
+            "assumed": not informed, "statement": text, "posterior_to_prior_sd": ratio,
+            "prior_w": list(prior), "fitted": True}
 
 
 def assumed_gain(statement: dict) -> dict:
-    """The ``nuisance_`` entry of an assumed night gain (:func:`gain_statement`): the pinned
-    value [W] with the 95 % interval of the assumption (what the flex coast uses)."""
+    """The ``nuisance_`` entry of a night gain not fitted (:func:`gain_statement`): the pinned
+    value [W] with the 95 % interval of its source (what the flex coast uses); ``assumed``
+    true only for an assumption, ``source`` says which, ``pinned`` that it was not fitted."""
     g, sd = statement["value_w"], statement["sd_w"]
     return {"value": g, "low": max(0.0, g - Z95 * sd), "high": g + Z95 * sd,
-            "bounds": list(NUISANCE_BOUNDS["night_gain_w"]), "assumed": True}
+            "bounds": list(NUISANCE_BOUNDS["night_gain_w"]),
+            "assumed": statement["source"] == "assumed", "source": statement["source"],
+            "pinned": True}

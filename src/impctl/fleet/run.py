@@ -114,11 +114,14 @@ def fit_fleet(
     progress: bool = True,
     echo: Callable[[str], None] = print,
     client=None,
+    night_gain_w: float | None = None,
+    night_gain_sd_w: float | None = None,
 ) -> FleetRun:
     """Fit every household of ``input_path`` into the FLEET dataset ``out`` (module docstring).
 
     ``client``: an existing ``distributed.Client`` to run on (left open), instead of
-    ``scheduler`` or a local cluster.
+    ``scheduler`` or a local cluster. ``night_gain_w``, ``night_gain_sd_w``: a night gain
+    declared for every household [W] (None: not declared; ``impctl fit --night-gain-w``).
 
     Raises
     ------
@@ -148,7 +151,8 @@ def fit_fleet(
     if not todo:
         run.wall_s = time.perf_counter() - started
         return run
-    settings = Settings(model_dir=resolved, tz=tz, timestamps=timestamps)
+    settings = Settings(model_dir=resolved, tz=tz, timestamps=timestamps,
+                        night_gain_w=night_gain_w, night_gain_sd_w=night_gain_sd_w)
     own = client is None
     if own:
         client, cluster = _client(scheduler, workers)

@@ -19,7 +19,8 @@ parameters (``floor_area_m2`` … ``u_windows_w_per_m2k``) and the fixed ``ach_v
 ``ach_infl_per_h`` (enough to re-simulate the house, e.g. ``impctl flex``); the fit's
 switch-off terms ``night_gain_w, emitter_tau_h, furniture_j_per_m2k`` each with ``_low``,
 ``_high`` (empty when the fit did not keep them; :mod:`impctl.flex.switch_off`) and
-``night_gain_assumed`` (the gain is the fit's assumption, :mod:`impctl.night_gain`, not fitted);
+``night_gain_assumed`` (the gain is the fit's assumption, :mod:`impctl.night_gain`, not fitted),
+``night_gain_source`` (declared | measured | estimated | assumed);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and
@@ -63,6 +64,7 @@ _FIELDS += [(c, pa.float64()) for c in ("coast_h", "coast_h_low", "coast_h_high"
                                         "rebound_kwh", "switch_off_drop_k")]
 _FIELDS += [(c, pa.float64()) for c in PARAM_COLUMNS.values()]
 _FIELDS += [(c, pa.float64()) for c in SWITCH_OFF_COLUMNS] + [(ASSUMED_COLUMN, pa.bool_())]
+_FIELDS += [("night_gain_source", pa.string())]
 _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
             ("eps_pct", pa.float64()), ("batch_size", pa.int32()),

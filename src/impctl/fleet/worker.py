@@ -42,6 +42,10 @@ class Settings:
     normal_model: str = "demand"
     ach_vent: float = 0.0
     ach_infl: float = 0.01
+    #: a night gain declared for every household [W] and its SD (None: not declared — each
+    #: household's p_house_w measures it, else it is estimated or assumed; impctl.night_gain)
+    night_gain_w: float | None = None
+    night_gain_sd_w: float | None = None
 
 
 def models(model_dir: str) -> tuple[dict, dict]:
@@ -115,7 +119,8 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     # No FLEET column reads the paper's per-night fits, and the joint fit does not depend on
     # them (they stop on their own: fit.layout.stop_units): skipping them saves ~10 % of a batch.
     params = {"normal_model": settings.normal_model, "timestamps": settings.timestamps,
-              "ach_vent": settings.ach_vent, "ach_infl": settings.ach_infl, "per_night": False}
+              "ach_vent": settings.ach_vent, "ach_infl": settings.ach_infl, "per_night": False,
+              "night_gain_w": settings.night_gain_w, "night_gain_sd_w": settings.night_gain_sd_w}
     probe = NightFit(**params)
     rows: dict[str, dict] = {}
     todo: list[tuple[str, list, dict | None, dict]] = []
@@ -210,6 +215,7 @@ def _fill(row: dict, fit) -> None:
     from ..flex.switch_off import to_columns
 
     row.update(to_columns(getattr(fit, "nuisance_", None)))
+    row["night_gain_source"] = (getattr(fit, "night_gain_", None) or {}).get("source")
     row["class_contradicted"] = bool(fit.class_check_.get("rejected", False))
     row["needs_more_nights"] = not all(e.determined for e in fit.lumped_.values())
     row["loss"] = float(fit.loss_)

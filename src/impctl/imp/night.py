@@ -31,6 +31,22 @@ class NightSamples:
         Thermal heat output of the heating [W].
     setpoint_c : float
         T_set of the night [°C] (for constrained nights the band centre); NaN if unknown.
+    p_house_w : float
+        Mean household electricity not used by the heat pump over the night [W] (the
+        NIGHTS column ``p_house_w``); NaN if not measured.
+    occupants : float
+        Mean number of sleepers over the night (the column ``occupants``); NaN if not given.
+    night_gain_w : float
+        The night gain declared for the night [W] (the column ``night_gain_w``: known, e.g. a
+        fleet's per-household declaration); NaN if not declared.
+    t_air_offset_k : float
+        Mean controller T_air − mean of the room sensors (``t_rooms_c``) [K] on a night whose
+        ``t_air_c`` is the room sensors' mean; NaN when the controller's own T_air is used.
+    t_out_offset_k : float
+        Mean T_out − reference outdoor temperature (``t_out_ref_c``) [K]; NaN without one.
+    not_held : str
+        Why an auto-labelled night is neither a held nor a constrained night (heat pulses,
+        drift: :mod:`impctl.imp.held`); "" for an IMP night. The fit skips it with this reason.
     """
 
     night_id: str
@@ -41,6 +57,12 @@ class NightSamples:
     t_out_c: np.ndarray
     q_hc_w: np.ndarray
     setpoint_c: float = float("nan")
+    p_house_w: float = float("nan")
+    occupants: float = float("nan")
+    night_gain_w: float = float("nan")
+    t_air_offset_k: float = float("nan")
+    t_out_offset_k: float = float("nan")
+    not_held: str = ""
 
     @property
     def duration_h(self) -> float:

@@ -12,12 +12,18 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
 * ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
+* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w`` (optional) —
+  household electricity besides the heat pump [W], sleepers, mean of the room sensors and a
+  reference outdoor temperature [°C], a declared night gain [W] (:mod:`.night_extras`: a bad
+  cell there is missing, not refused).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
 ``kind`` a night is ``constrained`` when the heating is off (``heating`` = 0, or without that
 column Q_HC ≤ :data:`~impctl.imp.features.Q_ON_W`) in at least :data:`OFF_FRACTION` of its samples
-during the first hour, else ``normal``.
+during the first hour, else ``normal``; such a night on which the setpoint is not held (heat
+pulses, T_air falling under a fixed heat input: :mod:`.held`) carries the reason in ``not_held``
+and is not fitted.
 """
 
 from __future__ import annotations
@@ -31,7 +37,9 @@ import pandas as pd
 from ..errors import InputError
 from ..tables import frame_table, read_table
 from .features import Q_ON_W
+from .held import not_held
 from .night import NightSamples
+from .night_extras import EXTRA_COLUMNS, extra_columns, night_extras
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
@@ -143,13 +151,15 @@ def read_nights(
         ``kind``, a labelled night with fewer than two samples, no night at all.
     """
     path = Path(path)
-    table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_TEXT,
+    table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_OPTIONAL,
                        may_be_empty=("setpoint",), tz=tz)
     return nights_from_table(table, path, tz, window=window)
 
 
 _NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating")
 _TEXT = ("night", "kind")
+# read as text, then each cell a number or missing (:mod:`.night_extras`), never a refusal
+_OPTIONAL = (*_TEXT, *EXTRA_COLUMNS)
 
 
 def read_nights_frame(
@@ -165,7 +175,8 @@ def read_nights_frame(
     name ``source`` and the row (counted as in the CSV form: the first data row is row 2).
     """
     table = frame_table(frame.reset_index(drop=True), source, required=REQUIRED_COLUMNS,
-                        numeric=_NUMERIC, optional=_TEXT, may_be_empty=("setpoint",), tz=tz)
+                        numeric=_NUMERIC, optional=_OPTIONAL, may_be_empty=("setpoint",),
+                        tz=tz)
     return nights_from_table(table, Path(source), tz, window=window)
 
 
@@ -206,6 +217,7 @@ def nights_from_table(
     kinds_all = table["kind"].to_numpy() if "kind" in table else None
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
+    extras = extra_columns(table)
     nights: list[NightSamples] = []
     for night_id, idx in groups:
         if night_id == "":
@@ -225,18 +237,24 @@ def nights_from_table(
             kind = str(kinds[0])
         else:
             kind = _infer_kind(time_s, off[idx])
+            more_held = {"not_held": not_held(kind, time_s, values["t_air"][idx], off[idx],
+                                              "heating" in table, values["q_hc"][idx])}
         setpoint = np.nan
         if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
             setpoint = float(np.nanmedian(setpoint_all[idx]))
+        t_air, more = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
+        if kinds_all is None:
+            more |= more_held
         nights.append(NightSamples(
             night_id=str(night_id),
             kind=kind,  # type: ignore[arg-type]
             start=start,
             time_s=time_s,
-            t_air_c=values["t_air"][idx],
+            t_air_c=t_air,
             t_out_c=values["t_out"][idx],
             q_hc_w=values["q_hc"][idx],
             setpoint_c=setpoint,
+            **more,
         ))
     if not nights:
         what = "no night with two or more samples" if explicit else (

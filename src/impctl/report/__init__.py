@@ -37,6 +37,10 @@ def _table(headers: list[str], rows: list[list[str]]) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
+def _list(x) -> list:
+    return x if isinstance(x, list) else []
+
+
 def _fmt(x, spec=".3g") -> str:
     return "—" if x is None else format(x, spec)
 
@@ -70,10 +74,14 @@ def _param_table(fit: dict, truth: HouseParameters | None) -> str:
     true = truth.as_dict() if truth is not None else {}
     for name, value in fit["parameters"].items():
         rng = fit.get("bounds", {}).get(name)
+        # a parameter the data do not determine is shown as its prior (the range centre)
+        shown = (fit.get("table_iv") or {}).get(name) if isinstance(
+            fit.get("table_iv"), dict) else None
+        value = shown.get("value", value) if isinstance(shown, dict) else value
         row = [name, fit.get("units", {}).get(name, ""), _fmt(value),
                "—" if not rng else f"{rng[0]:.3g} – {rng[1]:.3g}",
                "data" if fit.get("determined", {}).get(name) else
-               f"{fit.get('basis', {}).get(name, 'prior')} only"]
+               f"prior: {fit.get('basis', {}).get(name, 'prior')} centre"]
         if truth is not None:
             row.insert(3, _fmt(float(true[name])))
         rows.append(row)
@@ -227,9 +235,13 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         "<h1>impctl: house identification report</h1>",
         "<h2>What the nights determine</h2>", _lumped_table(fit),
         f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",
-        *[f"<p>{html.escape(g['statement'])} (sleepers and base load; it moves the HLC by "
-          "its error over the mean indoor–outdoor difference)</p>"
-          for g in [(fit.get("fit") or {}).get("night_gain")] if g and g.get("assumed")],
+        *[f"<p>{html.escape(str(g.get('statement')))} — source: "
+          f"{html.escape(str(g.get('source', 'assumed')))} (sleepers and base load; its error "
+          "moves the HLC by itself over the mean indoor–outdoor difference)</p>"
+          for g in [(fit.get("fit") or {}).get("night_gain")] if isinstance(g, dict)],
+        *[f"<p class='warn'>{html.escape(str(t.get('statement')))} (the bound, not the "
+          "nights, set it)</p>" for t in _list((fit.get("fit") or {}).get("nuisance_at_bound"))
+          if isinstance(t, dict)],
         *_flexibility_section(fit),
         "<h2>Measured vs fitted indoor temperature per night</h2>", _img(figs[0]),
         "<h2>Heat demand on the normal nights</h2>", _img(figs[1]),

@@ -16,7 +16,7 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
-from ...night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_W
+from ...night_gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .. import cli
 from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, refuse_large_file, time_zone
 
@@ -50,7 +50,8 @@ def _write_json(path: Path, data: dict) -> None:
 @cli.command("fit")
 @click.option("--nights", "nights_path", required=True,
               type=click.Path(dir_okay=False, path_type=Path),
-              help="NIGHTS.csv: timestamp,t_air,t_out,q_hc[,setpoint,heating,night,kind].")
+              help="NIGHTS.csv: timestamp,t_air,t_out,q_hc[,setpoint,heating,night,kind]"
+                   "[,p_house_w,occupants,t_rooms_c,t_out_ref_c,night_gain_w].")
 @click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Trained range classifiers [default: per-user data dir].")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -80,14 +81,20 @@ def _write_json(path: Path, data: dict) -> None:
               help="Fit at most this many nights: the most recent ones, a third of them "
                    "constrained (memory and time grow with the nights; "
                    f"{MAX_NIGHTS_RANGE[0]}–{MAX_NIGHTS_RANGE[1]}).")
-@click.option("--night-gain-w", default=NIGHT_GAIN_W, show_default=True, type=float,
+@click.option("--night-gain-w", default=None, type=float,
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
-              help="Assumed mean unmetered night gain [W] (≈ 70–80 W per sleeper + base "
-                   "load; the default is the 100–400 W range's centre). Reported as assumed, "
-                   f"not measured; {NIGHT_GAIN_LIMITS_W[0]:g}–{NIGHT_GAIN_LIMITS_W[1]:g}.")
+              help="The house's mean night gain besides the heating [W], declared: known "
+                   "(0 for an empty house; ≈ 75 W per sleeper + base load). Not given: "
+                   "measured from the nights' p_house_w/occupants columns, else estimated "
+                   f"or assumed ({NIGHT_GAIN_W:g} W ± {NIGHT_GAIN_SD_W:.0f}, said so); "
+                   f"{NIGHT_GAIN_LIMITS_W[0]:g}–{NIGHT_GAIN_LIMITS_W[1]:g}.")
+@click.option("--night-gain-sd-w", default=None, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="SD of the declared night gain [W] (default 0: known exactly).")
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
-        ach_vent: float, max_nights: int, night_gain_w: float) -> None:
+        ach_vent: float, max_nights: int, night_gain_w: float | None,
+        night_gain_sd_w: float | None) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -105,6 +112,9 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
     if ach_infl + ach_vent <= 0:
         raise InputError("--ach-infl and --ach-vent must have a positive sum")
+    if night_gain_sd_w is not None and night_gain_w is None:
+        raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
+                         "too")
     from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")
@@ -115,7 +125,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     nights = read_nights(nights_path, tz)
     check_units(nights, nights_path)
     estimator = NightFit(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
-                         ach_vent=ach_vent, night_gain_w=night_gain_w)
+                         ach_vent=ach_vent, night_gain_w=night_gain_w,
+                         night_gain_sd_w=night_gain_sd_w)
     cut, _ = cut_at_gaps(nights, estimator.emission_lag_h)
     kept, _, skipped = prepare_nights(cut, estimator.emission_lag_h, estimator.min_night_h,
                                       estimator.resume_threshold_w)
@@ -138,7 +149,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
             "too little data to fit: missing " + " and ".join(missing)
             + f". Nights found: {found}" + (f"; skipped: {why}" if why else ""), nights_path)
 
-    classes, ranges, notes = _classes(cut, model_dir)
+    # the classifiers see the IMP nights only (not an auto-cut night that is neither kind)
+    classes, ranges, notes = _classes([n for n in cut if not n.not_held], model_dir)
     if limit_note:
         notes.append(limit_note)
     click.echo(f"fitting {len(chosen)} nights ({sum(n.kind == 'constrained' for n in chosen)} "

@@ -11,7 +11,9 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
+from ...night_gain import NIGHT_GAIN_LIMITS_W
 from .. import cli
+from ..checks import bounded
 
 
 @cli.group("fleet")
@@ -43,9 +45,19 @@ def fleet() -> None:
               help="Households fitted together in one batched optimiser call (one Dask "
                    "task); a fleet smaller than two batches per worker is cut finer.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--night-gain-w", default=None, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="A night gain declared for every household [W], as for impctl fit. Not "
+                   "given: a household's own night_gain_w column declares it, else its "
+                   "p_house_w/occupants columns measure it, else it is estimated or assumed "
+                   "(the row's night_gain_source says which).")
+@click.option("--night-gain-sd-w", default=None, type=float,
+              callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
+              help="SD of the declared night gain [W] (default 0: known exactly).")
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
               workers: int | None, tz: str, timestamps: str, resume: bool,
-              report_dir: Path | None, batch_size: int, quiet: bool) -> None:
+              report_dir: Path | None, batch_size: int, quiet: bool,
+              night_gain_w: float | None, night_gain_sd_w: float | None) -> None:
     """Fit every household's nights in INPUT; one row per household into --out.
 
     INPUT: a folder of NIGHTS files (*.csv, *.parquet; household id = file stem), or one
@@ -54,9 +66,13 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
     """
     from ...fleet.run import fit_fleet
 
+    if night_gain_sd_w is not None and night_gain_w is None:
+        raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
+                         "too")
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
                     tz=tz, timestamps=timestamps, resume=resume, batch_size=batch_size,
-                    progress=not quiet, echo=click.echo)
+                    progress=not quiet, echo=click.echo, night_gain_w=night_gain_w,
+                    night_gain_sd_w=night_gain_sd_w)
     rate = run.fitted / run.wall_s if run.wall_s > 0 else 0.0
     c = run.counts
     click.echo(f"{run.found} households: {run.fitted} fitted now ({c['ok']} ok, "

@@ -51,6 +51,8 @@ def prepare_nights(
     massless and would drop at once, while real emitters keep heating (identifiability.md §11.2);
     they end before the first sample where the heat power exceeds ``resume_threshold_w`` again
     (heating resumed at T_min). Normal nights keep all samples. Non-finite samples are dropped.
+    An auto-cut night on which the setpoint was not held (``not_held``) is skipped with its
+    reason.
 
     Returns
     -------
@@ -60,6 +62,9 @@ def prepare_nights(
     """
     kept, offsets, skipped = [], [], []
     for night in nights:
+        if night.not_held:   # an auto-cut night that is neither kind (impctl.imp.held)
+            skipped.append((night.night_id, night.not_held))
+            continue
         t = np.asarray(night.time_s, float)
         arrays = [np.asarray(a, float) for a in (night.t_air_c, night.t_out_c, night.q_hc_w)]
         ok = np.isfinite(t) & np.all([np.isfinite(a) for a in arrays], axis=0)

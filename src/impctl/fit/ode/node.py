@@ -198,6 +198,8 @@ def build_rows(
         q_fur = (params[:, FUR_COLUMN] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
     if params.shape[-1] > len(PARAM_NAMES):
         gain = params[:, len(PARAM_NAMES)]
+        if packed.gain_w is not None:   # measured nights: each its own gain
+            gain = gain + packed.gain_w[night_index]
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
     g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
     if params.shape[-1] > len(PARAM_NAMES) and any_air:

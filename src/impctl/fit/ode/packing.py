@@ -59,6 +59,9 @@ class PackedNights:
     #: the meter measures the heat into an emitter node that holds ``emitter_share`` of C_m
     #: (``NightFit(emitter_lag=True)``, :func:`build_rows`)
     emitter_lag: bool = False
+    #: (N,) a night's measured gain less the campaign's pinned one [W] (None: 0 on every
+    #: night; ``impctl.fit.gain``)
+    gain_w: torch.Tensor | None = None
 
     @property
     def n_nights(self) -> int:

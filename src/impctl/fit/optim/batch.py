@@ -122,7 +122,8 @@ def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
 
 def _settings(p: _Problem) -> tuple:
     # not the prior: each problem keeps its own in the merged call (prior.PriorSlices)
-    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.max_iter,
+    return (p.ctx.ach_vent, p.ctx.ach_infl, p.ctx.ridge, p.ctx.solver, p.ctx.gain_prior,
+            p.max_iter,
             p.ctx.packed.timestamps,
             tuple(p.u0.shape[1:]), tuple(p.rows.box.shape[1:]),
             p.ctx.packed.power_ok is None, p.ctx.packed.emitter_lag)
@@ -146,6 +147,10 @@ def _merge_packed(parts: Sequence[PackedNights]) -> PackedNights:
             cols[name] = getattr(parts[0], name)
         elif name == "q_mean_w":
             cols[name] = torch.cat([p.q_mean_w for p in parts])
+        elif name == "gain_w":
+            cols[name] = (None if all(p.gain_w is None for p in parts) else torch.cat([
+                torch.zeros(p.n_nights, dtype=p.q_mean_w.dtype) if p.gain_w is None
+                else p.gain_w for p in parts]))
         elif name.endswith("_slope"):  # zero-length padded intervals have no slope
             cols[name] = torch.cat([torch.cat([getattr(p, name), torch.zeros(
                 p.n_nights, k - p.grid_s.shape[1], dtype=getattr(p, name).dtype)], 1)
@@ -186,7 +191,8 @@ def _solve_group(group: list[_Problem]) -> None:
         g_off += int(p.groups.max()) + 1
     ctx = lm.Context(packed, first.ach_vent, first.ach_infl, first.ridge, first.solver,
                      PriorSlices(tuple(p.ctx.prior for p in group), torch.cat(owner))
-                     if any(p.ctx.prior is not None for p in group) else None)
+                     if any(p.ctx.prior is not None for p in group) else None,
+                     gain_prior=first.gain_prior)
     rows = lm.Rows(
         torch.cat(problem), torch.cat(night), torch.cat([p.rows.row_type for p in group]),
         torch.cat([_pad(p.rows.phi_w, k) for p in group]),

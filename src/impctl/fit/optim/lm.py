@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import torch
 
 from ..ode.node import ROW_DEMAND
-from ..ode.parameters import DTYPE
+from ..ode.parameters import DTYPE, PARAM_NAMES
 from ..prior import penalty as prior_penalty
 from .priors import MergedPrior
 from .problem import Context, Rows, residuals, sum_rows
@@ -112,7 +112,25 @@ def penalty(ctx: Context, u: torch.Tensor, box: torch.Tensor):
              else prior_penalty(ctx.prior, u, box, ctx.ach_vent, ctx.ach_infl))
     if extra is not None:
         loss, h, g = loss + extra[0], h + extra[1], g + extra[2]
+    if ctx.gain_prior is not None and n > len(PARAM_NAMES):
+        loss, h, g = _gain_prior(ctx.gain_prior, u, box, loss, h, g)
     return loss, h, g
+
+
+def _gain_prior(prior: tuple[float, float], u: torch.Tensor, box: torch.Tensor, loss, h, g):
+    """The Gaussian prior on the night gain column (where it is free) added to the penalty:
+    r = (g − mean)/SD with g = lo + (hi − lo)·σ(u); its Gauss–Newton share."""
+    j = len(PARAM_NAMES)
+    lo, hi = box[:, j, 0], box[:, j, 1]
+    free = (hi > lo).to(u.dtype)
+    s = torch.sigmoid(u[:, j])
+    r = free * (lo + (hi - lo) * s - prior[0]) / prior[1]
+    dr = free * (hi - lo) * s * (1.0 - s) / prior[1]
+    h = h.clone()
+    g = g.clone()
+    h[:, j, j] = h[:, j, j] + dr * dr
+    g[:, j] = g[:, j] + dr * r
+    return loss + r * r, h, g
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:

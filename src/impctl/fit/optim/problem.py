@@ -82,6 +82,9 @@ class Context:
     ridge: float = 1e-2
     solver: str = "exact"   # NightODE method: "exact" or "rk4" (torchdiffeq)
     prior: object = None    # a ..prior.PopulationPrior: its residuals join the ridge (MAP)
+    #: (mean, SD) [W] of a Gaussian prior on a fitted night gain (impctl.fit.gain), None: none;
+    #: a residual (g − mean)/SD wherever the gain column of a problem's box is free
+    gain_prior: tuple[float, float] | None = None
 
 
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:

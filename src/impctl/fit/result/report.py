@@ -26,10 +26,18 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
      "fit": {"mode": "joint", "normal_model", "optimizer", "solver", "timestamps",
              "emission_lag_h", "settle_h", "starts", "iterations", "loss", "sigma", "time_s",
              "interval_basis": str,                  # sandwich over G nights, or "too few nights"
-             "night_gain": {"value_w", "sd_w", "assumed", "statement"},  # W; assumed: not fitted
+             "nuisance_at_bound": [{"term", "value", "bound", "affects", "statement"}],
+             "night_gain": {"value_w", "sd_w", "source", "assumed", "statement"[, "per_night_w",
+                            "detail"]},  # W; source declared | measured | estimated | assumed
              "model_error": {"group", "share": {"hlc", "c_m", "tau"}, "n_group",
                              "n_calibration", "n_fits", "seed", "version", "method"} | null},
      "skipped": [{"night_id", "reason"}], "notes": [str],
+     "table_iv": {name: {"value", "source": "data" | "prior", "fitted", "prior"}},
+                    # the value to report: the fitted one only where the data determine it,
+                    # else the prior (search-range centre); "parameters" stays the fitted set
+                    # (it re-simulates the house)
+     "cross_checks": {"t_air_minus_rooms_k": {"mean", "nights", "fitted_on"},
+                      "t_out_minus_ref_k": {"mean", "nights", "flagged"[, "statement"]}},
      "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
@@ -183,6 +191,17 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         out["fit"]["nuisance_check"] = fit.nuisance_check_
     if getattr(fit, "night_gain_", None) is not None:
         out["fit"]["night_gain"] = fit.night_gain_
+    if getattr(fit, "table_iv_", None):
+        out["table_iv"] = fit.table_iv_
+    for term in getattr(fit, "nuisance_at_bound_", None) or []:
+        notes.append(term["statement"] + " (the bound, not the nights, set it)")
+    if getattr(fit, "nuisance_at_bound_", None) is not None:
+        out["fit"]["nuisance_at_bound"] = fit.nuisance_at_bound_
+    if getattr(fit, "cross_checks_", None):
+        out["cross_checks"] = fit.cross_checks_
+        flagged = (fit.cross_checks_.get("t_out_minus_ref_k") or {}).get("statement")
+        if flagged:
+            notes.append(flagged)
     if getattr(fit, "nuisance_", None) is not None:
         out["nuisance"] = fit.nuisance_
         out["fit"]["nuisance_terms"] = (

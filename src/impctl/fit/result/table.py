@@ -71,14 +71,27 @@ def format_table(summary: dict) -> str:
         lines.append(f"  {label:<28} {unit:<5} {q['value'] * k:>9.4g}   "
                      f"{q['low'] * k:.4g} – {q['high'] * k:.4g}{flag}")
     fit_block = summary.get("fit", {})
+    for term in fit_block.get("nuisance_at_bound") or []:
+        lines.append(f"  {term['statement']} (the bound, not the nights, set it)")
     basis = fit_block.get("interval_basis") or ""
     if basis.startswith("too few nights"):
         lines.append(f"  intervals: {basis}")
     gain = fit_block.get("night_gain")
     if gain:
-        why = (" (impctl fit --night-gain-w; ≈ 70–80 W per sleeper + base load): it moves "
-               "HLC by its error / mean ΔT" if gain["assumed"] else "")
-        lines.append(f"  {gain['statement']}{why}")
+        why = (" (declare it: impctl fit --night-gain-w, or log p_house_w; ≈ 75 W per "
+               "sleeper + base load): it moves HLC by its error / mean ΔT"
+               if gain.get("assumed") else "")
+        lines.append(f"  {gain['statement']}{why} [source: {gain.get('source', 'assumed')}]")
+        if gain.get("detail") and gain["detail"] not in gain["statement"]:
+            lines.append(f"  ({gain['detail']})")
+    for key, check in (summary.get("cross_checks") or {}).items():
+        if key == "t_air_minus_rooms_k":
+            lines.append(f"  T_air from the room sensors (t_rooms_c) on {check['nights']} "
+                         f"nights; the controller's T_air reads {check['mean']:+.2f} K from it")
+        elif key == "t_out_minus_ref_k":
+            lines.append(check.get("statement") or (
+                f"  T_out − reference outdoor temperature {check['mean']:+.2f} K on "
+                f"{check['nights']} nights"))
     me = fit_block.get("model_error")
     if me:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
@@ -103,7 +116,12 @@ def format_table(summary: dict) -> str:
         else:
             src = f"{basis} only — {_WHY_NOT[name]}"
         rng = f"{_fmt(lo)}–{_fmt(hi)}"
-        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(summary['parameters'][name]):>8}"
+        # a parameter the data do not determine is shown as its prior, not as a fitted value
+        shown = ((summary.get("table_iv") or {}).get(name) or {}).get(
+            "value", summary["parameters"][name])
+        if basis != "data" and summary.get("table_iv"):
+            src = f"prior (range centre) — {basis} only; {_WHY_NOT[name]}"
+        lines.append(f"  {name:<12} {PARAM_UNITS[name]:<12} {_fmt(shown):>8}"
                      f"  {_fmt(avg.get(name)):>9}   {rng:<12} {src}")
     val = summary["validation"]
     lines.append("")
@@ -123,6 +141,9 @@ def format_table(summary: dict) -> str:
         for name, v in nuis.items():
             if v:
                 how = ("assumed, not measured" if v.get("assumed")
+                       else f"{v['source']}, not fitted" if v.get("pinned")
+                       else f"{v['source']} under its prior, bounds {v['bounds'][0]:g}–"
+                            f"{v['bounds'][1]:g}" if v.get("source")
                        else f"bounds {v['bounds'][0]:g}–{v['bounds'][1]:g}")
                 lines.append(f"  {name:<14} {v['value']:>9.4g}   {v['low']:.4g} – {v['high']:.4g}"
                              f"   ({how})")

@@ -193,6 +193,8 @@ class PlantSchedule:
     phi_hc_w: np.ndarray
     t_out_c: np.ndarray
     run: object
+    #: the internal gains the plant was given [W] (n_steps, n_houses); None without gains
+    internal_gains_w: np.ndarray | None = None
 
 
 def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
@@ -245,7 +247,8 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     else:
         sp = sched.setpoint_c.copy()
         run = _run(sp)
-    logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run)
+    logged = PlantSchedule(run["t_air_sensed_c"], run["heat_meter_w"], run["t_out_sensed_c"], run,
+                           g_int if gains else None)
     return logged, sp
 
 
@@ -259,13 +262,18 @@ def sample_nights(
     quantise_k: float = 0.1,
     power_noise: float = 0.05,
     seed: int = 0,
+    p_house: bool = False,
 ) -> list[NightSamples]:
     """Cut one house's simulation into measured nights (see the module docstring).
 
     ``sim`` is an Annex C :class:`~impctl.model.Simulation` or a :class:`PlantSchedule` (then
     T_out comes from its outdoor sensor; pass ``power_noise=0``: the meter has its own).
+    ``p_house``: the nights carry ``p_house_w``, the household electricity a meter would log
+    (:func:`house_meter`) — from a :class:`PlantSchedule`'s internal gains only.
     """
     rng = np.random.default_rng(seed)
+    gains = getattr(sim, "internal_gains_w", None) if p_house else None
+    meter = house_meter(seed) if gains is not None else None
     stride = int(round(sample_step_s / sched.dt_s))
     t_air = np.atleast_2d(sim.t_air_c.T).T[:, house_index]
     phi = np.atleast_2d(sim.phi_hc_w.T).T[:, house_index]
@@ -291,12 +299,32 @@ def sample_nights(
         def quant(x):
             return np.round(x / quantise_k) * quantise_k if quantise_k > 0 else x
 
+        extra = {}
+        if meter is not None and len(steps):
+            g = np.atleast_2d(gains.T).T[steps[0]:steps[-1] + stride, house_index]
+            extra["p_house_w"] = float(g.mean()) * meter
         nights.append(NightSamples(
             night_id=night_id, kind=kind, start=sched.index[w0],
             time_s=(steps - w0) * sched.dt_s, t_air_c=quant(t_air[steps]),
             t_out_c=quant(t_out[steps]), q_hc_w=np.maximum(q, 0.0), setpoint_c=t_set,
+            **extra,
         ))
     return nights
+
+
+def house_meter(seed: int) -> float:
+    """What a household electricity meter logs per W of the plant's internal gain [W/W]: the
+    gain is the indoor share of the electricity (uniform over
+    :data:`impctl.night_gain.INDOOR_SHARE`: the rest leaves as outdoor loads, drained warm
+    water), read with a systematic meter error uniform within
+    ±:data:`~impctl.night_gain.HOUSE_METER_ERROR` — one draw per house (``seed``), what the
+    fit's measured gain (:func:`impctl.night_gain.measured_sd_w`) states as its uncertainty."""
+    from ...night_gain import HOUSE_METER_ERROR, INDOOR_SHARE
+
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x9A1]))
+    share = rng.uniform(*INDOOR_SHARE)
+    error = rng.uniform(-HOUSE_METER_ERROR, HOUSE_METER_ERROR)
+    return (1.0 + error) / share
 
 
 def synth_nights(house: HouseParameters, *, seed: int = 0, sample_step_s: float = 300.0,
