@@ -103,11 +103,12 @@ def test_a_schema_3_store_is_migrated_keeping_its_fits(tmp_path):
         store.add_fit([1, 2, 5], _fit((180, 170, 190), (50, 45, 55)))
     # Make it what impctl wrote before the adaptive campaign (schema 3).
     con = sqlite3.connect(path)
-    con.executescript("DROP TABLE decisions; ALTER TABLE fits DROP COLUMN candidates;"
+    con.executescript("DROP TABLE house_inputs; DROP TABLE decisions;"
+                      "ALTER TABLE fits DROP COLUMN candidates;"
                       "ALTER TABLE fits DROP COLUMN night_count; PRAGMA user_version = 3;")
     con.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 4
+        assert store.schema_version == SCHEMA_VERSION == 5
         [fit] = store.fits()
         assert (fit.nights, fit.night_count, fit.candidates) == ([1, 2, 5], 3, None)
         assert fit.result["lumped"]["hlc"]["value"] == 180

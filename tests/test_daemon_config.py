@@ -124,7 +124,7 @@ def test_example_config_loads_and_documents_every_key():
     assert data["fit"] == {} and cfg.fit.night_gain_w is None
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "source", "fit"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit"}
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys

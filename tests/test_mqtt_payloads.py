@@ -92,7 +92,7 @@ def test_discovery_without_commands_has_no_buttons_and_templates_render():
     msgs = dict(discovery_messages(cfg, DEVICE, LIMITS))
     configs = {t: json.loads(p) for t, p in msgs.items()}
     assert check_discovery(configs) == []
-    assert len(configs) == 18
+    assert len(configs) == 21  # + next experiment, heat pump electricity, heat delivered
     assert not [t for t in configs if "/button/" in t or "/select/" in t or "/number/" in t]
     state = LiveState(t_air_c=20.456, t_out_c=None, q_hc_w=1234.4, night_state="active",
                       night_kind="normal", campaign_valid=2, campaign_planned=5,

@@ -15,6 +15,7 @@ from ..errors import InputError
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..mqtt.config import mqtt_from_mapping
+from ..mqtt.inputs import inputs_from_mapping, own_topic
 from .sections import (
     CampaignConfig,
     ClockConfig,
@@ -116,6 +117,13 @@ def _build(cls: type, data: dict, prefix: str, problems: list[str]) -> Any:
             if _is_table(value, where, problems):
                 kwargs[key] = mqtt_from_mapping(value, problems)
             continue
+        if key == "inputs" and cls is Config:  # [inputs], parsed by impctl.mqtt.inputs
+            if _is_table(value, where, problems):
+                kwargs[key] = inputs_from_mapping(value, problems, own_topic(data.get("mqtt")))
+                if "mqtt" not in data:
+                    problems.append(f"{where}: needs [mqtt]: the inputs are read from that "
+                                    "broker")
+            continue
         if key in _SECTIONS and cls is Config:
             if _is_table(value, where, problems):
                 kwargs[key] = _build(_SECTIONS[key], value, f"{key}.", problems)
@@ -144,6 +152,11 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
                 f"sleeper + base load), got {value:g}")
     if cfg.fit.night_gain_sd_w is not None and cfg.fit.night_gain_w is None:
         bad("fit.night_gain_sd_w", "is the SD of a declared gain: set fit.night_gain_w too")
+    if (cfg.inputs is not None and cfg.inputs.house_power_includes_heat_pump
+            and cfg.heatpump.generation == "compact"):
+        bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "
+            "its electrical power (register 2129 is on extended controllers only), so impctl "
+            "cannot subtract it: give a meter that excludes the heat pump and set false")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
     window = None

@@ -18,6 +18,7 @@ from ..imp.protocol import (
     DEFAULT_SETPOINTS_C,
 )
 from ..mqtt.config import MqttConfig
+from ..mqtt.inputs import InputsConfig
 
 
 @dataclass(frozen=True)
@@ -128,6 +129,7 @@ class Config:
     clock: ClockConfig = field(default_factory=ClockConfig)
     fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
+    inputs: InputsConfig | None = None  # [inputs]: the house's own sensors over MQTT
     source: str = ""
 
     @property

@@ -70,6 +70,9 @@ class NightController:
                  stop: asyncio.Event | None = None):
         self.client, self.store, self.clock, self.policy = client, store, clock, policy
         self.on_status = on_status or (lambda text: None)
+        #: Called with (night id, snapshot) after each stored sample (the house's own sensors
+        #: are stored beside it); must not raise.
+        self.on_sample: Callable[[int, Snapshot], None] | None = None
         self.stop = stop or asyncio.Event()
         self.last_snapshot: Snapshot | None = None
         self.last_good_read: datetime | None = None
@@ -212,6 +215,8 @@ class NightController:
         self._incidents.readings(readings_problem(snap), now, log)
         if night_id is not None:
             self.store.add_sample(sample_from_snapshot(night_id, snap))
+            if self.on_sample is not None:
+                self.on_sample(night_id, snap)
         return snap
 
     async def _prepare(self, night_id: int, req: NightRequest, log) -> Snapshot:

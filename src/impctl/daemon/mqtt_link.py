@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from datetime import UTC, datetime, timedelta
 from importlib import metadata
 from typing import TYPE_CHECKING
@@ -30,6 +31,8 @@ if TYPE_CHECKING:
 
 _LOG = logging.getLogger("impctl.daemon")
 _RUNNING = ("preparing", "active", "restoring")
+#: How often the next night's start is re-evaluated for Home Assistant at most [s, wall].
+_NEXT_NIGHT_S = 60.0
 _TASKS: set[asyncio.Task] = set()
 try:
     _VERSION = metadata.version("impctl")
@@ -45,6 +48,9 @@ class MqttLink:
         self._idle: Snapshot | None = None
         self._idle_ok = False
         self.bridge: MqttBridge | None = None
+        self._next_at: datetime | None = None
+        self._next_checked = -1e9
+        self._next_key: tuple = ()
 
     # -- StateSource -------------------------------------------------------------------------
     def identity(self) -> DeviceIdentity:
@@ -78,6 +84,9 @@ class MqttLink:
             state.t_air_c = snap.t_air_c.value
             state.t_out_c = snap.t_out_c.value
             state.q_hc_w = snap.q_hc_w.value
+            state.energy_el_kwh = snap.energy_electrical_kwh.value
+            state.energy_heat_kwh = snap.energy_thermal_kwh.value
+        state.next_night_at = self._next_night((state.night_state, state.night_id))
         state.link_ok = bool(ok and d._connected.is_set())
         camp = campaign_state(store, d.cfg)
         state.campaign_mode, state.campaign_status = camp.mode, camp.status
@@ -100,6 +109,27 @@ class MqttLink:
         state.restore_pending = [e.register for e in store.journal_pending()]
         return state
 
+    def _next_night(self, night: tuple) -> datetime | None:
+        """When the next night's preheat starts (None: nothing to run), re-evaluated when a
+        night starts or ends and at most once a minute of wall time otherwise (an adaptive
+        campaign's decision reads the fits)."""
+        now = time.monotonic()
+        if night == self._next_key and now - self._next_checked < _NEXT_NIGHT_S:
+            return self._next_at
+        self._next_key = night
+        from .schedule import next_act_time, peek_next_night
+
+        d = self.daemon
+        try:
+            act = next_act_time(d.cfg, d.clock.now())
+            req, _ = peek_next_night(d.store, d.cfg, act)
+            self._next_at = None if req is None else act
+        except Exception as exc:  # noqa: BLE001 - a sensor less, never a failed publish
+            _LOG.warning("next night for MQTT not known: %s", exc)
+            self._next_at = None
+        self._next_checked = now
+        return self._next_at
+
     async def refresh(self) -> None:
         """One snapshot outside a night, if the heat pump is free (never during a night or
         a restore: those hold the heat-pump lock and publish their own samples)."""
@@ -110,6 +140,8 @@ class MqttLink:
             try:
                 self._idle = await d.client.snapshot()
                 self._idle_ok = True
+                if d.house_inputs is not None:  # the outdoor-sensor check between nights
+                    d.house_inputs.record(None, self._idle)
             except (ModbusLinkError, HeatPumpError) as exc:
                 if self._idle_ok:
                     _LOG.warning("idle read for MQTT failed: %s", exc)
@@ -177,6 +209,7 @@ def start_mqtt(daemon: RunningDaemon) -> MqttLink | None:
                comfort_band_k=cfg.night.comfort_band_k,
                default_setpoint_c=cfg.campaign.constrained_setpoint_c))
     link.bridge.on_link_change = link.note_link
+    link.bridge.inputs = daemon.house_inputs  # [inputs]: the house's sensors, or None
     link.bridge.start()
     return link
 

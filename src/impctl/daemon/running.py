@@ -12,6 +12,7 @@ from ..config import Config
 from ..controller import NightController
 from ..heatpump import HeatPumpClient
 from ..store import Store
+from .house_inputs import HouseInputs
 from .lock import DaemonLock
 
 
@@ -26,6 +27,9 @@ class RunningDaemon(Protocol):
     controller: NightController | None
     #: the MQTT link (:class:`~impctl.daemon.mqtt_link.MqttLink`) when ``[mqtt]`` is configured
     mqtt: Any
+    #: the house's own sensors (:class:`~impctl.daemon.house_inputs.HouseInputs`) when
+    #: ``[inputs]`` is configured
+    house_inputs: HouseInputs | None
     #: set while the heat pump answers
     _connected: asyncio.Event
     #: held by whatever drives the heat pump (a night, a restore, an idle read)

@@ -110,6 +110,7 @@ class Daemon:
         self._heat_pump_lock = asyncio.Lock()
         self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
         self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
+        self.house_inputs = None  # HouseInputs when [inputs] is configured
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -134,6 +135,11 @@ class Daemon:
             self.controller = NightController(
                 self.client, self.store, self.clock, policy_from_config(self.cfg),
                 on_status=self._status, stop=self.stop)
+            if self.cfg.inputs is not None:  # the house's own sensors, stored per sample
+                from .house_inputs import HouseInputs
+
+                self.house_inputs = HouseInputs(self.cfg.inputs, self.clock, self.store)
+                self.controller.on_sample = self.house_inputs.record
             if not self.cfg.campaign.adaptive:  # the fixed plan (adaptive: none to keep)
                 self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)

@@ -88,6 +88,9 @@ class MqttBridge:
         self._task: asyncio.Task | None = None
         self._fit_sent: object = _UNSENT
         self._fit_checked = -1e9
+        #: ``[inputs]``: an object with ``topics`` (list of str), ``names`` (topic → input)
+        #: and ``receive(topic, payload, retained)`` (no I/O, must not raise), or None.
+        self.inputs = None
 
     # -- the daemon's side -----------------------------------------------------------------
     def start(self) -> None:
@@ -203,6 +206,9 @@ class MqttBridge:
         await client.subscribe(f"{base}/cmd/+", qos=1)
         # Home Assistant says "online" here when it (re)starts: announce again then.
         await client.subscribe(f"{self.cfg.discovery_prefix}/status")
+        # The house's own sensors; their retained values arrive at once.
+        for topic in (self.inputs.topics if self.inputs is not None else ()):
+            await client.subscribe(topic, qos=1)
         await self._announce(client)
         listener = asyncio.create_task(self._listen(client))
         try:
@@ -284,6 +290,9 @@ class MqttBridge:
                 if payload.strip().lower() == b"online":
                     self._rediscover.set()
                     self.wake()
+                continue
+            if self.inputs is not None and topic in self.inputs.names:
+                self.inputs.receive(topic, payload, bool(message.retain))
                 continue
             if not topic.startswith(prefix) or message.retain:
                 # A retained command would act again at every reconnect: ignore it.

@@ -21,6 +21,9 @@ from .config import MqttConfig
 
 #: Payloads of the availability topic.
 ONLINE, OFFLINE = "online", "offline"
+#: The values of the night's state and kind (Home Assistant's enum sensors list them).
+NIGHT_STATES = ("idle", "preparing", "active", "restoring")
+NIGHT_KINDS = ("none", "constrained", "normal")
 #: What the fit topics hold: name → (entity name, unit, device class or None).
 FIT_QUANTITIES = {
     "hlc": ("Heat loss coefficient HLC", "W/K", None),
@@ -71,6 +74,8 @@ def entities(cfg: MqttConfig, limits: Limits) -> list[tuple[str, str, dict]]:
     state, settings = f"{base}/state", f"{base}/settings"
     temp = {"device_class": "temperature", "unit_of_measurement": "°C",
             "state_class": "measurement", "suggested_display_precision": 1}
+    energy = {"device_class": "energy", "unit_of_measurement": "kWh",
+              "state_class": "total_increasing", "suggested_display_precision": 0}
     out: list[tuple[str, str, dict]] = [
         ("sensor", "t_air", {"name": "Indoor temperature", "state_topic": state,
                              "value_template": _state("t_air_c"), **temp}),
@@ -82,10 +87,23 @@ def entities(cfg: MqttConfig, limits: Limits) -> list[tuple[str, str, dict]]:
                             "suggested_display_precision": 0}),
         ("sensor", "night_state", {"name": "Night state", "state_topic": state,
                                    "value_template": _state("night_state"),
+                                   "device_class": "enum", "options": list(NIGHT_STATES),
                                    "icon": "mdi:weather-night"}),
         ("sensor", "night_kind", {"name": "Night kind", "state_topic": state,
                                   "value_template": _state("night_kind"),
+                                  "device_class": "enum", "options": list(NIGHT_KINDS),
                                   "icon": "mdi:thermometer-lines"}),
+        ("sensor", "next_night", {"name": "Next experiment", "state_topic": state,
+                                  "value_template": _state("next_night_at"),
+                                  "device_class": "timestamp",
+                                  "icon": "mdi:calendar-clock"}),
+        # The heat pump's lifetime counters (heating + hot water): the electricity one is a
+        # device's consumption in Home Assistant's Energy dashboard.
+        ("sensor", "energy_el", {"name": "Heat pump electricity", "state_topic": state,
+                                 "value_template": _state("energy_el_kwh"), **energy}),
+        ("sensor", "energy_heat", {"name": "Heat delivered", "state_topic": state,
+                                   "value_template": _state("energy_heat_kwh"), **energy,
+                                   "icon": "mdi:radiator"}),
         ("sensor", "campaign", {"name": "Campaign progress", "state_topic": state,
                                 "value_template": _state("campaign"),
                                 "json_attributes_topic": state,

@@ -33,6 +33,9 @@ class LiveState:
         (None = no fit yet, or not determined)
     campaign_status : short text (a Home Assistant state holds ≤ 255 characters);
         campaign_reason : the campaign's last decision in one sentence
+    energy_el_kwh, energy_heat_kwh : the heat pump's lifetime counters (heating + hot water):
+        electricity it used and heat it delivered [kWh]
+    next_night_at : when the next night's preheat starts (aware), None = none planned
     """
 
     ts: datetime | None = None
@@ -55,6 +58,9 @@ class LiveState:
     tau_rel_pct: float | None = None
     campaign_status: str = ""
     campaign_reason: str = ""
+    energy_el_kwh: float | None = None
+    energy_heat_kwh: float | None = None
+    next_night_at: datetime | None = None
 
     def as_json(self) -> dict[str, Any]:
         """The JSON object of ``<base>/state``."""
@@ -77,6 +83,10 @@ class LiveState:
             "tau_rel_pct": _round(self.tau_rel_pct, 1),
             "campaign_status": self.campaign_status[:255],
             "campaign_reason": self.campaign_reason,
+            "energy_el_kwh": _round(self.energy_el_kwh, 1),
+            "energy_heat_kwh": _round(self.energy_heat_kwh, 1),
+            "next_night_at": None if self.next_night_at is None else (
+                self.next_night_at.isoformat(timespec="seconds")),
         }
 
 
@@ -109,9 +119,24 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
         out[name] = {"value": scaled("value") if determined else None,
                      "low": scaled("low"), "high": scaled("high"),
                      "determined": determined, "unit": unit, **common}
+        if name == "hlc" and determined and out[name]["value"] is not None:
+            out[name]["heat_loss"] = heat_loss_words(out[name]["value"])
     flex = result.get("flexibility") or {}
     coast = flex.get("coast_h")
     out["coast_h"] = {"value": None if coast is None else round(float(coast), 2),
                       "low": flex.get("coast_h_low"), "high": flex.get("coast_h_high"),
                       "rebound_kwh": flex.get("rebound_kwh"), "unit": "h", **common}
     return out
+
+
+#: The conditions of the plain-words heat loss: a cold winter night and a usual room [°C].
+WORDS_T_OUT_C, WORDS_T_IN_C = -10.0, 21.0
+
+
+def heat_loss_words(hlc_w_per_k: float) -> str:
+    """The heat loss coefficient in plain words, e.g. "loses 106 W per °C of difference
+    between inside and outside: 3.3 kW at −10 °C outside with 21 °C inside"."""
+    at_w = hlc_w_per_k * (WORDS_T_IN_C - WORDS_T_OUT_C)
+    return (f"loses {hlc_w_per_k:.0f} W per °C of difference between inside and outside: "
+            f"{at_w / 1000:.1f} kW at {WORDS_T_OUT_C:g} °C outside with {WORDS_T_IN_C:g} °C "
+            "inside").replace("-", "−")

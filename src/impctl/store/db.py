@@ -14,11 +14,12 @@ from pathlib import Path
 from ..errors import InputError
 from ._times import _dt, _iso, _now
 from .campaign_tables import CampaignTables
+from .house_inputs import HouseInputTables
 from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
 from .schema import migrate
 
 
-class Store(CampaignTables):
+class Store(CampaignTables, HouseInputTables):
     """The impctl SQLite database (WAL mode, schema migrated on open).
 
     Parameters

@@ -3,7 +3,12 @@
 Columns: ``timestamp`` (ISO 8601, UTC offset), ``t_air`` and ``t_out`` [°C], ``q_hc`` [W thermal],
 ``setpoint`` [°C], ``heating`` (1 normal night, 0 constrained), ``night`` (id), ``kind``.
 Only samples inside each night's window are written (not the preheat before it), and those
-with a missing T_air, T_out or Q_HC are left out (the format has no missing values).
+with a missing T_air, T_out or Q_HC are left out.
+
+What the house's own sensors said at each sample (``[inputs]``, empty when not configured,
+stale or malformed): ``p_house_w`` (the household's electricity other than the heat pump, W),
+``t_rooms_c`` (mean of the room sensors, °C), ``t_out_ref_c`` (the reference outdoor
+temperature, °C), ``occupants`` (people at home).
 """
 
 from __future__ import annotations
@@ -16,7 +21,10 @@ from pathlib import Path
 from ..errors import InputError
 from .db import Store
 
-COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind")
+COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind",
+           "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
+#: The ``house_inputs`` column behind each export column of the house's own sensors.
+HOUSE_COLUMNS = ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
 
 
 def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
@@ -25,6 +33,7 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
     nights = store.nights(ids=night_ids, valid=True if valid_only else None)
     rows = []
     for night in nights:
+        house = {r.ts: r for r in store.house_inputs(night.id)}
         for s in store.samples(night.id):
             # Only the window: the preheat before it (heating on, also on constrained nights)
             # is not part of the night; `impctl fit` takes a night's first row as its start
@@ -37,6 +46,7 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
                 "timestamp": s.ts.isoformat(), "t_air": s.t_air_c, "t_out": s.t_out_c,
                 "q_hc": s.q_hc_w, "setpoint": night.setpoint_c,
                 "heating": int(night.kind == "normal"), "night": night.id, "kind": night.kind,
+                **{c: getattr(house.get(s.ts), c, None) for c in HOUSE_COLUMNS},
             })
     return rows
 
@@ -103,6 +113,8 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
         raise InputError(f"nothing to export: {what} no usable samples (see impctl nights)",
                          store.path)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
+    # Numbers even when every cell is missing (a column of None would be text in Parquet).
+    df[list(HOUSE_COLUMNS)] = df[list(HOUSE_COLUMNS)].astype(float)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:

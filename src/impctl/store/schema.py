@@ -112,6 +112,22 @@ MIGRATIONS: tuple[str, ...] = (
         forecast_source TEXT
     );
     """,
+    # 5: what the house's own sensors said at each sample ([inputs] over MQTT): the value with
+    # its age, missing when stale or malformed. night_id NULL: a reading between nights (the
+    # outdoor-sensor check at installation). t_out_c is the heat pump's sensor at that moment.
+    """
+    CREATE TABLE house_inputs (
+        night_id INTEGER REFERENCES nights(id),
+        ts TEXT NOT NULL,
+        house_power_w REAL, house_power_age_s REAL,
+        p_house_w REAL,
+        t_rooms_c REAL, t_rooms_age_s REAL, rooms INTEGER,
+        t_out_ref_c REAL, t_out_ref_age_s REAL,
+        occupants REAL, occupants_age_s REAL,
+        t_out_c REAL
+    );
+    CREATE UNIQUE INDEX house_inputs_sample ON house_inputs(night_id, ts);
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 

@@ -11,6 +11,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
+from .inputs_status import describe_inputs
 from .options import config_option
 
 
@@ -93,7 +94,8 @@ def _describe(cfg) -> list[str]:
             "for restores only)",
             f"nights:    {cfg.night.window} {cfg.timezone}, ΔT {cfg.night.comfort_band_k:g} K, "
             f"a sample every {cfg.night.sample_interval_s:g} s",
-            "campaign:  " + _campaign_line(cfg.campaign)]
+            "campaign:  " + _campaign_line(cfg.campaign),
+            "inputs:    " + describe_inputs(cfg.inputs)]
 
 
 def _campaign_line(camp) -> str:
@@ -140,9 +142,15 @@ def check_config_command(config_path: Path) -> None:
     lines = [f"config:    {config_path}: no problem found", *_describe(cfg)]
     lines += [f"warning:   {text}" for text in config_warnings(cfg)]
     lines.append(f"daemon:    {probe(cfg.state_dir).describe()}")
+    offset = None
     if cfg.db_path.exists():
         with Store(cfg.db_path, create=False) as store:
             tonight = _tonight(cfg, store)
+            offset = store.outdoor_offset() if (
+                cfg.inputs is not None and cfg.inputs.outdoor_temperature_c) else None
+        if offset is not None:  # the outdoor reference against the heat pump's sensor
+            lines.append(("WARNING:   " if offset.persistent else "outdoor:   ")
+                         + offset.describe())
     else:
         lines.append(f"store:     {cfg.db_path} (created when the daemon first starts)")
         tonight = _tonight(cfg, _NoStore())

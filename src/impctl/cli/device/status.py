@@ -61,6 +61,9 @@ def collect_status(cfg) -> dict:
         if out["next_night"] is not None:  # the night job honours a waiting skip first
             out["next_night"]["skipped_by"] = (out["skip_tonight"][0]["id"]
                                                if out["skip_tonight"] else None)
+        from .inputs_status import inputs_status
+
+        out["inputs"] = inputs_status(cfg, store)  # [inputs]: the house's own sensors
     out["heatpump"] = read_health(cfg.state_dir)  # generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.service import clock_from_config
@@ -280,6 +283,9 @@ def format_status(st: dict, tz: str = "UTC") -> str:
         lines.append(f"last fit:  {fit['created']:%Y-%m-%d %H:%M} UTC, nights {fit['nights']}"
                      + ("" if hlc is None else f", HLC {hlc:.1f} W/K"))
     lines.extend(_mqtt_lines(st.get("mqtt"), zone))
+    from .inputs_status import inputs_lines
+
+    lines.extend(inputs_lines(st.get("inputs"), zone))
     link = next((e for e in st["events"] if "link" in e["message"]), None)
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
