@@ -117,7 +117,8 @@ class MqttLink:
         if night == self._next_key and now - self._next_checked < _NEXT_NIGHT_S:
             return self._next_at
         self._next_key = night
-        from .schedule import next_act_time, peek_next_night
+        from .next_night import peek_next_night
+        from .schedule import next_act_time
 
         d = self.daemon
         try:
