@@ -21,7 +21,8 @@ from ..population.ranges import DEFAULT_RANGES
 
 # Resolved on first use (lazy_loader), so that importing the package stays light.
 __getattr__, __dir__, _LAZY_NAMES = lazy_loader.attach(__name__, submod_attrs={
-    "saved": ["ClassResult", "classify_nights", "default_model_dir", "load_models", "save_models"],
+    "result": ["ClassResult"],
+    "saved": ["classify_nights", "default_model_dir", "load_models", "save_models"],
     "training": ["TrainConfig", "train_classifiers"],
     "report": ["format_report"],
     "estimator": ["RangeClassifier"],
