@@ -116,8 +116,9 @@ def main() -> None:
             print(f"{name}: {line}")
     print("summary.json lumped + campaign identical: " + ("yes" if same else "NO"))
     print()
-    print("command: nice python bench/demo_determinism.py "
-          + " ".join(shlex.quote(a) for a in sys.argv[1:]))
+    nice = os.nice(0)   # the niceness it ran at, so the command says how it was run
+    print(("command: " + (f"nice -n {nice} " if nice else "") + "python "
+           + " ".join(shlex.quote(a) for a in sys.argv)))
 
 
 if __name__ == "__main__":
