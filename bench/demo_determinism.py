@@ -117,8 +117,8 @@ def main() -> None:
     print("summary.json lumped + campaign identical: " + ("yes" if same else "NO"))
     print()
     nice = os.nice(0)   # the niceness it ran at, so the command says how it was run
-    print(("command: " + (f"nice -n {nice} " if nice else "") + "python "
-           + " ".join(shlex.quote(a) for a in sys.argv)))
+    print("command: " + (f"nice -n {nice} " if nice else "") + "python "
+           + " ".join(shlex.quote(a) for a in sys.argv))
 
 
 if __name__ == "__main__":
