@@ -25,7 +25,9 @@ def demo_summary(house: HouseParameters, fit: dict, demand: dict | None = None, 
     truth = house.as_dict()
     params = []
     for name in PARAMS:
-        est = fit["parameters"].get(name)
+        # what the fit reports: the fitted value where the data determine it, else its prior
+        shown = (fit.get("table_iv") or {}).get(name)
+        est = shown["value"] if shown else fit["parameters"].get(name)
         cls = fit.get("classes", {}).get(name, {})
         params.append({
             "name": name, "unit": UNITS[name], "true": float(truth[name]), "estimate": est,
@@ -74,7 +76,7 @@ def format_summary(s: dict) -> str:
     for p in s["parameters"]:
         rng = p["range"]
         rng_s = "—" if not rng else f"{rng[0]:.3g}–{rng[1]:.3g}"
-        basis = "data" if p["determined"] else f"{p['basis']} (not the data)"
+        basis = "data" if p["determined"] else f"prior: {p['basis']} (not the data)"
         err = "—" if p["error_pct"] is None else f"{p['error_pct']:+.1f} %"
         lines.append(f"  {p['name']:<13}{p['unit']:<13}{p['true']:>9.3g}"
                      f"{_num(p['estimate']):>10}{err:>9}  {rng_s:<18} {basis}")
