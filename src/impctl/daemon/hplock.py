@@ -15,19 +15,17 @@ process dies, also on SIGKILL.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import ipaddress
 import json
 import os
 import re
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
 from ..errors import InputError
 from ..modbus.config import LinkConfig
-from .lock import DaemonRunning, FlockHolder
+from .lock import DaemonRunning, FlockHolder, flock_within
 
 LOCK_DIR_ENV = "IMPCTL_LOCK_DIR"
 DEFAULT_LOCK_DIR = "/run/lock/impctl"
@@ -127,23 +125,15 @@ class HeatPumpLock(FlockHolder):
         """Take the lock, or raise :class:`~.lock.DaemonRunning` naming the holder's PID and
         state directory."""
         fd, writable = self._open()
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() < deadline:
-                    time.sleep(0.05)
-                    continue
-                os.close(fd)
-                held = _holder(self.path)
-                who = (f"PID {held['pid']}, state_dir {held.get('state_dir', '?')}"
-                       if held else "another process")
-                raise DaemonRunning(
-                    f"another impctl {held.get('role') or 'daemon'} ({who}) already drives the "
-                    f"heat pump at {self.address}; one daemon per heat pump: stop it first, "
-                    "or point this configuration at another heat pump", self.path) from None
+        if not flock_within(fd, wait_s):
+            os.close(fd)
+            held = _holder(self.path)
+            who = (f"PID {held['pid']}, state_dir {held.get('state_dir', '?')}"
+                   if held else "another process")
+            raise DaemonRunning(
+                f"another impctl {(held or {}).get('role') or 'daemon'} ({who}) already drives the "
+                f"heat pump at {self.address}; one daemon per heat pump: stop it first, "
+                "or point this configuration at another heat pump", self.path) from None
         content = json.dumps({"pid": os.getpid(), "role": self.role,
                               "state_dir": self.state_dir, "heat_pump": self.address,
                               "started": datetime.now(UTC).isoformat()}).encode()

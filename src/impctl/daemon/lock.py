@@ -112,6 +112,20 @@ def probe(state_dir: str | Path) -> DaemonInfo:
         os.close(fd)
 
 
+def flock_within(fd: int, wait_s: float) -> bool:
+    """Take an exclusive ``flock`` on ``fd``, retrying for ``wait_s`` [s] (``impctl status``
+    may hold a shared lock for an instant); False when another process keeps it."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.05)
+
+
 class FlockHolder:
     """A file held open under a kernel ``flock`` (released by the kernel even on ``kill -9``);
     a context manager. Subclasses open and lock it in ``acquire`` and keep its descriptor in
@@ -161,22 +175,14 @@ class DaemonLock(FlockHolder):
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o640)
         except OSError as exc:
             raise InputError(f"cannot create the lock file: {exc.strerror}", self.path) from None
-        deadline = time.monotonic() + wait_s
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() < deadline:
-                    time.sleep(0.05)
-                    continue
-                os.close(fd)
-                pid, role, _ = _read(self.path)
-                who = f"PID {pid}" if pid is not None else "another process"
-                raise DaemonRunning(
-                    f"another impctl {role or 'daemon'} ({who}) already drives the heat pump of "
-                    f"this store; stop it first (systemctl stop impctl)",
-                    self.path.parent) from None
+        if not flock_within(fd, wait_s):
+            os.close(fd)
+            pid, role, _ = _read(self.path)
+            who = f"PID {pid}" if pid is not None else "another process"
+            raise DaemonRunning(
+                f"another impctl {role or 'daemon'} ({who}) already drives the heat pump of "
+                f"this store; stop it first (systemctl stop impctl)",
+                self.path.parent) from None
         self._content = {"pid": os.getpid(), "role": self.role,
                          "started": datetime.now(UTC).isoformat(), "notes": {}}
         self._fd = fd
