@@ -274,6 +274,19 @@ def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models
     shutil.rmtree(tmp_path / "report")
 
 
+def test_a_part_written_before_the_manifest_counts(tmp_path):
+    """A run stopped between a part's rename and the manifest's rewrite: readers count the
+    part file's rows, not the manifest's stale number."""
+    from impctl.fleet.manifest import Manifest, completeness, read_manifest, write_manifest
+    from impctl.fleet.table import empty_row, write_part
+
+    out = tmp_path / "F"
+    write_manifest(out, Manifest(input="in", options={}, households=4, done=0))
+    write_part(out, "abcd1234", 0, [empty_row("h0"), empty_row("h1")])
+    assert read_manifest(out).done == 0  # the file itself is one batch behind
+    assert completeness(out).startswith("partial: 2 of 4 households")
+
+
 def test_resume_with_other_options_is_refused(tmp_path, nights):
     from impctl.fleet.manifest import Manifest, write_manifest
 

@@ -113,4 +113,17 @@ def completeness(path: str | Path) -> str | None:
     if manifest is None:
         return (f"completeness unknown: no {MANIFEST_FILE} beside the parts (impctl fleet fit "
                 "writes one; a copy may have left it behind)")
+    recount(Path(path), manifest)
     return None if manifest.complete else manifest.status(path)
+
+
+def recount(out: Path, manifest: Manifest) -> Manifest:
+    """Set ``manifest.done`` from the part files in ``out``, the dataset's truth.
+
+    A run stopped between a part's rename and the manifest's rewrite (Ctrl-C, kill -9, a power
+    cut) leaves a manifest one batch behind its parts; counting the parts keeps "partial: K of
+    N" equal to the rows a reader finds."""
+    from .table import done_households
+
+    manifest.done = len(done_households(out))
+    return manifest

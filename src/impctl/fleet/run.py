@@ -33,7 +33,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..fit.household import FitOptions
 from .inputs import Source, discover
-from .manifest import MANIFEST_FILE, Manifest, read_manifest, write_manifest
+from .manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
 from .table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
 
@@ -279,6 +279,8 @@ def fit_fleet(
         for f in futures:
             f.cancel()
         if (out / MANIFEST_FILE).exists():
+            # Ctrl-C may land between a part's rename and the manifest's rewrite.
+            write_manifest(out, recount(out, manifest))
             echo(f"interrupted: {manifest.status(out)}")
         raise
     finally:
