@@ -19,9 +19,11 @@ Tests of the T_air abort use the default house on purpose: it cools fast.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -40,7 +42,9 @@ from impctl.store import Store
 ROOT = Path(__file__).resolve().parents[1]
 # The machine-wide heat-pump locks of the daemons these tests start: one directory per test
 # session, inherited by its subprocesses, instead of the machine's /run/lock/impctl.
-os.environ.setdefault("IMPCTL_LOCK_DIR", tempfile.mkdtemp(prefix="impctl-locks-"))
+if "IMPCTL_LOCK_DIR" not in os.environ:
+    os.environ["IMPCTL_LOCK_DIR"] = tempfile.mkdtemp(prefix="impctl-locks-")
+    atexit.register(shutil.rmtree, os.environ["IMPCTL_LOCK_DIR"], ignore_errors=True)
 PYTHON = sys.executable
 #: The daemon exactly as systemd starts it (``impctl daemon``), without relying on PATH.
 IMPCTL = [PYTHON, "-c", "from impctl.cli import main; main()"]
