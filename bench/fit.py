@@ -405,11 +405,17 @@ def gain_mode_nights(nights: list, mode: str, seed: int, args) -> tuple[list, di
     fit's options of ``--night-gain-w`` (none on the realistic plant: estimated or assumed);
     "measured" — the nights carry p_house_w (the plant's internal gain through a household
     meter, :func:`impctl.population.imp_run.synth.house_meter`); "declared" — the campaign's
-    true mean night gain over the fitted nights declared, ± 0 W, no p_house_w."""
+    true mean night gain over the fitted nights declared, ± 0 W, no p_house_w. On the ideal
+    plant (no night gain) both declare its true 0 W."""
     from dataclasses import replace as _replace
 
     from impctl.population.imp_run.synth import house_meter
 
+    if args.plant == "iso" and mode in ("measured", "declared"):
+        # the ideal 5R1C has no night gain: its truth is 0 W, whatever the synthetic
+        # household meter (made for the realistic plant's gains) would read
+        stripped = [_replace(n, p_house_w=float("nan")) for n in nights]
+        return stripped, {"night_gain_w": 0.0}
     if mode == "measured":
         return nights, night_gain(args)
     if mode == "declared":

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from impctl.fit.nights.quality import adequacy, night_quality
+from impctl.fit.nights.quality import adequacy, night_quality, residual_blocks
 from impctl.fit.nights.resample import coarsen
 from impctl.imp.night import NightSamples
 
@@ -51,14 +51,45 @@ def test_emitter_discharge_time_is_the_time_t_air_stays_off_the_later_cooling_cu
             assert 0.5 < got <= lag_h + 0.1
 
 
-def test_adequacy_speaks_up_when_residuals_are_correlated_or_too_large():
-    noise = {"constrained_t_air_k": 0.03, "normal_t_air_k": 0.01, "normal_power_w": 50.0}
-    good = adequacy(dict(noise), noise, {"constrained": 0.2, "normal_power": 0.1})
-    assert good["adequate"] and "NOT" not in good["statement"]
-    bad = adequacy({**noise, "normal_power_w": 400.0}, noise,
-                   {"constrained": 0.93, "normal_power": 0.1})
+def _adequacy_of(residual_k, residual_w, resolution_k=0.1, mean_power_w=3000.0):
+    """The verdict on given residual series (one 7 h night each, 5-min rows)."""
+    grid = np.arange(len(residual_k)) * 300.0
+    blocks = {"constrained": residual_blocks(residual_k[None], np.ones((1, len(grid)), bool),
+                                             grid[None]),
+              "normal_power": residual_blocks(residual_w[None], np.ones((1, len(grid)), bool),
+                                              grid[None])}
+    sigma = {"constrained_t_air_k": float(np.std(residual_k)), "normal_t_air_k": 0.01,
+             "normal_power_w": float(np.std(residual_w))}
+    noise = {"constrained_t_air_k": 0.01, "normal_t_air_k": 0.01,
+             "normal_power_w": float(np.std(np.diff(residual_w, 2)) / np.sqrt(6))}
+    return adequacy(sigma, noise, {"constrained": 0.3, "normal_power": 0.2}, blocks,
+                    resolution_k, mean_power_w)
+
+
+def test_adequacy_passes_white_residuals_and_names_hour_scale_structure():
+    rng = np.random.default_rng(3)
+    n = 7 * 12 * 4   # four nights' worth of 5-min rows in one series
+    t_h = np.arange(n) / 12.0
+    white_k, white_w = rng.normal(0, 0.03, n), rng.normal(0, 150.0, n)
+    good = _adequacy_of(white_k, white_w)
+    assert good["adequate"], good["statement"]
+    g = good["groups"]["constrained"]
+    assert 0.5 < g["low_frequency_ratio"] < 1.6 and g["whiteness_p"] > 0.01
+    # rounding to 0.1 K leaves 0.1/√12 K: the data's own floor (0.01 K) does not set it
+    assert g["reading_noise"] == pytest.approx(0.1 / np.sqrt(12))
+    # a slow swing the model misses: 0.2 K on T_air, 400 W (13 %) on the held power
+    bad = _adequacy_of(white_k + 0.2 * np.sin(t_h / 1.5), white_w + 400 * np.sin(t_h / 1.5))
     assert not bad["adequate"]
-    assert "autocorrelated" in bad["statement"] and "8.0×" in bad["statement"]
+    assert "constrained-night T_air" in bad["statement"] and "0.05 K" in bad["statement"]
+    assert "held-night heat power" in bad["statement"] and "5 % of the mean" in bad["statement"]
+    assert bad["groups"]["constrained"]["hour_scale_residual"] == pytest.approx(0.2 / np.sqrt(2),
+                                                                                rel=0.15)
+    # the same swing, clearly significant but below the sensors' accuracy and the meter's
+    # class: structure, but not a model error worth a warning
+    small = _adequacy_of(0.01 * rng.normal(size=n) + 0.04 * np.sin(t_h / 1.5),
+                         white_w * 0.2 + 100 * np.sin(t_h / 1.5))
+    assert small["groups"]["constrained"]["whiteness_p"] < 1e-6
+    assert small["adequate"], small["statement"]
 
 
 def test_coarsening_keeps_the_energy_and_the_temperature_at_the_nodes():

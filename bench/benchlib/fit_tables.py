@@ -334,6 +334,17 @@ def dump(res: dict, path: str) -> None:
     out["gain_w"] = [(getattr(f, "night_gain_", None) or {}).get("value_w") for f in res["fit"]]
     out["inflation"] = [max([(1 + r) / (1 - r) for r in f.residual_autocorrelation_.values()]
                             or [1.0]) for f in res["fit"]]
+    # the adequacy check's statistics per residual group (for its calibration)
+    for g in ("constrained", "normal_power"):
+        for k in ("lag1_autocorrelation", "rmse_over_noise", "low_frequency_ratio", "blocks",
+                  "whiteness_p", "rmse_over_reading_noise", "rmse", "reading_noise"):
+            out[f"adequacy:{g}:{k}"] = [((getattr(f, "adequacy_", None) or {}).get("groups", {})
+                                         .get(g, {}).get(k)) for f in res["fit"]]
+    out["mean_power_w"] = [float(np.nanmean(np.concatenate(
+        [np.asarray(p["q_measured_w"], float) for p in f.predictions_ if p["kind"] == "normal"]
+        or [np.array([np.nan])]))) for f in res["fit"]]
+    out["adequate"] = [bool((getattr(f, "adequacy_", None) or {}).get("adequate", True))
+                       for f in res["fit"]]
     priors = [getattr(f, "prior_", None) for f in res["fit"]]
     if any(p is not None for p in priors):   # the population prior (h14z)
         for k in ("hlc", "c_m", "tau"):

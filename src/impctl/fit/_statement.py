@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import SimpleNamespace
 
+import numpy as np
 import torch
 
 from ._params import FitParams
@@ -22,7 +23,7 @@ from .gain import cross_checks
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import best_of, terms_of
-from .nights.quality import adequacy, used_nights_quality
+from .nights.quality import adequacy, t_air_resolution_k, used_nights_quality
 from .ode.parameters import PARAM_NAMES, to_physical
 from .optim import lm
 from .prior import prior_statement
@@ -115,7 +116,12 @@ def statement(options: FitParams, problems: Problems, weights: Weights, result: 
     out["validation_"], out["predictions_"] = in_sample_validation(
         packed, p.kept, c.u, box, c.t_m0, p.phi_n, p.phi_in_n, ach_vent=o.ach_vent,
         ach_infl=o.ach_infl, solver=o.solver, normal_model=o.normal_model)
-    out["adequacy_"] = adequacy(weights.sigma, weights.guess, est["autocorrelation"])
+    res = [t_air_resolution_k(n.t_air_c) for n in p.kept if n.kind == "constrained"]
+    res = [r for r in res if r]
+    held = [np.asarray(n.q_hc_w, float) for n in p.kept if n.kind == "normal"]
+    out["adequacy_"] = adequacy(weights.sigma, weights.guess, est["autocorrelation"],
+                                est.get("residual_blocks"), min(res) if res else None,
+                                float(np.mean(np.concatenate(held))) if held else None)
     out["night_quality_"] = used_nights_quality(p.nights, p.kept, p.skipped,
                                                 o.resume_threshold_w, nuisance)
     out["interval_basis_"] = est["interval_basis"]

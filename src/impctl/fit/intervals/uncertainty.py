@@ -32,6 +32,7 @@ import torch
 from scipy.stats import t as student_t
 
 from ..nights.data import Estimate, lag1_autocorrelation
+from ..nights.quality import residual_blocks
 from ..ode.parameters import DTYPE, NUISANCE_NAMES, PARAM_NAMES, lumped, to_physical
 from ..optim import lm
 from ..optim.problem import raw_residuals
@@ -73,6 +74,10 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     out = {"inflation": float(inflate.max()), "autocorrelation": rhos}
     if summary_only:
         return out
+    grid = ctx.packed.grid_s[sub.night].numpy()
+    out["residual_blocks"] = {key: residual_blocks(raw, mask & (groups == g).numpy()[:, None],
+                                                   grid)
+                              for g, key in enumerate(GROUP_NAMES) if key in rhos}
     scaled = lm.Rows(sub.problem, sub.night, sub.row_type, sub.phi_w, sub.phi_in_w,
                          sub.scale / inflate[groups].sqrt(), sub.box, 1)
     with torch.no_grad():

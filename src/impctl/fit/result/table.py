@@ -197,8 +197,17 @@ def _quality_lines(summary: dict) -> list[str]:
     if adequacy:
         lines += ["", "Model adequacy (residuals of the joint fit)"]
         for group, g in adequacy["groups"].items():
-            lines.append(f"  {group:<13} RMSE {g['rmse']:.3g} {g['unit']} "
-                         f"({g['rmse_over_noise']:.1f}× the reading noise), lag-1 "
-                         f"autocorrelation {g['lag1_autocorrelation']:.2f}")
+            line = f"  {group:<13} RMSE {g['rmse']:.3g} {g['unit']}"
+            if g.get("hour_scale_residual") is not None:
+                noise = g["reading_noise"]
+                line += (f" (reading noise {noise:.2g} {g['unit']}); hour means "
+                         f"{g['hour_scale_residual']:.2g} {g['unit']}, "
+                         f"{g['low_frequency_ratio']:.1f}× white noise "
+                         f"(p = {g['whiteness_p']:.2g})")
+                if g.get("tolerance") is not None:
+                    tol = (f"{g['tolerance']:.2f}" if g["unit"] == "K"
+                           else f"{g['tolerance']:.0f}")
+                    line += f", tolerance {tol} {g['unit']}"
+            lines.append(line)
         lines.append(f"  {adequacy['statement']}")
     return lines
