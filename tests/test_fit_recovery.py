@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from impctl.fit.estimator import NightFit
-from impctl.fit.nights.data import prepare_nights, resume_time
+from impctl.fit.nights.data import RECOVERY_CHARGING_H, prepare_nights, resume_time
 from impctl.fit.ode.packing import pack_nights
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
@@ -55,17 +55,20 @@ def test_the_recovery_is_kept_only_with_the_option(simulated):
     assert not kept
 
 
-def test_the_heat_after_the_resume_drives_the_row_and_its_charging_hour_is_not_compared(
+def test_the_heat_after_the_resume_drives_the_row_and_its_charging_hours_are_not_compared(
         simulated):
     night = _constrained(simulated[True])[0]
     (kept,), offsets, _ = prepare_nights([night], min_hours=1.5, recovery=True)
     t_res = resume_time(kept)
-    packed = pack_nights([kept], offsets, resume_s=[t_res])
+    charging_s = RECOVERY_CHARGING_H * 3600.0
+    packed = pack_nights([kept], offsets, resume_s=[t_res], charging_s=charging_s)
     t = np.asarray(kept.time_s) - offsets[0]
     resumed = packed.resumed[0].numpy()[:len(t)]
     mask = packed.mask[0].numpy()[:len(t)]
     np.testing.assert_array_equal(resumed, np.asarray(kept.time_s) >= t_res)
-    charging = (np.asarray(kept.time_s) >= t_res) & (np.asarray(kept.time_s) < t_res + 3600.0)
+    stamps = np.asarray(kept.time_s)
+    charging = (stamps >= t_res) & (stamps < t_res + charging_s)
+    assert 0 < charging.sum() < (stamps >= t_res).sum()   # some of the recovery is compared
     np.testing.assert_array_equal(mask, ~charging)
     # without the resume the same samples are all compared and nothing resumes
     plain = pack_nights([kept], offsets)

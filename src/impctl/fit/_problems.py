@@ -20,7 +20,13 @@ from ..imp.night import NightSamples
 from ._params import FitParams
 from .gain import GainSource, resolve
 from .layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
-from .nights.data import compared_power, prepare_nights, resume_time, search_bounds
+from .nights.data import (
+    RECOVERY_CHARGING_H,
+    compared_power,
+    prepare_nights,
+    resume_time,
+    search_bounds,
+)
 from .nights.resample import coarsen
 from .ode.packing import PackedNights, pack_nights
 from .ode.parameters import bounds_tensor
@@ -98,7 +104,8 @@ def prepare(options: FitParams, nights: Sequence[NightSamples],
     packed = pack_nights(kept, offsets, timestamps=o.timestamps,
                          smooth_air_s=3600.0 * o.smooth_air_h,
                          smooth_out_s=3600.0 * o.smooth_out_h, power_ok=power_ok,
-                         resume_s=resume_s)
+                         resume_s=resume_s,
+                         charging_s=3600.0 * RECOVERY_CHARGING_H)
     packed.emitter_lag = bool(o.emitter_lag and o.emitter_state)
     gain = resolve(o.night_gain_w, o.night_gain_sd_w, kept)
     if gain.per_night_w:

@@ -101,8 +101,10 @@ class NightFit:
         heat power exceeds ``resume_threshold_w`` to the night's end) as data: the cooling and
         the recovery are one row with one initial mass temperature, the metered heat after
         the resume reaching the air through the emitter term's first-order lag, and T_air not
-        compared in the first hour after the resume (the emitter charges). Off (default): the
-        night ends at the resume.
+        compared for :data:`~.nights.data.RECOVERY_CHARGING_H` after the resume (the emitter
+        charges). Off (default): the night ends at the resume. Measured on the realistic
+        plant's gateway nights (``bench/fit.py --recovery``, 100 households, paired): no
+        change of HLC, τ or C_m beyond the bootstrap noise (decision record 0022).
     min_cooling_h : float or None
         With ``recovery``: a constrained night whose cooling after the emission lag covers at
         least this [h] is kept when cooling and recovery together cover ``min_night_h``. None
