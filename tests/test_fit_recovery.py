@@ -111,3 +111,18 @@ def _one_normal():
     sched = imp_schedule(1, seed=1, n_normal=1, n_constrained=0)
     sim, sp = run_schedule(HOUSE, sched)
     return sample_nights(sim, sp, sched, 0, seed=1)[0]
+
+
+def test_the_fleet_merges_households_with_and_without_a_recovery(simulated):
+    from impctl.fit.optim.batch import _merge_packed
+
+    night = _constrained(simulated[True])[0]
+    (kept,), offsets, _ = prepare_nights([night], min_hours=1.5, recovery=True)
+    (cut,), offsets_cut, _ = prepare_nights([night], min_hours=1.5)
+    with_ = pack_nights([kept], offsets, resume_s=[resume_time(kept)])
+    without = pack_nights([cut], offsets_cut)
+    merged = _merge_packed([without, with_])
+    k = with_.grid_s.shape[1]
+    assert merged.resumed.shape == (2, k)
+    assert not merged.resumed[0].any()
+    assert bool((merged.resumed[1] == with_.resumed[0]).all())
