@@ -193,17 +193,11 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         mode = getattr(args, "gain_mode", "unknown")
         nights = sample_nights(sim, sp, sched, i, sample_step_s=step_s, quantise_k=0.1,
                                power_noise=noise, seed=VAL_SEED + i,
-                               p_house=mode in ("measured", "declared"),
-                               recovery=args.recovery)
+                               p_house=mode in ("measured", "declared"))
         if stop:
             # The fit gets what the gateway keeps: the valid constrained nights it ran (the
             # first two), never an invalid or a spare not run; the normal nights all.
-            given = gate["used"][:, i]
-            if args.fit_short is not None and given.sum() < 2:
-                # --fit-short: a household short of two valid nights gives the fit the
-                # invalid ones it ran too (NightFit(min_cooling_h))
-                given = gate["run"][:, i]
-            used = iter(given)
+            used = iter(gate["used"][:, i])
             nights = [x for x in nights if x.kind != "constrained" or next(used)]
         probs = None
         if range_source == "true":
@@ -219,8 +213,6 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         fit = NightFit(normal_model=args.normal_model, n_starts=args.starts,
                        ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance, **gain_kw, min_night_h=valid_h,
-                       recovery=args.recovery or args.fit_short is not None,
-                       min_cooling_h=args.fit_short,
                        model_error="default" if args.model_error else None,
                        **bench_prior(args, probs)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
@@ -242,11 +234,6 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         res["lsq_house"].append(_safe_house(lsq) if lsq else None)
         res["mid_house"].append(_safe_house(mid))
         res["per_night_mean"].append(fit.per_night_mean_)
-        if stop and args.fit_short is not None:
-            # identified = the fit kept a constrained night (valid or, short, with its recovery)
-            dropped = {nid for nid, _ in fit.skipped_}
-            res.setdefault("n_fit_cons", []).append(sum(
-                x.kind == "constrained" and x.night_id not in dropped for x in nights))
         res.setdefault("class_check", []).append(fit.class_check_)
         if args.verbose:
             q = fit.lumped_
@@ -359,14 +346,6 @@ def main() -> None:
                          "'default': the fit's (C_m); 'none': no prior (the fit before h14z)")
     ap.add_argument("--prior-weight", type=float, default=1.0,
                     help="multiplies the prior's precision (PopulationPrior(weight))")
-    ap.add_argument("--recovery", action="store_true",
-                    help="keep each constrained night's heated recovery after T_min as data "
-                         "(NightFit(recovery=True))")
-    ap.add_argument("--fit-short", type=float, default=None, metavar="H",
-                    help="with --recovery: a household short of two valid constrained nights "
-                         "gives the fit the invalid ones it ran too, kept when their cooling "
-                         "covers H hours and cooling + recovery --valid-h "
-                         "(NightFit(min_cooling_h=H))")
     ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
                     help="stop exactly at T_min, not where the gateway anticipates it")
     args = ap.parse_args()

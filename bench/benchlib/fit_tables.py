@@ -362,9 +362,7 @@ def dump(res: dict, path: str) -> None:
     gate = res.get("gateway")
     if gate is not None:
         n = len(truth)
-        # --fit-short: the constrained nights the fit kept, valid or short with their recovery
-        out["n_used"] = (res["n_fit_cons"] if "n_fit_cons" in res
-                         else gate["used"][:, :n].sum(axis=0).tolist())
+        out["n_used"] = gate["used"][:, :n].sum(axis=0).tolist()
         out["paid"] = gate["paid"][:n].tolist()
         out["coldest_c"] = gate["comfort"]["coldest_c"][:n].tolist()
         out["kh_per_night"] = gate["comfort"]["kh_per_night"][:n].tolist()

@@ -26,8 +26,6 @@ class FitParams(Protocol):
     min_night_h: float
     ridge: float
     resume_threshold_w: float
-    recovery: bool
-    min_cooling_h: float | None
     seed: int
     fit_step_s: float
     night_gain: bool | str

@@ -20,13 +20,7 @@ from ..imp.night import NightSamples
 from ._params import FitParams
 from .gain import GainSource, resolve
 from .layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
-from .nights.data import (
-    RECOVERY_CHARGING_H,
-    compared_power,
-    prepare_nights,
-    resume_time,
-    search_bounds,
-)
+from .nights.data import compared_power, prepare_nights, search_bounds
 from .nights.resample import coarsen
 from .ode.packing import PackedNights, pack_nights
 from .ode.parameters import bounds_tensor
@@ -86,13 +80,8 @@ def prepare(options: FitParams, nights: Sequence[NightSamples],
     """
     o = options
     nights, gaps = cut_at_gaps(nights, o.emission_lag_h)
-    recovery = bool(getattr(o, "recovery", False))
     kept, offsets, skipped = prepare_nights(nights, o.emission_lag_h, o.min_night_h,
-                                            o.resume_threshold_w, recovery=recovery,
-                                            min_cooling_h=getattr(o, "min_cooling_h", None))
-    # where heating resumed on each constrained night kept with its recovery (before the rows
-    # are coarsened: a block's power is its mean, the resume is a sample's)
-    resume_s = [resume_time(n, o.resume_threshold_w) for n in kept] if recovery else None
+                                            o.resume_threshold_w)
     if not kept:
         why = "; ".join(f"{i}: {r}" for i, r in skipped) or "no nights given"
         raise InputError(f"no usable night to fit ({why})")
@@ -103,9 +92,7 @@ def prepare(options: FitParams, nights: Sequence[NightSamples],
     power_ok = compared_power(kept, o.resume_threshold_w, o.settle_h, o.settle_until_held)
     packed = pack_nights(kept, offsets, timestamps=o.timestamps,
                          smooth_air_s=3600.0 * o.smooth_air_h,
-                         smooth_out_s=3600.0 * o.smooth_out_h, power_ok=power_ok,
-                         resume_s=resume_s,
-                         charging_s=3600.0 * RECOVERY_CHARGING_H)
+                         smooth_out_s=3600.0 * o.smooth_out_h, power_ok=power_ok)
     packed.emitter_lag = bool(o.emitter_lag and o.emitter_state)
     gain = resolve(o.night_gain_w, o.night_gain_sd_w, kept)
     if gain.per_night_w:

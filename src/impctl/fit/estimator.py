@@ -96,19 +96,6 @@ class NightFit:
         Weight of the weak prior at the centre of each range (decides exactly flat directions).
     resume_threshold_w : float
         Heat power [W] that marks resumed heating on a constrained night.
-    recovery : bool
-        Keep a constrained night's heated recovery after T_min (from the first sample whose
-        heat power exceeds ``resume_threshold_w`` to the night's end) as data: the cooling and
-        the recovery are one row with one initial mass temperature, the metered heat after
-        the resume reaching the air through the emitter term's first-order lag, and T_air not
-        compared for :data:`~.nights.data.RECOVERY_CHARGING_H` after the resume (the emitter
-        charges). Off (default): the night ends at the resume. Measured on the realistic
-        plant's gateway nights (``bench/fit.py --recovery``, 100 households, paired): no
-        change of HLC, τ or C_m beyond the bootstrap noise (decision record 0022).
-    min_cooling_h : float or None
-        With ``recovery``: a constrained night whose cooling after the emission lag covers at
-        least this [h] is kept when cooling and recovery together cover ``min_night_h``. None
-        (default): the cooling alone must cover ``min_night_h``.
     seed : int
         Seed of the random starts.
     fit_step_s : float
@@ -236,8 +223,7 @@ class NightFit:
                  physical_bounds: dict[str, tuple[float, float]] | None = None,
                  n_starts: int = 4, max_iter: int = 40, optimizer: str = "lm",
                  per_night: bool = True, min_night_h: float = MIN_NIGHT_H, ridge: float = 1e-2,
-                 resume_threshold_w: float = Q_ON_W, recovery: bool = False,
-                 min_cooling_h: float | None = None, seed: int = 0, fit_step_s: float = 300.0,
+                 resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
                  night_gain: bool | str = "prior", emitter_state: bool = True,
                  furniture_state: bool = True,
                  sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
@@ -262,8 +248,6 @@ class NightFit:
         self.min_night_h = min_night_h
         self.ridge = ridge
         self.resume_threshold_w = resume_threshold_w
-        self.recovery = recovery
-        self.min_cooling_h = min_cooling_h
         self.seed = seed
         self.fit_step_s = fit_step_s
         self.night_gain = night_gain

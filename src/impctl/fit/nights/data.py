@@ -25,13 +25,6 @@ from ...model.house import H_MS, LAMBDA_AT, am_factor
 from ..ode.parameters import CLASSIFIED, PARAM_NAMES, PHYSICAL_BOUNDS, eq63_margin
 from .quality import power_usable
 
-#: Hours after heating resumed on a constrained night kept with its recovery whose T_air is not
-#: compared: the 5R1C's air node takes the metered heat at once, the real emitter (a screed for
-#: hours) charges first. Most of what the recovery tells is in its first hours (the heat that
-#: charges the mass), so the window is a compromise; 1 h and 2 h measured alike on the realistic
-#: plant (decision record 0022), 2 h loses the HLC on the ideal 5R1C.
-RECOVERY_CHARGING_H = 1.0
-
 
 @dataclass(frozen=True)
 class Estimate:
@@ -51,19 +44,13 @@ def prepare_nights(
     emission_lag_h: float = EMISSION_LAG_H,
     min_hours: float = MIN_NIGHT_H,
     resume_threshold_w: float = Q_ON_W,
-    recovery: bool = False,
-    min_cooling_h: float | None = None,
 ) -> tuple[list[NightSamples], list[float], list[tuple[str, str]]]:
     """Cut each night to its fit window and drop the unusable ones.
 
     Constrained nights start ``emission_lag_h`` after switch-off (time 0): the 5R1C air node is
     massless and would drop at once, while real emitters keep heating (identifiability.md §11.2);
     they end before the first sample where the heat power exceeds ``resume_threshold_w`` again
-    (heating resumed at T_min) — or, with ``recovery``, keep the heated recovery after it to the
-    night's end (:func:`resume_time`). The ``min_hours`` rule is on the cooling — or, with
-    ``recovery`` and ``min_cooling_h`` given, on cooling and recovery together, the cooling
-    covering at least ``min_cooling_h``.
-    Normal nights keep all samples. Non-finite samples are dropped.
+    (heating resumed at T_min). Normal nights keep all samples. Non-finite samples are dropped.
     An auto-cut night on which the setpoint was not held (``not_held``) is skipped with its
     reason.
 
@@ -81,21 +68,13 @@ def prepare_nights(
         t = np.asarray(night.time_s, float)
         arrays = [np.asarray(a, float) for a in (night.t_air_c, night.t_out_c, night.q_hc_w)]
         ok = np.isfinite(t) & np.all([np.isfinite(a) for a in arrays], axis=0)
-        cooling = ok
         if night.kind == "constrained":
             ok &= t >= emission_lag_h * 3600.0 - 1e-6
             on = ok & (arrays[2] > resume_threshold_w)
-            cooling = ok & (t < t[on.argmax()]) if on.any() else ok
-            if not recovery:
-                ok = cooling
-        tc = t[cooling]
-        short = cooling.sum() < 2 or tc[-1] - tc[0] < min_hours * 3600.0 - 1e-6
-        if short and recovery and min_cooling_h is not None and night.kind == "constrained":
-            ta = t[ok]
-            short = (cooling.sum() < 2 or tc[-1] - tc[0] < min_cooling_h * 3600.0 - 1e-6
-                     or ta[-1] - ta[0] < min_hours * 3600.0 - 1e-6)
-        if short:
-            span = (tc[-1] - tc[0]) / 3600.0 if cooling.sum() >= 2 else 0.0
+            if on.any():
+                ok &= t < t[on.argmax()]
+        if ok.sum() < 2 or t[ok][-1] - t[ok][0] < min_hours * 3600.0 - 1e-6:
+            span = (t[ok][-1] - t[ok][0]) / 3600.0 if ok.sum() >= 2 else 0.0
             what = " after the emission lag" if night.kind == "constrained" else ""
             skipped.append((night.night_id, f"{night.kind} night covers {span:.1f} h{what}, "
                             f"under the {min_hours:g} h minimum"))
@@ -105,16 +84,6 @@ def prepare_nights(
             q_hc_w=arrays[2][ok]))
         offsets.append(float(t[ok][0]))
     return kept, offsets, skipped
-
-
-def resume_time(night: NightSamples, threshold_w: float = Q_ON_W) -> float:
-    """Time [s, the night's clock] of the first sample of a constrained night whose heat power
-    exceeds ``threshold_w`` (heating resumed), inf if none; inf on a normal night."""
-    if night.kind != "constrained":
-        return float("inf")
-    q = np.asarray(night.q_hc_w, float)
-    on = np.isfinite(q) & (q > threshold_w)
-    return float(np.asarray(night.time_s, float)[on.argmax()]) if on.any() else float("inf")
 
 
 def settled(night: NightSamples, settle_h: float, until_held: bool = False,

@@ -202,33 +202,20 @@ def build_rows(
             gain = gain + packed.gain_w[night_index]
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
     g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
-    x = None
-    cons = packed.constrained[night_index][:, None]
-    # a term switched off has τ = 0 (and there is no τ without the nuisance columns)
-    em_tau_s = torch.full_like(a_air, 60.0)
     if params.shape[-1] > len(PARAM_NAMES) and any_air:
         u0_air = u0_air + (g_air_rate * gain)[:, None]
         z0_air = z0_air + g_air_level * gain
         # Extra heat to the air node, x(t) = the emitter's release on constrained nights
         # (− the furniture's uptake), linear between the nodes: it enters like Φ_HC (z stays
         # continuous).
-        em_w = params[:, len(PARAM_NAMES) + 1]
-        em_tau_s = (params[:, len(PARAM_NAMES) + 2] * 3600.0).clamp_min(60.0)
+        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
+        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
+        cons = packed.constrained[night_index][:, None]
         x = torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
         if cap_e is not None:
             x = x + torch.where(cons, _emitter_release(cap_e, em_tau_s, grid,
                                                        packed.t_air_in_slope[night_index]), 0.0)
-    if packed.resumed is not None and any_air:
-        # A constrained night kept with its recovery: the metered heat after heating resumed
-        # reaches the air through the emitter, a first-order lag with the release's time
-        # constant (60 s, i.e. at once, without the emitter term); its release goes on (the
-        # same linear emitter).
-        resumed = packed.resumed[night_index] & cons
-        rec = _emitter_output(torch.where(resumed, packed.q_in_w[night_index], 0.0), em_tau_s,
-                              grid)
-        x = rec if x is None else x + rec
-    if x is not None:
         h = torch.diff(grid, dim=1)
         x_slope = torch.zeros_like(x)
         x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
@@ -291,15 +278,6 @@ def build_rows(
         lag_rate=lag_rate,
         lag_extra=lag_extra,
     )
-
-
-def _emitter_output(q_in_w: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor
-                    ) -> torch.Tensor:
-    """Heat [W] (R, K) at the nodes that a first-order emitter (time constant ``tau_s``, (R,))
-    gives the air when fed the metered power ``q_in_w`` (R, K) (held on each interval) from
-    rest at the first node: dy/dt = (q − y)/τ_e."""
-    return exact_chain(torch.zeros_like(tau_s), -1.0 / tau_s, torch.diff(grid, dim=1),
-                       q_in_w[:, :-1] / tau_s[:, None], torch.zeros_like(q_in_w[:, :-1]))
 
 
 def _emitter_release(c_e: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor,

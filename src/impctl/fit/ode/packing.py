@@ -33,8 +33,7 @@ class PackedNights:
     q_mean_w : (N,) mean power over the night [W] (time-weighted)
     t_fur_slope : (N, K) dT_fur/dt [K/s] of a node that follows the (30-min smoothed) measured
         T_air with the time constant :data:`FURNITURE_TAU_S`
-    mask : (N, K) bool, node k is one of the night's samples (and, on a constrained night with
-        its recovery, not in the emitter's charging after heating resumed: ``resume_s``)
+    mask : (N, K) bool, node k is one of the night's samples
     next_node : (N, K) long, index of the night's next sample (itself for the last one)
     last : (N, K) bool, node k is the night's last sample
     """
@@ -63,9 +62,6 @@ class PackedNights:
     #: (N,) a night's measured gain less the campaign's pinned one [W] (None: 0 on every
     #: night; ``impctl.fit.gain``)
     gain_w: torch.Tensor | None = None
-    #: (N, K) bool: heating has resumed on the interval that starts at node k of a constrained
-    #: night kept with its recovery (``NightFit(recovery=True)``); None: no night has one
-    resumed: torch.Tensor | None = None
 
     @property
     def n_nights(self) -> int:
@@ -120,9 +116,7 @@ def furniture_rate(t: np.ndarray, t_air: np.ndarray, tau_s: float, steady: bool)
 def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
                 timestamps: str = "instant", smooth_air_s: float = 0.0,
                 smooth_out_s: float = 0.0,
-                power_ok: Sequence[np.ndarray] | None = None,
-                resume_s: Sequence[float] | None = None,
-                charging_s: float = 3600.0) -> PackedNights:
+                power_ok: Sequence[np.ndarray] | None = None) -> PackedNights:
     """Put prepared nights (already cut to their fit windows) side by side, each on its own
     sample times (padded to the longest night by repeating its last sample: zero-length
     intervals that change nothing).
@@ -143,10 +137,6 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
     power_ok : per night, bool per sample: False where the measured power is not the space
         heating the model describes (a DHW recharge, a defrost and the recovery after them);
         those samples still drive the model (T_air), their power is not compared
-    resume_s : per night, the time [s, its own clock] heating resumed on a constrained night kept
-        with its recovery (inf: none). The power from there drives the night
-        (:attr:`PackedNights.resumed`); its T_air is not compared for ``charging_s`` [s] after
-        it: the 5R1C's massless air node takes the heat at once, the real emitter charges first
     """
     if timestamps not in TIMESTAMPS:
         raise ValueError(f"timestamps must be one of {TIMESTAMPS}")
@@ -163,13 +153,12 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
     next_node = np.tile(np.arange(k), (n, 1))
     last = np.zeros((n, k), dtype=bool)
     q_mean = np.zeros(n)
-    resumed = np.zeros((n, k), dtype=bool)
 
     def padded(y, m):
         y = np.asarray(y, float)
         return np.concatenate([y, np.full(k - m, y[-1])])
 
-    for i, (night, t, off) in enumerate(zip(nights, rel, offsets_s, strict=True)):
+    for i, (night, t) in enumerate(zip(nights, rel, strict=True)):
         m = len(t)
         grid[i] = padded(t, m)
         t_air = np.asarray(night.t_air_c, float)
@@ -185,12 +174,6 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         if timestamps == "interval":
             q_in[i, :m - 1] = 0.5 * (qi[:-1] + qi[1:])
         mask[i, :m] = True
-        if resume_s is not None and np.isfinite(resume_s[i]):
-            t_res = float(resume_s[i]) - off
-            ends = np.append(t[1:], np.inf)   # node k's interval [t_k, t_k+1) reaches t_res
-            resumed[i, :m] = ends > t_res + 1e-6
-            resumed[i, m:] = True
-            mask[i, :m] &= ~(resumed[i, :m] & (t < t_res + charging_s - 1e-6))
         next_node[i, :m - 1] += 1
         last[i, m - 1] = True
         span = np.diff(t)
@@ -208,5 +191,4 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         next_node=torch.as_tensor(next_node), last=torch.as_tensor(last),
         power_ok=None if power_ok is None else torch.as_tensor(np.stack([
             np.concatenate([np.asarray(p, bool), np.ones(k - len(p), bool)]) for p in power_ok])),
-        resumed=torch.as_tensor(resumed) if resumed.any() else None,
     )

@@ -161,10 +161,6 @@ def _merge_packed(parts: Sequence[PackedNights]) -> PackedNights:
         elif name == "next_node":
             cols[name] = torch.cat([torch.cat([p.next_node, torch.arange(p.grid_s.shape[1], k)
                                                .expand(p.n_nights, -1)], 1) for p in parts])
-        elif name == "resumed":   # None: no night of that household kept its recovery
-            cols[name] = (None if all(p.resumed is None for p in parts) else torch.cat([_pad(
-                torch.zeros_like(p.mask) if p.resumed is None else p.resumed, k)
-                for p in parts]))
         elif name == "power_ok":
             cols[name] = None if parts[0].power_ok is None else torch.cat([torch.cat(
                 [p.power_ok, torch.ones(p.n_nights, k - p.grid_s.shape[1], dtype=torch.bool)],

@@ -235,12 +235,8 @@ def sample_nights(
     power_noise: float = 0.05,
     seed: int = 0,
     p_house: bool = False,
-    recovery: bool = False,
 ) -> list[NightSamples]:
     """Cut one house's simulation into measured nights (see the module docstring).
-
-    A constrained night ends where heating resumes at T_min — or, with ``recovery``, goes on
-    to the window's end through the heated recovery, as the gateway logs it.
 
     ``sim`` is an Annex C :class:`~impctl.model.Simulation` or a :class:`PlantSchedule` (then
     T_out comes from its outdoor sensor; pass ``power_noise=0``: the meter has its own).
@@ -263,8 +259,7 @@ def sample_nights(
             # The cooling only: samples before the step where heating resumes at T_min.
             on = ~np.isnan(spc[w0:w1])
             end = w0 + (int(on.argmax()) if on.any() else w1 - w0)
-            if not recovery or end == w0:   # never switched off: no samples either way
-                steps = steps[steps < end]
+            steps = steps[steps < end]
         if not len(steps):   # never switched off (pre-heat short): a night without samples
             q = np.zeros(0)
         elif steps[0] + len(steps) * stride <= len(phi):   # the same means, without a loop
