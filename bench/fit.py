@@ -182,6 +182,9 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
         onoff = np.broadcast_to(np.asarray(params.heat_pump.min_modulation), (m,)) >= 0.999
         control = np.broadcast_to(np.asarray(params.heat_pump.control), (m,))
         kind, onoff, control = kind[:n], onoff[:n], control[:n]
+        # the heat meter's gain error per house: HLC and C_m are also scored on its scale
+        res["meter_gain"] = np.broadcast_to(
+            np.asarray(params.sensors.meter_gain_error, float), (m,))[:n].copy()
         res["types"] = {
             "radiators": kind == 0, "underfloor": kind == 1,
             "modulating": ~onoff, "on/off": onoff,

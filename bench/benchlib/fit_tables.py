@@ -49,6 +49,24 @@ def stats(err) -> tuple[float, float]:
     return float(np.median(a)), float(np.percentile(a, 90))
 
 
+def _meter_scale_line(fits, meter_gain, t_hlc, t_cm) -> None:
+    """HLC and C_m against the truth on the heat meter's scale (truth × (1 + its gain
+    error)): what the nights can tell at best; the meter's own error is a type-B share beside
+    it (class 3: ±5 %, SD 2.9 % as a uniform), not a fit error."""
+    g = 1.0 + np.asarray(meter_gain, float)[:len(fits)]
+    parts = []
+    for k, t in (("hlc", t_hlc), ("c_m", t_cm)):
+        est = [f.lumped_[k] for f in fits]
+        scaled = np.asarray(t, float) * g
+        e = rel([x.value for x in est], scaled)
+        cov = 100.0 * np.mean([x.low <= v <= x.high for x, v in zip(est, scaled, strict=True)])
+        med, p90 = stats(e)
+        parts.append(f"{'HLC' if k == 'hlc' else 'C_m'} {med:.1f} / {p90:.1f} % "
+                     f"(coverage {cov:.0f} %)")
+    print("on the heat meter's scale (truth × (1 + its gain error), median / P90): "
+          + ", ".join(parts) + "; the meter's ±5 % (SD 2.9 %) is a type-B share beside it")
+
+
 def report(res: dict, step_s: float, range_source: str, args) -> None:
     truth = res["truth"]
     t_hlc = [h.hlc_w_per_k for h in truth]
@@ -121,6 +139,8 @@ def report(res: dict, step_s: float, range_source: str, args) -> None:
     print("NODE joint, median 95 % half-width: " + ", ".join(
         f"{lab} ±{half_width(lumped(k)):.1f} %" for k, lab in (("hlc", "HLC"), ("tau", "τ"),
                                                                ("c_m", "C_m"))))
+    if res.get("meter_gain") is not None:
+        _meter_scale_line(fits, res["meter_gain"], t_hlc, t_cm)
     _model_error_lines(fits, {"hlc": t_hlc, "tau": t_tau, "c_m": t_cm})
     if args.why and "types" in res:
         ty = res["types"]
@@ -328,6 +348,11 @@ def dump(res: dict, path: str) -> None:
         out[f"{k}_covered"] = [bool(e.low <= v <= e.high) for e, v in zip(est, t, strict=True)]
         out[f"{k}_halfwidth_pct"] = [50.0 * float(np.log(e.high / e.low))
                                      for e in est]
+    if res.get("meter_gain") is not None:   # on the heat meter's scale
+        g = 1.0 + np.asarray(res["meter_gain"], float)[:len(truth)]
+        for k in ("hlc", "c_m"):
+            out[f"{k}_meter_err_pct"] = [float(x) for x in rel(
+                [f.lumped_[k].value for f in res["fit"]], np.asarray(true[k], float) * g)]
     # where each fit's night gain came from, and its value [W]
     out["gain_source"] = [(getattr(f, "night_gain_", None) or {}).get("source")
                           for f in res["fit"]]
