@@ -175,6 +175,23 @@ def test_a_non_utf8_password_file_is_one_line_and_exit_2(tmp_path, command):
     assert not (tmp_path / "s").exists()
 
 
+def test_a_non_utf8_systemd_credential_is_one_line_and_exit_2(tmp_path, monkeypatch):
+    """No password_file: the unit's credential ``mqtt.password`` is checked the same way."""
+    cfg, _ = _mqtt_config(tmp_path, b"unused\n", 0o600)
+    cfg.write_text(cfg.read_text().replace(f'password_file = "{tmp_path / "mqtt.password"}"\n',
+                                           ""))
+    creds = tmp_path / "credentials"
+    creds.mkdir()
+    (creds / "mqtt.password").write_bytes(b"s\xe9cret\n")
+    monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
+    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "Traceback" not in result.stderr
+    assert _lines(result, cfg) == [
+        f"systemd credential mqtt.password (the MQTT password): {creds / 'mqtt.password'}: "
+        "not UTF-8 text (byte 2): write the password as plain text on the first line"]
+
+
 def test_a_password_file_others_can_read_is_a_warning(tmp_path):
     cfg, pw = _mqtt_config(tmp_path, b"secret\n", 0o644)
     result = run_cli("check-config", "--config", str(cfg), timeout_s=30)

@@ -21,6 +21,7 @@ from typing import Protocol
 
 import aiomqtt
 
+from ..errors import InputError
 from .commands import BadCommand, Command, parse_command
 from .config import MqttConfig
 from .discovery import (
@@ -182,6 +183,13 @@ class MqttBridge:
                 if short is None and down_since is None:  # one line per outage, not per retry
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
                                  "to %g s)", where, exc, self.cfg.reconnect_max_s)
+                    down_since = time.monotonic()
+            except (InputError, OSError) as exc:   # the password unreadable: one line, no trace
+                quiet = False
+                self._set_connected(False, str(exc))
+                if down_since is None:
+                    _LOG.error("MQTT not connecting: %s (retrying with back-off up to %g s)",
+                               exc, self.cfg.reconnect_max_s)
                     down_since = time.monotonic()
             except Exception as exc:  # noqa: BLE001 - MQTT must never take the daemon down
                 quiet = False

@@ -151,15 +151,21 @@ def mqtt_from_mapping(data: dict, problems: list[str], prefix: str = "mqtt.") ->
                      f"got {text!r}")
     if not cfg.discovery_prefix:
         bad("discovery_prefix", "must not be empty")
-    if cfg.password_file:
-        if not cfg.username:
-            bad("password_file", "needs mqtt.username")
-        try:
-            cfg.password()
-        except OSError as exc:
-            bad("password_file", f"cannot read it: {exc.strerror or exc}")
-        except InputError as exc:
-            bad("password_file", f"{cfg.password_file}: {exc.problem}")
+    if cfg.password_file and not cfg.username:
+        bad("password_file", "needs mqtt.username")
+    # the password file, or the systemd credential the unit loads when there is none
+    def unreadable(text: str) -> None:
+        if cfg.password_file:
+            bad("password_file", text)
+        else:
+            problems.append(f"systemd credential {CREDENTIAL} (the MQTT password): {text}")
+
+    try:
+        cfg.password()
+    except OSError as exc:
+        unreadable(f"cannot read it: {exc.strerror or exc}")
+    except InputError as exc:
+        unreadable(f"{exc.source}: {exc.problem}")
     if cfg.ca_file:
         if not cfg.tls:
             bad("ca_file", "only used with mqtt.tls = true")
