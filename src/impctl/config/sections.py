@@ -106,8 +106,10 @@ class ClockConfig:
     """Simulated time for a dry run: ``speed`` × real time from ``epoch``.
 
     Load-sensitive: simulated time runs on while the daemon waits for the CPU, so on a busy
-    or slow gateway a night may start late or miss samples. The demo and the tests run on a
-    virtual-time event loop instead (:mod:`impctl.clock.loop`), where it cannot.
+    or slow gateway a night may start late or miss samples. The demo and the in-process tests
+    run on a virtual-time event loop instead (:mod:`impctl.clock.loop`), where it cannot; the
+    tests that start the daemon as its own process use this clock, at speeds slow enough that
+    a busy machine's pauses do not skip what they check.
     """
 
     epoch: str = ""                      # ISO 8601 instant; empty = real time
