@@ -190,3 +190,57 @@ def test_declared_zero_gain_is_known_and_its_sd_only_when_given(tmp_path, nights
     alone = run_cli("fit", "--nights", str(csv), "--night-gain-sd-w", "40",
                     env_model_dir=tmp_path / "no-models")
     assert alone.returncode == 2 and "--night-gain-w" in alone.stderr
+
+
+def test_the_instruments_are_assumed_unless_declared(tmp_path, nights):
+    """Sensor offsets and the meter's error: assumed (and printed so) unless the installer
+    declares them; a declared value is used, said to be declared, and moves the intervals."""
+    csv = write_nights(tmp_path / "nights.csv", nights)
+    out = tmp_path / "fit.json"
+    base = ("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0")
+    assumed = run_cli(*base, env_model_dir=tmp_path / "no-models")
+    assert assumed.returncode == 0, assumed.stderr
+    assert ("type B in the intervals: T_air sensor offset SD 0.5 K (assumed), T_out sensor 1 K "
+            "(assumed), heat meter ±5 % (assumed); declare what you know") in assumed.stdout
+    wide = json.loads(out.read_text())
+    declared = run_cli(*base, "--t-air-offset-sd-k", "0.1", "--t-out-offset-sd-k", "0.2",
+                       "--meter-error", "0.01", env_model_dir=tmp_path / "no-models")
+    assert declared.returncode == 0, declared.stderr
+    assert ("T_air sensor offset SD 0.1 K (declared), T_out sensor 0.2 K (declared), heat "
+            "meter ±1 % (declared)") in declared.stdout and "declare what you know" not in \
+        declared.stdout
+    sharp = json.loads(out.read_text())
+    allowance = sharp["fit"]["offset_allowance"]
+    assert allowance["sources"] == {"t_air_offset": "declared", "t_out_offset": "declared",
+                                    "meter_error": "declared"}
+    assert allowance["sensor_offsets_k"] == [0.1, 0.2] and allowance["meter_error"] == 0.01
+    for k in ("hlc", "c_m"):   # the same point, a narrower interval
+        w, s = wide["lumped"][k], sharp["lumped"][k]
+        assert s["value"] == pytest.approx(w["value"], rel=1e-9)
+        assert s["high"] / s["low"] < w["high"] / w["low"]
+    bad = run_cli(*base, "--meter-error", "0.5", env_model_dir=tmp_path / "no-models")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert "--meter-error" in bad.stderr and "0.2" in bad.stderr
+
+
+def test_the_configured_instruments_reach_the_fit_arguments(tmp_path):
+    """``[fit]`` t_air_offset_sd_k, t_out_offset_sd_k, meter_error of the example config →
+    the daemon's ``impctl fit`` arguments; absent, nothing is declared; out of range, one
+    clear line naming the key."""
+    from impctl.config import ConfigError, load_config
+    from impctl.daemon.fitting import fit_arguments
+
+    text = (Path(__file__).parents[1] / "deploy" / "config.example.toml").read_text()
+    cfg_path = tmp_path / "impctl.toml"
+    cfg_path.write_text(text)
+    csv, out = tmp_path / "n.csv", tmp_path / "f.json"
+    unset = fit_arguments(load_config(cfg_path), csv, out, "m")
+    assert not {"--t-air-offset-sd-k", "--t-out-offset-sd-k", "--meter-error"} & set(unset)
+    cfg_path.write_text(text.replace("# t_air_offset_sd_k = 0.5", "t_air_offset_sd_k = 0.2")
+                        .replace("# meter_error = 0.05", "meter_error = 0.02"))
+    args = fit_arguments(load_config(cfg_path), csv, out, "m")
+    assert args[-4:] == ["--t-air-offset-sd-k", "0.2", "--meter-error", "0.02"]
+    assert "--t-out-offset-sd-k" not in args
+    cfg_path.write_text(text.replace("# meter_error = 0.05", "meter_error = 0.5"))
+    with pytest.raises(ConfigError, match=r"fit\.meter_error': must lie in \[0, 0\.2\]"):
+        load_config(cfg_path)

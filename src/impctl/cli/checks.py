@@ -89,3 +89,31 @@ def time_zone(ctx: click.Context | None, param: click.Parameter | None, value: s
         raise InputError(f"unknown time zone {value!r} (an IANA name such as "
                          "Europe/Ljubljana or UTC)", place="--tz") from None
     return value
+
+
+def instrument_options(command: Callable) -> Callable:
+    """``--t-air-offset-sd-k``, ``--t-out-offset-sd-k`` and ``--meter-error`` of ``impctl fit``
+    and ``impctl fleet fit``: what the installer knows of the instruments
+    (:mod:`impctl.fit.instruments`; not given: assumed, and said so)."""
+    from ..fit.instruments import (
+        ASSUMED_METER_ERROR,
+        ASSUMED_SENSOR_OFFSETS_K,
+        METER_ERROR_LIMITS,
+        SENSOR_OFFSET_LIMITS_K,
+    )
+
+    lo, hi = SENSOR_OFFSET_LIMITS_K
+    for name, which, assumed in (("--t-out-offset-sd-k", "outdoor", ASSUMED_SENSOR_OFFSETS_K[1]),
+                                 ("--t-air-offset-sd-k", "indoor", ASSUMED_SENSOR_OFFSETS_K[0])):
+        command = click.option(
+            name, default=None, type=float, callback=bounded(SENSOR_OFFSET_LIMITS_K, "K"),
+            help=f"SD of the {which} temperature sensor's offset [K], declared (a calibrated "
+                 f"sensor: its calibration uncertainty). Not given: assumed {assumed:g} K. It "
+                 f"enters the intervals as offset/ΔT; {lo:g}–{hi:g}.")(command)
+    m_lo, m_hi = METER_ERROR_LIMITS
+    return click.option(
+        "--meter-error", default=None, type=float, callback=bounded(METER_ERROR_LIMITS),
+        help="The heat meter's maximum systematic error, a fraction (0.02: class 2; 0.05: "
+             "class 3; about 0.01 for the electric power of resistive heaters), declared. Not "
+             f"given: assumed {ASSUMED_METER_ERROR:g}. It scales HLC and C_m one to one; "
+             f"{m_lo:g}–{m_hi:g}.")(command)

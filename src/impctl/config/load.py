@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
+from ..fit.instruments import METER_ERROR_LIMITS, SENSOR_OFFSET_LIMITS_K
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..mqtt.config import mqtt_from_mapping
@@ -150,6 +151,12 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         if value is not None and not gain_lo <= value <= gain_hi:
             bad(f"fit.{key}", f"must lie in [{gain_lo:g}, {gain_hi:g}] W (≈ 75 W per "
                 f"sleeper + base load), got {value:g}")
+    for key, (low, high), unit in (("t_air_offset_sd_k", SENSOR_OFFSET_LIMITS_K, " K"),
+                                   ("t_out_offset_sd_k", SENSOR_OFFSET_LIMITS_K, " K"),
+                                   ("meter_error", METER_ERROR_LIMITS, "")):
+        value = getattr(cfg.fit, key)
+        if value is not None and not low <= value <= high:
+            bad(f"fit.{key}", f"must lie in [{low:g}, {high:g}]{unit}, got {value:g}")
     if cfg.fit.night_gain_sd_w is not None and cfg.fit.night_gain_w is None:
         bad("fit.night_gain_sd_w", "is the SD of a declared gain: set fit.night_gain_w too")
     if (cfg.inputs is not None and cfg.inputs.house_power_includes_heat_pump

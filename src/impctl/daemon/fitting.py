@@ -57,13 +57,18 @@ async def _step(cmd: list[str]) -> tuple[int, str]:
 def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str) -> list[str]:
     """``impctl fit`` arguments of the daemon's fit: what the config tells it about the house
     (``[fit] night_gain_w`` and ``night_gain_sd_w``, a declared night gain [W]; not set: not
-    declared, the fit measures, estimates or assumes it and says which)."""
+    declared, the fit measures, estimates or assumes it and says which; ``t_air_offset_sd_k``,
+    ``t_out_offset_sd_k``, ``meter_error``, the instruments' declared uncertainty)."""
     args = ["fit", "--nights", str(nights_csv), "--json", str(out_json), "--model-dir",
             model_dir]
     if cfg.fit.night_gain_w is not None:
         args += ["--night-gain-w", repr(cfg.fit.night_gain_w)]
         if cfg.fit.night_gain_sd_w is not None:
             args += ["--night-gain-sd-w", repr(cfg.fit.night_gain_sd_w)]
+    # what the installer knows of the instruments; absent: the fit assumes and says so
+    for key in ("t_air_offset_sd_k", "t_out_offset_sd_k", "meter_error"):
+        if getattr(cfg.fit, key) is not None:
+            args += ["--" + key.replace("_", "-"), repr(getattr(cfg.fit, key))]
     return args
 
 

@@ -31,8 +31,8 @@ class FitParams(Protocol):
     night_gain: bool | str
     emitter_state: bool
     furniture_state: bool
-    sensor_offsets_k: tuple[float, float]
-    meter_error: float
+    sensor_offsets_k: tuple[float | None, float | None] | None
+    meter_error: float | None
     night_gain_w: float | None
     night_gain_sd_w: float | None
     settle_h: float

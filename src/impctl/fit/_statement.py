@@ -20,6 +20,7 @@ from ._params import FitParams
 from ._problems import Problems
 from ._weights import Weights
 from .gain import cross_checks
+from .instruments import instruments
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
 from .layout import best_of, terms_of
@@ -83,11 +84,13 @@ def statement(options: FitParams, problems: Problems, weights: Weights, result: 
     }
     est = laplace(p.ctx, c.sub, c.u, c.t_m0, p.group_n,
                   has_power=bool((~packed.constrained).any()), terms=terms_of(result, c.sel))
+    offsets, meter, sources = instruments(o.sensor_offsets_k, o.meter_error)
     lumped, allowance = offset_allowance(
-        est["lumped"], p.kept, o.sensor_offsets_k, o.meter_error,
+        est["lumped"], p.kept, offsets, meter,
         # a fitted gain's uncertainty is in the covariance already
         0.0 if (c.nuisance_check.get("selected") and o.night_gain is True)
         or p.ctx.gain_prior is not None else p.gain.sd_w)
+    allowance["sources"] = sources
     share = None
     if o.structure_share and p.lay["simple"]:
         lumped, share = structure_share(result, p.lay, lumped, o.ach_vent, o.ach_infl)

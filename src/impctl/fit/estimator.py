@@ -118,11 +118,14 @@ class NightFit:
         emitter's release after switch-off (amplitude and time constant); air/furniture
         capacity at the air node (counted in the reported C_m, τ). Kept only when a
         likelihood-ratio test says the data need them.
-    sensor_offsets_k : (float, float)
-        Assumed SD of uncalibrated T_air and T_out offsets [K] (type-B interval share).
-    meter_error : float
-        Half-width of the heat meter's systematic relative error (0.05: class 3), added to the
-        HLC and C_m intervals as a uniform type-B share.
+    sensor_offsets_k : (float or None, float or None) or None
+        SD of the T_air and T_out sensors' offsets [K] (a type-B interval share), declared;
+        None (or a None element): assumed, 0.5 K indoors and 1.0 K outdoors
+        (:data:`.instruments.ASSUMED_SENSOR_OFFSETS_K`), and said so.
+    meter_error : float or None
+        Half-width of the heat meter's systematic relative error (0.02: class 2, 0.05: class 3),
+        added to the HLC and C_m intervals as a uniform type-B share, declared; None: assumed
+        0.05, and said so.
     settle_h : float
         Hours after the start of a held night whose heat power is not compared (the setpoint
         step charges emitter, air and furniture); T_air still drives the model.
@@ -226,8 +229,8 @@ class NightFit:
                  resume_threshold_w: float = Q_ON_W, seed: int = 0, fit_step_s: float = 300.0,
                  night_gain: bool | str = "prior", emitter_state: bool = True,
                  furniture_state: bool = True,
-                 sensor_offsets_k: tuple[float, float] = (0.5, 1.0),
-                 meter_error: float = 0.05, night_gain_w: float | None = None,
+                 sensor_offsets_k: tuple[float | None, float | None] | None = None,
+                 meter_error: float | None = None, night_gain_w: float | None = None,
                  night_gain_sd_w: float | None = None,
                  settle_h: float = 1.0, structure_share: bool = True, solver: str = "exact",
                  emitter_lag: bool = False, settle_until_held: bool = False,

@@ -59,12 +59,20 @@ class FitOptions:
     #: columns, else estimated, else assumed — :mod:`impctl.fit.gain`)
     night_gain_w: float | None = None
     night_gain_sd_w: float | None = None
+    #: declared SD of the indoor / outdoor sensor's offset [K] and the heat meter's error
+    #: (a fraction); None: assumed (:mod:`impctl.fit.instruments`)
+    t_air_offset_sd_k: float | None = None
+    t_out_offset_sd_k: float | None = None
+    meter_error: float | None = None
 
     def estimator_params(self) -> dict[str, Any]:
         """The :class:`~impctl.fit.NightFit` constructor parameters among these options."""
+        offsets = (None if self.t_air_offset_sd_k is None and self.t_out_offset_sd_k is None
+                   else (self.t_air_offset_sd_k, self.t_out_offset_sd_k))
         return {"normal_model": self.normal_model, "timestamps": self.timestamps,
                 "ach_infl": self.ach_infl, "ach_vent": self.ach_vent,
-                "night_gain_w": self.night_gain_w, "night_gain_sd_w": self.night_gain_sd_w}
+                "night_gain_w": self.night_gain_w, "night_gain_sd_w": self.night_gain_sd_w,
+                "sensor_offsets_k": offsets, "meter_error": self.meter_error}
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready (the fleet's manifest keeps them: a resumed run must use the same)."""

@@ -19,7 +19,7 @@ from ...errors import InputError
 from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .. import cli
-from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, time_zone
+from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, instrument_options, time_zone
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -82,10 +82,12 @@ def _write_json(path: Path, data: dict) -> None:
 @click.option("--night-gain-sd-w", default=None, type=float,
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
               help="SD of the declared night gain [W] (default 0: known exactly).")
+@instrument_options
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
         ach_vent: float, max_nights: int, night_gain_w: float | None,
-        night_gain_sd_w: float | None) -> None:
+        night_gain_sd_w: float | None, t_air_offset_sd_k: float | None,
+        t_out_offset_sd_k: float | None, meter_error: float | None) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -116,7 +118,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     refuse_database(plot_path, "--plot")
     options = FitOptions(normal_model=normal_model, timestamps=timestamps, ach_infl=ach_infl,
                          ach_vent=ach_vent, max_nights=max_nights, night_gain_w=night_gain_w,
-                         night_gain_sd_w=night_gain_sd_w)
+                         night_gain_sd_w=night_gain_sd_w, t_air_offset_sd_k=t_air_offset_sd_k,
+                         t_out_offset_sd_k=t_out_offset_sd_k, meter_error=meter_error)
     # the same path as every household of impctl fleet fit (impctl.fit.household)
     if 1.0 <= file_mb(nights_path) <= MAX_FILE_MB:  # ~25,000 rows: reading takes seconds
         click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)

@@ -14,7 +14,7 @@ from ...errors import InputError
 from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from ...imp.gain import NIGHT_GAIN_LIMITS_W
 from .. import cli
-from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded, time_zone
+from ..checks import FLEX_DROP_K, SETPOINT_C, T_OUT_C, bounded, instrument_options, time_zone
 
 
 @cli.group("fleet")
@@ -60,10 +60,13 @@ def fleet() -> None:
 @click.option("--night-gain-sd-w", default=None, type=float,
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
               help="SD of the declared night gain [W] (default 0: known exactly).")
+@instrument_options
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
               workers: int | None, tz: str, timestamps: str, max_nights: int, resume: bool,
               report_dir: Path | None, batch_size: int, quiet: bool,
-              night_gain_w: float | None, night_gain_sd_w: float | None) -> None:
+              night_gain_w: float | None, night_gain_sd_w: float | None,
+              t_air_offset_sd_k: float | None, t_out_offset_sd_k: float | None,
+              meter_error: float | None) -> None:
     """Fit every household's nights in INPUT; one row per household into --out.
 
     INPUT: a folder of NIGHTS files (*.csv, *.parquet; household id = file stem), or one
@@ -81,7 +84,8 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                          "too")
     check_places(input_path, out, report_dir)
     options = FitOptions(timestamps=timestamps, max_nights=max_nights, night_gain_w=night_gain_w,
-                         night_gain_sd_w=night_gain_sd_w)
+                         night_gain_sd_w=night_gain_sd_w, t_air_offset_sd_k=t_air_offset_sd_k,
+                         t_out_offset_sd_k=t_out_offset_sd_k, meter_error=meter_error)
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
                     tz=tz, options=options, resume=resume, batch_size=batch_size,
                     progress=not quiet, echo=click.echo)

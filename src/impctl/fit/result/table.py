@@ -85,6 +85,16 @@ def format_table(summary: dict) -> str:
         lines.append(f"  {gain['statement']}{why} [source: {gain.get('source', 'assumed')}]")
         if gain.get("detail") and gain["detail"] not in gain["statement"]:
             lines.append(f"  ({gain['detail']})")
+    allowance = fit_block.get("offset_allowance") or {}
+    sources = allowance.get("sources")
+    if sources:
+        s_in, s_out = allowance["sensor_offsets_k"]
+        said = [f"T_air sensor offset SD {s_in:g} K ({sources['t_air_offset']})",
+                f"T_out sensor {s_out:g} K ({sources['t_out_offset']})",
+                f"heat meter ±{100 * allowance['meter_error']:g} % ({sources['meter_error']})"]
+        hint = ("; declare what you know: impctl fit --t-air-offset-sd-k, --t-out-offset-sd-k, "
+                "--meter-error" if "assumed" in sources.values() else "")
+        lines.append("  type B in the intervals: " + ", ".join(said) + hint)
     for key, check in (summary.get("cross_checks") or {}).items():
         if key == "t_air_minus_rooms_k":
             lines.append(f"  T_air from the room sensors (t_rooms_c) on {check['nights']} "
