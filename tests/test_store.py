@@ -61,6 +61,27 @@ def test_night_lifecycle_and_samples(tmp_path):
         assert store.nights(states=["active"]) == []
 
 
+def test_an_interrupted_night_is_never_seen_without_its_verdict(tmp_path):
+    """The orphan sweep's two updates are one transaction: a second connection, which reads
+    only committed data, sees either neither or both."""
+    with Store(tmp_path / "db") as store, Store(tmp_path / "db") as reader:
+        nid = store.create_night("normal", 22.0, T0, T0 + timedelta(hours=7))
+        store.set_night_state(nid, "active", started=T0)
+        seen = []
+        real = store.assess_night
+
+        def assess_and_look(*args, **kwargs):
+            seen.append((reader.night(nid).state, reader.night(nid).valid))  # between the two
+            return real(*args, **kwargs)
+
+        store.assess_night = assess_and_look
+        store.interrupt_night(nid, "interrupted: impctl stopped during the night")
+        assert seen == [("active", None)]   # the state was not yet visible on its own
+        night = reader.night(nid)
+        assert (night.state, night.valid) == ("interrupted", False)
+        assert night.reasons == ("interrupted: impctl stopped during the night",)
+
+
 def test_samples_survive_a_killed_writer(tmp_path):
     """Every sample is committed as it is taken: SIGKILL right after the last insert."""
     path = tmp_path / "db"

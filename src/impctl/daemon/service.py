@@ -71,8 +71,7 @@ def sweep_orphans(store: Store) -> list[int]:
     """Mark nights that were running when the process died as interrupted (not valid)."""
     ids = []
     for night in store.nights(states=_INTERRUPTED):
-        store.set_night_state(night.id, "interrupted")
-        store.assess_night(night.id, False, ["interrupted: impctl stopped during the night"])
+        store.interrupt_night(night.id, "interrupted: impctl stopped during the night")
         store.add_event("warning", f"night {night.id} was interrupted; restoring")
         ids.append(night.id)
     return ids

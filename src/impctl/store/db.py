@@ -119,6 +119,14 @@ class Store(CampaignTables, HouseInputTables):
         self._db.execute("UPDATE nights SET valid = ?, reasons = ? WHERE id = ?",
                          (int(valid), json.dumps(list(reasons)), night_id))
 
+    def interrupt_night(self, night_id: int, reason: str) -> None:
+        """Mark a night that was running when the process died ``interrupted`` and not valid
+        in one transaction: no reader, and no second crash, sees the state without the
+        verdict (the next sweep would not look at an interrupted night again)."""
+        with self._immediate():
+            self.set_night_state(night_id, "interrupted")
+            self.assess_night(night_id, False, [reason])
+
     def night(self, night_id: int) -> Night | None:
         """One night, or None."""
         row = self._db.execute("SELECT * FROM nights WHERE id = ?", (night_id,)).fetchone()
