@@ -240,3 +240,38 @@ def test_an_mqtt5_session_taken_over_is_a_clash_at_once():
     # A connect that fails (no session began) is an outage, and ends the clash.
     assert watch.ended(aiomqtt.MqttError("[Errno 111] Connection refused")) is None
     assert not watch.clash
+
+
+def test_a_session_lost_during_a_publish_is_as_long_as_it_lasted(monkeypatch):
+    # The broker drops the session while a QoS 1 publish awaits its PUBACK: aiomqtt raises
+    # "Operation timed out" only at the publish's own timeout, 10 s later. The session lasted
+    # until the drop, so it is short, and the drop's reason is what is told.
+    import asyncio
+
+    import aiomqtt
+
+    from impctl.mqtt import takeover
+    from impctl.mqtt.bridge import _on_lost, _why_lost
+    from impctl.mqtt.takeover import TakeoverWatch
+
+    now = [1000.0]
+    monkeypatch.setattr(takeover.time, "monotonic", lambda: now[0])
+    watch = TakeoverWatch("gw1")
+
+    async def session():
+        client = aiomqtt.Client("127.0.0.1", 1, identifier="gw1")
+        fut = asyncio.get_running_loop().create_future()
+        client._disconnected = fut  # what aiomqtt resolves in paho's on_disconnect
+        watch.started()
+        _on_lost(client, watch.lost)
+        now[0] += 0.5
+        fut.set_exception(aiomqtt.MqttCodeError(7, "Unexpected disconnection"))
+        await asyncio.sleep(0)  # the done-callback runs
+        now[0] += 10.0          # the publish's timeout
+        timed_out = aiomqtt.MqttError("Operation timed out")
+        return _why_lost(client, timed_out)
+
+    why = asyncio.run(session())
+    assert isinstance(why, aiomqtt.MqttCodeError) and why.rc == 7, why
+    assert watch.lived_s() == 0.5
+    assert watch.ended(why) == "short"

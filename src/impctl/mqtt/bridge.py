@@ -43,6 +43,25 @@ _FIT_CHECK_S = 60.0
 _UNSENT = object()
 
 
+def _on_lost(client: aiomqtt.Client, lost: Callable[[], None]) -> None:
+    # aiomqtt resolves this future in paho's on_disconnect; an operation awaiting the broker
+    # (a QoS 1 publish) raises only at its own timeout, so the drop's moment comes from here.
+    fut = getattr(client, "_disconnected", None)
+    if isinstance(fut, asyncio.Future):
+        fut.add_done_callback(lambda _f: lost())
+
+
+def _why_lost(client: aiomqtt.Client | None, exc: aiomqtt.MqttError) -> aiomqtt.MqttError:
+    """The connection's own end when an operation timed out after it (its reason code tells a
+    session taken over from an outage), else ``exc``."""
+    fut = getattr(client, "_disconnected", None)
+    if isinstance(fut, asyncio.Future) and fut.done() and not fut.cancelled():
+        cause = fut.exception()
+        if isinstance(cause, aiomqtt.MqttError) and cause is not exc:
+            return cause
+    return exc
+
+
 class StateSource(Protocol):
     """What the daemon offers the bridge."""
 
@@ -149,10 +168,13 @@ class MqttBridge:
         watch = TakeoverWatch(self.cfg.client_id)
         quiet = False  # reconnecting after a short session: no line (see takeover.py)
         while True:
+            client = None
             try:
-                async with self._client() as client:
+                client = self._client()  # outside the try it would be unbound on a bad TLS file
+                async with client:
                     self._set_connected(True)
                     watch.started()
+                    _on_lost(client, watch.lost)
                     asyncio.get_running_loop().call_later(
                         watch.short_s + 0.2, self._held, watch, where)
                     if quiet:
@@ -168,6 +190,7 @@ class MqttBridge:
                     down_since, quiet = None, False
                     await self._session(client)
             except aiomqtt.MqttError as exc:
+                exc = _why_lost(client, exc)
                 short = watch.ended(exc)
                 if short == "new":
                     _LOG.warning("MQTT %s: %s (retrying with back-off up to %g s)", where,

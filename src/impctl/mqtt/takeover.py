@@ -38,6 +38,7 @@ class TakeoverWatch:
         self.clash = False
         self._short = 0
         self._started: float | None = None
+        self._lost: float | None = None
 
     @property
     def reason(self) -> str:
@@ -48,17 +49,27 @@ class TakeoverWatch:
 
     def started(self) -> None:
         """A session began (CONNACK received)."""
-        self._started = time.monotonic()
+        self._started, self._lost = time.monotonic(), None
+
+    def lost(self) -> None:
+        """The connection dropped now. An operation awaiting the broker's reply notices it
+        only at its own timeout, seconds later; the session's length ends here."""
+        if self._started is not None and self._lost is None:
+            self._lost = time.monotonic()
 
     def lived_s(self) -> float:
-        """Wall seconds the current (or last) session has lasted; inf when none began."""
-        return math.inf if self._started is None else time.monotonic() - self._started
+        """Wall seconds the current (or last) session has lasted (up to the moment its
+        connection dropped, when known); inf when none began."""
+        if self._started is None:
+            return math.inf
+        end = time.monotonic() if self._lost is None else self._lost
+        return end - self._started
 
     def ended(self, exc: BaseException) -> str | None:
         """The broker ended the session with ``exc``. Returns "new" when this makes a clash,
         "ongoing" while one lasts, "short" for a short session not (yet) a clash, None for an
         ordinary end (the caller's outage handling applies)."""
-        lived, self._started = self.lived_s(), None
+        lived, self._started, self._lost = self.lived_s(), None, None
         taken = _reason_code(exc) == SESSION_TAKEN_OVER
         if not taken and lived >= self.short_s:
             self._short, self.clash = 0, False
