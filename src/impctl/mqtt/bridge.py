@@ -43,19 +43,24 @@ _FIT_CHECK_S = 60.0
 _UNSENT = object()
 
 
-def _on_lost(client: aiomqtt.Client, lost: Callable[[], None]) -> None:
-    # aiomqtt resolves this future in paho's on_disconnect; an operation awaiting the broker
-    # (a QoS 1 publish) raises only at its own timeout, so the drop's moment comes from here.
+def _disconnected(client: aiomqtt.Client | None) -> asyncio.Future | None:
+    # aiomqtt resolves this future in paho's on_disconnect, at the moment of the drop; an
+    # operation awaiting the broker (a QoS 1 publish) raises only at its own timeout.
     fut = getattr(client, "_disconnected", None)
-    if isinstance(fut, asyncio.Future):
+    return fut if isinstance(fut, asyncio.Future) else None
+
+
+def _on_lost(client: aiomqtt.Client, lost: Callable[[], None]) -> None:
+    """Call ``lost`` when the connection drops (the session's length ends there)."""
+    if (fut := _disconnected(client)) is not None:
         fut.add_done_callback(lambda _f: lost())
 
 
 def _why_lost(client: aiomqtt.Client | None, exc: aiomqtt.MqttError) -> aiomqtt.MqttError:
     """The connection's own end when an operation timed out after it (its reason code tells a
     session taken over from an outage), else ``exc``."""
-    fut = getattr(client, "_disconnected", None)
-    if isinstance(fut, asyncio.Future) and fut.done() and not fut.cancelled():
+    fut = _disconnected(client)
+    if fut is not None and fut.done() and not fut.cancelled():
         cause = fut.exception()
         if isinstance(cause, aiomqtt.MqttError) and cause is not exc:
             return cause
@@ -170,7 +175,9 @@ class MqttBridge:
         while True:
             client = None
             try:
-                client = self._client()  # outside the try it would be unbound on a bad TLS file
+                # bound before entering, so that the handlers below can ask it why it ended
+                # (None when building it failed, e.g. on an unreadable TLS file)
+                client = self._client()
                 async with client:
                     self._set_connected(True)
                     watch.started()
