@@ -13,17 +13,20 @@ house (seed 20260) or at its ideal limit:
 * ``offsets``: the sensors' offsets (T_air ±1 K, T_out ±2 K) → 0;
 * ``gains``: internal (night 100–400 W, drift) and solar gains → none (still drawn, so the
   sensor noise stays the same);
-* ``sensors``: T_air noise, quantisation and lag, T_out noise, meter noise and positive-only
-  integration → perfect readings (the bench still rounds the logged T_air to 0.1 K, as
-  ``bench/fit.py`` does on both plants);
+* ``noise``: the room and outdoor sensors' random noise → 0;
+* ``sensors``: T_air quantisation and lag, the meter's noise and positive-only integration →
+  perfect readings (the bench still rounds the logged T_air to 0.1 K, as ``bench/fit.py``
+  does on both plants);
 * ``air``: air and furniture capacity → 0 (all of C_m in the 5R1C mass);
 * ``emitter``: radiator water and steel / underfloor screed and the buffer → a massless
   radiator (kind radiators, 0 J/K; underfloor houses keep their exponent and water
   temperature). The screed's range (130–250 kJ/(m²K)) has no zero: a massless underfloor
   emitter is a massless radiator;
 * ``control``: the heat pump's control (weather curve / room thermostat, on/off cycling,
-  modulation limits, ramp, defrost) → ``CONTROL_IDEAL`` (the Annex C demand at the air node)
-  with defrost off.
+  modulation limits, ramp) → ``CONTROL_IDEAL`` (the Annex C demand at the air node);
+* ``defrost``: the heat pump's defrosts → none. They act through the control only (the ideal
+  control delivers the demand as it is), so ``only:defrost`` is ``none``; ``but:defrost``
+  is what they cost.
 
 The first three are what IMP nights cannot see: a gain error scales the metered power, an
 offset shifts ΔT, a constant night gain looks like a lower HLC (README "Limits"). The row
@@ -85,14 +88,16 @@ GROUPS = {
     "meter_gain": "heat-meter gain error ±5 %",
     "offsets": "sensor offsets T_air ±1 K, T_out ±2 K",
     "gains": "internal + solar gains",
-    "sensors": "sensor noise, quantisation, lag; meter noise",
+    "noise": "room and outdoor sensor noise",
+    "sensors": "T_air quantisation and lag; meter noise, positive-only meter",
     "air": "air + furniture capacity",
     "emitter": "emitter capacity (radiators, screed, buffer)",
-    "control": "heat-pump control, cycling, defrost",
+    "control": "heat-pump control, cycling, modulation limits",
+    "defrost": "heat-pump defrosts",
 }
 #: What the nights cannot see (the floor row).
 UNSEEN = ("meter_gain", "offsets", "gains")
-DEFAULT_ROWS = (["none"] + [f"only:{g}" for g in GROUPS] + ["unseen", "all"]
+DEFAULT_ROWS = (["none"] + [f"only:{g}" for g in GROUPS if g != "defrost"] + ["unseen", "all"]
                 + [f"but:{g}" for g in GROUPS])
 
 
@@ -103,16 +108,20 @@ def ablate(full: PlantParams, off: set[str]) -> tuple[PlantParams, bool]:
         p = p.with_section("sensors", meter_gain_error=0.0)
     if "offsets" in off:
         p = p.with_section("sensors", t_air_offset_k=0.0, t_out_offset_k=0.0)
+    if "noise" in off:
+        p = p.with_section("sensors", t_air_noise_k=0.0, t_out_noise_k=0.0)
     if "sensors" in off:
-        p = p.with_section("sensors", t_air_noise_k=0.0, t_air_quantum_k=0.0, t_air_lag_s=0.0,
-                           t_out_noise_k=0.0, meter_noise=0.0, meter_positive_only=0)
+        p = p.with_section("sensors", t_air_quantum_k=0.0, t_air_lag_s=0.0, meter_noise=0.0,
+                           meter_positive_only=0)
     if "air" in off:
         p = p.with_section("capacities", air_j_per_m3k=0.0, furniture_j_per_m2k=0.0)
     if "emitter" in off:
         p = p.with_section("emitter", kind=RADIATORS, radiator_j_per_k_per_w=0.0,
                            buffer_l_per_kw=0.0)
     if "control" in off:
-        p = p.with_section("heat_pump", control=CONTROL_IDEAL, defrost=0)
+        p = p.with_section("heat_pump", control=CONTROL_IDEAL)
+    if "defrost" in off:
+        p = p.with_section("heat_pump", defrost=0)
     return p, "gains" not in off
 
 
