@@ -44,9 +44,9 @@ def state_dir_problem(state_dir: str | Path) -> str | None:
 
 def _tonight(cfg, store) -> list[str]:
     """What the next night would do, as lines for people."""
+    from ...daemon.configured import clock_from_config
     from ...daemon.next_night import peek_next_night, why_no_night
     from ...daemon.schedule import next_act_time
-    from ...daemon.service import clock_from_config
 
     tz = ZoneInfo(cfg.timezone)
     act = next_act_time(cfg, clock_from_config(cfg).now())

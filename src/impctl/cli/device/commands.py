@@ -98,9 +98,9 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
     A request identical to one already waiting (kind, setpoint, --now/--tonight) is not
     queued twice: the waiting one stands.
     """
+    from ...daemon.configured import clock_from_config
     from ...daemon.lock import DaemonLock, probe
     from ...daemon.schedule import request_expiry
-    from ...daemon.service import clock_from_config
     from ...store import Store
 
     cfg = _load(config_path)
@@ -190,8 +190,8 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             await asyncio.sleep(HEARTBEAT_S)
 
     from ...controller import NightController, NightRequest
+    from ...daemon.configured import clock_from_config, open_client, policy_from_config
     from ...daemon.schedule import next_act_time, window_after_act
-    from ...daemon.service import clock_from_config, open_client, policy_from_config
     from ...store import Store
 
     clock = clock_from_config(cfg)
@@ -251,7 +251,7 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
 async def _restore(cfg, store, timeout_s: float):
     from ...clock import VirtualClock
     from ...controller import restore_all
-    from ...daemon.service import clock_from_config, open_client
+    from ...daemon.configured import clock_from_config, open_client
     from ...heatpump import ModbusLinkError
 
     clock = clock_from_config(cfg)

@@ -66,7 +66,7 @@ def collect_status(cfg) -> dict:
         out["inputs"] = inputs_status(cfg, store)  # [inputs]: the house's own sensors
     out["heatpump"] = read_health(cfg.state_dir)  # generation evidence, quirks
     if cfg.budget_path.exists():
-        from ...daemon.service import clock_from_config
+        from ...daemon.configured import clock_from_config
 
         # The budget counts per UTC day of the clock the daemon runs on (the accelerated
         # clock of a demo or test, else real time).
@@ -155,9 +155,9 @@ def _finite(x: float) -> float | None:
 
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
+    from ...daemon.configured import clock_from_config
     from ...daemon.next_night import peek_next_night, why_no_night
     from ...daemon.schedule import next_act_time, retry_waits
-    from ...daemon.service import clock_from_config
 
     act = next_act_time(cfg, clock_from_config(cfg).now())
     req, request_id = peek_next_night(store, cfg, act)
