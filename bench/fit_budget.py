@@ -2,6 +2,7 @@
 
 Run:  .venv/bin/python bench/fit_budget.py [--households 50] [--rows none,only:air,...]
           [--stops recorded|own] [--no-stop-at-t-min] [--night-gain-w W] [--gain-prior-w W]
+          [--signed-meter]
 
 An ablation on exactly the households, weather, schedule, nights and seeds of
 ``bench/fit.py --households 50 --ranges true --plant realistic --steps 300 --no-lsq`` (the
@@ -39,6 +40,10 @@ group on but those), ``unseen`` (= ``only:meter_gain+offsets+gains``). Per row: 
 |error| and the signed median of HLC, τ, C_m; heat-demand ε (median / P90, against the true
 house replayed like the estimate, ``bench/fit.py --eps-truth house``); coverage of the 95 %
 intervals (calibrated model-error share included, as the bench's default); fit time per house.
+
+``--signed-meter``: every house's heat meter reads the negative heat of a defrost instead of 0
+(the realistic population's meters count positive heat only; the ``sensors`` group off means
+a perfect, signed meter too).
 
 ``--gain-prior-w W`` adds W to the metered power of every night before the fit: what a known
 constant night gain (e.g. the documented range's midpoint, 250 W) would buy.
@@ -232,6 +237,9 @@ def main() -> None:
     ap.add_argument("--no-stop-at-t-min", dest="stop_at_t_min", action="store_false",
                     help="constrained nights cool to 05:00 and are all fitted (the nights "
                          "before branch hfloor), not the gateway's")
+    ap.add_argument("--signed-meter", action="store_true",
+                    help="every house's heat meter reads negative heat (defrosts) instead of "
+                         "0 (the realistic plant's meters count positive heat only)")
     ap.add_argument("--stops", choices=("recorded", "own"), default="recorded",
                     help="where the gateway's constrained nights end: as on the full realistic "
                          "house, every row (default), or by the rule on each row's own plant")
@@ -244,6 +252,8 @@ def main() -> None:
     n = args.households
     houses = sample_households(n, seed=VAL_SEED)
     full = sample_params(n, VAL_SEED)
+    if args.signed_meter:
+        full = full.with_section("sensors", meter_positive_only=0)
     nights = (f"the gateway's nights (ΔT {DEFAULT_BAND_K:g} K, stopped at T_min or its "
               f"anticipated end, valid ≥ {MIN_NIGHT_H:g} h after the lag; stops: {args.stops})"
               if args.stop_at_t_min else "constrained nights cooling to 05:00, all fitted")

@@ -321,6 +321,45 @@ def test_a_night_with_a_dhw_recharge_is_used_and_its_interruption_not_compared(
     assert blind.lumped_["hlc"].value < 0.9 * HOUSE.hlc_w_per_k
 
 
+def _with_defrosts(night, every_h=1.5, draw_w=1500.0, repay_samples=4):
+    """A held night read by a signed heat meter: every ``every_h`` hours one 15-min sample of a
+    defrost (−``draw_w``), then the heat it drew and the room's heat of that sample put back
+    over the next ``repay_samples`` samples — the same energy over the cycle."""
+    q = night.q_hc_w.copy()
+    for k in range(4, len(q) - repay_samples, int(round(every_h * 4))):
+        debt = q[k] + draw_w
+        q[k] = -draw_w
+        q[k + 1:k + 1 + repay_samples] += debt / repay_samples
+    return dataclasses.replace(night, q_hc_w=q)
+
+
+def test_a_defrost_is_compared_with_its_repayment_so_the_hlc_stays_right(nights_15min,
+                                                                          monkeypatch):
+    """A signed heat reading goes negative in a defrost and the heat pump repays the draw
+    afterwards: compared over whole cycles the held nights' heat is still the house's. Left
+    out (the defrost and as long again after it), the rest of the repayment reads as demand
+    and the HLC comes out high."""
+    nights = [_with_defrosts(n) if n.kind == "normal" else n for n in nights_15min]
+    fit = NightFit(**IDEAL, n_starts=3).fit(nights, RANGES)
+    normal = [q for q in fit.night_quality_ if q["kind"] == "normal"]
+    assert all(any(i["kind"] == "defrost" for i in q["interruptions"]) for q in normal)
+    assert rel(fit.lumped_["hlc"].value, HOUSE.hlc_w_per_k) < 0.04
+
+    from impctl.fit.nights import data
+
+    def leave_out_defrosts(night, threshold_w):
+        t, q = np.asarray(night.time_s, float), np.asarray(night.q_hc_w, float)
+        ok = np.ones(len(t), bool)
+        if night.kind == "normal":
+            for k in np.flatnonzero(q < -threshold_w):
+                ok &= ~((t >= t[k]) & (t < t[k] + 3 * 900.0))
+        return ok
+
+    monkeypatch.setattr(data, "power_usable", leave_out_defrosts)
+    masked = NightFit(**IDEAL, n_starts=3).fit(nights, RANGES)
+    assert masked.lumped_["hlc"].value > 1.08 * HOUSE.hlc_w_per_k
+
+
 def test_sensor_offset_allowance_widens_every_interval_by_its_stated_share(fitted):
     from impctl.fit.intervals.uncertainty import offset_allowance
 

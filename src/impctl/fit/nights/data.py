@@ -111,8 +111,8 @@ def compared_power(nights: Sequence[NightSamples], threshold_w: float, settle_h:
     """Bool per sample of each night: its heat power is compared with the model (the rest of
     the night still drives it). ``threshold_w`` [W] as :func:`.quality.power_usable`;
     ``settle_h`` [h] and ``until_held`` as :func:`settled`, on held nights."""
-    # A night with a DHW recharge or a defrost is used: its T_air still drives the model,
-    # only the power during the interruption and its recovery is not compared.
+    # A night with a DHW recharge is used: its T_air still drives the model, only the power
+    # during the interruption and its recovery is not compared (a defrost's is: power_usable).
     power_ok = [power_usable(n, threshold_w) for n in nights]
     # The first hour after the setpoint step of a held night is emitter, air and furniture
     # charging and the sensor's lag (README "Accuracy", error budget): that power drives

@@ -263,15 +263,24 @@ def residual_blocks(raw: np.ndarray, mask: np.ndarray, grid_s: np.ndarray,
 
 
 def power_usable(night: NightSamples, threshold_w: float = Q_ON_W) -> np.ndarray:
-    """Per sample of a held night: False inside a DHW/defrost interruption and during the
-    recovery after it (as long again as the interruption, the heat debt being repaid), where
-    the measured power is not the house's space-heating demand. True everywhere on a
-    constrained night."""
+    """Per sample of a held night: False inside a DHW recharge or a stop of the space heating
+    and during the recovery after it (as long again as the interruption, the heat debt being
+    repaid), where the measured power is not the house's space-heating demand. True everywhere
+    on a constrained night.
+
+    A defrost (negative heat) stays compared, and so does its recovery: the heat it draws from
+    the water is heat the heat pump puts back afterwards, so over whole cycles a signed reading
+    is the house's demand. Leaving the negative readings out keeps the repayment, which outlasts
+    any window and runs into the next defrost: on 50 realistic houses with a signed reading the
+    HLC came out +14 % (signed median) with the defrosts left out, −1.6 % with them compared
+    (decision record 0025)."""
     t = np.asarray(night.time_s, float)
     ok = np.ones(len(t), bool)
     if night.kind != "normal" or len(t) < 3:
         return ok
     for stop in interruptions(t, night.q_hc_w, threshold_w):
+        if stop["kind"] == "defrost":
+            continue
         a = stop["start_h"] * 3600.0
         ok &= ~((t >= a) & (t < a + 2 * 60.0 * stop["minutes"]))
     return ok

@@ -135,7 +135,7 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         is an input of every row, and its sensor noise (0.2–0.5 K per reading, real-houses.md
         §5) would otherwise enter as errors in the variables and bias the fit
     power_ok : per night, bool per sample: False where the measured power is not the space
-        heating the model describes (a DHW recharge, a defrost and the recovery after them);
+        heating the model describes (a DHW recharge and the recovery after it);
         those samples still drive the model (T_air), their power is not compared
     """
     if timestamps not in TIMESTAMPS:

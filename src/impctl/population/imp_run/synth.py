@@ -278,7 +278,7 @@ def sample_nights(
         nights.append(NightSamples(
             night_id=night_id, kind=kind, start=sched.index[w0],
             time_s=(steps - w0) * sched.dt_s, t_air_c=quant(t_air[steps]),
-            t_out_c=quant(t_out[steps]), q_hc_w=np.maximum(q, 0.0), setpoint_c=t_set,
+            t_out_c=quant(t_out[steps]), q_hc_w=q, setpoint_c=t_set,
             **extra,
         ))
     return nights
