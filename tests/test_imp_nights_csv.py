@@ -88,7 +88,7 @@ GOOD = ("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22.0,1.0,2000\n"
     (GOOD + "2026-01-12T22:20,,1.0,2000\n", "row 4: column 't_air': empty cell"),
     (GOOD + "2026-01-12T22:10,22.0,1.0,2000\n", "row 4: timestamps must strictly increase"),
     (GOOD + "2026-01-12T22:20,2150,1.0,2000\n", "row 4: column 't_air': 2150 is outside"),
-    (GOOD + "2026-01-12T22:20,22,1.0,-300\n", "row 4: column 'q_hc': -300 is outside"),
+    (GOOD + "2026-01-12T22:20,22,1.0,-30000\n", "row 4: column 'q_hc': -30000 is outside"),
     (GOOD + "yesterday,22,1.0,300\n", "row 4: cannot parse timestamp"),
     ("timestamp,t_air,t_out,q_hc,heating\n2026-01-12T22:00,22,1,0,2\n", "row 2: column 'heating'"),
     ("timestamp,t_air,t_out,q_hc,kind\n2026-01-12T22:00,22,1,0,cold\n", "row 2: column 'kind'"),

@@ -40,6 +40,27 @@ def test_fit_on_q_hc_in_kw_is_refused_naming_the_unit(tmp_path, nights_csv, labe
     assert "kW" in line
 
 
+def test_a_signed_reading_in_a_defrost_is_fitted_not_refused(tmp_path, nights_csv):
+    """A heat reading that goes negative while a defrost draws heat from the water (the
+    gateway stores what the heat pump reports) is data: ``impctl fit`` fits the file, lists the
+    defrost among the held night's interruptions and keeps the night."""
+    frame = pd.read_csv(nights_csv)
+    held = frame.index[frame["kind"] == "normal"]
+    frame.loc[held[8], "q_hc"] = -1500.0
+    path = tmp_path / "defrost.csv"
+    frame.to_csv(path, index=False)
+    code, _, err = cli("fit", "--nights", str(path), "--json", str(tmp_path / "fit.json"))
+    assert code == 0, err
+    quality = json.loads((tmp_path / "fit.json").read_text())["night_quality"]
+    defrosted = [q for q in quality if any(i["kind"] == "defrost" for i in q["interruptions"])]
+    assert len(defrosted) == 1 and defrosted[0]["used"]
+    frame.loc[held[8], "q_hc"] = -40000.0   # not a defrost: a wrong column or unit
+    frame.to_csv(path, index=False)
+    (work := tmp_path / "refused").mkdir()
+    (line,) = fit_refused(work, path)
+    assert "column 'q_hc': -40000 is outside -25000…100000 W" in line
+
+
 @pytest.mark.parametrize("factor, words", [(0.03, "far too small"), (0.04, "far too small"),
                                            (13.0, "far too large")])
 def test_power_implausible_for_the_temperature_difference_is_refused(tmp_path, nights_csv,

@@ -7,7 +7,8 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``timestamp`` — ISO 8601, strictly increasing (within each night when ``night`` is given);
   naive times are local time in ``tz``.
 * ``t_air``, ``t_out`` — indoor air and outdoor temperature [°C].
-* ``q_hc`` — thermal heat output of the heating [W] (not electrical power), ≥ 0.
+* ``q_hc`` — thermal heat output of the heating [W] (not electrical power); negative only
+  while a defrost draws heat from the heating water (a signed heat reading), ≥ −25 kW.
 * ``setpoint`` (optional, may be empty) — T_set [°C]; for constrained nights the band centre.
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
@@ -47,7 +48,9 @@ REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 PLAUSIBLE = {
     "t_air": (-40.0, 60.0, "°C"),
     "t_out": (-60.0, 60.0, "°C"),
-    "q_hc": (0.0, 100_000.0, "W"),
+    # A signed heat reading goes negative while a defrost draws heat from the water (up to the
+    # unit's output; real-houses.md §3); the fit compares it with its recovery.
+    "q_hc": (-25_000.0, 100_000.0, "W"),
     "setpoint": (5.0, 35.0, "°C"),
 }
 #: Share of the first hour's samples that must be "heating off" for an unlabelled constrained night.
