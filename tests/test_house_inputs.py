@@ -355,5 +355,6 @@ def test_export_without_inputs_has_empty_numeric_columns(tmp_path):
     frame = pd.read_parquet(tmp_path / "n.parquet")
     for col in ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants"):
         assert frame[col].dtype == float and frame[col].isna().all()
+    assert frame["defrost"].isna().all()   # not logged: missing, not "no defrost"
     header = (tmp_path / "n.csv").read_text().splitlines()[0]
-    assert header.endswith(",p_house_w,t_rooms_c,t_out_ref_c,occupants")
+    assert header.endswith(",p_house_w,t_rooms_c,t_out_ref_c,occupants,defrost")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from datetime import timedelta
 
+import pytest
 from daemon_fixtures import run_cli, write_config
 
 from impctl.model import default_house
@@ -46,9 +47,13 @@ def test_exported_house_power_is_the_fits_measured_gain(tmp_path):
     assert 180.0 < gain["value_w"] < 180.0 + 2 * 100.0, gain
 
 
-def test_a_night_with_a_defrost_on_a_signed_reading_goes_from_store_to_fit(tmp_path):
-    """The heat pump reports negative heat while it defrosts (flagged, as the gateway stores
-    it): the export carries the sample and the fit takes the file and keeps the night."""
+@pytest.mark.parametrize("reading_w", [-1200.0, 0.0])
+def test_a_logged_defrost_goes_from_store_to_fit_and_an_unread_draw_is_said(tmp_path,
+                                                                              reading_w):
+    """The heat pump flags its defrosts (register 2011, stored with each sample). A signed
+    reading (−1200 W) goes through the export into the fit, which takes the file and keeps
+    the nights; a reading that stays at 0 W did not read the heat the defrost drew, and the
+    fit says that its heat, HLC and C_m read high."""
     state = tmp_path / "state"
     config = write_config(tmp_path / "config.toml", {
         "state_dir": str(state), "heatpump": {"host": "127.0.0.1"}})
@@ -60,20 +65,27 @@ def test_a_night_with_a_defrost_on_a_signed_reading_goes_from_store_to_fit(tmp_p
             nid = store.create_night(night.kind, night.setpoint_c, start, end)
             store.assess_night(nid, True, [])
             for k, t_s in enumerate(night.time_s):
-                defrost = night.kind == "normal" and k == 20
+                defrost = night.kind == "normal" and k in (20, 21)
                 store.add_sample(Sample(nid, start + timedelta(seconds=float(t_s)),
                                         t_air_c=float(night.t_air_c[k]),
                                         t_out_c=float(night.t_out_c[k]),
-                                        q_hc_w=-1200.0 if defrost else float(night.q_hc_w[k]),
+                                        q_hc_w=reading_w if defrost else float(night.q_hc_w[k]),
                                         defrost=defrost))
     out = tmp_path / "nights.csv"
     done = run_cli("export", "--config", str(config), "--out", str(out))
     assert done.returncode == 0, done.stderr
-    assert "-1200" in out.read_text()
+    assert "defrost" in out.read_text().splitlines()[0]
     fitted = run_cli("fit", "--nights", str(out), "--json", str(tmp_path / "fit.json"),
                      timeout_s=300)
     assert fitted.returncode == 0, fitted.stderr
-    quality = json.loads((tmp_path / "fit.json").read_text())["night_quality"]
-    held = [q for q in quality if q["kind"] == "normal"]
+    result = json.loads((tmp_path / "fit.json").read_text())
+    held = [q for q in result["night_quality"] if q["kind"] == "normal"]
     assert len(held) == 2 and all(q["used"] for q in held)
-    assert all(any(i["kind"] == "defrost" for i in q["interruptions"]) for q in held)
+    check = result["cross_checks"]["defrost"]
+    assert check["nights"] == 2 and check["defrost_h"] > 0
+    if reading_w < 0:
+        assert check["unread_h"] == 0 and not check["flagged"] and "statement" not in check
+        assert "read high" not in fitted.stdout
+    else:
+        assert check["unread_h"] == check["defrost_h"] and check["flagged"]
+        assert "read high" in check["statement"] and "read high" in fitted.stdout

@@ -6,7 +6,8 @@ declared; else the nights' ``p_house_w``/``occupants`` measure it, night by nigh
 fit's gain term estimates it where that term is switched on and kept by the likelihood-ratio
 test (:func:`.selection.gain_statement`); else the assumption of :mod:`impctl.imp.gain`.
 :func:`cross_checks` reports the room sensors' and the reference outdoor temperature's offsets
-the nights carry (:mod:`impctl.imp.night_extras`).
+the nights carry, and the held nights' defrosts whose heat reading did not go negative
+(:mod:`impctl.imp.night_extras`).
 """
 
 from __future__ import annotations
@@ -108,4 +109,19 @@ def cross_checks(nights: Sequence[NightSamples]) -> dict:
                 f"the outdoor sensor reads {mean:+.1f} K from its reference on average over "
                 f"{len(ref)} nights (more than ±{T_OUT_OFFSET_FLAG_K:g} K, persistent): sun "
                 "or a warm wall on the sensor? It shifts ΔT and with it the HLC")
+    held = [n for n in nights if n.kind == "normal" and not math.isnan(n.defrost_h)]
+    if held:
+        hours = sum(n.defrost_h for n in held)
+        unread = sum(n.defrost_unread_h for n in held)
+        span = sum(n.duration_h for n in held)
+        out["defrost"] = {"defrost_h": hours, "unread_h": unread, "nights": len(held),
+                          "share": hours / span if span > 0 else 0.0, "flagged": unread > 0}
+        if unread > 0:
+            out["defrost"]["statement"] = (
+                f"the heat reading stayed at or above 0 W in {60 * unread:.0f} of the "
+                f"{60 * hours:.0f} min the heat pump defrosted on {len(held)} held nights: it "
+                "counts the heat put back after a defrost but not the heat the defrost drew "
+                "from the water, so the heat, and with it HLC and C_m, read high (on the "
+                "realistic plant, whose meters do this, the defrosts move HLC up by about "
+                "4 % on median)")
     return out

@@ -44,6 +44,12 @@ class NightSamples:
         ``t_air_c`` is the room sensors' mean; NaN when the controller's own T_air is used.
     t_out_offset_k : float
         Mean T_out − reference outdoor temperature (``t_out_ref_c``) [K]; NaN without one.
+    defrost_h : float
+        Hours of the night the heat pump spent defrosting (the column ``defrost``); NaN when
+        not logged.
+    defrost_unread_h : float
+        Of those, the hours whose heat reading stayed at or above 0: the heat a defrost draws
+        from the water was not read, the heat put back afterwards was [h]; NaN when not logged.
     not_held : str
         Why an auto-labelled night is neither a held nor a constrained night (heat pulses,
         drift: :mod:`impctl.imp.held`); "" for an IMP night. The fit skips it with this reason.
@@ -62,6 +68,8 @@ class NightSamples:
     night_gain_w: float = float("nan")
     t_air_offset_k: float = float("nan")
     t_out_offset_k: float = float("nan")
+    defrost_h: float = float("nan")
+    defrost_unread_h: float = float("nan")
     not_held: str = ""
 
     @property

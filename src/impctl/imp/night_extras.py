@@ -8,7 +8,10 @@
 * ``t_out_ref_c`` — a reference outdoor temperature [°C] (a weather service, a second
   sensor): the night's mean offset of ``t_out`` from it is reported;
 * ``night_gain_w`` — the night gain declared for the household [W] (known, as ``impctl fit
-  --night-gain-w``): a fleet's per-household declaration.
+  --night-gain-w``): a fleet's per-household declaration;
+* ``defrost`` — 1 while the heat pump defrosts (Kronoterm register 2011), else 0: the hours
+  of defrost, and of those the hours whose heat reading did not go negative (the draw not
+  read: the heat reads high, :func:`defrost_fields`).
 
 A cell that is empty, not a number or outside its plausible range is missing (NaN), never a
 number: these columns inform the fit, they do not refuse a file whose series are sound.
@@ -26,6 +29,7 @@ EXTRA_COLUMNS: dict[str, tuple[float, float]] = {
     "t_rooms_c": (-40.0, 60.0),
     "t_out_ref_c": (-60.0, 60.0),
     "night_gain_w": (0.0, 2000.0),   # impctl.imp.gain.NIGHT_GAIN_LIMITS_W
+    "defrost": (0.0, 1.0),
 }
 #: Share of a night's rows that must carry a value for the night to have it.
 PRESENT_FRACTION = 0.8
@@ -71,3 +75,20 @@ def night_extras(extras: dict[str, np.ndarray], idx: np.ndarray, t_air_c: np.nda
     if ref is not None and _present(ref[idx]):
         fields["t_out_offset_k"] = float(np.nanmean(t_out_c - ref[idx]))
     return t_air_c, fields
+
+
+def defrost_fields(extras: dict[str, np.ndarray], idx: np.ndarray, time_s: np.ndarray,
+                   q_hc_w: np.ndarray, read_below_w: float) -> dict[str, float]:
+    """The NightSamples fields ``defrost_h`` and ``defrost_unread_h`` [h] of the rows ``idx``
+    of one night (``time_s`` [s], ``q_hc_w`` [W] those rows'), when the ``defrost`` column is
+    present on the night. A row stands for the interval up to the next one (the last row for
+    the median interval). A defrost row whose reading is not below −``read_below_w`` [W] did
+    not read the heat the defrost drew from the water."""
+    flag = extras.get("defrost")
+    if flag is None or not _present(flag[idx]) or len(idx) < 2:
+        return {}
+    on = flag[idx] >= 0.5
+    step = np.diff(np.asarray(time_s, float))
+    span_h = np.append(step, np.median(step)) / 3600.0
+    unread = on & (np.asarray(q_hc_w, float) >= -read_below_w)
+    return {"defrost_h": float(span_h[on].sum()), "defrost_unread_h": float(span_h[unread].sum())}

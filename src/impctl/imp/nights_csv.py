@@ -13,10 +13,10 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
 * ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
-* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w`` (optional) —
-  household electricity besides the heat pump [W], sleepers, mean of the room sensors and a
-  reference outdoor temperature [°C], a declared night gain [W] (:mod:`.night_extras`: a bad
-  cell there is missing, not refused).
+* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``
+  (optional) — household electricity besides the heat pump [W], sleepers, mean of the room
+  sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while the heat
+  pump defrosts (:mod:`.night_extras`: a bad cell there is missing, not refused).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
@@ -39,7 +39,7 @@ from ..errors import InputError
 from .features import Q_ON_W
 from .held import not_held
 from .night import NightSamples
-from .night_extras import EXTRA_COLUMNS, extra_columns, night_extras
+from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
 from .tables import frame_table, read_table
 
@@ -256,6 +256,7 @@ def nights_from_table(
         if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
             setpoint = float(np.nanmedian(setpoint_all[idx]))
         t_air, more = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
+        more |= defrost_fields(extras, idx, time_s, values["q_hc"][idx], Q_ON_W)
         if kinds_all is None:
             more |= more_held
         nights.append(NightSamples(

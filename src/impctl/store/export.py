@@ -22,7 +22,7 @@ from ..errors import InputError
 from .db import Store
 
 COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind",
-           "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
+           "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants", "defrost")
 #: The ``house_inputs`` column behind each export column of the house's own sensors.
 HOUSE_COLUMNS = ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
 
@@ -47,6 +47,7 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
                 "q_hc": s.q_hc_w, "setpoint": night.setpoint_c,
                 "heating": int(night.kind == "normal"), "night": night.id, "kind": night.kind,
                 **{c: getattr(house.get(s.ts), c, None) for c in HOUSE_COLUMNS},
+                "defrost": None if s.defrost is None else int(s.defrost),
             })
     return rows
 
@@ -115,6 +116,7 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     # Numbers even when every cell is missing (a column of None would be text in Parquet).
     df[list(HOUSE_COLUMNS)] = df[list(HOUSE_COLUMNS)].astype(float)
+    df["defrost"] = df["defrost"].astype("Int8")   # 1/0, empty where not logged
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:

@@ -39,7 +39,9 @@ JSON schema (``impctl-fit/1``), units as in the house TOML; hlc W/K, c_m J/K, ta
                     # else the prior (search-range centre); "parameters" stays the fitted set
                     # (it re-simulates the house)
      "cross_checks": {"t_air_minus_rooms_k": {"mean", "nights", "fitted_on"},
-                      "t_out_minus_ref_k": {"mean", "nights", "flagged"[, "statement"]}},
+                      "t_out_minus_ref_k": {"mean", "nights", "flagged"[, "statement"]},
+                      "defrost": {"defrost_h", "unread_h", "nights", "share", "flagged"
+                                  [, "statement"]}},
      "gaps": [{"night_id", "kind", "start_s", "end_s", "kept_from_s", "kept_to_s", "hours"}],
      "night_quality": [{"night_id", "kind", "rows", "hours", "t_air_resolution_k",
                         "cycles_per_h", "interruptions": [{"kind", "start_h", "minutes"}],
@@ -213,9 +215,10 @@ def fit_to_dict(fit, classes: dict | None = None, notes: list[str] | None = None
         out["fit"]["nuisance_at_bound"] = fit.nuisance_at_bound_
     if getattr(fit, "cross_checks_", None):
         out["cross_checks"] = fit.cross_checks_
-        flagged = (fit.cross_checks_.get("t_out_minus_ref_k") or {}).get("statement")
-        if flagged:
-            notes.append(flagged)
+        for key in ("t_out_minus_ref_k", "defrost"):
+            flagged = (fit.cross_checks_.get(key) or {}).get("statement")
+            if flagged:
+                notes.append(flagged)
     if getattr(fit, "nuisance_", None) is not None:
         out["nuisance"] = fit.nuisance_
         out["fit"]["nuisance_terms"] = (

@@ -103,6 +103,10 @@ def format_table(summary: dict) -> str:
             lines.append(check.get("statement") or (
                 f"  T_out − reference outdoor temperature {check['mean']:+.2f} K on "
                 f"{check['nights']} nights"))
+        elif key == "defrost":
+            lines.append("  " + (check.get("statement") or (
+                f"defrosts on the held nights: {60 * check['defrost_h']:.0f} min, read as "
+                "negative heat and compared with their recovery")))
     me = fit_block.get("model_error")
     if me:
         sizes = ", ".join(f"{n} {100 * me['share'][k]:.1f} %" for k, n in
