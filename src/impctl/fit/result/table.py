@@ -103,7 +103,7 @@ def format_table(summary: dict) -> str:
             lines.append(check.get("statement") or (
                 f"  T_out − reference outdoor temperature {check['mean']:+.2f} K on "
                 f"{check['nights']} nights"))
-        elif key == "defrost":
+        elif key == "defrost" and check["defrost_h"] > 0:
             lines.append("  " + (check.get("statement") or (
                 f"defrosts on the held nights: {60 * check['defrost_h']:.0f} min, read as "
                 "negative heat and compared with their recovery")))
