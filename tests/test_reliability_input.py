@@ -472,7 +472,9 @@ def _nights_text(rows: int = 24) -> str:
 
 
 _NOT_EMPTY = [b for b in BAD_NUMBERS if b != ""]  # an empty setpoint means "heating off"
-_POWER = [b for b in BAD_NUMBERS if b != "2150"]   # 2150 W is a plausible heat output
+# 2150 W is a plausible heat output and −600 W a defrost's draw on a signed heat reading;
+# −30000 W is below any defrost
+_POWER = [b for b in BAD_NUMBERS if b not in ("2150", "-600")] + ["-30000"]
 DRIVERS_MUTATIONS = csv_mutations(_drivers_text(), {"t_out": BAD_NUMBERS,
                                                     "setpoint": _NOT_EMPTY}, equal_steps=True)
 NIGHTS_MUTATIONS = csv_mutations(_nights_text(), {"t_air": BAD_NUMBERS, "t_out": BAD_NUMBERS,
@@ -555,7 +557,7 @@ def test_fuzzed_csv_cells_are_refused_cleanly_or_read_as_plausible_numbers(name,
                 for night in read_nights(path, "Europe/Ljubljana"):
                     assert np.all((night.t_air_c >= -40) & (night.t_air_c <= 60))
                     assert np.all((night.t_out_c >= -60) & (night.t_out_c <= 60))
-                    assert np.all((night.q_hc_w >= 0) & (night.q_hc_w <= 100_000))
+                    assert np.all((night.q_hc_w >= -25_000) & (night.q_hc_w <= 100_000))
         except InputError:
             if name == "DRIVERS":
                 _simulate_refused(work, path, _write(work / "house.toml",
