@@ -114,17 +114,21 @@ def test_missing_file_is_named(tmp_path):
         read_nights(Path(tmp_path / "nope.csv"))
 
 
-def test_defrost_column_gives_each_night_its_defrost_hours_and_those_not_read(tmp_path):
-    """10-min rows: two defrost rows read 0 W (the draw not read), one reads −900 W; a night
-    whose defrost cells are mostly missing has no defrost figures (NaN), never a number."""
+@pytest.mark.parametrize("signed", [False, True])
+def test_defrost_column_gives_each_night_its_defrost_hours_and_those_not_read(tmp_path, signed):
+    """10-min rows, three of them defrosting: read at 0 W the draw was not read (all three
+    hours count as unread); with one row at −900 W the reading is signed (none unread: the
+    other rows are means over defrost and heating). A night whose defrost cells are mostly
+    unreadable has no defrost figures (NaN), never a number."""
     log = _log("2026-01-12T12:00", 48)
     night2 = pd.to_datetime(log["timestamp"]) >= pd.Timestamp("2026-01-13T12:00", tz=TZ)
     held2 = night2 & (pd.to_datetime(log["timestamp"]).dt.hour == 23)
     rows = np.flatnonzero(held2)[:3]
     log["defrost"] = "0"
     log.loc[rows, "defrost"] = "1"
-    log.loc[rows[:2], "q_hc"] = 0.0
-    log.loc[rows[2], "q_hc"] = -900.0
+    log.loc[rows, "q_hc"] = 0.0
+    if signed:
+        log.loc[rows[2], "q_hc"] = -900.0
     log.loc[~night2, "defrost"] = "x"   # the first day's cells unreadable: missing
     path = tmp_path / "nights.csv"
     log.to_csv(path, index=False)
@@ -132,4 +136,4 @@ def test_defrost_column_gives_each_night_its_defrost_hours_and_those_not_read(tm
     assert np.isnan(first.defrost_h) and np.isnan(first.defrost_unread_h)
     assert second.kind == "normal"
     assert second.defrost_h == pytest.approx(0.5)
-    assert second.defrost_unread_h == pytest.approx(1 / 3)
+    assert second.defrost_unread_h == (0.0 if signed else pytest.approx(0.5))

@@ -370,6 +370,11 @@ def dump(res: dict, path: str) -> None:
         or [np.array([np.nan])]))) for f in res["fit"]]
     out["adequate"] = [bool((getattr(f, "adequacy_", None) or {}).get("adequate", True))
                        for f in res["fit"]]
+    # the held nights' defrosts: their share of the time, and whether the fit said that the
+    # reading did not go negative in them (the draw not read)
+    defrost = [(getattr(f, "cross_checks_", None) or {}).get("defrost") or {} for f in res["fit"]]
+    out["defrost_share"] = [d.get("share") for d in defrost]
+    out["defrost_flagged"] = [bool(d.get("flagged")) for d in defrost]
     priors = [getattr(f, "prior_", None) for f in res["fit"]]
     if any(p is not None for p in priors):   # the population prior (h14z)
         for k in ("hlc", "c_m", "tau"):

@@ -82,13 +82,16 @@ def defrost_fields(extras: dict[str, np.ndarray], idx: np.ndarray, time_s: np.nd
     """The NightSamples fields ``defrost_h`` and ``defrost_unread_h`` [h] of the rows ``idx``
     of one night (``time_s`` [s], ``q_hc_w`` [W] those rows'), when the ``defrost`` column is
     present on the night. A row stands for the interval up to the next one (the last row for
-    the median interval). A defrost row whose reading is not below −``read_below_w`` [W] did
-    not read the heat the defrost drew from the water."""
+    the median interval). The defrost rows did not read the heat the defrosts drew from the
+    water when none of them is below −``read_below_w`` [W]: a signed reading shows itself by
+    its negative rows, and a row that is a mean over a defrost and some heating may still be
+    positive."""
     flag = extras.get("defrost")
     if flag is None or not _present(flag[idx]) or len(idx) < 2:
         return {}
     on = flag[idx] >= 0.5
     step = np.diff(np.asarray(time_s, float))
     span_h = np.append(step, np.median(step)) / 3600.0
-    unread = on & (np.asarray(q_hc_w, float) >= -read_below_w)
-    return {"defrost_h": float(span_h[on].sum()), "defrost_unread_h": float(span_h[unread].sum())}
+    signed = bool((on & (np.asarray(q_hc_w, float) < -read_below_w)).any())
+    hours = float(span_h[on].sum())
+    return {"defrost_h": hours, "defrost_unread_h": 0.0 if signed else hours}

@@ -28,7 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...imp.features import Q_ON_W
 from ...imp.night import NightSamples
+from ...imp.night_extras import defrost_fields
 from ...imp.plan import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,
@@ -204,7 +206,8 @@ def run_schedule_plant(houses: HouseParameters, sched: SynthSchedule, params,
     if not gains:
         g_int, g_sol = 0.0, 0.0
     plant_seed = int(rng.integers(2**31))
-    keep = outputs or ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w", "t_air_c")
+    keep = outputs or ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w", "t_air_c",
+                       "defrost")
     if stop_at_t_min and "t_air_sensed_c" not in keep:
         keep = (*keep, "t_air_sensed_c")
 
@@ -250,6 +253,9 @@ def sample_nights(
     t_air = np.atleast_2d(sim.t_air_c.T).T[:, house_index]
     phi = np.atleast_2d(sim.phi_hc_w.T).T[:, house_index]
     t_out = (sim.t_out_c if isinstance(sim, PlantSchedule) else sched.t_out_c)[:, house_index]
+    run = getattr(sim, "run", None) if isinstance(sim, PlantSchedule) else None
+    defrost = (np.asarray(run["defrost"])[:, house_index].astype(bool)
+               if run is not None and "defrost" in run.outputs else None)
     spc = sp[:, house_index]
     nights = []
     for night_id, kind, w0, w1, t_set in sched.windows:
@@ -272,6 +278,12 @@ def sample_nights(
             return np.round(x / quantise_k) * quantise_k if quantise_k > 0 else x
 
         extra = {}
+        if defrost is not None and kind == "normal" and len(steps):
+            # the heat pump's defrost flag (register 2011) as the gateway logs it: a sample
+            # stands for its interval, defrosting when the plant defrosted in any of its steps
+            flag = np.array([defrost[s:s + stride].any() for s in steps], float)
+            extra |= defrost_fields({"defrost": flag}, np.arange(len(steps)),
+                                    (steps - w0) * sched.dt_s, q, Q_ON_W)
         if meter is not None and len(steps):
             g = np.atleast_2d(gains.T).T[steps[0]:steps[-1] + stride, house_index]
             extra["p_house_w"] = float(g.mean()) * meter
