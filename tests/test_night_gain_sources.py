@@ -12,7 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from impctl.fit.gain import cross_checks, resolve
+from impctl.fit.cross_checks import cross_checks
+from impctl.fit.gain import resolve
 from impctl.fit.nights.data import prepare_nights
 from impctl.fit.result.table import format_table
 from impctl.fit.undetermined import mark_undetermined, nuisance_at_bound, table_iv

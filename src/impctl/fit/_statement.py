@@ -19,7 +19,7 @@ import torch
 from ._params import FitParams
 from ._problems import Problems
 from ._weights import Weights
-from .gain import cross_checks
+from .cross_checks import cross_checks
 from .instruments import instruments
 from .intervals import model_error
 from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
