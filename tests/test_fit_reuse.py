@@ -35,12 +35,15 @@ def test_joint_fit_is_the_same_with_and_without_per_night_fits(realistic_nights)
     without = NightFit(per_night=False).fit(realistic_nights)
     assert with_pn.per_night_ and not without.per_night_
     # Before the joint and per-night fits stopped on their own, this house's C_m interval
-    # moved by 2e-4 when the per-night fits ran.
+    # moved by 2e-4 when the per-night fits ran. Since its held nights are driven by their
+    # constant mean (packing.held_driver), the batched arithmetic is no longer the same to
+    # the last bit with and without the per-night rows, and the optimiser stops a few
+    # parts in 1e7 apart, inside its tolerance.
     for key in ("hlc", "c_m", "tau"):
         a, b = with_pn.lumped_[key], without.lumped_[key]
-        assert (b.value, b.low, b.high) == pytest.approx((a.value, a.low, a.high), rel=1e-12)
-    assert with_pn.parameters_ == pytest.approx(without.parameters_, rel=1e-12)
-    assert with_pn.loss_ == without.loss_
+        assert (b.value, b.low, b.high) == pytest.approx((a.value, a.low, a.high), rel=1e-5)
+    assert with_pn.parameters_ == pytest.approx(without.parameters_, rel=1e-5)
+    assert with_pn.loss_ == pytest.approx(without.loss_, rel=1e-7)
 
 
 def test_intervals_from_reused_terms_equal_a_fresh_evaluation(realistic_nights):

@@ -8,8 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.stats import chi2
 
 from ...imp.night import NightSamples
+from ..nights.quality import t_air_resolution_k
 from .parameters import DTYPE, FURNITURE_TAU_S
 
 TIMESTAMPS = ("instant", "interval")
@@ -97,6 +99,42 @@ def smooth(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
+#: Level of the test that a held night's T_air is one constant level within its readings' noise
+#: (:func:`held_driver`).
+HELD_FLAT_LEVEL = 0.95
+
+
+def held_driver(t: np.ndarray, t_air: np.ndarray, width_s: float) -> np.ndarray:
+    """The T_air [°C] that drives a held night's DEMAND row, at its samples (``t`` [s]).
+
+    The night's mean when its hourly means are one constant level within the readings' noise
+    (χ² test at :data:`HELD_FLAT_LEVEL`; the noise from the night's second differences, at
+    least its resolution/√12), else the centred moving average of width ``width_s`` [s].
+    The massless air node turns any T_air change into heat at once, about 1.4 kW/K in a
+    150 m² house, and the mass can follow a slow change, so a slow drift in the driver is
+    absorbed best by a smaller C_m: the noise a moving average leaves (σ/√12 over an hour) pulls
+    C_m and τ low. On the realistic plant with only the room sensor's noise (0–0.3 K) the
+    moving average gave τ 15.8 % low on median, the mean of a night that is held 0.4 %
+    (decision record 0026)."""
+    t = np.asarray(t, float)
+    y = np.asarray(t_air, float)
+    smoothed = smooth(t, y, width_s)
+    if len(y) < 4:
+        return smoothed
+    res = t_air_resolution_k(y) or 0.0
+    noise = max(float(np.std(np.diff(y, 2))) / np.sqrt(6.0), res / np.sqrt(12.0))
+    hour = np.floor((t - t[0]) / 3600.0).astype(int)
+    count = np.bincount(hour)
+    full = count >= max(3, int(0.5 * np.median(count)))
+    if full.sum() < 2 or noise <= 0.0:
+        return smoothed
+    means = np.bincount(hour, weights=y)[full] / count[full]
+    stat = float(np.sum(count[full] * (means - y.mean()) ** 2)) / noise ** 2
+    if stat <= chi2.ppf(HELD_FLAT_LEVEL, int(full.sum()) - 1):
+        return np.full_like(y, y.mean())
+    return smoothed
+
+
 def furniture_rate(t: np.ndarray, t_air: np.ndarray, tau_s: float, steady: bool) -> np.ndarray:
     """dT_fur/dt [K/s] at the samples of a node following ``t_air`` (piecewise linear) with
     time constant ``tau_s`` (exact per interval). It starts in step with T_air (``steady``:
@@ -131,6 +169,8 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         stamp (hourly logs, the virtual IMP): temperatures then belong to the interval's middle,
         so the nodes move there, and the power on [middle_k, middle_k+1) is (q_k + q_k+1)/2.
     smooth_air_s : width of the moving average applied to the T_air that drives DEMAND rows [s]
+        (a held night whose T_air is one level within its noise is driven by its mean:
+        :func:`held_driver`)
     smooth_out_s : width of the moving average applied to T_out [s]: the outdoor temperature
         is an input of every row, and its sensor noise (0.2–0.5 K per reading, real-houses.md
         §5) would otherwise enter as errors in the variables and bias the fit
@@ -163,8 +203,9 @@ def pack_nights(nights: Sequence[NightSamples], offsets_s: Sequence[float], *,
         grid[i] = padded(t, m)
         t_air = np.asarray(night.t_air_c, float)
         t_out = smooth(t, np.asarray(night.t_out_c, float), smooth_out_s)
-        for dst, dst_s, y in ((te, te_s, t_out), (ta, ta_s, t_air),
-                              (tai, tai_s, smooth(t, t_air, smooth_air_s))):
+        driver = (held_driver(t, t_air, smooth_air_s) if night.kind == "normal"
+                  else smooth(t, t_air, smooth_air_s))
+        for dst, dst_s, y in ((te, te_s, t_out), (ta, ta_s, t_air), (tai, tai_s, driver)):
             dst[i] = padded(y, m)
             dst_s[i, :m - 1] = np.diff(np.asarray(y, float)) / np.diff(t)
         fur[i, :m] = furniture_rate(t, t_air, FURNITURE_TAU_S, night.kind != "constrained")
