@@ -95,6 +95,13 @@ def interruptions(time_s: np.ndarray, q_w: np.ndarray, threshold_w: float = Q_ON
     return sorted(out, key=lambda x: x["start_h"])
 
 
+def reading_noise(y: np.ndarray) -> float:
+    """White-noise SD of readings ``y`` from their second differences (SD σ·√6 for white
+    noise of SD σ; a slowly varying signal drops out); 0 with fewer than 4 readings."""
+    y = np.asarray(y, float)
+    return float(np.std(np.diff(y, 2)) / np.sqrt(6.0)) if len(y) > 3 else 0.0
+
+
 def emitter_discharge_h(time_s: np.ndarray, t_air_c: np.ndarray, t_out_c: np.ndarray
                         ) -> float | None:
     """Hours after switch-off (time 0) during which T_air departs from the night's later
@@ -110,7 +117,7 @@ def emitter_discharge_h(time_s: np.ndarray, t_air_c: np.ndarray, t_out_c: np.nda
     if slope >= 0:
         return None
     curve = te + np.exp(icpt + slope * t)
-    noise = float(np.std(np.diff(ta[late], 2)) / np.sqrt(6.0)) if late.sum() > 3 else 0.0
+    noise = reading_noise(ta[late])
     threshold = max(0.1, 3.0 * noise)
     off = np.abs(ta - curve) > threshold
     early = t < 0.5 * t[-1]

@@ -11,7 +11,7 @@ import torch
 from scipy.stats import chi2
 
 from ...imp.night import NightSamples
-from ..nights.quality import t_air_resolution_k
+from ..nights.quality import reading_noise, residual_blocks, t_air_resolution_k
 from .parameters import DTYPE, FURNITURE_TAU_S
 
 TIMESTAMPS = ("instant", "interval")
@@ -121,16 +121,11 @@ def held_driver(t: np.ndarray, t_air: np.ndarray, width_s: float) -> np.ndarray:
     smoothed = smooth(t, y, width_s)
     if len(y) < 4:
         return smoothed
-    res = t_air_resolution_k(y) or 0.0
-    noise = max(float(np.std(np.diff(y, 2))) / np.sqrt(6.0), res / np.sqrt(12.0))
-    hour = np.floor((t - t[0]) / 3600.0).astype(int)
-    count = np.bincount(hour)
-    full = count >= max(3, int(0.5 * np.median(count)))
-    if full.sum() < 2 or noise <= 0.0:
+    noise = max(reading_noise(y), (t_air_resolution_k(y) or 0.0) / np.sqrt(12.0))
+    hours = residual_blocks((y - y.mean())[None], np.ones((1, len(y)), bool), t[None])
+    if hours["blocks"] < 2 or noise <= 0.0:
         return smoothed
-    means = np.bincount(hour, weights=y)[full] / count[full]
-    stat = float(np.sum(count[full] * (means - y.mean()) ** 2)) / noise ** 2
-    if stat <= chi2.ppf(HELD_FLAT_LEVEL, int(full.sum()) - 1):
+    if hours["lf"] / noise ** 2 <= chi2.ppf(HELD_FLAT_LEVEL, hours["blocks"] - 1):
         return np.full_like(y, y.mean())
     return smoothed
 
