@@ -217,6 +217,7 @@ def run_step(houses_arr: HouseParameters, step_s: float, range_source: str, args
                        ach_vent=ACH[0], ach_infl=ACH[1],
                        emitter_state=args.nuisance, **gain_kw, min_night_h=valid_h,
                        model_error="default" if args.model_error else None,
+                       **instrument_options(args),
                        **bench_prior(args, probs)).fit(nights, ranges)
         kept, _, _ = prepare_nights(nights)
         box = search_bounds(ranges)
@@ -325,6 +326,13 @@ def main() -> None:
                          "assumption (the fit before the gain's sources: 250 ± 87 W)")
     ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
                     help="SD of that assumption [W] (default the fit's, 300/√12 ≈ 87 W)")
+    ap.add_argument("--sensor-offsets-k", default=None, metavar="K,K",
+                    help="the indoor and outdoor sensors' offset SDs [K] declared to the fit "
+                         "(NightFit(sensor_offsets_k)); default: not declared, the fit assumes "
+                         "0.5, 1 K. The ideal 5R1C's sensors have none: 0,0 declares that")
+    ap.add_argument("--meter-error", type=float, default=None, metavar="F",
+                    help="the heat meter's systematic error declared to the fit, a fraction "
+                         "(NightFit(meter_error)); default: not declared, the fit assumes 0.05")
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
@@ -426,6 +434,17 @@ def gain_mode_nights(nights: list, mode: str, seed: int, args) -> tuple[list, di
         stripped = [_replace(n, p_house_w=float("nan")) for n in nights]
         return stripped, {"night_gain_w": float(np.mean(true)) if true else None}
     return nights, night_gain(args)
+
+
+def instrument_options(args) -> dict:
+    """NightFit's declared instruments from ``--sensor-offsets-k`` / ``--meter-error`` ({}:
+    the fit's assumptions)."""
+    out = {}
+    if args.sensor_offsets_k is not None:
+        out["sensor_offsets_k"] = tuple(float(v) for v in args.sensor_offsets_k.split(","))
+    if args.meter_error is not None:
+        out["meter_error"] = args.meter_error
+    return out
 
 
 def bench_prior(args, probabilities: dict | None = None) -> dict:

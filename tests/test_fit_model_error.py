@@ -178,6 +178,40 @@ def test_few_night_fits_have_their_own_band_and_a_thin_cell_never_takes_the_narr
     assert (band, group) == ("few", "plain") and entry is few["plain"]
 
 
+def test_a_thin_clean_cell_takes_the_conformal_share_of_the_clean_fits_of_both_bands():
+    rng = np.random.default_rng(2)
+    clean = {"rho_power": 0.0, "rmse_over_noise_power": 1.0, "nuisance_selected": False,
+             "row_step_s": 300.0}
+    plain = {**clean, "rho_power": 0.5, "rmse_over_noise_power": 2.0}
+
+    def recs(n, nights, diag, hlc, tau):
+        return [{"diagnostics": {**diag, "n_nights": nights},
+                 "log_error": {"hlc": float(hlc * rng.standard_normal()), "c_m": 0.0,
+                               "tau": float(tau * rng.standard_normal())},
+                 "sd": {q: 0.02 for q in model_error.QUANTITIES}} for _ in range(n)]
+
+    # many nights: 3 clean fits, one far off in HLC; few nights: 40 clean fits whose HLC sits
+    # within its own interval and whose τ errs by 10 %
+    thin = recs(2, 8, clean, 0.0, 0.05) + [{"diagnostics": {**clean, "n_nights": 8},
+                                           "log_error": {"hlc": 0.5, "c_m": 0.0, "tau": 0.0},
+                                           "sd": {q: 0.02 for q in model_error.QUANTITIES}}]
+    records = thin + recs(40, 3, clean, 0.005, 0.1) + recs(60, 8, plain, 0.3, 0.3)
+    cal = model_error.calibrate(records, {})
+    cell = cal["bands"]["many"]["groups"]["clean"]
+    assert cell["n"] == 3 and "43 clean fits of both bands" in cell["source"]
+    both = [r for r in records if model_error.group_of(r["diagnostics"]) == "clean"]
+    for q in model_error.QUANTITIES:
+        pooled = model_error.conformal_share([r["log_error"][q] for r in both],
+                                             [r["sd"][q] for r in both])
+        assert cell["share"][q] == min(pooled, cal["bands"]["many"]["pooled"][q])
+    # the one fit off by 50 % is one of 43: no reason to widen every clean HLC interval by it
+    assert cell["share"]["hlc"] == 0.0 and cell["share"]["tau"] > 0.05
+    # too few clean fits in both bands: the largest share its own fits needed, as before
+    few_clean = model_error.calibrate(thin + recs(10, 3, clean, 0.005, 0.1)
+                                      + recs(60, 8, plain, 0.3, 0.3), {})
+    assert few_clean["bands"]["many"]["groups"]["clean"]["share"]["hlc"] > 0.2
+
+
 def test_the_conformal_share_covers_the_stated_share_of_households():
     rng = np.random.default_rng(0)
     err, sd = 0.2 * rng.standard_normal(99), np.full(99, 0.05)

@@ -168,13 +168,14 @@ def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE,
     nights ({"constrained_setpoint_c" [°C], "normal_setpoints_c" [°C], "sequences"}).
 
     A cell with fewer than :data:`MIN_GROUP` fits is too small for the conformal rank:
-    "clean" then takes the largest share any of its fits needed (0 if none: no realistic
-    house looked clean, so there is no evidence of model error to add), but no more than its
-    band's pooled share (one or two of a handful of fits are no reason to be wider than the
-    whole band; with few nights 17 realistic fits looked clean, 4 needed a share), the others
-    the larger
-    of their band's pooled share and the same group's share in the other band (e.g. "coarse"
-    with few nights: the coarse rows' share or the few nights', whichever is wider).
+    "clean" then takes the conformal share of the clean fits of both bands when they are
+    enough (the nights are described by the model in both; with many nights only a few
+    realistic fits look clean, 3 of 274, too few to say anything alone), else the largest share
+    any of its fits needed (0 if none: no evidence of model error to add); either no more than
+    its band's pooled share (a group the model describes is no reason to be wider than the
+    whole band). The others take the larger of their band's pooled share and the same group's
+    share in the other band (e.g. "coarse" with few nights: the coarse rows' share or the few
+    nights', whichever is wider).
     """
     def share(rs):
         return {q: conformal_share([r["log_error"][q] for r in rs], [r["sd"][q] for r in rs],
@@ -186,6 +187,7 @@ def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE,
              for b, rs in by_band.items()}
     conformal = {b: {g: share(rs) for g, rs in c.items() if len(rs) >= MIN_GROUP}
                  for b, c in cells.items()}
+    clean = [r for c in cells.values() for r in c["clean"]]
     bands = {}
     for b in BANDS:
         other = next(x for x in BANDS if x != b)
@@ -193,6 +195,11 @@ def calibrate(records: list[dict], provenance: dict, coverage: float = COVERAGE,
         for name, rs in cells[b].items():
             if name in conformal[b]:
                 entry = {"share": conformal[b][name], "source": f"conformal, {coverage:.0%}"}
+            elif name == "clean" and len(clean) >= MIN_GROUP:
+                entry = {"share": {q: min(pooled[b][q], v) for q, v in share(clean).items()},
+                         "source": f"conformal, {coverage:.0%}, over the {len(clean)} clean "
+                                   f"fits of both bands ({len(rs)} in this one, fewer than "
+                                   f"{MIN_GROUP}), at most the band's pooled share"}
             elif name == "clean":
                 entry = {"share": {q: min(pooled[b][q], float(max(
                     required_share([r["log_error"][q] for r in rs], [r["sd"][q] for r in rs]),
