@@ -7,7 +7,7 @@ Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|
           [--no-anticipate] [--no-stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
 
-``--plant realistic``: the same houses, weather and schedule on the realistic plant
+``--plant realistic`` (the default): the same houses, weather and schedule on the realistic plant
 (:mod:`impctl.plant`; realism options drawn by ``impctl.population.realism.sample_params`` with the
 validation seed): the logged T_air is the room sensor, T_out the outdoor sensor, the power the
 heat meter's interval mean (no extra noise); the demand truth is the true heat-pump output.
@@ -15,7 +15,8 @@ heat meter's interval mean (no extra noise); the demand truth is the true heat-p
 Validation population: ``impctl.population.households.sample_households`` with seed 20260 (the
 classifiers are trained with other seeds, so they never saw these houses). Each household runs
 the IMP protocol of ``impctl.population.imp_run.synth`` on its own seeded winter weather, simulated
-with the Annex C model at 60 s: two spin-up days at 21 °C, then 8 nights (2 constrained at T_set
+at 60 s (the realistic plant, or the Annex C model with ``--plant iso``): two spin-up days at
+21 °C, then 8 nights (2 constrained at T_set
 21 °C, 6 normal at 22/23/24 °C in turn: the gateway's ``[campaign]`` defaults,
 :mod:`impctl.imp.protocol`); constrained nights pre-heat to T_set + ΔT and cool from
 22:00 until the gateway ends them (below), normal nights step up from the 21 °C day; both 2 h before
@@ -295,9 +296,10 @@ def main() -> None:
                     help="the demo's export (impctl demo --out D writes D/nights.csv) for --speed")
     ap.add_argument("--virtual-imp", type=int, default=0, metavar="N",
                     help="also fit N households simulated by impctl.population.imp_run.ideal")
-    ap.add_argument("--plant", choices=("iso", "realistic"), default="iso",
-                    help="validation houses on the ideal 5R1C (iso) or on the realistic plant "
-                         "(impctl.plant, realism drawn with seed 20260)")
+    ap.add_argument("--plant", choices=("iso", "realistic"), default="realistic",
+                    help="validation houses on the realistic plant (impctl.plant, realism "
+                         "drawn with seed 20260; the default) or on the ideal 5R1C (iso: the "
+                         "fit's consistency check)")
     ap.add_argument("--preheat-h", type=float, default=None, metavar="H",
                     help="pre-heat before the window, both kinds of night [h] (default: the "
                          "gateway's 2 h)")
