@@ -328,7 +328,7 @@ def main() -> None:
                          "assumption (the fit before the gain's sources: 250 ± 87 W)")
     ap.add_argument("--night-gain-sd-w", type=float, default=None, metavar="W",
                     help="SD of that assumption [W] (default the fit's, 300/√12 ≈ 87 W)")
-    ap.add_argument("--sensor-offsets-k", default=None, metavar="K,K",
+    ap.add_argument("--sensor-offsets-k", type=_two_offsets, default=None, metavar="K,K",
                     help="the indoor and outdoor sensors' offset SDs [K] declared to the fit "
                          "(NightFit(sensor_offsets_k)); default: not declared, the fit assumes "
                          "0.5, 1 K. The ideal 5R1C's sensors have none: 0,0 declares that")
@@ -438,12 +438,23 @@ def gain_mode_nights(nights: list, mode: str, seed: int, args) -> tuple[list, di
     return nights, night_gain(args)
 
 
+def _two_offsets(text: str) -> tuple[float, float]:
+    """``--sensor-offsets-k``: two non-negative SDs [K], indoor then outdoor."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 2 or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give two SDs ≥ 0 [K], indoor,outdoor")
+    return values
+
+
 def instrument_options(args) -> dict:
     """NightFit's declared instruments from ``--sensor-offsets-k`` / ``--meter-error`` ({}:
     the fit's assumptions)."""
     out = {}
     if args.sensor_offsets_k is not None:
-        out["sensor_offsets_k"] = tuple(float(v) for v in args.sensor_offsets_k.split(","))
+        out["sensor_offsets_k"] = args.sensor_offsets_k
     if args.meter_error is not None:
         out["meter_error"] = args.meter_error
     return out
