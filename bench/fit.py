@@ -133,6 +133,12 @@ from benchlib.fit_variants import compare, virtual_imp_check
 
 from impctl.fit import baselines
 from impctl.fit.estimator import NightFit
+from impctl.fit.instruments import (
+    ASSUMED_METER_ERROR,
+    ASSUMED_SENSOR_OFFSETS_K,
+    METER_ERROR_LIMITS,
+    SENSOR_OFFSET_LIMITS_K,
+)
 from impctl.fit.nights.data import prepare_nights, search_bounds
 from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.model import HouseParameters
@@ -331,10 +337,12 @@ def main() -> None:
     ap.add_argument("--sensor-offsets-k", type=_two_offsets, default=None, metavar="K,K",
                     help="the indoor and outdoor sensors' offset SDs [K] declared to the fit "
                          "(NightFit(sensor_offsets_k)); default: not declared, the fit assumes "
-                         "0.5, 1 K. The ideal 5R1C's sensors have none: 0,0 declares that")
-    ap.add_argument("--meter-error", type=float, default=None, metavar="F",
+                         f"{ASSUMED_SENSOR_OFFSETS_K[0]:g}, {ASSUMED_SENSOR_OFFSETS_K[1]:g} K. "
+                         "The ideal 5R1C's sensors have none: 0,0 declares that")
+    ap.add_argument("--meter-error", type=_meter_error, default=None, metavar="F",
                     help="the heat meter's systematic error declared to the fit, a fraction "
-                         "(NightFit(meter_error)); default: not declared, the fit assumes 0.05")
+                         "(NightFit(meter_error)); default: not declared, the fit assumes "
+                         f"{ASSUMED_METER_ERROR:g}")
     ap.add_argument("--eps-truth", choices=("house", "plant"), default="house",
                     help="realistic plant: heat-demand truth from the true house replayed like "
                          "the estimate (house) or the plant's heat-pump output (plant)")
@@ -444,9 +452,23 @@ def _two_offsets(text: str) -> tuple[float, float]:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 2 or min(values) < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: give two SDs ≥ 0 [K], indoor,outdoor")
+    lo, hi = SENSOR_OFFSET_LIMITS_K
+    if len(values) != 2 or not all(lo <= v <= hi for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: give two SDs in {lo:g}–{hi:g} K, "
+                                         "indoor,outdoor")
     return values
+
+
+def _meter_error(text: str) -> float:
+    """``--meter-error``: a fraction within the fit's limits."""
+    lo, hi = METER_ERROR_LIMITS
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a fraction in {lo:g}–{hi:g}")
+    return value
 
 
 def instrument_options(args) -> dict:
