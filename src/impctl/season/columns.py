@@ -1,0 +1,152 @@
+"""The season model: the 5R1C heat balance in demand form, as regressors of a linear problem.
+
+ISO 13790's 5R1C has a massless air and surface node; eliminating the surface node leaves three
+conductances between air, mass and outside (a star–delta transform): K_ao (air–outside: the
+ventilation and the windows' path), K_am (air–mass) and K_mo (mass–outside), and one capacity
+C_m at the mass. Read in *demand form* — the measured room temperature drives the model, the
+heat is its output — the heat the house needs is
+
+    Φ_room = K_ao·(T_air − T_out) + K_am·(T_air − T_m) − Φ_air
+    τ_mm·dT_m/dt = w·T_air + (1 − w)·T_out + Φ_mass/(K_am + K_mo) − T_m
+
+with w = K_am/(K_am + K_mo) and τ_mm = C_m/(K_am + K_mo): the mass is a low-pass filter of the
+measured temperatures, so it is carried from day to night by what was measured, never simulated
+open loop. The heat reaches the room through the emitter, a first-order lag τ_e of what the
+meter reads (radiators minutes, a screed hours), less what a defrost drew from the water and a
+positive-only meter did not read (D·defrost share):
+
+    LP_τe(Φ_meter − D·defrost) = Φ_room.
+
+The gains Φ = G_night or G_day (people asleep or about; the level also takes in the sensors'
+offsets times the HLC — it is an intercept, not the gain) split half to the air, half to the
+mass, plus each day's sun a_d·shape(hour) split f_s to the air and 1 − f_s to the mass.
+
+For given nonlinear parameters θ = (τ_mm, w, τ_e, f_s) the balance is *linear* in
+β = (K_ao, K_am, G_night, G_day, D, a_1 … a_days, one initial mass state per segment), so the fit
+solves β by least squares inside the search over θ (variable projection). :func:`columns` builds
+the regressors on the 5-min grid, filters there (the mass sees the switch-off within a block), and
+averages them to the likelihood's 30-min blocks.
+
+Derived: HLC = K_ao + K_am·(1 − w); K_mo = K_am·(1 − w)/w; C_m = τ_mm·K_am/w;
+τ = C_m/(K_mo + K_am·K_ao/(K_am + K_ao)) (ISO's free-running time constant).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+
+from .record import NIGHT_HOURS, SeasonRecord, sun_shape
+
+Array = NDArray[np.float64]
+
+#: Share of the internal gains at the air node (ISO 13790 C.1: Φ_ia = 0.5 Φ_int).
+AIR_SHARE = 0.5
+#: Names of the nonlinear parameters (θ), in order, with their units.
+THETA = ("tau_mm_s", "w", "tau_e_s", "f_sun")
+#: Names of the fixed linear parameters (β) before the per-day and per-segment ones.
+BETA = ("k_ao_w_per_k", "k_am_w_per_k", "g_night_w", "g_day_w", "defrost_w")
+
+
+def lowpass(x: Array, tau_s: float, step_s: float, segments: NDArray[np.int64]) -> Array:
+    """First-order low-pass y' = (x − y)/τ on each segment, starting at its first value
+    (exact for inputs held over each step). ``x`` (n,) or (n, m); NaN outside segments."""
+    b = math.exp(-step_s / max(tau_s, 1e-9))
+    out = np.full(x.shape, np.nan)
+    for lo, hi in _runs(segments):
+        seg = x[lo:hi]
+        zi = b * seg[:1]
+        out[lo:hi] = lfilter([1.0 - b], [1.0, -b], seg, axis=0, zi=zi)[0]
+    return out
+
+
+def _runs(segments: NDArray[np.int64]) -> list[tuple[int, int]]:
+    """(start, end) of each segment's steps."""
+    ok = segments >= 0
+    edges = np.flatnonzero(np.diff(np.r_[-2, segments, -2]) != 0)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if ok[a]]
+
+
+@dataclass
+class Design:
+    """The fixed parts of one record the regressors are built from (computed once)."""
+
+    rec: SeasonRecord
+    segments: NDArray[np.int64]
+    runs: list[tuple[int, int]]
+    blocks: NDArray[np.bool_]
+    night: Array
+    sun: Array          # (n, days): each day's sun shape
+    defrost: Array
+    n_days: int
+
+    @classmethod
+    def of(cls, rec: SeasonRecord) -> Design:
+        seg = rec.segments()
+        h = rec.hour
+        night = ((h >= NIGHT_HOURS[0]) | (h < NIGHT_HOURS[1])).astype(float)
+        days = rec.day - rec.day.min()
+        n_days = int(days.max()) + 1
+        sun = np.zeros((rec.n, n_days))
+        sun[np.arange(rec.n), days] = sun_shape(h)
+        return cls(rec, seg, _runs(seg), rec.usable_blocks(), night, sun,
+                   np.nan_to_num(rec.defrost), n_days)
+
+    def block_day(self) -> NDArray[np.int64]:
+        """Local day of each usable block (the clusters of the interval)."""
+        k = self.rec.per_block
+        nb = len(self.blocks)
+        return (self.rec.day[: nb * k].reshape(nb, k)[:, 0])[self.blocks]
+
+    def block_mean(self, x: Array) -> Array:
+        """Means of ``x`` over the usable likelihood blocks."""
+        k = self.rec.per_block
+        nb = len(self.blocks)
+        xb = x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
+        return xb[self.blocks]
+
+
+def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array, Array, list[str]]:
+    """(X, y, names): the block means of the regressors and of the emitter-lagged meter reading
+    for nonlinear parameters ``theta`` (:data:`THETA`), over the usable blocks."""
+    tau_mm, w, tau_e, f_sun = theta
+    r, seg, dt = d.rec, d.segments, d.rec.step_s
+    ta, to = r.t_air_c, r.t_out_c
+
+    def mf(x):
+        return lowpass(x, tau_mm, dt, seg)
+
+    y = lowpass(r.q_hc_w, tau_e, dt, seg)
+    drive = mf(w * ta + (1.0 - w) * to)
+    cols = [ta - to, ta - drive]
+    for level in (d.night, 1.0 - d.night):
+        cols.append(-(AIR_SHARE * level + w * (1.0 - AIR_SHARE) * mf(level)))
+    cols.append(lowpass(d.defrost, tau_e, dt, seg))
+    names = list(BETA)
+    # Each segment's own initial heat store: a free offset of the mass, decaying with τ_mm.
+    decay = np.exp(-dt / tau_mm)
+    for i, (lo, hi) in enumerate(d.runs):
+        c = np.zeros(r.n)
+        c[lo:hi] = -decay ** np.arange(hi - lo)
+        cols.append(c)
+        names.append(f"mass0_{i}")
+    X = np.stack(cols, axis=1)
+    sun = -(f_sun * d.sun + w * (1.0 - f_sun) * mf(d.sun))
+    X = np.concatenate([X, sun], axis=1)
+    names += [f"sun_{i}_w" for i in range(d.n_days)]
+    return d.block_mean(X), d.block_mean(y), names
+
+
+def lumped(theta: tuple[float, float, float, float], k_ao: float, k_am: float) -> dict[str, float]:
+    """HLC [W/K], C_m [J/K], τ [h] and K_mo [W/K] of a solution (module docstring)."""
+    tau_mm, w, _, _ = theta
+    k_mo = k_am * (1.0 - w) / w
+    hlc = k_ao + k_am * (1.0 - w)
+    c_m = tau_mm * k_am / w
+    free = k_mo + k_am * k_ao / (k_am + k_ao) if k_am + k_ao > 0 else float("nan")
+    return {"hlc_w_per_k": hlc, "c_m_j_per_k": c_m, "tau_h": c_m / free / 3600.0,
+            "k_mo_w_per_k": k_mo}

@@ -1,0 +1,120 @@
+"""The season's record as the season model reads it: one regular grid of the gateway's rows.
+
+The gateway records the house around the clock (the owner's days and nights, kind ``owner``, and
+its own IMP nights). :class:`SeasonRecord` puts every row on one regular grid of ``step_s``
+(5 min) — means of the samples in each step, NaN where nothing was recorded — and says which
+30-min blocks the likelihood may use and why the others are left out:
+
+* a hot-water charge (space heating paused, the meter may read the tank) and the hour after it
+  (the emitter refills);
+* a night the owner's own changes or a missing reading spoiled (its ``label``);
+* a constrained night the gateway judged invalid;
+* a gap: the record is cut into segments, each with its own initial heat store.
+
+No torch, no pandas: arrays in, arrays out. Units: °C, W, s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+#: Grid step of the record [s] (the gateway's owner rows).
+STEP_S = 300.0
+#: Block over which the model's heat balance is compared [s].
+BLOCK_S = 1800.0
+#: After a hot-water charge, the emitter refills: blocks left out [s].
+DHW_AFTER_S = 3600.0
+#: A gap longer than this starts a new segment [s].
+MAX_GAP_S = 1800.0
+#: Local hours of the night level of internal gains [h] (people asleep).
+NIGHT_HOURS = (22.0, 7.0)
+#: Local hours of daylight for the solar gains [h] (a winter day) [assumption].
+SUN_HOURS = (8.0, 16.0)
+
+
+def sun_shape(hour_local: Array) -> Array:
+    """Clear-day shape of the solar gain at local hour ``hour_local`` [h]: a half-sine over
+    :data:`SUN_HOURS`, 1 at its middle [-] — only its daily amplitude is fitted."""
+    h = np.asarray(hour_local, float)
+    span = SUN_HOURS[1] - SUN_HOURS[0]
+    inside = (h >= SUN_HOURS[0]) & (h <= SUN_HOURS[1])
+    return np.where(inside, np.clip(np.sin(np.pi * (h - SUN_HOURS[0]) / span), 0.0, None), 0.0)
+
+
+@dataclass
+class SeasonRecord:
+    """One household's season on a regular grid (arrays of length ``n`` at ``step_s``).
+
+    Attributes
+    ----------
+    t0_s : epoch seconds of the first step's start
+    hour : local hour of each step's middle [h]
+    day : local day number of each step (0 = the first)
+    t_air_c, t_out_c : room and outdoor temperature, step means [°C] (NaN: not recorded)
+    q_hc_w : heat output read by the meter, step mean [W] (NaN: not recorded)
+    defrost : share of the step the heat pump defrosted [0–1] (0 when not logged)
+    kind : per step "owner", "constrained", "normal" or "" (not recorded)
+    night_id : per step the record (night) it belongs to ("" when none)
+    excluded : per step why its block is left out of the likelihood ("" when used)
+    p_house_w : household electricity, step mean [W] (NaN when not measured)
+    """
+
+    t0_s: float
+    step_s: float
+    hour: Array
+    day: NDArray[np.int64]
+    t_air_c: Array
+    t_out_c: Array
+    q_hc_w: Array
+    defrost: Array
+    kind: NDArray[np.str_]
+    night_id: NDArray[np.object_]
+    excluded: NDArray[np.object_]
+    p_house_w: Array = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n(self) -> int:
+        """Steps on the grid."""
+        return len(self.t_air_c)
+
+    @property
+    def per_block(self) -> int:
+        """Grid steps per likelihood block."""
+        return int(round(BLOCK_S / self.step_s))
+
+    def segments(self) -> NDArray[np.int64]:
+        """Segment number of each step: a new segment after a gap (a step with T_air, T_out or
+        the heat reading missing, or longer gaps); -1 for the missing steps themselves."""
+        ok = np.isfinite(self.t_air_c) & np.isfinite(self.t_out_c) & np.isfinite(self.q_hc_w)
+        start = ok & ~np.r_[False, ok[:-1]]
+        seg = np.cumsum(start) - 1
+        return np.where(ok, seg, -1)
+
+    def usable_blocks(self) -> NDArray[np.bool_]:
+        """Blocks whose every step is recorded, in one segment and not excluded."""
+        k = self.per_block
+        nb = self.n // k
+        seg = self.segments()[: nb * k].reshape(nb, k)
+        exc = (self.excluded[: nb * k] != "").reshape(nb, k)
+        whole = (seg >= 0).all(axis=1) & (seg == seg[:, :1]).all(axis=1)
+        return whole & ~exc.any(axis=1)
+
+    def exclusion_counts(self) -> dict[str, float]:
+        """Hours left out of the likelihood, by reason [h]."""
+        out: dict[str, float] = {}
+        for reason in set(self.excluded) - {""}:
+            out[str(reason)] = float(np.sum(self.excluded == reason)) * self.step_s / 3600.0
+        return out
+
+
+def exclude_after(flag: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
+    """``flag`` widened by ``steps`` steps after each flagged step."""
+    if steps <= 0:
+        return flag.copy()
+    window = np.convolve(flag.astype(float), np.ones(steps + 1), mode="full")[: len(flag)]
+    return window > 0

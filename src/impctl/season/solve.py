@@ -1,0 +1,180 @@
+"""The season model's search: variable projection over θ, least squares for β.
+
+For each θ (:data:`~.columns.THETA`) the linear parameters β come from a ridge least-squares
+solve (the daily sun amplitudes are shrunk towards their mean: a cloudy week leaves few blocks to
+tell them apart); the search over θ — four numbers in transformed coordinates — is a bounded
+trust-region least squares on the projected residual, started from a small grid. No torch.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from .columns import BETA, Design, columns, lumped
+
+Array = NDArray[np.float64]
+
+#: Bounds of θ in physical units: τ_mm [s], w [-], τ_e [s], f_sun [-].
+THETA_BOUNDS = ((1.0 * 3600, 400.0 * 3600), (0.02, 0.995), (60.0, 3.0 * 3600), (0.02, 0.98))
+#: Start grid of (τ_mm [h], w): the search starts from the best few.
+START_GRID = tuple((t, w) for t in (3.0, 8.0, 24.0, 80.0) for w in (0.7, 0.9, 0.97))
+#: Ridge weight of the daily sun amplitudes about their mean, per block [-].
+SUN_RIDGE = 0.05
+#: Residual scale [W] (the search is scale-free; this keeps the numbers near 1).
+W_SCALE = 100.0
+
+
+def to_u(theta) -> Array:
+    """Physical θ → unconstrained coordinates (log of the times, logit of the shares)."""
+    out = []
+    for (lo, hi), v in zip(THETA_BOUNDS, theta):
+        f = (math.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo)) if lo > 1 else \
+            (v - lo) / (hi - lo)
+        f = min(max(f, 1e-6), 1 - 1e-6)
+        out.append(math.log(f / (1 - f)))
+    return np.array(out)
+
+
+def from_u(u: Array) -> tuple[float, float, float, float]:
+    """Unconstrained coordinates → physical θ."""
+    out = []
+    for (lo, hi), x in zip(THETA_BOUNDS, u):
+        f = 1.0 / (1.0 + math.exp(-float(np.clip(x, -30, 30))))
+        out.append(math.exp(math.log(lo) + f * (math.log(hi) - math.log(lo))) if lo > 1
+                   else lo + f * (hi - lo))
+    return tuple(out)  # type: ignore[return-value]
+
+
+@dataclass
+class Projection:
+    """The linear solve at one θ."""
+
+    beta: Array
+    names: list[str]
+    residual_w: Array
+    X: Array
+    y: Array
+    penalty: Array
+    ridge: Array
+
+
+def project(theta, d: Design) -> Projection:
+    """β by ridge least squares at ``theta`` (module docstring)."""
+    X, y, names = columns(theta, d)
+    p = X.shape[1]
+    sun = np.array([n.startswith("sun_") for n in names])
+    scale = np.sqrt(np.mean(X ** 2, axis=0)) + 1e-12
+    Xs = X / scale
+    ns = int(sun.sum())
+    rows = np.zeros((ns, p))
+    if ns > 1:
+        lam = math.sqrt(SUN_RIDGE * len(y))
+        centre = np.eye(ns) - 1.0 / ns
+        rows[:, sun] = lam * centre / scale[sun] * np.median(scale[sun])
+    A = np.concatenate([Xs, rows])
+    b = np.concatenate([y, np.zeros(ns)])
+    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+    beta = coef / scale
+    return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
+
+
+def _residual(u: Array, d: Design) -> Array:
+    pr = project(from_u(u), d)
+    return np.concatenate([pr.residual_w, pr.penalty]) / W_SCALE
+
+
+def search(d: Design, n_starts: int = 2, max_nfev: int = 60) -> tuple[tuple, Projection, object]:
+    """Best θ, its projection and the optimiser's result (least squares over θ)."""
+    scored = []
+    for tau_h, w in START_GRID:
+        u = to_u((tau_h * 3600, w, 1800.0, 0.3))
+        scored.append((float(np.sum(_residual(u, d) ** 2)), u))
+    scored.sort(key=lambda t: t[0])
+    best = None
+    for _, u0 in scored[:n_starts]:
+        res = least_squares(_residual, u0, args=(d,), method="lm", max_nfev=max_nfev,
+                            diff_step=1e-4, x_scale=1.0)
+        if best is None or res.cost < best.cost:
+            best = res
+    theta = from_u(best.x)
+    return theta, project(theta, d), best
+
+
+def beta_dict(pr: Projection) -> dict[str, float]:
+    """The fixed linear parameters by name (:data:`~.columns.BETA`)."""
+    return {n: float(b) for n, b in zip(pr.names, pr.beta) if n in BETA}
+
+
+#: Finite-difference step in the transformed θ coordinates for the Jacobian [-].
+FD_STEP = 1e-4
+
+
+def _fixed_residual(u: Array, beta: Array, d: Design) -> Array:
+    X, y, _ = columns(from_u(u), d)
+    return y - X @ beta
+
+
+def covariance(u: Array, pr: Projection, d: Design) -> Array:
+    """Covariance of (u, β) by the day-clustered sandwich: the bread from the Jacobian of the
+    block residuals (the ridge rows included), the meat from each local day's summed scores —
+    residuals of one day share its weather, its sun and its owner, so they are not independent.
+    """
+    r0 = _fixed_residual(u, pr.beta, d)
+    ju = np.empty((len(r0), len(u)))
+    for k in range(len(u)):
+        du = np.zeros_like(u)
+        du[k] = FD_STEP
+        ju[:, k] = (_fixed_residual(u + du, pr.beta, d) - r0) / FD_STEP
+    J = np.concatenate([ju, -pr.X], axis=1)
+    ns = pr.penalty.shape[0]
+    Jp = np.zeros((ns, J.shape[1]))
+    if ns:
+        Jp[:, len(u):] = -_penalty_rows(pr)
+    bread = np.linalg.pinv(J.T @ J + Jp.T @ Jp)
+    day = d.block_day()
+    scores = J * r0[:, None]
+    meat = np.zeros((J.shape[1], J.shape[1]))
+    days = np.unique(day)
+    for c in days:
+        g = scores[day == c].sum(axis=0)
+        meat += np.outer(g, g)
+    n_c = len(days)
+    return bread @ meat @ bread * (n_c / max(n_c - 1, 1))
+
+
+def _penalty_rows(pr: Projection) -> Array:
+    """The ridge rows in β's own scale (their residual is rows @ β)."""
+    return pr.ridge
+
+
+#: The lumped quantities the intervals are given for.
+LUMPED = ("hlc_w_per_k", "tau_h", "c_m_j_per_k")
+
+
+def lumped_log_se(u: Array, pr: Projection, cov: Array) -> dict[str, float]:
+    """Standard errors of log HLC, log τ and log C_m by the delta method (finite differences
+    over θ's coordinates and the two conductances; every other β enters none of them)."""
+    ia, im = pr.names.index("k_ao_w_per_k"), pr.names.index("k_am_w_per_k")
+    nu = len(u)
+    idx = list(range(nu)) + [nu + ia, nu + im]
+
+    def f(p: Array) -> Array:
+        L = lumped(from_u(p[:nu]), p[nu], p[nu + 1])
+        return np.log(np.maximum([L[k] for k in LUMPED], 1e-12))
+
+    p0 = np.r_[u, pr.beta[ia], pr.beta[im]]
+    f0 = f(p0)
+    G = np.empty((len(LUMPED), len(p0)))
+    for k in range(len(p0)):
+        h = FD_STEP * max(1.0, abs(p0[k])) if k >= nu else FD_STEP
+        dp = np.zeros_like(p0)
+        dp[k] = h
+        G[:, k] = (f(p0 + dp) - f0) / h
+    sub = cov[np.ix_(idx, idx)]
+    var = np.einsum("ij,jk,ik->i", G, sub, G)
+    return {k: float(np.sqrt(max(v, 0.0))) for k, v in zip(LUMPED, var)}
