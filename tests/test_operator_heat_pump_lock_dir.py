@@ -302,3 +302,28 @@ def test_a_lock_file_replaced_before_flock_lets_only_one_daemon_start(base, monk
     finally:
         for held in second:
             held.release()
+
+
+def test_only_root_makes_the_machines_lock_directory(base, monkeypatch):
+    """After a reboot without the tmpfiles line, a user's impctl does not make the machine's
+    lock directory (it would be theirs to fake); root's makes it, root's own, 0755."""
+    folder = run_lock_dir(base) / "impctl"
+    monkeypatch.setattr(hplock, "DEFAULT_LOCK_DIR", str(folder))  # /run/lock/impctl here
+    monkeypatch.delenv("IMPCTL_LOCK_DIR")
+    link = LinkConfig(host="127.0.0.1", port=502)
+
+    def take() -> str:
+        try:
+            HeatPumpLock(link, "/home/nobody/impctl").acquire().release()
+        except InputError as exc:
+            return str(exc)
+        return "taken"
+
+    assert as_user(take) == (f"{folder}: missing: root creates the heat-pump lock directory at "
+                             "boot from deploy/impctl.tmpfiles (as root: systemd-tmpfiles "
+                             "--create impctl.conf), or set IMPCTL_LOCK_DIR to a directory of "
+                             "your own")
+    assert not os.path.lexists(folder)
+    with HeatPumpLock(link, "/var/lib/impctl"):
+        st = os.stat(folder)
+        assert (st.st_uid, stat.S_IMODE(st.st_mode)) == (0, 0o755)

@@ -184,11 +184,10 @@ class HeatPumpLock(FlockHolder):
                           "file with one link that impctl created; remove it as root",
                           self.path)
 
-    def _open(self, dirfd: int, folder: os.stat_result) -> tuple[int, bool] | None:
-        """(fd, writable) of the lock file, created if missing; None when it changed under
-        us (try again)."""
+    def _open(self, dirfd: int, folder: os.stat_result) -> int | None:
+        """The lock file, opened for writing and created if missing; None when it changed
+        under us (try again)."""
         name = self.path.name
-        shared = bool(folder.st_mode & stat.S_IWGRP)
         try:
             fd = os.open(name, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
                          | os.O_CLOEXEC, 0o600, dir_fd=dirfd)
@@ -197,12 +196,13 @@ class HeatPumpLock(FlockHolder):
         except OSError as exc:
             raise InputError(f"cannot create the heat-pump lock: {exc.strerror} (the "
                              f"directory is {_describe(folder)}); {_FIX}", self.path) from None
-        else:  # ours: readable and writable by the members of a shared directory's group
-            if shared:
+        else:
+            if folder.st_mode & stat.S_IWGRP:  # ours: for the group the directory is shared with
                 with contextlib.suppress(OSError):
                     os.fchown(fd, -1, folder.st_gid)
+                with contextlib.suppress(OSError):
                     os.fchmod(fd, 0o660)
-            return fd, True
+            return fd
         try:  # look before opening: never open a link, a pipe or a device here
             seen = os.stat(name, dir_fd=dirfd, follow_symlinks=False)
         except FileNotFoundError:
@@ -214,25 +214,23 @@ class HeatPumpLock(FlockHolder):
                                f"file), {_describe(seen)}")
         if not _may_write_dir(seen, folder):
             raise self._refuse(f"a file {_describe(seen)}, who cannot write the lock directory")
-        flags = os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC
         try:
-            fd, writable = os.open(name, os.O_RDWR | flags, dir_fd=dirfd), True
-        except PermissionError:  # flock works on a read-only descriptor too
-            try:
-                fd, writable = os.open(name, os.O_RDONLY | flags, dir_fd=dirfd), False
-            except PermissionError as denied:
-                raise InputError(f"cannot open the heat-pump lock: {denied.strerror} (it is "
-                                 f"{_describe(seen)}); run as root or as a member of the "
-                                 "lock directory's group", self.path) from None
+            fd = os.open(name, os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY
+                         | os.O_CLOEXEC, dir_fd=dirfd)
         except FileNotFoundError:
             return None
+        except PermissionError as denied:  # the holder must be able to name itself in it
+            raise InputError(f"cannot open the heat-pump lock: {denied.strerror} (it is "
+                             f"{_describe(seen)}); run as root or as a member of the lock "
+                             "directory's group, or as root remove it while no impctl runs",
+                             self.path) from None
         except OSError as exc:  # replaced by a link in between: ELOOP
             raise self._refuse(exc.strerror) from None
         now = os.fstat(fd)
         if (now.st_dev, now.st_ino) != (seen.st_dev, seen.st_ino):
             os.close(fd)
             return None
-        return fd, writable
+        return fd
 
     def _still_named(self, dirfd: int, fd: int) -> bool:
         """Is ``fd`` still the file the lock's name points to (not removed or replaced)?"""
@@ -249,10 +247,9 @@ class HeatPumpLock(FlockHolder):
         dirfd, folder = open_lock_dir(self.path.parent)
         try:
             for _ in range(_ATTEMPTS):
-                opened = self._open(dirfd, folder)
-                if opened is None:
+                fd = self._open(dirfd, folder)
+                if fd is None:
                     continue
-                fd, writable = opened
                 if not flock_within(fd, wait_s):
                     held = _holder(fd)
                     os.close(fd)
@@ -265,13 +262,12 @@ class HeatPumpLock(FlockHolder):
                                  "find what does it", self.path)
         finally:
             os.close(dirfd)
-        if writable:
-            content = json.dumps({"pid": os.getpid(), "role": self.role,
-                                  "state_dir": self.state_dir, "heat_pump": self.address,
-                                  "started": datetime.now(UTC).isoformat()}).encode()
-            with contextlib.suppress(OSError):  # the lock holds all the same
-                os.ftruncate(fd, 0)
-                os.pwrite(fd, content, 0)
+        content = json.dumps({"pid": os.getpid(), "role": self.role,
+                              "state_dir": self.state_dir, "heat_pump": self.address,
+                              "started": datetime.now(UTC).isoformat()}).encode()
+        with contextlib.suppress(OSError):  # the lock holds all the same
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, content, 0)
         self._fd = fd
         return self
 
