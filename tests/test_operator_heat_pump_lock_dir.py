@@ -8,7 +8,8 @@ real ``systemd-tmpfiles`` line, a tmpfs whose ``run/lock`` is 1777 like ``/run/l
   link in its place, gets both commands refused with one line naming the directory, its
   owner and mode, and the fix; the link's target (root's 0600 file) keeps its content and
   mode, and no fake holder is ever named;
-* the same checks apply to a person running impctl with ``IMPCTL_LOCK_DIR``;
+* the same checks apply to a person running impctl with ``IMPCTL_LOCK_DIR``; without the
+  tmpfiles line only root's impctl makes the machine's ``/run/lock/impctl``;
 * in the directory tmpfiles makes (``root:impctl`` 3770), even a member of the group cannot
   make root follow a link, open a pipe or write through a hard link;
 * another user can neither take a lock (held or free), nor fake a holder note, nor remove

@@ -6,7 +6,8 @@ a directory every impctl on the machine shares: ``$IMPCTL_LOCK_DIR``, else
 ``/run/lock/impctl`` (``/run/lock`` is the FHS place for locks; a tmpfs, so nothing survives
 a reboot). ``deploy/impctl.tmpfiles`` creates it at boot as ``root:impctl`` mode 3770: the
 service user (group ``impctl``) and root share it, nobody else can enter it, and the sticky
-bit keeps one member from removing another's lock.
+bit keeps one member from removing another's lock. Without that line only root's impctl makes
+it (root's own, 0755), since a directory another user made would be theirs to fake.
 
 Nothing in that directory is taken on trust. It is opened without following a symbolic link
 and refused (one line naming its owner and mode) unless it belongs to root or to the running
