@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
+from ..numtext import non_ascii_problem
 
 _OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
 
@@ -34,9 +35,10 @@ def parse_timestamps(raw: pd.Series, path: str | Path, tz: str, column: str = "t
     bad = parsed.isna().to_numpy()
     if bad.any():
         row = _first_bad(bad)
-        raise InputError(
-            f"cannot parse {column} {text.iloc[row - 2]!r} as ISO 8601", path, f"row {row}"
-        )
+        cell = text.iloc[row - 2]
+        raise InputError(f"cannot parse {column} {cell!r} as ISO 8601"
+                         + (f": {why}" if (why := non_ascii_problem(cell)) else ""),
+                         path, f"row {row}")
     has_offset = text.str.contains(_OFFSET).to_numpy()
     if has_offset.all():
         return pd.DatetimeIndex(parsed).tz_convert(tz)
@@ -130,7 +132,8 @@ def read_table(
         if bad.any():
             row = _first_bad(bad)
             cell = text.iloc[row - 2]
-            what = "empty cell" if cell == "" else f"{cell!r} is not a finite number"
+            what = "empty cell" if cell == "" else (
+                non_ascii_problem(cell) or f"{cell!r} is not a finite number")
             raise InputError(f"column '{col}': {what}", path, f"row {row}")
         out[col] = values
     for col in optional:
