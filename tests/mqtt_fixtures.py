@@ -31,9 +31,10 @@ MOSQUITTO_PASSWD = shutil.which("mosquitto_passwd") or "/usr/bin/mosquitto_passw
 
 class Broker:
     """A mosquitto process on 127.0.0.1:``port``; ``users`` = {name: password} or None
-    (anonymous)."""
+    (anonymous); ``extra``: more lines of mosquitto.conf."""
 
-    def __init__(self, work: Path, users: dict[str, str] | None = None):
+    def __init__(self, work: Path, users: dict[str, str] | None = None,
+                 extra: tuple[str, ...] = ()):
         self.work, self.users = work, users
         self.port = free_port()
         self.log = work / "mosquitto.log"
@@ -52,6 +53,7 @@ class Broker:
             lines += ["allow_anonymous false", f"password_file {pw}"]
         else:
             lines += ["allow_anonymous true"]
+        lines += list(extra)
         self.conf.write_text("\n".join(lines) + "\n")
         self.proc: subprocess.Popen | None = None
 
@@ -76,10 +78,11 @@ class Broker:
 
 
 @contextlib.contextmanager
-def broker(work: Path, users: dict[str, str] | None = None) -> Iterator[Broker]:
+def broker(work: Path, users: dict[str, str] | None = None,
+           extra: tuple[str, ...] = ()) -> Iterator[Broker]:
     """A started :class:`Broker`, stopped at the end."""
     work.mkdir(parents=True, exist_ok=True)
-    b = Broker(work, users)
+    b = Broker(work, users, extra)
     b.start()
     try:
         yield b

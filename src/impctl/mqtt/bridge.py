@@ -21,9 +21,11 @@ from typing import Protocol
 
 import aiomqtt
 
+from ..clock import VirtualClock
 from ..errors import InputError
-from .commands import BadCommand, Command, parse_command
+from .commands import COMMANDS, BadCommand, Command, parse_command
 from .config import MqttConfig
+from .counted import CountedWarnings
 from .discovery import (
     OFFLINE,
     ONLINE,
@@ -95,10 +97,16 @@ class MqttBridge:
     cfg : MqttConfig
     source : StateSource
     limits : Limits (the trigger's safety limits; also the number entity's range)
+    clock : the daemon's clock (the windows of the counted warnings run on it); real time
+        when None
     """
 
-    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits) -> None:
+    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits,
+                 clock: VirtualClock | None = None) -> None:
         self.cfg, self.source, self.limits = cfg, source, limits
+        clock = clock or VirtualClock.real()
+        #: Ignored commands: the first of a kind in full, a flood counted (counted.py).
+        self.ignored = CountedWarnings(_LOG, clock.now_s, clock.wall_seconds)
         self._device: DeviceIdentity | None = None  # as last announced
         self.kind = "constrained"
         self.setpoint_c = limits.default_setpoint_c
@@ -154,6 +162,7 @@ class MqttBridge:
             pass
         except Exception as exc:  # noqa: BLE001 - stopping must not fail the daemon's exit
             _LOG.warning("MQTT bridge ended with %r", exc)
+        self.ignored.flush()
 
     # -- connection loop ---------------------------------------------------------------------
     def _client(self) -> aiomqtt.Client:
@@ -332,21 +341,21 @@ class MqttBridge:
             if self.inputs is not None and topic in self.inputs.names:
                 self.inputs.receive(topic, payload, bool(message.retain))
                 continue
-            if not topic.startswith(prefix) or message.retain:
-                # A retained command would act again at every reconnect: ignore it.
-                if message.retain:
-                    _LOG.warning("MQTT command on %s ignored: retained messages are not "
-                                 "commands", topic)
+            if not topic.startswith(prefix) and not message.retain:
                 continue
-            name = topic[len(prefix):]
+            name = topic[len(prefix):] if topic.startswith(prefix) else topic
+            if message.retain:
+                # A retained command would act again at every reconnect: ignore it.
+                self._ignored(name, topic, "retained", "retained messages are not commands")
+                continue
             if not self.cfg.commands:
-                _LOG.warning("MQTT command %s ignored: commands are off (mqtt.commands = "
-                             "false in the configuration)", topic)
+                self._ignored(name, topic, "off", "commands are off (mqtt.commands = false "
+                                                  "in the configuration)")
                 continue
             try:
                 cmd = parse_command(name, payload, self.limits, self.kind, self.setpoint_c)
             except BadCommand as exc:
-                _LOG.warning("MQTT command %s ignored: %s", topic, exc)
+                self._ignored(name, topic, "malformed", str(exc))
                 continue
             if cmd.name in ("night_kind", "night_setpoint"):
                 self.kind = cmd.kind or self.kind
@@ -358,7 +367,16 @@ class MqttBridge:
                 try:
                     _LOG.info("MQTT command %s: %s", cmd.name, self.source.submit(cmd))
                 except BadCommand as exc:
-                    _LOG.warning("MQTT command %s refused: %s", topic, exc)
+                    self._ignored(name, topic, "refused", str(exc), verb="refused")
                 except Exception as exc:  # noqa: BLE001 - a store error must not end MQTT
                     _LOG.error("MQTT command %s could not be queued: %s", cmd.name, exc)
                 self.wake()
+
+    def _ignored(self, name: str, topic: str, kind: str, reason: str,
+                 verb: str = "ignored") -> None:
+        """A command not acted on: one line, or counted in a flood (:mod:`.counted`). The
+        keys are bounded: any name that is no command counts as one."""
+        known = name in COMMANDS
+        subject = topic if known else f"{self.cfg.topic}/cmd/+ (unknown commands)"
+        self.ignored.warn((name if known else None, kind), subject, reason,
+                          f"MQTT command {topic} {verb}: {reason}")

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from ..numtext import non_ascii_problem
 from .discovery import Limits
 
+#: The commands under ``<base>/cmd/``.
+COMMANDS = ("abort", "skip_tonight", "trigger", "night_kind", "night_setpoint")
 #: Payloads a button may send (Home Assistant's default is PRESS; ours name the command).
 #: Never the empty payload: that is how a retained message is cleared (``mosquitto_pub -r -n``),
 #: and a person tidying the broker must not switch the heating off.
