@@ -321,9 +321,9 @@ def read_config_toml(path: str | Path) -> dict:
 
 def config_warnings(cfg: Config) -> list[str]:
     """What a valid configuration allows but should not (one line each, for the log and
-    ``impctl check-config``): an MQTT password file other users can read."""
-    warning = cfg.mqtt.password_file_warning() if cfg.mqtt is not None else None
-    return [warning] if warning else []
+    ``impctl check-config``): an MQTT password file or client key other users can read, an
+    MQTT password sent over the network in clear text."""
+    return cfg.mqtt.warnings() if cfg.mqtt is not None else []
 
 
 def load_config(path: str | Path) -> Config:
