@@ -115,10 +115,15 @@ def layout_problem(path: str | Path, required: tuple[str, ...]) -> tuple[str, st
     return None
 
 
-def order_problem(stamps: pd.Series, back: np.ndarray) -> tuple[str, int]:
+def order_problem(stamps: pd.Series, back: np.ndarray,
+                  text: np.ndarray | None = None) -> tuple[str, int]:
     """What is wrong with timestamps that do not strictly increase (``back`` marks each row
     that does not come after the one before it): duplicates, or rows out of time order; and
-    the index of the row the text speaks of."""
+    the index of the row the text speaks of. ``text``: the timestamp cells as the file writes
+    them, which the line quotes (else the parsed instants)."""
+    def quoted(i: int) -> str:
+        return str(text[i]) if text is not None else stamps.iloc[i].isoformat()
+
     step = stamps.diff().dt.total_seconds().to_numpy()
     same = back & (step == 0)
     earlier = back & (step < 0)
@@ -126,12 +131,12 @@ def order_problem(stamps: pd.Series, back: np.ndarray) -> tuple[str, int]:
         first = int(np.argmax(same))
         return (f"timestamps must strictly increase: {int(same.sum())} duplicated "
                 f"timestamp{'s' if same.sum() > 1 else ''} (the first, "
-                f"{stamps.iloc[first].isoformat()}, repeats the row before): remove the "
+                f"{quoted(first)}, repeats the row before): remove the "
                 "repeated rows", first)
     first = int(np.argmax(earlier))
     dup = f", and {int(same.sum())} duplicated" if same.any() else ""
     return (f"timestamps must strictly increase: the rows are not in time order "
             f"({int(earlier.sum())} step{'s' if earlier.sum() > 1 else ''} back in time{dup}; "
-            f"the first, {stamps.iloc[first].isoformat()}, comes after "
-            f"{stamps.iloc[first - 1].isoformat()}): sort the rows by timestamp"
+            f"the first, {quoted(first)}, comes after {quoted(first - 1)}): sort the rows by "
+            "timestamp"
             + (" and remove the repeated rows" if same.any() else ""), first)

@@ -43,7 +43,7 @@ from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
 from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
-from .tables import frame_table, read_table
+from .tables import TIMESTAMP_TEXT, frame_table, read_table
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 #: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).
@@ -104,7 +104,7 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if back.any():
         from .csv_hints import order_problem  # only on the failure path
 
-        text, i = order_problem(table["timestamp"], back)
+        text, i = order_problem(table["timestamp"], back, table.attrs.get(TIMESTAMP_TEXT))
         raise InputError(text, path, _row(i))
 
 

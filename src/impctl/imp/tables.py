@@ -16,6 +16,8 @@ from ..errors import InputError
 from ..numtext import non_ascii_problem
 
 _OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
+#: Key of ``DataFrame.attrs`` holding the timestamp cells as the source wrote them (strings).
+TIMESTAMP_TEXT = "timestamp_text"
 
 
 def _first_bad(mask: np.ndarray) -> int:
@@ -120,6 +122,8 @@ def read_table(
         raise InputError("no data rows", path)
     out = pd.DataFrame(index=range(len(df)))
     out["timestamp"] = parse_timestamps(df["timestamp"], path, tz)
+    # as the file writes them, for messages that quote a row (TIMESTAMP_TEXT)
+    out.attrs[TIMESTAMP_TEXT] = df["timestamp"].str.strip().to_numpy()
     for col in numeric:
         if col not in df.columns:
             continue
@@ -174,6 +178,7 @@ def frame_table(
                                              source, tz))
     else:
         out["timestamp"] = parse_timestamps(stamps.astype(object), source, tz)
+    out.attrs[TIMESTAMP_TEXT] = stamps.astype(str).str.strip().to_numpy()
     may_be_empty = set(may_be_empty)
     for col in numeric:
         if col not in cols:
