@@ -148,6 +148,9 @@ def test_a_password_over_plain_tcp_to_another_machine_is_a_warning(tmp_path):
     status = run_cli("status", "--config", str(config), timeout_s=30)
     assert f"impctl: warning: {warning}" in status.stderr
     assert PASSWORD not in result.stdout + result.stderr + status.stdout + status.stderr
+    # the password from the systemd credential the unit loads (check-config cannot see it)
+    result = _check(_config(tmp_path, {**mqtt, "password_file": ""}))
+    assert result.returncode == 0 and f"warning:   {warning}" in result.stdout, result
     # the same broker on this machine, or over TLS, or without a password: no warning
     for other in ({"host": "127.0.0.1"}, {"host": "localhost"}, {"tls": True, "port": 8883},
                   {"username": "", "password_file": ""}):

@@ -121,11 +121,11 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-def cleartext_warning(host: str, port: int, tls: bool, username: str,
-                      has_password: bool) -> str | None:
+def cleartext_warning(host: str, port: int, tls: bool, username: str) -> str | None:
     """A password that would cross the network unencrypted, in one line (never the password
-    itself), or None: TLS off, a password set, and the broker not on this machine."""
-    if tls or not has_password or is_loopback(host):
+    itself), or None: TLS off, a user name (and so a password) set, and the broker not on
+    this machine."""
+    if tls or not username or is_loopback(host):
         return None
     return (f"the MQTT password of '{username}' goes to {host}:{port} in clear text "
             "(mqtt.tls = false): anyone on the network path can read it; set mqtt.tls = true "
