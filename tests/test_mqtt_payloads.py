@@ -121,3 +121,28 @@ def test_password_from_file_or_systemd_credential(tmp_path, monkeypatch):
     (creds / "mqtt.password").write_text("from-systemd\n")
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
     assert MqttConfig(host="h").password() == "from-systemd"
+
+
+def test_counted_warnings_bound_the_lines_and_lose_no_count(caplog):
+    """A few lines in full per kind and window, the rest counted at the window's end (or at
+    stop); commands that are no command share one kind however many names they use."""
+    import logging
+
+    from impctl.mqtt.counted import CountedWarnings
+
+    now = [0.0]
+    log = logging.getLogger("test.counted")
+    warnings = CountedWarnings(log, lambda: now[0], window_s=60.0, in_full=2)
+    with caplog.at_level(logging.WARNING, logger="test.counted"):
+        for i in range(1000):
+            warnings.warn((None, "malformed"), "b/cmd/+ (unknown commands)", f"unknown {i}",
+                          f"MQTT command b/cmd/x{i} ignored: unknown command 'x{i}'")
+        now[0] = 61.0  # the next one, a minute later, opens a new window
+        warnings.warn((None, "malformed"), "b/cmd/+ (unknown commands)", "unknown z", "z")
+        warnings.flush()
+    assert [r.getMessage() for r in caplog.records] == [
+        "MQTT command b/cmd/x0 ignored: unknown command 'x0'",
+        "MQTT command b/cmd/x1 ignored: unknown command 'x1'",
+        "MQTT: 998 more commands on b/cmd/+ (unknown commands) ignored within 60 s of the "
+        "first: the last: unknown 999",
+        "z"]

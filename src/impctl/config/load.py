@@ -17,6 +17,7 @@ from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..mqtt.config import mqtt_from_mapping
 from ..mqtt.inputs import inputs_from_mapping, own_topic
+from ..numtext import non_ascii_problem
 from .sections import (
     CampaignConfig,
     ClockConfig,
@@ -172,7 +173,8 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         if window[0] == window[1]:
             bad("night.window", "start and end are the same")
     except ValueError:
-        bad("night.window", f"expected HH:MM-HH:MM, got {night.window!r}")
+        bad("night.window", non_ascii_problem(night.window)
+            or f"expected HH:MM-HH:MM, got {night.window!r}")
     if not 0 < night.max_comfort_band_k <= COMFORT_BAND_MAX_K:
         bad("night.max_comfort_band_k",
             f"must lie in (0, {COMFORT_BAND_MAX_K:g}] K: further below the owner's setpoint a "
@@ -319,9 +321,9 @@ def read_config_toml(path: str | Path) -> dict:
 
 def config_warnings(cfg: Config) -> list[str]:
     """What a valid configuration allows but should not (one line each, for the log and
-    ``impctl check-config``): an MQTT password file other users can read."""
-    warning = cfg.mqtt.password_file_warning() if cfg.mqtt is not None else None
-    return [warning] if warning else []
+    ``impctl check-config``): an MQTT password file or client key other users can read, an
+    MQTT password sent over the network in clear text."""
+    return cfg.mqtt.warnings() if cfg.mqtt is not None else []
 
 
 def load_config(path: str | Path) -> Config:

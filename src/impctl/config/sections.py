@@ -19,6 +19,7 @@ from ..imp.protocol import (
 )
 from ..mqtt.config import MqttConfig
 from ..mqtt.inputs import InputsConfig
+from ..numtext import parse_int
 
 
 @dataclass(frozen=True)
@@ -162,7 +163,7 @@ def _window(text: str) -> tuple[int, int]:
     out = []
     for part in (a, b):
         h, m = part.strip().split(":")
-        hh, mm = int(h), int(m)
+        hh, mm = parse_int(h), parse_int(m)  # '２２' is not 22
         if not (0 <= hh < 24 and 0 <= mm < 60):
             raise ValueError(text)
         out.append(hh * 60 + mm)

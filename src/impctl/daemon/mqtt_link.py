@@ -208,7 +208,8 @@ def start_mqtt(daemon: RunningDaemon) -> MqttLink | None:
         cfg.mqtt, link,
         Limits(setpoint_min_c=lo, setpoint_max_c=hi,
                comfort_band_k=cfg.night.comfort_band_k,
-               default_setpoint_c=cfg.campaign.constrained_setpoint_c))
+               default_setpoint_c=cfg.campaign.constrained_setpoint_c),
+        clock=daemon.clock)
     link.bridge.on_link_change = link.note_link
     link.bridge.inputs = daemon.house_inputs  # [inputs]: the house's sensors, or None
     link.bridge.start()

@@ -13,10 +13,11 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
 * ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
-* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``
-  (optional) — household electricity besides the heat pump [W], sleepers, mean of the room
-  sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while the heat
-  pump defrosts (:mod:`.night_extras`: a bad cell there is missing, not refused).
+* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``,
+  ``p_el_w`` (optional) — household electricity besides the heat pump [W], sleepers, mean of
+  the room sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while
+  the heat pump defrosts, the heat pump's electrical power [W] (:mod:`.night_extras`: a bad
+  cell there is missing, not refused).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
@@ -41,7 +42,8 @@ from .held import not_held
 from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
-from .tables import frame_table, read_table
+from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
+from .tables import TIMESTAMP_TEXT, frame_table, read_table
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 #: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).
@@ -62,6 +64,10 @@ def _row(index: int) -> str:
 
 
 def _check_values(table: pd.DataFrame, path: Path) -> None:
+    # A file in °F: its rooms are warmer than any room in °C, yet mostly inside t_air's range.
+    fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
+    if fahrenheit is not None:
+        raise InputError(fahrenheit, path, "column 't_air'")
     for col, (lo, hi, unit) in PLAUSIBLE.items():
         if col not in table:
             continue
@@ -69,9 +75,11 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
         bad = np.isfinite(values) & ((values < lo) | (values > hi))
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(
-                f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}", path, _row(i)
-            )
+            text = f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}"
+            if unit == "°C" and values[i] > hi and lo <= to_celsius(values[i]) <= hi:
+                text += (f" — looks like °F ({to_celsius(values[i]):.1f} °C): convert with "
+                         "(°F − 32) / 1.8")
+            raise InputError(text, path, _row(i))
     if "heating" in table:
         heating = table["heating"].to_numpy(dtype=float)
         bad = (heating != 0) & (heating != 1)
@@ -96,7 +104,7 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if back.any():
         from .csv_hints import order_problem  # only on the failure path
 
-        text, i = order_problem(table["timestamp"], back)
+        text, i = order_problem(table["timestamp"], back, table.attrs.get(TIMESTAMP_TEXT))
         raise InputError(text, path, _row(i))
 
 
@@ -231,6 +239,10 @@ def nights_from_table(
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
     extras = extra_columns(table)
+    if "p_el_w" in extras:  # the heat pump's electricity: q_hc must be well above it
+        why = electrical_problem(values["q_hc"], extras["p_el_w"])
+        if why is not None:
+            raise InputError(why, path, "column 'q_hc'")
     nights: list[NightSamples] = []
     for night_id, idx in groups:
         if night_id == "":

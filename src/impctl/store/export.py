@@ -109,10 +109,10 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
                              store.path, "--nights")
     rows = nights_rows(store, night_ids, valid_only)
     if not rows:
-        what = "the selected nights have" if night_ids is not None else (
-            "the store has no valid night with" if valid_only else "the store has")
-        raise InputError(f"nothing to export: {what} no usable samples (see impctl nights)",
-                         store.path)
+        what = "the selected nights have no usable sample" if night_ids is not None else (
+            "no valid night in the store has a usable sample" if valid_only
+            else "the store has no usable sample")
+        raise InputError(f"nothing to export: {what} (see impctl nights)", store.path)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     # Numbers even when every cell is missing (a column of None would be text in Parquet).
     df[list(HOUSE_COLUMNS)] = df[list(HOUSE_COLUMNS)].astype(float)

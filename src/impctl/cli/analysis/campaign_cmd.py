@@ -19,6 +19,7 @@ from ...imp.protocol import (
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
+from ...numtext import non_ascii_problem, parse_float
 from .. import cli
 from ..checks import MAX_FILE_MB, SETPOINT_C, T_OUT_C, in_range, refuse_large_file, time_zone
 
@@ -33,10 +34,11 @@ def _setpoints(ctx: click.Context, param: click.Parameter, value: str) -> list[f
     out = []
     for part in value.split(","):
         try:
-            sp = float(part)
-        except ValueError:
-            raise InputError(f"{part.strip()!r} is not a number (a comma-separated list of "
-                             "°C, e.g. 21,22,23)", place=place) from None
+            sp = parse_float(part)
+        except ValueError as exc:
+            why = non_ascii_problem(part) and str(exc)
+            raise InputError(why or f"{part.strip()!r} is not a number (a comma-separated list "
+                             "of °C, e.g. 21,22,23)", place=place) from None
         out.append(in_range(sp, SETPOINT_C, place, "°C"))
     return out
 

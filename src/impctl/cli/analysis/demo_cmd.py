@@ -7,14 +7,16 @@ from pathlib import Path
 import click
 
 from ...errors import InputError
+from ...numtext import non_ascii_problem, parse_float, parse_int
 from .. import cli
 
 
 def _nights(text: str) -> tuple[int, int]:
     try:
-        c, n = (int(x) for x in text.split("+"))
+        c, n = (parse_int(x) for x in text.split("+"))
     except ValueError:
-        raise InputError(f"expected CONSTRAINED+NORMAL such as 2+6, got {text!r}",
+        raise InputError(non_ascii_problem(text)
+                         or f"expected CONSTRAINED+NORMAL such as 2+6, got {text!r}",
                          place="--nights") from None
     if c < 1 or n < 1:
         raise InputError("a campaign needs at least one night of each kind", place="--nights")
@@ -86,9 +88,10 @@ def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, s
 
 def _target(text: str) -> tuple[float, float]:
     try:
-        hlc, tau = (float(x) for x in text.split(","))
+        hlc, tau = (parse_float(x) for x in text.split(","))
     except ValueError:
-        raise InputError(f"expected HLC,TAU such as 0.05,0.08, got {text!r}",
+        raise InputError(non_ascii_problem(text)
+                         or f"expected HLC,TAU such as 0.05,0.08, got {text!r}",
                          place="--target") from None
     if not (0 < hlc < 1 and 0 < tau < 1):
         raise InputError("relative half-widths must lie in (0, 1), e.g. 0.05,0.08",

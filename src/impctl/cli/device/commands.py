@@ -18,6 +18,7 @@ from zoneinfo import ZoneInfo
 import click
 
 from ...errors import InputError
+from ...numtext import non_ascii_problem, parse_int
 from .. import cli
 from .options import config_option
 
@@ -341,10 +342,10 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
     ids = None
     if night_ids:
         try:
-            ids = [int(x) for x in night_ids.split(",") if x.strip()]
+            ids = [parse_int(x) for x in night_ids.split(",") if x.strip()]
         except ValueError:
-            raise InputError(f"expected comma-separated ids, got {night_ids!r}",
-                             place="--nights") from None
+            raise InputError(non_ascii_problem(night_ids) or f"expected comma-separated ids, "
+                             f"got {night_ids!r}", place="--nights") from None
     with Store(db_path, create=False) as store:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
                           force=force)
