@@ -15,6 +15,7 @@ from ..errors import InputError
 from ._times import _dt, _iso, _now
 from .campaign_tables import CampaignTables
 from .house_inputs import HouseInputTables
+from .owner_file import OWNER_FILE, remove_owner_values, write_owner_values
 from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
 from .schema import migrate
 
@@ -38,6 +39,8 @@ class Store(CampaignTables, HouseInputTables):
 
     def __init__(self, path: str | Path, *, create: bool = True):
         self.path = Path(path)
+        #: The pending journal's copy outside the database (:mod:`.owner_file`).
+        self.owner_file = self.path.parent / OWNER_FILE
         if not create and not self.path.exists():
             raise InputError("no impctl store here (has the daemon run? check state_dir)",
                              self.path)
@@ -119,6 +122,14 @@ class Store(CampaignTables, HouseInputTables):
         self._db.execute("UPDATE nights SET valid = ?, reasons = ? WHERE id = ?",
                          (int(valid), json.dumps(list(reasons)), night_id))
 
+    def end_night(self, night_id: int, state: str, ended: datetime, valid: bool,
+                  reasons: Sequence[str]) -> None:
+        """A night's end state and verdict in one transaction (never one without the other:
+        a night left running is swept as interrupted at the next start)."""
+        with self._immediate():
+            self.set_night_state(night_id, state, ended=ended)
+            self.assess_night(night_id, valid, reasons)
+
     def interrupt_night(self, night_id: int, reason: str) -> None:
         """Mark a night that was running when the process died ``interrupted`` and not valid
         in one transaction: no reader, and no second crash, sees the state without the
@@ -197,6 +208,13 @@ class Store(CampaignTables, HouseInputTables):
         If an unrestored entry for the register already exists (an earlier restore did not
         complete), that entry is kept and returned: the owner's value is the one recorded
         before impctl ever touched the register, never a value impctl wrote itself.
+
+        The pending journal is then copied to :attr:`owner_file`.
+
+        Raises
+        ------
+        OSError
+            The copy could not be written (the entry is in the database): write nothing.
         """
         with self._immediate():
             row = self._db.execute(
@@ -209,6 +227,7 @@ class Store(CampaignTables, HouseInputTables):
                     (night_id, register, address, raw_value, _iso(_now())))
                 row = self._db.execute("SELECT * FROM journal WHERE id = ?",
                                        (cur.lastrowid,)).fetchone()
+        write_owner_values(self.owner_file, self.journal_pending())
         return _journal(row)
 
     def journal_pending(self) -> list[JournalEntry]:
@@ -220,6 +239,7 @@ class Store(CampaignTables, HouseInputTables):
         """Mark an entry restored (after the read-back matched)."""
         self._db.execute("UPDATE journal SET restored = ?, outcome = 'restored' WHERE id = ?",
                          (_iso(_now()), entry_id))
+        self._mirror_journal()
 
     def journal_mark_owner_changed(self, entry_id: int, raw_value: int) -> None:
         """Close an entry without restoring it: the owner set the register themselves
@@ -227,6 +247,24 @@ class Store(CampaignTables, HouseInputTables):
         self._db.execute(
             "UPDATE journal SET restored = ?, outcome = ? WHERE id = ? AND restored IS NULL",
             (_iso(_now()), f"owner changed it to raw {int(raw_value)}", entry_id))
+        self._mirror_journal()
+
+    def forget_owner_values(self) -> None:
+        """Remove :attr:`owner_file`: every entry is back on the heat pump, verified, even
+        if this store could not record it (a full disk; the next start closes the entries)."""
+        remove_owner_values(self.owner_file)
+
+    def _mirror_journal(self) -> None:
+        """Bring :attr:`owner_file` up to the pending journal; when it cannot be rewritten
+        it is removed, so it never holds a value that is no longer to be restored."""
+        pending = self.journal_pending()
+        try:
+            if pending:
+                write_owner_values(self.owner_file, pending)
+                return
+        except OSError:
+            pass
+        remove_owner_values(self.owner_file)
 
     # -- manual trigger requests -----------------------------------------------------------
     def add_request(self, kind: str, setpoint_c: float | None, when: str, *,
