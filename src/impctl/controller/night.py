@@ -102,6 +102,12 @@ class NightController:
         self._aborted.set()
         return True
 
+    def _clock_check(self) -> None:
+        """End the night (raises ``_Abort``) when the wall clock stepped since the last look."""
+        step = self._time.step_s()
+        if step is not None:
+            raise _Abort(f"system clock stepped by {describe_step(step)}")
+
     async def _sleep_until(self, when: datetime) -> None:
         """Sleep until ``when``, one sample interval at most, or a stop or an abort."""
         await self._time.sleep_until(when, self.stop, self._aborted)
@@ -197,9 +203,7 @@ class NightController:
         """One poll; stores it as a sample; None when the link failed (the incident is
         logged once, when it starts). A wall-clock step since the last poll ends the night
         before anything is stored (raises ``_Abort``)."""
-        step = self._time.step_s()
-        if step is not None:
-            raise _Abort(f"system clock stepped by {describe_step(step)}")
+        self._clock_check()
         polled = self.clock.now()
         try:
             snap = await self.client.snapshot()
@@ -312,6 +316,7 @@ class NightController:
                 raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise _Abort("stop requested (signal)")
+            self._clock_check()  # before the deadline: a step forward is named as such
             now = self.clock.now()
             if self._time.reached(deadline):
                 raise _Abort("hard deadline passed")

@@ -115,6 +115,10 @@ class Daemon:
 
                 self.house_inputs = HouseInputs(self.cfg.inputs, self.clock, self.store)
                 self.controller.on_sample = self.house_inputs.record
+            taken = self.store.recover_journal()  # what a truncated store lost, if anything
+            if taken:
+                _LOG.warning("the store had lost the owner's values of %s; taken back from %s",
+                             ", ".join(e.register for e in taken), self.store.owner_file)
             if not self.cfg.campaign.adaptive:  # the fixed plan (adaptive: none to keep)
                 self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)

@@ -15,12 +15,13 @@ from ..errors import InputError
 from ._times import _dt, _iso, _now
 from .campaign_tables import CampaignTables
 from .house_inputs import HouseInputTables
-from .owner_file import OWNER_FILE, remove_owner_values, write_owner_values
-from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
+from .journal import JournalTables
+from .owner_file import OWNER_FILE
+from .records import SAMPLE_COLUMNS, Command, Night, Sample, TriggerRequest
 from .schema import migrate
 
 
-class Store(CampaignTables, HouseInputTables):
+class Store(CampaignTables, HouseInputTables, JournalTables):
     """The impctl SQLite database (WAL mode, schema migrated on open).
 
     Parameters
@@ -200,72 +201,6 @@ class Store(CampaignTables, HouseInputTables):
             raise
         self._db.execute("COMMIT")
 
-    # -- restore journal -------------------------------------------------------------------
-    def journal_record(self, night_id: int | None, register: str, address: int,
-                       raw_value: int) -> JournalEntry:
-        """Record the owner's value of ``register`` before the first write.
-
-        If an unrestored entry for the register already exists (an earlier restore did not
-        complete), that entry is kept and returned: the owner's value is the one recorded
-        before impctl ever touched the register, never a value impctl wrote itself.
-
-        The pending journal is then copied to :attr:`owner_file`.
-
-        Raises
-        ------
-        OSError
-            The copy could not be written (the entry is in the database): write nothing.
-        """
-        with self._immediate():
-            row = self._db.execute(
-                "SELECT * FROM journal WHERE register = ? AND restored IS NULL",
-                (register,)).fetchone()
-            if row is None:
-                cur = self._db.execute(
-                    "INSERT INTO journal (night_id, register, address, raw_value, recorded)"
-                    " VALUES (?, ?, ?, ?, ?)",
-                    (night_id, register, address, raw_value, _iso(_now())))
-                row = self._db.execute("SELECT * FROM journal WHERE id = ?",
-                                       (cur.lastrowid,)).fetchone()
-        write_owner_values(self.owner_file, self.journal_pending())
-        return _journal(row)
-
-    def journal_pending(self) -> list[JournalEntry]:
-        """Entries whose restore has not been confirmed by read-back."""
-        rows = self._db.execute("SELECT * FROM journal WHERE restored IS NULL ORDER BY id")
-        return [_journal(r) for r in rows]
-
-    def journal_mark_restored(self, entry_id: int) -> None:
-        """Mark an entry restored (after the read-back matched)."""
-        self._db.execute("UPDATE journal SET restored = ?, outcome = 'restored' WHERE id = ?",
-                         (_iso(_now()), entry_id))
-        self._mirror_journal()
-
-    def journal_mark_owner_changed(self, entry_id: int, raw_value: int) -> None:
-        """Close an entry without restoring it: the owner set the register themselves
-        (to ``raw_value``) while impctl held it, and the owner's newer choice wins."""
-        self._db.execute(
-            "UPDATE journal SET restored = ?, outcome = ? WHERE id = ? AND restored IS NULL",
-            (_iso(_now()), f"owner changed it to raw {int(raw_value)}", entry_id))
-        self._mirror_journal()
-
-    def forget_owner_values(self) -> None:
-        """Remove :attr:`owner_file`: every entry is back on the heat pump, verified, even
-        if this store could not record it (a full disk; the next start closes the entries)."""
-        remove_owner_values(self.owner_file)
-
-    def _mirror_journal(self) -> None:
-        """Bring :attr:`owner_file` up to the pending journal; when it cannot be rewritten
-        it is removed, so it never holds a value that is no longer to be restored."""
-        pending = self.journal_pending()
-        try:
-            if pending:
-                write_owner_values(self.owner_file, pending)
-                return
-        except OSError:
-            pass
-        remove_owner_values(self.owner_file)
-
     # -- manual trigger requests -----------------------------------------------------------
     def add_request(self, kind: str, setpoint_c: float | None, when: str, *,
                     expires: datetime | None = None) -> int:
@@ -392,12 +327,6 @@ def _night(row: sqlite3.Row) -> Night:
         reasons=tuple(json.loads(row["reasons"])), started=_dt(row["started"]),
         ended=_dt(row["ended"]),
     )
-
-
-def _journal(row: sqlite3.Row) -> JournalEntry:
-    return JournalEntry(id=row["id"], night_id=row["night_id"], register=row["register"],
-                        address=row["address"], raw_value=row["raw_value"],
-                        recorded=_dt(row["recorded"]), restored=_dt(row["restored"]))
 
 
 def _request(row: sqlite3.Row) -> TriggerRequest:

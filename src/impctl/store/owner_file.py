@@ -6,7 +6,8 @@ So the pending journal entries are mirrored in a small file next to the store, w
 ``impctl restore`` uses when the store is unusable:
 
 * written whenever the journal changes (before the first write of a night, when an entry is
-  restored or closed), removed when nothing is pending;
+  restored or closed); when nothing is pending it says so (and when it cannot be rewritten,
+  on a full disk, it is removed: it never names a value that is no longer to be restored);
 * atomic: a temporary file in the same directory, fsync, rename over the old one, fsync of
   the directory — a power cut leaves the old file or the new one, never half of one;
 * checksummed: a SHA-256 over the canonical JSON of its content; a file whose checksum, format
@@ -26,7 +27,7 @@ from datetime import datetime
 from pathlib import Path
 
 from ..errors import InputError
-from ._times import _dt, _iso
+from ._times import _dt, _iso, _now
 from .records import JournalEntry
 
 #: The file's name in the state directory.
@@ -34,6 +35,7 @@ OWNER_FILE = "owner-values.json"
 _FORMAT = "impctl owner values"
 _VERSION = 1
 _FIELDS = ("id", "night_id", "register", "address", "raw_value", "recorded")
+_KEYS = {"format", "version", "updated", "entries", "sha256"}
 
 
 def _canonical(content: dict) -> bytes:
@@ -49,7 +51,7 @@ def write_owner_values(path: Path, entries: Sequence[JournalEntry]) -> None:
     OSError
         The file could not be written (the old one, if any, is left as it was).
     """
-    content = {"format": _FORMAT, "version": _VERSION, "entries": [
+    content = {"format": _FORMAT, "version": _VERSION, "updated": _iso(_now()), "entries": [
         {"id": e.id, "night_id": e.night_id, "register": e.register, "address": e.address,
          "raw_value": e.raw_value, "recorded": _iso(e.recorded)} for e in entries]}
     data = {**content, "sha256": hashlib.sha256(_canonical(content)).hexdigest()}
@@ -69,9 +71,17 @@ def write_owner_values(path: Path, entries: Sequence[JournalEntry]) -> None:
     _fsync_dir(path.parent)
 
 
+def clear_owner_values(path: Path) -> None:
+    """Nothing is pending any more: say so in the file, or remove it when it cannot be
+    rewritten (a full disk); never raises."""
+    try:
+        write_owner_values(path, [])
+    except OSError:
+        remove_owner_values(path)
+
+
 def remove_owner_values(path: Path) -> None:
-    """Remove the file (nothing pending any more); never raises. Removing needs no free
-    space, so it works on a full disk too."""
+    """Remove the file; never raises. Removing needs no free space (a full disk)."""
     try:
         os.unlink(path)
     except FileNotFoundError:
@@ -90,8 +100,8 @@ def _fsync_dir(directory: Path) -> None:
             os.close(fd)
 
 
-def read_owner_values(path: Path) -> list[JournalEntry]:
-    """The pending journal entries kept in ``path``, checked.
+def read_owner_values(path: Path) -> tuple[list[JournalEntry], datetime]:
+    """The pending journal entries kept in ``path``, checked, and when it was written.
 
     Raises
     ------
@@ -112,8 +122,14 @@ def read_owner_values(path: Path) -> list[JournalEntry]:
     content = {k: v for k, v in data.items() if k != "sha256"}
     if hashlib.sha256(_canonical(content)).hexdigest() != data.get("sha256"):
         raise InputError("checksum does not match its content; not used", path)
-    if data.get("version") != _VERSION or not isinstance(data.get("entries"), list):
+    if data.get("version") != _VERSION or set(data) != _KEYS:
         raise InputError(f"unsupported version {data.get('version')!r}", path)
+    try:
+        updated = _dt(data["updated"])
+    except (TypeError, ValueError):
+        raise InputError("malformed time", path, "updated") from None
+    if not isinstance(data["entries"], list) or updated is None or updated.tzinfo is None:
+        raise InputError("malformed content", path)
     out = []
     for i, item in enumerate(data["entries"]):
         if not isinstance(item, dict) or set(item) != set(_FIELDS):
@@ -126,13 +142,13 @@ def read_owner_values(path: Path) -> list[JournalEntry]:
         if not ok:
             raise InputError("malformed entry", path, f"entry {i + 1}")
         try:
-            recorded: datetime | None = _dt(item["recorded"])
+            recorded = _dt(item["recorded"])
         except ValueError:
             raise InputError("malformed time", path, f"entry {i + 1}") from None
         out.append(JournalEntry(id=item["id"], night_id=item["night_id"],
                                 register=item["register"], address=item["address"],
                                 raw_value=item["raw_value"], recorded=recorded, restored=None))
-    return out
+    return out, updated
 
 
 class OwnerValuesJournal:
@@ -140,7 +156,7 @@ class OwnerValuesJournal:
 
     It answers what :func:`impctl.controller.restore_all` asks of a store
     (``journal_pending``, ``journal_mark_restored``, ``add_event``); when every entry is
-    restored and verified, the file is removed.
+    restored and verified, the file says that nothing is pending.
 
     Parameters
     ----------
@@ -154,7 +170,7 @@ class OwnerValuesJournal:
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
-        self.entries = read_owner_values(self.path)
+        self.entries, self.updated = read_owner_values(self.path)
         self._restored: set[int] = set()
 
     def journal_pending(self) -> list[JournalEntry]:
@@ -165,11 +181,11 @@ class OwnerValuesJournal:
         """Note an entry restored (after its read-back); the last one removes the file."""
         self._restored.add(entry_id)
         if not self.journal_pending():
-            remove_owner_values(self.path)
+            clear_owner_values(self.path)
 
     def forget_owner_values(self) -> None:
-        """Remove the file (every entry restored and verified)."""
-        remove_owner_values(self.path)
+        """Every entry is restored and verified: the file says nothing is pending."""
+        clear_owner_values(self.path)
 
     def add_event(self, level: str, message: str) -> None:
         """Events have nowhere to go without the store (the log has them)."""

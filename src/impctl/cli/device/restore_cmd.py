@@ -48,8 +48,10 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
         return
     with store:
         try:
+            # Entries the copy holds and this database lost (truncated, or an empty file).
+            taken = store.recover_journal()
             pending = store.journal_pending()
-        except sqlite3.DatabaseError as exc:  # opens, but the journal's pages are gone
+        except sqlite3.Error as exc:  # opens, but the journal's pages are gone (or full)
             pending = None
             problem = f"{cfg.db_path}: not a usable impctl database: {exc}"
         if pending is not None:
@@ -64,11 +66,14 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
     if left:
         click.echo("still pending: " + ", ".join(e.register for e in left), err=True)
         sys.exit(1)
+    note = ""
+    if taken:
+        note = (f" ({', '.join(e.register for e in taken)} taken from {copy}: the store had "
+                "lost them)")
     if why:
-        click.echo(f"restored and verified; the store cannot record it ({', '.join(why)}): "
-                   "the next start or impctl restore closes the journal")
-        return
-    click.echo("restored and verified")
+        note += (f"; the store cannot record it ({', '.join(why)}): the next start or impctl "
+                 "restore closes the journal")
+    click.echo("restored and verified" + note)
 
 
 def _restore_from_copy(cfg, copy: Path, problem: str, timeout_s: float) -> None:
@@ -83,7 +88,8 @@ def _restore_from_copy(cfg, copy: Path, problem: str, timeout_s: float) -> None:
     except InputError as exc:
         _by_hand(problem, None, str(exc))
     if not journal.entries:
-        click.echo(f"nothing to restore ({problem}; {copy} lists nothing pending)")
+        click.echo(f"nothing to restore ({problem}; its copy {copy} lists nothing pending "
+                   f"since {journal.updated:%Y-%m-%d %H:%M} UTC)")
         return
     left = asyncio.run(_restore(cfg, journal, timeout_s))
     if left:
