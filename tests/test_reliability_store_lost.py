@@ -88,6 +88,11 @@ def test_impctl_restore_without_the_store(tmp_path, size):
             "loop1_setpoint": OWNER_SETPOINT_RAW, "loop1_mode": OWNER_MODE}
         assert (state / "owner-values.json").stat().st_mode & 0o777 == 0o640
         _truncate(state, size)
+        if size == 100:  # the store does not open: status says what is still to restore
+            status = run_cli("status", "--config", str(config))
+            assert status.returncode == 2 and status.stderr.count("\n") == 1, status
+            assert "lists loop1_setpoint, loop1_mode to restore (run impctl restore)" in \
+                status.stderr, status.stderr
         done = run_cli("restore", "--config", str(config))
         assert done.returncode == 0, (done.stdout, done.stderr)
         assert "Traceback" not in done.stderr, done.stderr
@@ -117,3 +122,39 @@ def test_a_copy_that_fails_its_checksum_is_never_used(tmp_path):
         assert "not a usable impctl database" in line and "checksum" in line, line
         assert "may still be off" in line and "2187" in line and "2042" in line, line
         assert owner_state(sim.port) == (225, 0)  # nothing written from a bad copy
+
+
+def test_the_copy_follows_the_journal_and_only_lost_entries_are_taken_back(tmp_path):
+    """Real SQLite and the real file: the copy lists exactly the pending entries; a copy
+    left behind by a crash between the database's commit and the file's rename (its entries
+    already closed in the store) is not taken back — it would restore over the owner's later
+    choice; an empty store (truncated to 0 bytes) takes the copy's entries back, pending."""
+    from impctl.store import Store
+    from impctl.store.owner_file import read_owner_values, write_owner_values
+
+    state = tmp_path / "state"
+    with Store(state / "impctl.db") as store:
+        a = store.journal_record(None, "loop1_setpoint", 2186, 210)
+        b = store.journal_record(None, "loop1_mode", 2041, 1)
+        entries, _ = read_owner_values(store.owner_file)
+        assert [(e.register, e.raw_value) for e in entries] == [
+            ("loop1_setpoint", 210), ("loop1_mode", 1)]
+        store.journal_mark_owner_changed(b.id, 0)  # the owner's own choice: never restored
+        assert [e.register for e in read_owner_values(store.owner_file)[0]] == [
+            "loop1_setpoint"]
+        stale = [a, b]
+        store.journal_mark_restored(a.id)
+        assert read_owner_values(store.owner_file)[0] == []
+        write_owner_values(store.owner_file, stale)  # as if the last rename never happened
+        assert store.recover_journal() == []
+        assert store.journal_pending() == []
+        assert read_owner_values(store.owner_file)[0] == []  # the stale copy is corrected
+        write_owner_values(store.owner_file, stale)
+    (state / "impctl.db").write_bytes(b"")  # the store lost everything
+    with Store(state / "impctl.db") as store:
+        taken = store.recover_journal()
+        assert [(e.register, e.raw_value) for e in taken] == [
+            ("loop1_setpoint", 210), ("loop1_mode", 1)]
+        assert [e.register for e in store.journal_pending()] == ["loop1_setpoint", "loop1_mode"]
+        assert store.recover_journal() == []  # taken once
+        assert store.integrity_check() == "ok"

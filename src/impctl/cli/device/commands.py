@@ -190,7 +190,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             lock.heartbeat()
             await asyncio.sleep(HEARTBEAT_S)
 
-    from ...controller import NightController, NightRequest
+    from ...controller import NightController, NightRefused, NightRequest
     from ...daemon.configured import clock_from_config, open_client, policy_from_config
     from ...daemon.schedule import next_act_time, window_after_act
     from ...store import Store
@@ -216,6 +216,9 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             try:
                 night = await ctl.run(NightRequest(kind, sp, start, end,
                                                    cfg.night.comfort_band_k, source="trigger"))
+            except NightRefused as exc:  # not even created: the store cannot record
+                click.echo(f"impctl: night not started: {exc}", err=True)
+                return 1
             finally:
                 beat.cancel()
         finally:
