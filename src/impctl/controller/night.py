@@ -176,9 +176,9 @@ class NightController:
         self._incidents.close(self.clock.now())
         try:
             self.store.set_night_state(night_id, "restoring" if wrote else state)
-        except sqlite3.Error as exc:  # the restore below matters more than the bookkeeping
+        except Exception as exc:  # noqa: BLE001 - the restore below matters more
             log.error("cannot record the night's state (%s); restoring the heat pump anyway",
-                      sqlite_problem(exc))
+                      sqlite_problem(exc), exc_info=not isinstance(exc, sqlite3.Error))
         if self.store.journal_pending():
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
