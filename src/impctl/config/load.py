@@ -24,6 +24,7 @@ from .sections import (
     Config,
     FitConfig,
     NightConfig,
+    RecordConfig,
     TargetHalfwidth,
     _window,
 )
@@ -41,7 +42,7 @@ class ConfigError(InputError):
 
 
 _SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig,
-             "fit": FitConfig}
+             "fit": FitConfig, "record": RecordConfig}
 #: Sub-tables inside a section: key → its dataclass.
 _SUBTABLES = {"target_rel_halfwidth": TargetHalfwidth}
 #: Operational bounds. The link-lost limit: a house with the heating off may lose ~1 K/h, so
@@ -244,6 +245,7 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     if camp.constrained_nights < 0 or camp.normal_nights_per_setpoint < 0:
         bad("campaign.constrained_nights", "night counts must be >= 0")
     _check_adaptive(camp, bad)
+    _check_record(cfg, bad)
     from .bounds import bound_problems  # the upper bounds, each with its reason
 
     bound_problems(cfg, window, bad)
@@ -281,6 +283,28 @@ def _check_adaptive(camp: CampaignConfig, bad) -> None:
     if camp.mode == "adaptive" and not camp.normal_setpoints_c:
         bad("campaign.normal_setpoints_c", "the adaptive campaign needs at least one normal "
                                            "setpoint to choose from")
+
+
+#: ``[record] interval_s`` [s]: a row of at least a minute, at most an hour (the house's heat
+#: store moves over hours; an hour's mean still shows a day's course). A divisor of an hour, so
+#: rows start on the hour and at local noon, where an owner record starts.
+RECORD_INTERVAL_S = (60.0, 3600.0)
+#: ``[record] keep_days``: at least a day; at most ten years (a season is ~200 days; the store
+#: grows by about 8.5 MB per 100 days at the defaults, docs/explanation/benchmarks.md).
+RECORD_KEEP_DAYS = (1, 3660)
+
+
+def _check_record(cfg: Config, bad) -> None:
+    rec = cfg.record
+    lo, hi = RECORD_INTERVAL_S
+    if not lo <= rec.interval_s <= hi or 3600.0 % rec.interval_s:
+        bad("record.interval_s", f"must lie in {lo:g}–{hi:g} s and divide an hour (60, 300, "
+            f"600, 900, 1800, 3600 …), got {rec.interval_s:g}")
+    if rec.sample_interval_s is not None and not 5 <= rec.sample_interval_s <= 900:
+        bad("record.sample_interval_s", "must lie in 5–900 s")
+    k_lo, k_hi = RECORD_KEEP_DAYS
+    if not k_lo <= rec.keep_days <= k_hi:
+        bad("record.keep_days", f"must lie in {k_lo}–{k_hi} days, got {rec.keep_days}")
 
 
 def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:

@@ -108,6 +108,27 @@ class FitConfig:
 
 
 @dataclass(frozen=True)
+class RecordConfig:
+    """``[record]``: the house recorded read-only around the clock while no IMP night runs.
+
+    A snapshot every ``sample_interval_s`` (absent: ``night.sample_interval_s``), averaged
+    into rows of ``interval_s``; a column with fewer than ``night.min_coverage`` of a row's
+    snapshots is missing. One ``owner`` record per local day (12:00 to 12:00); records older
+    than ``keep_days`` are deleted once a day. Nothing is ever written to the heat pump.
+    """
+
+    enabled: bool = True
+    interval_s: float = 300.0
+    keep_days: int = 400
+    sample_interval_s: float | None = None
+
+    def snapshot_interval_s(self, night: NightConfig) -> float:
+        """Seconds between two snapshots: ``sample_interval_s``, or the night's."""
+        return night.sample_interval_s if self.sample_interval_s is None else (
+            self.sample_interval_s)
+
+
+@dataclass(frozen=True)
 class ClockConfig:
     """Simulated time for a dry run: ``speed`` × real time from ``epoch``.
 
@@ -135,6 +156,7 @@ class Config:
     night: NightConfig = field(default_factory=NightConfig)
     campaign: CampaignConfig = field(default_factory=CampaignConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    record: RecordConfig = field(default_factory=RecordConfig)
     fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     inputs: InputsConfig | None = None  # [inputs]: the house's own sensors over MQTT

@@ -17,11 +17,12 @@ from .campaign_tables import CampaignTables
 from .house_inputs import HouseInputTables
 from .journal import JournalTables
 from .owner_file import OWNER_FILE
-from .records import SAMPLE_COLUMNS, Command, Night, Sample, TriggerRequest
+from .owner_records import OwnerRecordTables
+from .records import IMP_KINDS, SAMPLE_COLUMNS, Command, Night, Sample, TriggerRequest
 from .schema import migrate
 
 
-class Store(CampaignTables, HouseInputTables, JournalTables):
+class Store(CampaignTables, HouseInputTables, JournalTables, OwnerRecordTables):
     """The impctl SQLite database (WAL mode, schema migrated on open).
 
     Parameters
@@ -145,9 +146,13 @@ class Store(CampaignTables, HouseInputTables, JournalTables):
         return None if row is None else _night(row)
 
     def nights(self, *, states: Iterable[str] | None = None, valid: bool | None = None,
-               ids: Iterable[int] | None = None) -> list[Night]:
-        """Nights in id order, optionally filtered by state, validity or id."""
-        sql, args = "SELECT * FROM nights WHERE 1", []
+               ids: Iterable[int] | None = None,
+               kinds: Iterable[str] = IMP_KINDS) -> list[Night]:
+        """Nights in id order, optionally filtered by state, validity or id; the IMP nights
+        only unless ``kinds`` says otherwise (the owner records: ``kinds=("owner",)``)."""
+        kinds = list(kinds)
+        sql = f"SELECT * FROM nights WHERE kind IN ({','.join('?' * len(kinds))})"
+        args: list = kinds
         if states is not None:
             states = list(states)
             sql += f" AND state IN ({','.join('?' * len(states))})"

@@ -107,6 +107,7 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
 
     from ...campaign.design import Protocol, predict
     from ...imp import read_nights
+    from ...imp.night import split_owner
     from ...store.export import refuse_database
     from .fit_cmd import _write_json
 
@@ -117,7 +118,9 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
     refuse_database(json_path, "--json")
     refuse_large_file(nights_path, MAX_FILE_MB)
     result = _read_fit(fit_path)
-    nights = read_nights(nights_path, tz)
+    nights, owner_note = split_owner(read_nights(nights_path, tz))
+    if owner_note is not None:
+        click.echo(owner_note, err=True)
     steps = np.concatenate([np.diff(np.asarray(n.time_s, float)) for n in nights]
                            ) if nights else np.array([])
     steps = steps[steps > 0]

@@ -277,16 +277,21 @@ def nights_command(config_path: Path, as_json: bool) -> None:
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv",
               show_default=True)
 @click.option("--nights", "night_ids", default=None,
-              help="Comma-separated night ids (default: all valid nights).")
+              help="Comma-separated night ids (default: all valid nights and every owner "
+                   "record).")
 @click.option("--all", "include_invalid", is_flag=True, help="Include nights not valid.")
+@click.option("--no-owner", "no_owner", is_flag=True,
+              help="Leave out the owner records (the house recorded between IMP nights).")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
               help="NIGHTS file to write (timestamp,t_air,t_out,q_hc,setpoint,heating,night,"
                    "kind); its directory must exist.")
 @click.option("--force", is_flag=True,
               help="Overwrite an existing file (never a database: the store is refused).")
 def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids: str | None,
-                   include_invalid: bool, out_path: Path, force: bool) -> None:
-    """Write stored nights in the measured-data format of ``impctl fit``.
+                   include_invalid: bool, no_owner: bool, out_path: Path, force: bool) -> None:
+    """Write stored nights in the measured-data format of ``impctl fit``: the IMP nights and
+    the owner records (kind owner, labelled where they are not the owner's ordinary night),
+    in time order.
 
     Never writes onto the store or another database, into a directory that does not exist,
     or onto an existing file without --force; unknown night ids or nothing to export give
@@ -306,5 +311,5 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
                              f"got {night_ids!r}", place="--nights") from None
     with Store(db_path, create=False) as store:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
-                          force=force)
+                          force=force, owner=not no_owner)
     click.echo(f"wrote {n} samples to {out_path}")

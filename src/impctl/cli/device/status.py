@@ -87,6 +87,9 @@ def collect_status(cfg) -> dict:
         from .inputs_status import inputs_status
 
         out["inputs"] = inputs_status(cfg, store)  # [inputs]: the house's own sensors
+        from .record_status import record_status
+
+        out["record"] = record_status(cfg, store, info)  # [record]: the owner recording
     out["heatpump"] = read_health(cfg.state_dir)  # generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.configured import clock_from_config
@@ -309,6 +312,9 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     from .inputs_status import inputs_lines
 
     lines.extend(inputs_lines(st.get("inputs"), zone))
+    from .record_status import record_lines
+
+    lines.extend(record_lines(st.get("record"), zone))
     link = next((e for e in st["events"] if "link" in e["message"]), None)
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
