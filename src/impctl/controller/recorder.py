@@ -36,6 +36,9 @@ from .record_rows import RowBuilder, row_start
 from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger("impctl.record")
+#: Closer than this [simulated s], an instant counts as come (ten times the timing module's
+#: reach tolerance).
+_SOON_S = 0.01
 
 
 class OwnerRecorder:
@@ -79,9 +82,12 @@ class OwnerRecorder:
         """The next snapshot instant on the grid of the snapshot interval, after now."""
         now = self.clock.now_s()
         step = self.sample_interval_s
-        # A clock a rounding error short of a grid instant is at it (POSIX seconds as floats
-        # carry ~0.2 µs): else the next instant would be that same one, for ever.
-        nxt = (math.floor(now / step + 1e-6) + 1) * step
+        nxt = (math.floor(now / step) + 1) * step
+        # An instant closer than a wait can be (the clock a rounding error short of it, POSIX
+        # seconds as floats carry ~0.2 µs) counts as come: the next one, else this instant
+        # would be "reached" without waiting, for ever.
+        while nxt - now <= _SOON_S:
+            nxt += step
         return datetime.fromtimestamp(nxt, UTC)
 
     async def sleep_until(self, when: datetime, *wake: asyncio.Event) -> None:
