@@ -115,3 +115,68 @@ def test_owner_rows_in_order_with_their_inputs_and_retention(tmp_path):
         assert store.integrity_check() == "ok"
         # owner rows are committed without fsync; the store's own setting stays FULL
         assert store._db.execute("PRAGMA synchronous").fetchone()[0] == 2
+
+
+def test_export_writes_owner_records_in_time_order_with_their_labels(tmp_path):
+    """``impctl export``: the valid IMP nights and every owner record, sorted by time; an
+    owner row's own setpoint, heating and hot-water share; ``--no-owner`` leaves them out;
+    the file reads back."""
+    import subprocess
+    import sys
+
+    import pandas as pd
+
+    from impctl.imp.nights_csv import read_nights
+
+    db = tmp_path / "impctl.db"
+    night_start = T0 + timedelta(hours=10)  # 22:00 local, between the two records' rows
+    with Store(db) as store:
+        for day, labels in ((1, ["owner changed the setpoint: 2187 21.0 → 19.0 °C at 23:05"]),
+                            (0, [])):
+            start = T0 + timedelta(days=day)
+            rid = store.open_owner_record(start, start + timedelta(days=1))
+            for i in range(6):
+                store.add_owner_row(Sample(
+                    rid, start + timedelta(minutes=5 * i), t_air_c=21.0, t_out_c=-1.0,
+                    q_hc_w=2000.0 + i, p_el_w=600.0, t_supply_c=35.0, t_return_c=30.0,
+                    t_flow_target_c=36.0, setpoint_c=21.0 if i < 3 else 19.0,
+                    loop_mode=0 if i == 5 else 1, system_on=1, dhw_share=0.4 if i == 2 else 0.0,
+                    defrost=False, snapshots=5))
+            # an unread row: missing values are not exported as numbers
+            store.add_owner_row(Sample(rid, start + timedelta(minutes=30), snapshots=1))
+            store.close_owner_record(rid, labels, 21.0, start, start + timedelta(minutes=35))
+        nid = store.create_night("normal", 22.0, night_start, night_start + timedelta(hours=7))
+        for i in range(4):
+            store.add_sample(Sample(nid, night_start + timedelta(minutes=5 * i), t_air_c=22.0,
+                                    t_out_c=-1.0, q_hc_w=2500.0, t_supply_c=38.0,
+                                    t_return_c=32.0, t_flow_target_c=38.5, p_el_w=700.0,
+                                    dhw_active=i == 1, defrost=False))
+        store.end_night(nid, "done", night_start + timedelta(hours=7), True, ["window ended"])
+
+    def export(*extra: str) -> pd.DataFrame:
+        out = tmp_path / f"n{len(extra)}.csv"
+        res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()",
+                              "export", "--db", str(db), "--out", str(out), *extra],
+                             capture_output=True, text=True, timeout=60)
+        assert res.returncode == 0, res.stderr
+        return pd.read_csv(out, keep_default_na=False)
+
+    df = export()
+    for col in ("p_el_w", "t_flow_c", "t_return_c", "t_flow_target_c", "dhw", "label"):
+        assert col in df.columns
+    assert list(df["kind"]) == ["owner"] * 6 + ["normal"] * 4 + ["owner"] * 6
+    stamps = pd.to_datetime(df["timestamp"], format="ISO8601")
+    assert stamps.is_monotonic_increasing
+    first = df[df["kind"] == "owner"].iloc[:6]
+    assert list(first["setpoint"]) == [21.0] * 3 + [19.0] * 3
+    assert list(first["heating"]) == [1] * 5 + [0]
+    assert list(first["dhw"]) == [0.0, 0.0, 0.4, 0.0, 0.0, 0.0]
+    assert set(first["label"]) == {""}
+    assert set(df[df["kind"] == "owner"].iloc[6:]["label"]) == {
+        "owner changed the setpoint: 2187 21.0 → 19.0 °C at 23:05"}
+    imp = df[df["kind"] == "normal"]
+    assert list(imp["dhw"]) == [0, 1, 0, 0] and set(imp["t_flow_target_c"]) == {38.5}
+    assert set(imp["setpoint"]) == {22.0} and set(imp["label"]) == {""}
+    nights = read_nights(tmp_path / "n0.csv", "Europe/Ljubljana")
+    assert [n.kind for n in nights] == ["owner", "normal", "owner"]
+    assert set(export("--no-owner")["kind"]) == {"normal"}

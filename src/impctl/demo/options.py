@@ -46,9 +46,10 @@ class DemoOptions:
     adaptive: bool = False  # the adaptive campaign (issue 18) instead of the fixed counts
     # days of the owner's own heating recorded before the campaign and after it (the daemon's
     # [record]); the owner's snapshots and rows at OWNER_SAMPLE_S, coarser than a gateway's
-    # 60 s: simulating a day of the realistic plant costs ~0.5 s however it is sampled
-    owner_days_before: float = 4.0
-    owner_days_after: float = 7.0
+    # 60 s. Each simulated day costs wall time however it is sampled (the realistic plant's
+    # steps): a few days, not weeks, keep the demo short (--owner-days asks for more)
+    owner_days_before: int = 2
+    owner_days_after: int = 3
     max_nights: int = 5  # adaptive: nights run at most
     target_rel: tuple[float, float] = (0.05, 0.08)  # adaptive: HLC, τ 95 % half-width / estimate
 

@@ -36,6 +36,10 @@ def _nights(text: str) -> tuple[int, int]:
               help="--adaptive: nights run at most.")
 @click.option("--target", default="0.05,0.08", show_default=True,
               help="--adaptive: HLC,τ 95 % interval half-widths relative to the estimates.")
+@click.option("--owner-days", "owner_days", default="2+3", show_default=True,
+              help="Days of the owner's own heating the daemon records (read-only) before "
+                   "the campaign + after it; exported with the nights as kind owner. Each "
+                   "simulated day costs about a second of wall time.")
 @click.option("--speed", type=float, default=None,
               help="Simulated seconds per second of the event loop's virtual time: how the "
                    "daemon's real-time pauses (Modbus timeouts, retry delays) scale into "
@@ -57,8 +61,8 @@ def _nights(text: str) -> tuple[int, int]:
               help="realistic: air/furniture capacity, radiators, a cycling weather-compensated "
                    "heat pump, gains, sensors (the house file's [plant.*] tables); iso: the "
                    "ideal 5R1C the fit assumes.")
-def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, seed, model_dir,
-                 households, plant) -> None:
+def demo_command(house_path, nights, adaptive, max_nights, target, owner_days, speed, out,
+                 seed, model_dir, households, plant) -> None:
     """Run the whole product against a simulated heat pump and write the report.
 
     Simulator (Modbus TCP on loopback) → the daemon's IMP campaign on simulated time →
@@ -76,14 +80,35 @@ def demo_command(house_path, nights, adaptive, max_nights, target, speed, out, s
         raise InputError("is a fixed campaign; --adaptive chooses its nights (use --max-nights)",
                          place="--nights")
     c, n = _nights(nights or "2+6")
+    before, after = _owner_days(owner_days)
     options = DemoOptions(out=out, house_path=house_path, constrained_nights=c,
                           normal_nights=n, speed=speed, seed=seed, model_dir=model_dir,
                           households=households, plant=plant, adaptive=adaptive,
-                          max_nights=max_nights, target_rel=_target(target))
+                          max_nights=max_nights, target_rel=_target(target),
+                          owner_days_before=before, owner_days_after=after)
     try:
         run_demo(options, echo=click.echo)
     except DemoError as exc:  # one line and exit status 1, never a traceback
         raise click.ClickException(f"demo: {exc}") from None
+
+
+#: Owner days before and after the campaign, each at most (the demo's weather covers about
+#: six days before its start and a month after).
+OWNER_DAYS_MAX = (6, 21)
+
+
+def _owner_days(text: str) -> tuple[int, int]:
+    try:
+        before, after = (parse_int(x) for x in text.split("+"))
+    except ValueError:
+        raise InputError(non_ascii_problem(text)
+                         or f"expected BEFORE+AFTER such as 2+3, got {text!r}",
+                         place="--owner-days") from None
+    if not (0 <= before <= OWNER_DAYS_MAX[0] and 0 <= after <= OWNER_DAYS_MAX[1]):
+        raise InputError(f"days before must lie in 0–{OWNER_DAYS_MAX[0]}, after in "
+                         f"0–{OWNER_DAYS_MAX[1]} (the demo's weather), got {text!r}",
+                         place="--owner-days")
+    return before, after
 
 
 def _target(text: str) -> tuple[float, float]:
