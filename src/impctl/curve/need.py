@@ -18,9 +18,11 @@ night gain.
 water θ_set + (Q/K)^(1/n); the flow runs Q/(2ṁc) above it.
 
 **Upper bound.** :data:`DRAWS` draws of HLC (log-normal from its interval), G (its mean over
-the blocks under that HLC, ± its standard error over the nights), ln K and n (their
-posterior) give the flow needed at each outdoor temperature; the curve's bound is their
-:data:`CONFIDENCE` quantile, and the stated margin is added on top.
+the blocks under that HLC, spread as much as it varies from one night to the next: the room
+must stay warm on the night the occupants, the appliances and the storage give least, not on
+the average one), ln K and n (their posterior) give the flow needed at each outdoor
+temperature; the curve's bound is their :data:`CONFIDENCE` quantile, and the stated margin is
+added on top.
 
 **The curve.** A heat pump runs a line through two points (Kronoterm: the flows at −15 and
 +15 °C outdoor). The bound bows out on both sides of the nights' own temperatures (a steeper
@@ -63,8 +65,11 @@ HLC_SD_ASSUMED = 0.15
 SIGNATURE_NIGHTS = 6
 #: Narrowest range of indoor–outdoor difference [K] a signature is read over.
 SIGNATURE_RANGE_K = 5.0
-#: Floor of the standard error of G [W] (the heat meter's noise over a few nights).
-GAIN_SE_FLOOR_W = 30.0
+#: Floor of G's night-to-night SD [W] (the heat meter's noise over a night).
+GAIN_SD_FLOOR_W = 30.0
+#: G's night-to-night SD with a single night to read it from [W] (assumed: the fit's prior SD
+#: of the night gain, :mod:`impctl.imp.gain`).
+GAIN_SD_ONE_NIGHT_W = 87.0
 
 
 class NeedUnknown(ValueError):
@@ -79,7 +84,8 @@ class HeatNeed:
     ----------
     hlc_w_per_k, hlc_low, hlc_high : the fit's HLC and its 95 % interval [W/K].
     hlc_source : "fit" or "nights" (an energy signature of the blocks).
-    gain_w, gain_se_w : G and its standard error [W].
+    gain_w, gain_sd_w : G and how much it varies from night to night (the SD of one night's
+        G about the mean, the mean's own uncertainty included) [W].
     gain_source : "measured" (the night blocks) or "fit" (the fit's night gain).
     anchor_t_out_c : mean outdoor temperature of the blocks G was read from [°C] (or None).
     blocks, nights : the night blocks and nights used.
@@ -90,7 +96,7 @@ class HeatNeed:
     hlc_high: float
     hlc_source: str
     gain_w: float
-    gain_se_w: float
+    gain_sd_w: float
     gain_source: str
     anchor_t_out_c: float | None
     blocks: int
@@ -116,14 +122,14 @@ class HeatNeed:
             gain = hlc * float(np.mean(self._x)) - float(np.mean(self._q))
         else:
             gain = np.full(n, self.gain_w)
-        return hlc, gain + self.gain_se_w * rng.standard_normal(n)
+        return hlc, gain + self.gain_sd_w * rng.standard_normal(n)
 
     def to_dict(self) -> dict:
         """The JSON block ``heat_need``."""
         return {
             "hlc_w_per_k": {"value": self.hlc_w_per_k, "low": self.hlc_low,
                             "high": self.hlc_high, "source": self.hlc_source},
-            "gain_w": {"value": self.gain_w, "se": self.gain_se_w, "source": self.gain_source},
+            "gain_w": {"value": self.gain_w, "sd": self.gain_sd_w, "source": self.gain_source},
             "anchor_t_out_c": self.anchor_t_out_c, "blocks": self.blocks, "nights": self.nights,
         }
 
@@ -169,10 +175,11 @@ def heat_need(blocks: pd.DataFrame, fit: dict | None) -> HeatNeed:
     if len(night):
         g_blocks = value * x - q
         per_night = pd.Series(g_blocks).groupby(groups).mean().to_numpy()
-        se = (float(np.std(per_night, ddof=1) / math.sqrt(len(per_night)))
-              if len(per_night) > 1 else float(np.std(g_blocks)))
+        m = len(per_night)
+        sd = (float(np.std(per_night, ddof=1)) * math.sqrt(1.0 + 1.0 / m) if m > 1
+              else GAIN_SD_ONE_NIGHT_W)
         return HeatNeed(value, low, high, source, float(np.mean(g_blocks)),
-                        max(se, GAIN_SE_FLOOR_W), "measured",
+                        max(sd, GAIN_SD_FLOOR_W), "measured",
                         float(night["t_out_c"].mean()), int(len(night)),
                         int(len(set(groups))), x, q)
     gain = (fit or {}).get("fit", {}).get("night_gain", {})

@@ -151,7 +151,7 @@ class CurveResult:
         n = self.need
         out.append(f"  heat loss:                   {n.hlc_w_per_k:.0f} W/K "
                    f"({n.hlc_low:.0f}–{n.hlc_high:.0f}, {n.hlc_source}); other heat "
-                   f"{n.gain_w:.0f} ± {n.gain_se_w:.0f} W ({n.gain_source})")
+                   f"{n.gain_w:.0f} W, ± {n.gain_sd_w:.0f} W from night to night ({n.gain_source})")
         c = self.cop
         out.append(f"  efficiency:                  {c.eta:.2f} of the ideal (Carnot) "
                    + ("— ASSUMED, the nights carry no electrical power" if c.assumed else

@@ -19,6 +19,7 @@ from ..clock import VirtualClock
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from .adaptive import campaign_state
+from .curve_state import curve_path, load_curve, suggested_flow_c
 from .running import RunningDaemon
 from .schedule import daytime_reason, request_expiry
 from .waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
@@ -51,6 +52,7 @@ class MqttLink:
         self._next_at: datetime | None = None
         self._next_checked = -1e9
         self._next_key: tuple = ()
+        self._curve: tuple[float | None, dict | None] = (None, None)  # (mtime, result)
 
     # -- StateSource -------------------------------------------------------------------------
     def identity(self) -> DeviceIdentity:
@@ -87,6 +89,7 @@ class MqttLink:
             state.energy_el_kwh = snap.energy_electrical_kwh.value
             state.energy_heat_kwh = snap.energy_thermal_kwh.value
         state.next_night_at = self._next_night((state.night_state, state.night_id))
+        state.suggested_flow_c = suggested_flow_c(self.last_curve(), state.t_out_c)
         state.link_ok = bool(ok and d._connected.is_set())
         camp = campaign_state(store, d.cfg)
         state.campaign_mode, state.campaign_status = camp.mode, camp.status
@@ -150,6 +153,17 @@ class MqttLink:
 
     def last_fit(self):
         return self.daemon.store.last_fit()
+
+    def last_curve(self) -> dict | None:
+        """The kept heating curve (read again when its file changed)."""
+        try:
+            mtime = curve_path(self.daemon.cfg.state_dir).stat().st_mtime
+        except OSError:
+            mtime = None
+        if mtime != self._curve[0]:
+            self._curve = (mtime, None if mtime is None else load_curve(
+                self.daemon.cfg.state_dir))
+        return self._curve[1]
 
     def submit(self, command: Command) -> str:
         store = self.daemon.store
