@@ -84,6 +84,9 @@ class NightController:
         self._abort_reason: str | None = None  # a household's stop request (abort())
         self._aborted = asyncio.Event()
         self._running = False
+        #: Registers a night's restore leaves as they are (their journal entries stay
+        #: pending): the heating-curve points while the owner has impctl's curve set.
+        self.keep_registers: frozenset[str] = frozenset()
 
     def abort(self, reason: str) -> bool:
         """End the running night now and restore, leaving the process running (the
@@ -172,13 +175,14 @@ class NightController:
             self.store.set_night_state(night_id, "restoring" if wrote else state)
         except Exception:  # noqa: BLE001 - the restore below matters more than the bookkeeping
             log.exception("cannot record the night's state; restoring the heat pump anyway")
-        if self.store.journal_pending():
+        if [e for e in self.store.journal_pending() if e.register not in self.keep_registers]:
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
             left = await asyncio.shield(restore_all(
                 self.client, self.store, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
-                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
+                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
+                keep=self.keep_registers))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
         reasons += self._incidents.notes

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
+from collections.abc import Collection
 
 from ..clock import VirtualClock
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
@@ -36,8 +37,10 @@ async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntr
 
 
 async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClock,
-                      timeout_s: float, retry_s: float = 5.0) -> list[JournalEntry]:
-    """Restore every pending journal entry, retrying while the link is down.
+                      timeout_s: float, retry_s: float = 5.0,
+                      keep: Collection[str] = ()) -> list[JournalEntry]:
+    """Restore every pending journal entry (but those of the registers in ``keep``: a heating
+    curve the owner asked for stays when a night ends), retrying while the link is down.
 
     Parameters
     ----------
@@ -46,6 +49,7 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
     clock : for the simulated-time timeout
     timeout_s : give up after this many (simulated) seconds; entries stay pending
     retry_s : pause between attempts [wall s]
+    keep : register names whose pending entries are left pending
 
     Returns
     -------
@@ -55,7 +59,8 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
     reported = False
     unrecorded: set[int] = set()  # restored on the heat pump, the store could not say so
     while True:
-        pending = [e for e in store.journal_pending() if e.id not in unrecorded]
+        pending = [e for e in store.journal_pending()
+                   if e.id not in unrecorded and e.register not in keep]
         if not pending:
             return []
         for entry in pending:
@@ -75,12 +80,13 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
                 if isinstance(exc, ModbusLinkError):
                     break  # the link is down: the other entries cannot get through either
                 # Else try the other entries anyway: heating back on matters most.
-        if not [e for e in store.journal_pending() if e.id not in unrecorded]:
+        if not [e for e in store.journal_pending()
+                if e.id not in unrecorded and e.register not in keep]:
             if reported:
                 _LOG.info("restore completed after the heat pump answered again")
             return []
         if clock.now_s() >= deadline:
-            left = store.journal_pending()
+            left = [e for e in store.journal_pending() if e.register not in keep]
             _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
                        ", ".join(e.register for e in left))
             return left

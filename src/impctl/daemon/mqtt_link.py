@@ -241,7 +241,7 @@ async def run_commands(daemon: RunningDaemon) -> None:
         if daemon.controller is not None and daemon.controller.abort(reason):
             _LOG.warning("abort requested (%s): ending the night and restoring", cmd.source)
             store.add_event("warning", f"abort requested ({cmd.source}): night ended")
-        elif store.journal_pending():
+        elif [e for e in store.journal_pending() if e.register not in _kept(daemon)]:
             # No night runs but the owner's settings are not back: restore, as
             # `impctl restore` does.
             _LOG.warning("abort requested (%s): restoring the owner's settings", cmd.source)
@@ -259,10 +259,18 @@ async def run_commands(daemon: RunningDaemon) -> None:
             daemon.mqtt.wake()
 
 
+def _kept(daemon: RunningDaemon) -> frozenset[str]:
+    """The registers a restore leaves: the heating curve's while the owner has it set."""
+    from .curve_watch import KEEP
+
+    curve = getattr(daemon, "curve", None)
+    return KEEP if curve is not None and curve.held is not None else frozenset()
+
+
 async def _restore(daemon: RunningDaemon) -> None:
     async with daemon._heat_pump_lock:
         await restore_all(daemon.client, daemon.store, clock=VirtualClock.real(),
-                          timeout_s=60.0, retry_s=1.0)
+                          timeout_s=60.0, retry_s=1.0, keep=_kept(daemon))
 
 
 def skip_tonight(daemon: RunningDaemon) -> bool:

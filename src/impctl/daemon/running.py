@@ -36,3 +36,5 @@ class RunningDaemon(Protocol):
     _heat_pump_lock: asyncio.Lock
     #: the store's one-process lock (``daemon.lock``), None before it is taken
     _lock: DaemonLock | None
+    #: the running night's task (None or done between nights)
+    _night_task: asyncio.Task | None
