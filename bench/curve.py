@@ -133,6 +133,10 @@ def main() -> None:
     ap.add_argument("--model-dir", default=None)
     ap.add_argument("--cache", type=Path, default=Path("out/bench-curve"))
     ap.add_argument("--refit", action="store_true")
+    ap.add_argument("--oracle", action="store_true",
+                    help="also the winter with the true house's own curve (its true heat "
+                         "loss, night gain and emitter, as a straight line, no margin) where it "
+                         "lowers the installer's: what perfect knowledge would save")
     ap.add_argument("--verbose", action="store_true",
                     help="one line per household whose curve impctl changed")
     args = ap.parse_args()
@@ -179,6 +183,37 @@ def main() -> None:
     print(f"winters simulated ({time.perf_counter() - t_start:.0f} s)\n", flush=True)
     report(args, command, params, base, ours, changed, central0, rec0, run0, truth0, inst0,
            timing)
+    if args.oracle:
+        ofa, ofb = oracle_curves(core, learn.night_gain_w, inst0)
+        known = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
+                         dt_s=args.dt, curve=(ofa, ofb))
+        print("\n=== the true house's own curve (perfect knowledge, no margin) ===")
+        report(args, command, params, base, known, np.isfinite(ofa), central0, rec0, run0,
+               truth0, inst0, timing)
+
+
+def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Each house's own curve from its truth (the need on the grid as both the central and the
+    bound, no margin, the same straight-line rule over the assumed winter), where it is at
+    least 0.5 K below the installer's at 0 °C; NaN elsewhere."""
+    from impctl.curve.need import GRID_T_OUT_C, NeedCurve, recommend
+    from impctl.curve.savings import ASSUMED_DAYS
+    from impctl.weather import winter_weather
+
+    climate = winter_weather(days=ASSUMED_DAYS, step_s=3600, seed=0).to_numpy()
+    idx = np.clip(np.rint((climate - GRID_T_OUT_C[0]) / 0.5), 0, len(GRID_T_OUT_C) - 1)
+    fa, fb = np.full(core.n, np.nan), np.full(core.n, np.nan)
+    need = np.array([true_flow_c(core, night_gain_w, float(t)) for t in GRID_T_OUT_C])
+    for j in range(core.n):
+        q = np.maximum(core.hlc[j] * (SETPOINT_C - climate) - night_gain_w[j], 0.0)
+        weights = np.bincount(idx.astype(int), weights=q, minlength=len(GRID_T_OUT_C))
+        curve = NeedCurve(GRID_T_OUT_C, need[:, j], need[:, j], q)
+        line, _ = recommend(curve, 0.0, weights, SETPOINT_C, float(np.quantile(climate, 0.01)),
+                            0.0)
+        if line.at(0.0) <= inst0[j] - 0.5 and max(line.flow_a_c, line.flow_b_c) <= 55.0:
+            fa[j], fb[j] = line.flow_a_c, line.flow_b_c
+    return fa, fb
 
 
 def report(args, command, params, base, ours, changed, central0, rec0, run0, truth0, inst0,

@@ -289,3 +289,19 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def modbus_write(port: int, ma: int, raw: int, unit: int = 20) -> None:
+    """Write documented register ``ma`` as someone else would (the owner's app, a plain
+    pymodbus client)."""
+    from pymodbus.client import ModbusTcpClient
+
+    client = ModbusTcpClient("127.0.0.1", port=port, timeout=2)
+    try:
+        if not client.connect():
+            raise AssertionError(f"cannot connect to the simulator on {port}")
+        rr = client.write_register(ma - 1, raw & 0xFFFF, device_id=unit)
+        if rr.isError():
+            raise AssertionError(f"writing {ma}: {rr}")
+    finally:
+        client.close()

@@ -15,6 +15,7 @@ from zoneinfo import ZoneInfo
 from daemon_fixtures import (
     daemon_mapping,
     modbus_read,
+    modbus_write,
     run_cli,
     sim_process,
     start_daemon,
@@ -153,3 +154,82 @@ def test_no_curve_is_set_on_a_compact_controller_or_without_the_owners_word(tmp_
             assert _points(sim.port) == owner and not _curve_journal(state / "impctl.db")
         finally:
             stop_process(d.proc)
+
+
+def test_a_controller_that_does_not_follow_its_points_gets_them_back(tmp_path):
+    """The ideal plant keeps its flow target whatever the points say: after the check the
+    owner's points are back, the curve stays advice, and impctl does not try again."""
+    with sim_process(tmp_path, EPOCH, SPEED, plant="iso") as sim:
+        owner = _points(sim.port)
+        state = tmp_path / "state"
+        _kept_curve(state, (36.0, 24.0))
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: "did not follow the curve points" in d.output(), 30,
+                       "the check to fail", proc=d.proc)
+            wait_until(lambda: _points(sim.port) == owner, 10, "the owner's points back")
+            assert not _curve_journal(db)
+            assert json.loads((state / "curve-intent.json").read_text())["apply"] is False
+            assert "does not follow its curve points" in d.output()
+        finally:
+            stop_process(d.proc)
+
+
+def test_the_owners_own_change_is_kept_and_a_night_leaves_the_curve(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+        want = (round(new[0] * 10), round(new[1] * 10))
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True},
+            night={"window": "10:00-11:30", "preheat_h": 0.25, "sample_interval_s": 120}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == want, 30, "the curve set", proc=d.proc)
+            # a night runs and ends: its restore gives back the setpoint, not the curve
+            res = run_cli("trigger", "--kind", "normal", "--now", "--force", "--config",
+                          str(config))
+            assert res.returncode == 0, res.stderr
+            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None
+                       if store_query(db, lambda s: s.nights()) else False, 60,
+                       "the night to end", proc=d.proc)
+            assert _points(sim.port) == want
+            assert {e.register for e in _curve_journal(db)} == set(KEEP)
+            # the owner sets a point of their own: kept, and impctl sets no curve any more
+            modbus_write(sim.port, 2309, want[0] + 15)
+            wait_until(lambda: "the owner changed the heating curve" in d.output(), 30,
+                       "the owner's change noticed", proc=d.proc)
+            assert not _curve_journal(db)
+            assert _points(sim.port)[0] == want[0] + 15
+        finally:
+            stop_process(d.proc)
+
+
+def test_curve_restore_gives_the_points_back_when_no_daemon_runs(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == (round(new[0] * 10), round(new[1] * 10)),
+                       30, "the curve set", proc=d.proc)
+            d.proc.kill()  # no stop, no restore: the journal keeps the owner's points
+            d.proc.wait(10)
+        finally:
+            stop_process(d.proc)
+        assert len(_curve_journal(db)) == 2
+        res = run_cli("curve", "--restore", "--config", str(config))
+        assert res.returncode == 0, res.stderr
+        assert "your heating curve is back" in res.stdout
+        assert _points(sim.port) == owner and not _curve_journal(db)

@@ -112,12 +112,15 @@ class CurveConfig:
     """The heating curve (``impctl curve``): advice always; set on the heat pump only when the
     owner asks.
 
-    ``apply``: set the recommended curve on the heat pump's loop-1 curve points (an extended
-    controller with its adaptive curve off) and watch comfort on the following nights;
-    ``impctl curve --apply`` / ``--restore`` say the same at run time and win over this key.
-    ``margin_k``: kelvin of flow temperature above the bound of what the house needs [K].
-    ``raise_k``: how much the comfort watch raises both curve points when the room stayed more
-    than ``short_k`` below its setpoint for over ``short_h`` [K, K, h].
+    Attributes
+    ----------
+    apply : set the recommended curve on the heat pump's loop-1 curve points (an extended
+        controller with its adaptive curve off) and watch comfort; ``impctl curve --apply`` and
+        ``--restore`` say the same at run time and win over this key.
+    margin_k : kelvin of flow temperature kept above the bound of what the house needs [K].
+    raise_k : how much the comfort watch raises both curve points at a time [K].
+    short_k : the room counts as short when it is more than this below its setpoint [K].
+    short_h : the watch raises the curve when the room has been short for over this [h].
     """
 
     apply: bool = False

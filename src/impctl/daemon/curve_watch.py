@@ -11,8 +11,8 @@ no night runs, the daemon:
    journaled first, then written through the safe path (whitelist, 20–55 °C, compare, budget,
    read-back);
 2. **checks** at the next look that the controller follows: its own flow target (2128) must
-   sit as close to the new line at the outdoor temperature now as it sat to the owner's line
-   before, within :data:`FOLLOW_TOL_K`; if it does not, the owner's points come back and the
+   have moved as the line moved at the outdoor temperature now (the new line less the
+   owner's), within :data:`FOLLOW_TOL_K`; if it has not, the owner's points come back and the
    curve stays advice (the points' meaning is the controller document's, not measured);
 3. **watches comfort**: a room more than ``[curve] short_k`` below its setpoint for over
    ``short_h`` raises both points by ``raise_k`` (said in the log and the store's events); a
@@ -49,8 +49,8 @@ CURVE_REGISTERS = {2309: "loop1_curve_cold", 2314: "loop1_curve_mild"}
 KEEP = frozenset(CURVE_REGISTERS.values())
 #: The owner's word at run time (``impctl curve --apply`` / ``--restore``).
 INTENT_FILE = "curve-intent.json"
-#: How far the controller's flow target may stay off the new line, beyond how far it was off
-#: the owner's line before the write [K].
+#: How far the controller's flow target may have moved otherwise than the line [K] (a
+#: controller's own curve need not be straight between its points).
 FOLLOW_TOL_K = 1.5
 #: A new kept curve replaces the one set when a point moves by at least this [K].
 MOVE_K = 0.5
@@ -98,7 +98,7 @@ class CurveWatch:
         self.daemon = daemon
         self.held: tuple[float, float] | None = None   # points impctl wrote [°C]
         self.owner: tuple[float, float] | None = None  # the owner's points [°C]
-        self._verify: tuple[float, float] | None = None  # (owner's line at T_out, 2128) before
+        self._verify: float | None = None                # 2128 before the write [°C]
         self._short_since: float | None = None          # simulated s the room got short
         self.raised_k = 0.0
         self._refused: str | None = None                # why not now (said once)
@@ -169,9 +169,7 @@ class CurveWatch:
         self.owner = owner  # the points before impctl ever wrote (kept across restarts)
         self._keep(True)
         await self._write(points)
-        t_out, target = before[2103].value, before[2128].value
-        self._verify = (None if t_out is None or target is None
-                        else (abs(target - line_flow_c(owner, t_out)), t_out))
+        self._verify = before[2128].value
         self.held, self.raised_k, self._refused = points, 0.0, None
         text = (f"heating curve set to {points[0]:.1f} °C at −15 °C and {points[1]:.1f} °C at "
                 f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
@@ -213,22 +211,22 @@ class CurveWatch:
         if any(v is None or abs(v - h) > 0.05 for v, h in zip(seen, self.held, strict=True)):
             return self._owner_changed(now)
         if self._verify is not None:
-            off_before, _ = self._verify
             t_out, target = now[2103].value, now[2128].value
             if t_out is not None and target is not None:
+                moved = target - self._verify
+                expected = line_flow_c(self.held, t_out) - line_flow_c(self.owner, t_out)
                 self._verify = None
-                off_now = abs(target - line_flow_c(self.held, t_out))
-                if off_now > off_before + FOLLOW_TOL_K:
+                if abs(moved - expected) > FOLLOW_TOL_K:
                     await self._give_back(
                         f"the controller did not follow the curve points: its flow target "
-                        f"{target:.1f} °C is {off_now:.1f} K off the new line at "
+                        f"moved {moved:+.1f} K where the line moved {expected:+.1f} K at "
                         f"{t_out:.1f} °C outside")
                     self._refuse("the controller does not follow its curve points as "
                                  "documented")
                     set_intent(d.cfg.state_dir, False, "the controller did not follow")
                     return
-                _LOG.info("heating curve followed: the flow target %.1f °C is %.1f K off the "
-                          "new line at %.1f °C outside", target, off_now, t_out)
+                _LOG.info("heating curve followed: the flow target moved %+.1f K where the "
+                          "line moved %+.1f K at %.1f °C outside", moved, expected, t_out)
         if curve is None or not curve.get("lowers"):
             return await self._give_back("the kept curve no longer lowers the running one")
         new = tuple(float(v) + self.raised_k for v in curve["recommended"]["flow_c"])

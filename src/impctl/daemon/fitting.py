@@ -117,7 +117,8 @@ async def _curve(cfg: Config, base: list[str], nights_csv: Path, fit_json: Path,
     out = work / "curve.json"
     out.unlink(missing_ok=True)
     code, last = await _step([*base, "curve", "--nights", str(nights_csv), "--fit",
-                              str(fit_json), "--json", str(out), "--tz", cfg.timezone])
+                              str(fit_json), "--json", str(out), "--tz", cfg.timezone,
+                              "--margin-k", repr(cfg.curve.margin_k)])
     if code != 0 or not out.exists():
         _LOG.info("no heating curve from these nights: %s", last or f"exit {code}")
         return

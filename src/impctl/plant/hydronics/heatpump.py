@@ -170,6 +170,11 @@ class Controller:
         self._has_curve = np.isfinite(fa) & np.isfinite(fb)
         self._curve = (fa, fb, ref, lag) if self._has_curve.any() else None
 
+    @property
+    def flow_curve_set(self) -> NDArray[np.bool_]:
+        """Houses running a two-point flow curve (:meth:`set_flow_curve`)."""
+        return self._has_curve.copy()
+
     def p_max_w(self, t_out_c: Array) -> Array:
         """Capacity at outdoor ``t_out_c`` [W]."""
         return self.nominal_w * capacity_factor(self.cap_per_k, t_out_c)
