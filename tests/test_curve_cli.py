@@ -71,3 +71,80 @@ def test_bad_options_and_outputs_are_refused(tmp_path, nights_csv):
     fit.write_text("[1, 2]")
     res = run_cli("curve", "--nights", str(nights_csv), "--fit", str(fit))
     assert res.returncode == 2 and "expected a JSON object" in res.stderr
+
+
+FIT = {"schema": "impctl-fit/1",
+       "lumped": {"hlc": {"value": 200.0, "low": 175.0, "high": 230.0},
+                  "c_m": {"value": 2.0e7}, "tau": {"value": 28.0}},
+       "parameters": {"u_walls": 0.5}}
+
+
+def test_the_daemon_keeps_the_curve_after_a_fit_and_keeps_the_last_one(tmp_path, nights_csv,
+                                                                       caplog):
+    """The fit's subprocess chain runs the real ``impctl curve``; its result becomes
+    ``<state_dir>/curve.json``, the daemon's plain-number reader takes it; nights without
+    flow and return temperatures give no new curve, one log line, and the last one stays."""
+    import asyncio
+    import logging
+
+    from impctl.config import load_config
+    from impctl.daemon.curve_state import load_curve, suggested_flow_c
+    from impctl.daemon.fitting import _curve
+
+    state = tmp_path / "state"
+    state.mkdir()
+    config = tmp_path / "config.toml"
+    config.write_text(f'state_dir = "{state}"\n[heatpump]\nhost = "127.0.0.1"\n'
+                      "[curve]\nmargin_k = 1.5\n")
+    cfg = load_config(config)
+    fit_json = tmp_path / "fit.json"
+    fit_json.write_text(json.dumps(FIT))
+    base = [sys.executable, "-c", "from impctl.cli import main; main()"]
+    asyncio.run(_curve(cfg, base, nights_csv, fit_json, tmp_path))
+    kept = load_curve(state)
+    assert kept is not None and kept["margin_k"] == 1.5
+    assert kept["heat_need"]["hlc_w_per_k"]["source"].startswith("fit")
+    flow = suggested_flow_c(kept, 0.0)
+    assert flow == pytest.approx(kept["recommended"]["flow_at_0_c"], abs=0.05)
+    lines = nights_csv.read_text().splitlines()
+    head = lines[0].split(",")
+    keep = [i for i, c in enumerate(head) if c not in ("t_flow_c", "t_return_c")]
+    bare = tmp_path / "bare.csv"
+    bare.write_text("\n".join(",".join(r.split(",")[i] for i in keep) for r in lines) + "\n")
+    with caplog.at_level(logging.INFO, logger="impctl.daemon"):
+        asyncio.run(_curve(cfg, base, bare, fit_json, tmp_path))
+    assert "no heating curve from these nights" in caplog.text
+    assert "t_flow_c, t_return_c" in caplog.text
+    assert load_curve(state) == kept
+
+
+def test_the_curve_section_is_checked_with_every_problem_at_once(tmp_path):
+    from impctl.config import load_config
+    from impctl.errors import InputError
+
+    config = tmp_path / "config.toml"
+    config.write_text('[heatpump]\nhost = "127.0.0.1"\n'
+                      '[curve]\napply = "yes"\nraise_k = 9.0\nshort_h = 0.0\nmargin = 1\n')
+    with pytest.raises(InputError) as err:
+        load_config(config)
+    lines = str(err.value).splitlines()
+    assert any("curve.apply" in ln and "true or false" in ln for ln in lines)
+    assert any("curve.raise_k" in ln and "[0.5, 3]" in ln for ln in lines)
+    assert any("curve.short_h" in ln for ln in lines)
+    assert any("curve.margin" in ln and "unknown key" in ln for ln in lines)
+
+
+def test_the_owners_word_is_readable_by_the_daemons_user(tmp_path):
+    """``impctl curve --apply`` runs as root, the daemon as its own user: the word it leaves
+    (and the kept curve) must be readable by others, not mkstemp's 0600."""
+    import stat
+
+    from impctl.daemon.curve_state import keep_curve
+    from impctl.daemon.curve_watch import intent, set_intent
+
+    path = set_intent(tmp_path, True, "test")
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644 and intent(tmp_path) is True
+    src = tmp_path / "fresh.json"
+    src.write_text("{}")
+    keep_curve(tmp_path, src)
+    assert stat.S_IMODE((tmp_path / "curve.json").stat().st_mode) == 0o644

@@ -34,6 +34,7 @@ def keep_curve(state_dir: str | Path, source: Path) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(Path(source).read_bytes())
+        os.chmod(tmp, 0o644)  # the report and the CLI read it as another user (mkstemp: 0600)
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -73,6 +73,8 @@ def set_intent(state_dir: str | Path, apply: bool, why: str) -> Path:
     try:
         with os.fdopen(fd, "w") as fh:
             json.dump({"apply": apply, "why": why}, fh)
+        # readable by the daemon's own user when root wrote it (mkstemp makes it 0600)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
