@@ -13,6 +13,7 @@ from impctl.config import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
     load_config,
@@ -118,13 +119,14 @@ def test_example_config_loads_and_documents_every_key():
         "/var/lib/impctl", "Europe/Ljubljana", "info", "")
     data = tomllib.loads(EXAMPLE.read_text())
     for section, cls in (("night", NightConfig), ("campaign", CampaignConfig),
-                         ("clock", ClockConfig)):
+                         ("clock", ClockConfig), ("curve", CurveConfig)):
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
+    assert cfg.curve == CurveConfig()
     # [fit]'s keys are optional (absent = not declared): documented as comments
     assert data["fit"] == {} and cfg.fit.night_gain_w is None
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit", "curve"}
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys

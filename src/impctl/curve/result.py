@@ -9,8 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .cop import CopModel
 from .emitter import EmitterFit
 from .need import CONFIDENCE, HeatNeed, Line, NeedCurve
@@ -76,7 +74,8 @@ class CurveResult:
             parts.append(f"Your heating runs its water {hot:.0f} K hotter than this house "
                          f"needs at 0 °C outside. Setting the heating curve to {setting} "
                          "keeps the rooms at "
-                         f"{self.setpoint_c:.1f} °C with {self.margin_k:g} K to spare")
+                         f"{self.setpoint_c:.1f} °C, the water still {self.margin_k:g} K warmer "
+                         "than the least it needs,")
             if s is not None:
                 parts[-1] += (f" and would save about {_kwh(s.saving_kwh)} of electricity "
                               f"over {self.climate.describe()} (between "
@@ -85,9 +84,9 @@ class CurveResult:
             parts[-1] += "."
         elif hot is not None and hot <= -ABOUT_RIGHT_K:
             parts.append(f"Your heating runs its water {-hot:.0f} K cooler than impctl would "
-                         f"set it at 0 °C outside ({setting}, with {self.margin_k:g} K to "
-                         "spare). Keep it unless the rooms get cold: lowering it saves "
-                         "nothing.")
+                         f"set it at 0 °C outside ({setting}, {self.margin_k:g} K warmer than "
+                         "the least the house needs). Keep it unless the rooms get cold: "
+                         "lowering it saves nothing.")
         else:
             parts.append("Your heating curve is already about as low as this house allows "
                          f"(within {ABOUT_RIGHT_K:g} K of {setting} at 0 °C outside): "
@@ -168,8 +167,3 @@ class CurveResult:
 def _kwh(x: float) -> str:
     return f"{x:,.0f} kWh" if abs(x) >= 10 else f"{x:.0f} kWh"
 
-
-def flow_grid(result: CurveResult) -> tuple[np.ndarray, np.ndarray]:
-    """The grid and the recommended curve on it (for plots)."""
-    t = result.need_curve.t_out_c
-    return t, result.recommended.at(t)
