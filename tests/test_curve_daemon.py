@@ -74,6 +74,10 @@ def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_pat
             wait_until(lambda: "heating curve followed" in d.output(), 30, "the check",
                        proc=d.proc)
             assert "did not follow" not in d.output() and _points(sim.port) == want
+            # set on the owner's word, watched: held, not a restore waiting
+            st = run_cli("status", "--config", str(config))
+            assert "impctl's heating curve is set" in st.stdout
+            assert "restore:" not in st.stdout and "RESTORE PENDING" not in st.stdout
 
             # the owner takes it back while the daemon runs
             res = run_cli("curve", "--restore", "--config", str(config))
