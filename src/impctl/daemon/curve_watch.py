@@ -32,6 +32,7 @@ import asyncio
 import json
 import logging
 import os
+import sqlite3
 import tempfile
 from dataclasses import replace
 from pathlib import Path
@@ -116,6 +117,10 @@ class CurveWatch:
                 await self.check()
             except HeatPumpError as exc:  # the link: the next look tries again
                 _LOG.info("heating curve: heat pump not answering (%s); next look later", exc)
+            except (OSError, sqlite3.Error) as exc:
+                # The owner's points cannot be journaled (a full disk): nothing was written
+                # (the journal comes first); said once, tried again at the next look.
+                self._refuse(f"the owner's points cannot be kept ({exc})")
 
     async def check(self) -> None:
         """One look: never during a night, a restore or while the heat pump is away."""

@@ -7,8 +7,10 @@ Never imports torch, scikit-learn or pandas: classification and the fit run in a
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
+import sqlite3
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -16,8 +18,8 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 
 from ..clock import VirtualClock
 from ..config import Config
-from ..controller import NightController, NightRequest, restore_all
-from ..controller.restore import restore_entry
+from ..controller import NightController, NightRefused, NightRequest, restore_all
+from ..controller.restore import record_restored, restore_entry, unrecorded
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
@@ -116,6 +118,10 @@ class Daemon:
 
                 self.house_inputs = HouseInputs(self.cfg.inputs, self.clock, self.store)
                 self.controller.on_sample = self.house_inputs.record
+            taken = self.store.recover_journal()  # what a truncated store lost, if anything
+            if taken:
+                _LOG.warning("the store had lost the owner's values of %s; taken back from %s",
+                             ", ".join(e.register for e in taken), self.store.owner_file)
             if not self.cfg.campaign.adaptive:  # the fixed plan (adaptive: none to keep)
                 self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)
@@ -245,20 +251,29 @@ class Daemon:
                     or self._heat_pump_lock.locked() or not self._restorable()):
                 continue
             async with self._heat_pump_lock:
+                restored = False
                 try:
                     for entry in self._restorable():
+                        if entry.id in unrecorded(self.store):
+                            # Back on the heat pump and verified; only the record failed
+                            # (a full disk): try the record alone, quietly, until it works.
+                            record_restored(self.store, entry)
+                            continue
                         await restore_entry(self.client, self.store, entry)
+                        restored = True
                 except (ModbusLinkError, HeatPumpError) as exc:
                     if not waiting:  # one line per incident, not one per retry
                         _LOG.warning("owner's settings still to restore: %s", exc)
-                        self.store.add_event("warning", f"restore pending: {exc}")
+                        with contextlib.suppress(sqlite3.Error):
+                            self.store.add_event("warning", f"restore pending: {exc}")
                         self._status("RESTORE PENDING: waiting for the heat pump")
                         waiting = True
                     continue
-            _LOG.info("owner's settings restored%s", " after the link came back"
-                      if waiting else "")
-            waiting = False
-            self._status(self._idle_status())
+            if restored:
+                _LOG.info("owner's settings restored%s", " after the link came back"
+                          if waiting else "")
+                waiting = False
+                self._status(self._idle_status())
 
     def _restorable(self) -> list:
         """Pending journal entries but the heating curve's while the owner has it set."""
@@ -363,7 +378,11 @@ class Daemon:
     async def _run_night(self, req: NightRequest) -> None:
         self._night_task = asyncio.current_task()
         async with self._heat_pump_lock:
-            night = await self.controller.run(req)
+            try:
+                night = await self.controller.run(req)
+            except NightRefused as exc:  # not even created (the store cannot record); logged
+                self._status(f"night not started: {exc}")
+                return
         self._status(self._idle_status())
         if night.valid and (self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete):
             self._want_fit()

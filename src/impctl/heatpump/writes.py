@@ -6,7 +6,9 @@ The order matters and is the safety argument:
    when configured), never 2017, 2018, 2113, 539 or 2197 — refused before any traffic;
 2. the value is clamped to the configured limits (mode registers: an exact documented code);
 3. the register is read; if it already holds the value, nothing is written (no EEPROM wear);
-4. the write is counted against the register's daily budget *before* it is sent;
+4. the write is counted against the register's daily budget *before* it is sent (an
+   experiment's write that cannot be counted is refused; a restore that cannot be counted
+   is logged and sent anyway: putting the owner's settings back never depends on recording);
 5. FC 06, then read back (after a pause; the first answer may still be the old value) until
    it matches, else :class:`WriteVerifyError`.
 
@@ -193,14 +195,14 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
         _LOG.info("register %d (%s) already %s %s; not written", reg.ma, reg.name, target,
                   reg.unit)
         return WriteResult(reg.name, reg.ma, float(value), target, clamped, False,
-                           previous, previous, budget.used(reg.ma, clock.now().date()))
+                           previous, previous, budget.used_or_zero(reg.ma, clock.now().date()))
     reserve = policy.restore_reserve if restore else 0
     day = clock.now().date()
     # A register whose last write failed: log its repeated failures at DEBUG only.
     loud = logging.DEBUG if reg.ma in link.failed_writes else logging.WARNING
     delay = link.config.retry_delay_s
     for attempt in range(link.config.attempts):
-        used = budget.consume(reg.ma, day, reserve=reserve)
+        used = budget.consume(reg.ma, day, reserve=reserve, best_effort=restore)
         write_error = await _send(link, reg, word, loud)
         read_back = await _read_back(link, reg, word, policy, loud)
         if read_back == word:

@@ -1,4 +1,4 @@
-"""Device-side commands: daemon, trigger, status, nights, restore, export.
+"""Device-side commands: daemon, trigger, status, nights, export (restore: :mod:`.restore_cmd`).
 
 None of these import torch, scikit-learn or pandas at module level (export imports pandas
 only when it runs).
@@ -190,7 +190,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             lock.heartbeat()
             await asyncio.sleep(HEARTBEAT_S)
 
-    from ...controller import NightController, NightRequest
+    from ...controller import NightController, NightRefused, NightRequest
     from ...daemon.configured import clock_from_config, open_client, policy_from_config
     from ...daemon.schedule import next_act_time, window_after_act
     from ...store import Store
@@ -216,6 +216,9 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             try:
                 night = await ctl.run(NightRequest(kind, sp, start, end,
                                                    cfg.night.comfort_band_k, source="trigger"))
+            except NightRefused as exc:  # not even created: the store cannot record
+                click.echo(f"impctl: night not started: {exc}", err=True)
+                return 1
             finally:
                 beat.cancel()
         finally:
@@ -223,51 +226,6 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     click.echo(f"night {night.id}: {night.state}, {'valid' if night.valid else 'not valid'}"
                f" — {'; '.join(night.reasons)}")
     return 0 if night.state in ("done", "aborted", "refused") else 1
-
-
-@cli.command("restore")
-@config_option
-@click.option("--timeout", "timeout_s", type=float, default=60.0, show_default=True,
-              help="Keep retrying a lost link this long [s].")
-def restore_command(config_path: Path, timeout_s: float) -> None:
-    """Restore the journaled owner's settings now (also systemd's ExecStopPost)."""
-    from ...store import Store
-
-    cfg = _load(config_path)
-    _setup_logging(cfg.log_level, cfg.timezone)
-    if not cfg.db_path.exists():
-        click.echo("nothing to restore (no store yet)")
-        return
-    with Store(cfg.db_path) as store:
-        if not store.journal_pending():
-            click.echo("nothing to restore")
-            return
-        left = asyncio.run(_restore(cfg, store, timeout_s))
-    if left:
-        click.echo("still pending: " + ", ".join(e.register for e in left), err=True)
-        sys.exit(1)
-    click.echo("restored and verified")
-
-
-async def _restore(cfg, store, timeout_s: float):
-    from ...clock import VirtualClock
-    from ...controller import restore_all
-    from ...daemon.configured import clock_from_config, open_client
-    from ...heatpump import ModbusLinkError
-
-    clock = clock_from_config(cfg)
-    client = open_client(cfg, clock)
-    try:
-        try:
-            await client.connect(max_wait_s=timeout_s)
-        except ModbusLinkError as exc:
-            click.echo(f"heat pump not reachable: {exc}", err=True)
-            return store.journal_pending()
-        # The timeout is in real seconds, whatever clock the nights run on.
-        return await restore_all(client, store, clock=VirtualClock.real(),
-                                 timeout_s=timeout_s, retry_s=1.0)
-    finally:
-        client.close()
 
 
 @cli.command("status")

@@ -3,7 +3,26 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from zoneinfo import ZoneInfo
+
+from ...errors import InputError
+
+
+def _copy_hint(exc: InputError, cfg) -> InputError:
+    """The store's error, plus what its copy outside it says is still to restore."""
+    from ...store.owner_file import OWNER_FILE, read_owner_values
+
+    copy = Path(cfg.state_dir) / OWNER_FILE
+    try:
+        entries, _ = read_owner_values(copy)
+    except (FileNotFoundError, InputError):
+        return exc
+    if not entries:
+        return exc
+    return InputError(f"{exc.problem}; the heat pump may still be in an experiment's state: "
+                      f"{copy} lists {', '.join(e.register for e in entries)} to restore "
+                      "(run impctl restore)", exc.source, exc.place)
 
 
 def collect_status(cfg) -> dict:
@@ -24,7 +43,11 @@ def collect_status(cfg) -> dict:
     # The broker link as the running daemon last noted it (written on change only).
     out["mqtt"] = None if cfg.mqtt is None else {
         "configured": True, **((info.notes.get("mqtt") or {}) if info.running else {})}
-    with Store(cfg.db_path, create=False) as store:
+    try:
+        store = Store(cfg.db_path, create=False)
+    except InputError as exc:
+        raise _copy_hint(exc, cfg) from None
+    with store:
         running = store.nights(states=["preparing", "active", "restoring"])
         if running:
             night = running[-1]
