@@ -13,6 +13,7 @@ from impctl.config import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
     RecordConfig,
@@ -119,13 +120,15 @@ def test_example_config_loads_and_documents_every_key():
         "/var/lib/impctl", "Europe/Ljubljana", "info", "")
     data = tomllib.loads(EXAMPLE.read_text())
     for section, cls in (("night", NightConfig), ("campaign", CampaignConfig),
-                         ("clock", ClockConfig)):
+                         ("clock", ClockConfig), ("curve", CurveConfig)):
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
+    assert cfg.curve == CurveConfig()
     # [fit]'s keys are optional (absent = not declared): documented as comments
     assert data["fit"] == {} and cfg.fit.night_gain_w is None
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit", "record"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit", "record",
+        "curve"}
     # [record]: every key but the optional snapshot interval (a comment)
     assert set(data["record"]) == {f.name for f in dataclasses.fields(RecordConfig)} - {
         "sample_interval_s"}

@@ -26,6 +26,7 @@ def _register() -> None:
     from .device import check_config, commands, restore_cmd  # noqa: F401
     __import__(f"{__name__}.analysis.fleet_cmd")  # impctl fleet fit, impctl flex
     __import__(f"{__name__}.analysis.campaign_cmd")  # impctl campaign next
+    __import__(f"{__name__}.analysis.curve_cmd")  # impctl curve
     from .checks import ascii_numbers
 
     ascii_numbers(cli)  # '２２' is not 22 (click's number types call float() and int())

@@ -20,6 +20,7 @@ from .sections import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
     RecordConfig,
@@ -27,6 +28,7 @@ from .sections import (
 )
 
 __all__ = ["COMFORT_BAND_MAX_K", "LINK_LOST_LIMIT_MAX_S", "MIN_COVERAGE_LOW", "CampaignConfig",
-           "ClockConfig", "Config", "ConfigError", "FitConfig", "NightConfig", "RecordConfig",
+           "ClockConfig", "Config", "ConfigError", "CurveConfig", "FitConfig", "NightConfig",
+           "RecordConfig",
            "TargetHalfwidth",
            "config_from_mapping", "config_warnings", "load_config", "read_config_toml"]

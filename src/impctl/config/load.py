@@ -22,6 +22,7 @@ from .sections import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
     RecordConfig,
@@ -42,7 +43,7 @@ class ConfigError(InputError):
 
 
 _SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig,
-             "fit": FitConfig, "record": RecordConfig}
+             "fit": FitConfig, "record": RecordConfig, "curve": CurveConfig}
 #: Sub-tables inside a section: key → its dataclass.
 _SUBTABLES = {"target_rel_halfwidth": TargetHalfwidth}
 #: Operational bounds. The link-lost limit: a house with the heating off may lose ~1 K/h, so
@@ -52,6 +53,16 @@ LINK_LOST_LIMIT_MAX_S = 3600.0
 MIN_COVERAGE_LOW = 0.5
 #: ΔT: T_min = T_set − 3 K (18 °C from 21 °C) is the edge of EN 16798-1 category III comfort.
 COMFORT_BAND_MAX_K = 3.0
+#: The curve's margin [K]: 0 (the bound itself) to 5 K, as ``impctl curve --margin-k``.
+CURVE_MARGIN_K = (0.0, 5.0)
+#: The comfort watch's raise [K]: at least half a kelvin (less goes unnoticed by a room), at
+#: most 3 K at a time (the margin again, several times over).
+CURVE_RAISE_K = (0.5, 3.0)
+#: How far below its setpoint the room counts as short [K]: a tenth of a kelvin is a sensor's
+#: resolution, more than 2 K is a cold room, not a margin.
+CURVE_SHORT_K = (0.2, 2.0)
+#: Time the room may stay short before the watch raises the curve [h].
+CURVE_SHORT_H = (0.25, 6.0)
 #: Marker left in the problem list when [heatpump] could not be read: its safety limits are
 #: unknown then, so the setpoints are not checked against the defaults (no invented problems).
 _HEATPUMP_FAILED = "\0heatpump"
@@ -166,6 +177,11 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "
             "its electrical power (register 2129 is on extended controllers only), so impctl "
             "cannot subtract it: give a meter that excludes the heat pump and set false")
+    for key, (low, high) in (("margin_k", CURVE_MARGIN_K), ("raise_k", CURVE_RAISE_K),
+                             ("short_k", CURVE_SHORT_K), ("short_h", CURVE_SHORT_H)):
+        value = getattr(cfg.curve, key)
+        if not low <= value <= high:
+            bad(f"curve.{key}", f"must lie in [{low:g}, {high:g}], got {value:g}")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
     window = None

@@ -129,6 +129,29 @@ class RecordConfig:
 
 
 @dataclass(frozen=True)
+class CurveConfig:
+    """The heating curve (``impctl curve``): advice always; set on the heat pump only when the
+    owner asks.
+
+    Attributes
+    ----------
+    apply : set the recommended curve on the heat pump's loop-1 curve points (an extended
+        controller with its adaptive curve off) and watch comfort; ``impctl curve --apply`` and
+        ``--restore`` say the same at run time and win over this key.
+    margin_k : kelvin of flow temperature kept above the bound of what the house needs [K].
+    raise_k : how much the comfort watch raises both curve points at a time [K].
+    short_k : the room counts as short when it is more than this below its setpoint [K].
+    short_h : the watch raises the curve when the room has been short for over this [h].
+    """
+
+    apply: bool = False
+    margin_k: float = 1.0
+    raise_k: float = 1.0
+    short_k: float = 0.5
+    short_h: float = 1.0
+
+
+@dataclass(frozen=True)
 class ClockConfig:
     """Simulated time for a dry run: ``speed`` × real time from ``epoch``.
 
@@ -160,6 +183,7 @@ class Config:
     fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     inputs: InputsConfig | None = None  # [inputs]: the house's own sensors over MQTT
+    curve: CurveConfig = field(default_factory=CurveConfig)
     source: str = ""
 
     @property

@@ -90,6 +90,9 @@ class NightController:
         self._abort_reason: str | None = None  # a household's stop request (abort())
         self._aborted = asyncio.Event()
         self._running = False
+        #: Registers a night's restore leaves as they are (their journal entries stay
+        #: pending): the heating-curve points while the owner has impctl's curve set.
+        self.keep_registers: frozenset[str] = frozenset()
         self._time = NightTime(clock, policy.sample_interval_s)
         self._last_stored: datetime | None = None  # the newest sample's time this night
 
@@ -179,13 +182,14 @@ class NightController:
         except Exception as exc:  # noqa: BLE001 - the restore below matters more
             log.error("cannot record the night's state (%s); restoring the heat pump anyway",
                       sqlite_problem(exc), exc_info=not isinstance(exc, sqlite3.Error))
-        if self.store.journal_pending():
+        if [e for e in self.store.journal_pending() if e.register not in self.keep_registers]:
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
             left = await asyncio.shield(restore_all(
                 self.client, self.store, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
-                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
+                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
+                keep=self.keep_registers))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
         reasons += self._incidents.notes

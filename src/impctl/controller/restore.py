@@ -18,6 +18,7 @@ import asyncio
 import logging
 import sqlite3
 import weakref
+from collections.abc import Collection
 from typing import Any
 
 from ..clock import VirtualClock
@@ -78,9 +79,10 @@ def _said_unrecorded(store: Store) -> None:
 
 
 async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal, *,
-                      clock: VirtualClock, timeout_s: float,
-                      retry_s: float = 5.0) -> list[JournalEntry]:
-    """Restore every pending journal entry, retrying while the link is down.
+                      clock: VirtualClock, timeout_s: float, retry_s: float = 5.0,
+                      keep: Collection[str] = ()) -> list[JournalEntry]:
+    """Restore every pending journal entry (but those of the registers in ``keep``: a heating
+    curve the owner asked for stays when a night ends), retrying while the link is down.
 
     Parameters
     ----------
@@ -90,6 +92,7 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
         shortens nor prolongs it)
     timeout_s : give up after this many (simulated) seconds; entries stay pending
     retry_s : pause between attempts [wall s]
+    keep : register names whose pending entries are left pending
 
     Returns
     -------
@@ -102,9 +105,10 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
         if entry.id in skip:
             record_restored(store, entry)
     while True:
-        pending = [e for e in store.journal_pending() if e.id not in skip]
+        pending = [e for e in store.journal_pending()
+                   if e.id not in skip and e.register not in keep]
         if not pending:
-            return _done(store)
+            return _done(store, keep)
         for entry in pending:
             try:
                 await restore_entry(client, store, entry)
@@ -121,12 +125,14 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
                 if isinstance(exc, ModbusLinkError):
                     break  # the link is down: the other entries cannot get through either
                 # Else try the other entries anyway: heating back on matters most.
-        if not [e for e in store.journal_pending() if e.id not in skip]:
+        if not [e for e in store.journal_pending()
+                if e.id not in skip and e.register not in keep]:
             if reported:
                 _LOG.info("restore completed after the heat pump answered again")
-            return _done(store)
+            return _done(store, keep)
         if clock.monotonic_s() >= deadline:
-            left = [e for e in store.journal_pending() if e.id not in skip]
+            left = [e for e in store.journal_pending()
+                    if e.id not in skip and e.register not in keep]
             _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
                        ", ".join(e.register for e in left))
             return left
@@ -138,12 +144,14 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
             pass
 
 
-def _done(store: Store) -> list[JournalEntry]:
-    """Everything is back and verified: drop the owner-values copy, and say so once when the
-    store could not record it."""
+def _done(store: Store, keep: Collection[str] = ()) -> list[JournalEntry]:
+    """Everything is back and verified: drop the owner-values copy (unless it still holds
+    entries left pending on purpose, ``keep``), and say so once when the store could not
+    record it."""
     if unrecorded(store):
         _said_unrecorded(store)
-        store.forget_owner_values()
+        if not any(e.register in keep for e in store.journal_pending()):
+            store.forget_owner_values()
     return []
 
 

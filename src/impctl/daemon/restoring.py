@@ -41,12 +41,12 @@ async def restore_pending(daemon: RunningDaemon) -> None:
     while True:
         await asyncio.sleep(interval)
         if (daemon.stop.is_set() or not daemon._connected.is_set()
-                or daemon._heat_pump_lock.locked() or not daemon.store.journal_pending()):
+                or daemon._heat_pump_lock.locked() or not daemon._restorable()):
             continue
         async with daemon._heat_pump_lock:
             restored = False
             try:
-                for entry in daemon.store.journal_pending():
+                for entry in daemon._restorable():
                     if entry.id in unrecorded(daemon.store):
                         # Back on the heat pump and verified; only the record failed
                         # (a full disk): try the record alone, quietly, until it works.

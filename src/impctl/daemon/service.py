@@ -22,6 +22,8 @@ from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from . import adaptive
 from .configured import clock_from_config, open_client, policy_from_config
+from .curve_watch import KEEP as CURVE_KEEP
+from .curve_watch import start_curve_watch
 from .fitting import fit_ready, needs_fit, run_fit
 from .hplock import HeatPumpLock
 from .lock import HEARTBEAT_S, DaemonLock
@@ -75,6 +77,7 @@ class Daemon:
         self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
         self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
         self.house_inputs = None  # HouseInputs when [inputs] is configured
+        self.curve = None  # the heating curve's watch (impctl.daemon.curve_watch)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -133,6 +136,7 @@ class Daemon:
             if not self.stop.is_set():
                 self._start_scheduler()
                 self._start_recording()
+                self.curve = start_curve_watch(self)  # sets nothing unless the owner asks
                 if self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete:
                     self._want_fit()  # a fit the last run did not finish (stopped mid-fit)
                 self._status(self._idle_status())
@@ -194,6 +198,9 @@ class Daemon:
         return True
 
     async def _shutdown(self) -> None:
+        if self.curve is not None:  # before the restore below, which gives the curve back
+            self.curve.task.cancel()
+            await asyncio.gather(self.curve.task, return_exceptions=True)
         if self._night_task is not None and not self._night_task.done():
             # The controller sees the stop event, aborts and restores; wait for it.
             try:
@@ -226,6 +233,13 @@ class Daemon:
         if self.store is not None:
             self.store.close()
         _LOG.info("impctl daemon stopped")
+
+    def _restorable(self) -> list:
+        """Pending journal entries but the heating curve's while the owner has it set."""
+        held = self.curve is not None and self.curve.held is not None
+        return [e for e in self.store.journal_pending()
+                if not (held and e.register in CURVE_KEEP)]
+
 
     # -- systemd ---------------------------------------------------------------------------
     def _status(self, text: str) -> None:

@@ -33,7 +33,7 @@ from .discovery import (
     discovery_messages,
     withdrawn_topics,
 )
-from .payloads import LiveState, fit_payloads
+from .payloads import LiveState, curve_payload, fit_payloads
 from .takeover import TakeoverWatch
 from .tls import SocketErrors, connect_hint
 from .tls import context as tls_context
@@ -87,6 +87,9 @@ class StateSource(Protocol):
     def last_fit(self) -> tuple[datetime, list[int], dict] | None:
         """The store's newest fit."""
 
+    def last_curve(self) -> dict | None:
+        """The kept heating-curve result (``impctl-curve/1``), or None."""
+
     def submit(self, command: Command) -> str:
         """Queue a household command through the store; returns a line for the log, or
         raises :class:`BadCommand` when the command may not run now (e.g. a daytime ``now``)."""
@@ -124,6 +127,7 @@ class MqttBridge:
         self._rediscover = asyncio.Event()
         self._task: asyncio.Task | None = None
         self._fit_sent: object = _UNSENT
+        self._curve_sent: object = _UNSENT
         self._fit_checked = -1e9
         #: ``[inputs]``: an object with ``topics`` (list of str), ``names`` (topic → input)
         #: and ``receive(topic, payload, retained)`` (no I/O, must not raise), or None.
@@ -302,6 +306,7 @@ class MqttBridge:
         await client.publish(f"{self.cfg.topic}/availability", ONLINE, qos=1, retain=True)
         await self._publish_settings(client)
         self._fit_sent = _UNSENT
+        self._curve_sent = _UNSENT
         await self._publish_fit(client)
 
     async def _publish_settings(self, client: aiomqtt.Client) -> None:
@@ -319,6 +324,16 @@ class MqttBridge:
             await client.publish(f"{self.cfg.topic}/fit/{name}", json.dumps(payload),
                                  qos=1, retain=True)
         self._fit_sent = key
+        await self._publish_curve(client)
+
+    async def _publish_curve(self, client: aiomqtt.Client) -> None:
+        last = getattr(self.source, "last_curve", None)
+        payload = json.dumps(curve_payload(last() if last is not None else None),
+                             ensure_ascii=False)
+        if payload == self._curve_sent:
+            return
+        await client.publish(f"{self.cfg.topic}/curve", payload, qos=1, retain=True)
+        self._curve_sent = payload
 
     async def _publish_loop(self, client: aiomqtt.Client) -> None:
         idle_s = self.cfg.idle_interval_s
@@ -337,6 +352,7 @@ class MqttBridge:
                                  qos=0, retain=False)
             if time.monotonic() - self._fit_checked >= min(idle_s, _FIT_CHECK_S):
                 await self._publish_fit(client)
+                await self._publish_curve(client)
             self._wake.clear()
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout=idle_s)

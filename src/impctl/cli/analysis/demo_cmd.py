@@ -134,27 +134,33 @@ def _target(text: str) -> tuple[float, float]:
 @click.option("--fit", "fit_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="A fit JSON from `impctl fit --json` (default: the newest "
                                  "fit in the store).")
+@click.option("--curve", "curve_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="An `impctl curve --json` result (default: the one the "
+                                 "daemon keeps beside the store, if any).")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               default=Path("impctl-report"), show_default=True,
               help="Output directory for report.html and its fig_*.png figures; created if "
                    "missing (its parent must exist). Files are written only when the whole "
                    "report succeeded.")
-def report_command(config_path, db_path, fit_path, out) -> None:
+def report_command(config_path, db_path, fit_path, curve_path, out) -> None:
     """Write the HTML report with its PNG figures for a campaign.
 
     Reads the nights from the store (--db, or the store of --config) and the fit from --fit or
     the store; writes OUT/report.html and OUT/fig_nights.png, fig_heat_demand.png,
-    fig_classes.png, fig_parameters.png.
+    fig_classes.png, fig_parameters.png (and, with a heating curve, its section and
+    fig_curve.png).
     """
     from ...report import write_report
+    from ...report.curve import read_curve_json
     from ...report.fit_json import read_fit_json
 
     tz = "Europe/Ljubljana"
     fit = read_fit_json(fit_path) if fit_path is not None else None
+    curve = read_curve_json(curve_path) if curve_path is not None else None
     if db_path is None:
         from ...config import load_config
 
         cfg = load_config(config_path)
         db_path, tz = cfg.db_path, cfg.timezone
-    page = write_report(db_path, out, fit=fit, tz=tz)
+    page = write_report(db_path, out, fit=fit, tz=tz, curve=curve)
     click.echo(f"report: {page}")

@@ -77,7 +77,15 @@ def collect_status(cfg) -> dict:
             "lumped": fit[2].get("lumped") if isinstance(fit[2], dict) else None}
         out["events"] = [{"ts": t, "level": lvl, "message": m} for t, lvl, m in store.events(8)]
         out["pending_restore"] = [e.register for e in store.journal_pending()]
-        out["restore"] = _restore_state(out["pending_restore"], out["current_night"], info)
+        # impctl's heating curve, set on the owner's word and watched by a live daemon: held,
+        # not waiting to be restored (without a live daemon it is unsupervised like the rest)
+        from ...daemon.curve_watch import KEEP
+
+        alive = info.running and not info.stale
+        held = [r for r in out["pending_restore"] if r in KEEP] if alive else []
+        out["curve_held"] = held
+        out["restore"] = _restore_state([r for r in out["pending_restore"] if r not in held],
+                                        out["current_night"], info)
         out["pending_requests"] = len(store.pending_requests())
         out["skip_tonight"] = _skips(store)
         out["next_night"] = _next_night(store, cfg)
@@ -319,6 +327,10 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
     lines.extend(_restore_lines(st.get("restore")))
+    if st.get("curve_held"):
+        lines.append("curve:     impctl's heating curve is set (the owner's points are "
+                     "journaled: impctl curve --restore, a stop or impctl restore gives them "
+                     "back)")
     writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
                        for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")
