@@ -200,8 +200,8 @@ def test_the_owners_own_change_is_kept_and_a_night_leaves_the_curve(tmp_path):
             res = run_cli("trigger", "--kind", "normal", "--now", "--force", "--config",
                           str(config))
             assert res.returncode == 0, res.stderr
-            wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None
-                       if store_query(db, lambda s: s.nights()) else False, 60,
+            wait_until(lambda: store_query(db, lambda s: [n.valid for n in s.nights()]
+                                         ) not in ([], [None]), 60,
                        "the night to end", proc=d.proc)
             assert _points(sim.port) == want
             assert {e.register for e in _curve_journal(db)} == set(KEEP)

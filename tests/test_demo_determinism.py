@@ -47,5 +47,6 @@ def test_the_same_campaign_quiet_and_beside_cpu_burners(tmp_path):
     imp = [(n[0], n[2], n[3]) for n in nights if n[0] != "owner"]
     assert imp == [("constrained", "done", True), ("normal", "done", True)], nights
     assert sum(n[0] == "owner" for n in nights) >= 3
-    assert all(len(s) > 20 for s in samples)
+    # every finished night or day has its rows (the demo stops inside a last day's record)
+    assert all(len(s) > 20 for s, n in zip(samples, nights) if n[2] == "done")
     assert busy == quiet
