@@ -98,6 +98,9 @@ def daemon_mapping(state_dir: Path, port: int, clock: VirtualClock,
         # assertions use those numbers, whatever the product's default band.
         "night": {"sample_interval_s": 120, "t_out_max_c": 8.0, "comfort_band_k": 1.5},
         "campaign": {"enabled": False, "mode": "fixed", "fit_when_complete": False},
+        # The owner recording is the product's default; these rigs count a night's reads,
+        # samples and ids, so they turn it off unless a test asks for it (``record=...``).
+        "record": {"enabled": False},
         "clock": {"epoch": clock.epoch.isoformat(), "speed": clock.factor,
                   "wall_epoch_s": clock.wall_epoch_s},
     }
