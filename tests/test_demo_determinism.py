@@ -48,5 +48,5 @@ def test_the_same_campaign_quiet_and_beside_cpu_burners(tmp_path):
     assert imp == [("constrained", "done", True), ("normal", "done", True)], nights
     assert sum(n[0] == "owner" for n in nights) >= 3
     # every finished night or day has its rows (the demo stops inside a last day's record)
-    assert all(len(s) > 20 for s, n in zip(samples, nights) if n[2] == "done")
+    assert all(len(s) > 20 for s, n in zip(samples, nights, strict=True) if n[2] == "done")
     assert busy == quiet
