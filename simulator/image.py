@@ -26,13 +26,17 @@ LAYOUT: Mapping[Generation, tuple[tuple[int, int], ...]] = {
 }
 
 #: Registers whose writes drive the plant; other documented RW registers are just stored.
-PLANT_INPUTS = {2187: "setpoint", 2042: "loop_mode", 2012: "system_on", 2014: "correction"}
+PLANT_INPUTS = {2187: "setpoint", 2042: "loop_mode", 2012: "system_on", 2014: "correction",
+                2309: "curve", 2314: "curve"}
 
 #: Raw ranges the simulated controller accepts on write (else exception 3, illegal value).
 WRITE_RANGES: Mapping[int, tuple[int, int]] = {
     2187: (50, 600), 2049: (50, 600), 2059: (50, 600), 2069: (50, 600),
     2042: (0, 2), 2052: (0, 2), 2062: (0, 2), 2072: (0, 2), 2026: (0, 2), 2035: (0, 2),
     2081: (0, 2), 2012: (0, 1), 2014: (-4, 4), 2023: (250, 550), 2079: (199, 350),
+    # the curve points: the document gives no range; a controller takes flows a heat pump
+    # can make [own choice]
+    2309: (150, 700), 2314: (150, 700), 2320: (0, 1),
 }
 
 _ABSENT_SENSORS = (2107, 2108, 2109, 2110, 2111, 2112)
@@ -51,11 +55,14 @@ def writable(ma: int, generation: Generation) -> bool:
             and in_layout(ma, generation))
 
 
-def initial_rw(setpoint_c: float) -> dict[int, int]:
-    """Raw start values of the RW registers (signed)."""
+def initial_rw(setpoint_c: float, curve_c: tuple[float, float] = (45.0, 30.0)
+               ) -> dict[int, int]:
+    """Raw start values of the RW registers (signed); ``curve_c`` the loop-1 curve points
+    (2309/2314) [°C]."""
     rw = {reg.ma: 0 for reg in REGISTERS.values() if reg.access is Access.RW}
     rw.update({2012: 1, 2023: 480, 2026: 1, 2035: 1, 2042: 1, 2049: 200, 2059: 200, 2069: 200,
-               2079: 280, 2187: round(setpoint_c * 10), 2325: 15, 539: 12})
+               2079: 280, 2187: round(setpoint_c * 10), 2325: 15, 539: 12,
+               2309: _tenths(curve_c[0]), 2314: _tenths(curve_c[1]), 2320: 0})
     return rw
 
 
@@ -96,7 +103,7 @@ def kronoterm_values(plant: PlantLike, rw: Mapping[int, int], *, room_thermostat
         2104: _tenths(plant.t_supply_c),
         2105: _tenths(t_out_c - (3.0 if running else 0.0)),
         2106: _tenths(t_out_c - (6.0 if running else 0.0)),
-        2128: _tenths(plant.t_w_target_c), 2129: round(plant.p_el_w),
+        2128: _tenths(plant.flow_target_c), 2129: round(plant.p_el_w),
         2130: _tenths(plant.t_supply_c),
         2160: _tenths(t_air_c) if room_thermostat else -400,
         2161: -400, 2162: -400, 2163: -400,

@@ -109,6 +109,19 @@ class ControllerInputs:
         """Effective room setpoint: 2187 plus the 2014 correction [°C]."""
         return self.setpoint_c + self.correction_k
 
+    def installer_curve_c(self) -> tuple[float, float]:
+        """The loop-1 curve points (2309/2314) the controller starts with [°C]."""
+        return (45.0, 30.0)
+
+    def set_curve(self, points_c: tuple[float, float] | None) -> None:
+        """Curve points written (2309/2314); None: back to the controller's own curve. The
+        ideal plant has no curve: its heat follows the room's need whatever the points."""
+
+    @property
+    def flow_target_c(self) -> float:
+        """The flow temperature the control aims at (2128) [°C]."""
+        return self.t_w_target_c
+
 
 class Plant(ControllerInputs):
     """State and step of the simulated house + heat pump.

@@ -104,6 +104,31 @@ class RealisticPlant(ControllerInputs):
     q_em_w = property(lambda self: self._out["emitter_w"], doc="Emitter output to the room [W].")
     t_w_target_c = property(lambda self: self._out["t_water_target_c"],
                             doc="Target water temperature of the control [°C].")
+    def _steady_flow_c(self, node_c: float) -> float:
+        ctl, core = self.core.core.controller, self.core.core
+        return float(ctl.steady_flow_c(np.array([node_c]), self.room_setpoint_c,
+                                       core.flow_lag_k_per_w)[0])
+
+    def installer_curve_c(self) -> tuple[float, float]:
+        """The plant's own curve (``curve_gain`` × the matched one) as the flows at −15 and
+        +15 °C outdoor for the room setpoint [°C]: what 2309/2314 read before a write."""
+        ctl, sp = self.core.core.controller, np.array([self.room_setpoint_c])
+        return tuple(self._steady_flow_c(float(ctl.target_water_c(sp, sp, np.array([t]))[0]))
+                     for t in (-15.0, 15.0))
+
+    def set_curve(self, points_c: tuple[float, float] | None) -> None:
+        """Run the two-point flow curve ``points_c`` (2309/2314 written) set for the room
+        setpoint now; None: the plant's own curve again."""
+        fa, fb = points_c if points_c is not None else (np.nan, np.nan)
+        self.core.core.set_flow_curve(fa, fb, self.room_setpoint_c)
+
+    @property
+    def flow_target_c(self) -> float:
+        """The flow temperature the control aims at (2128) [°C]: the two-point curve's where
+        one runs, else the steady flow of the built-in curve's water target."""
+        flow = float(self.core.core.controller.flow_target_c[0])
+        return flow if np.isfinite(flow) else self._steady_flow_c(self._out["t_water_target_c"])
+
     space_heat_metered_w = property(lambda self: 0.0 if self._out["dhw"] else
                                     self._out["heat_meter_w"],
                                     doc="Space heat the heat meter reads [W] (meter errors).")

@@ -116,7 +116,10 @@ class KronotermSimulator:
         self._weather = config.weather_feed(self.clock)
         warm_from = self.clock.now_s() - config.warmup_s
         self.plant = config.make_plant(self.clock, self._weather.t_out_c(warm_from))
-        self.rw = initial_rw(config.setpoint_c)
+        self.rw = initial_rw(config.setpoint_c, self.plant.installer_curve_c())
+        #: The curve points the controller started with (raw): writing them back is the
+        #: controller's own curve again.
+        self._own_curve = (self.rw[2309], self.rw[2314])
         self._rng = np.random.default_rng(config.seed)
         self._faults_file = faults_file
         self._faults_mtime: float | None = None
@@ -334,6 +337,10 @@ class KronotermSimulator:
             self.plant.system_on = raw
         elif which == "correction":
             self.plant.correction_k = raw
+        elif which == "curve":
+            points = (self.rw[2309], self.rw[2314])
+            self.plant.set_curve(None if points == self._own_curve
+                                 else (points[0] / 10.0, points[1] / 10.0))
         return None
 
     async def _meter_action(self, function_code: int, start_address: int, address: int,

@@ -98,6 +98,9 @@ def daemon_mapping(state_dir: Path, port: int, clock: VirtualClock,
         # assertions use those numbers, whatever the product's default band.
         "night": {"sample_interval_s": 120, "t_out_max_c": 8.0, "comfort_band_k": 1.5},
         "campaign": {"enabled": False, "mode": "fixed", "fit_when_complete": False},
+        # The owner recording is the product's default; these rigs count a night's reads,
+        # samples and ids, so they turn it off unless a test asks for it (``record=...``).
+        "record": {"enabled": False},
         "clock": {"epoch": clock.epoch.isoformat(), "speed": clock.factor,
                   "wall_epoch_s": clock.wall_epoch_s},
     }
@@ -216,8 +219,9 @@ class SimProcess:
 def sim_process(tmp_path: Path, epoch: datetime, speed: float, *,
                 house: HouseParameters = HEAVY_HOUSE, t_out_c: float = 0.0,
                 setpoint_c: float = OWNER_SETPOINT_C,
-                plant: str = "realistic") -> Iterator[SimProcess]:
-    """Start ``impctl-sim --port 0 --clock-file F`` and read back its port and clock spec."""
+                plant: str = "realistic", args: tuple[str, ...] = ()) -> Iterator[SimProcess]:
+    """Start ``impctl-sim --port 0 --clock-file F`` (and ``args``) and read back its port and
+    clock spec."""
     clock_file = tmp_path / "sim.clock"
     faults_file = tmp_path / "sim.faults"
     faults_file.write_text("none\n")
@@ -226,7 +230,7 @@ def sim_process(tmp_path: Path, epoch: datetime, speed: float, *,
            "--clock-file", str(clock_file), "--faults-file", str(faults_file),
            "--house", str(house_toml(tmp_path / "house.toml", house)),
            "--weather", str(weather_csv(tmp_path / "weather.csv", t_out_c)),
-           "--setpoint", repr(setpoint_c), "--plant", plant]
+           "--setpoint", repr(setpoint_c), "--plant", plant, *args]
     with log.open("w") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, cwd=ROOT)
     try:
@@ -288,3 +292,19 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def modbus_write(port: int, ma: int, raw: int, unit: int = 20) -> None:
+    """Write documented register ``ma`` as someone else would (the owner's app, a plain
+    pymodbus client)."""
+    from pymodbus.client import ModbusTcpClient
+
+    client = ModbusTcpClient("127.0.0.1", port=port, timeout=2)
+    try:
+        if not client.connect():
+            raise AssertionError(f"cannot connect to the simulator on {port}")
+        rr = client.write_register(ma - 1, raw & 0xFFFF, device_id=unit)
+        if rr.isError():
+            raise AssertionError(f"writing {ma}: {rr}")
+    finally:
+        client.close()

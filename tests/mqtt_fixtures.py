@@ -31,9 +31,10 @@ MOSQUITTO_PASSWD = shutil.which("mosquitto_passwd") or "/usr/bin/mosquitto_passw
 
 class Broker:
     """A mosquitto process on 127.0.0.1:``port``; ``users`` = {name: password} or None
-    (anonymous)."""
+    (anonymous); ``extra``: more lines of mosquitto.conf."""
 
-    def __init__(self, work: Path, users: dict[str, str] | None = None):
+    def __init__(self, work: Path, users: dict[str, str] | None = None,
+                 extra: tuple[str, ...] = ()):
         self.work, self.users = work, users
         self.port = free_port()
         self.log = work / "mosquitto.log"
@@ -52,6 +53,7 @@ class Broker:
             lines += ["allow_anonymous false", f"password_file {pw}"]
         else:
             lines += ["allow_anonymous true"]
+        lines += list(extra)
         self.conf.write_text("\n".join(lines) + "\n")
         self.proc: subprocess.Popen | None = None
 
@@ -76,10 +78,11 @@ class Broker:
 
 
 @contextlib.contextmanager
-def broker(work: Path, users: dict[str, str] | None = None) -> Iterator[Broker]:
+def broker(work: Path, users: dict[str, str] | None = None,
+           extra: tuple[str, ...] = ()) -> Iterator[Broker]:
     """A started :class:`Broker`, stopped at the end."""
     work.mkdir(parents=True, exist_ok=True)
-    b = Broker(work, users)
+    b = Broker(work, users, extra)
     b.start()
     try:
         yield b
@@ -161,6 +164,52 @@ def home_assistant(port: int, **kw) -> Iterator[HomeAssistant]:
         yield ha
     finally:
         ha.close()
+
+
+@dataclass
+class Pki:
+    """A CA, a server certificate for 127.0.0.1 and a client certificate it signed (PEM
+    files made with the ``openssl`` command line), and a second key that is not the
+    client's."""
+
+    ca: Path
+    server_cert: Path
+    server_key: Path
+    client_cert: Path
+    client_key: Path
+    other_key: Path
+
+
+def make_pki(work: Path) -> Pki:
+    """Generate :class:`Pki` in ``work`` (the keys mode 0600)."""
+    work.mkdir(parents=True, exist_ok=True)
+
+    def openssl(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=work)
+
+    openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out",
+            "ca.crt", "-days", "2", "-subj", "/CN=impctl test CA")
+    (work / "san.ext").write_text("subjectAltName=IP:127.0.0.1,DNS:localhost\n")
+    for name, subject, ext in (("server", "/CN=127.0.0.1", ["-extfile", "san.ext"]),
+                               ("client", "/CN=impctl-gw1", [])):
+        openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", f"{name}.key", "-out",
+                f"{name}.csr", "-subj", subject)
+        openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.crt", "-CAkey", "ca.key",
+                "-CAcreateserial", "-out", f"{name}.crt", "-days", "2", *ext)
+    openssl("genpkey", "-algorithm", "RSA", "-pkeyopt", "rsa_keygen_bits:2048", "-out",
+            "other.key")
+    for key in work.glob("*.key"):
+        key.chmod(0o600)
+    return Pki(work / "ca.crt", work / "server.crt", work / "server.key", work / "client.crt",
+               work / "client.key", work / "other.key")
+
+
+def tls_listener(port: int, pki: Pki, require_certificate: bool = True) -> tuple[str, ...]:
+    """mosquitto.conf lines of a second listener on ``port``: MQTT over TLS with ``pki``'s
+    server certificate, asking for a client certificate signed by its CA."""
+    return (f"listener {port} 127.0.0.1", f"cafile {pki.ca}", f"certfile {pki.server_cert}",
+            f"keyfile {pki.server_key}",
+            f"require_certificate {'true' if require_certificate else 'false'}")
 
 
 def mqtt_section(b: Broker, **extra) -> dict:

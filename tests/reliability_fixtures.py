@@ -400,7 +400,9 @@ def loop_wall() -> Callable[[], float]:
 async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = HEAVY_HOUSE,
                      t_out_c: float = 0.0, epoch: datetime = MORNING,
                      heatpump: dict | None = None, night: dict | None = None,
-                     sim_faults: str | None = None, name: str = "rig"
+                     sim_faults: str | None = None, name: str = "rig",
+                     record: dict | None = None,
+                     daemon_clock: Callable[[VirtualClock], VirtualClock] | None = None
                      ) -> AsyncIterator[DaemonRig]:
     """Simulator → proxy → in-process daemon, one event loop, one accelerated clock (on the
     loop's time: run it with :func:`run_virtual` to make it independent of the machine's load).
@@ -408,6 +410,8 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
     The night window of a manual (``--now``) night lasts ``night['window']``; the default
     here is one hour after a 6-minute preheat. Several rigs may run in one event loop; give
     each its own ``name`` (its logs are kept apart by the :data:`RIG` context variable).
+    ``record`` is merged into ``[record]``; ``daemon_clock(house_clock)`` gives the daemon a
+    clock of its own (a wall clock that steps), the simulated house keeping the unstepped one.
     """
     from impctl_sim import parse_faults
 
@@ -423,8 +427,9 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
         mapping = daemon_mapping(
             tmp_path / "state", proxy.port, clock, heatpump=heatpump or {},
             night={"window": "22:00-23:00", "preheat_h": 0.1, "sample_interval_s": 60,
-                   **(night or {})})
-        daemon = Daemon(config_from_mapping(mapping), clock=clock)
+                   **(night or {})}, **({"record": record} if record else {}))
+        daemon = Daemon(config_from_mapping(mapping),
+                        clock=clock if daemon_clock is None else daemon_clock(clock))
         context = contextvars.copy_context()
         context.run(RIG.set, name)
         task = asyncio.create_task(daemon.run(), name=f"impctl daemon {name}",

@@ -105,10 +105,14 @@ def test_a_schema_3_store_is_migrated_keeping_its_fits(tmp_path):
     con = sqlite3.connect(path)
     con.executescript("DROP TABLE house_inputs; DROP TABLE decisions;"
                       "ALTER TABLE fits DROP COLUMN candidates;"
-                      "ALTER TABLE fits DROP COLUMN night_count; PRAGMA user_version = 3;")
+                      "ALTER TABLE fits DROP COLUMN night_count;"
+                      "ALTER TABLE samples DROP COLUMN t_flow_target_c;"
+                      "ALTER TABLE samples DROP COLUMN dhw_share;"
+                      "ALTER TABLE samples DROP COLUMN system_on;"
+                      "ALTER TABLE samples DROP COLUMN snapshots; PRAGMA user_version = 3;")
     con.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 5
+        assert store.schema_version == SCHEMA_VERSION == 6
         [fit] = store.fits()
         assert (fit.nights, fit.night_count, fit.candidates) == ([1, 2, 5], 3, None)
         assert fit.result["lumped"]["hlc"]["value"] == 180

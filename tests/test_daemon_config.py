@@ -13,8 +13,10 @@ from impctl.config import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
+    RecordConfig,
     load_config,
 )
 from impctl.heatpump import HeatPumpConfig, LinkConfig, WritePolicy
@@ -112,19 +114,25 @@ def test_example_config_loads_and_documents_every_key():
     # "every key, with its default unless marked example": the values are the defaults.
     assert cfg.night == NightConfig() and cfg.campaign == CampaignConfig()
     assert cfg.clock == ClockConfig() and cfg.heatpump.writes == WritePolicy()
-    assert cfg.fit == FitConfig()
+    assert cfg.fit == FitConfig() and cfg.record == RecordConfig()
     assert dataclasses.replace(cfg.heatpump.link, host="127.0.0.1") == LinkConfig()
     assert (cfg.state_dir, cfg.timezone, cfg.log_level, cfg.model_dir) == (
         "/var/lib/impctl", "Europe/Ljubljana", "info", "")
     data = tomllib.loads(EXAMPLE.read_text())
     for section, cls in (("night", NightConfig), ("campaign", CampaignConfig),
-                         ("clock", ClockConfig)):
+                         ("clock", ClockConfig), ("curve", CurveConfig)):
         assert set(data[section]) == {f.name for f in dataclasses.fields(cls)}, section
+    assert cfg.curve == CurveConfig()
     # [fit]'s keys are optional (absent = not declared): documented as comments
     assert data["fit"] == {} and cfg.fit.night_gain_w is None
     top = {k for k, v in data.items() if not isinstance(v, dict)}
     assert top == {f.name for f in dataclasses.fields(Config)} - {
-        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit"}
+        "heatpump", "night", "campaign", "clock", "mqtt", "inputs", "source", "fit", "record",
+        "curve"}
+    # [record]: every key but the optional snapshot interval (a comment)
+    assert set(data["record"]) == {f.name for f in dataclasses.fields(RecordConfig)} - {
+        "sample_interval_s"}
+    assert re.search(r"^# *sample_interval_s", EXAMPLE.read_text(), re.M)
     hp_keys = {f.name for f in dataclasses.fields(LinkConfig)} | {
         f.name for f in dataclasses.fields(HeatPumpConfig)} - {"link", "writes", "heat_meter"}
     assert set(data["heatpump"]) - {"writes"} == hp_keys

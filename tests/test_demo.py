@@ -23,7 +23,8 @@ def demo(tmp_path_factory):
     # The ideal plant: the accuracy asserted below is the fit's on its own model (the
     # realistic default is test_demo_realistic_plant_is_the_default).
     proc = run_cli("demo", "--nights", "1+2", "--households", "40", "--speed", "20000",
-                   "--out", str(out), "--model-dir", str(out / "models"), "--plant", "iso")
+                   "--out", str(out), "--model-dir", str(out / "models"), "--plant", "iso",
+                   "--owner-days", "1+1")
     return out, proc
 
 
@@ -51,6 +52,18 @@ def test_short_demo_runs_end_to_end(demo):
     # The fixed 1 + 2 campaign: three valid nights (and any invalid ones before them).
     assert summary["nights_valid"] == 3 and summary["nights_run"] >= 3
     assert summary["campaign"]["mode"] == "fixed" and "Campaign: fixed 1 + 2" in text
+    # The owner's own days around and between the nights: recorded read-only, exported as
+    # kind owner (a day before the campaign, a day after, the days between its nights), and
+    # left out of this fit with the reason.
+    owner = summary["owner"]
+    assert owner["records"] >= 4 and owner["rows"] >= 3 * 96, owner
+    assert "Owner days: " in text and "in nights.csv as kind owner" in text
+    import pandas as pd
+
+    exported = pd.read_csv(out / "nights.csv", keep_default_na=False)
+    kinds = exported.drop_duplicates("night")["kind"].tolist()
+    assert kinds[0] == "owner" and kinds[-1] == "owner" and kinds.count("owner") == owner[
+        "records"] and set(kinds) == {"owner", "constrained", "normal"}, kinds
     params = {p["name"]: p for p in summary["parameters"]}
     # Product-only parameters are never claimed as measured.
     for name in ("walls_area", "windows_area", "u_windows"):
@@ -68,7 +81,7 @@ def test_demo_realistic_plant_is_the_default(demo, tmp_path):
     shutil.copytree(out_iso / "models", tmp_path / "models")
     out = tmp_path / "demo"
     proc = run_cli("demo", "--nights", "1+1", "--households", "40", "--out", str(out),
-                   "--model-dir", str(tmp_path / "models"))
+                   "--model-dir", str(tmp_path / "models"), "--owner-days", "0+0")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "plant: realistic (radiators, weather curve" in proc.stdout
     assert "Plant: realistic (radiators, weather curve" in proc.stdout
@@ -101,7 +114,7 @@ def test_demo_adaptive_campaign(demo, tmp_path):
     out = tmp_path / "demo"
     proc = run_cli("demo", "--adaptive", "--max-nights", "3", "--target", "0.3,0.5",
                    "--plant", "iso", "--speed", "10000", "--out", str(out),
-                   "--model-dir", str(tmp_path / "models"))
+                   "--model-dir", str(tmp_path / "models"), "--owner-days", "0+0")
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "cached models reused" in proc.stdout  # the ideal plant's, for the ideal plant
     summary = json.loads((out / "summary.json").read_text())
@@ -164,4 +177,12 @@ def test_report_without_store_is_one_line_exit_2(tmp_path):
 def test_demo_rejects_bad_nights_option(tmp_path):
     proc = run_cli("demo", "--nights", "three", "--out", str(tmp_path / "d"), timeout=60)
     assert proc.returncode == 2 and "--nights" in proc.stderr
+
+
+@pytest.mark.parametrize("value, words", [("2", "expected BEFORE+AFTER"),
+                                          ("7+30", "after in 0–21"), ("-1+2", "days before")])
+def test_demo_rejects_bad_owner_days(tmp_path, value, words):
+    proc = run_cli("demo", "--owner-days", value, "--out", str(tmp_path / "d"), timeout=60)
+    assert proc.returncode == 2 and "--owner-days" in proc.stderr and words in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and not (tmp_path / "d").exists()
     assert not (tmp_path / "d").exists()

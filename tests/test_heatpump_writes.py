@@ -239,3 +239,38 @@ def test_restore_may_use_a_small_reserve_beyond_the_budget(tmp_path, caplog):
             with pytest.raises(WriteBudgetExceeded, match=r"\+1 reserve"):
                 await hp.restore_raw(2187, 200)  # the reserve is bounded too
     run(body())
+
+
+def test_the_curve_points_are_written_only_when_allowed_and_always_restorable(tmp_path):
+    """2309/2314 are no register impctl writes by default; while the owner has impctl's
+    curve set (``loop1_curve_c``) they are clamped to 20–55 °C and read back, and the owner's
+    points go back whatever the configuration; the adaptive-curve switch 2320 is never
+    written. The simulated controller runs the points it is given."""
+    from dataclasses import replace
+
+    from impctl_sim import SimConfig as Sim
+
+    async def body():
+        wb = budget(tmp_path)
+        async with simulator(Sim(clock=clock(1.0), plant_kind="realistic")) as sim, \
+                client(sim, budget=wb, writes=POLICY) as hp:
+            owner = (await hp.read(2309)).value
+            owner_mild = (await hp.read(2314)).value
+            with pytest.raises(WriteRefused, match="not in the write whitelist"):
+                await hp.write(2309, 40.0)
+            with pytest.raises(WriteRefused):
+                await hp.write(2320, 0)
+            hp.config = replace(hp.config, writes=replace(POLICY, loop1_curve_c=(20.0, 55.0)))
+            high = await hp.write(2309, 70.0)
+            assert high.clamped and high.target == 55.0 and high.read_back == 55.0
+            low = await hp.write(2314, 10.0)
+            assert low.clamped and low.target == 20.0
+            assert sim.plant.core.core.controller.flow_curve_set[0]  # the controller runs them
+            with pytest.raises(WriteRefused):
+                await hp.write(2320, 1)
+            hp.config = replace(hp.config, writes=POLICY)  # the owner took the curve back
+            back = await hp.restore(2309, owner)
+            assert back.written and back.read_back == owner
+            await hp.restore(2314, owner_mild)
+            assert not sim.plant.core.core.controller.flow_curve_set[0]  # its own curve
+    run(body())

@@ -9,13 +9,17 @@ real mosquitto, and clients that press buttons as Home Assistant and people do.
   it back;
 * ``commands = true`` → ``false``: the command entities are withdrawn from Home Assistant and
   a command sent anyway is logged as dropped, with why;
-* another client with impctl's client id: the clash is named, not logged as an outage.
+* another client with impctl's client id: the clash is named, not logged as an outage;
+* 5,000 commands in a burst, refused (malformed, or commands off): a handful of log lines, the
+  rest counted, the count exact; nothing queued, nothing written;
+* a setpoint typed with other digits than ASCII ('２２') is refused, not read as 22.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import re
 from datetime import datetime
 from pathlib import Path
 from types import SimpleNamespace
@@ -51,10 +55,11 @@ COMMAND_CONFIGS = [f"homeassistant/{c}/gw1/{k}/config" for c, k in (
 
 
 @contextlib.contextmanager
-def _rig(work: Path, **mqtt):
-    """A broker, Home Assistant, the simulator and a running daemon (``[mqtt]`` + ``mqtt``)."""
-    with broker(work / "broker") as b, home_assistant(b.port) as ha, \
-            sim_process(work, NOON, 60.0, plant="iso") as sim:
+def _rig(work: Path, speed: float = 60.0, broker_conf: tuple[str, ...] = (), **mqtt):
+    """A broker, Home Assistant, the simulator and a running daemon (``[mqtt]`` + ``mqtt``)
+    on a clock ``speed`` times real time."""
+    with broker(work / "broker", extra=broker_conf) as b, home_assistant(b.port) as ha, \
+            sim_process(work, NOON, speed, plant="iso") as sim:
         config = write_config(work / "config.toml", daemon_mapping(
             work / "state", sim.port, sim.clock, campaign={"enabled": False},
             night={"window": "22:00-05:00", "preheat_h": 0.5},
@@ -111,6 +116,19 @@ def test_an_empty_payload_is_never_a_command(rig):
         [], [])
     assert store_query(rig.db, lambda s: s.nights()) == []
     assert owner_state(rig.sim.port) == OWNER
+
+
+def test_a_setpoint_in_other_digits_is_refused_not_read(rig):
+    ha, d = rig.ha, rig.d
+    ha.press(f"{BASE}/cmd/night_setpoint", "２２")  # float() reads it as 22
+    wait_until(lambda: _lines(d, "FULLWIDTH DIGIT TWO"), 20, "the refusal", proc=d.proc)
+    [line] = _lines(d, f"{BASE}/cmd/night_setpoint")
+    assert "ignored: '２２' holds '２' (FULLWIDTH DIGIT TWO): write numbers with the ASCII " \
+           "digits 0-9" in line, line
+    ha.press(f"{BASE}/cmd/night_setpoint", "21")  # the same path takes ASCII digits
+    wait_until(lambda: len(ha.on(f"{BASE}/settings")) == 2, 20, "the setting", proc=d.proc)
+    assert [json.loads(m.payload)["setpoint_c"] for m in ha.on(f"{BASE}/settings")] == [
+        21.0, 21.0]  # announced, then the ASCII press; never 22
 
 
 def test_a_hundred_presses_are_one_waiting_request(rig):
@@ -189,6 +207,52 @@ def test_commands_switched_off_withdraw_the_buttons_and_say_why(tmp_path):
         assert "ignored: commands are off (mqtt.commands = false" in line
         assert store_query(r.db, lambda s: (s.pending_requests(), s.pending_commands())) == (
             [], [])
+
+
+_FULL = re.compile(r"MQTT command (\S+) ignored: (.*)$")
+_COUNTED = re.compile(r"MQTT: ([\d,]+) more commands? on (\S+) ignored within 60 s of the "
+                      r"first: (.*)$")
+
+
+@pytest.mark.parametrize(("commands", "payload", "why"), [
+    (True, '{"kind": "normal", "setpoint_c": 40}', "outside the safety limits"),
+    (False, "tonight", "commands are off (mqtt.commands = false in the configuration)"),
+])
+def test_a_flood_of_commands_is_counted_not_logged_line_by_line(tmp_path, commands, payload,
+                                                                why):
+    """5,000 refused commands in a burst: the first few of a minute (the daemon's) are logged
+    in full, the rest counted in one line per minute; the lines account for every message."""
+    n = 5000
+    # speed 6: a minute of the daemon's clock is 10 s; the broker queues the whole burst for
+    # the daemon (mosquitto drops above 1,000 queued messages by default)
+    with _rig(tmp_path, speed=6.0, broker_conf=("max_queued_messages 0",),
+              commands=commands) as r:
+        topic = f"{BASE}/cmd/trigger"
+        for _ in range(n - 1):
+            r.ha.client.publish(topic, payload, qos=1)
+        r.ha.client.publish(topic, payload, qos=1).wait_for_publish(60)
+
+        def accounted() -> tuple[int, list[str]]:
+            lines = [ln for ln in r.d.output().splitlines()
+                     if _FULL.search(ln) or _COUNTED.search(ln)]
+            total = sum(1 if _FULL.search(ln) else int(_COUNTED.search(ln)[1].replace(",", ""))
+                        for ln in lines)
+            return total, lines
+
+        wait_until(lambda: accounted()[0] >= n, 90, "every command accounted for",
+                   proc=r.d.proc)
+        total, lines = accounted()
+        assert total == n, lines
+        assert len(lines) <= 60, lines  # 6 per window of 10 s wall: a burst is not 5,000
+        full = [_FULL.search(ln) for ln in lines if _FULL.search(ln)]
+        counted = [_COUNTED.search(ln) for ln in lines if _COUNTED.search(ln)]
+        assert full and counted and all("WARNING" in ln for ln in lines)
+        assert {m[1] for m in full} == {m[2] for m in counted} == {topic}
+        assert all(why in m[2] for m in full) and all(why in m[3] for m in counted)
+        assert int(counted[0][1].replace(",", "")) >= 1
+        assert store_query(r.db, lambda s: (s.pending_requests(), s.pending_commands(),
+                                            s.nights())) == ([], [], [])
+        assert owner_state(r.sim.port) == OWNER
 
 
 def test_another_client_with_the_same_id_is_named_not_an_outage(tmp_path):

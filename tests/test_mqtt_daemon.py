@@ -47,8 +47,9 @@ OWNER = (OWNER_SETPOINT_RAW, OWNER_MODE)
 BASE = "impctl/gw1"
 ONE_CONSTRAINED = {"enabled": True, "mode": "fixed", "constrained_nights": 1,
                    "normal_setpoints_c": [], "fit_when_complete": False}
-#: 17 sensors/binary sensors of state, 4 fit sensors; 5 command entities with commands = true.
-N_ENTITIES = {False: 21, True: 26}
+#: 18 sensors/binary sensors of state, 4 fit sensors, the curve's saving; 5 command entities
+#: with commands = true.
+N_ENTITIES = {False: 23, True: 28}
 
 
 @contextlib.contextmanager

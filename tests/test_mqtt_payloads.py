@@ -92,7 +92,8 @@ def test_discovery_without_commands_has_no_buttons_and_templates_render():
     msgs = dict(discovery_messages(cfg, DEVICE, LIMITS))
     configs = {t: json.loads(p) for t, p in msgs.items()}
     assert check_discovery(configs) == []
-    assert len(configs) == 21  # + next experiment, heat pump electricity, heat delivered
+    # + next experiment, heat pump electricity, heat delivered; the curve's flow now and saving
+    assert len(configs) == 23
     assert not [t for t in configs if "/button/" in t or "/select/" in t or "/number/" in t]
     state = LiveState(t_air_c=20.456, t_out_c=None, q_hc_w=1234.4, night_state="active",
                       night_kind="normal", campaign_valid=2, campaign_planned=5,
@@ -111,6 +112,40 @@ def test_discovery_without_commands_has_no_buttons_and_templates_render():
     assert configs["homeassistant/sensor/gw9/tau/config"]["device_class"] == "duration"
 
 
+def test_the_heating_curve_sensors_say_what_to_set_and_what_it_saves():
+    """The suggested flow temperature now follows the outdoor temperature along the kept
+    curve; the expected saving is the curve result's, its advice an attribute in plain
+    words; no curve kept: both unknown, never a number."""
+    from impctl.daemon.curve_state import suggested_flow_c
+    from impctl.mqtt.payloads import curve_payload
+
+    cfg = MqttConfig(host="h", client_id="gw9")
+    by_key = {t.split("/")[3]: json.loads(p)
+              for t, p in discovery_messages(cfg, DEVICE, LIMITS)}
+    flow, saving = by_key["curve_flow_now"], by_key["curve_saving"]
+    assert flow["name"] == "Suggested flow temperature now" and flow["unit_of_measurement"] == "°C"
+    assert saving["name"] == "Expected saving this winter"
+    assert saving["unit_of_measurement"] == "kWh" and saving["state_topic"] == "impctl/gw9/curve"
+    curve = {"schema": "impctl-curve/1", "lowers": True, "hotter_at_0_k": 4.2,
+             "advice": "Your heating runs its water 4 K hotter than this house needs …",
+             "recommended": {"flow_c": [44.0, 26.0], "flow_at_0_c": 35.0},
+             "running": {"flow_at_0_c": 39.2},
+             "savings": {"saving_kwh": {"value": 312.0, "low": 250.0, "high": 380.0},
+                         "climate": {"description": "an assumed winter"}},
+             "cop": {"assumed": False}}
+    state = LiveState(t_out_c=-5.0, suggested_flow_c=suggested_flow_c(curve, -5.0))
+    assert render(flow["value_template"], json.dumps(state.as_json()).encode()) == "38.0"
+    payload = json.dumps(curve_payload(curve)).encode()
+    assert render(saving["value_template"], payload) == "312.0"
+    attrs = curve_payload(curve)
+    assert attrs["advice"].startswith("Your heating runs") and attrs["low"] == 250.0
+    assert "HLC" not in attrs["advice"] and "HLC" not in saving["name"] + flow["name"]
+    kept = curve_payload({**curve, "lowers": False})
+    assert kept["value"] == 0.0  # the curve is kept: nothing to save
+    assert curve_payload(None)["value"] is None
+    assert suggested_flow_c(None, 3.0) is None and suggested_flow_c(curve, None) is None
+
+
 def test_password_from_file_or_systemd_credential(tmp_path, monkeypatch):
     monkeypatch.delenv("CREDENTIALS_DIRECTORY", raising=False)
     assert MqttConfig(host="h").password() is None
@@ -121,3 +156,28 @@ def test_password_from_file_or_systemd_credential(tmp_path, monkeypatch):
     (creds / "mqtt.password").write_text("from-systemd\n")
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
     assert MqttConfig(host="h").password() == "from-systemd"
+
+
+def test_counted_warnings_bound_the_lines_and_lose_no_count(caplog):
+    """A few lines in full per kind and window, the rest counted at the window's end (or at
+    stop); commands that are no command share one kind however many names they use."""
+    import logging
+
+    from impctl.mqtt.counted import CountedWarnings
+
+    now = [0.0]
+    log = logging.getLogger("test.counted")
+    warnings = CountedWarnings(log, lambda: now[0], window_s=60.0, in_full=2)
+    with caplog.at_level(logging.WARNING, logger="test.counted"):
+        for i in range(1000):
+            warnings.warn((None, "malformed"), "b/cmd/+ (unknown commands)", f"unknown {i}",
+                          f"MQTT command b/cmd/x{i} ignored: unknown command 'x{i}'")
+        now[0] = 61.0  # the next one, a minute later, opens a new window
+        warnings.warn((None, "malformed"), "b/cmd/+ (unknown commands)", "unknown z", "z")
+        warnings.flush()
+    assert [r.getMessage() for r in caplog.records] == [
+        "MQTT command b/cmd/x0 ignored: unknown command 'x0'",
+        "MQTT command b/cmd/x1 ignored: unknown command 'x1'",
+        "MQTT: 998 more commands on b/cmd/+ (unknown commands) ignored within 60 s of the "
+        "first: the last: unknown 999",
+        "z"]

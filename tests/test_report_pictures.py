@@ -148,3 +148,41 @@ def test_the_classes_figure_says_what_the_probability_is(fitted, calibrated, wor
     plt.close(fig)
     table = format_table({**fit, "classes": classes})
     assert table.count(f"p = 0.80 ({words})") == len(classes)
+
+
+def _curve_json() -> dict:
+    t = np.arange(-15.0, 15.5, 0.5)
+    return {"schema": "impctl-curve/1", "setpoint_c": {"value": 21.0, "source": "given"},
+            "margin_k": 1.0, "confidence": 0.95,
+            "need": {"t_out_c": t.tolist(), "flow_c": (34.0 - 0.6 * t).tolist(),
+                     "flow_upper_c": (35.0 - 0.62 * t).tolist()},
+            "recommended": {"t_out_c": [-15.0, 15.0], "flow_c": [45.5, 27.0],
+                            "flow_at_0_c": 36.2},
+            "running": {"t_out_c": [-15.0, 15.0], "flow_c": [52.0, 30.0], "flow_at_0_c": 41.0,
+                        "source": "target", "t_out_range_c": [-6.0, 8.0]},
+            "advice": "Your heating runs its water 5 K hotter than this house needs at 0 °C "
+                      "outside. Setting the heating curve to 46 °C at −15 °C outside and 27 °C "
+                      "at +15 °C keeps the rooms at 21.0 °C with 1 K to spare and would save "
+                      "about 310 kWh of electricity.",
+            "notes": ["the saving is over an ASSUMED winter"]}
+
+
+def test_the_report_says_what_heating_curve_to_set(tmp_path, fitted):
+    """With a heating curve kept beside the store, the report opens with it in plain words:
+    the advice, the suggested and the running flow at everyday outdoor temperatures, the
+    figure; a kept file that is no curve result costs the section, not the report."""
+    import json
+
+    nights, fit = fitted
+    db = _store(tmp_path, nights)
+    (db.parent / "curve.json").write_text(json.dumps(_curve_json()))
+    page = write_report(db, tmp_path / "rep", fit=fit).read_text()
+    text = html.unescape(re.sub(r"<[^>]+>", "", page))
+    assert page.index("Your heating curve") < page.index("What the nights determine")
+    assert "Your heating runs its water 5 K hotter than this house needs" in text
+    assert "−15 °C46 °C52 °C" in text
+    assert "0 °C36 °C41 °C" in text
+    assert (tmp_path / "rep" / "fig_curve.png").read_bytes()[:4] == b"\x89PNG"
+    (db.parent / "curve.json").write_text("[]")
+    page = write_report(db, tmp_path / "rep2", fit=fit).read_text()
+    assert "Your heating curve" not in page and "What the nights determine" in page

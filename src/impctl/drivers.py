@@ -16,6 +16,7 @@ import pandas as pd
 from .errors import InputError
 from .imp.tables import read_table, step_seconds
 from .model import HouseParameters, simulate
+from .numtext import non_ascii_problem, parse_int
 
 _NUMERIC = ("t_out", "setpoint", "phi_hc", "internal_gains", "solar_gains")
 _MAY_BE_EMPTY = ("setpoint", "phi_hc")
@@ -45,11 +46,12 @@ class Window:
 def parse_window(text: str) -> Window:
     try:
         a, b = text.split("-")
-        parts = [tuple(int(x) for x in t.strip().split(":")) for t in (a, b)]
+        parts = [tuple(parse_int(x) for x in t.strip().split(":")) for t in (a, b)]
         if any(len(p) != 2 or not (0 <= p[0] < 24 and 0 <= p[1] < 60) for p in parts):
             raise ValueError
     except ValueError:
-        raise InputError(f"expected HH:MM-HH:MM, got {text!r}", place="--heating-off") from None
+        raise InputError(non_ascii_problem(text) or f"expected HH:MM-HH:MM, got {text!r}",
+                         place="--heating-off") from None
     (h1, m1), (h2, m2) = parts
     return Window(h1 * 60 + m1, h2 * 60 + m2)
 

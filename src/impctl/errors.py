@@ -38,3 +38,16 @@ class InputError(ValueError):
             self.source if self.source is not None else source,
             self.place if self.place is not None else place,
         )
+
+
+def sqlite_problem(exc: BaseException) -> str:
+    """What a failed SQLite write means for the person reading the log, in a few words:
+    "disk full", "read-only file system", or SQLite's own text."""
+    import sqlite3
+
+    code = getattr(exc, "sqlite_errorcode", None)
+    if code == sqlite3.SQLITE_FULL:
+        return "disk full"
+    if code is not None and code & 0xFF == sqlite3.SQLITE_READONLY:
+        return "read-only"
+    return str(exc) or type(exc).__name__

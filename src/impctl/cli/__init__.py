@@ -23,9 +23,13 @@ def cli() -> None:
 def _register() -> None:
     # Each subcommand module adds itself to the group; keep imports light (no torch here).
     from .analysis import demo_cmd, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
-    from .device import check_config, commands  # noqa: F401
+    from .device import check_config, commands, restore_cmd  # noqa: F401
     __import__(f"{__name__}.analysis.fleet_cmd")  # impctl fleet fit, impctl flex
     __import__(f"{__name__}.analysis.campaign_cmd")  # impctl campaign next
+    __import__(f"{__name__}.analysis.curve_cmd")  # impctl curve
+    from .checks import ascii_numbers
+
+    ascii_numbers(cli)  # '２２' is not 22 (click's number types call float() and int())
 
 
 def run_group(group: click.Group, argv: list[str] | None, prog: str,

@@ -16,6 +16,7 @@ from ..errors import InputError
 
 # the size guard of every command that reads nights (and of each household of a fleet)
 from ..imp.file_limits import MAX_FILE_MB, file_mb, refuse_large_file  # noqa: F401
+from ..numtext import non_ascii_problem
 
 #: Setpoints a room can be heated to [°C]: a room thermostat's span, as the NIGHTS.csv and
 #: DRIVERS.csv ``setpoint`` column (impctl.imp.nights_csv.PLAUSIBLE).
@@ -57,11 +58,52 @@ def in_range(value: float | None, bounds: tuple[float, float], place: str, unit:
     return value
 
 
+def option_name(param: click.Parameter | None) -> str | None:
+    """The name an error line gives a parameter: its longest option string (``--max-nights``)."""
+    if param is None:
+        return None
+    return max(param.opts, key=len) if param.opts else param.name
+
+
+_ASCII_TYPES: dict[type, type] = {}
+
+
+def _ascii_type(kind: type) -> type:
+    """``kind`` (a click number type: FLOAT, INT, their ranges) refusing text outside ASCII
+    first: click's number types call ``float()`` / ``int()``, which take '٢٢' and '２２' as 22.
+    A subclass, so that help texts still show ranges as click shows them."""
+    if kind not in _ASCII_TYPES:
+        def convert(self: Any, value: Any, param: click.Parameter | None,
+                    ctx: click.Context | None) -> Any:
+            if isinstance(value, str) and (problem := non_ascii_problem(value)) is not None:
+                raise InputError(problem, place=option_name(param))
+            return super(_ASCII_TYPES[kind], self).convert(value, param, ctx)
+
+        _ASCII_TYPES[kind] = type(f"Ascii{kind.__name__}", (kind,), {"convert": convert})
+    return _ASCII_TYPES[kind]
+
+
+def ascii_numbers(command: click.Command) -> None:
+    """Make every number option and argument of ``command`` and its subcommands take ASCII
+    text only (one line naming the option and the character, exit status 2)."""
+    import copy
+
+    for param in command.params:
+        kind = type(param.type)
+        if isinstance(param.type, (click.types.FloatParamType, click.types.IntParamType)) and (
+                kind not in _ASCII_TYPES.values()):
+            typed = copy.copy(param.type)
+            typed.__class__ = _ascii_type(kind)
+            param.type = typed
+    for sub in getattr(command, "commands", {}).values():
+        ascii_numbers(sub)
+
+
 def bounded(bounds: tuple[float, float], unit: str = "", *, low_open: bool = False
             ) -> Callable[[click.Context, click.Parameter, Any], Any]:
     """A click ``callback`` that checks a float option with :func:`in_range`."""
     def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
-        return in_range(value, bounds, max(param.opts, key=len), unit, low_open=low_open)
+        return in_range(value, bounds, option_name(param), unit, low_open=low_open)
     return callback
 
 

@@ -15,6 +15,10 @@ samples. That mode is for a dry run on a field gateway (``[clock] speed``). A si
 must not depend on the machine uses :meth:`VirtualClock.on_loop` on a
 :class:`~impctl.clock.loop.VirtualTimeLoop`, whose time advances only when everyone waits.
 
+The wall clock can step (NTP correcting a clock that ran ahead, a wrong ``date -s``, a
+resume from suspend); :meth:`VirtualClock.monotonic_s` cannot. The night controller bounds its
+waits and its window on the monotonic count and compares the two to detect a step.
+
 This module imports nothing from the simulator or the model so the daemon can use it.
 """
 
@@ -42,6 +46,10 @@ class VirtualClock:
         Wall-clock anchor [POSIX s]. Default: now.
     wall : callable, optional
         Source of wall time [POSIX s]; ``time.time`` by default (tests may inject one).
+    monotonic : callable, optional
+        A source of seconds that never steps, ticking with ``wall`` [s, any origin]:
+        ``time.monotonic`` for ``time.time``; an injected ``wall`` is its own by default
+        (a test that steps its wall passes the unstepped source here).
     """
 
     def __init__(
@@ -51,12 +59,14 @@ class VirtualClock:
         wall_epoch_s: float | None = None,
         *,
         wall: Callable[[], float] = time.time,
+        monotonic: Callable[[], float] | None = None,
     ) -> None:
         if not factor > 0:
             raise InputError(f"clock factor must be > 0, got {factor}", place="clock")
         if epoch is not None and epoch.tzinfo is None:
             raise InputError("clock epoch must carry a time zone", place="clock")
         self._wall = wall
+        self._monotonic = monotonic or (time.monotonic if wall is time.time else wall)
         self.on_loop_time = False  # True: wall is an event loop's time (see on_loop)
         self.factor = float(factor)
         self.wall_epoch_s = float(wall() if wall_epoch_s is None else wall_epoch_s)
@@ -97,6 +107,11 @@ class VirtualClock:
         """Simulated time now (UTC, time zone-aware)."""
         return datetime.fromtimestamp(self.now_s(), UTC)
 
+    def monotonic_s(self) -> float:
+        """Simulated seconds on a source that never steps [s, arbitrary origin]: only its
+        differences mean anything. A wall-clock step moves :meth:`now_s`, not this."""
+        return self._monotonic() * self.factor
+
     def wall_seconds(self, sim_s: float) -> float:
         """Wall-clock seconds that ``sim_s`` simulated seconds take."""
         return sim_s / self.factor
@@ -119,7 +134,8 @@ class VirtualClock:
                 f"wall_epoch={self.wall_epoch_s!r}")
 
     @classmethod
-    def from_spec(cls, spec: str, *, wall: Callable[[], float] = time.time) -> VirtualClock:
+    def from_spec(cls, spec: str, *, wall: Callable[[], float] = time.time,
+                  monotonic: Callable[[], float] | None = None) -> VirtualClock:
         """Rebuild a clock from :meth:`spec` output (``epoch=…,factor=…,wall_epoch=…``).
 
         Raises
@@ -143,7 +159,7 @@ class VirtualClock:
             wall_epoch = float(parts["wall_epoch"]) if "wall_epoch" in parts else None
         except ValueError as exc:
             raise InputError(f"bad clock spec {spec!r}: {exc}", place="clock") from None
-        return cls(epoch, factor, wall_epoch, wall=wall)
+        return cls(epoch, factor, wall_epoch, wall=wall, monotonic=monotonic)
 
     def __repr__(self) -> str:
         if self.on_loop_time:

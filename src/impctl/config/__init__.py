@@ -20,11 +20,15 @@ from .sections import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
+    RecordConfig,
     TargetHalfwidth,
 )
 
 __all__ = ["COMFORT_BAND_MAX_K", "LINK_LOST_LIMIT_MAX_S", "MIN_COVERAGE_LOW", "CampaignConfig",
-           "ClockConfig", "Config", "ConfigError", "FitConfig", "NightConfig", "TargetHalfwidth",
+           "ClockConfig", "Config", "ConfigError", "CurveConfig", "FitConfig", "NightConfig",
+           "RecordConfig",
+           "TargetHalfwidth",
            "config_from_mapping", "config_warnings", "load_config", "read_config_toml"]

@@ -17,12 +17,15 @@ from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..mqtt.config import mqtt_from_mapping
 from ..mqtt.inputs import inputs_from_mapping, own_topic
+from ..numtext import non_ascii_problem
 from .sections import (
     CampaignConfig,
     ClockConfig,
     Config,
+    CurveConfig,
     FitConfig,
     NightConfig,
+    RecordConfig,
     TargetHalfwidth,
     _window,
 )
@@ -40,7 +43,7 @@ class ConfigError(InputError):
 
 
 _SECTIONS = {"night": NightConfig, "campaign": CampaignConfig, "clock": ClockConfig,
-             "fit": FitConfig}
+             "fit": FitConfig, "record": RecordConfig, "curve": CurveConfig}
 #: Sub-tables inside a section: key → its dataclass.
 _SUBTABLES = {"target_rel_halfwidth": TargetHalfwidth}
 #: Operational bounds. The link-lost limit: a house with the heating off may lose ~1 K/h, so
@@ -50,6 +53,16 @@ LINK_LOST_LIMIT_MAX_S = 3600.0
 MIN_COVERAGE_LOW = 0.5
 #: ΔT: T_min = T_set − 3 K (18 °C from 21 °C) is the edge of EN 16798-1 category III comfort.
 COMFORT_BAND_MAX_K = 3.0
+#: The curve's margin [K]: 0 (the bound itself) to 5 K, as ``impctl curve --margin-k``.
+CURVE_MARGIN_K = (0.0, 5.0)
+#: The comfort watch's raise [K]: at least half a kelvin (less goes unnoticed by a room), at
+#: most 3 K at a time (the margin again, several times over).
+CURVE_RAISE_K = (0.5, 3.0)
+#: How far below its setpoint the room counts as short [K]: a tenth of a kelvin is a sensor's
+#: resolution, more than 2 K is a cold room, not a margin.
+CURVE_SHORT_K = (0.2, 2.0)
+#: Time the room may stay short before the watch raises the curve [h].
+CURVE_SHORT_H = (0.25, 6.0)
 #: Marker left in the problem list when [heatpump] could not be read: its safety limits are
 #: unknown then, so the setpoints are not checked against the defaults (no invented problems).
 _HEATPUMP_FAILED = "\0heatpump"
@@ -164,6 +177,11 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "
             "its electrical power (register 2129 is on extended controllers only), so impctl "
             "cannot subtract it: give a meter that excludes the heat pump and set false")
+    for key, (low, high) in (("margin_k", CURVE_MARGIN_K), ("raise_k", CURVE_RAISE_K),
+                             ("short_k", CURVE_SHORT_K), ("short_h", CURVE_SHORT_H)):
+        value = getattr(cfg.curve, key)
+        if not low <= value <= high:
+            bad(f"curve.{key}", f"must lie in [{low:g}, {high:g}], got {value:g}")
     if cfg.heatpump.writes.daily_budget < 4:
         bad("heatpump.writes.daily_budget", "must allow at least 4 writes (a night needs them)")
     window = None
@@ -172,7 +190,8 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         if window[0] == window[1]:
             bad("night.window", "start and end are the same")
     except ValueError:
-        bad("night.window", f"expected HH:MM-HH:MM, got {night.window!r}")
+        bad("night.window", non_ascii_problem(night.window)
+            or f"expected HH:MM-HH:MM, got {night.window!r}")
     if not 0 < night.max_comfort_band_k <= COMFORT_BAND_MAX_K:
         bad("night.max_comfort_band_k",
             f"must lie in (0, {COMFORT_BAND_MAX_K:g}] K: further below the owner's setpoint a "
@@ -242,6 +261,7 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
     if camp.constrained_nights < 0 or camp.normal_nights_per_setpoint < 0:
         bad("campaign.constrained_nights", "night counts must be >= 0")
     _check_adaptive(camp, bad)
+    _check_record(cfg, bad)
     from .bounds import bound_problems  # the upper bounds, each with its reason
 
     bound_problems(cfg, window, bad)
@@ -279,6 +299,28 @@ def _check_adaptive(camp: CampaignConfig, bad) -> None:
     if camp.mode == "adaptive" and not camp.normal_setpoints_c:
         bad("campaign.normal_setpoints_c", "the adaptive campaign needs at least one normal "
                                            "setpoint to choose from")
+
+
+#: ``[record] interval_s`` [s]: a row of at least a minute, at most an hour (the house's heat
+#: store moves over hours; an hour's mean still shows a day's course). A divisor of an hour, so
+#: rows start on the hour and at local noon, where an owner record starts.
+RECORD_INTERVAL_S = (60.0, 3600.0)
+#: ``[record] keep_days``: at least a day; at most ten years (a season is ~200 days; the store
+#: grows by about 8.5 MB per 100 days at the defaults, docs/explanation/benchmarks.md).
+RECORD_KEEP_DAYS = (1, 3660)
+
+
+def _check_record(cfg: Config, bad) -> None:
+    rec = cfg.record
+    lo, hi = RECORD_INTERVAL_S
+    if not lo <= rec.interval_s <= hi or 3600.0 % rec.interval_s:
+        bad("record.interval_s", f"must lie in {lo:g}–{hi:g} s and divide an hour (60, 300, "
+            f"600, 900, 1800, 3600 …), got {rec.interval_s:g}")
+    if rec.sample_interval_s is not None and not 5 <= rec.sample_interval_s <= 900:
+        bad("record.sample_interval_s", "must lie in 5–900 s")
+    k_lo, k_hi = RECORD_KEEP_DAYS
+    if not k_lo <= rec.keep_days <= k_hi:
+        bad("record.keep_days", f"must lie in {k_lo}–{k_hi} days, got {rec.keep_days}")
 
 
 def config_from_mapping(data: dict, source: str | Path | None = None) -> Config:
@@ -319,9 +361,9 @@ def read_config_toml(path: str | Path) -> dict:
 
 def config_warnings(cfg: Config) -> list[str]:
     """What a valid configuration allows but should not (one line each, for the log and
-    ``impctl check-config``): an MQTT password file other users can read."""
-    warning = cfg.mqtt.password_file_warning() if cfg.mqtt is not None else None
-    return [warning] if warning else []
+    ``impctl check-config``): an MQTT password file or client key other users can read, an
+    MQTT password sent over the network in clear text."""
+    return cfg.mqtt.warnings() if cfg.mqtt is not None else []
 
 
 def load_config(path: str | Path) -> Config:

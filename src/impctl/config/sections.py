@@ -19,6 +19,7 @@ from ..imp.protocol import (
 )
 from ..mqtt.config import MqttConfig
 from ..mqtt.inputs import InputsConfig
+from ..numtext import parse_int
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,50 @@ class FitConfig:
 
 
 @dataclass(frozen=True)
+class RecordConfig:
+    """``[record]``: the house recorded read-only around the clock while no IMP night runs.
+
+    A snapshot every ``sample_interval_s`` (absent: ``night.sample_interval_s``), averaged
+    into rows of ``interval_s``; a column with fewer than ``night.min_coverage`` of a row's
+    snapshots is missing. One ``owner`` record per local day (12:00 to 12:00); records older
+    than ``keep_days`` are deleted once a day. Nothing is ever written to the heat pump.
+    """
+
+    enabled: bool = True
+    interval_s: float = 300.0
+    keep_days: int = 400
+    sample_interval_s: float | None = None
+
+    def snapshot_interval_s(self, night: NightConfig) -> float:
+        """Seconds between two snapshots: ``sample_interval_s``, or the night's."""
+        return night.sample_interval_s if self.sample_interval_s is None else (
+            self.sample_interval_s)
+
+
+@dataclass(frozen=True)
+class CurveConfig:
+    """The heating curve (``impctl curve``): advice always; set on the heat pump only when the
+    owner asks.
+
+    Attributes
+    ----------
+    apply : set the recommended curve on the heat pump's loop-1 curve points (an extended
+        controller with its adaptive curve off) and watch comfort; ``impctl curve --apply`` and
+        ``--restore`` say the same at run time and win over this key.
+    margin_k : kelvin of flow temperature kept above the bound of what the house needs [K].
+    raise_k : how much the comfort watch raises both curve points at a time [K].
+    short_k : the room counts as short when it is more than this below its setpoint [K].
+    short_h : the watch raises the curve when the room has been short for over this [h].
+    """
+
+    apply: bool = False
+    margin_k: float = 1.0
+    raise_k: float = 1.0
+    short_k: float = 0.5
+    short_h: float = 1.0
+
+
+@dataclass(frozen=True)
 class ClockConfig:
     """Simulated time for a dry run: ``speed`` × real time from ``epoch``.
 
@@ -134,9 +179,11 @@ class Config:
     night: NightConfig = field(default_factory=NightConfig)
     campaign: CampaignConfig = field(default_factory=CampaignConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    record: RecordConfig = field(default_factory=RecordConfig)
     fit: FitConfig = field(default_factory=FitConfig)
     mqtt: MqttConfig | None = None  # [mqtt]: off unless the section is present
     inputs: InputsConfig | None = None  # [inputs]: the house's own sensors over MQTT
+    curve: CurveConfig = field(default_factory=CurveConfig)
     source: str = ""
 
     @property
@@ -162,7 +209,7 @@ def _window(text: str) -> tuple[int, int]:
     out = []
     for part in (a, b):
         h, m = part.strip().split(":")
-        hh, mm = int(h), int(m)
+        hh, mm = parse_int(h), parse_int(m)  # '２２' is not 22
         if not (0 <= hh < 24 and 0 <= mm < 60):
             raise ValueError(text)
         out.append(hh * 60 + mm)

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import sqlite3
+from datetime import datetime
+
+from ..errors import sqlite_problem
 from ..imp.protocol import MIN_NIGHT_H, Q_ON_W
-from ..store import Store
+from ..store import Night, Store
 from .heat_output import heat_output_problems
-from .plan import NightPolicy
+from .plan import NightPolicy, NightRequest
 
 #: Working function code of domestic hot water (2001 = 1): heating is interrupted meanwhile.
 _DHW = 1
@@ -89,3 +93,21 @@ def _usable_s(samples: list, kind: str, emission_lag_h: float) -> float:
             break
         kept.append(s.ts)
     return (kept[-1] - kept[0]).total_seconds() if len(kept) >= 2 else 0.0
+
+
+def record_end(store: Store, policy: NightPolicy, night_id: int, req: NightRequest, state: str,
+               reasons: list[str], ended: datetime) -> tuple[Night, str | None]:
+    """Store the night's end and verdict; returns the night and, when the store cannot
+    record it (a full disk), why — the night is then built in memory, not valid, and stays
+    "active" in the store until the next start marks it interrupted."""
+    try:
+        if state == "refused":
+            store.end_night(night_id, state, ended, False, reasons)
+        else:
+            valid, why = assess_night(store, night_id, policy)
+            store.end_night(night_id, state, ended, valid and state == "done", reasons + why)
+        return store.night(night_id), None
+    except sqlite3.Error as exc:
+        return Night(night_id, req.kind, req.setpoint_c, req.t_min_c, req.t_max_c,
+                     req.window_start, req.window_end, state, req.source, False,
+                     tuple(reasons), None, ended), sqlite_problem(exc)

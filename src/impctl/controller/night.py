@@ -15,25 +15,31 @@ Safety rules this module keeps:
   system switched off, ends the night at once (not valid); the changed register keeps the
   owner's new value (its journal entry is closed, not restored) and the others are restored;
 * one log line per incident (link lost, readings missing), when it starts, and one when it
-  ends; each incident is also noted in the night's reasons.
+  ends; each incident is also noted in the night's reasons;
+* a store that cannot record (a full disk) ends the night; the restore never needs it;
+* waits last one sample interval at most, a wall-clock step ends the night, the window holds
+  on the monotonic clock too (:mod:`.timing`); samples are never stored out of order.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import sqlite3
 from collections.abc import Callable
 from datetime import datetime, timedelta
 
 from ..clock import VirtualClock
+from ..errors import sqlite_problem
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..store import Night, Store
-from .assess import assess_night
+from .assess import record_end
 from .incidents import Incidents
 from .owner import describe_changes, fmt_register, owner_changes
 from .plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
-from .restore import restore_all
+from .restore import forget_unrecorded, restore_all
+from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
@@ -84,6 +90,11 @@ class NightController:
         self._abort_reason: str | None = None  # a household's stop request (abort())
         self._aborted = asyncio.Event()
         self._running = False
+        #: Registers a night's restore leaves as they are (their journal entries stay
+        #: pending): the heating-curve points while the owner has impctl's curve set.
+        self.keep_registers: frozenset[str] = frozenset()
+        self._time = NightTime(clock, policy.sample_interval_s)
+        self._last_stored: datetime | None = None  # the newest sample's time this night
 
     def abort(self, reason: str) -> bool:
         """End the running night now and restore, leaving the process running (the
@@ -94,28 +105,15 @@ class NightController:
         self._aborted.set()
         return True
 
-    # -- timing ----------------------------------------------------------------------------
+    def _clock_check(self) -> None:
+        """End the night (raises ``_Abort``) when the wall clock stepped since the last look."""
+        step = self._time.step_s()
+        if step is not None:
+            raise _Abort(f"system clock stepped by {describe_step(step)}")
+
     async def _sleep_until(self, when: datetime) -> None:
-        """Sleep until the simulated instant ``when`` or until a stop is requested."""
-        delay = self.clock.wall_seconds(when.timestamp() - self.clock.now_s())
-        if 0 < delay <= 1.0:  # short: an abort is seen at the next check anyway
-            try:
-                await asyncio.wait_for(self.stop.wait(), timeout=delay)
-            except TimeoutError:
-                pass
-        elif delay > 0:  # long (real-time nights): wake on a stop or an abort
-            waits = [asyncio.ensure_future(e.wait()) for e in (self.stop, self._aborted)]
-            try:
-                await asyncio.wait(waits, timeout=delay, return_when=asyncio.FIRST_COMPLETED)
-            finally:
-                for w in waits:
-                    w.cancel()
-        # Python 3.11's wait_for (here and inside pymodbus) can swallow a cancellation that
-        # arrives as its inner future completes (CPython gh-86296); the request is still
-        # counted on the task, so honour it here, where every loop of the night passes.
-        task = asyncio.current_task()
-        if task is not None and task.cancelling():
-            raise asyncio.CancelledError("night cancelled")
+        """Sleep until ``when``, one sample interval at most, or a stop or an abort."""
+        await self._time.sleep_until(when, self.stop, self._aborted)
 
     # -- the night ---------------------------------------------------------------------------
     async def run(self, req: NightRequest) -> Night:
@@ -124,11 +122,16 @@ class NightController:
         The heat pump is restored before this returns, whatever happened (unless the process
         dies, in which case the journal drives the restore at the next start).
         """
-        night_id = self.store.create_night(
-            req.kind, req.setpoint_c, req.window_start, req.window_end, t_min_c=req.t_min_c,
-            t_max_c=req.t_max_c, source=req.source)
-        if req.campaign_seq is not None:
-            self.store.link_campaign(req.campaign_seq, night_id)
+        try:
+            night_id = self.store.create_night(
+                req.kind, req.setpoint_c, req.window_start, req.window_end,
+                t_min_c=req.t_min_c, t_max_c=req.t_max_c, source=req.source)
+            if req.campaign_seq is not None:
+                self.store.link_campaign(req.campaign_seq, night_id)
+        except sqlite3.Error as exc:  # nothing written to the heat pump: nothing to restore
+            why = f"the store cannot record: {sqlite_problem(exc)}"
+            _LOG.error("night not started: %s", why)
+            raise NightRefused(why) from None
         log = _LOG.getChild(f"night{night_id}")
         state, reasons = "done", []
         wrote = False
@@ -136,6 +139,8 @@ class NightController:
         self._held = {}
         self._abort_reason, self._running = None, True
         self._aborted.clear()
+        self._time = NightTime(self.clock, self.policy.sample_interval_s)
+        self._last_stored = None
         try:
             self.store.set_night_state(night_id, "preparing")
             first = await self._prepare(night_id, req, log)
@@ -153,50 +158,56 @@ class NightController:
             state, reasons = "aborted", ["stopped (cancelled)"]
             log.warning("night cancelled: restoring the heat pump")
             self._running = False
-            await self._finish(night_id, state, reasons, wrote, log)
+            await self._finish(night_id, req, state, reasons, wrote, log)
             raise
         except HeatPumpError as exc:
             state, reasons = "aborted", [f"heat pump: {exc}"]
             log.error("night aborted by a heat-pump error: %s", exc)
+        except sqlite3.Error as exc:  # a full disk, a read-only or damaged store
+            state, reasons = "aborted", [f"the store cannot record: {sqlite_problem(exc)}"]
+            log.error("night aborted: %s; restoring the heat pump", reasons[0])
         except Exception as exc:  # a bug or a failing store must not leave the heating off
             state, reasons = "aborted", [f"internal error: {exc!r}"]
             log.exception("night aborted by an unexpected error; restoring the heat pump")
         self._running = False
-        await self._finish(night_id, state, reasons, wrote, log)
-        return self.store.night(night_id)
+        return await self._finish(night_id, req, state, reasons, wrote, log)
 
-    async def _finish(self, night_id: int, state: str, reasons: list[str], wrote: bool,
-                      log: logging.Logger) -> None:
+    async def _finish(self, night_id: int, req: NightRequest, state: str, reasons: list[str],
+                      wrote: bool, log: logging.Logger) -> Night:
+        """Restore, then record and assess the night; the restore comes first and never
+        depends on the store recording anything."""
         self._incidents.close(self.clock.now())
         try:
             self.store.set_night_state(night_id, "restoring" if wrote else state)
-        except Exception:  # noqa: BLE001 - the restore below matters more than the bookkeeping
-            log.exception("cannot record the night's state; restoring the heat pump anyway")
-        if self.store.journal_pending():
+        except Exception as exc:  # noqa: BLE001 - the restore below matters more
+            log.error("cannot record the night's state (%s); restoring the heat pump anyway",
+                      sqlite_problem(exc), exc_info=not isinstance(exc, sqlite3.Error))
+        if [e for e in self.store.journal_pending() if e.register not in self.keep_registers]:
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
             left = await asyncio.shield(restore_all(
                 self.client, self.store, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
-                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s))))
+                retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
+                keep=self.keep_registers))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
         reasons += self._incidents.notes
-        self.store.set_night_state(night_id, state, ended=self.clock.now())
-        if state == "refused":
-            self.store.assess_night(night_id, False, reasons)
-        else:
-            valid, why = assess_night(self.store, night_id, self.policy)
-            self.store.assess_night(night_id, valid and state == "done", reasons + why)
-        night = self.store.night(night_id)
-        log.info("night %d %s, %s: %s", night_id, night.state,
-                 "valid" if night.valid else "not valid", "; ".join(night.reasons))
+        night, unrecorded = record_end(self.store, self.policy, night_id, req, state, reasons,
+                                       self.clock.now())
+        log.info("night %d %s, %s: %s%s", night_id, night.state,
+                 "valid" if night.valid else "not valid", "; ".join(night.reasons),
+                 "" if unrecorded is None else f" (not recorded: {unrecorded}; the next start "
+                 "marks it interrupted)")
         self.on_status(f"night {night_id} {night.state} "
                        f"({'valid' if night.valid else 'not valid'})")
+        return night
 
     async def _snapshot(self, night_id: int | None, log: logging.Logger) -> Snapshot | None:
         """One poll; stores it as a sample; None when the link failed (the incident is
-        logged once, when it starts)."""
+        logged once, when it starts). A wall-clock step since the last poll ends the night
+        before anything is stored (raises ``_Abort``)."""
+        self._clock_check()
         polled = self.clock.now()
         try:
             snap = await self.client.snapshot()
@@ -214,7 +225,14 @@ class NightController:
             self.last_t_air = now
         self._incidents.readings(readings_problem(snap), now, log)
         if night_id is not None:
+            if self._last_stored is not None and snap.timestamp <= self._last_stored:
+                # A wall-clock step within the tolerance: a sample is never stored out of
+                # order (nor over an earlier one); the next one is.
+                log.info("sample at %s not stored: not after the previous one (%s)",
+                         snap.timestamp.isoformat(), self._last_stored.isoformat())
+                return snap
             self.store.add_sample(sample_from_snapshot(night_id, snap))
+            self._last_stored = snap.timestamp
             if self.on_sample is not None:
                 self.on_sample(night_id, snap)
         return snap
@@ -224,7 +242,9 @@ class NightController:
         then journal the owner's state before any write."""
         act_at = req.window_start - timedelta(hours=self.policy.preheat_h)
         give_up = max(act_at, self.clock.now()) + timedelta(seconds=self.policy.start_grace_s)
-        await self._sleep_until(act_at)
+        while not (self._time.reached(act_at) or self.stop.is_set()
+                   or self._abort_reason is not None):
+            await self._sleep_until(act_at)
         try:
             self.client.require_heat_power()
         except HeatPumpError as exc:
@@ -259,7 +279,12 @@ class NightController:
             reading = await self.client.read(ma)
             if reading.raw is None:
                 raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
-            self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
+            try:
+                entry = self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
+            except OSError as exc:  # the copy outside the store; nothing written yet
+                raise NightRefused(f"cannot keep the owner's values in "
+                                   f"{self.store.owner_file}: {exc.strerror or exc}") from None
+            forget_unrecorded(self.store, entry.id)  # this night writes it: restore anew
             if reading.value is not None:
                 self._held[ma] = reading.value
         log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
@@ -288,16 +313,19 @@ class NightController:
         switched_off = False
         deadline = req.window_end + timedelta(seconds=policy.deadline_grace_s)
         interval = timedelta(seconds=policy.sample_interval_s)
+        self._time.anchor()  # from here the window is held on the monotonic clock as well
         next_at = self.clock.now()
         while True:
             if self._abort_reason is not None:
                 raise _Abort(self._abort_reason)
             if self.stop.is_set():
                 raise _Abort("stop requested (signal)")
+            self._clock_check()  # before the deadline: a step forward is named as such
             now = self.clock.now()
-            if now >= deadline:
+            if self._time.reached(deadline):
                 raise _Abort("hard deadline passed")
-            if req.kind == "constrained" and not switched_off and now >= req.window_start:
+            if (req.kind == "constrained" and not switched_off
+                    and self._time.reached(req.window_start)):
                 too_cold = preheat_short(self.last_snapshot, req, policy)
                 if too_cold:  # switching off would only take the room under T_min
                     return too_cold
@@ -311,7 +339,7 @@ class NightController:
                 return reason
             self.on_status(status_line(night_id, req, snap))
             next_at = max(next_at + interval, self.clock.now())
-            if next_at >= req.window_end:
+            if next_at >= req.window_end or self._time.reached(req.window_end):
                 await self._sleep_until(req.window_end)
                 final = await self._snapshot(night_id, log)
                 if final is not None:

@@ -31,6 +31,8 @@ def sample_from_snapshot(night_id: int, snap: Snapshot) -> Sample:
         loop_mode=None if v["loop1_mode"] is None else int(v["loop1_mode"]),
         setpoint_c=v["loop1_setpoint_c"],
         dhw_active=None if v["working_function"] is None else int(v["working_function"]) == 1,
+        t_flow_target_c=v["loop1_target_c"],
+        system_on=None if v["system_on"] is None else int(v["system_on"]),
     )
 
 

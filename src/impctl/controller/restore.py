@@ -3,6 +3,13 @@
 Used at a night's end, on every abort, on SIGTERM, by ``impctl restore`` (also systemd's
 ExecStopPost) and by the orphan sweep at daemon start. A restore writes the journaled raw
 value verbatim: it is the owner's value, so it is not clamped to impctl's experiment limits.
+
+A restore never depends on recording anything: when the store cannot record that an entry
+is back (a full disk, a read-only file system), the heat pump is restored and verified all
+the same, one line says so, and the entry stays pending in the store until a later start or
+``impctl restore`` can close it (this process remembers it, so it does not restore it twice).
+The journal can also come from the owner-values file instead of the store
+(:class:`impctl.store.owner_file.OwnerValuesJournal`), when the store is unusable.
 """
 
 from __future__ import annotations
@@ -10,58 +17,101 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
+import weakref
+from collections.abc import Collection
+from typing import Any
 
 from ..clock import VirtualClock
+from ..errors import sqlite_problem
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
 from ..store import JournalEntry, Store
+from ..store.owner_file import OwnerValuesJournal
 
 _LOG = logging.getLogger(__name__)
+#: Per journal (store): entries restored and verified by this process whose record failed
+#: (entry id → why), until the record succeeds, a restore of them is tried again, or a night
+#: journals them anew.
+_UNRECORDED: weakref.WeakKeyDictionary[Any, dict[int, str]] = weakref.WeakKeyDictionary()
+
+
+def unrecorded(store: Store) -> dict[int, str]:
+    """Entries of ``store``'s journal that this process restored and verified but could not
+    record (entry id → why, e.g. "disk full")."""
+    return _UNRECORDED.setdefault(store, {})
+
+
+def forget_unrecorded(store: Store, entry_id: int) -> None:
+    """A night journaled ``entry_id`` again (it will write the register): its next restore
+    must write and verify, not only record."""
+    unrecorded(store).pop(entry_id, None)
 
 
 async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry) -> bool:
     """Restore one journal entry; True when the read-back shows the owner's value and the
     journal records it, False when the heat pump is restored but the store could not record
-    it (the entry stays pending; restoring it again writes nothing)."""
+    it (the entry stays pending, see :func:`unrecorded`)."""
+    forget_unrecorded(store, entry.id)
     await client.restore_raw(entry.address + 1, entry.raw_value)
     _LOG.info("restored %s (register %d) to raw %d, verified by read-back", entry.register,
               entry.address + 1, entry.raw_value)
+    return record_restored(store, entry)
+
+
+def record_restored(store: Store, entry: JournalEntry) -> bool:
+    """Record that ``entry`` is back on the heat pump (verified); False when the store
+    cannot (remembered in :func:`unrecorded`; the heat pump comes first, the record later)."""
     try:
         store.journal_mark_restored(entry.id)
-        store.add_event("info", f"restored {entry.register} (register {entry.address + 1}) "
-                                f"to raw {entry.raw_value}")
-    except sqlite3.Error as exc:  # the heat pump comes first; the record can follow later
-        _LOG.error("restored %s, but the store cannot record it: %s", entry.register, exc)
+    except sqlite3.Error as exc:
+        unrecorded(store)[entry.id] = sqlite_problem(exc)
         return False
+    unrecorded(store).pop(entry.id, None)
+    _event(store, "info", f"restored {entry.register} (register {entry.address + 1}) to raw "
+                          f"{entry.raw_value}")
     return True
 
 
-async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClock,
-                      timeout_s: float, retry_s: float = 5.0) -> list[JournalEntry]:
-    """Restore every pending journal entry, retrying while the link is down.
+def _said_unrecorded(store: Store) -> None:
+    why = sorted(set(unrecorded(store).values()))
+    _LOG.error("the owner's settings are back on the heat pump, verified by read-back, but "
+               "the store cannot record it (%s); the next start or impctl restore closes the "
+               "journal", ", ".join(why))
+
+
+async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal, *,
+                      clock: VirtualClock, timeout_s: float, retry_s: float = 5.0,
+                      keep: Collection[str] = ()) -> list[JournalEntry]:
+    """Restore every pending journal entry (but those of the registers in ``keep``: a heating
+    curve the owner asked for stays when a night ends), retrying while the link is down.
 
     Parameters
     ----------
     client : a connected (or reconnectable) HeatPumpClient
-    store : the store holding the journal
-    clock : for the simulated-time timeout
+    store : the store holding the journal, or the owner-values file's journal
+    clock : for the timeout, counted on its monotonic clock (a wall-clock step neither
+        shortens nor prolongs it)
     timeout_s : give up after this many (simulated) seconds; entries stay pending
     retry_s : pause between attempts [wall s]
+    keep : register names whose pending entries are left pending
 
     Returns
     -------
     The entries still pending (empty when everything was restored and verified).
     """
-    deadline = clock.now_s() + timeout_s
+    deadline = clock.monotonic_s() + timeout_s
     reported = False
-    unrecorded: set[int] = set()  # restored on the heat pump, the store could not say so
+    skip = unrecorded(store)
+    for entry in store.journal_pending():  # restored earlier by this process: record only
+        if entry.id in skip:
+            record_restored(store, entry)
     while True:
-        pending = [e for e in store.journal_pending() if e.id not in unrecorded]
+        pending = [e for e in store.journal_pending()
+                   if e.id not in skip and e.register not in keep]
         if not pending:
-            return []
+            return _done(store, keep)
         for entry in pending:
             try:
-                if not await restore_entry(client, store, entry):
-                    unrecorded.add(entry.id)
+                await restore_entry(client, store, entry)
             except HeatPumpError as exc:
                 if not reported:  # one line per incident, not one per retry
                     if isinstance(exc, ModbusLinkError):
@@ -75,12 +125,14 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
                 if isinstance(exc, ModbusLinkError):
                     break  # the link is down: the other entries cannot get through either
                 # Else try the other entries anyway: heating back on matters most.
-        if not [e for e in store.journal_pending() if e.id not in unrecorded]:
+        if not [e for e in store.journal_pending()
+                if e.id not in skip and e.register not in keep]:
             if reported:
                 _LOG.info("restore completed after the heat pump answered again")
-            return []
-        if clock.now_s() >= deadline:
-            left = store.journal_pending()
+            return _done(store, keep)
+        if clock.monotonic_s() >= deadline:
+            left = [e for e in store.journal_pending()
+                    if e.id not in skip and e.register not in keep]
             _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
                        ", ".join(e.register for e in left))
             return left
@@ -90,6 +142,17 @@ async def restore_all(client: HeatPumpClient, store: Store, *, clock: VirtualClo
                 await client.link.connect(max_wait_s=retry_s)
         except ModbusLinkError:
             pass
+
+
+def _done(store: Store, keep: Collection[str] = ()) -> list[JournalEntry]:
+    """Everything is back and verified: drop the owner-values copy (unless it still holds
+    entries left pending on purpose, ``keep``), and say so once when the store could not
+    record it."""
+    if unrecorded(store):
+        _said_unrecorded(store)
+        if not any(e.register in keep for e in store.journal_pending()):
+            store.forget_owner_values()
+    return []
 
 
 def _event(store: Store, level: str, message: str) -> None:

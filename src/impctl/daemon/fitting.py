@@ -1,5 +1,7 @@
-"""The fit after every valid night, in subprocesses: ``impctl export`` → ``impctl fit`` and, in
-adaptive mode, ``impctl campaign next`` (the predictions for the next night).
+"""The fit after every valid night, in subprocesses: ``impctl export`` → ``impctl fit`` →
+``impctl curve`` (the heating curve the house needs, kept in the state directory when the
+nights hold what it needs) and, in adaptive mode, ``impctl campaign next`` (the predictions for
+the next night).
 
 The daemon never imports torch, scikit-learn or pandas; only the JSON results come back. Each
 fit is stored with the number of valid nights it used, its predictions with it.
@@ -17,6 +19,7 @@ from pathlib import Path
 from ..config import Config
 from ..store import Store
 from .adaptive import forecast
+from .curve_state import keep_curve
 
 _LOG = logging.getLogger("impctl.daemon")
 _KINDS = ("constrained", "normal")
@@ -86,7 +89,9 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
             "from impctl.cli import main; main()"]
     model_dir = cfg.model_dir or str(Path(cfg.state_dir) / "models")
     steps = [
-        [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
+        # The IMP nights: the fit leaves owner records out anyway (they are the season
+        # model's), and a season of them is a file a hundred times larger.
+        [*base, "export", "--db", str(cfg.db_path), "--format", "csv", "--no-owner",
          "--out", str(nights_csv), "--force"],
         [*base, *fit_arguments(cfg, nights_csv, out_json, model_dir)],
     ]
@@ -100,9 +105,27 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
     fit_id = store.add_fit(ids, result)
     store.add_event("info", f"fit stored ({len(ids)} nights)")
     _LOG.info("fit stored for nights %s", ids)
+    await _curve(cfg, base, nights_csv, out_json, work)
     if cfg.campaign.adaptive:
         await _predict(store, cfg, fit_id, base, out_json, nights_csv, next_json)
     return result
+
+
+async def _curve(cfg: Config, base: list[str], nights_csv: Path, fit_json: Path,
+                 work: Path) -> None:
+    """``impctl curve`` on the exported nights and the new fit, kept as
+    ``<state_dir>/curve.json``. Never fatal: nights without flow and return temperatures give
+    no curve (one line in the log), and the last kept one stays."""
+    out = work / "curve.json"
+    out.unlink(missing_ok=True)
+    code, last = await _step([*base, "curve", "--nights", str(nights_csv), "--fit",
+                              str(fit_json), "--json", str(out), "--tz", cfg.timezone,
+                              "--margin-k", repr(cfg.curve.margin_k)])
+    if code != 0 or not out.exists():
+        _LOG.info("no heating curve from these nights: %s", last or f"exit {code}")
+        return
+    keep_curve(cfg.state_dir, out)
+    _LOG.info("heating curve kept (%s)", Path(cfg.state_dir) / "curve.json")
 
 
 async def _predict(store: Store, cfg: Config, fit_id: int, base: list[str], fit_json: Path,

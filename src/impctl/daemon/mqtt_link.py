@@ -19,6 +19,7 @@ from ..clock import VirtualClock
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
 from .adaptive import campaign_state
+from .curve_state import curve_path, load_curve, suggested_flow_c
 from .running import RunningDaemon
 from .schedule import daytime_reason, request_expiry
 from .waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
@@ -51,6 +52,7 @@ class MqttLink:
         self._next_at: datetime | None = None
         self._next_checked = -1e9
         self._next_key: tuple = ()
+        self._curve: tuple[float | None, dict | None] = (None, None)  # (mtime, result)
 
     # -- StateSource -------------------------------------------------------------------------
     def identity(self) -> DeviceIdentity:
@@ -87,6 +89,7 @@ class MqttLink:
             state.energy_el_kwh = snap.energy_electrical_kwh.value
             state.energy_heat_kwh = snap.energy_thermal_kwh.value
         state.next_night_at = self._next_night((state.night_state, state.night_id))
+        state.suggested_flow_c = suggested_flow_c(self.last_curve(), state.t_out_c)
         state.link_ok = bool(ok and d._connected.is_set())
         camp = campaign_state(store, d.cfg)
         state.campaign_mode, state.campaign_status = camp.mode, camp.status
@@ -151,6 +154,17 @@ class MqttLink:
     def last_fit(self):
         return self.daemon.store.last_fit()
 
+    def last_curve(self) -> dict | None:
+        """The kept heating curve (read again when its file changed)."""
+        try:
+            mtime = curve_path(self.daemon.cfg.state_dir).stat().st_mtime
+        except OSError:
+            mtime = None
+        if mtime != self._curve[0]:
+            self._curve = (mtime, None if mtime is None else load_curve(
+                self.daemon.cfg.state_dir))
+        return self._curve[1]
+
     def submit(self, command: Command) -> str:
         store = self.daemon.store
         if command.name == "trigger":
@@ -208,7 +222,8 @@ def start_mqtt(daemon: RunningDaemon) -> MqttLink | None:
         cfg.mqtt, link,
         Limits(setpoint_min_c=lo, setpoint_max_c=hi,
                comfort_band_k=cfg.night.comfort_band_k,
-               default_setpoint_c=cfg.campaign.constrained_setpoint_c))
+               default_setpoint_c=cfg.campaign.constrained_setpoint_c),
+        clock=daemon.clock)
     link.bridge.on_link_change = link.note_link
     link.bridge.inputs = daemon.house_inputs  # [inputs]: the house's sensors, or None
     link.bridge.start()
@@ -226,7 +241,7 @@ async def run_commands(daemon: RunningDaemon) -> None:
         if daemon.controller is not None and daemon.controller.abort(reason):
             _LOG.warning("abort requested (%s): ending the night and restoring", cmd.source)
             store.add_event("warning", f"abort requested ({cmd.source}): night ended")
-        elif store.journal_pending():
+        elif [e for e in store.journal_pending() if e.register not in _kept(daemon)]:
             # No night runs but the owner's settings are not back: restore, as
             # `impctl restore` does.
             _LOG.warning("abort requested (%s): restoring the owner's settings", cmd.source)
@@ -244,10 +259,18 @@ async def run_commands(daemon: RunningDaemon) -> None:
             daemon.mqtt.wake()
 
 
+def _kept(daemon: RunningDaemon) -> frozenset[str]:
+    """The registers a restore leaves: the heating curve's while the owner has it set."""
+    from .curve_watch import KEEP
+
+    curve = getattr(daemon, "curve", None)
+    return KEEP if curve is not None and curve.held is not None else frozenset()
+
+
 async def _restore(daemon: RunningDaemon) -> None:
     async with daemon._heat_pump_lock:
         await restore_all(daemon.client, daemon.store, clock=VirtualClock.real(),
-                          timeout_s=60.0, retry_s=1.0)
+                          timeout_s=60.0, retry_s=1.0, keep=_kept(daemon))
 
 
 def skip_tonight(daemon: RunningDaemon) -> bool:

@@ -36,3 +36,21 @@ class RunningDaemon(Protocol):
     _heat_pump_lock: asyncio.Lock
     #: the store's one-process lock (``daemon.lock``), None before it is taken
     _lock: DaemonLock | None
+    #: the running night's task (None or done between nights)
+    _night_task: asyncio.Task | None
+
+    def night_running(self) -> bool:
+        """True from a night's first action (its pre-heat) to the end of its restore."""
+        ...
+
+    def _status(self, text: str) -> None:
+        """Tell systemd (STATUS=) and Home Assistant what the daemon does."""
+        ...
+
+    def _idle_status(self) -> str:
+        """The status line between nights."""
+        ...
+
+    def _restorable(self) -> list:
+        """Journal entries still to put back (the heating curve's left while the owner has it)."""
+        ...

@@ -8,6 +8,7 @@ across a DST change lasts 6 or 8 hours).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Awaitable, Callable
 from datetime import datetime, timedelta
@@ -109,6 +110,28 @@ async def accelerated_nights(cfg: Config, clock: VirtualClock,
         await asyncio.wait({job})
         if not job.cancelled() and job.exception() is not None:  # as APScheduler logs it
             _LOG.error("night job at %s failed", act, exc_info=job.exception())
+
+
+async def every_second(stop: asyncio.Event, poll: Callable[[], Awaitable[None]],
+                       name: str) -> None:
+    """Run ``poll`` once a second of the event loop's time until ``stop`` is set.
+
+    The loop's time is monotonic: a wall-clock step (NTP correcting a clock that ran ahead, a
+    wrong ``date -s``) neither stops nor hurries it. A poll that fails is logged, once until
+    it works again, and polled again a second later."""
+    failed: str | None = None
+    while not stop.is_set():
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=1.0)
+        if stop.is_set():
+            return
+        try:
+            await poll()
+            failed = None
+        except Exception as exc:  # noqa: BLE001 - the next second polls again
+            if failed != repr(exc):
+                _LOG.error("%s failed; polling on", name, exc_info=exc)
+                failed = repr(exc)
 
 
 def drop_expired_requests(store: Store, now: datetime) -> list[int]:

@@ -16,41 +16,31 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 
 from ..clock import VirtualClock
 from ..config import Config
-from ..controller import NightController, NightRequest, restore_all
-from ..controller.restore import restore_entry
-from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
+from ..controller import NightController, NightRefused, NightRequest, restore_all
+from ..heatpump import HeatPumpClient, HeatPumpError
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from . import adaptive
 from .configured import clock_from_config, open_client, policy_from_config
+from .curve_watch import KEEP as CURVE_KEEP
+from .curve_watch import start_curve_watch
 from .fitting import fit_ready, needs_fit, run_fit
 from .hplock import HeatPumpLock
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
 from .next_night import adaptive_tonight, next_campaign_night
+from .recording import make_recorder, record_house
+from .restoring import restore_pending, sweep_orphans
 from .schedule import (
     accelerated_nights,
     act_trigger,
     campaign_plan,
     drop_expired_requests,
+    every_second,
 )
 from .systemd import Notifier
 
 _LOG = logging.getLogger("impctl.daemon")
-# "planned" too: a night created just before the process died never reached "preparing".
-_INTERRUPTED = ("planned", "preparing", "active", "restoring")
-
-
-def sweep_orphans(store: Store) -> list[int]:
-    """Mark nights that were running when the process died as interrupted (not valid)."""
-    ids = []
-    for night in store.nights(states=_INTERRUPTED):
-        store.interrupt_night(night.id, "interrupted: impctl stopped during the night")
-        store.add_event("warning", f"night {night.id} was interrupted; restoring")
-        ids.append(night.id)
-    return ids
-
-
 def _log_crash(task: asyncio.Task) -> None:
     if not task.cancelled() and task.exception() is not None:
         _LOG.error("%s failed", task.get_name(), exc_info=task.exception())
@@ -77,6 +67,9 @@ class Daemon:
         self._night_task: asyncio.Task | None = None
         self._fit_task: asyncio.Task | None = None
         self._accelerated_task: asyncio.Task | None = None  # nights on a simulated clock
+        self._polls: list[asyncio.Task] = []  # the 1 s trigger and command polls
+        self._recorder_task: asyncio.Task | None = None  # [record]: the owner recording
+        self.recorder = None  # its OwnerRecorder while it runs
         self._connected = asyncio.Event()
         # Held by a night and by the background restore: never both at once (a restore
         # marking an entry done while a night re-journals it would lose the owner's value).
@@ -84,6 +77,7 @@ class Daemon:
         self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
         self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
         self.house_inputs = None  # HouseInputs when [inputs] is configured
+        self.curve = None  # the heating curve's watch (impctl.daemon.curve_watch)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
@@ -113,6 +107,10 @@ class Daemon:
 
                 self.house_inputs = HouseInputs(self.cfg.inputs, self.clock, self.store)
                 self.controller.on_sample = self.house_inputs.record
+            taken = self.store.recover_journal()  # what a truncated store lost, if anything
+            if taken:
+                _LOG.warning("the store had lost the owner's values of %s; taken back from %s",
+                             ", ".join(e.register for e in taken), self.store.owner_file)
             if not self.cfg.campaign.adaptive:  # the fixed plan (adaptive: none to keep)
                 self.store.set_campaign(campaign_plan(self.cfg))
             orphans = sweep_orphans(self.store)
@@ -126,7 +124,7 @@ class Daemon:
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
         watchdog = asyncio.create_task(self._watchdog())
         self.mqtt = start_mqtt(self)  # MQTT hook: never awaited by the control loop
-        restorer = asyncio.create_task(self._restore_pending())
+        restorer = asyncio.create_task(restore_pending(self))
         try:
             await self._connect()
             if not self.stop.is_set() and self.store.journal_pending():
@@ -137,6 +135,8 @@ class Daemon:
                                       retry_s=2.0)
             if not self.stop.is_set():
                 self._start_scheduler()
+                self._start_recording()
+                self.curve = start_curve_watch(self)  # sets nothing unless the owner asks
                 if self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete:
                     self._want_fit()  # a fit the last run did not finish (stopped mid-fit)
                 self._status(self._idle_status())
@@ -198,12 +198,23 @@ class Daemon:
         return True
 
     async def _shutdown(self) -> None:
+        if self.curve is not None:  # before the restore below, which gives the curve back
+            self.curve.task.cancel()
+            await asyncio.gather(self.curve.task, return_exceptions=True)
         if self._night_task is not None and not self._night_task.done():
             # The controller sees the stop event, aborts and restores; wait for it.
             try:
                 await asyncio.wait_for(asyncio.shield(self._night_task), timeout=80.0)
             except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
                 _LOG.error("night did not finish cleanly on stop: %r", exc)
+        for task in self._polls:
+            task.cancel()
+        if self._recorder_task is not None:  # its last row stored, its snapshot done
+            try:
+                await asyncio.wait_for(asyncio.shield(self._recorder_task), timeout=30.0)
+            except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
+                _LOG.error("owner recording did not stop cleanly: %r", exc)
+                self._recorder_task.cancel()
         if self.store is not None and self.store.journal_pending() and self._connected.is_set():
             await restore_all(self.client, self.store, clock=self.clock, timeout_s=60.0,
                               retry_s=1.0)
@@ -223,35 +234,12 @@ class Daemon:
             self.store.close()
         _LOG.info("impctl daemon stopped")
 
-    async def _restore_pending(self) -> None:
-        """Put the owner's settings back whenever the journal holds any and no night runs.
+    def _restorable(self) -> list:
+        """Pending journal entries but the heating curve's while the owner has it set."""
+        held = self.curve is not None and self.curve.held is not None
+        return [e for e in self.store.journal_pending()
+                if not (held and e.register in CURVE_KEEP)]
 
-        A night's own restore gives up after ``restore_timeout_s`` (the journal stays
-        pending); without this loop a link that comes back later would leave the heating in
-        the experiment's state until the next night or restart.
-        """
-        interval = max(0.5, min(5.0, self.clock.wall_seconds(self.cfg.night.sample_interval_s)))
-        waiting = False
-        while True:
-            await asyncio.sleep(interval)
-            if (self.stop.is_set() or not self._connected.is_set()
-                    or self._heat_pump_lock.locked() or not self.store.journal_pending()):
-                continue
-            async with self._heat_pump_lock:
-                try:
-                    for entry in self.store.journal_pending():
-                        await restore_entry(self.client, self.store, entry)
-                except (ModbusLinkError, HeatPumpError) as exc:
-                    if not waiting:  # one line per incident, not one per retry
-                        _LOG.warning("owner's settings still to restore: %s", exc)
-                        self.store.add_event("warning", f"restore pending: {exc}")
-                        self._status("RESTORE PENDING: waiting for the heat pump")
-                        waiting = True
-                    continue
-            _LOG.info("owner's settings restored%s", " after the link came back"
-                      if waiting else "")
-            waiting = False
-            self._status(self._idle_status())
 
     # -- systemd ---------------------------------------------------------------------------
     def _status(self, text: str) -> None:
@@ -283,6 +271,20 @@ class Daemon:
             await asyncio.sleep(interval)
 
     # -- scheduling ------------------------------------------------------------------------
+    def night_running(self) -> bool:
+        """True from a night's first action (its pre-heat) to the end of its restore."""
+        return self._night_task is not None and not self._night_task.done()
+
+    def _start_recording(self) -> None:
+        """``[record] enabled``: record the house whenever no IMP night runs."""
+        if not self.cfg.record.enabled:
+            _LOG.info("owner recording off (record.enabled = false)")
+            return
+        self.recorder = make_recorder(self)
+        self._recorder_task = asyncio.create_task(record_house(self, self.recorder),
+                                                  name="owner recording")
+        self._recorder_task.add_done_callback(_log_crash)
+
     def _start_scheduler(self) -> None:
         self.scheduler = AsyncIOScheduler(timezone=self.cfg.timezone)
         grace = int(self.cfg.campaign.misfire_grace_s)
@@ -292,13 +294,14 @@ class Daemon:
             self.scheduler.add_job(self._night_job, act_trigger(self.cfg), id="imp-night",
                                    replace_existing=True, misfire_grace_time=grace,
                                    coalesce=True, max_instances=1)
-        self.scheduler.add_job(self._poll_requests, "interval", seconds=1.0,
-                               id="trigger-poll", replace_existing=True, coalesce=True,
-                               max_instances=1)
-        # Household commands (abort, skip_tonight) queued in the store, e.g. over MQTT.
-        self.scheduler.add_job(run_commands, "interval", seconds=1.0, args=[self],
-                               id="command-poll", replace_existing=True, coalesce=True,
-                               max_instances=1)
+        # Manual triggers and household commands (abort, skip_tonight) queued in the store:
+        # each second of the loop's monotonic time, never an APScheduler job (APScheduler
+        # waits for a wall-clock time; a clock stepped back 3 h would stop them for 3 h).
+        self._polls = [
+            asyncio.create_task(every_second(self.stop, self._poll_requests, "trigger poll"),
+                                name="trigger poll"),
+            asyncio.create_task(every_second(self.stop, lambda: run_commands(self),
+                                             "command poll"), name="command poll")]
         self.scheduler.start()
         if accelerated:
             self._accelerated_task = asyncio.create_task(accelerated_nights(
@@ -339,8 +342,8 @@ class Daemon:
             sp = req.setpoint_c if req.setpoint_c is not None else (
                 self.cfg.campaign.constrained_setpoint_c)
             _LOG.info("manual trigger %d: %s night at %.1f °C now", req.id, req.kind, sp)
-            # Its own task, so this 1 s poll job returns at once (a job still running at its
-            # next run time makes APScheduler log a warning every second all night).
+            # Its own task, so this 1 s poll returns at once (the commands are polled
+            # beside it all night).
             self._night_task = asyncio.create_task(self._run_night(NightRequest(
                 req.kind, sp, start, start + length, self.cfg.night.comfort_band_k,
                 source="trigger")), name=f"manual night {req.id}")
@@ -350,7 +353,11 @@ class Daemon:
     async def _run_night(self, req: NightRequest) -> None:
         self._night_task = asyncio.current_task()
         async with self._heat_pump_lock:
-            night = await self.controller.run(req)
+            try:
+                night = await self.controller.run(req)
+            except NightRefused as exc:  # not even created (the store cannot record); logged
+                self._status(f"night not started: {exc}")
+                return
         self._status(self._idle_status())
         if night.valid and (self.cfg.campaign.adaptive or self.cfg.campaign.fit_when_complete):
             self._want_fit()

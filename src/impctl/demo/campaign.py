@@ -21,6 +21,7 @@ from ..model import HouseParameters
 from ..store import Store
 from .options import (
     FIT_WAIT_S,
+    OWNER_SAMPLE_S,
     TZ,
     DemoError,
     DemoOptions,
@@ -44,7 +45,9 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
 
     from ..daemon.service import Daemon
 
-    epoch = datetime.fromisoformat(opts.start).replace(tzinfo=ZoneInfo(TZ))
+    campaign_start = datetime.fromisoformat(opts.start).replace(tzinfo=ZoneInfo(TZ))
+    # The gateway is installed (and records the owner's days) before the campaign begins.
+    epoch = campaign_start - timedelta(days=opts.owner_days_before)
     clock = VirtualClock.on_loop(epoch, opts.speed)
     state = opts.out / "state"
     state.mkdir(parents=True, exist_ok=True)
@@ -61,7 +64,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
                       f"clock ×{opts.speed:g} on virtual time (advancing only when the "
                       f"daemon and the simulator wait) from {epoch:%Y-%m-%d %H:%M %Z}; plant "
                       f"{plant_summary(opts, realism)['kind']}")
-        cfg = config_from_mapping({
+        mapping = {
             "state_dir": str(state), "timezone": TZ, "log_level": "warning",
             "model_dir": str(opts.model_dir or ""),
             "heatpump": {"host": "127.0.0.1", "port": sim.port, "timeout_s": 1.0,
@@ -76,11 +79,29 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             "clock": {"epoch": epoch.isoformat(), "speed": opts.speed},
             "fit": ({} if fit_night_gain_w(opts) is None
                     else {"night_gain_w": fit_night_gain_w(opts)}),
-        }, "demo config")
+            "record": {"interval_s": OWNER_SAMPLE_S, "sample_interval_s": OWNER_SAMPLE_S},
+        }
+        cfg = config_from_mapping(mapping, "demo config")
+        started = time.perf_counter()
+        if opts.owner_days_before > 0:  # the daemon records, no campaign yet
+            before = config_from_mapping(
+                {**mapping, "campaign": {**mapping["campaign"], "enabled": False}},
+                "demo config")
+            await _daemon_until(before, clock, lambda: clock.now() >= campaign_start,
+                                _owner_progress(before, clock, sim, progress, "before"))
+        progress.timing_s["owner_before"] = time.perf_counter() - started
         daemon = Daemon(cfg, clock=clock)
         task = asyncio.create_task(daemon.run())
         try:
+            started = time.perf_counter()
             await _watch(cfg, clock, sim, progress, trainer, task)
+            progress.timing_s["nights"] = time.perf_counter() - started
+            started = time.perf_counter()
+            if opts.owner_days_after > 0:  # the campaign is done; the daemon records on
+                until = _noon_after(clock.now() + timedelta(days=opts.owner_days_after))
+                await _until(task, lambda: clock.now() >= until,
+                             _owner_progress(cfg, clock, sim, progress, "after"))
+            progress.timing_s["owner_after"] = time.perf_counter() - started
         finally:
             daemon.stop.set()
             await asyncio.gather(task, return_exceptions=True)
@@ -94,6 +115,52 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
         progress.line(f"campaign done; simulator loop-1 setpoint back at "
                       f"{sim.plant.setpoint_c:.1f} °C, mode {sim.plant.loop_mode}")
         return cfg.db_path
+
+
+def _noon_after(ts: datetime) -> datetime:
+    """The first local noon at or after ``ts``: where an owner record ends."""
+    local = ts.astimezone(ZoneInfo(TZ))
+    noon = local.replace(hour=12, minute=0, second=0, microsecond=0)
+    return noon if noon >= local else (noon + timedelta(days=1)).replace(hour=12)
+
+
+def _owner_progress(cfg, clock, sim, progress: Progress, when: str):
+    """A progress line (every 3 s of wall time) while the daemon records the owner's days."""
+    last = [0.0]
+
+    def line() -> None:
+        if time.perf_counter() - last[0] < 3.0:
+            return
+        last[0] = time.perf_counter()
+        with Store(cfg.db_path) as store:
+            records = len(store.owner_records())
+        now = clock.now().astimezone(ZoneInfo(TZ))
+        progress.line(f"owner days ({when} the campaign): {records} records | sim "
+                      f"{now:%a %d %b %H:%M} T_air {sim.plant.t_air_c:.1f} °C, T_out "
+                      f"{sim.plant.t_out_c:.1f} °C | recording, nothing written")
+    return line
+
+
+async def _until(task: asyncio.Task, done, tick) -> None:
+    """Until ``done()``; ``tick()`` on the way; the daemon ``task`` must stay up."""
+    while not done():
+        if task.done():
+            raise DemoError(f"the daemon stopped: {task!r} (see demo.log)")
+        await asyncio.sleep(0.5)  # the loop's time
+        tick()
+
+
+async def _daemon_until(cfg, clock, done, tick) -> None:
+    """A daemon of ``cfg`` until ``done()``, then stopped (its last row stored)."""
+    from ..daemon.service import Daemon
+
+    daemon = Daemon(cfg, clock=clock)
+    task = asyncio.create_task(daemon.run())
+    try:
+        await _until(task, done, tick)
+    finally:
+        daemon.stop.set()
+        await asyncio.gather(task, return_exceptions=True)
 
 
 def _campaign_section(opts: DemoOptions, setpoints: list[float], per_sp: int) -> dict:
@@ -215,4 +282,16 @@ def campaign_summary(store: Store, opts: DemoOptions) -> dict:
     else:
         block["line"] = (f"Campaign: fixed {opts.constrained_nights} + {opts.normal_nights}, "
                          f"{len(run)} nights run, {len(valid)} valid.")
-    return {"nights_run": len(run), "nights_valid": len(valid), "campaign": block}
+    summary = store.owner_summary()
+    owner = {"records": summary.count, "labelled": summary.labelled, "rows": summary.rows,
+             "row_s": OWNER_SAMPLE_S, "days_before": opts.owner_days_before,
+             "days_after": opts.owner_days_after}
+    labelled = sum(summary.labelled.values())
+    owner["line"] = (f"Owner days: {summary.count} records of the owner's own heating "
+                     f"({summary.rows} rows of {OWNER_SAMPLE_S / 60:g} min, recorded read-only "
+                     f"{opts.owner_days_before:g} days before and {opts.owner_days_after:g} "
+                     f"after the campaign and between its nights; {labelled} labelled"
+                     + (": " + ", ".join(f"{k} {n}" for k, n in summary.labelled.items())
+                        if labelled else "") + "), in nights.csv as kind owner.")
+    return {"nights_run": len(run), "nights_valid": len(valid), "campaign": block,
+            "owner": owner}

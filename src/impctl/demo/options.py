@@ -14,6 +14,10 @@ TZ = "Europe/Ljubljana"
 #: scales the daemon's real-time pauses (Modbus timeouts, retry delays, poll intervals) into
 #: simulated time; the demo's wall time does not depend on it.
 DEFAULT_SPEED = {"realistic": 10000.0, "iso": 20000.0}
+#: The owner recording of the demo: a snapshot and a row every this many simulated seconds
+#: (a gateway: a snapshot a minute, rows of 5 min). Each snapshot is a Modbus poll of the
+#: simulator, as on a gateway, and costs wall time the demo keeps for the campaign.
+OWNER_SAMPLE_S = 900.0
 #: How long the adaptive demo waits after the stop for the daemon's last fit [simulated s]:
 #: the fits take none (the clock waits for them), so only a failed fit runs into it.
 FIT_WAIT_S = 86400.0
@@ -40,6 +44,12 @@ class DemoOptions:
     sample_interval_s: float = 300.0
     plant: str = "realistic"
     adaptive: bool = False  # the adaptive campaign (issue 18) instead of the fixed counts
+    # days of the owner's own heating recorded before the campaign and after it (the daemon's
+    # [record]); the owner's snapshots and rows at OWNER_SAMPLE_S, coarser than a gateway's
+    # 60 s. Each simulated day costs wall time however it is sampled (the realistic plant's
+    # steps): a few days, not weeks, keep the demo short (--owner-days asks for more)
+    owner_days_before: int = 2
+    owner_days_after: int = 3
     max_nights: int = 5  # adaptive: nights run at most
     target_rel: tuple[float, float] = (0.05, 0.08)  # adaptive: HLC, τ 95 % half-width / estimate
 

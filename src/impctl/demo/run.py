@@ -142,8 +142,8 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     started = time.perf_counter()
     nights_csv = opts.out / "nights.csv"
     fit_json = opts.out / "fit.json"
-    progress.line("exporting the valid nights" + ("" if opts.adaptive else
-                                                  " and fitting (impctl fit)"))
+    progress.line("exporting the valid nights and the owner records"
+                  + ("" if opts.adaptive else " and fitting (impctl fit)"))
     export = subprocess.run(_cmd("export", "--db", str(db_path), "--out", str(nights_csv),
                                  "--force"), capture_output=True, text=True)
     if export.returncode != 0:
@@ -188,5 +188,6 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     (opts.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     echo(format_summary(summary))
     echo(summary["campaign"]["line"])
+    echo(summary["owner"]["line"])
     echo(f"report: {opts.out / 'report.html'}")
     return summary

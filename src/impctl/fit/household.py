@@ -188,9 +188,11 @@ def choose_nights(nights: Sequence, max_nights: int = DEFAULT_MAX_NIGHTS) -> Cho
     defaults), and choose at most ``max_nights``: the most recent, a third of them (at least
     one) constrained when there are enough, the rest normal."""
     from ..imp.gaps import cut_at_gaps
+    from ..imp.night import split_owner
     from ..imp.plan import EMISSION_LAG_H
     from .nights.data import prepare_nights
 
+    nights, owner_note = split_owner(list(nights))  # the season model's, not this fit's
     cut, _ = cut_at_gaps(nights, EMISSION_LAG_H)
     kept, _, skipped = prepare_nights(cut, EMISSION_LAG_H, MIN_NIGHT_H, Q_ON_W)
     chosen = _most_recent(kept, max_nights)
@@ -203,6 +205,8 @@ def choose_nights(nights: Sequence, max_nights: int = DEFAULT_MAX_NIGHTS) -> Cho
         note = (f"{len(kept)} usable nights in the file; the fit uses the {len(chosen)} "
                 f"most recent ({chosen[0].night_id} … {chosen[-1].night_id}; --max-nights "
                 f"{max_nights})")
+    if owner_note is not None:
+        note = owner_note if note is None else f"{owner_note}; {note}"
     missing = tuple(k for k in ("constrained", "normal") if not any(n.kind == k for n in kept))
     return ChosenNights(chosen_nights, chosen_cut, kept, chosen, skipped, missing, note,
                         list(nights))

@@ -14,8 +14,8 @@ from collections.abc import Mapping
 from datetime import date
 from pathlib import Path
 
-from ..errors import InputError
-from .errors import WriteBudgetExceeded
+from ..errors import InputError, sqlite_problem
+from .errors import WriteBudgetExceeded, WriteRefused
 
 _LOG = logging.getLogger(__name__)
 
@@ -80,7 +80,8 @@ class WriteBudget:
         row = self._db.execute("SELECT count FROM lifetime WHERE ma = ?", (ma,)).fetchone()
         return int(row[0]) if row else 0
 
-    def consume(self, ma: int, day: date, *, reserve: int = 0) -> int:
+    def consume(self, ma: int, day: date, *, reserve: int = 0,
+                best_effort: bool = False) -> int:
         """Count one write of ``ma`` on ``day``; return the day's count including it.
 
         Parameters
@@ -88,19 +89,39 @@ class WriteBudget:
         reserve : int
             Extra writes allowed beyond the budget (restoring the owner's settings); using
             one is logged at ERROR level.
+        best_effort : bool
+            A restore: when the count cannot be recorded (a full disk, a read-only file
+            system, a damaged file), log one line and allow the write anyway — putting the
+            owner's settings back never depends on recording anything.
 
         Raises
         ------
         WriteBudgetExceeded
             When the day's budget (plus ``reserve``) is already used up; nothing is counted
             then. Logged at ERROR level as well, so a refused write is never silent.
+        WriteRefused
+            When the count cannot be recorded and ``best_effort`` is False (an experiment's
+            write is not sent uncounted).
         """
+        try:
+            return self._consume(ma, day, reserve)
+        except sqlite3.Error as exc:
+            why = sqlite_problem(exc)
+            if not best_effort:
+                msg = (f"register {ma}: the write budget cannot count the write ({why}: "
+                       f"{self.path}); write refused")
+                _LOG.error(msg)
+                raise WriteRefused(msg) from None
+            _LOG.error("register %d: the write budget cannot count the restore (%s: %s); "
+                       "restoring anyway", ma, why, self.path)
+            return self.used_or_zero(ma, day) + 1
+
+    def _consume(self, ma: int, day: date, reserve: int) -> int:
         db = self._db
         db.execute("BEGIN IMMEDIATE")  # check-and-increment atomically across processes
         try:
             used = self.used(ma, day)
             if used >= self.limit(ma) + reserve:
-                db.execute("ROLLBACK")
                 msg = (f"write budget exhausted for register {ma}: {used} of "
                        f"{self.limit(ma)} (+{reserve} reserve) writes used on "
                        f"{day.isoformat()}; write refused")
@@ -120,25 +141,46 @@ class WriteBudget:
                 (ma,),
             )
             db.execute("COMMIT")
-        except sqlite3.Error:
-            db.execute("ROLLBACK")
+        except BaseException:
+            self._rollback()
             raise
         return used + 1
+
+    def _rollback(self) -> None:
+        """Roll back what is open; never raise. A COMMIT that failed with SQLITE_FULL or an
+        I/O error may already have rolled the transaction back itself, and then ROLLBACK
+        would raise "no transaction is active" over the error that matters."""
+        if not self._db.in_transaction:
+            return
+        try:
+            self._db.execute("ROLLBACK")
+        except sqlite3.Error as exc:
+            _LOG.debug("rollback of %s failed: %s", self.path, exc)
+
+    def used_or_zero(self, ma: int, day: date) -> int:
+        """:meth:`used`, or 0 when the file cannot be read (for log lines and results only,
+        never for a decision)."""
+        try:
+            return self.used(ma, day)
+        except sqlite3.Error:
+            return 0
 
     def refund(self, ma: int, day: date) -> None:
         """Give back one write of ``ma`` on ``day`` that provably never took effect (a restore
         the device refused, or whose read-back shows the register unchanged), so failed
-        restore attempts cannot use up the budget and its reserve."""
+        restore attempts cannot use up the budget and its reserve. Best effort: a refund that
+        cannot be recorded is logged, never raised (it only ever follows a failed write)."""
         db = self._db
-        db.execute("BEGIN IMMEDIATE")
         try:
+            db.execute("BEGIN IMMEDIATE")
             db.execute("UPDATE daily SET count = count - 1 WHERE day = ? AND ma = ? AND count > 0",
                        (day.isoformat(), ma))
             db.execute("UPDATE lifetime SET count = count - 1 WHERE ma = ? AND count > 0", (ma,))
             db.execute("COMMIT")
-        except sqlite3.Error:
-            db.execute("ROLLBACK")
-            raise
+        except sqlite3.Error as exc:
+            self._rollback()
+            _LOG.error("register %d: the write budget cannot give back a write that did not "
+                       "take effect (%s: %s)", ma, sqlite_problem(exc), self.path)
 
     def close(self) -> None:
         """Close the database."""

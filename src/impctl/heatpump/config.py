@@ -80,8 +80,10 @@ class WritePolicy:
     """Which registers impctl may write, within which limits, how often.
 
     Loop-1 setpoint (2187) and loop-1 mode (2042) are always allowed; loop 2 (2049/2052) only
-    with ``loop2_setpoint_c`` set, the ±4 K correction (2014) only with ``correction_k`` set.
-    2017, 2018, 2113, 539 and 2197 are never written.
+    with ``loop2_setpoint_c`` set, the ±4 K correction (2014) only with ``correction_k`` set,
+    the loop-1 heating-curve points (2309/2314) only with ``loop1_curve_c`` set (the daemon
+    sets it while the owner asks for impctl's curve). 2017, 2018, 2113, 539 and 2197 are never
+    written.
 
     Attributes
     ----------
@@ -90,6 +92,9 @@ class WritePolicy:
         never clamped.
     loop2_setpoint_c : (min, max) clamp for 2049 [°C]; ``None`` = loop 2 not writable.
     correction_k : (min, max) clamp for 2014 [K], within −4…4; ``None`` = not writable.
+    loop1_curve_c : (min, max) clamp for the curve points 2309/2314 [°C], within
+        :data:`CURVE_FLOW_BOUNDS_C`; ``None`` = not writable (a restore of the owner's points
+        is always allowed).
     daily_budget : writes per register per day (UTC day of the client's clock); build the
         budget with ``WriteBudget(path, policy.daily_budget)``.
     verify_attempts : read-backs after a write before it counts as failed.
@@ -101,6 +106,7 @@ class WritePolicy:
     loop1_setpoint_c: tuple[float, float] = (16.0, 24.0)
     loop2_setpoint_c: tuple[float, float] | None = None
     correction_k: tuple[int, int] | None = None
+    loop1_curve_c: tuple[float, float] | None = None
     daily_budget: int = 12
     verify_attempts: int = 3
     verify_delay_s: float = 0.5
@@ -138,6 +144,10 @@ class HeatPumpConfig:
 #: frost damage and damp, above 30 °C no room is meant to be heated (EN 16798-1 design
 #: ranges lie within 16–26 °C); a write outside them is a typo, not an experiment.
 ROOM_SETPOINT_BOUNDS_C = (10.0, 30.0)
+#: Flow temperatures a heating-curve point may be set to [°C]: below 20 °C no emitter heats a
+#: room, above 55 °C an air-source heat pump runs near its limit (and radiators sized for it
+#: are no house impctl lowers a curve in).
+CURVE_FLOW_BOUNDS_C = (20.0, 55.0)
 #: Endurance of the controller's non-volatile memory [writes per register over its life]:
 #: assumed — Kronoterm publishes no figure, so the conservative class of the makers that do
 #: (Weishaupt 100,000; iDM 300,000; reference kronoterm-modbus.md §4.1).
@@ -183,6 +193,11 @@ def _write_problems(c: Any) -> list[Problem]:
                              f"{hi_b:g} °C, got [{limits[0]:g}, {limits[1]:g}]"))
     if c.correction_k is not None and not -4 <= c.correction_k[0] <= c.correction_k[1] <= 4:
         out.append(("correction_k", "limits must lie within -4…4 K"))
+    lo_c, hi_c = CURVE_FLOW_BOUNDS_C
+    if c.loop1_curve_c is not None and not lo_c <= c.loop1_curve_c[0] <= c.loop1_curve_c[1] \
+            <= hi_c:
+        out.append(("loop1_curve_c", f"limits must satisfy {lo_c:g} <= min <= max <= "
+                                     f"{hi_c:g} °C"))
     for key, low in (("daily_budget", 0), ("restore_reserve", 0), ("verify_attempts", 1)):
         if getattr(c, key) < low:
             out.append((key, f"must be >= {low}"))
@@ -220,7 +235,7 @@ _FLOATS = _FLOATS | {"settle_s"}  # issue 15 (answer attribution)
 _STRINGS = frozenset({"transport", "host", "serial_port", "datatype", "generation",
                       "room_sensor"})
 _PAIRS = frozenset({"connect_backoff_s", "loop1_setpoint_c", "loop2_setpoint_c", "correction_k",
-                    "valid"})
+                    "loop1_curve_c", "valid"})
 
 
 def _type_problem(key: str, value: Any) -> str | None:

@@ -2,11 +2,13 @@
 
 The order matters and is the safety argument:
 
-1. only whitelisted registers (2187, 2042; 2049/2052 and 2014 when configured), never 2017,
-   2018, 2113, 539 or 2197 — refused before any traffic;
+1. only whitelisted registers (2187, 2042; 2049/2052, 2014 and the curve points 2309/2314
+   when configured), never 2017, 2018, 2113, 539 or 2197 — refused before any traffic;
 2. the value is clamped to the configured limits (mode registers: an exact documented code);
 3. the register is read; if it already holds the value, nothing is written (no EEPROM wear);
-4. the write is counted against the register's daily budget *before* it is sent;
+4. the write is counted against the register's daily budget *before* it is sent (an
+   experiment's write that cannot be counted is refused; a restore that cannot be counted
+   is logged and sent anyway: putting the owner's settings back never depends on recording);
 5. FC 06, then read back (after a pause; the first answer may still be the old value) until
    it matches, else :class:`WriteVerifyError`.
 
@@ -36,11 +38,13 @@ from ..kronoterm.decode import decode, encode, raw_value
 from ..kronoterm.registers import FORBIDDEN_WRITES, Kind, Register
 from ..modbus import ModbusDeviceError, ModbusLink, ModbusLinkError
 from .budget import WriteBudget
-from .config import WritePolicy
+from .config import CURVE_FLOW_BOUNDS_C, WritePolicy
 from .errors import HeatPumpError, WriteRefused, WriteVerifyError
 
 _LOG = logging.getLogger(__name__)
 _MODES = frozenset({0, 1, 2})
+#: The loop-1 heating-curve points: their owner's values are always restorable.
+CURVE_POINTS = (2309, 2314)
 
 Rule = tuple[float, float] | frozenset[int]
 
@@ -79,15 +83,21 @@ def write_rules(policy: WritePolicy) -> Mapping[int, Rule]:
         rules.update({2049: policy.loop2_setpoint_c, 2052: _MODES})
     if policy.correction_k is not None:
         rules[2014] = (float(policy.correction_k[0]), float(policy.correction_k[1]))
+    if policy.loop1_curve_c is not None:
+        rules.update(dict.fromkeys(CURVE_POINTS, (float(policy.loop1_curve_c[0]),
+                                                  float(policy.loop1_curve_c[1]))))
     if FORBIDDEN_WRITES & set(rules):  # guards against a future edit of this table
         raise RuntimeError("a forbidden register slipped into the write whitelist")
     return rules
 
 
-def _rule(reg: Register, policy: WritePolicy) -> Rule:
+def _rule(reg: Register, policy: WritePolicy, restore: bool = False) -> Rule:
     if reg.ma in FORBIDDEN_WRITES:
         raise WriteRefused(f"register {reg.ma} ({reg.name}) is never written by impctl")
     rule = write_rules(policy).get(reg.ma)
+    if rule is None and restore and reg.ma in CURVE_POINTS:
+        # The owner's curve comes back whatever the configuration says now.
+        rule = CURVE_FLOW_BOUNDS_C
     if rule is None:
         raise WriteRefused(f"register {reg.ma} ({reg.name}) is not in the write whitelist "
                            "for this configuration")
@@ -133,7 +143,7 @@ def check_restore(reg: Register, value: float, policy: WritePolicy) -> float:
     it is no documented mode code, no plausible temperature (sentinel or outside −60…150 °C) or
     outside the documented −4…4 K of the correction.
     """
-    rule = _rule(reg, policy)
+    rule = _rule(reg, policy, restore=True)
     value = _finite(reg, value)
     if isinstance(rule, frozenset):
         return _mode(reg, value, rule)
@@ -185,14 +195,14 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
         _LOG.info("register %d (%s) already %s %s; not written", reg.ma, reg.name, target,
                   reg.unit)
         return WriteResult(reg.name, reg.ma, float(value), target, clamped, False,
-                           previous, previous, budget.used(reg.ma, clock.now().date()))
+                           previous, previous, budget.used_or_zero(reg.ma, clock.now().date()))
     reserve = policy.restore_reserve if restore else 0
     day = clock.now().date()
     # A register whose last write failed: log its repeated failures at DEBUG only.
     loud = logging.DEBUG if reg.ma in link.failed_writes else logging.WARNING
     delay = link.config.retry_delay_s
     for attempt in range(link.config.attempts):
-        used = budget.consume(reg.ma, day, reserve=reserve)
+        used = budget.consume(reg.ma, day, reserve=reserve, best_effort=restore)
         write_error = await _send(link, reg, word, loud)
         read_back = await _read_back(link, reg, word, policy, loud)
         if read_back == word:

@@ -32,13 +32,75 @@ def file_mb(path: str | Path) -> float:
         return 0.0
 
 
+def size_above(size_bytes: int, max_mb: float) -> str:
+    """``size_bytes`` as "N MB is more than the M MB" with as many digits as it takes to show
+    the difference (never "25 MB is more than the 25 MB"), in bytes when MB cannot."""
+    size_mb = size_bytes / 1e6
+    for digits in range(4):
+        text = f"{size_mb:,.{digits}f}"
+        if float(text.replace(",", "")) > max_mb:
+            return f"{text} MB is more than the {max_mb:g} MB"
+    return f"{size_bytes:,} bytes are more than the {round(max_mb * 1e6):,} bytes"
+
+
+#: Rows closer than this [s] are finer than the fit needs (it works on 5-minute blocks).
+FINE_STEP_S = 60.0
+#: Bytes of a file read to find its sampling step.
+_HEAD_BYTES = 16384
+
+
+def head_step_s(path: str | Path) -> float | None:
+    """The median step [s] between the first rows' ``timestamp`` cells, or None when it cannot
+    be told (no such column, unreadable stamps). Reads the first few kilobytes only."""
+    import csv
+    import itertools
+    import statistics
+    from datetime import datetime
+
+    try:
+        with Path(path).open("rb") as fh:
+            head = fh.read(_HEAD_BYTES).decode("utf-8-sig", errors="replace")
+    except OSError:
+        return None
+    lines = head.splitlines()[:-1]  # the last line may be cut
+    rows = list(csv.reader(lines))
+    if len(rows) < 3 or "timestamp" not in [c.strip() for c in rows[0]]:
+        return None
+    col = [c.strip() for c in rows[0]].index("timestamp")
+    stamps = []
+    for row in rows[1:]:
+        try:
+            stamps.append(datetime.fromisoformat(row[col].strip()))
+        except (IndexError, ValueError):
+            return None
+    try:
+        steps = [(b - a).total_seconds() for a, b in itertools.pairwise(stamps)]
+    except TypeError:  # naive and aware stamps mixed: the reader says so
+        return None
+    steps = [s for s in steps if s > 0]
+    return statistics.median(steps) if steps else None
+
+
 def refuse_large_file(path: str | Path, max_mb: float = MAX_FILE_MB) -> None:
-    """A file above ``max_mb`` [MB] is refused before it is read, with what to do instead."""
-    size_mb = file_mb(path)
-    if size_mb > max_mb:
+    """A file above ``max_mb`` [MB] is refused before it is read, with what to do instead:
+    for rows closer than :data:`FINE_STEP_S`, averaging them to one a minute."""
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        return  # the reader names the problem
+    if size <= max_mb * 1e6:
+        return
+    step = head_step_s(path)
+    if step is not None and step < FINE_STEP_S:
         raise InputError(
-            f"{size_mb:.0f} MB is more than the {max_mb:g} MB read here (about 600,000 rows; "
-            + _WHAT_TO_DO, path)
+            f"{size_above(size, max_mb)} read here (about 600,000 rows): its rows are "
+            f"{step:g} s apart, finer than the fit uses (5-minute blocks) — average them to "
+            "one a minute first, which makes the file about "
+            f"{FINE_STEP_S / step:.0f} times smaller (pandas: "
+            "df.resample('60s', on='timestamp').mean(); docs: NIGHTS files, 'Sampling')",
+            path)
+    raise InputError(f"{size_above(size, max_mb)} read here (about 600,000 rows; "
+                     + _WHAT_TO_DO, path)
 
 
 def refuse_many_rows(rows: int, source: str | Path, max_rows: int | None = None) -> None:

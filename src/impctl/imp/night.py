@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
-NightKind = Literal["constrained", "normal"]
+NightKind = Literal["constrained", "normal", "owner"]
 
 
 @dataclass(frozen=True)
@@ -19,8 +19,11 @@ class NightSamples:
     ----------
     night_id : str
         Identifier (e.g. ``"2026-01-12"`` or the CSV's ``night`` value).
-    kind : {"constrained", "normal"}
-        Heating switched off, or held at ``setpoint_c``.
+    kind : {"constrained", "normal", "owner"}
+        Heating switched off, or held at ``setpoint_c``; or an owner night: the house as its
+        owner runs it, recorded read-only (a local day from noon to noon, rows that are the
+        means over [timestamp, timestamp + the row interval)). The fit leaves owner nights
+        out (:func:`split_owner`): they are the season model's.
     start : pandas.Timestamp
         Time zone-aware start of the window (time 0 of ``time_s``).
     time_s : ndarray
@@ -53,6 +56,17 @@ class NightSamples:
     not_held : str
         Why an auto-labelled night is neither a held nor a constrained night (heat pulses,
         drift: :mod:`impctl.imp.held`); "" for an IMP night. The fit skips it with this reason.
+    t_flow_c, t_return_c, t_flow_target_c : ndarray or None
+        Supply and return water and the heat pump's calculated flow target (its heating
+        curve) per sample [°C], NaN where a cell is empty; None when the file has no such
+        column. Aligned with ``time_s`` as read (code that cuts ``time_s`` — the fit's gap
+        cut, its resampling — does not cut these).
+    dhw : ndarray or None
+        Share of each sample's time the heat pump charged hot water (0–1; an instant's
+        sample 0 or 1), NaN where empty, None without the column; aligned as above.
+    label : str
+        Why an owner night is not the owner's ordinary night ("owner changed the setpoint:
+        …; data missing: …"); "" when it is, and on IMP nights.
     """
 
     night_id: str
@@ -71,8 +85,25 @@ class NightSamples:
     defrost_h: float = float("nan")
     defrost_unread_h: float = float("nan")
     not_held: str = ""
+    t_flow_c: np.ndarray | None = None
+    t_return_c: np.ndarray | None = None
+    t_flow_target_c: np.ndarray | None = None
+    dhw: np.ndarray | None = None
+    label: str = ""
 
     @property
     def duration_h(self) -> float:
         """Covered time [h] from the first to the last sample."""
         return float(self.time_s[-1] - self.time_s[0]) / 3600.0 if len(self.time_s) else 0.0
+
+
+#: Why the fit leaves owner nights out (one line, printed once).
+OWNER_NOTE = "owner nights: fitted by the season model"
+
+
+def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | None]:
+    """(the IMP nights, a note when owner nights were left out): what the fit, the
+    classifiers and ``impctl campaign next`` take; the owner nights are the season model's."""
+    imp = [n for n in nights if n.kind != "owner"]
+    left = len(nights) - len(imp)
+    return imp, (None if not left else f"{OWNER_NOTE} ({left} left out)")

@@ -11,7 +11,10 @@
   --night-gain-w``): a fleet's per-household declaration;
 * ``defrost`` — 1 while the heat pump defrosts (Kronoterm register 2011), else 0: the hours
   of defrost, and of those the hours whose heat reading did not go negative (the draw not
-  read: the heat reads high, :func:`defrost_fields`).
+  read: the heat reads high, :func:`defrost_fields`);
+* ``p_el_w`` — the heat pump's own electrical power [W]: where it is given, a ``q_hc`` that
+  is this electrical power rather than the heat is refused
+  (:func:`impctl.imp.plausibility.electrical_problem`).
 
 A cell that is empty, not a number or outside its plausible range is missing (NaN), never a
 number: these columns inform the fit, they do not refuse a file whose series are sound.
@@ -30,6 +33,7 @@ EXTRA_COLUMNS: dict[str, tuple[float, float]] = {
     "t_out_ref_c": (-60.0, 60.0),
     "night_gain_w": (0.0, 2000.0),   # impctl.imp.gain.NIGHT_GAIN_LIMITS_W
     "defrost": (0.0, 1.0),
+    "p_el_w": (0.0, 30_000.0),
 }
 #: Share of a night's rows that must carry a value for the night to have it.
 PRESENT_FRACTION = 0.8

@@ -12,11 +12,17 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``setpoint`` (optional, may be empty) — T_set [°C]; for constrained nights the band centre.
 * ``heating`` (optional) — 1 while the heating is enabled, 0 while it is switched off.
 * ``night`` (optional) — night identifier; rows of one night must be contiguous.
-* ``kind`` (optional) — ``constrained`` or ``normal``, the same on every row of a night.
-* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``
-  (optional) — household electricity besides the heat pump [W], sleepers, mean of the room
-  sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while the heat
-  pump defrosts (:mod:`.night_extras`: a bad cell there is missing, not refused).
+* ``kind`` (optional) — ``constrained``, ``normal`` or ``owner`` (the house as its owner runs
+  it, recorded read-only between IMP nights; the fit leaves these out), the same on every row
+  of a night.
+* ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``,
+  ``p_el_w`` (optional) — household electricity besides the heat pump [W], sleepers, mean of
+  the room sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while
+  the heat pump defrosts, the heat pump's electrical power [W] (:mod:`.night_extras`: a bad
+  cell there is missing, not refused).
+* ``t_flow_c``, ``t_return_c``, ``t_flow_target_c``, ``dhw``, ``label`` (optional) — supply,
+  return and target flow water [°C], the share of time charging hot water, an owner night's
+  label (:mod:`.night_series`: a bad value there refuses the file).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
@@ -40,8 +46,10 @@ from .features import Q_ON_W
 from .held import not_held
 from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
+from .night_series import LABEL, SERIES_COLUMNS, check_labels, check_series, series_fields
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
-from .tables import frame_table, read_table
+from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
+from .tables import TIMESTAMP_TEXT, frame_table, read_table
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 #: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).
@@ -55,6 +63,8 @@ PLAUSIBLE = {
 }
 #: Share of the first hour's samples that must be "heating off" for an unlabelled constrained night.
 OFF_FRACTION = 0.8
+#: The kinds a ``kind`` cell may name: the IMP nights' and the owner's recorded nights.
+KINDS = (*NIGHT_KINDS, "owner")
 
 
 def _row(index: int) -> str:
@@ -62,6 +72,10 @@ def _row(index: int) -> str:
 
 
 def _check_values(table: pd.DataFrame, path: Path) -> None:
+    # A file in °F: its rooms are warmer than any room in °C, yet mostly inside t_air's range.
+    fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
+    if fahrenheit is not None:
+        raise InputError(fahrenheit, path, "column 't_air'")
     for col, (lo, hi, unit) in PLAUSIBLE.items():
         if col not in table:
             continue
@@ -69,9 +83,11 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
         bad = np.isfinite(values) & ((values < lo) | (values > hi))
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(
-                f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}", path, _row(i)
-            )
+            text = f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}"
+            if unit == "°C" and values[i] > hi and lo <= to_celsius(values[i]) <= hi:
+                text += (f" — looks like °F ({to_celsius(values[i]):.1f} °C): convert with "
+                         "(°F − 32) / 1.8")
+            raise InputError(text, path, _row(i))
     if "heating" in table:
         heating = table["heating"].to_numpy(dtype=float)
         bad = (heating != 0) & (heating != 1)
@@ -80,12 +96,12 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
             raise InputError(f"column 'heating': {heating[i]:g} is not 1 or 0", path, _row(i))
     if "kind" in table:
         kinds = table["kind"]
-        bad = ~kinds.isin(NIGHT_KINDS).to_numpy()
+        bad = ~kinds.isin(KINDS).to_numpy()
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(
-                f"column 'kind': {kinds.iloc[i]!r} is not 'constrained' or 'normal'", path, _row(i)
-            )
+            raise InputError(f"column 'kind': {kinds.iloc[i]!r} is not 'constrained', 'normal' "
+                             "or 'owner'", path, _row(i))
+    check_series(table, path, _row)
     if "night" in table:
         empty = (table["night"] == "").to_numpy()
         if empty.any():
@@ -96,7 +112,7 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if back.any():
         from .csv_hints import order_problem  # only on the failure path
 
-        text, i = order_problem(table["timestamp"], back)
+        text, i = order_problem(table["timestamp"], back, table.attrs.get(TIMESTAMP_TEXT))
         raise InputError(text, path, _row(i))
 
 
@@ -158,7 +174,7 @@ def read_nights(
     path = Path(path)
     try:
         table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_OPTIONAL,
-                           may_be_empty=("setpoint",), tz=tz)
+                           may_be_empty=_MAY_BE_EMPTY, tz=tz)
     except InputError:
         from .csv_hints import layout_problem
 
@@ -169,8 +185,10 @@ def read_nights(
     return nights_from_table(table, path, tz, window=window)
 
 
-_NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating")
-_TEXT = ("night", "kind")
+_NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating", *SERIES_COLUMNS)
+#: numeric columns whose empty cells are missing values
+_MAY_BE_EMPTY = ("setpoint", *SERIES_COLUMNS)
+_TEXT = ("night", "kind", LABEL)
 # read as text, then each cell a number or missing (:mod:`.night_extras`), never a refusal
 _OPTIONAL = (*_TEXT, *EXTRA_COLUMNS)
 
@@ -188,7 +206,7 @@ def read_nights_frame(
     name ``source`` and the row (counted as in the CSV form: the first data row is row 2).
     """
     table = frame_table(frame.reset_index(drop=True), source, required=REQUIRED_COLUMNS,
-                        numeric=_NUMERIC, optional=_OPTIONAL, may_be_empty=("setpoint",),
+                        numeric=_NUMERIC, optional=_OPTIONAL, may_be_empty=_MAY_BE_EMPTY,
                         tz=tz)
     return nights_from_table(table, Path(source), tz, window=window)
 
@@ -228,9 +246,15 @@ def nights_from_table(
 
     off = ((table["heating"] == 0) if "heating" in table else (table["q_hc"] <= Q_ON_W)).to_numpy()
     kinds_all = table["kind"].to_numpy() if "kind" in table else None
+    check_labels(table, groups, lambda _, idx: None if kinds_all is None else kinds_all[idx[0]],
+                 path, _row)
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
     extras = extra_columns(table)
+    if "p_el_w" in extras:  # the heat pump's electricity: q_hc must be well above it
+        why = electrical_problem(values["q_hc"], extras["p_el_w"])
+        if why is not None:
+            raise InputError(why, path, "column 'q_hc'")
     nights: list[NightSamples] = []
     for night_id, idx in groups:
         if night_id == "":
@@ -269,6 +293,7 @@ def nights_from_table(
             q_hc_w=values["q_hc"][idx],
             setpoint_c=setpoint,
             **more,
+            **series_fields(table, idx),
         ))
     if not nights:
         what = "no night with two or more samples" if explicit else (

@@ -9,6 +9,13 @@ column, not a house — above all q_hc logged in kW, which the fit would otherwi
 HLC of a few W/K with exit 0. After the fit, a model that misses the measured heat of its own
 normal nights by more than :data:`MAX_EPS_PCT` is refused the same way
 (:func:`fit_problem`).
+
+Two wrong inputs look like a house and are told by what else the file holds: temperatures in
+°F (a room at 70 °F is a 70 °C room to the reader, :func:`fahrenheit_problem`) and, where the
+heat pump's electrical power ``p_el_w`` is given, a q_hc that is that electrical power rather
+than the heat (COP ≈ 1 instead of 2–5, :func:`electrical_problem`). Without ``p_el_w`` an
+electrical power stays plausible (it gives a third of the HLC, still a dwelling's) and cannot
+be told.
 """
 
 from __future__ import annotations
@@ -30,6 +37,58 @@ HLC_W_PER_K = (10.0, 2000.0)
 MAX_EPS_PCT = 100.0
 #: Normal nights whose mean T_air − T_out is below this [K] do not tell the ratio well.
 MIN_DELTA_T_K = 3.0
+
+
+#: Median room air [°F] of a file in °F: 10–32 °C. As °C no heated room is that warm.
+FAHRENHEIT_ROOM = (50.0, 90.0)
+#: The heat pump counts as running above this electrical power [W] (compressor on; standby
+#: and the controller draw tens of watts).
+P_EL_RUNNING_W = 200.0
+#: q_hc / p_el_w at or below this on running rows is no heat pump's heat [-]: air-source
+#: units deliver 2–5 times their electricity, still ~1.5× at −20 °C.
+ELECTRICAL_RATIO = 1.3
+#: Running rows the ratio needs before it says anything.
+MIN_RUNNING_ROWS = 10
+
+
+def to_celsius(t_f: float) -> float:
+    """°F → °C."""
+    return (t_f - 32.0) / 1.8
+
+
+def fahrenheit_problem(t_air: np.ndarray) -> str | None:
+    """Why room temperatures ``t_air`` look like °F (their median in
+    :data:`FAHRENHEIT_ROOM`, a heated room's 10–32 °C written in °F), or None."""
+    finite = np.asarray(t_air, float)
+    finite = finite[np.isfinite(finite)]
+    if not len(finite):
+        return None
+    median = float(np.median(finite))
+    lo, hi = FAHRENHEIT_ROOM
+    if not lo <= median <= hi:
+        return None
+    return (f"the room temperatures look like °F (median {median:.1f}: "
+            f"{to_celsius(median):.1f} °C if it is °F; no heated room is at {median:.0f} °C): "
+            "NIGHTS files hold °C — convert t_air, t_out and setpoint with (°F − 32) / 1.8")
+
+
+def electrical_problem(q_hc_w: np.ndarray, p_el_w: np.ndarray) -> str | None:
+    """Why ``q_hc_w`` [W] looks like the heat pump's electrical power ``p_el_w`` [W] rather
+    than its heat: on the rows where the heat pump runs (p_el ≥ :data:`P_EL_RUNNING_W`,
+    q_hc > :data:`~impctl.imp.features.Q_ON_W`) the median q_hc / p_el is at most
+    :data:`ELECTRICAL_RATIO`; None otherwise (or with fewer than
+    :data:`MIN_RUNNING_ROWS` running rows)."""
+    q, p = np.asarray(q_hc_w, float), np.asarray(p_el_w, float)
+    running = np.isfinite(q) & np.isfinite(p) & (p >= P_EL_RUNNING_W) & (q > Q_ON_W)
+    if running.sum() < MIN_RUNNING_ROWS:
+        return None
+    ratio = float(np.median(q[running] / p[running]))
+    if ratio > ELECTRICAL_RATIO:
+        return None
+    return (f"q_hc looks like electrical power, not heat: on the {int(running.sum())} rows "
+            f"where p_el_w shows the heat pump running, q_hc is {ratio:.2f} × p_el_w in the "
+            "median (a heat pump delivers 2–5 times the electricity it uses) — give the "
+            "thermal heat output in W (a heat meter; Kronoterm register 2329)")
 
 
 def implied_hlc(nights: Sequence[NightSamples]) -> float | None:

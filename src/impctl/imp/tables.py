@@ -13,8 +13,11 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
+from ..numtext import non_ascii_problem
 
 _OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
+#: Key of ``DataFrame.attrs`` holding the timestamp cells as the source wrote them (strings).
+TIMESTAMP_TEXT = "timestamp_text"
 
 
 def _first_bad(mask: np.ndarray) -> int:
@@ -34,9 +37,10 @@ def parse_timestamps(raw: pd.Series, path: str | Path, tz: str, column: str = "t
     bad = parsed.isna().to_numpy()
     if bad.any():
         row = _first_bad(bad)
-        raise InputError(
-            f"cannot parse {column} {text.iloc[row - 2]!r} as ISO 8601", path, f"row {row}"
-        )
+        cell = text.iloc[row - 2]
+        raise InputError(f"cannot parse {column} {cell!r} as ISO 8601"
+                         + (f": {why}" if (why := non_ascii_problem(cell)) else ""),
+                         path, f"row {row}")
     has_offset = text.str.contains(_OFFSET).to_numpy()
     if has_offset.all():
         return pd.DatetimeIndex(parsed).tz_convert(tz)
@@ -118,6 +122,8 @@ def read_table(
         raise InputError("no data rows", path)
     out = pd.DataFrame(index=range(len(df)))
     out["timestamp"] = parse_timestamps(df["timestamp"], path, tz)
+    # as the file writes them, for messages that quote a row (TIMESTAMP_TEXT)
+    out.attrs[TIMESTAMP_TEXT] = df["timestamp"].str.strip().to_numpy()
     for col in numeric:
         if col not in df.columns:
             continue
@@ -130,7 +136,8 @@ def read_table(
         if bad.any():
             row = _first_bad(bad)
             cell = text.iloc[row - 2]
-            what = "empty cell" if cell == "" else f"{cell!r} is not a finite number"
+            what = "empty cell" if cell == "" else (
+                non_ascii_problem(cell) or f"{cell!r} is not a finite number")
             raise InputError(f"column '{col}': {what}", path, f"row {row}")
         out[col] = values
     for col in optional:
@@ -171,6 +178,7 @@ def frame_table(
                                              source, tz))
     else:
         out["timestamp"] = parse_timestamps(stamps.astype(object), source, tz)
+    out.attrs[TIMESTAMP_TEXT] = stamps.astype(str).str.strip().to_numpy()
     may_be_empty = set(may_be_empty)
     for col in numeric:
         if col not in cols:

@@ -258,6 +258,12 @@ _TABLE: tuple[Register, ...] = (
     _e("remote_function", 2197, RW, E, "remote function control: 1 = remote off"),
     _e("bms_control", 539, RW, C, "BMS control of the HP: 0 = remote off",
        {0: "remote off", 1: "1 compressor", 2: "2 compressors", 12: "automatic"}),
+    # §2.2 loop-1 heating curve (extended only; the TT3000 document has no curve register)
+    _t("loop1_curve_cold", 2309, RW, E, "loop-1 heating curve: flow at the first point "
+       "(−15 °C outdoor)"),
+    _t("loop1_curve_mild", 2314, RW, E, "loop-1 heating curve: flow at the second point "
+       "(+15 °C outdoor)"),
+    _e("loop1_adaptive_curve", 2320, RW, E, "loop-1 adaptive curve"),
     # §2.7 extended: compressor, pressure, power, energy, COP
     _b("compressor_bits", 2318, E, "b0 compressor 1, b1 compressor 2"),
     _b("compressor_protection_bits", 2319, E, "b0 anti-cycling lockout, b1 starting"),

@@ -13,7 +13,6 @@ import asyncio
 import json
 import logging
 import random
-import ssl
 import time
 from collections.abc import Callable
 from datetime import UTC, datetime
@@ -21,9 +20,11 @@ from typing import Protocol
 
 import aiomqtt
 
+from ..clock import VirtualClock
 from ..errors import InputError
-from .commands import BadCommand, Command, parse_command
+from .commands import COMMANDS, BadCommand, Command, parse_command
 from .config import MqttConfig
+from .counted import CountedWarnings
 from .discovery import (
     OFFLINE,
     ONLINE,
@@ -32,10 +33,14 @@ from .discovery import (
     discovery_messages,
     withdrawn_topics,
 )
-from .payloads import LiveState, fit_payloads
+from .payloads import LiveState, curve_payload, fit_payloads
 from .takeover import TakeoverWatch
+from .tls import SocketErrors, connect_hint
+from .tls import context as tls_context
 
 _LOG = logging.getLogger("impctl.mqtt")
+#: The MQTT client library's own log (paho through aiomqtt).
+_CLIENT_LOG = logging.getLogger("impctl.mqtt.client")
 #: A publish or subscribe the broker does not acknowledge in this time counts as an outage [s].
 _TIMEOUT_S = 10.0
 #: How often the fit results are re-read from the store at most [s].
@@ -82,6 +87,9 @@ class StateSource(Protocol):
     def last_fit(self) -> tuple[datetime, list[int], dict] | None:
         """The store's newest fit."""
 
+    def last_curve(self) -> dict | None:
+        """The kept heating-curve result (``impctl-curve/1``), or None."""
+
     def submit(self, command: Command) -> str:
         """Queue a household command through the store; returns a line for the log, or
         raises :class:`BadCommand` when the command may not run now (e.g. a daytime ``now``)."""
@@ -95,10 +103,17 @@ class MqttBridge:
     cfg : MqttConfig
     source : StateSource
     limits : Limits (the trigger's safety limits; also the number entity's range)
+    clock : the daemon's clock (the windows of the counted warnings run on it); real time
+        when None
     """
 
-    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits) -> None:
+    def __init__(self, cfg: MqttConfig, source: StateSource, limits: Limits,
+                 clock: VirtualClock | None = None) -> None:
         self.cfg, self.source, self.limits = cfg, source, limits
+        clock = clock or VirtualClock.real()
+        #: Ignored commands: the first of a kind in full, a flood counted (counted.py).
+        self.ignored = CountedWarnings(_LOG, clock.now_s, clock.wall_seconds)
+        self._socket_errors = SocketErrors()  # the cause a failed TLS connect leaves there
         self._device: DeviceIdentity | None = None  # as last announced
         self.kind = "constrained"
         self.setpoint_c = limits.default_setpoint_c
@@ -112,6 +127,7 @@ class MqttBridge:
         self._rediscover = asyncio.Event()
         self._task: asyncio.Task | None = None
         self._fit_sent: object = _UNSENT
+        self._curve_sent: object = _UNSENT
         self._fit_checked = -1e9
         #: ``[inputs]``: an object with ``topics`` (list of str), ``names`` (topic → input)
         #: and ``receive(topic, payload, retained)`` (no I/O, must not raise), or None.
@@ -120,6 +136,7 @@ class MqttBridge:
     # -- the daemon's side -----------------------------------------------------------------
     def start(self) -> None:
         """Start the bridge task (returns at once)."""
+        _CLIENT_LOG.addFilter(self._socket_errors)
         self._task = asyncio.create_task(self._run(), name="mqtt bridge")
 
     def link_state(self) -> dict:
@@ -154,18 +171,18 @@ class MqttBridge:
             pass
         except Exception as exc:  # noqa: BLE001 - stopping must not fail the daemon's exit
             _LOG.warning("MQTT bridge ended with %r", exc)
+        self.ignored.flush()
+        _CLIENT_LOG.removeFilter(self._socket_errors)
 
     # -- connection loop ---------------------------------------------------------------------
     def _client(self) -> aiomqtt.Client:
         cfg = self.cfg
-        tls = None
-        if cfg.tls:
-            tls = ssl.create_default_context(cafile=cfg.ca_file or None)
+        tls = tls_context(cfg.ca_file, cfg.cert_file, cfg.key_file) if cfg.tls else None
         return aiomqtt.Client(
             cfg.host, cfg.port, username=cfg.username or None, password=cfg.password(),
             identifier=cfg.client_id, keepalive=cfg.keepalive_s, timeout=_TIMEOUT_S,
             will=aiomqtt.Will(f"{cfg.topic}/availability", OFFLINE, qos=1, retain=True),
-            tls_context=tls, logger=logging.getLogger("impctl.mqtt.client"))
+            tls_context=tls, logger=_CLIENT_LOG)
 
     async def _run(self) -> None:
         delay, down_since = 1.0, None
@@ -198,6 +215,7 @@ class MqttBridge:
                     await self._session(client)
             except aiomqtt.MqttError as exc:
                 exc = _why_lost(client, exc)
+                why = self._explain(exc)
                 short = watch.ended(exc)
                 if short == "new":
                     _LOG.warning("MQTT %s: %s (retrying with back-off up to %g s)", where,
@@ -205,14 +223,14 @@ class MqttBridge:
                 if short is not None:
                     # Ended by the broker right after it began: the next connect tells an
                     # outage (logged then) from a takeover (named above once it repeats).
-                    self._set_connected(False, watch.reason if watch.clash else str(exc))
+                    self._set_connected(False, watch.reason if watch.clash else why)
                     quiet = True
                 else:  # an outage (also after a short session): its lines as usual
-                    self._set_connected(False, str(exc))
+                    self._set_connected(False, why)
                     quiet = False
                 if short is None and down_since is None:  # one line per outage, not per retry
                     _LOG.warning("MQTT broker %s unavailable: %s (retrying with back-off up "
-                                 "to %g s)", where, exc, self.cfg.reconnect_max_s)
+                                 "to %g s)", where, why, self.cfg.reconnect_max_s)
                     down_since = time.monotonic()
             except (InputError, OSError) as exc:   # the password unreadable: one line, no trace
                 quiet = False
@@ -231,6 +249,17 @@ class MqttBridge:
                 self._set_connected(False)
             await asyncio.sleep(delay * random.uniform(0.8, 1.2))
             delay = min(delay * 2, self.cfg.reconnect_max_s)
+
+    def _explain(self, exc: aiomqtt.MqttError) -> str:
+        """``exc`` in words: with the socket error the client library saw (a TLS alert comes
+        only there) and the likely cause, e.g. a TLS client on a plain port."""
+        text = str(exc)
+        cause = self._socket_errors.take()
+        if cause and cause not in text:
+            text = f"{text} ({cause})"
+        cfg = self.cfg
+        hint = connect_hint(text, cfg.host, cfg.port, cfg.tls, cfg.cert_file)
+        return f"{text}: {hint}" if hint else text
 
     def _held(self, watch: TakeoverWatch, where: str) -> None:
         if watch.held():
@@ -277,6 +306,7 @@ class MqttBridge:
         await client.publish(f"{self.cfg.topic}/availability", ONLINE, qos=1, retain=True)
         await self._publish_settings(client)
         self._fit_sent = _UNSENT
+        self._curve_sent = _UNSENT
         await self._publish_fit(client)
 
     async def _publish_settings(self, client: aiomqtt.Client) -> None:
@@ -294,6 +324,16 @@ class MqttBridge:
             await client.publish(f"{self.cfg.topic}/fit/{name}", json.dumps(payload),
                                  qos=1, retain=True)
         self._fit_sent = key
+        await self._publish_curve(client)
+
+    async def _publish_curve(self, client: aiomqtt.Client) -> None:
+        last = getattr(self.source, "last_curve", None)
+        payload = json.dumps(curve_payload(last() if last is not None else None),
+                             ensure_ascii=False)
+        if payload == self._curve_sent:
+            return
+        await client.publish(f"{self.cfg.topic}/curve", payload, qos=1, retain=True)
+        self._curve_sent = payload
 
     async def _publish_loop(self, client: aiomqtt.Client) -> None:
         idle_s = self.cfg.idle_interval_s
@@ -312,6 +352,7 @@ class MqttBridge:
                                  qos=0, retain=False)
             if time.monotonic() - self._fit_checked >= min(idle_s, _FIT_CHECK_S):
                 await self._publish_fit(client)
+                await self._publish_curve(client)
             self._wake.clear()
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout=idle_s)
@@ -332,21 +373,21 @@ class MqttBridge:
             if self.inputs is not None and topic in self.inputs.names:
                 self.inputs.receive(topic, payload, bool(message.retain))
                 continue
-            if not topic.startswith(prefix) or message.retain:
-                # A retained command would act again at every reconnect: ignore it.
-                if message.retain:
-                    _LOG.warning("MQTT command on %s ignored: retained messages are not "
-                                 "commands", topic)
+            if not topic.startswith(prefix) and not message.retain:
                 continue
-            name = topic[len(prefix):]
+            name = topic[len(prefix):] if topic.startswith(prefix) else topic
+            if message.retain:
+                # A retained command would act again at every reconnect: ignore it.
+                self._ignored(name, topic, "retained", "retained messages are not commands")
+                continue
             if not self.cfg.commands:
-                _LOG.warning("MQTT command %s ignored: commands are off (mqtt.commands = "
-                             "false in the configuration)", topic)
+                self._ignored(name, topic, "off", "commands are off (mqtt.commands = false "
+                                                  "in the configuration)")
                 continue
             try:
                 cmd = parse_command(name, payload, self.limits, self.kind, self.setpoint_c)
             except BadCommand as exc:
-                _LOG.warning("MQTT command %s ignored: %s", topic, exc)
+                self._ignored(name, topic, "malformed", str(exc))
                 continue
             if cmd.name in ("night_kind", "night_setpoint"):
                 self.kind = cmd.kind or self.kind
@@ -358,7 +399,16 @@ class MqttBridge:
                 try:
                     _LOG.info("MQTT command %s: %s", cmd.name, self.source.submit(cmd))
                 except BadCommand as exc:
-                    _LOG.warning("MQTT command %s refused: %s", topic, exc)
+                    self._ignored(name, topic, "refused", str(exc), verb="refused")
                 except Exception as exc:  # noqa: BLE001 - a store error must not end MQTT
                     _LOG.error("MQTT command %s could not be queued: %s", cmd.name, exc)
                 self.wake()
+
+    def _ignored(self, name: str, topic: str, kind: str, reason: str,
+                 verb: str = "ignored") -> None:
+        """A command not acted on: one line, or counted in a flood (:mod:`.counted`). The
+        keys are bounded: any name that is no command counts as one."""
+        known = name in COMMANDS
+        subject = topic if known else f"{self.cfg.topic}/cmd/+ (unknown commands)"
+        self.ignored.warn((name if known else None, kind), subject, reason,
+                          f"MQTT command {topic} {verb}: {reason}")

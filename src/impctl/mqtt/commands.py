@@ -17,8 +17,11 @@ import json
 import math
 from dataclasses import dataclass
 
+from ..numtext import non_ascii_problem
 from .discovery import Limits
 
+#: The commands under ``<base>/cmd/``.
+COMMANDS = ("abort", "skip_tonight", "trigger", "night_kind", "night_setpoint")
 #: Payloads a button may send (Home Assistant's default is PRESS; ours name the command).
 #: Never the empty payload: that is how a retained message is cleared (``mosquitto_pub -r -n``),
 #: and a person tidying the broker must not switch the heating off.
@@ -54,6 +57,8 @@ def setpoint_problem(kind: str, setpoint_c: float, limits: Limits) -> str | None
 def _number(value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise BadCommand(f"expected a number, got {value!r}")
+    if isinstance(value, str) and (problem := non_ascii_problem(value)) is not None:
+        raise BadCommand(problem)  # float() would take '٢٢' or '２２' as 22
     try:
         out = float(value)
     except ValueError:

@@ -38,6 +38,9 @@ class MqttConfig:
     ----------
     host, port : the broker (port 1883, or 8883 with TLS by convention)
     tls : bool, connect with TLS; ``ca_file`` is the CA bundle (empty = the system's)
+    cert_file, key_file : impctl's client certificate and its private key (PEM, the key
+        without a passphrase), for a broker that requires client certificates; ``key_file``
+        empty: the key is in ``cert_file``
     username, password_file : credentials; the password is read from the file at each
         connect (empty: the systemd credential ``mqtt.password``, if the unit loads one)
     client_id : MQTT client id, also the device id in Home Assistant
@@ -53,6 +56,8 @@ class MqttConfig:
     port: int = 1883
     tls: bool = False
     ca_file: str = ""
+    cert_file: str = ""
+    key_file: str = ""
     username: str = ""
     password_file: str = ""
     client_id: str = ""
@@ -83,6 +88,17 @@ class MqttConfig:
             raise InputError(f"not UTF-8 text (byte {exc.start + 1}): write the password as "
                              "plain text on the first line", path, "password file") from None
         return lines[0] if lines else ""
+
+    def warnings(self) -> list[str]:
+        """What a valid ``[mqtt]`` allows but should not, one line each: a password file or
+        a client key other users can read, a password sent in clear text over the network."""
+        from .tls import cleartext_warning, key_file_warning
+
+        # A user name means a password: from password_file, or from the systemd credential
+        # the unit loads (which check-config, run from a shell, cannot see).
+        found = [self.password_file_warning(), key_file_warning(self.cert_file, self.key_file),
+                 cleartext_warning(self.host, self.port, self.tls, self.username)]
+        return [w for w in found if w]
 
     def password_file_warning(self) -> str | None:
         """Why the password file is too open (group- or world-readable), or None."""
@@ -166,11 +182,16 @@ def mqtt_from_mapping(data: dict, problems: list[str], prefix: str = "mqtt.") ->
         unreadable(f"cannot read it: {exc.strerror or exc}")
     except InputError as exc:
         unreadable(f"{exc.source}: {exc.problem}")
-    if cfg.ca_file:
-        if not cfg.tls:
-            bad("ca_file", "only used with mqtt.tls = true")
-        elif not Path(cfg.ca_file).is_file():
-            bad("ca_file", f"no such file: {cfg.ca_file}")
+    for key in ("ca_file", "cert_file", "key_file"):
+        if getattr(cfg, key) and not cfg.tls:
+            bad(key, "only used with mqtt.tls = true")
+    if cfg.key_file and not cfg.cert_file:
+        bad("key_file", "is the key of a client certificate: set mqtt.cert_file too")
+    elif cfg.tls:  # loaded as the bridge will load them: a bad file shows now, not at night
+        from .tls import problems as tls_problems
+
+        for key, text in tls_problems(cfg.ca_file, cfg.cert_file, cfg.key_file):
+            bad(key, text)
     if not 10 <= cfg.idle_interval_s <= 3600:
         bad("idle_interval_s", "must lie in 10–3600 s")
     if not 5 <= cfg.keepalive_s <= 3600:

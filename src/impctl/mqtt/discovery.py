@@ -5,6 +5,7 @@ Topics (``<base>`` = ``MqttConfig.topic``):
 * ``<base>/availability`` — ``online`` / ``offline`` (retained; ``offline`` is the last will);
 * ``<base>/state`` — live values and the night's state as one JSON object (not retained);
 * ``<base>/fit/<name>`` — the last fit's HLC, C_m, τ and the coast time (retained);
+* ``<base>/curve`` — the heating curve's expected saving and advice (retained);
 * ``<base>/settings`` — the kind and setpoint the trigger button will use (retained);
 * ``<base>/cmd/<command>`` — commands, only with ``commands = true``.
 
@@ -143,6 +144,18 @@ def entities(cfg: MqttConfig, limits: Limits) -> list[tuple[str, str, dict]]:
                                         "{{ value_json.writes | tojson }}",
                                     "state_class": "measurement",
                                     "entity_category": "diagnostic", "icon": "mdi:counter"}),
+        # The heating curve (impctl curve): what to set the heat pump to, and what it saves.
+        ("sensor", "curve_flow_now", {"name": "Suggested flow temperature now",
+                                      "state_topic": state,
+                                      "value_template": _state("suggested_flow_c"), **temp,
+                                      "icon": "mdi:thermometer-water"}),
+        ("sensor", "curve_saving", {"name": "Expected saving this winter",
+                                    "state_topic": f"{base}/curve",
+                                    "value_template": _state("value"),
+                                    "json_attributes_topic": f"{base}/curve",
+                                    "unit_of_measurement": "kWh",
+                                    "suggested_display_precision": 0,
+                                    "icon": "mdi:piggy-bank-outline"}),
         ("binary_sensor", "experiment_active", {
             "name": "Experiment active", "state_topic": state,
             "value_template": _flag("experiment_active"), "device_class": "running"}),

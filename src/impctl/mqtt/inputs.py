@@ -16,10 +16,13 @@ import re
 from dataclasses import dataclass, fields
 from typing import Any
 
+from ..numtext import non_ascii_problem
+
 #: Topic names: no MQTT wildcards, no empty level, no spaces.
 _TOPIC = re.compile(r"^[^#+/\s]+(/[^#+/\s]+)*$")
 #: A plain decimal number, as Home Assistant writes a sensor's state ("523.4", "-3", "1e3").
-_NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
+#: ASCII digits only: ``\d`` and ``float()`` would take '٢٢' or '２２' as 22.
+_NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$", re.ASCII)
 #: States Home Assistant publishes for an entity without a value: missing, not a problem.
 HA_NO_VALUE = frozenset({"unavailable", "unknown", "none", "null", ""})
 
@@ -107,10 +110,12 @@ def parse_payload(name: str, payload: bytes) -> tuple[float | None, str | None]:
         if text[:1] in "{[\"":
             return None, (f"{shown!r} is JSON; publish the plain number (Home Assistant's "
                           "mqtt_statestream does)")
-        m = re.match(r"^([+-]?[\d.]+(?:[eE][+-]?\d+)?)\s*([A-Za-z°%/]+)$", text)
+        m = re.match(r"^([+-]?[\d.]+(?:[eE][+-]?\d+)?)\s*([A-Za-z°%/]+)$", text, re.ASCII)
         if m:
             return None, (f"{shown!r} carries a unit; publish the plain number in "
                           f"{_bounds(name)[2]}")
+        if (ascii_problem := non_ascii_problem(text)) is not None:
+            return None, ascii_problem
         return None, f"{shown!r} is not a number"
     value = float(text)
     if not math.isfinite(value):

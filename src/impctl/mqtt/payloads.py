@@ -36,6 +36,8 @@ class LiveState:
     energy_el_kwh, energy_heat_kwh : the heat pump's lifetime counters (heating + hot water):
         electricity it used and heat it delivered [kWh]
     next_night_at : when the next night's preheat starts (aware), None = none planned
+    suggested_flow_c : the flow temperature the recommended heating curve gives at the
+        outdoor temperature now [°C] (None = no curve yet)
     """
 
     ts: datetime | None = None
@@ -61,6 +63,7 @@ class LiveState:
     energy_el_kwh: float | None = None
     energy_heat_kwh: float | None = None
     next_night_at: datetime | None = None
+    suggested_flow_c: float | None = None
 
     def as_json(self) -> dict[str, Any]:
         """The JSON object of ``<base>/state``."""
@@ -87,6 +90,7 @@ class LiveState:
             "energy_heat_kwh": _round(self.energy_heat_kwh, 1),
             "next_night_at": None if self.next_night_at is None else (
                 self.next_night_at.isoformat(timespec="seconds")),
+            "suggested_flow_c": _round(self.suggested_flow_c, 1),
         }
 
 
@@ -140,3 +144,33 @@ def heat_loss_words(hlc_w_per_k: float) -> str:
     return (f"loses {hlc_w_per_k:.0f} W per °C of difference between inside and outside: "
             f"{at_w / 1000:.1f} kW at {WORDS_T_OUT_C:g} °C outside with {WORDS_T_IN_C:g} °C "
             "inside").replace("-", "−")
+
+
+def curve_payload(curve: dict | None) -> dict:
+    """The retained ``<base>/curve`` payload from the kept heating-curve result
+    (``impctl-curve/1``): the expected saving over a winter [kWh] as the value (null when
+    the curve it runs is unknown, or when none is kept), its interval and the advice in plain
+    words as attributes, and the recommended curve's flows at −15, 0 and +15 °C outside."""
+    if curve is None:
+        return {"value": None}
+    savings = curve.get("savings") or {}
+    saving = (savings.get("saving_kwh") or {})
+    rec = curve.get("recommended") or {}
+    run = curve.get("running") or {}
+    flows = rec.get("flow_c") or [None, None]
+    if not saving:
+        value = None  # the curve it runs is unknown, so is the saving
+    elif curve.get("lowers"):
+        value = saving.get("value")
+    else:
+        value = 0.0  # the curve is kept: nothing to save
+    return {
+        "value": value,
+        "low": saving.get("low"), "high": saving.get("high"), "unit": "kWh",
+        "advice": str(curve.get("advice", "")),
+        "curve_at_minus_15_c": flows[0], "curve_at_0_c": rec.get("flow_at_0_c"),
+        "curve_at_plus_15_c": flows[1], "running_at_0_c": run.get("flow_at_0_c"),
+        "hotter_at_0_k": curve.get("hotter_at_0_k"),
+        "winter": (savings.get("climate") or {}).get("description"),
+        "efficiency_assumed": bool((curve.get("cop") or {}).get("assumed", True)),
+    }

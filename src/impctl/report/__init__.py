@@ -126,7 +126,8 @@ padding:1em;overflow-x:auto}"""
 
 def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = None,
                  truth: HouseParameters | None = None, summary: dict | None = None,
-                 demand: dict | None = None, tz: str = "Europe/Ljubljana") -> Path:
+                 demand: dict | None = None, tz: str = "Europe/Ljubljana",
+                 curve: dict | None = None) -> Path:
     """Write OUT/report.html and OUT/fig_*.png; returns the HTML path.
 
     Parameters
@@ -138,6 +139,8 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     summary : the demo summary (:func:`demo_summary`), printed on the page
     demand : an out-of-sample heat-demand check (:mod:`impctl.report.demand`); default: the
         fit's own validation
+    curve : an ``impctl curve`` result (``impctl-curve/1``); default: the one the daemon
+        keeps beside the store (``curve.json``), if any
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -169,8 +172,15 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     os.umask(umask)
     tmp.chmod(0o777 & ~umask)  # mkdtemp makes it 0700; OUT gets the usual permissions
     try:
+        if curve is None and (Path(db_path).parent / "curve.json").is_file():
+            from .curve import read_curve_json
+
+            try:
+                curve = read_curve_json(Path(db_path).parent / "curve.json")
+            except InputError:
+                curve = None  # a kept curve that does not read is no reason to lose the report
         _render(tmp, fit, truth, summary, demand, nights_html, campaign,
-                household_html(household_summary(fit, comfort)))
+                household_html(household_summary(fit, comfort)), curve)
         if out.exists():
             for item in tmp.iterdir():
                 os.replace(item, out / item.name)
@@ -180,6 +190,12 @@ def write_report(db_path: str | Path, out: str | Path, *, fit: dict | None = Non
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return out / "report.html"
+
+
+def _curve_parts(curve: dict, out: Path) -> list[str]:
+    from .curve import curve_section
+
+    return curve_section(curve, out, _img)
 
 
 def _campaign_rows(store: Store, tz: str) -> tuple[list[dict], list[list[str]]]:
@@ -226,7 +242,7 @@ def _campaign_section(out: Path, campaign: tuple[list[dict], list[list[str]]]) -
 def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict | None,
             demand: dict | None, nights_html: str,
             campaign: tuple[list[dict], list[list[str]]] = ([], []),
-            household: str = "") -> None:
+            household: str = "", curve: dict | None = None) -> None:
     figs = [
         figures.night_fits(fit, out / "fig_nights.png"),
         figures.heat_demand(demand or fit.get("validation", {}), out / "fig_heat_demand.png"),
@@ -243,6 +259,7 @@ def _render(out: Path, fit: dict, truth: HouseParameters | None, summary: dict |
         f"<style>{_CSS}</style></head><body>",
         "<h1>impctl: house identification report</h1>",
         f"<div class='household'>{household}</div>" if household else "",
+        *(_curve_parts(curve, out) if curve is not None else []),
         "<p><i>Below: the engineer's tables and figures.</i></p>" if household else "",
         "<h2>What the nights determine</h2>", _lumped_table(fit),
         f"<p>Intervals: {html.escape(fit.get('interval_method', ''))}</p>",

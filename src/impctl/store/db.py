@@ -15,11 +15,14 @@ from ..errors import InputError
 from ._times import _dt, _iso, _now
 from .campaign_tables import CampaignTables
 from .house_inputs import HouseInputTables
-from .records import SAMPLE_COLUMNS, Command, JournalEntry, Night, Sample, TriggerRequest
+from .journal import JournalTables
+from .owner_file import OWNER_FILE
+from .owner_records import OwnerRecordTables
+from .records import IMP_KINDS, SAMPLE_COLUMNS, Command, Night, Sample, TriggerRequest
 from .schema import migrate
 
 
-class Store(CampaignTables, HouseInputTables):
+class Store(CampaignTables, HouseInputTables, JournalTables, OwnerRecordTables):
     """The impctl SQLite database (WAL mode, schema migrated on open).
 
     Parameters
@@ -38,6 +41,8 @@ class Store(CampaignTables, HouseInputTables):
 
     def __init__(self, path: str | Path, *, create: bool = True):
         self.path = Path(path)
+        #: The pending journal's copy outside the database (:mod:`.owner_file`).
+        self.owner_file = self.path.parent / OWNER_FILE
         if not create and not self.path.exists():
             raise InputError("no impctl store here (has the daemon run? check state_dir)",
                              self.path)
@@ -119,6 +124,14 @@ class Store(CampaignTables, HouseInputTables):
         self._db.execute("UPDATE nights SET valid = ?, reasons = ? WHERE id = ?",
                          (int(valid), json.dumps(list(reasons)), night_id))
 
+    def end_night(self, night_id: int, state: str, ended: datetime, valid: bool,
+                  reasons: Sequence[str]) -> None:
+        """A night's end state and verdict in one transaction (never one without the other:
+        a night left running is swept as interrupted at the next start)."""
+        with self._immediate():
+            self.set_night_state(night_id, state, ended=ended)
+            self.assess_night(night_id, valid, reasons)
+
     def interrupt_night(self, night_id: int, reason: str) -> None:
         """Mark a night that was running when the process died ``interrupted`` and not valid
         in one transaction: no reader, and no second crash, sees the state without the
@@ -133,9 +146,13 @@ class Store(CampaignTables, HouseInputTables):
         return None if row is None else _night(row)
 
     def nights(self, *, states: Iterable[str] | None = None, valid: bool | None = None,
-               ids: Iterable[int] | None = None) -> list[Night]:
-        """Nights in id order, optionally filtered by state, validity or id."""
-        sql, args = "SELECT * FROM nights WHERE 1", []
+               ids: Iterable[int] | None = None,
+               kinds: Iterable[str] = IMP_KINDS) -> list[Night]:
+        """Nights in id order, optionally filtered by state, validity or id; the IMP nights
+        only unless ``kinds`` says otherwise (the owner records: ``kinds=("owner",)``)."""
+        kinds = list(kinds)
+        sql = f"SELECT * FROM nights WHERE kind IN ({','.join('?' * len(kinds))})"
+        args: list = kinds
         if states is not None:
             states = list(states)
             sql += f" AND state IN ({','.join('?' * len(states))})"
@@ -188,45 +205,6 @@ class Store(CampaignTables, HouseInputTables):
             self._db.execute("ROLLBACK")
             raise
         self._db.execute("COMMIT")
-
-    # -- restore journal -------------------------------------------------------------------
-    def journal_record(self, night_id: int | None, register: str, address: int,
-                       raw_value: int) -> JournalEntry:
-        """Record the owner's value of ``register`` before the first write.
-
-        If an unrestored entry for the register already exists (an earlier restore did not
-        complete), that entry is kept and returned: the owner's value is the one recorded
-        before impctl ever touched the register, never a value impctl wrote itself.
-        """
-        with self._immediate():
-            row = self._db.execute(
-                "SELECT * FROM journal WHERE register = ? AND restored IS NULL",
-                (register,)).fetchone()
-            if row is None:
-                cur = self._db.execute(
-                    "INSERT INTO journal (night_id, register, address, raw_value, recorded)"
-                    " VALUES (?, ?, ?, ?, ?)",
-                    (night_id, register, address, raw_value, _iso(_now())))
-                row = self._db.execute("SELECT * FROM journal WHERE id = ?",
-                                       (cur.lastrowid,)).fetchone()
-        return _journal(row)
-
-    def journal_pending(self) -> list[JournalEntry]:
-        """Entries whose restore has not been confirmed by read-back."""
-        rows = self._db.execute("SELECT * FROM journal WHERE restored IS NULL ORDER BY id")
-        return [_journal(r) for r in rows]
-
-    def journal_mark_restored(self, entry_id: int) -> None:
-        """Mark an entry restored (after the read-back matched)."""
-        self._db.execute("UPDATE journal SET restored = ?, outcome = 'restored' WHERE id = ?",
-                         (_iso(_now()), entry_id))
-
-    def journal_mark_owner_changed(self, entry_id: int, raw_value: int) -> None:
-        """Close an entry without restoring it: the owner set the register themselves
-        (to ``raw_value``) while impctl held it, and the owner's newer choice wins."""
-        self._db.execute(
-            "UPDATE journal SET restored = ?, outcome = ? WHERE id = ? AND restored IS NULL",
-            (_iso(_now()), f"owner changed it to raw {int(raw_value)}", entry_id))
 
     # -- manual trigger requests -----------------------------------------------------------
     def add_request(self, kind: str, setpoint_c: float | None, when: str, *,
@@ -354,12 +332,6 @@ def _night(row: sqlite3.Row) -> Night:
         reasons=tuple(json.loads(row["reasons"])), started=_dt(row["started"]),
         ended=_dt(row["ended"]),
     )
-
-
-def _journal(row: sqlite3.Row) -> JournalEntry:
-    return JournalEntry(id=row["id"], night_id=row["night_id"], register=row["register"],
-                        address=row["address"], raw_value=row["raw_value"],
-                        recorded=_dt(row["recorded"]), restored=_dt(row["restored"]))
 
 
 def _request(row: sqlite3.Row) -> TriggerRequest:

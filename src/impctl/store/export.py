@@ -5,6 +5,17 @@ Columns: ``timestamp`` (ISO 8601, UTC offset), ``t_air`` and ``t_out`` [°C], ``
 Only samples inside each night's window are written (not the preheat before it), and those
 with a missing T_air, T_out or Q_HC are left out.
 
+The owner records (``kind`` owner: the house recorded read-only between IMP nights, one per
+local day from noon to noon) are written whole, every row the mean over [timestamp, timestamp
++ the row interval), labelled or not: ``label`` says why one is not the owner's ordinary night
+(empty when it is), ``setpoint`` is the owner's setpoint in that row, ``heating`` 0 where loop 1
+or the heating system was off. Nights and records are sorted by their first row.
+
+What the heat pump said besides: ``p_el_w`` (its electrical power, W), ``t_flow_c`` and
+``t_return_c`` (supply and return water, °C), ``t_flow_target_c`` (its calculated flow
+target: the heating curve it runs, °C), ``dhw`` (an owner row's share of time charging hot
+water, 0–1; an IMP night's sample 1 or 0).
+
 What the house's own sensors said at each sample (``[inputs]``, empty when not configured,
 stale or malformed): ``p_house_w`` (the household's electricity other than the heat pump, W),
 ``t_rooms_c`` (mean of the room sensors, °C), ``t_out_ref_c`` (the reference outdoor
@@ -22,33 +33,64 @@ from ..errors import InputError
 from .db import Store
 
 COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind",
-           "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants", "defrost")
+           "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants", "defrost", "p_el_w",
+           "t_flow_c", "t_return_c", "t_flow_target_c", "dhw", "label")
 #: The ``house_inputs`` column behind each export column of the house's own sensors.
 HOUSE_COLUMNS = ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
+#: Export columns that are numbers (empty where missing).
+NUMBER_COLUMNS = (*HOUSE_COLUMNS, "p_el_w", "t_flow_c", "t_return_c", "t_flow_target_c", "dhw")
 
 
 def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
-                valid_only: bool = True) -> list[dict]:
-    """One dict per usable sample of the selected nights (valid ones by default)."""
-    nights = store.nights(ids=night_ids, valid=True if valid_only else None)
-    rows = []
+                valid_only: bool = True, owner: bool = True) -> list[dict]:
+    """One dict per usable sample of the selected nights (valid ones by default) and, with
+    ``owner``, of every owner record (labelled or not; with ``night_ids`` those among them),
+    nights and records in the order of their first row."""
+    kinds = ("constrained", "normal", "owner") if owner else ("constrained", "normal")
+    nights = [n for n in store.nights(ids=night_ids, kinds=kinds)
+              if n.kind == "owner" or not valid_only or n.valid]
+    blocks = []
     for night in nights:
-        house = {r.ts: r for r in store.house_inputs(night.id)}
-        for s in store.samples(night.id):
-            # Only the window: the preheat before it (heating on, also on constrained nights)
-            # is not part of the night; `impctl fit` takes a night's first row as its start
-            # (the switch-off of a constrained night).
-            if not night.window_start <= s.ts <= night.window_end:
-                continue
-            if s.t_air_c is None or s.t_out_c is None or s.q_hc_w is None:
-                continue
-            rows.append({
-                "timestamp": s.ts.isoformat(), "t_air": s.t_air_c, "t_out": s.t_out_c,
-                "q_hc": s.q_hc_w, "setpoint": night.setpoint_c,
-                "heating": int(night.kind == "normal"), "night": night.id, "kind": night.kind,
-                **{c: getattr(house.get(s.ts), c, None) for c in HOUSE_COLUMNS},
-                "defrost": None if s.defrost is None else int(s.defrost),
-            })
+        rows = _night_rows(store, night)
+        if rows:
+            blocks.append(rows)
+    blocks.sort(key=lambda rows: rows[0]["_ts"])
+    out = []
+    for rows in blocks:
+        for row in rows:
+            del row["_ts"]
+            out.append(row)
+    return out
+
+
+def _night_rows(store: Store, night) -> list[dict]:
+    house = {r.ts: r for r in store.house_inputs(night.id)}
+    owner = night.kind == "owner"
+    label = "; ".join(night.reasons) if owner else ""
+    rows = []
+    for s in store.samples(night.id):
+        # Only the window: the preheat before it (heating on, also on constrained nights)
+        # is not part of the night; `impctl fit` takes a night's first row as its start
+        # (the switch-off of a constrained night). An owner record is its window.
+        if not night.window_start <= s.ts <= night.window_end:
+            continue
+        if s.t_air_c is None or s.t_out_c is None or s.q_hc_w is None:
+            continue
+        if owner:
+            heating, setpoint = int(not (s.loop_mode == 0 or s.system_on == 0)), s.setpoint_c
+            dhw = s.dhw_share
+        else:
+            heating, setpoint = int(night.kind == "normal"), night.setpoint_c
+            dhw = None if s.dhw_active is None else int(s.dhw_active)
+        rows.append({
+            "_ts": s.ts, "timestamp": s.ts.isoformat(), "t_air": s.t_air_c, "t_out": s.t_out_c,
+            "q_hc": s.q_hc_w, "setpoint": setpoint, "heating": heating, "night": night.id,
+            "kind": night.kind,
+            **{c: getattr(house.get(s.ts), c, None) for c in HOUSE_COLUMNS},
+            "defrost": None if s.defrost is None else int(s.defrost),
+            "p_el_w": s.p_el_w, "t_flow_c": s.t_supply_c, "t_return_c": s.t_return_c,
+            "t_flow_target_c": s.t_flow_target_c, "dhw": dhw, "label": label,
+        })
     return rows
 
 
@@ -89,7 +131,7 @@ def check_output_file(out: Path, force: bool = False, protect: Iterable[Path] = 
 
 
 def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | None = None,
-                  valid_only: bool = True, *, force: bool = False) -> int:
+                  valid_only: bool = True, *, force: bool = False, owner: bool = True) -> int:
     """Write the selected nights to ``out`` as CSV or Parquet, atomically; returns the row count.
 
     Raises :class:`InputError` (nothing written) for an unsafe ``out`` (see
@@ -102,20 +144,21 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
     check_output_file(out, force, protect=[store.path])
     if night_ids is not None:
         night_ids = list(night_ids)
-        known = {n.id for n in store.nights(ids=night_ids)}
+        known = {n.id for n in store.nights(ids=night_ids,
+                                            kinds=("constrained", "normal", "owner"))}
         missing = [i for i in night_ids if i not in known]
         if missing:
             raise InputError(f"no such night(s) in the store: {', '.join(map(str, missing))}",
                              store.path, "--nights")
-    rows = nights_rows(store, night_ids, valid_only)
+    rows = nights_rows(store, night_ids, valid_only, owner)
     if not rows:
-        what = "the selected nights have" if night_ids is not None else (
-            "the store has no valid night with" if valid_only else "the store has")
-        raise InputError(f"nothing to export: {what} no usable samples (see impctl nights)",
-                         store.path)
+        what = "the selected nights have no usable sample" if night_ids is not None else (
+            "no valid night in the store has a usable sample" if valid_only
+            else "the store has no usable sample")
+        raise InputError(f"nothing to export: {what} (see impctl nights)", store.path)
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     # Numbers even when every cell is missing (a column of None would be text in Parquet).
-    df[list(HOUSE_COLUMNS)] = df[list(HOUSE_COLUMNS)].astype(float)
+    df[list(NUMBER_COLUMNS)] = df[list(NUMBER_COLUMNS)].astype(float)
     df["defrost"] = df["defrost"].astype("Int8")   # 1/0, empty where not logged
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)

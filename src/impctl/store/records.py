@@ -5,20 +5,29 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from datetime import datetime
 
+#: The kinds of IMP night (the heat pump driven); the third kind, "owner", is recorded only.
+IMP_KINDS = ("constrained", "normal")
+
 
 @dataclass(frozen=True)
 class Night:
-    """One IMP night as stored.
+    """One IMP night as stored, or one owner record (``kind`` "owner").
 
     ``state`` runs planned → active → restoring → done; ``aborted`` when an abort condition
     stopped it (restored), ``interrupted`` when the process died during it (restored at the
     next start). ``valid`` is None until assessed; ``reasons`` lists why a night is not valid
     (or notes on a valid one).
+
+    An owner record (the house recorded read-only, :mod:`impctl.controller.recorder`) spans
+    ``window_start`` (local noon) to ``window_end`` (the next local noon); ``state`` is
+    "recording" until it is closed ("done"), ``reasons`` are its labels ("data missing: …"),
+    ``valid`` is True without a label, and ``setpoint_c`` is the owner's loop-1 setpoint at
+    night (None when it was never read).
     """
 
     id: int
     kind: str
-    setpoint_c: float
+    setpoint_c: float | None
     t_min_c: float | None
     t_max_c: float | None
     window_start: datetime
@@ -36,7 +45,16 @@ class Sample:
     """One snapshot of the heat pump during a night; None = missing (sensor absent, sentinel).
 
     Temperatures °C, powers W; ``working_function``, ``error_bits`` and ``loop_mode`` are the
-    raw register codes.
+    raw register codes; ``t_flow_target_c`` is the loop-1 calculated flow target (2128, the
+    heating curve the heat pump runs), ``system_on`` the heating system switch (2012).
+
+    A row of an owner record is the mean of ``snapshots`` snapshots taken in [``ts``, ``ts`` +
+    the row interval): temperatures and powers are means (None when fewer than the minimum
+    coverage of the row's snapshots had the value), ``dhw_share`` the share of them that
+    charged hot water (0–1), ``defrost`` True when any of them defrosted, ``error_bits`` the
+    bits any of them showed; ``setpoint_c``, ``loop_mode``, ``system_on`` and
+    ``working_function`` are the last values read. An IMP night's sample is one snapshot
+    (``snapshots`` and ``dhw_share`` None).
     """
 
     night_id: int
@@ -53,11 +71,16 @@ class Sample:
     loop_mode: int | None = None
     setpoint_c: float | None = None
     dhw_active: bool | None = None
+    t_flow_target_c: float | None = None
+    dhw_share: float | None = None
+    system_on: int | None = None
+    snapshots: int | None = None
 
 
 SAMPLE_COLUMNS = (
     "t_air_c", "t_out_c", "q_hc_w", "p_el_w", "t_supply_c", "t_return_c", "working_function",
-    "defrost", "error_bits", "loop_mode", "setpoint_c", "dhw_active",
+    "defrost", "error_bits", "loop_mode", "setpoint_c", "dhw_active", "t_flow_target_c",
+    "dhw_share", "system_on", "snapshots",
 )
 
 

@@ -128,6 +128,41 @@ MIGRATIONS: tuple[str, ...] = (
     );
     CREATE UNIQUE INDEX house_inputs_sample ON house_inputs(night_id, ts);
     """,
+    # 6: the owner's own days and nights, recorded read-only between IMP nights: a night of
+    # kind 'owner' per local day (12:00 to 12:00; its setpoint, the owner's, may be unknown)
+    # whose samples are the means of the snapshots in each [ts, ts + record.interval_s). The
+    # nights table is recreated for its kind constraint (foreign keys off meanwhile, see
+    # migrate()); every row and id is kept. New sample columns: the loop-1 calculated flow
+    # target (2128), the DHW share of a row, the heating system switch (2012) and how many
+    # snapshots a row averages (NULL: an IMP night's sample, one snapshot).
+    """
+    CREATE TABLE nights_6 (
+        id INTEGER PRIMARY KEY,
+        kind TEXT NOT NULL CHECK (kind IN ('constrained', 'normal', 'owner')),
+        setpoint_c REAL,
+        t_min_c REAL,
+        t_max_c REAL,
+        window_start TEXT NOT NULL,
+        window_end TEXT NOT NULL,
+        state TEXT NOT NULL,
+        source TEXT NOT NULL,
+        valid INTEGER,
+        reasons TEXT NOT NULL DEFAULT '[]',
+        started TEXT,
+        ended TEXT
+    );
+    INSERT INTO nights_6 (id, kind, setpoint_c, t_min_c, t_max_c, window_start, window_end,
+                          state, source, valid, reasons, started, ended)
+        SELECT id, kind, setpoint_c, t_min_c, t_max_c, window_start, window_end, state, source,
+               valid, reasons, started, ended FROM nights;
+    DROP TABLE nights;
+    ALTER TABLE nights_6 RENAME TO nights;
+    CREATE INDEX nights_kind ON nights(kind, window_start);
+    ALTER TABLE samples ADD COLUMN t_flow_target_c REAL;
+    ALTER TABLE samples ADD COLUMN dhw_share REAL;
+    ALTER TABLE samples ADD COLUMN system_on INTEGER;
+    ALTER TABLE samples ADD COLUMN snapshots INTEGER;
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -139,14 +174,30 @@ def migrate(db: sqlite3.Connection, path: Path) -> None:
         raise InputError(
             f"database schema {version} is newer than this impctl ({SCHEMA_VERSION}); "
             "upgrade impctl", path)
-    for target in range(version + 1, SCHEMA_VERSION + 1):
-        db.execute("BEGIN IMMEDIATE")
-        try:
-            for statement in MIGRATIONS[target - 1].split(";"):
-                if statement.strip():
-                    db.execute(statement)
-            db.execute(f"PRAGMA user_version = {target}")
-            db.execute("COMMIT")
-        except BaseException:
-            db.execute("ROLLBACK")
-            raise
+    if version >= SCHEMA_VERSION:
+        return
+    # A table other tables refer to is recreated (SQLite's way to change a constraint) with
+    # foreign keys off: with them on, dropping it would delete-check every referring row.
+    # The pragma is a no-op inside a transaction, so it is set around them, and every
+    # reference is checked before each commit instead.
+    keys_on = bool(db.execute("PRAGMA foreign_keys").fetchone()[0])
+    db.execute("PRAGMA foreign_keys=OFF")
+    try:
+        for target in range(version + 1, SCHEMA_VERSION + 1):
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                for statement in MIGRATIONS[target - 1].split(";"):
+                    if statement.strip():
+                        db.execute(statement)
+                broken = db.execute("PRAGMA foreign_key_check").fetchone()
+                if broken is not None:
+                    raise sqlite3.IntegrityError(
+                        f"migration {target} would leave a row of {broken[0]} pointing nowhere")
+                db.execute(f"PRAGMA user_version = {target}")
+                db.execute("COMMIT")
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+    finally:
+        if keys_on:
+            db.execute("PRAGMA foreign_keys=ON")

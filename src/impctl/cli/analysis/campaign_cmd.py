@@ -19,6 +19,7 @@ from ...imp.protocol import (
     DEFAULT_PREHEAT_H,
     DEFAULT_SETPOINTS_C,
 )
+from ...numtext import non_ascii_problem, parse_float
 from .. import cli
 from ..checks import MAX_FILE_MB, SETPOINT_C, T_OUT_C, in_range, refuse_large_file, time_zone
 
@@ -33,10 +34,11 @@ def _setpoints(ctx: click.Context, param: click.Parameter, value: str) -> list[f
     out = []
     for part in value.split(","):
         try:
-            sp = float(part)
-        except ValueError:
-            raise InputError(f"{part.strip()!r} is not a number (a comma-separated list of "
-                             "°C, e.g. 21,22,23)", place=place) from None
+            sp = parse_float(part)
+        except ValueError as exc:
+            why = non_ascii_problem(part) and str(exc)
+            raise InputError(why or f"{part.strip()!r} is not a number (a comma-separated list "
+                             "of °C, e.g. 21,22,23)", place=place) from None
         out.append(in_range(sp, SETPOINT_C, place, "°C"))
     return out
 
@@ -105,6 +107,7 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
 
     from ...campaign.design import Protocol, predict
     from ...imp import read_nights
+    from ...imp.night import split_owner
     from ...store.export import refuse_database
     from .fit_cmd import _write_json
 
@@ -115,7 +118,9 @@ def next_night(fit_path: Path, nights_path: Path, forecast_t_out_c: float,
     refuse_database(json_path, "--json")
     refuse_large_file(nights_path, MAX_FILE_MB)
     result = _read_fit(fit_path)
-    nights = read_nights(nights_path, tz)
+    nights, owner_note = split_owner(read_nights(nights_path, tz))
+    if owner_note is not None:
+        click.echo(owner_note, err=True)
     steps = np.concatenate([np.diff(np.asarray(n.time_s, float)) for n in nights]
                            ) if nights else np.array([])
     steps = steps[steps > 0]

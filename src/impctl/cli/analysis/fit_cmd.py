@@ -41,7 +41,7 @@ def _write_json(path: Path, data: dict) -> None:
               type=click.Path(dir_okay=False, path_type=Path),
               help="NIGHTS.csv: columns timestamp, t_air, t_out, q_hc; optional setpoint, "
                    "heating, night, kind, p_house_w, occupants, t_rooms_c, t_out_ref_c, "
-                   "night_gain_w, defrost.")
+                   "night_gain_w, defrost, p_el_w.")
 @click.option("--model-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Trained range classifiers [default: per-user data dir].")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),

@@ -103,11 +103,14 @@ def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) 
     from ...classifiers.saved import classify_nights
     from ...imp import read_nights
     from ...imp.gaps import cut_at_gaps
+    from ...imp.night import split_owner
     from ...imp.plausibility import check_units
     from ...population.ranges import UNITS
 
     refuse_large_file(nights_path, MAX_FILE_MB)
-    nights = read_nights(nights_path, tz)
+    nights, owner_note = split_owner(read_nights(nights_path, tz))
+    if owner_note is not None:
+        click.echo(owner_note, err=True)
     check_units(nights, nights_path)
     nights, gaps = cut_at_gaps(nights)
     results = classify_nights(nights, model_dir)

@@ -95,7 +95,17 @@ def _describe(cfg) -> list[str]:
             f"nights:    {cfg.night.window} {cfg.timezone}, ΔT {cfg.night.comfort_band_k:g} K, "
             f"a sample every {cfg.night.sample_interval_s:g} s",
             "campaign:  " + _campaign_line(cfg.campaign),
+            "recording: " + _record_line(cfg),
             "inputs:    " + describe_inputs(cfg.inputs)]
+
+
+def _record_line(cfg) -> str:
+    rec = cfg.record
+    if not rec.enabled:
+        return "off (record.enabled = false): nothing recorded between nights"
+    return (f"the house between nights, read-only: a snapshot every "
+            f"{rec.snapshot_interval_s(cfg.night):g} s, rows of {rec.interval_s:g} s, owner "
+            f"records kept {rec.keep_days} days")
 
 
 def _campaign_line(camp) -> str:

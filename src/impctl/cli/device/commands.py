@@ -1,4 +1,4 @@
-"""Device-side commands: daemon, trigger, status, nights, restore, export.
+"""Device-side commands: daemon, trigger, status, nights, export (restore: :mod:`.restore_cmd`).
 
 None of these import torch, scikit-learn or pandas at module level (export imports pandas
 only when it runs).
@@ -18,6 +18,7 @@ from zoneinfo import ZoneInfo
 import click
 
 from ...errors import InputError
+from ...numtext import non_ascii_problem, parse_int
 from .. import cli
 from .options import config_option
 
@@ -189,7 +190,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             lock.heartbeat()
             await asyncio.sleep(HEARTBEAT_S)
 
-    from ...controller import NightController, NightRequest
+    from ...controller import NightController, NightRefused, NightRequest
     from ...daemon.configured import clock_from_config, open_client, policy_from_config
     from ...daemon.schedule import next_act_time, window_after_act
     from ...store import Store
@@ -215,6 +216,9 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
             try:
                 night = await ctl.run(NightRequest(kind, sp, start, end,
                                                    cfg.night.comfort_band_k, source="trigger"))
+            except NightRefused as exc:  # not even created: the store cannot record
+                click.echo(f"impctl: night not started: {exc}", err=True)
+                return 1
             finally:
                 beat.cancel()
         finally:
@@ -222,51 +226,6 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     click.echo(f"night {night.id}: {night.state}, {'valid' if night.valid else 'not valid'}"
                f" — {'; '.join(night.reasons)}")
     return 0 if night.state in ("done", "aborted", "refused") else 1
-
-
-@cli.command("restore")
-@config_option
-@click.option("--timeout", "timeout_s", type=float, default=60.0, show_default=True,
-              help="Keep retrying a lost link this long [s].")
-def restore_command(config_path: Path, timeout_s: float) -> None:
-    """Restore the journaled owner's settings now (also systemd's ExecStopPost)."""
-    from ...store import Store
-
-    cfg = _load(config_path)
-    _setup_logging(cfg.log_level, cfg.timezone)
-    if not cfg.db_path.exists():
-        click.echo("nothing to restore (no store yet)")
-        return
-    with Store(cfg.db_path) as store:
-        if not store.journal_pending():
-            click.echo("nothing to restore")
-            return
-        left = asyncio.run(_restore(cfg, store, timeout_s))
-    if left:
-        click.echo("still pending: " + ", ".join(e.register for e in left), err=True)
-        sys.exit(1)
-    click.echo("restored and verified")
-
-
-async def _restore(cfg, store, timeout_s: float):
-    from ...clock import VirtualClock
-    from ...controller import restore_all
-    from ...daemon.configured import clock_from_config, open_client
-    from ...heatpump import ModbusLinkError
-
-    clock = clock_from_config(cfg)
-    client = open_client(cfg, clock)
-    try:
-        try:
-            await client.connect(max_wait_s=timeout_s)
-        except ModbusLinkError as exc:
-            click.echo(f"heat pump not reachable: {exc}", err=True)
-            return store.journal_pending()
-        # The timeout is in real seconds, whatever clock the nights run on.
-        return await restore_all(client, store, clock=VirtualClock.real(),
-                                 timeout_s=timeout_s, retry_s=1.0)
-    finally:
-        client.close()
 
 
 @cli.command("status")
@@ -318,16 +277,21 @@ def nights_command(config_path: Path, as_json: bool) -> None:
 @click.option("--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv",
               show_default=True)
 @click.option("--nights", "night_ids", default=None,
-              help="Comma-separated night ids (default: all valid nights).")
+              help="Comma-separated night ids (default: all valid nights and every owner "
+                   "record).")
 @click.option("--all", "include_invalid", is_flag=True, help="Include nights not valid.")
+@click.option("--no-owner", "no_owner", is_flag=True,
+              help="Leave out the owner records (the house recorded between IMP nights).")
 @click.option("--out", "out_path", type=click.Path(path_type=Path), required=True,
               help="NIGHTS file to write (timestamp,t_air,t_out,q_hc,setpoint,heating,night,"
                    "kind); its directory must exist.")
 @click.option("--force", is_flag=True,
               help="Overwrite an existing file (never a database: the store is refused).")
 def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids: str | None,
-                   include_invalid: bool, out_path: Path, force: bool) -> None:
-    """Write stored nights in the measured-data format of ``impctl fit``.
+                   include_invalid: bool, no_owner: bool, out_path: Path, force: bool) -> None:
+    """Write stored nights in the measured-data format of ``impctl fit``: the IMP nights and
+    the owner records (kind owner, labelled where they are not the owner's ordinary night),
+    in time order.
 
     Never writes onto the store or another database, into a directory that does not exist,
     or onto an existing file without --force; unknown night ids or nothing to export give
@@ -341,11 +305,11 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
     ids = None
     if night_ids:
         try:
-            ids = [int(x) for x in night_ids.split(",") if x.strip()]
+            ids = [parse_int(x) for x in night_ids.split(",") if x.strip()]
         except ValueError:
-            raise InputError(f"expected comma-separated ids, got {night_ids!r}",
-                             place="--nights") from None
+            raise InputError(non_ascii_problem(night_ids) or f"expected comma-separated ids, "
+                             f"got {night_ids!r}", place="--nights") from None
     with Store(db_path, create=False) as store:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
-                          force=force)
+                          force=force, owner=not no_owner)
     click.echo(f"wrote {n} samples to {out_path}")

@@ -3,7 +3,26 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from zoneinfo import ZoneInfo
+
+from ...errors import InputError
+
+
+def _copy_hint(exc: InputError, cfg) -> InputError:
+    """The store's error, plus what its copy outside it says is still to restore."""
+    from ...store.owner_file import OWNER_FILE, read_owner_values
+
+    copy = Path(cfg.state_dir) / OWNER_FILE
+    try:
+        entries, _ = read_owner_values(copy)
+    except (FileNotFoundError, InputError):
+        return exc
+    if not entries:
+        return exc
+    return InputError(f"{exc.problem}; the heat pump may still be in an experiment's state: "
+                      f"{copy} lists {', '.join(e.register for e in entries)} to restore "
+                      "(run impctl restore)", exc.source, exc.place)
 
 
 def collect_status(cfg) -> dict:
@@ -24,7 +43,11 @@ def collect_status(cfg) -> dict:
     # The broker link as the running daemon last noted it (written on change only).
     out["mqtt"] = None if cfg.mqtt is None else {
         "configured": True, **((info.notes.get("mqtt") or {}) if info.running else {})}
-    with Store(cfg.db_path, create=False) as store:
+    try:
+        store = Store(cfg.db_path, create=False)
+    except InputError as exc:
+        raise _copy_hint(exc, cfg) from None
+    with store:
         running = store.nights(states=["preparing", "active", "restoring"])
         if running:
             night = running[-1]
@@ -54,7 +77,15 @@ def collect_status(cfg) -> dict:
             "lumped": fit[2].get("lumped") if isinstance(fit[2], dict) else None}
         out["events"] = [{"ts": t, "level": lvl, "message": m} for t, lvl, m in store.events(8)]
         out["pending_restore"] = [e.register for e in store.journal_pending()]
-        out["restore"] = _restore_state(out["pending_restore"], out["current_night"], info)
+        # impctl's heating curve, set on the owner's word and watched by a live daemon: held,
+        # not waiting to be restored (without a live daemon it is unsupervised like the rest)
+        from ...daemon.curve_watch import KEEP
+
+        alive = info.running and not info.stale
+        held = [r for r in out["pending_restore"] if r in KEEP] if alive else []
+        out["curve_held"] = held
+        out["restore"] = _restore_state([r for r in out["pending_restore"] if r not in held],
+                                        out["current_night"], info)
         out["pending_requests"] = len(store.pending_requests())
         out["skip_tonight"] = _skips(store)
         out["next_night"] = _next_night(store, cfg)
@@ -64,6 +95,9 @@ def collect_status(cfg) -> dict:
         from .inputs_status import inputs_status
 
         out["inputs"] = inputs_status(cfg, store)  # [inputs]: the house's own sensors
+        from .record_status import record_status
+
+        out["record"] = record_status(cfg, store, info)  # [record]: the owner recording
     out["heatpump"] = read_health(cfg.state_dir)  # generation evidence, quirks
     if cfg.budget_path.exists():
         from ...daemon.configured import clock_from_config
@@ -286,10 +320,17 @@ def format_status(st: dict, tz: str = "UTC") -> str:
     from .inputs_status import inputs_lines
 
     lines.extend(inputs_lines(st.get("inputs"), zone))
+    from .record_status import record_lines
+
+    lines.extend(record_lines(st.get("record"), zone))
     link = next((e for e in st["events"] if "link" in e["message"]), None)
     lines.append("link:      " + ("no incident recorded" if link is None else
                                   f"{link['message']} ({link['ts']:%Y-%m-%d %H:%M} UTC)"))
     lines.extend(_restore_lines(st.get("restore")))
+    if st.get("curve_held"):
+        lines.append("curve:     impctl's heating curve is set (the owner's points are "
+                     "journaled: impctl curve --restore, a stop or impctl restore gives them "
+                     "back)")
     writes = ", ".join(f"{ma}: {v['used']}/{v['limit']}"
                        for ma, v in st["writes_today"].items()) or "none"
     lines.append(f"writes:    today {writes}")

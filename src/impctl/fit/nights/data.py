@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -76,7 +77,9 @@ def prepare_nights(
         if ok.sum() < 2 or t[ok][-1] - t[ok][0] < min_hours * 3600.0 - 1e-6:
             span = (t[ok][-1] - t[ok][0]) / 3600.0 if ok.sum() >= 2 else 0.0
             what = " after the emission lag" if night.kind == "constrained" else ""
-            skipped.append((night.night_id, f"{night.kind} night covers {span:.1f} h{what}, "
+            # rounded down: 2.97 h is "2.9 h, under the 3 h minimum", never "3.0 h, under"
+            shown = math.floor(span * 10 + 1e-9) / 10
+            skipped.append((night.night_id, f"{night.kind} night covers {shown:.1f} h{what}, "
                             f"under the {min_hours:g} h minimum"))
             continue
         kept.append(dataclasses.replace(

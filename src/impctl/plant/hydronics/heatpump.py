@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..params import CONTROL_THERMOSTAT, HeatPump
+from .flow_curve import curve_flow_c, flow_for_node, node_for_flow
 
 Array = NDArray[np.float64]
 
@@ -148,6 +149,31 @@ class Controller:
         self._not_thermostat = ~self.thermostat
         self._any_defrost = bool(self.defrost_on.any())
         self._no = np.zeros(n, bool)
+        #: Two-point flow curves (:meth:`set_flow_curve`); None: the built-in curve everywhere.
+        self._curve: tuple[Array, ...] | None = None
+        self._has_curve = np.zeros(n, bool)
+        #: Flow temperature the control aimed at in the last step [°C] (the curve's, or the
+        #: built-in curve's node target as a steady flow).
+        self.flow_target_c = np.full(n, np.nan)
+
+    def set_flow_curve(self, flow_a_c: Array, flow_b_c: Array, setpoint_ref_c: Array,
+                       lag_k_per_w: Array) -> None:
+        """Run a two-point flow curve (:mod:`.flow_curve`) instead of the built-in one where
+        ``flow_a_c`` is finite (flows at −15 and +15 °C outdoor [°C], the setpoint they are set
+        for [°C], the flow's lag over the node per W [K/W]); NaN keeps the built-in curve."""
+        n = self.k_w.shape[0]
+
+        def b(v):
+            return np.broadcast_to(np.asarray(v, dtype=float), (n,)).copy()
+
+        fa, fb, ref, lag = b(flow_a_c), b(flow_b_c), b(setpoint_ref_c), b(lag_k_per_w)
+        self._has_curve = np.isfinite(fa) & np.isfinite(fb)
+        self._curve = (fa, fb, ref, lag) if self._has_curve.any() else None
+
+    @property
+    def flow_curve_set(self) -> NDArray[np.bool_]:
+        """Houses running a two-point flow curve (:meth:`set_flow_curve`)."""
+        return self._has_curve.copy()
 
     def p_max_w(self, t_out_c: Array) -> Array:
         """Capacity at outdoor ``t_out_c`` [W]."""
@@ -158,8 +184,19 @@ class Controller:
         """Heating curve with room influence [°C]."""
         load = self._hlc_per_k * np.maximum(setpoint_c - t_out_sensed, 0.0)
         curve = setpoint_c + self.curve_gain * load ** self._inv_n
-        target = curve + self.room_k * (setpoint_c - t_air_sensed)
+        room = self.room_k * (setpoint_c - t_air_sensed)
+        target = curve + room
+        if self._curve is not None:
+            fa, fb, ref, lag = self._curve
+            flow = curve_flow_c(fa, fb, ref, setpoint_c, t_out_sensed) + room
+            node = node_for_flow(flow, setpoint_c, self.k_w, self.n_exp, lag)
+            target = np.where(self._has_curve, node, target)
+            self.flow_target_c = np.where(self._has_curve, flow, np.nan)
         return np.minimum(np.maximum(target, WATER_MIN_C), self.water_max_c)
+
+    def steady_flow_c(self, node_c: Array, setpoint_c: Array, lag_k_per_w: Array) -> Array:
+        """Steady flow temperature of a node target [°C] (:func:`.flow_curve.flow_for_node`)."""
+        return flow_for_node(node_c, setpoint_c, self.k_w, self.n_exp, lag_k_per_w)
 
     def step(self, st: ControlState, dt: float, enabled: NDArray[np.bool_], setpoint_c: Array,
              t_air_sensed: Array, t_out_sensed: Array, t_out_c: Array, t_water_c: Array,

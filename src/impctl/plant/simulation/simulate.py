@@ -92,6 +92,20 @@ class PlantCore:
         self.sensed_air = np.full(n, 20.0)
         self.sensed_out = np.full(n, 0.0)
 
+    @property
+    def flow_lag_k_per_w(self) -> Array:
+        """How far the flow runs above the emitter node per W of output [K/W]:
+        1/G_pipe + 1/(2·ṁc)."""
+        return 1.0 / self.g_pipe + 0.5 / self.flow_w_per_k
+
+    def set_flow_curve(self, flow_a_c: ArrayLike, flow_b_c: ArrayLike,
+                       setpoint_ref_c: ArrayLike) -> None:
+        """Let the heat pumps run a two-point flow curve: flow temperatures [°C] at −15 and
+        +15 °C outdoor, set for ``setpoint_ref_c`` [°C]; NaN keeps a house's built-in curve
+        (:mod:`impctl.plant.hydronics.flow_curve`)."""
+        self.controller.set_flow_curve(flow_a_c, flow_b_c, setpoint_ref_c,
+                                       self.flow_lag_k_per_w)
+
     # --- initial state -------------------------------------------------------------------
     def start_steady(self, t_air_c: ArrayLike, t_out_c: ArrayLike,
                      t_m_c: ArrayLike | None = None) -> None:

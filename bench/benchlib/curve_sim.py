@@ -1,0 +1,154 @@
+"""bench/curve.py's simulation: the validation households on the realistic plant through a
+stretch of winter, day by day (so that 200 houses × months fit in memory), with the
+installer's curve or a two-point curve per house, and what each stretch costs and gives.
+
+* weather: :func:`impctl.weather.winter_weather`, one seed per household and stretch, hourly,
+  interpolated to the step;
+* gains: the plant's internal and solar gains (:mod:`impctl.plant.building.gains`) over the
+  local day, drawn at 10-minute steps and held within them;
+* the owner's setpoint all day and night (:data:`SETPOINT_C`), no hot water (the same under
+  both curves; the electricity compared is the space heating's);
+* the fit: the household's IMP campaign of ``bench/fit.py`` (the gateway's nights on the same
+  plant, seed 20260), fitted as ``impctl fit`` fits (:func:`fit_json`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from impctl.curve.synth import SYNTH_OUTPUTS, rows_from_run
+from impctl.imp.protocol import DEFAULT_BAND_K
+from impctl.plant import PlantCore, simulate_plant
+from impctl.plant.building.gains import internal_gains_w, solar_gains_w
+from impctl.plant.hydronics.flow_curve import flow_for_node
+from impctl.weather import DEFAULT_TZ, winter_weather
+
+#: The owner's setpoint [°C] (the validation schedule's day setpoint).
+SETPOINT_C = 21.0
+#: The comfort floor of a constrained night, T_set − the band [°C].
+T_MIN_C = SETPOINT_C - DEFAULT_BAND_K
+#: Gains drawn at this step [s].
+GAIN_STEP_S = 600.0
+#: A step this far below the setpoint counts as cold [K].
+COLD_K = 0.5
+
+
+@dataclass
+class Stretch:
+    """What one stretch of winter cost and gave, per house (arrays over houses)."""
+
+    electricity_kwh: np.ndarray
+    heat_kwh: np.ndarray
+    cold_h: np.ndarray
+    hours: float
+    coldest_c: np.ndarray
+    coldest_night_c: np.ndarray
+    mean_t_air_c: np.ndarray
+    night_gain_w: np.ndarray
+    #: hours the room sensor (what the owner and the heat pump see) read below sp − 0.5 K
+    cold_sensed_h: np.ndarray = None  # type: ignore[assignment]
+    rows: list[list[pd.DataFrame]] = field(default_factory=list)
+
+    def house_rows(self, j: int) -> pd.DataFrame:
+        """House ``j``'s recorded rows, all days."""
+        return pd.concat(self.rows[j], ignore_index=True)
+
+
+def weather(n: int, days: float, seed: int, start: str) -> np.ndarray:
+    """Hourly outdoor temperatures (n_hours, n) [°C], one seed per house."""
+    cols = [winter_weather(start, days=days + 1, step_s=3600, seed=seed * 1000 + j,
+                           tz=DEFAULT_TZ).to_numpy() for j in range(n)]
+    return np.column_stack(cols)
+
+
+def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:00", *,
+             dt_s: float = 60.0, curve: tuple[np.ndarray, np.ndarray] | None = None,
+             row_step_s: float | None = None) -> Stretch:
+    """Simulate ``days`` days from ``start`` (local) on the realistic plant, day by day.
+
+    ``curve``: flows at −15 and +15 °C per house [°C] (NaN: the house keeps its built-in
+    curve); ``row_step_s``: also keep each house's recorded rows at this step (owner nights,
+    :func:`impctl.curve.synth.rows_from_run`).
+    """
+    n = houses.n_houses
+    t_hour = weather(n, days, seed, start)
+    begin = pd.Timestamp(start, tz=DEFAULT_TZ)
+    core = PlantCore(houses, params, seed=seed)
+    core.start_steady(SETPOINT_C, t_hour[0])
+    if curve is not None:
+        core.set_flow_curve(curve[0], curve[1], SETPOINT_C)
+    per_gain = int(round(GAIN_STEP_S / dt_s))
+    g_index = begin + pd.to_timedelta(np.arange(int(days * 86400 / GAIN_STEP_S)) * GAIN_STEP_S,
+                                      unit="s")
+    hours = (g_index.hour + g_index.minute / 60.0).to_numpy()
+    day_no = (g_index.normalize().tz_localize(None).asi8 // 86_400_000_000_000)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x6A1]))
+    g_int = internal_gains_w(hours, params.gains, n, rng, GAIN_STEP_S)
+    g_sol = solar_gains_w(hours, day_no, params.gains, n, rng)
+    steps = int(86400 / dt_s)
+    out = Stretch(*(np.zeros(n) for _ in range(3)), 0.0, np.full(n, np.inf),
+                  np.full(n, np.inf), np.zeros(n), np.zeros(n))
+    night_gain, night_n = np.zeros(n), 0
+    sp = np.full(steps, SETPOINT_C)
+    keep = SYNTH_OUTPUTS if row_step_s else ("t_air_c", "t_air_sensed_c", "electric_w",
+                                             "heat_pump_w")
+    out.cold_sensed_h = np.zeros(n)
+    for d in range(days):
+        t0 = d * 86400.0
+        t_end = t0 + dt_s * np.arange(1, steps + 1)
+        t_mid = t_end - dt_s / 2
+        t_out = np.column_stack([np.interp(t_mid / 3600.0, np.arange(len(t_hour)), t_hour[:, j])
+                                 for j in range(n)])
+        gi = np.repeat(g_int[d * steps // per_gain:(d + 1) * steps // per_gain], per_gain, axis=0)
+        gs = np.repeat(g_sol[d * steps // per_gain:(d + 1) * steps // per_gain], per_gain, axis=0)
+        run = simulate_plant(houses, params, t_out, dt_s, setpoint_c=sp, internal_gains_w=gi,
+                             solar_gains_w=gs, outputs=keep, core=core)
+        index = begin + pd.to_timedelta(t_end, unit="s")
+        local_h = index.hour.to_numpy()
+        night = (local_h >= 22) | (local_h < 6)
+        t_air = run["t_air_c"]
+        out.electricity_kwh += run["electric_w"].sum(axis=0) * dt_s / 3.6e6
+        out.heat_kwh += np.maximum(run["heat_pump_w"], 0.0).sum(axis=0) * dt_s / 3.6e6
+        out.cold_h += (t_air < SETPOINT_C - COLD_K).sum(axis=0) * dt_s / 3600.0
+        out.cold_sensed_h += (run["t_air_sensed_c"] < SETPOINT_C - COLD_K).sum(axis=0) \
+            * dt_s / 3600.0
+        out.coldest_c = np.minimum(out.coldest_c, t_air.min(axis=0))
+        out.coldest_night_c = np.minimum(out.coldest_night_c, t_air[night].min(axis=0))
+        out.mean_t_air_c += t_air.mean(axis=0) / days
+        night_gain += gi[night].sum(axis=0)
+        night_n += int(night.sum())
+        if row_step_s:
+            target = core.controller.steady_flow_c(run["t_water_target_c"],
+                                                   np.full((steps, 1), SETPOINT_C),
+                                                   core.flow_lag_k_per_w)
+            if not d:
+                out.rows = [[] for _ in range(n)]
+            for j in range(n):
+                out.rows[j].append(rows_from_run(run, index, j, setpoint_c=sp,
+                                                 flow_target=target, sample_step_s=row_step_s,
+                                                 dt_s=dt_s))
+    out.hours = days * 24.0
+    out.night_gain_w = night_gain / max(night_n, 1)
+    return out
+
+
+def true_flow_c(core: PlantCore, night_gain_w: np.ndarray, t_out_c: float,
+                setpoint_c: float = SETPOINT_C) -> np.ndarray:
+    """The flow the true house needs at ``t_out_c`` [°C]: its heat loss less its mean night
+    gain, through its true emitter (Q = K·dⁿ, the flow Q/(2ṁc) above the mean water, an
+    underfloor screed's water Q/G_pipe above the screed)."""
+    q = np.maximum(core.hlc * (setpoint_c - t_out_c) - night_gain_w, 0.0)
+    node = setpoint_c + (q / core.k_w) ** (1.0 / core.exponent)
+    return flow_for_node(node, setpoint_c, core.k_w, core.exponent, core.flow_lag_k_per_w)
+
+
+def installer_flow_c(core: PlantCore, t_out_c: float, setpoint_c: float = SETPOINT_C
+                     ) -> np.ndarray:
+    """The installer's curve (the plant's own, curve_gain) as the steady flow at ``t_out_c``."""
+    node = core.controller.target_water_c(np.full(core.n, setpoint_c),
+                                          np.full(core.n, setpoint_c),
+                                          np.full(core.n, float(t_out_c)))
+    return core.controller.steady_flow_c(node, setpoint_c, core.flow_lag_k_per_w)

@@ -1,0 +1,296 @@
+"""The heating curve on the heat pump — only when the owner asked for it — and the comfort
+watch that follows it.
+
+The owner asks with ``[curve] apply = true`` or ``impctl curve --apply`` (and takes it back
+with ``impctl curve --restore``; the command's word wins over the configuration). Then, while
+no night runs, the daemon:
+
+1. **sets** the kept curve (:mod:`.curve_state`) when it lowers the running one: only on an
+   extended controller (a compact one has no curve register) whose adaptive curve (2320) is
+   off (the controller would change the points itself); the owner's points 2309/2314 are
+   journaled first, then written through the safe path (whitelist, 20–55 °C, compare, budget,
+   read-back);
+2. **checks** at the next look that the controller follows: its own flow target (2128) must
+   have moved as the line moved at the outdoor temperature now (the new line less the
+   owner's), within :data:`FOLLOW_TOL_K`; if it has not, the owner's points come back and the
+   curve stays advice (the points' meaning is the controller document's, not measured);
+3. **watches comfort**: a room more than ``[curve] short_k`` below its setpoint for over
+   ``short_h`` raises both points by ``raise_k`` (said in the log and the store's events); a
+   curve raised back to the owner's is the owner's again;
+4. keeps the owner's word: points the owner changed are kept (their journal entries closed)
+   and impctl stops setting the curve until asked again.
+
+The owner's points come back on ``impctl curve --restore``, on ``impctl restore`` and the
+unit's ``ExecStopPost``, on every stop of the daemon and at its next start (the orphan sweep;
+the watch then sets the curve again). A night's own restore leaves them
+(:attr:`impctl.controller.NightController.keep_registers`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import sqlite3
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from ..heatpump import HeatPumpError
+from ..heatpump.config import CURVE_FLOW_BOUNDS_C
+from ..kronoterm.registers import Generation
+from ..store import JournalEntry
+from .curve_state import line_flow_c, load_curve
+from .running import RunningDaemon
+
+_LOG = logging.getLogger("impctl.daemon")
+#: The curve points: documented number → journal name.
+CURVE_REGISTERS = {2309: "loop1_curve_cold", 2314: "loop1_curve_mild"}
+KEEP = frozenset(CURVE_REGISTERS.values())
+#: The owner's word at run time (``impctl curve --apply`` / ``--restore``).
+INTENT_FILE = "curve-intent.json"
+#: How far the controller's flow target may have moved otherwise than the line [K] (a
+#: controller's own curve need not be straight between its points).
+FOLLOW_TOL_K = 1.5
+#: A new kept curve replaces the one set when a point moves by at least this [K].
+MOVE_K = 0.5
+
+
+def intent(state_dir: str | Path) -> bool | None:
+    """The owner's last word (True: set the curve; False: give mine back), or None."""
+    try:
+        data = json.loads((Path(state_dir) / INTENT_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    value = data.get("apply") if isinstance(data, dict) else None
+    return value if isinstance(value, bool) else None
+
+
+def set_intent(state_dir: str | Path, apply: bool, why: str) -> Path:
+    """Record the owner's word (atomically; read by the daemon at its next look)."""
+    target = Path(state_dir) / INTENT_FILE
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump({"apply": apply, "why": why}, fh)
+        # readable by the daemon's own user when root wrote it (mkstemp makes it 0600)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return target
+
+
+def wanted(daemon: RunningDaemon) -> bool:
+    """Whether the owner wants impctl's curve on the heat pump now."""
+    word = intent(daemon.cfg.state_dir)
+    return daemon.cfg.curve.apply if word is None else word
+
+
+def curve_entries(store) -> list[JournalEntry]:
+    """The pending journal entries of the curve points."""
+    return [e for e in store.journal_pending() if e.register in KEEP]
+
+
+class CurveWatch:
+    """Sets the curve, checks it, watches comfort (module docstring)."""
+
+    def __init__(self, daemon: RunningDaemon):
+        self.daemon = daemon
+        self.held: tuple[float, float] | None = None   # points impctl wrote [°C]
+        self.owner: tuple[float, float] | None = None  # the owner's points [°C]
+        self._verify: float | None = None                # 2128 before the write [°C]
+        self._short_since: float | None = None          # simulated s the room got short
+        self.raised_k = 0.0
+        self._refused: str | None = None                # why not now (said once)
+        self.task: asyncio.Task | None = None
+
+    # -- the daemon's hooks ------------------------------------------------------------------
+    async def run(self) -> None:
+        """Look every sampling interval while the daemon runs."""
+        d = self.daemon
+        while not d.stop.is_set():
+            await asyncio.sleep(max(0.2, d.clock.wall_seconds(d.cfg.night.sample_interval_s)))
+            try:
+                await self.check()
+            except HeatPumpError as exc:  # the link: the next look tries again
+                _LOG.info("heating curve: heat pump not answering (%s); next look later", exc)
+            except (OSError, sqlite3.Error) as exc:
+                # The owner's points cannot be journaled (a full disk): nothing was written
+                # (the journal comes first); said once, tried again at the next look.
+                self._refuse(f"the owner's points cannot be kept ({exc})")
+
+    async def check(self) -> None:
+        """One look: never during a night, a restore or while the heat pump is away."""
+        d = self.daemon
+        night = d._night_task
+        if (d.stop.is_set() or not d._connected.is_set() or d._heat_pump_lock.locked()
+                or (night is not None and not night.done())):
+            return
+        async with d._heat_pump_lock:
+            if not wanted(d):
+                if curve_entries(d.store):
+                    await self._give_back("the owner asked for their curve back")
+                self.held = None
+                return
+            curve = load_curve(d.cfg.state_dir)
+            if self.held is None:
+                await self._set(curve)
+            else:
+                await self._follow(curve)
+
+    # -- setting -------------------------------------------------------------------------------
+    def _refuse(self, why: str) -> None:
+        if why != self._refused:
+            _LOG.warning("heating curve not set: %s; it stays advice", why)
+            self.daemon.store.add_event("warning", f"heating curve not set: {why}")
+            self._refused = why
+
+    async def _set(self, curve: dict | None) -> None:
+        d = self.daemon
+        client = d.client
+        if curve is None or not curve.get("lowers"):
+            if curve_entries(d.store):  # set before this run: the owner's, until it lowers
+                await self._give_back("the kept curve no longer lowers the running one")
+            return
+        points = tuple(float(v) for v in curve["recommended"]["flow_c"])
+        lo, hi = CURVE_FLOW_BOUNDS_C
+        if not all(lo <= p <= hi for p in points):
+            return self._refuse(f"its points lie outside {lo:g}–{hi:g} °C")
+        if client.generation is not Generation.EXTENDED:
+            return self._refuse("a compact controller (TT3000) has no heating-curve "
+                                "registers: set the curve in its menu")
+        adaptive = await client.read(2320)
+        if adaptive.value is None or adaptive.value != 0:
+            return self._refuse("the controller's adaptive curve (2320) is on or unknown: "
+                                "it changes the points itself")
+        before = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
+        if any(before[ma].raw is None for ma in CURVE_REGISTERS):
+            return self._refuse("the curve points cannot be read")
+        for ma, name in CURVE_REGISTERS.items():
+            d.store.journal_record(None, name, ma - 1, int(before[ma].raw))
+        owner = tuple(e.raw_value / 10.0 for e in sorted(curve_entries(d.store),
+                                                         key=lambda e: e.address))
+        self.owner = owner  # the points before impctl ever wrote (kept across restarts)
+        self._keep(True)
+        await self._write(points)
+        self._verify = before[2128].value
+        self.held, self.raised_k, self._refused = points, 0.0, None
+        text = (f"heating curve set to {points[0]:.1f} °C at −15 °C and {points[1]:.1f} °C at "
+                f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
+        _LOG.warning(text)
+        d.store.add_event("info", text)
+
+    async def _write(self, points: tuple[float, float]) -> None:
+        client = self.daemon.client
+        writes = client.config.writes
+        if writes.loop1_curve_c is None:  # whitelisted while the owner asks for the curve
+            client.config = replace(client.config,
+                                    writes=replace(writes, loop1_curve_c=CURVE_FLOW_BOUNDS_C))
+        for ma, value in zip(CURVE_REGISTERS, points, strict=True):
+            await client.write(ma, value)
+
+    def _keep(self, held: bool) -> None:
+        ctl = self.daemon.controller
+        if ctl is not None:
+            ctl.keep_registers = KEEP if held else frozenset()
+
+    async def _give_back(self, why: str) -> None:
+        from ..controller.restore import restore_entry
+
+        d = self.daemon
+        for entry in curve_entries(d.store):
+            await restore_entry(d.client, d.store, entry)
+        self.held, self._verify, self._short_since = None, None, None
+        self._keep(False)
+        text = f"the owner's heating curve restored ({why})"
+        _LOG.warning(text)
+        d.store.add_event("info", text)
+
+    # -- after it is set -------------------------------------------------------------------------
+    async def _follow(self, curve: dict | None) -> None:
+        d = self.daemon
+        client = d.client
+        now = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
+        seen = tuple(now[ma].value for ma in CURVE_REGISTERS)
+        if any(v is None or abs(v - h) > 0.05 for v, h in zip(seen, self.held, strict=True)):
+            return self._owner_changed(now)
+        if self._verify is not None:
+            t_out, target = now[2103].value, now[2128].value
+            if t_out is not None and target is not None:
+                moved = target - self._verify
+                expected = line_flow_c(self.held, t_out) - line_flow_c(self.owner, t_out)
+                self._verify = None
+                if abs(moved - expected) > FOLLOW_TOL_K:
+                    await self._give_back(
+                        f"the controller did not follow the curve points: its flow target "
+                        f"moved {moved:+.1f} K where the line moved {expected:+.1f} K at "
+                        f"{t_out:.1f} °C outside")
+                    self._refuse("the controller does not follow its curve points as "
+                                 "documented")
+                    set_intent(d.cfg.state_dir, False, "the controller did not follow")
+                    return
+                _LOG.info("heating curve followed: the flow target moved %+.1f K where the "
+                          "line moved %+.1f K at %.1f °C outside", moved, expected, t_out)
+        if curve is None or not curve.get("lowers"):
+            return await self._give_back("the kept curve no longer lowers the running one")
+        new = tuple(float(v) + self.raised_k for v in curve["recommended"]["flow_c"])
+        if max(abs(a - b) for a, b in zip(new, self.held, strict=True)) >= MOVE_K:
+            await self._write(new)
+            self.held = new
+            _LOG.warning("heating curve moved to %.1f / %.1f °C (a new fit)", *new)
+            d.store.add_event("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C")
+        await self._comfort()
+
+    def _owner_changed(self, now: dict) -> None:
+        d = self.daemon
+        for entry in curve_entries(d.store):
+            reading = now[entry.address + 1]
+            d.store.journal_mark_owner_changed(entry.id, int(reading.raw or entry.raw_value))
+        self.held, self._verify = None, None
+        self._keep(False)
+        set_intent(d.cfg.state_dir, False, "the owner changed the curve points")
+        text = ("the owner changed the heating curve: their points are kept, impctl sets no "
+                "curve until asked again (impctl curve --apply)")
+        _LOG.warning(text)
+        d.store.add_event("warning", text)
+
+    async def _comfort(self) -> None:
+        d = self.daemon
+        cfg = d.cfg.curve
+        snap = await d.client.snapshot()
+        t_air, sp = snap.t_air_c.value, snap.loop1_setpoint_c.value
+        if t_air is None or sp is None:
+            return
+        now = d.clock.now_s()
+        if t_air >= sp - cfg.short_k:
+            self._short_since = None
+            return
+        if self._short_since is None:
+            self._short_since = now
+            return
+        if now - self._short_since < cfg.short_h * 3600.0:
+            return
+        self._short_since = None
+        raised = tuple(p + cfg.raise_k for p in self.held)
+        why = (f"the room stayed more than {cfg.short_k:g} K below its setpoint {sp:.1f} °C "
+               f"for over {cfg.short_h:g} h ({t_air:.1f} °C now)")
+        if self.owner is not None and all(r >= o for r, o in zip(raised, self.owner,
+                                                                 strict=True)):
+            return await self._give_back(why + "; raised back to the owner's curve")
+        await self._write(raised)
+        self.held, self.raised_k = raised, self.raised_k + cfg.raise_k
+        text = f"{why}: heating curve raised by {cfg.raise_k:g} K to " \
+               f"{raised[0]:.1f} / {raised[1]:.1f} °C"
+        _LOG.warning(text)
+        d.store.add_event("warning", text)
+
+
+def start_curve_watch(daemon: RunningDaemon) -> CurveWatch:
+    """The watch and its task (the daemon cancels it on stop, before its restore)."""
+    watch = CurveWatch(daemon)
+    task = asyncio.create_task(watch.run(), name="heating curve")
+    watch.task = task
+    return watch

@@ -1,0 +1,73 @@
+"""The optional NIGHTS.csv columns a night carries per sample for the season model and the heat
+pump's curve: the heating water and the hot water, and an owner night's label.
+
+* ``t_flow_c``, ``t_return_c`` — supply and return water [°C] (Kronoterm 2104, 2101);
+* ``t_flow_target_c`` — the heat pump's calculated flow target [°C] (2128): the heating
+  curve it runs;
+* ``dhw`` — share of the row's time charging hot water (0–1; a single reading 0 or 1);
+* ``label`` — why an owner night is not the owner's ordinary night, empty when it is; only
+  owner nights carry one, the same on every row of the night.
+
+Unlike the columns of :mod:`.night_extras` these are checked: a cell that is not a number or
+lies outside its range refuses the file with one line naming the row (an empty cell is
+missing). They describe the samples themselves, and a wrong one would be taken as measured.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..errors import InputError
+
+#: Per-sample columns and their ranges: heating water between freezing and boiling.
+SERIES_COLUMNS: dict[str, tuple[float, float, str]] = {
+    "t_flow_c": (0.0, 100.0, "°C"),
+    "t_return_c": (0.0, 100.0, "°C"),
+    "t_flow_target_c": (0.0, 100.0, "°C"),
+    "dhw": (0.0, 1.0, "(a share of the row's time)"),
+}
+LABEL = "label"
+
+
+def check_series(table: pd.DataFrame, path, row) -> None:
+    """Refuse (:class:`InputError`, one line) a value of :data:`SERIES_COLUMNS` outside its
+    range; ``row(i)`` names the row of index ``i``."""
+    for col, (lo, hi, unit) in SERIES_COLUMNS.items():
+        if col not in table:
+            continue
+        values = table[col].to_numpy(dtype=float)
+        bad = np.isfinite(values) & ((values < lo) | (values > hi))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}",
+                             path, row(i))
+
+
+def check_labels(table: pd.DataFrame, groups, kind_of, path, row) -> None:
+    """Refuse a ``label`` on a night that is not an owner night, or one that changes within a
+    night. ``groups``: (night id, row indices); ``kind_of(night id, indices)``: its kind."""
+    if LABEL not in table:
+        return
+    labels = table[LABEL].to_numpy(dtype=object)
+    for night_id, idx in groups:
+        if night_id == "":
+            continue
+        mine = labels[idx]
+        changed = mine != mine[0]
+        if changed.any():
+            raise InputError(f"night {night_id!r} changes label from {mine[0]!r}", path,
+                             row(int(idx[int(np.argmax(changed))])))
+        if mine[0] and kind_of(night_id, idx) != "owner":
+            raise InputError(f"column 'label': only owner nights carry a label (night "
+                             f"{night_id!r} is not one)", path, row(int(idx[0])))
+
+
+def series_fields(table: pd.DataFrame, idx: np.ndarray) -> dict:
+    """The :class:`~impctl.imp.night.NightSamples` fields of the rows ``idx``: each column of
+    :data:`SERIES_COLUMNS` the file has (NaN where empty) and the ``label``."""
+    out: dict = {col: table[col].to_numpy(dtype=float)[idx]
+                 for col in SERIES_COLUMNS if col in table}
+    if LABEL in table:
+        out[LABEL] = str(table[LABEL].iloc[int(idx[0])])
+    return out

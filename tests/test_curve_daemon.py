@@ -1,0 +1,239 @@
+"""The heating curve on a gateway: the real ``impctl daemon`` against the real simulator over
+Modbus TCP — it sets the kept curve only when the owner asks, journals the owner's points
+first, checks the controller follows, raises the curve when the room stays short, and gives
+the owner's points back on ``impctl curve --restore``, on stop and never on a compact
+controller it touches at all."""
+
+from __future__ import annotations
+
+import json
+import signal
+from datetime import datetime
+from pathlib import Path
+from zoneinfo import ZoneInfo
+
+from daemon_fixtures import (
+    daemon_mapping,
+    modbus_read,
+    modbus_write,
+    run_cli,
+    sim_process,
+    start_daemon,
+    stop_process,
+    store_query,
+    wait_until,
+    write_config,
+)
+
+TZ = ZoneInfo("Europe/Ljubljana")
+EPOCH = datetime(2026, 1, 12, 9, 0, tzinfo=TZ)  # morning: no night window for hours
+SPEED = 600.0
+KEEP = ("loop1_curve_cold", "loop1_curve_mild")
+
+
+def _kept_curve(state: Path, points: tuple[float, float], lowers: bool = True) -> None:
+    """A kept ``impctl curve`` result with the recommended ``points`` [°C]."""
+    state.mkdir(parents=True, exist_ok=True)
+    (state / "curve.json").write_text(json.dumps({
+        "schema": "impctl-curve/1", "lowers": lowers, "advice": "Your heating runs hot.",
+        "recommended": {"t_out_c": [-15.0, 15.0], "flow_c": list(points),
+                        "flow_at_0_c": sum(points) / 2}}))
+
+
+def _points(port: int) -> tuple[int, int]:
+    return modbus_read(port, 2309)[0], modbus_read(port, 2314)[0]
+
+
+def _curve_journal(db: Path) -> list:
+    return [e for e in store_query(db, lambda s: s.journal_pending()) if e.register in KEEP]
+
+
+def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        assert 300 < owner[0] < 600 and owner[1] < owner[0]  # the installer's curve, raw
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)  # 4 K and 2 K lower
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        target_before = modbus_read(sim.port, 2128)[0]
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            want = (round(new[0] * 10), round(new[1] * 10))
+            wait_until(lambda: _points(sim.port) == want, 30, "the curve set", proc=d.proc)
+            # the owner's points journaled before the first write
+            journal = {e.register: e.raw_value for e in _curve_journal(db)}
+            assert journal == {"loop1_curve_cold": owner[0], "loop1_curve_mild": owner[1]}
+            assert "heating curve set to" in d.output()
+            # the controller follows: its flow target came down with the curve, and the
+            # check at the next look left the curve set
+            wait_until(lambda: modbus_read(sim.port, 2128)[0] <= target_before - 20, 30,
+                       "the flow target to come down", proc=d.proc)
+            wait_until(lambda: "heating curve followed" in d.output(), 30, "the check",
+                       proc=d.proc)
+            assert "did not follow" not in d.output() and _points(sim.port) == want
+            # set on the owner's word, watched: held, not a restore waiting
+            st = run_cli("status", "--config", str(config))
+            assert "impctl's heating curve is set" in st.stdout
+            assert "restore:" not in st.stdout and "RESTORE PENDING" not in st.stdout
+
+            # the owner takes it back while the daemon runs
+            res = run_cli("curve", "--restore", "--config", str(config))
+            assert res.returncode == 0, res.stderr
+            assert "the running daemon gives your heating curve back" in res.stdout
+            wait_until(lambda: _points(sim.port) == owner, 30, "the owner's curve back",
+                       proc=d.proc)
+            wait_until(lambda: not _curve_journal(db), 10, "the journal closed")
+            assert "the owner's heating curve restored" in d.output()
+
+            # and asks for it again; a stop gives the owner's points back
+            res = run_cli("curve", "--apply", "--config", str(config))
+            assert res.returncode == 0 and "Your heating runs hot." in res.stdout
+            wait_until(lambda: _points(sim.port) == want, 30, "the curve set again",
+                       proc=d.proc)
+            d.proc.send_signal(signal.SIGTERM)
+            assert d.proc.wait(30) == 0
+            assert _points(sim.port) == owner
+            assert not _curve_journal(db)
+        finally:
+            stop_process(d.proc)
+
+
+def test_the_watch_raises_a_curve_that_leaves_the_room_short(tmp_path):
+    with sim_process(tmp_path, EPOCH, 1800.0) as sim:
+        state = tmp_path / "state"
+        _kept_curve(state, (26.0, 21.0))  # far too low for this house at 0 °C
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True, "raise_k": 2.0}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == (260, 210), 30, "the curve set",
+                       proc=d.proc)
+            wait_until(lambda: "heating curve raised by 2 K" in d.output(), 90,
+                       "the comfort watch to raise the curve", proc=d.proc)
+            raised = _points(sim.port)
+            assert raised[0] >= 280 and raised[1] >= 230
+            events = store_query(db, lambda s: s.events(50))
+            assert any("raised by 2 K" in message for _, _, message in events)
+        finally:
+            stop_process(d.proc)
+
+
+def test_no_curve_is_set_on_a_compact_controller_or_without_the_owners_word(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED, args=("--generation", "compact",
+                                                     "--heat-meter-id", "30")) as sim:
+        state = tmp_path / "state"
+        _kept_curve(state, (40.0, 25.0))
+        mapping = daemon_mapping(state, sim.port, sim.clock, curve={"apply": True})
+        mapping["heatpump"]["generation"] = "compact"
+        mapping["heatpump"]["heat_meter"] = {"device_id": 30, "address": 0,
+                                             "datatype": "uint32"}
+        config = write_config(tmp_path / "config.toml", mapping)
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: "compact controller (TT3000) has no heating-curve registers"
+                       in d.output(), 30, "the refusal", proc=d.proc)
+            assert not _curve_journal(db)
+            # said once, not at every look
+            wait_until(lambda: store_query(db, lambda s: len(s.events(50))) > 0, 5, "events")
+            assert d.output().count("heating curve not set") == 1
+        finally:
+            stop_process(d.proc)
+    (tmp_path / "b").mkdir()
+    with sim_process(tmp_path / "b", EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        state = tmp_path / "b" / "state"
+        _kept_curve(state, ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0))
+        config = write_config(tmp_path / "b.toml", daemon_mapping(state, sim.port, sim.clock))
+        d = start_daemon(config, state / "impctl.db", tmp_path / "b.log")
+        try:  # [curve] apply not set, no impctl curve --apply: advice only
+            wait_until(lambda: "next night job at" in d.output(), 30, "the daemon",
+                       proc=d.proc)
+            res = run_cli("curve", "--restore", "--config", str(tmp_path / "b.toml"))
+            assert res.returncode == 0
+            assert _points(sim.port) == owner and not _curve_journal(state / "impctl.db")
+        finally:
+            stop_process(d.proc)
+
+
+def test_a_controller_that_does_not_follow_its_points_gets_them_back(tmp_path):
+    """The ideal plant keeps its flow target whatever the points say: after the check the
+    owner's points are back, the curve stays advice, and impctl does not try again."""
+    with sim_process(tmp_path, EPOCH, SPEED, plant="iso") as sim:
+        owner = _points(sim.port)
+        state = tmp_path / "state"
+        _kept_curve(state, (36.0, 24.0))
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: "did not follow the curve points" in d.output(), 30,
+                       "the check to fail", proc=d.proc)
+            wait_until(lambda: _points(sim.port) == owner, 10, "the owner's points back")
+            assert not _curve_journal(db)
+            assert json.loads((state / "curve-intent.json").read_text())["apply"] is False
+            assert "does not follow its curve points" in d.output()
+        finally:
+            stop_process(d.proc)
+
+
+def test_the_owners_own_change_is_kept_and_a_night_leaves_the_curve(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+        want = (round(new[0] * 10), round(new[1] * 10))
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True},
+            night={"window": "10:00-11:30", "preheat_h": 0.25, "sample_interval_s": 120}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == want, 30, "the curve set", proc=d.proc)
+            # a night runs and ends: its restore gives back the setpoint, not the curve
+            res = run_cli("trigger", "--kind", "normal", "--now", "--force", "--config",
+                          str(config))
+            assert res.returncode == 0, res.stderr
+            wait_until(lambda: store_query(db, lambda s: [n.valid for n in s.nights()]
+                                         ) not in ([], [None]), 60,
+                       "the night to end", proc=d.proc)
+            assert _points(sim.port) == want
+            assert {e.register for e in _curve_journal(db)} == set(KEEP)
+            # the owner sets a point of their own: kept, and impctl sets no curve any more
+            modbus_write(sim.port, 2309, want[0] + 15)
+            wait_until(lambda: "the owner changed the heating curve" in d.output(), 30,
+                       "the owner's change noticed", proc=d.proc)
+            assert not _curve_journal(db)
+            assert _points(sim.port)[0] == want[0] + 15
+        finally:
+            stop_process(d.proc)
+
+
+def test_curve_restore_gives_the_points_back_when_no_daemon_runs(tmp_path):
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == (round(new[0] * 10), round(new[1] * 10)),
+                       30, "the curve set", proc=d.proc)
+            d.proc.kill()  # no stop, no restore: the journal keeps the owner's points
+            d.proc.wait(10)
+        finally:
+            stop_process(d.proc)
+        assert len(_curve_journal(db)) == 2
+        res = run_cli("curve", "--restore", "--config", str(config))
+        assert res.returncode == 0, res.stderr
+        assert "your heating curve is back" in res.stdout
+        assert _points(sim.port) == owner and not _curve_journal(db)

@@ -1,0 +1,180 @@
+"""The daemon records the house read-only between IMP nights: the real daemon against the
+realistic simulator over loopback Modbus TCP (through a proxy that sees every request), a real
+store, on the virtual-time loop (days in seconds, the same on a busy machine).
+
+What is promised: not one write over days of recording (no FC 06 request crosses the wire,
+the write budget file is untouched); rows every interval, in time order, their snapshots
+averaged; one record per local day from noon to noon, closed and labelled after its day,
+23 h and 25 h on the days the clocks change; an IMP night is left out of the owner record
+(it keeps its own); old records are deleted by the daemon; ``[record] enabled = false``
+records nothing.
+"""
+
+from __future__ import annotations
+
+import os
+from datetime import datetime, timedelta
+from zoneinfo import ZoneInfo
+
+from reliability_fixtures import daemon_rig, run_virtual
+
+from impctl.cli.device.status import collect_status, format_status
+from impctl.controller.record_labels import record_day
+from impctl.heatpump import WriteBudget
+from impctl.imp.nights_csv import read_nights
+from impctl.store.export import export_nights
+
+TZ = ZoneInfo("Europe/Ljubljana")
+SPEED = 600.0
+
+
+def _stat(path) -> tuple:
+    """(size, mtime) of the write-budget file and its WAL, as the kernel has them."""
+    out = []
+    for suffix in ("", "-wal"):
+        try:
+            st = os.stat(f"{path}{suffix}")
+            out.append((st.st_size, st.st_mtime_ns))
+        except FileNotFoundError:
+            out.append(None)
+    return tuple(out)
+
+
+def _in_order(rows) -> bool:
+    return all(a.ts < b.ts for a, b in zip(rows, rows[1:], strict=False))
+
+
+def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
+    """Three days and a half (03:00 on day 0 to 15:00 on day 3): 120-s snapshots, 5-min rows,
+    records kept for 1 day."""
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED, night={"sample_interval_s": 120},
+                              record={"keep_days": 1}) as rig:
+            cfg = rig.daemon.cfg
+            await rig.sim_minutes(15)
+            budget_before = _stat(cfg.budget_path)
+            start = rig.clock.now()
+            end = start + timedelta(days=3, hours=12)
+            await rig.until(lambda: rig.clock.now() >= end, timeout_s=4 * 86400 / SPEED)
+            st = collect_status(cfg)
+            return dict(
+                fc06=rig.proxy.stats.requests[6], sim_writes=dict(rig.sim.stats.writes),
+                budget=(budget_before, _stat(cfg.budget_path)),
+                records=rig.store.owner_records(),
+                rows={n.id: rig.store.samples(n.id) for n in rig.store.owner_records()},
+                nights=rig.store.nights(), pending=rig.store.journal_pending(),
+                status=format_status(st, "Europe/Ljubljana"), st=st["record"],
+                export=export_nights(rig.store, tmp_path / "nights.csv", "csv"),
+                warnings=rig.logs.lines(), start=start)
+
+    r = run_virtual(scenario(), 5 * 86400 / SPEED)
+    # Read only: not one write request crossed the wire, none reached the heat pump, and the
+    # write-budget file is as the daemon's start left it.
+    assert r["fc06"] == 0 and r["sim_writes"] == {}
+    assert r["budget"][0] == r["budget"][1], r["budget"]
+    with WriteBudget(tmp_path / "state" / "writes.db", 12) as budget:
+        assert budget.lifetime(2187) == budget.lifetime(2042) == 0
+    assert r["nights"] == [] and r["pending"] == []
+    assert r["warnings"] == [], r["warnings"]
+    # Kept one day, deleted once a day (at 03:00 here, 24 h after the start): the records
+    # that ended before 03:00 yesterday (11 Jan from 03:00 on the 12th, 12 Jan) are gone; the
+    # records of 13 and 14 Jan are closed, the one of 15 Jan recording.
+    days = [record_day(n.window_start, TZ).isoformat() for n in r["records"]]
+    assert days == ["2026-01-13", "2026-01-14", "2026-01-15"], days
+    _, closed, current = r["records"]
+    assert (closed.state, closed.valid, closed.reasons) == ("done", True, ()), closed
+    assert current.state == "recording" and current.valid is None
+    assert closed.setpoint_c == 21.0  # the owner's, as read at night
+    rows = r["rows"][closed.id]
+    assert len(rows) == 288 and _in_order(rows)  # 24 h of 5-min rows, every one
+    assert rows[0].ts == closed.window_start and closed.started == closed.window_start
+    assert closed.ended == closed.window_end
+    assert all(s.snapshots in (2, 3) and s.ts.timestamp() % 300 == 0 for s in rows)
+    assert all(None not in (s.t_air_c, s.t_out_c, s.q_hc_w, s.t_flow_target_c,
+                            s.dhw_share, s.setpoint_c) for s in rows)
+    assert any(0 < s.q_hc_w for s in rows) and all(-1 < s.t_out_c < 1 for s in rows)
+    # Exported whole, as kind owner, in time order; read back as owner nights with the
+    # heat pump's curve and the hot water per row.
+    nights = read_nights(tmp_path / "nights.csv", "Europe/Ljubljana")
+    assert [n.kind for n in nights] == ["owner", "owner", "owner"]
+    first = nights[1]
+    assert first.label == "" and len(first.time_s) == 288
+    assert first.t_flow_target_c is not None and (first.t_flow_target_c > 20).all()
+    assert first.dhw is not None and first.t_flow_c is not None
+    assert r["export"] == sum(len(rows) for rows in r["rows"].values())
+    # impctl status: recording now, the records kept, the store's size
+    assert r["st"]["state"] == "recording" and r["st"]["records"] == 3
+    assert "recording: on (a snapshot every 120 s, rows of 300 s)" in r["status"]
+    assert "owner:     3 records kept (2026-01-13 … 2026-01-15, 1 open), 0 labelled" in (
+        r["status"])
+    assert "store:     " in r["status"]
+
+
+def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
+    """A manual night at 21:30 (the rig's night window: 22:00–23:00): the owner's rows stop
+    at its pre-heat and resume after its restore; the owner record of that night is labelled
+    "IMP night"."""
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED,
+                              epoch=datetime(2026, 1, 12, 21, 0, tzinfo=TZ)) as rig:
+            await rig.sim_minutes(30)
+            night_id = await rig.trigger("constrained")
+            await rig.until(lambda: rig.finished(night_id), 600)
+            # the record of that night closes at noon
+            noon = datetime(2026, 1, 13, 13, 0, tzinfo=TZ)
+            await rig.until(lambda: rig.clock.now() >= noon, 600)
+            record = rig.store.owner_records()[0]
+            return dict(night=rig.store.night(night_id), record=record,
+                        rows=rig.store.samples(record.id),
+                        fc06=rig.proxy.stats.requests[6])
+
+    r = run_virtual(scenario(), 86400)
+    night, record, rows = r["night"], r["record"], r["rows"]
+    assert night.state == "done" and r["fc06"] > 0  # the night wrote; then restored
+    assert record.state == "done" and record.valid is False
+    assert record.reasons[0].startswith(f"IMP night: night {night.id} ran "), record.reasons
+    assert _in_order(rows)
+    inside = [s for s in rows if s.ts >= night.started
+              and s.ts + timedelta(seconds=300) <= night.ended]
+    assert inside == [], inside  # no owner row within the night
+    before = [s for s in rows if s.ts < night.started]
+    after = [s for s in rows if s.ts >= night.ended]
+    assert before and after and after[0].ts < night.ended + timedelta(minutes=10)
+    assert all(s.loop_mode == 1 for s in rows)  # the owner's own mode, before and after
+
+
+def _dst_record(tmp_path, day: str) -> tuple:
+    """Record from 09:00 on ``day`` to 13:00 the day after: the record of ``day``."""
+    epoch = datetime.fromisoformat(f"{day}T09:00").replace(tzinfo=TZ)
+
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED, epoch=epoch,
+                              record={"sample_interval_s": 300}) as rig:
+            await rig.until(lambda: rig.clock.now() >= epoch + timedelta(hours=28), 600)
+            records = rig.store.owner_records()
+            return records, {n.id: rig.store.samples(n.id) for n in records}
+    return run_virtual(scenario(), 86400)
+
+
+def test_the_days_the_clocks_change_are_23_and_25_hours(tmp_path):
+    for day, hours in (("2026-03-28", 23), ("2026-10-24", 25)):
+        records, rows = _dst_record(tmp_path / day, day)
+        record = next(n for n in records if record_day(n.window_start, TZ).isoformat() == day)
+        assert record.window_end - record.window_start == timedelta(hours=hours)
+        assert (record.state, record.valid, record.reasons) == ("done", True, ()), record
+        mine = rows[record.id]
+        # from 12:00 on the day (rows start at 09:00 in the record of the day before)
+        assert len(mine) == hours * 12 and _in_order(mine), (day, len(mine))
+        assert mine[-1].ts + timedelta(seconds=300) == record.window_end
+
+
+def test_recording_off_records_nothing(tmp_path):
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED, record={"enabled": False}) as rig:
+            await rig.sim_minutes(90)
+            st = collect_status(rig.daemon.cfg)
+            return rig.store.owner_records(), format_status(st, "Europe/Ljubljana")
+    records, status = run_virtual(scenario(), 86400)
+    assert records == []
+    assert "recording: off (record.enabled = false)" in status
+    assert "owner:     no owner record yet" in status
