@@ -64,6 +64,9 @@ class NightSamples:
     dhw : ndarray or None
         Share of each sample's time the heat pump charged hot water (0–1; an instant's
         sample 0 or 1), NaN where empty, None without the column; aligned as above.
+    defrost_share : ndarray or None
+        The ``defrost`` column per sample (share of the row's time the heat pump defrosted,
+        0–1; NaN where empty), None without the column; aligned as above.
     label : str
         Why an owner night is not the owner's ordinary night ("owner changed the setpoint:
         …; data missing: …"); "" when it is, and on IMP nights.
@@ -89,6 +92,7 @@ class NightSamples:
     t_return_c: np.ndarray | None = None
     t_flow_target_c: np.ndarray | None = None
     dhw: np.ndarray | None = None
+    defrost_share: np.ndarray | None = None
     label: str = ""
 
     @property

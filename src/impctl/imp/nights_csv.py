@@ -281,6 +281,8 @@ def nights_from_table(
             setpoint = float(np.nanmedian(setpoint_all[idx]))
         t_air, more = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
         more |= defrost_fields(extras, idx, time_s, values["q_hc"][idx], Q_ON_W)
+        if extras.get("defrost") is not None:
+            more["defrost_share"] = np.asarray(extras["defrost"][idx], float)
         if kinds_all is None:
             more |= more_held
         nights.append(NightSamples(
@@ -313,12 +315,19 @@ def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
         stamps = night.start + pd.to_timedelta(np.asarray(night.time_s, float), unit="s")
         q = np.asarray(night.q_hc_w, float)
         heating = np.ones(len(q), int) if night.kind == "normal" else (q > Q_ON_W).astype(int)
-        frames.append(pd.DataFrame({
+        frame = pd.DataFrame({
             "timestamp": stamps.map(lambda t: t.isoformat()),
             "t_air": night.t_air_c, "t_out": night.t_out_c, "q_hc": q,
             "setpoint": night.setpoint_c, "heating": heating,
             "night": night.night_id, "kind": night.kind,
-        }))
+        })
+        # The per-sample series the season model reads, where the night carries them.
+        for col, values in (("dhw", night.dhw), ("defrost", night.defrost_share)):
+            if values is not None:
+                frame[col] = values
+        if night.kind == "owner":
+            frame["label"] = night.label
+        frames.append(frame)
     path = Path(path)
     pd.concat(frames, ignore_index=True).to_csv(path, index=False, float_format="%.9g")
     return path

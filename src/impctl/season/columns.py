@@ -22,7 +22,8 @@ offsets times the HLC — it is an intercept, not the gain) split half to the ai
 mass, plus each day's sun a_d·shape(hour) split f_s to the air and 1 − f_s to the mass.
 
 For given nonlinear parameters θ = (τ_mm, w, τ_e, f_s) the balance is *linear* in
-β = (K_ao, K_am, G_night, G_day, D, a_1 … a_days, one initial mass state per segment), so the fit
+β = (K_ao, K_am, G_night, G_day, D, a_1 … a_days, one initial mass and emitter state per
+segment), so the fit
 solves β by least squares inside the search over θ (variable projection). :func:`columns` builds
 the regressors on the 5-min grid, filters there (the mass sees the switch-off within a block), and
 averages them to the likelihood's 30-min blocks.
@@ -68,7 +69,7 @@ def _runs(segments: NDArray[np.int64]) -> list[tuple[int, int]]:
     """(start, end) of each segment's steps."""
     ok = segments >= 0
     edges = np.flatnonzero(np.diff(np.r_[-2, segments, -2]) != 0)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if ok[a]]
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True) if ok[a]]
 
 
 @dataclass
@@ -76,8 +77,12 @@ class Design:
     """The fixed parts of one record the regressors are built from (computed once)."""
 
     rec: SeasonRecord
-    segments: NDArray[np.int64]
+    segments: NDArray[np.int64]       # the meter's runs: the emitter restarts after a gap
     runs: list[tuple[int, int]]
+    stretch: NDArray[np.int64]        # the heat store's: short gaps bridged
+    stretch_runs: list[tuple[int, int]]
+    t_air_c: Array                    # bridged
+    t_out_c: Array
     blocks: NDArray[np.bool_]
     night: Array
     sun: Array          # (n, days): each day's sun shape
@@ -87,13 +92,15 @@ class Design:
     @classmethod
     def of(cls, rec: SeasonRecord) -> Design:
         seg = rec.segments()
+        stretch, ta, to = rec.stretches()
         h = rec.hour
         night = ((h >= NIGHT_HOURS[0]) | (h < NIGHT_HOURS[1])).astype(float)
         days = rec.day - rec.day.min()
         n_days = int(days.max()) + 1
         sun = np.zeros((rec.n, n_days))
         sun[np.arange(rec.n), days] = sun_shape(h)
-        return cls(rec, seg, _runs(seg), rec.usable_blocks(), night, sun,
+        return cls(rec, seg, _runs(seg), stretch, _runs(stretch), ta, to,
+                   rec.usable_blocks(), night, sun,
                    np.nan_to_num(rec.defrost), n_days)
 
     def block_day(self) -> NDArray[np.int64]:
@@ -115,30 +122,34 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     for nonlinear parameters ``theta`` (:data:`THETA`), over the usable blocks."""
     tau_mm, w, tau_e, f_sun = theta
     r, seg, dt = d.rec, d.segments, d.rec.step_s
-    ta, to = r.t_air_c, r.t_out_c
-
-    def mf(x):
-        return lowpass(x, tau_mm, dt, seg)
-
-    y = lowpass(r.q_hc_w, tau_e, dt, seg)
-    drive = mf(w * ta + (1.0 - w) * to)
-    cols = [ta - to, ta - drive]
-    for level in (d.night, 1.0 - d.night):
-        cols.append(-(AIR_SHARE * level + w * (1.0 - AIR_SHARE) * mf(level)))
-    cols.append(lowpass(d.defrost, tau_e, dt, seg))
-    names = list(BETA)
-    # Each segment's own initial heat store: a free offset of the mass, decaying with τ_mm.
-    decay = np.exp(-dt / tau_mm)
-    for i, (lo, hi) in enumerate(d.runs):
-        c = np.zeros(r.n)
-        c[lo:hi] = -decay ** np.arange(hi - lo)
-        cols.append(c)
-        names.append(f"mass0_{i}")
-    X = np.stack(cols, axis=1)
-    sun = -(f_sun * d.sun + w * (1.0 - f_sun) * mf(d.sun))
-    X = np.concatenate([X, sun], axis=1)
-    names += [f"sun_{i}_w" for i in range(d.n_days)]
-    return d.block_mean(X), d.block_mean(y), names
+    ta, to = d.t_air_c, d.t_out_c
+    # One pass of each filter over all its inputs: the mass's and the emitter's.
+    mass_in = np.concatenate([(w * ta + (1.0 - w) * to)[:, None], d.night[:, None],
+                              1.0 - d.night[:, None], d.sun], axis=1)
+    m = lowpass(mass_in, tau_mm, dt, d.stretch)
+    e = lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, seg)
+    n_s, n_e = len(d.stretch_runs), len(d.runs)
+    X = np.zeros((r.n, len(BETA) + n_s + n_e + d.n_days))
+    X[:, 0] = ta - to
+    X[:, 1] = ta - m[:, 0]
+    for k, level in enumerate((d.night, 1.0 - d.night)):
+        X[:, 2 + k] = -(AIR_SHARE * level + w * (1.0 - AIR_SHARE) * m[:, 1 + k])
+    X[:, 4] = e[:, 1]
+    # Each stretch's own initial heat store: a free offset of the mass, decaying with τ_mm;
+    # each run of the meter its own initial emitter: the filter starts at the run's first
+    # reading, the water and the screed at whatever a pre-heat or a gap left them.
+    decay, decay_e = np.exp(-dt / tau_mm), np.exp(-dt / tau_e)
+    col = len(BETA)
+    for lo, hi in d.stretch_runs:
+        X[lo:hi, col] = -decay ** np.arange(hi - lo)
+        col += 1
+    for lo, hi in d.runs:
+        X[lo:hi, col] = decay_e ** np.arange(hi - lo)
+        col += 1
+    X[:, col:] = -(f_sun * d.sun + w * (1.0 - f_sun) * m[:, 3:])
+    names = [*BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
+             *(f"sun_{i}_w" for i in range(d.n_days))]
+    return d.block_mean(X), d.block_mean(e[:, 0]), names
 
 
 def lumped(theta: tuple[float, float, float, float], k_ao: float, k_am: float) -> dict[str, float]:

@@ -29,8 +29,10 @@ STEP_S = 300.0
 BLOCK_S = 1800.0
 #: After a hot-water charge, the emitter refills: blocks left out [s].
 DHW_AFTER_S = 3600.0
-#: A gap longer than this starts a new segment [s].
-MAX_GAP_S = 1800.0
+#: A gap up to this long is bridged for the heat store: the room and outdoor temperatures are
+#: interpolated across it (an IMP night's pre-heat, a restart) [s]; a longer one starts a new
+#: stretch with a heat store of its own.
+MAX_BRIDGE_S = 4 * 3600.0
 #: Local hours of the night level of internal gains [h] (people asleep).
 NIGHT_HOURS = (22.0, 7.0)
 #: Local hours of daylight for the solar gains [h] (a winter day) [assumption].
@@ -94,6 +96,26 @@ class SeasonRecord:
         start = ok & ~np.r_[False, ok[:-1]]
         seg = np.cumsum(start) - 1
         return np.where(ok, seg, -1)
+
+    def stretches(self) -> tuple[NDArray[np.int64], Array, Array]:
+        """(stretch number of each step, -1 outside; T_air and T_out with the bridged gaps
+        interpolated [°C]): the heat store runs on through gaps up to :data:`MAX_BRIDGE_S`."""
+        ok = np.isfinite(self.t_air_c) & np.isfinite(self.t_out_c)
+        idx = np.flatnonzero(ok)
+        stretch = np.full(self.n, -1)
+        ta, to = self.t_air_c.copy(), self.t_out_c.copy()
+        if not len(idx):
+            return stretch, ta, to
+        jump = np.diff(idx) * self.step_s > MAX_BRIDGE_S + self.step_s
+        number = np.r_[0, np.cumsum(jump)]
+        for k in range(int(number[-1]) + 1):
+            mine = idx[number == k]
+            lo, hi = int(mine[0]), int(mine[-1]) + 1
+            stretch[lo:hi] = k
+            span = np.arange(lo, hi)
+            ta[lo:hi] = np.interp(span, mine, self.t_air_c[mine])
+            to[lo:hi] = np.interp(span, mine, self.t_out_c[mine])
+        return stretch, ta, to
 
     def usable_blocks(self) -> NDArray[np.bool_]:
         """Blocks whose every step is recorded, in one segment and not excluded."""

@@ -32,7 +32,7 @@ W_SCALE = 100.0
 def to_u(theta) -> Array:
     """Physical θ → unconstrained coordinates (log of the times, logit of the shares)."""
     out = []
-    for (lo, hi), v in zip(THETA_BOUNDS, theta):
+    for (lo, hi), v in zip(THETA_BOUNDS, theta, strict=True):
         f = (math.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo)) if lo > 1 else \
             (v - lo) / (hi - lo)
         f = min(max(f, 1e-6), 1 - 1e-6)
@@ -43,7 +43,7 @@ def to_u(theta) -> Array:
 def from_u(u: Array) -> tuple[float, float, float, float]:
     """Unconstrained coordinates → physical θ."""
     out = []
-    for (lo, hi), x in zip(THETA_BOUNDS, u):
+    for (lo, hi), x in zip(THETA_BOUNDS, u, strict=True):
         f = 1.0 / (1.0 + math.exp(-float(np.clip(x, -30, 30))))
         out.append(math.exp(math.log(lo) + f * (math.log(hi) - math.log(lo))) if lo > 1
                    else lo + f * (hi - lo))
@@ -107,7 +107,7 @@ def search(d: Design, n_starts: int = 2, max_nfev: int = 60) -> tuple[tuple, Pro
 
 def beta_dict(pr: Projection) -> dict[str, float]:
     """The fixed linear parameters by name (:data:`~.columns.BETA`)."""
-    return {n: float(b) for n, b in zip(pr.names, pr.beta) if n in BETA}
+    return {n: float(b) for n, b in zip(pr.names, pr.beta, strict=True) if n in BETA}
 
 
 #: Finite-difference step in the transformed θ coordinates for the Jacobian [-].
@@ -177,4 +177,4 @@ def lumped_log_se(u: Array, pr: Projection, cov: Array) -> dict[str, float]:
         G[:, k] = (f(p0 + dp) - f0) / h
     sub = cov[np.ix_(idx, idx)]
     var = np.einsum("ij,jk,ik->i", G, sub, G)
-    return {k: float(np.sqrt(max(v, 0.0))) for k, v in zip(LUMPED, var)}
+    return {k: float(np.sqrt(max(v, 0.0))) for k, v in zip(LUMPED, var, strict=True)}

@@ -144,12 +144,30 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         raise refusal
     summary = fit_to_dict(estimator, classes.classes, notes)
     click.echo(format_table(summary))
+    season, season_note = _season(nights)
+    if season is not None:
+        summary["season"] = season.as_dict()
+    elif season_note is not None:
+        click.echo(season_note)
     if json_path is not None:
         _write_json(json_path, summary)
         click.echo(f"JSON written to {json_path}")
     if plot_path is not None:
         plot_fit(estimator, plot_path)
         click.echo(f"plot written to {plot_path}")
+
+
+def _season(nights: list):
+    """The season model of the owner nights and the IMP nights together, printed."""
+    from ...season.fit import fit_nights, format_season
+
+    if not any(n.kind == "owner" for n in nights):
+        return None, None
+    with _ticking("the season model"):
+        season, note = fit_nights(nights)
+    if season is not None:
+        click.echo("\n".join(format_season(season)))
+    return season, note
 
 
 @contextlib.contextmanager

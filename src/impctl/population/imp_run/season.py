@@ -42,7 +42,6 @@ from ...model import HouseParameters
 from ...plant import PlantCore, PlantParams
 from ...plant.building.gains import internal_gains_w, solar_gains_w
 from ...weather import DEFAULT_TZ, WinterClimate, winter_weather
-from .gateway import campaign_runs
 from .realistic import _GatewayStop
 from .setup import ImpSimConfig
 from .synth import house_meter, night_plan
@@ -109,7 +108,7 @@ class Season:
     Attributes
     ----------
     index : DatetimeIndex of the samples (each sample stands for the interval it starts)
-    t_air_c, t_out_c : room and outdoor sensors at the sample instant [°C]
+    t_air_c, t_out_c : room and outdoor sensors, means over the interval [°C]
     q_hc_w : heat meter, mean over the interval [W]
     setpoint_c : the loop-1 setpoint as read [°C]; NaN where the heating loop is off
     dhw, defrost : a hot-water charge / a defrost in the interval
@@ -162,9 +161,11 @@ def _weather(n: int, days: int, cfg: SeasonConfig, seed: int) -> pd.DataFrame:
     return pd.DataFrame(cols, index=s.index)
 
 
-def simulate_season(houses: HouseParameters, params: PlantParams, config: SeasonConfig | None = None,
-                    seed: int = 0, gains: bool = True) -> Season:
-    """Run ``houses`` (arrays over n) on the realistic plant through a season (module docstring)."""
+def simulate_season(houses: HouseParameters, params: PlantParams,
+                    config: SeasonConfig | None = None, seed: int = 0,
+                    gains: bool = True) -> Season:
+    """Run ``houses`` (arrays over n) on the realistic plant through a season (module
+    docstring); ``gains=False`` runs them without internal and solar gains."""
     cfg = config or SeasonConfig()
     n = houses.n_houses or 1
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EA5]))

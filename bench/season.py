@@ -1,0 +1,167 @@
+"""The season model against the energy signature, on simulated winters of realistic households.
+
+Each household runs a season on the realistic plant (impctl.population.imp_run.season: the IMP
+campaign every other night, the owner's own nights between, cold and mild spells, night
+setback, hot water, defrosts, owner changes). For every N in ``--owner-nights`` the household's
+record is cut when its N-th plain owner night is over, exported as the gateway would
+(season_nights.household_nights: owner records noon to noon, IMP nights, the pre-heats not
+recorded) and fitted by ``impctl.season`` — the same path as ``impctl fit``. Beside it, the
+energy signature of the same owner nights (00:00–05:00 means). Errors against the true house;
+medians and P90 with 95 % bootstrap intervals; coverage and median half-width of the 95 %
+intervals; the fit's wall time.
+
+    python bench/season.py --households 200 --owner-nights 14,28
+    python bench/season.py --households 40 --variant signed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 cores
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.imp_run.season import SeasonConfig, simulate_season  # noqa: E402
+from impctl.population.imp_run.season_nights import household_nights  # noqa: E402
+from impctl.population.realism import sample_params  # noqa: E402
+from impctl.season.fit import LUMPED, fit_nights  # noqa: E402
+
+_SEASON = None
+QUANTITIES = {"hlc_w_per_k": "HLC", "tau_h": "tau", "c_m_j_per_k": "C_m"}
+
+
+def cutoff(s, h: int, n_owner: int) -> int | None:
+    """The sample after the noon that follows household ``h``'s ``n_owner``-th plain owner
+    night (None when the season has fewer)."""
+    seen = 0
+    for j, (_, kinds, a, b) in enumerate(s.nights):
+        if kinds[h] == "owner" and not s.labels[j, h]:
+            seen += 1
+            if seen == n_owner:
+                return b + int(round(7 * 3600 / s.sample_s))
+    return None
+
+
+def _fit(job: tuple[int, int]) -> dict:
+    h, n_owner = job
+    s = _SEASON
+    end = cutoff(s, h, n_owner)
+    row = {"household": h, "owner_nights": n_owner}
+    if end is None:
+        return {**row, "status": "season too short"}
+    t0 = time.perf_counter()
+    fit, note = fit_nights(household_nights(s, h, upto_sample=end))
+    row["fit_s"] = time.perf_counter() - t0
+    if fit is None:
+        return {**row, "status": note or "no fit"}
+    row.update(status="ok", imp_nights=fit.imp_nights,
+               signature_hlc_w_per_k=fit.signature_hlc_w_per_k,
+               **{f"{k}": fit.values[k] for k in LUMPED},
+               **{f"{k}_low": fit.low[k] for k in LUMPED},
+               **{f"{k}_high": fit.high[k] for k in LUMPED})
+    return row
+
+
+def _boot_ci(x: np.ndarray, q: float, rng: np.random.Generator, n: int = 2000) -> tuple:
+    idx = rng.integers(0, len(x), (n, len(x)))
+    qs = np.percentile(x[idx], q, axis=1)
+    return float(np.percentile(qs, 2.5)), float(np.percentile(qs, 97.5))
+
+
+def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> dict:
+    """Per quantity: median and P90 of |error| [%] with bootstrap CIs, coverage, half-width."""
+    rng = np.random.default_rng(0)
+    ok = [r for r in rows if r["owner_nights"] == n_owner and r["status"] == "ok"]
+    out: dict = {"owner_nights": n_owner, "households": sum(r["owner_nights"] == n_owner
+                                                           for r in rows),
+                 "fitted": len(ok),
+                 "fit_s_median": float(np.median([r["fit_s"] for r in ok])) if ok else math.nan}
+    h = np.array([r["household"] for r in ok], int)
+    for k, name in QUANTITIES.items():
+        est = np.array([r[k] for r in ok])
+        true = truth[k][h]
+        err = 100 * np.abs(est / true - 1)
+        lo, hi = np.array([r[f"{k}_low"] for r in ok]), np.array([r[f"{k}_high"] for r in ok])
+        cover = (lo <= true) & (true <= hi)
+        half = 100 * (hi - lo) / 2 / est
+        out[name] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
+                     "p90_pct": float(np.percentile(err, 90)), "p90_ci": _boot_ci(err, 90, rng),
+                     "coverage": float(cover.mean()), "half_width_pct": float(np.median(half))}
+    sig = np.array([r["signature_hlc_w_per_k"] for r in ok])
+    good = np.isfinite(sig)
+    err = 100 * np.abs(sig[good] / truth["hlc_w_per_k"][h[good]] - 1)
+    out["signature"] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
+                        "p90_pct": float(np.percentile(err, 90)), "n": int(good.sum())}
+    return out
+
+
+def _fmt(ci: tuple) -> str:
+    return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=200)
+    ap.add_argument("--owner-nights", default="14,28")
+    ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
+    ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--variant", choices=("realistic", "signed"), default="realistic",
+                    help="signed: the heat meter reads a defrost's draw as negative heat")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--json", default=None, help="write the rows and the summary here")
+    args = ap.parse_args(argv)
+    global _SEASON
+    n = args.households
+    houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
+    if args.variant == "signed":
+        params = params.with_section("sensors", meter_positive_only=0)
+    t0 = time.perf_counter()
+    print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
+    _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed)
+    sim_s = time.perf_counter() - t0
+    truth = {"hlc_w_per_k": np.asarray(houses.hlc_w_per_k, float),
+             "tau_h": np.asarray(houses.tau_h, float),
+             "c_m_j_per_k": np.asarray(houses.c_m_j_per_k, float)}
+    ns = [int(x) for x in args.owner_nights.split(",")]
+    jobs = [(h, k) for k in ns for h in range(n)]
+    rows: list[dict] = []
+    with mp.get_context("fork").Pool(args.workers) as pool:
+        for i, row in enumerate(pool.imap_unordered(_fit, jobs, chunksize=2), 1):
+            rows.append(row)
+            if i % 20 == 0 or i == len(jobs):
+                print(f"  {i}/{len(jobs)} fits, {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr, flush=True)
+    summaries = [summarize(rows, truth, k) for k in ns]
+    print(f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+    print(f"{n} households ({args.variant} plant, seed {args.seed}), season simulated in "
+          f"{sim_s:.0f} s; the fits: {args.workers} processes")
+    print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
+          f"{'coverage':>8} {'half-width %':>12}")
+    for sm in summaries:
+        for name in QUANTITIES.values():
+            q = sm[name]
+            print(f"{sm['owner_nights']:>12} {name:>4} {q['median_pct']:6.1f} "
+                  f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
+                  f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}")
+        sg = sm["signature"]
+        print(f"{sm['owner_nights']:>12} {'sig':>4} {sg['median_pct']:6.1f} "
+              f"{_fmt(sg['median_ci']):>15} {sg['p90_pct']:6.1f} {'':>15}   (energy "
+              f"signature HLC, {sg['n']} households)")
+        print(f"{'':>12} fitted {sm['fitted']}/{sm['households']}, median fit "
+              f"{sm['fit_s_median']:.1f} s")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"rows": rows, "summary": summaries, "args": vars(args)}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,174 @@
+"""The season fit: HLC, τ and C_m of a house from everything the gateway recorded.
+
+:func:`fit_season` reads a :class:`~.record.SeasonRecord` (:func:`~.nights.record_from_nights`)
+with the demand-form 5R1C (:mod:`.columns`, :mod:`.solve`) and gives each quantity a 95 %
+interval: the day-clustered sandwich covariance carried to log HLC, log τ and log C_m by the
+delta method, scaled by :data:`INTERVAL_SCALE` and combined with a model-error floor
+(:data:`MODEL_FLOOR`) — more nights shrink the statistical part, not what the model leaves out
+of a real house (a second thermal mass, the furniture, the sun's real shape, the emitter's own
+capacity). Both are estimated on simulated seasons of 40 realistic households that the bench
+does not use (``bench/season.py --calibrate``), for 95 % coverage.
+
+The energy signature on the same owner nights (:func:`signature`) is reported beside it: the
+baseline the season model has to beat. Units in every name.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .columns import lumped
+from .record import SeasonRecord
+from .solve import LUMPED, beta_dict, covariance, lumped_log_se, search
+
+#: Scale of the sandwich standard errors [-] (estimated, module docstring).
+INTERVAL_SCALE = 1.5
+#: Model-error floor of each log quantity [-] (estimated, module docstring).
+MODEL_FLOOR = {"hlc_w_per_k": 0.11, "tau_h": 0.113, "c_m_j_per_k": 0.131}
+#: Normal quantile of a two-sided 95 % interval.
+Z95 = 1.959964
+#: Fewest owner nights the season model is run on.
+MIN_OWNER_NIGHTS = 5
+#: The signature's window: local hours after midnight [h] (heat and ΔT means over it).
+SIGNATURE_HOURS = (0.0, 5.0)
+
+
+@dataclass
+class SeasonFit:
+    """The season model's result (:func:`fit_season`).
+
+    Attributes
+    ----------
+    values : HLC [W/K], τ [h], C_m [J/K] (keys of :data:`~.solve.LUMPED`)
+    low, high : their 95 % interval bounds, same keys and units
+    owner_nights : owner nights (local days) with rows the likelihood used
+    imp_nights : IMP nights with rows it used
+    used_h : hours of rows in the likelihood [h]
+    left_out_h : hours left out, by reason [h]
+    theta : the nonlinear parameters (τ_mm [s], w [-], τ_e [s], f_sun [-])
+    beta : the fixed linear parameters (K_ao, K_am [W/K], gains levels [W], defrost [W])
+    signature_hlc_w_per_k : the energy signature's slope on the same owner nights [W/K]
+        (NaN with fewer than three)
+    """
+
+    values: dict[str, float]
+    low: dict[str, float]
+    high: dict[str, float]
+    owner_nights: int
+    imp_nights: int
+    used_h: float
+    left_out_h: dict[str, float] = field(default_factory=dict)
+    theta: tuple[float, ...] = ()
+    beta: dict[str, float] = field(default_factory=dict)
+    signature_hlc_w_per_k: float = float("nan")
+
+    def as_dict(self) -> dict:
+        """JSON-ready, units in the names."""
+        return {
+            "model": "season 5R1C, demand form (variable projection)",
+            **{k: {"value": self.values[k], "low": self.low[k], "high": self.high[k]}
+               for k in LUMPED},
+            "owner_nights": self.owner_nights,
+            "imp_nights": self.imp_nights,
+            "used_h": round(self.used_h, 2),
+            "left_out_h": {k: round(v, 2) for k, v in self.left_out_h.items()},
+            "baseline_signature_hlc_w_per_k": (None if not math.isfinite(
+                self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
+            "interval": f"95 %: day-clustered sandwich × {INTERVAL_SCALE:g} with a model-error "
+                        "floor, both estimated on simulated seasons",
+        }
+
+
+def nights_used(rec: SeasonRecord, used: np.ndarray) -> tuple[int, int]:
+    """(owner nights, IMP nights) with at least one step in the likelihood's blocks."""
+    k = rec.per_block
+    nb = len(used)
+    steps = np.repeat(used, k)
+    ids, kinds = rec.night_id[: nb * k][steps], rec.kind[: nb * k][steps]
+    owner = {i for i, kd in zip(ids, kinds, strict=True) if kd == "owner" and i}
+    imp = {i for i, kd in zip(ids, kinds, strict=True) if kd in ("constrained", "normal")}
+    return len(owner), len(imp)
+
+
+def fit_season(rec: SeasonRecord, calibrated: bool = True) -> SeasonFit:
+    """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
+    intervals (the bench calibrates on them). Raises ValueError when fewer than
+    :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
+    from .columns import Design
+
+    d = Design.of(rec)
+    owner, imp = nights_used(rec, d.blocks)
+    if owner < MIN_OWNER_NIGHTS:
+        raise ValueError(f"{owner} owner nights with usable rows, fewer than "
+                         f"{MIN_OWNER_NIGHTS}")
+    theta, pr, res = search(d)
+    b = beta_dict(pr)
+    values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
+    se = lumped_log_se(res.x, pr, covariance(res.x, pr, d))
+    low, high = {}, {}
+    for k in LUMPED:
+        half = Z95 * (math.hypot(INTERVAL_SCALE * se[k], MODEL_FLOOR[k]) if calibrated
+                      else se[k])
+        low[k], high[k] = values[k] * math.exp(-half), values[k] * math.exp(half)
+    return SeasonFit({k: float(values[k]) for k in LUMPED}, low, high, owner, imp,
+                     float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
+                     rec.exclusion_counts(), tuple(float(t) for t in theta), b,
+                     signature(rec))
+
+
+def signature(rec: SeasonRecord) -> float:
+    """The energy signature's HLC [W/K]: per owner night the mean heat over
+    :data:`SIGNATURE_HOURS` against the mean (T_air − T_out), least squares; nights with a
+    left-out or missing row in the window are skipped. NaN with fewer than three nights."""
+    h0, h1 = SIGNATURE_HOURS
+    inside = (rec.hour >= h0) & (rec.hour < h1) & (rec.kind == "owner")
+    ok = (inside & (rec.excluded == "") & np.isfinite(rec.t_air_c) & np.isfinite(rec.q_hc_w)
+          & np.isfinite(rec.t_out_c))
+    want = int(round((h1 - h0) * 3600 / rec.step_s))
+    x, y = [], []
+    for day in np.unique(rec.day[inside]):
+        sel = ok & (rec.day == day)
+        if sel.sum() < want or (inside & (rec.day == day) & ~ok).any():
+            continue
+        x.append(float(np.mean(rec.t_air_c[sel] - rec.t_out_c[sel])))
+        y.append(float(np.mean(rec.q_hc_w[sel])))
+    if len(x) < 3:
+        return float("nan")
+    A = np.c_[x, np.ones(len(x))]
+    return float(np.linalg.lstsq(A, np.asarray(y), rcond=None)[0][0])
+
+
+def fit_nights(nights) -> tuple[SeasonFit | None, str | None]:
+    """(the season fit, None) of a household's nights (NightSamples of every kind), or
+    (None, why not) — no owner nights, too few usable ones, or no usable record."""
+    from .nights import record_from_nights
+
+    owner = [n for n in nights if n.kind == "owner"]
+    if not owner:
+        return None, None
+    try:
+        return fit_season(record_from_nights(list(nights))), None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        return None, f"season model not fitted: {exc}"
+
+
+def format_season(fit: SeasonFit) -> list[str]:
+    """The season result as text lines (values, 95 % intervals, what they rest on)."""
+    v, lo, hi = fit.values, fit.low, fit.high
+    lines = [f"season model: {fit.owner_nights} owner nights and {fit.imp_nights} IMP nights, "
+             f"{fit.used_h:.0f} h of rows",
+             f"  {'HLC':<5}{v['hlc_w_per_k']:9.1f} W/K   95 % {lo['hlc_w_per_k']:.1f} – "
+             f"{hi['hlc_w_per_k']:.1f}",
+             f"  {'tau':<5}{v['tau_h']:9.1f} h     95 % {lo['tau_h']:.1f} – {hi['tau_h']:.1f}",
+             f"  {'C_m':<5}{v['c_m_j_per_k'] / 3.6e6:9.2f} kWh/K 95 % "
+             f"{lo['c_m_j_per_k'] / 3.6e6:.2f} – {hi['c_m_j_per_k'] / 3.6e6:.2f}"]
+    if math.isfinite(fit.signature_hlc_w_per_k):
+        lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
+                     f"{fit.signature_hlc_w_per_k:.1f} W/K")
+    if fit.left_out_h:
+        lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"
+                                               for k, h in sorted(fit.left_out_h.items())))
+    return lines

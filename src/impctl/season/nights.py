@@ -1,0 +1,102 @@
+"""A household's nights (NIGHTS.csv, the store's export) as one season record.
+
+Every row the gateway logged — the owner's days and nights (kind ``owner``), the constrained
+and the normal IMP nights — goes onto one regular 5-min grid (:class:`~.record.SeasonRecord`):
+the means of the samples whose time falls in each step. What the season model leaves out, and
+why, is said per step:
+
+* a hot-water charge and the hour after it (the meter may read the tank; the emitter refills);
+* a record whose clock stepped (its rows' times are not to be trusted);
+* the first half hour of each stretch without gaps (the model's filters start there).
+
+An owner's changed setpoint, a night with the heating off and an IMP night's own steps stay in:
+the model is driven by the measured room temperature, whatever moved it. Units: °C, W, s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..imp.night import NightSamples
+from .record import STEP_S, SeasonRecord, exclude_after
+
+#: After a hot-water charge the emitter refills: steps left out [s].
+DHW_AFTER_S = 3600.0
+#: The first hours of each gap-free stretch, while the heat store settles [s].
+SETTLE_S = 1800.0
+#: A row counts as a hot-water charge from this share of its time on [-].
+DHW_SHARE = 0.05
+#: Labels whose record the model does not read at all.
+DROP_LABELS = ("clock stepped",)
+
+
+def record_from_nights(nights: Sequence[NightSamples], step_s: float = STEP_S) -> SeasonRecord:
+    """The season record of ``nights`` (module docstring); raises ValueError with no samples."""
+    if not nights:
+        raise ValueError("no nights")
+    tz = nights[0].start.tz
+    t_abs = [pd.Timestamp(n.start).timestamp() + np.asarray(n.time_s, float) for n in nights]
+    t0 = float(np.floor(min(t[0] for t in t_abs) / step_s) * step_s)
+    t1 = max(t[-1] for t in t_abs)
+    n_steps = int((t1 - t0) // step_s) + 1
+    sums = {k: np.zeros(n_steps) for k in ("t_air", "t_out", "q_hc", "defrost", "dhw", "n",
+                                           "n_def", "n_dhw", "p_house", "n_p")}
+    kind = np.full(n_steps, "", dtype=object)
+    night_id = np.full(n_steps, "", dtype=object)
+    dropped = np.zeros(n_steps, bool)
+    # IMP nights last, so where a record and an IMP night overlap the IMP night's rows win.
+    order = sorted(range(len(nights)), key=lambda i: nights[i].kind != "owner")
+    for i in order:
+        n, t = nights[i], t_abs[i]
+        k = ((t - t0) // step_s).astype(int)
+        ok = np.isfinite(n.t_air_c) & np.isfinite(n.t_out_c) & np.isfinite(n.q_hc_w)
+        kk = k[ok]
+        for name, x in (("t_air", n.t_air_c), ("t_out", n.t_out_c), ("q_hc", n.q_hc_w)):
+            sums[name] += np.bincount(kk, np.asarray(x, float)[ok], n_steps)
+        sums["n"] += np.bincount(kk, minlength=n_steps)
+        for name, x in (("defrost", n.defrost_share), ("dhw", n.dhw)):
+            if x is not None:
+                good = ok & np.isfinite(x)
+                sums[name] += np.bincount(k[good], np.asarray(x, float)[good], n_steps)
+                sums["n_" + ("def" if name == "defrost" else "dhw")] += np.bincount(
+                    k[good], minlength=n_steps)
+        if np.isfinite(n.p_house_w):
+            sums["p_house"] += np.bincount(kk, np.full(len(kk), n.p_house_w), n_steps)
+            sums["n_p"] += np.bincount(kk, minlength=n_steps)
+        span = np.unique(k)
+        kind[span] = n.kind
+        night_id[span] = n.night_id
+        dropped[span] = any(n.label.startswith(d) for d in DROP_LABELS)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cnt = np.where(sums["n"] > 0, sums["n"], np.nan)
+        t_air, t_out, q_hc = (sums[k] / cnt for k in ("t_air", "t_out", "q_hc"))
+        defrost = np.where(sums["n_def"] > 0, sums["defrost"] / sums["n_def"], 0.0)
+        dhw = np.where(sums["n_dhw"] > 0, sums["dhw"] / sums["n_dhw"], 0.0)
+        p_house = np.where(sums["n_p"] > 0, sums["p_house"] / sums["n_p"], np.nan)
+    t_air[dropped] = t_out[dropped] = q_hc[dropped] = np.nan
+    excluded = np.full(n_steps, "", dtype=object)
+    excluded[exclude_after(dhw > DHW_SHARE, int(DHW_AFTER_S // step_s))] = "hot water"
+    excluded[dropped] = "clock stepped"
+    index = pd.date_range(pd.Timestamp(t0, unit="s", tz="UTC"), periods=n_steps,
+                          freq=f"{int(step_s)}s").tz_convert(tz)
+    hour = (index.hour + index.minute / 60.0).to_numpy() + step_s / 7200.0
+    local_day = index.tz_localize(None).normalize()
+    day = np.asarray((local_day - local_day[0]).days, dtype=np.int64)
+    rec = SeasonRecord(t0, step_s, hour, day, t_air, t_out, q_hc, defrost,
+                       kind.astype(str), night_id, excluded, p_house)
+    _settle(rec, int(SETTLE_S // step_s))
+    return rec
+
+
+def _settle(rec: SeasonRecord, steps: int) -> None:
+    """Leave out the first ``steps`` of every gap-free stretch (the heat store settles)."""
+    seg = rec.segments()
+    starts = np.flatnonzero((seg >= 0) & np.r_[True, seg[1:] != seg[:-1]])
+    for s in starts:
+        part = slice(s, s + steps)
+        same = seg[part] == seg[s]
+        idx = np.arange(part.start, min(part.stop, rec.n))[same[: min(steps, rec.n - s)]]
+        rec.excluded[idx[rec.excluded[idx] == ""]] = "first hours (the heat store settles)"

@@ -1,0 +1,115 @@
+"""The season model: the record it reads, the fit, and ``impctl fit`` with owner nights.
+
+A short winter of two realistic households (the IMP campaign every other night, the owner's own
+nights between, hot water, defrosts) simulated once; NIGHTS.csv files written and read back
+through the product's own reader; ``impctl fit`` run as a real subprocess.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from impctl.imp.night import NightSamples
+from impctl.imp.nights_csv import read_nights, write_nights
+from impctl.population.households import sample_households
+from impctl.population.imp_run.season import SeasonConfig, simulate_season
+from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.realism import sample_params
+from impctl.season import fit_season, record_from_nights
+from impctl.season.fit import fit_nights, signature
+
+TZ = "Europe/Ljubljana"
+
+
+@pytest.fixture(scope="module")
+def season():
+    houses, params = sample_households(2, seed=31), sample_params(2, 31)
+    return simulate_season(houses, params, SeasonConfig(nights=20), seed=31)
+
+
+def _owner(day: str, hours: float, step_s: float = 300.0, label: str = "",
+           dhw_at: int | None = None) -> NightSamples:
+    start = pd.Timestamp(f"{day} 12:00", tz=TZ)
+    t = np.arange(0.0, hours * 3600, step_s)
+    dhw = np.zeros(len(t))
+    if dhw_at is not None:
+        dhw[dhw_at] = 1.0
+    return NightSamples(f"{day} owner", "owner", start, t, 21.0 + 0 * t, 2.0 + 0 * t,
+                        1500.0 + 0 * t, dhw=dhw, label=label)
+
+
+def test_hot_water_and_the_hour_after_it_are_left_out():
+    rec = record_from_nights([_owner("2026-12-01", 24.0, dhw_at=100)])
+    assert rec.exclusion_counts()["hot water"] == pytest.approx(65 / 60)  # 5 min + 1 h after
+    assert np.isfinite(rec.t_air_c).all()
+
+
+def test_a_short_gap_is_bridged_for_the_heat_store_a_long_one_is_not():
+    a = _owner("2026-12-01", 20.0)                 # ends 08:00; the next starts 12:00 (4 h)
+    b = _owner("2026-12-02", 24.0)
+    stretch, ta, _ = record_from_nights([a, b]).stretches()
+    assert set(stretch[stretch >= 0]) == {0} and np.isfinite(ta).all()
+    c = _owner("2026-12-04", 24.0)                 # 24 h after b: a heat store of its own
+    stretch, *_ = record_from_nights([a, b, c]).stretches()
+    assert set(stretch[stretch >= 0]) == {0, 1}
+
+
+def test_a_record_whose_clock_stepped_is_not_read():
+    rec = record_from_nights([_owner("2026-12-01", 24.0),
+                              _owner("2026-12-02", 24.0, label="clock stepped by −3.0 h")])
+    day2 = rec.night_id == "2026-12-02 owner"
+    assert day2.any() and np.isnan(rec.q_hc_w[day2]).all()
+    assert rec.exclusion_counts()["clock stepped"] == pytest.approx(24.0)
+
+
+def test_the_season_fit_finds_the_house_and_its_interval_holds_it(season):
+    for h in range(2):
+        fit = fit_season(record_from_nights(household_nights(season, h)))
+        assert fit.owner_nights >= 5 and fit.imp_nights >= 4
+        truth = {"hlc_w_per_k": season.houses.hlc_w_per_k[h], "tau_h": season.houses.tau_h[h],
+                 "c_m_j_per_k": season.houses.c_m_j_per_k[h]}
+        for k, true in truth.items():
+            assert fit.low[k] < fit.values[k] < fit.high[k]
+            assert abs(fit.values[k] / float(true) - 1) < 0.35, (h, k, fit.values[k], true)
+        assert abs(fit.values["hlc_w_per_k"] / float(truth["hlc_w_per_k"]) - 1) < 0.15
+
+
+def test_too_few_owner_nights_are_said_not_fitted(season):
+    nights = [n for n in household_nights(season, 0) if n.kind != "owner"]
+    assert fit_nights(nights) == (None, None)
+    few = household_nights(season, 0, upto_sample=4 * 288)
+    fit, note = fit_nights(few)
+    assert fit is None and "fewer than 5" in note
+
+
+def test_the_signature_needs_three_whole_owner_nights():
+    rec = record_from_nights([_owner("2026-12-01", 24.0), _owner("2026-12-02", 24.0)])
+    assert np.isnan(signature(rec))
+
+
+def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
+    nights = household_nights(season, 1)
+    csv = write_nights(nights, tmp_path / "nights.csv")
+    back = read_nights(csv, TZ)
+    assert sum(n.kind == "owner" for n in back) == sum(n.kind == "owner" for n in nights)
+    expected, _ = fit_nights(back)
+    out = tmp_path / "fit.json"
+    env = {**os.environ, "IMPCTL_MODEL_DIR": str(tmp_path / "no-models")}
+    res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", "fit",
+                          "--nights", str(csv), "--json", str(out)], capture_output=True,
+                         text=True, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr
+    assert "season model:" in res.stdout and "energy signature" in res.stdout
+    season_json = json.loads(out.read_text())["season"]
+    assert season_json["owner_nights"] == expected.owner_nights
+    for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
+        q = season_json[k]
+        assert q["value"] == pytest.approx(expected.values[k], rel=1e-6)
+        assert q["low"] < q["value"] < q["high"]
