@@ -104,6 +104,8 @@ def daemon_mapping(state_dir: Path, port: int, clock: VirtualClock,
         "clock": {"epoch": clock.epoch.isoformat(), "speed": clock.factor,
                   "wall_epoch_s": clock.wall_epoch_s},
     }
+    if "record" in sections:  # a test that configures the recording wants it on
+        sections = {**sections, "record": {"enabled": True, **sections["record"]}}
     return _merge(base, sections)
 
 

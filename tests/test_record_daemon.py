@@ -115,7 +115,7 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
     at its pre-heat and resume after its restore; the owner record of that night is labelled
     "IMP night"."""
     async def scenario():
-        async with daemon_rig(tmp_path, speed=SPEED,
+        async with daemon_rig(tmp_path, speed=SPEED, record={"enabled": True},
                               epoch=datetime(2026, 1, 12, 21, 0, tzinfo=TZ)) as rig:
             await rig.sim_minutes(30)
             night_id = await rig.trigger("constrained")
