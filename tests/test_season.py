@@ -113,3 +113,20 @@ def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
         q = season_json[k]
         assert q["value"] == pytest.approx(expected.values[k], rel=1e-6)
         assert q["low"] < q["value"] < q["high"]
+
+
+def test_a_fleet_row_carries_the_season_model(tmp_path, season, monkeypatch):
+    from impctl.fleet import fit_fleet, read_fleet
+
+    monkeypatch.setenv("IMPCTL_MODEL_DIR", str(tmp_path / "no-models"))  # → prior ranges
+    folder = tmp_path / "houses"
+    folder.mkdir()
+    write_nights(household_nights(season, 0), folder / "house-0.csv")
+    expected, _ = fit_nights(read_nights(folder / "house-0.csv", TZ))
+    fit_fleet(folder, tmp_path / "F.parquet", workers=1, model_dir=None, progress=False,
+              echo=lambda _: None)
+    row = read_fleet(tmp_path / "F.parquet").iloc[0]
+    assert row["status"] == "ok" and row["season_owner_nights"] == expected.owner_nights
+    for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
+        assert row[f"season_{k}"] == pytest.approx(expected.values[k], rel=1e-6)
+        assert row[f"season_{k}_low"] < row[f"season_{k}"] < row[f"season_{k}_high"]

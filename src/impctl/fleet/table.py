@@ -21,6 +21,10 @@ switch-off terms ``night_gain_w, emitter_tau_h, furniture_j_per_m2k`` each with 
 ``_high`` (empty when the fit did not keep them; :mod:`impctl.flex.switch_off`) and
 ``night_gain_assumed`` (the gain is the fit's assumption, :mod:`impctl.imp.gain`, not fitted),
 ``night_gain_source`` (declared | measured | estimated | assumed);
+``season_hlc_w_per_k, season_tau_h, season_c_m_j_per_k`` each with ``_low``, ``_high`` (the
+season model of the owner and IMP nights together, :mod:`impctl.season`; empty without owner
+nights), ``season_owner_nights``, ``season_signature_hlc_w_per_k`` (its baseline),
+``season_note`` (why it did not run);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and
@@ -65,6 +69,12 @@ _FIELDS += [(c, pa.float64()) for c in ("coast_h", "coast_h_low", "coast_h_high"
 _FIELDS += [(c, pa.float64()) for c in PARAM_COLUMNS.values()]
 _FIELDS += [(c, pa.float64()) for c in SWITCH_OFF_COLUMNS] + [(ASSUMED_COLUMN, pa.bool_())]
 _FIELDS += [("night_gain_source", pa.string())]
+SEASON_COLUMNS = ("season_hlc_w_per_k", "season_tau_h", "season_c_m_j_per_k")
+for _col in SEASON_COLUMNS:
+    _FIELDS += [(_col, pa.float64()), (f"{_col}_low", pa.float64()),
+                (f"{_col}_high", pa.float64())]
+_FIELDS += [("season_owner_nights", pa.int32()),
+            ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string())]
 _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
             ("eps_pct", pa.float64()), ("batch_size", pa.int32()),

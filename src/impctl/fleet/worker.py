@@ -128,6 +128,7 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
             row.update(status="error", reason=getattr(nights, "reason", "unreadable input"),
                        error=str(nights))
             continue
+        _season(row, nights)
         chosen = choose_nights(nights, settings.options.max_nights)
         row.update(nights_used=len(chosen.chosen),
                    nights_constrained=sum(n.kind == "constrained" for n in chosen.chosen),
@@ -159,6 +160,24 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
                    worker=f"{socket.gethostname()}:{state['pid']}",
                    worker_rss_mb=state["rss_mb"])
     return [rows[s.household] for s in sources]
+
+
+def _season(row: dict, nights: list) -> None:
+    """The season model's columns of a household with owner nights (empty without)."""
+    import math
+
+    from ..season.fit import fit_nights
+
+    fit, note = fit_nights(nights)
+    row["season_note"] = note
+    if fit is None:
+        return
+    for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
+        row[f"season_{k}"] = fit.values[k]
+        row[f"season_{k}_low"], row[f"season_{k}_high"] = fit.low[k], fit.high[k]
+    row["season_owner_nights"] = fit.owner_nights
+    sig = fit.signature_hlc_w_per_k
+    row["season_signature_hlc_w_per_k"] = sig if math.isfinite(sig) else None
 
 
 def _classify(nights, settings: Settings):
