@@ -43,7 +43,7 @@ def cutoff(s, h: int, n_owner: int) -> int | None:
     """The sample after the noon that follows household ``h``'s ``n_owner``-th plain owner
     night (None when the season has fewer)."""
     seen = 0
-    for j, (_, kinds, a, b) in enumerate(s.nights):
+    for j, (_, kinds, _a, b) in enumerate(s.nights):
         if kinds[h] == "owner" and not s.labels[j, h]:
             seen += 1
             if seen == n_owner:

@@ -130,3 +130,18 @@ def test_a_fleet_row_carries_the_season_model(tmp_path, season, monkeypatch):
     for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
         assert row[f"season_{k}"] == pytest.approx(expected.values[k], rel=1e-6)
         assert row[f"season_{k}_low"] < row[f"season_{k}"] < row[f"season_{k}_high"]
+
+
+def test_home_assistant_shows_the_season_value_with_its_owner_nights():
+    from datetime import UTC, datetime
+
+    from impctl.mqtt.payloads import fit_payloads
+
+    result = {"lumped": {"hlc": {"value": 150.0, "low": 100.0, "high": 200.0,
+                                 "determined": True}},
+              "season": {"hlc_w_per_k": {"value": 131.0, "low": 120.0, "high": 143.0},
+                         "owner_nights": 28}}
+    out = fit_payloads((datetime(2026, 12, 1, tzinfo=UTC), [1, 2], result))
+    assert (out["hlc"]["value"], out["hlc"]["low"], out["hlc"]["high"]) == (131.0, 120.0, 143.0)
+    assert out["hlc"]["source"] == "season model" and out["hlc"]["owner_nights"] == 28
+    assert out["tau"]["value"] is None and out["tau"]["source"] == "IMP nights"

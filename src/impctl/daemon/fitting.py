@@ -89,9 +89,8 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
             "from impctl.cli import main; main()"]
     model_dir = cfg.model_dir or str(Path(cfg.state_dir) / "models")
     steps = [
-        # The IMP nights: the fit leaves owner records out anyway (they are the season
-        # model's), and a season of them is a file a hundred times larger.
-        [*base, "export", "--db", str(cfg.db_path), "--format", "csv", "--no-owner",
+        # The IMP nights and the owner records: the fit runs the season model on them all.
+        [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
          "--out", str(nights_csv), "--force"],
         [*base, *fit_arguments(cfg, nights_csv, out_json, model_dir)],
     ]

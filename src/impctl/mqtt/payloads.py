@@ -104,7 +104,10 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
     HLC in W/K, C_m in MJ/K (the fit JSON holds J/K), τ and the coast time in h. The interval
     goes to attributes (``low``, ``high``); a quantity the nights do not determine
     (``determined: false``) has ``value: null`` and keeps its interval: it is never shown as
-    measured. ``coast_h`` comes from the fit's ``flexibility`` block, null when absent.
+    measured. Where the fit carries the season model (owner nights recorded), its value and
+    interval are shown instead, with ``source: season model`` and the count of owner nights
+    behind them (``owner_nights``). ``coast_h`` comes from the fit's ``flexibility`` block,
+    null when absent.
     """
     if fit is None:
         return {name: {"value": None} for name in ("hlc", "c_m", "tau", "coast_h")}
@@ -122,7 +125,15 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
 
         out[name] = {"value": scaled("value") if determined else None,
                      "low": scaled("low"), "high": scaled("high"),
-                     "determined": determined, "unit": unit, **common}
+                     "determined": determined, "unit": unit, "source": "IMP nights", **common}
+        sq = (result.get("season") or {}).get(_SEASON_KEYS[name])
+        if sq and sq.get("value") is not None:
+            # The season model reads every recorded night: its number, when there is one.
+            out[name].update(value=scaled("value", sq), low=scaled("low", sq),
+                             high=scaled("high", sq), determined=True,
+                             source="season model",
+                             owner_nights=result["season"].get("owner_nights"))
+            determined = True
         if name == "hlc" and determined and out[name]["value"] is not None:
             out[name]["heat_loss"] = heat_loss_words(out[name]["value"])
     flex = result.get("flexibility") or {}
@@ -133,6 +144,8 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
     return out
 
 
+#: The season block's key of each sensor's quantity.
+_SEASON_KEYS = {"hlc": "hlc_w_per_k", "c_m": "c_m_j_per_k", "tau": "tau_h"}
 #: The conditions of the plain-words heat loss: a cold winter night and a usual room [°C].
 WORDS_T_OUT_C, WORDS_T_IN_C = -10.0, 21.0
 

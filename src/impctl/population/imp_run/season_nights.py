@@ -17,8 +17,8 @@ from .season import Season
 
 
 def household_nights(s: Season, h: int, upto_sample: int | None = None) -> list[NightSamples]:
-    """Household ``h``'s owner records (named by the day their noon starts) and IMP nights up to sample ``upto_sample`` (exclusive;
-    all when None), in time order."""
+    """Household ``h``'s owner records (named by the day their noon starts) and IMP nights up
+    to sample ``upto_sample`` (exclusive; all when None), in time order."""
     n = s.t_air_c.shape[0] if upto_sample is None else min(upto_sample, s.t_air_c.shape[0])
     per = int(round(3600 / s.sample_s))
     preheat = int(round(s.config.preheat_h * per))
@@ -49,7 +49,8 @@ def household_nights(s: Season, h: int, upto_sample: int | None = None) -> list[
         if len(rows) < 2:
             continue
         lab = next((str(x) for x in labels[rows] if x), "")
-        out.append(_night(s, h, rows, None, "owner", f"{(s.index[a] - pd.Timedelta(hours=12)).date()} owner", np.nan, lab))
+        day = (s.index[a] - pd.Timedelta(hours=12)).date()
+        out.append(_night(s, h, rows, None, "owner", f"{day} owner", np.nan, lab))
     return sorted(out, key=lambda x: x.start)
 
 
