@@ -87,10 +87,14 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
                  "fit_s_median": float(np.median([r["fit_s"] for r in ok])) if ok else math.nan}
     h = np.array([r["household"] for r in ok], int)
     for k, name in QUANTITIES.items():
-        est = np.array([r[k] for r in ok])
-        true = truth[k][h]
+        est = np.array([r[k] if r[k] is not None else np.nan for r in ok], float)
+        given = np.isfinite(est)
+        out[f"{name}_missing"] = int((~given).sum())
+        est, hk = est[given], h[given]
+        true = truth[k][hk]
         err = 100 * np.abs(est / true - 1)
-        lo, hi = np.array([r[f"{k}_low"] for r in ok]), np.array([r[f"{k}_high"] for r in ok])
+        lo = np.array([r[f"{k}_low"] for r in ok], float)[given]
+        hi = np.array([r[f"{k}_high"] for r in ok], float)[given]
         cover = (lo <= true) & (true <= hi)
         half = 100 * (hi - lo) / 2 / est
         out[name] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
@@ -151,7 +155,8 @@ def main(argv: list[str] | None = None) -> None:
             q = sm[name]
             print(f"{sm['owner_nights']:>12} {name:>4} {q['median_pct']:6.1f} "
                   f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
-                  f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}")
+                  f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}"
+                  + (f"  ({sm[name + '_missing']} without)" if sm[name + "_missing"] else ""))
         sg = sm["signature"]
         print(f"{sm['owner_nights']:>12} {'sig':>4} {sg['median_pct']:6.1f} "
               f"{_fmt(sg['median_ci']):>15} {sg['p90_pct']:6.1f} {'':>15}   (energy "

@@ -145,3 +145,16 @@ def test_home_assistant_shows_the_season_value_with_its_owner_nights():
     assert (out["hlc"]["value"], out["hlc"]["low"], out["hlc"]["high"]) == (131.0, 120.0, 143.0)
     assert out["hlc"]["source"] == "season model" and out["hlc"]["owner_nights"] == 28
     assert out["tau"]["value"] is None and out["tau"]["source"] == "IMP nights"
+
+
+def test_a_value_the_model_cannot_give_is_missing_not_a_number():
+    from impctl.season.fit import SeasonFit, format_season
+
+    nan = float("nan")
+    fit = SeasonFit({"hlc_w_per_k": 120.0, "tau_h": nan, "c_m_j_per_k": 3.6e7},
+                    {"hlc_w_per_k": 110.0, "tau_h": nan, "c_m_j_per_k": 3.0e7},
+                    {"hlc_w_per_k": 130.0, "tau_h": nan, "c_m_j_per_k": 4.0e7}, 14, 8, 500.0)
+    data = json.loads(json.dumps(fit.as_dict(), allow_nan=False))
+    assert data["tau_h"] == {"value": None, "low": None, "high": None}
+    assert data["hlc_w_per_k"]["value"] == 120.0
+    assert any("tau" in line and "not determined" in line for line in format_season(fit))

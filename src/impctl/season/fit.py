@@ -69,8 +69,8 @@ class SeasonFit:
         """JSON-ready, units in the names."""
         return {
             "model": "season 5R1C, demand form (variable projection)",
-            **{k: {"value": self.values[k], "low": self.low[k], "high": self.high[k]}
-               for k in LUMPED},
+            **{k: {"value": _num(self.values[k]), "low": _num(self.low[k]),
+                   "high": _num(self.high[k])} for k in LUMPED},
             "owner_nights": self.owner_nights,
             "imp_nights": self.imp_nights,
             "used_h": round(self.used_h, 2),
@@ -80,6 +80,11 @@ class SeasonFit:
             "interval": f"95 %: day-clustered sandwich × {INTERVAL_SCALE:g} with a model-error "
                         "floor, both estimated on simulated seasons",
         }
+
+
+def _num(x: float) -> float | None:
+    """A JSON number, or None for a value the model could not give."""
+    return float(x) if math.isfinite(x) else None
 
 
 def nights_used(rec: SeasonRecord, used: np.ndarray) -> tuple[int, int]:
@@ -110,6 +115,10 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True) -> SeasonFit:
     se = lumped_log_se(res.x, pr, covariance(res.x, pr, d))
     low, high = {}, {}
     for k in LUMPED:
+        if not (math.isfinite(values[k]) and values[k] > 0 and math.isfinite(se[k])):
+            # e.g. a negative air path: no time constant to give — missing, never a number
+            values[k] = low[k] = high[k] = float("nan")
+            continue
         half = Z95 * (math.hypot(INTERVAL_SCALE * se[k], MODEL_FLOOR[k]) if calibrated
                       else se[k])
         low[k], high[k] = values[k] * math.exp(-half), values[k] * math.exp(half)
@@ -157,14 +166,17 @@ def fit_nights(nights) -> tuple[SeasonFit | None, str | None]:
 
 def format_season(fit: SeasonFit) -> list[str]:
     """The season result as text lines (values, 95 % intervals, what they rest on)."""
-    v, lo, hi = fit.values, fit.low, fit.high
     lines = [f"season model: {fit.owner_nights} owner nights and {fit.imp_nights} IMP nights, "
-             f"{fit.used_h:.0f} h of rows",
-             f"  {'HLC':<5}{v['hlc_w_per_k']:9.1f} W/K   95 % {lo['hlc_w_per_k']:.1f} – "
-             f"{hi['hlc_w_per_k']:.1f}",
-             f"  {'tau':<5}{v['tau_h']:9.1f} h     95 % {lo['tau_h']:.1f} – {hi['tau_h']:.1f}",
-             f"  {'C_m':<5}{v['c_m_j_per_k'] / 3.6e6:9.2f} kWh/K 95 % "
-             f"{lo['c_m_j_per_k'] / 3.6e6:.2f} – {hi['c_m_j_per_k'] / 3.6e6:.2f}"]
+             f"{fit.used_h:.0f} h of rows"]
+    for key, name, unit, scale in (("hlc_w_per_k", "HLC", "W/K", 1.0),
+                                   ("tau_h", "tau", "h", 1.0),
+                                   ("c_m_j_per_k", "C_m", "kWh/K", 1 / 3.6e6)):
+        v = fit.values[key]
+        if not math.isfinite(v):
+            lines.append(f"  {name:<5}{'—':>9} {unit:<6} not determined by the model")
+            continue
+        lines.append(f"  {name:<5}{v * scale:9.2f} {unit:<6} 95 % {fit.low[key] * scale:.2f} – "
+                     f"{fit.high[key] * scale:.2f}")
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")
