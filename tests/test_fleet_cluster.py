@@ -50,6 +50,14 @@ def inputs(tmp_path_factory) -> tuple[Path, Path]:
     return folder, models
 
 
+def _running(process: psutil.Process) -> bool:
+    """Still running (an exited process whose parent has not reaped it yet is not)."""
+    try:
+        return process.status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
 def _table(out: Path) -> pd.DataFrame:
     table = pd.read_parquet(out).sort_values("household").reset_index(drop=True)
     return table.drop(columns=RUN_COLUMNS)
@@ -71,7 +79,8 @@ def test_a_separate_scheduler_and_worker_give_the_local_clusters_table(inputs, t
         assert "3 households: 3 fitted now (3 ok" in remote.stdout
         assert "on 1 workers" in remote.stdout
         # the batches ran in the `dask worker` program's worker process, not in the CLI's
-        worker_pids = {p.pid for p in psutil.Process(procs[1].pid).children(recursive=True)}
+        workers = psutil.Process(procs[1].pid).children(recursive=True)
+        worker_pids = {p.pid for p in workers}
         ran_in = {int(w.rsplit(":", 1)[1])
                   for w in pd.read_parquet(tmp_path / "REMOTE.parquet")["worker"]}
         assert ran_in and ran_in <= worker_pids
@@ -81,8 +90,8 @@ def test_a_separate_scheduler_and_worker_give_the_local_clusters_table(inputs, t
         with Client(address, timeout="10s") as client:
             assert len(client.scheduler_info()["workers"]) == 1
     assert all(p.poll() is not None for p in procs)
-    assert not any(psutil.pid_exists(pid) and psutil.Process(pid).status() != "zombie"
-                   for pid in worker_pids)
+    _, alive = psutil.wait_procs(workers, timeout=30)
+    assert not [p for p in alive if _running(p)]
 
     a, b = _table(tmp_path / "LOCAL.parquet"), _table(tmp_path / "REMOTE.parquet")
     assert list(a["household"]) == ["house-0", "house-1", "house-2"]
