@@ -163,6 +163,26 @@ def test_demo_retrains_models_of_another_night_protocol(model_dir, tmp_path):
         "realistic plant")
 
 
+def test_demo_checks_cached_models_as_impctl_fit_loads_them(model_dir, tmp_path):
+    """Whether the demo may reuse cached classifiers is read from what ``impctl fit`` loads —
+    the compact forests — without importing scikit-learn or unpickling the forests (seconds
+    of every demo); with the pickles damaged but the compact forests whole, fit still works,
+    and so the demo reuses them."""
+    import shutil
+
+    assert json.loads((model_dir / "models.json").read_text())["compact"]
+    damaged = shutil.copytree(model_dir, tmp_path / "damaged")
+    for pickled in damaged.glob("*.joblib"):
+        pickled.write_bytes(b"not a pickle")
+    probe = ("import sys; from pathlib import Path; from impctl.demo.run import _models_unfit; "
+             "print([_models_unfit(Path(d), 'realistic') for d in sys.argv[1:]], "
+             "'sklearn' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", probe, str(model_dir), str(damaged)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[None, None] False"
+
+
 def _with_setpoint(src: Path, dst: Path, night_ids, setpoint_c: float) -> Path:
     table = pd.read_csv(src)
     table.loc[table["night"].isin(night_ids), "setpoint"] = setpoint_c

@@ -6,16 +6,14 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from dask_fixtures import dask_cluster
 
 from impctl.imp import write_nights
 from impctl.model import HouseParameters
@@ -26,18 +24,11 @@ HOUSES = HouseParameters(
     walls_area=np.array([160.0, 200.0]), windows_area=np.array([25.0, 30.0]),
     c_f=np.array([2.2, 1.2]), u_walls=np.array([0.5, 0.9]), u_windows=np.array([1.3, 1.8]),
     ach_vent=np.zeros(2), ach_infl=np.full(2, 0.01))
-DASK = str(Path(sys.executable).with_name("dask"))
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
                           capture_output=True, text=True, timeout=600)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -78,43 +69,9 @@ def fleet_dir(tmp_path_factory, nights) -> Path:
 @pytest.fixture(scope="module")
 def scheduler(tmp_path_factory):
     """A Dask scheduler and a worker with two processes, started as separate programs."""
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    log = tmp_path_factory.mktemp("dask")
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    logs = [open(log / "scheduler.log", "w"), open(log / "worker.log", "w")]  # noqa: SIM115
-    procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                               "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=logs[0],
-                              env=env, start_new_session=True)]
-    procs.append(subprocess.Popen([DASK, "worker", address, "--nworkers", "2", "--nthreads",
-                                   "1", "--no-dashboard", "--host", "127.0.0.1"],
-                                  stdout=subprocess.DEVNULL, stderr=logs[1], env=env,
-                                  start_new_session=True))
-    from distributed import Client
-
-    try:
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                with Client(address, timeout="5s") as client:
-                    client.wait_for_workers(2, timeout=120)
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(1)
+    with dask_cluster(tmp_path_factory.mktemp("dask"), 2, {"OMP_NUM_THREADS": "1"}) as (
+            address, _):
         yield address
-    finally:
-        for p in reversed(procs):
-            os.killpg(p.pid, signal.SIGTERM)
-        for p in reversed(procs):
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait()
-        for f in logs:
-            f.close()
 
 
 @pytest.fixture(scope="module")
@@ -253,7 +210,6 @@ def test_local_cluster_on_a_parquet_dataset(tmp_path, nights, monkeypatch):
 def test_local_cluster_workers_run_with_two_malloc_arenas():
     """The default cluster's worker processes start with MALLOC_ARENA_MAX=2 (their memory
     stays flat over a run; README "Fleets"): read from the real worker processes."""
-    import os
 
     from impctl.fleet.run import _client
 

@@ -52,10 +52,12 @@ def _models_unfit(model_dir: Path, plant: str) -> str | None:
     simulates (their dataset manifest's ``plant``), on the nights the gateway runs there
     (decision record 0005, one protocol)."""
     try:
-        from ..classifiers.saved import load_models
+        from ..classifiers.saved import load_classifiers
         from ..population.imp_run.setup import ImpSimConfig
 
-        _, meta = load_models(model_dir)
+        # What `impctl fit` loads: the compact forests (0.1 s), else the pickled ones
+        # (scikit-learn's import and unpickling: ~2.7 s of a demo that reuses them).
+        _, meta = load_classifiers(model_dir)
     except (InputError, OSError):
         return "no loadable models"
     dataset = meta.get("dataset") or {}

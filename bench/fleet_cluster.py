@@ -1,0 +1,170 @@
+"""Benchmark of ``impctl fleet fit --scheduler`` on a cluster of separate programs: throughput
+on 1 and 2 worker processes, the ratio, and each worker's peak resident memory.
+
+Run:  .venv/bin/python bench/fleet_cluster.py [--households 448] [--data DIR]
+          [--workers 1,2] [--batch-size 16] [--model-dir DIR]
+
+For every worker count W, as on a real cluster: ``dask scheduler`` and ``dask worker
+--nworkers W --nthreads 1`` (``MALLOC_ARENA_MAX=2``, as docs/how-to/fleet-dask.md starts them)
+are started as separate programs on loopback TCP, the fleet is fitted through the scheduler's
+address (:func:`impctl.fleet.fit_fleet` with ``scheduler=``, as ``impctl fleet fit
+--scheduler`` does), and the programs are stopped. Measured per run:
+
+* wall time of the fit, from the call to the last FLEET part (the plugin that loads torch in
+  each worker included; the cluster's own start is not), households/s and households/hour;
+* CPU-s per household in the workers' batches (the FLEET ``cpu_s_per_household`` column);
+* peak resident memory of each worker process [MB]: the kernel's high-water mark (``VmHWM``
+  of ``/proc/PID/status``), read just before the cluster stops.
+
+Then the throughput ratio of the largest worker count against one. Input: the realistic-plant
+fleet of ``bench/fleet.py`` (8 nights of 5-minute rows per household; generated once and kept
+in ``--data``). Without ``--model-dir`` the fits search the whole prior ranges (no classifiers,
+as ``bench/fleet.py``). The machine's other load skews the ratio: keep it quiet while this runs
+(the load average is printed before and after each run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import platform
+import shlex
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+DASK = str(Path(sys.executable).with_name("dask"))
+#: The worker programs' environment, as the how-to starts them.
+WORKER_ENV = {"MALLOC_ARENA_MAX": "2"}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def cluster(workers: int, logs: Path):
+    """Scheduler and worker programs, ready (all workers registered); stopped on exit."""
+    from distributed import Client
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, **WORKER_ENV}
+    logs.mkdir(parents=True, exist_ok=True)
+    procs = []
+    try:
+        procs.append(subprocess.Popen(
+            [DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            stdout=subprocess.DEVNULL, stderr=open(logs / "scheduler.log", "w"),  # noqa: SIM115
+            env=env, start_new_session=True))
+        procs.append(subprocess.Popen(
+            [DASK, "worker", address, "--nworkers", str(workers), "--nthreads", "1",
+             "--no-dashboard", "--host", "127.0.0.1"],
+            stdout=subprocess.DEVNULL, stderr=open(logs / "worker.log", "w"),  # noqa: SIM115
+            env=env, start_new_session=True))
+        deadline = time.monotonic() + 180
+        while True:
+            try:
+                with Client(address, timeout="5s") as client:
+                    client.wait_for_workers(workers, timeout=180)
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(1)
+        yield address
+    finally:
+        for p in reversed(procs):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory [MB] (run in each worker by ``client.run``)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path) -> dict:
+    from distributed import Client
+
+    from impctl.fleet import fit_fleet
+
+    out = work / f"FLEET-{workers}w.parquet"
+    with cluster(workers, work / f"logs-{workers}w") as address:
+        load = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        result = fit_fleet(data, out, scheduler=address, model_dir=model_dir,
+                           batch_size=batch, progress=False, echo=lambda s: None)
+        wall = time.perf_counter() - t0
+        with Client(address, timeout="10s") as client:
+            peaks = client.run(_peak_rss_mb)
+            pids = client.run(os.getpid)
+    fleet = pd.read_parquet(out)
+    rate = result.fitted / wall
+    return {"workers": result.workers, "households": result.fitted, "counts": result.counts,
+            "wall_s": wall, "rate": rate, "cpu_s": fleet["cpu_s_per_household"].mean(),
+            "peaks": {pids[w]: peaks[w] for w in peaks}, "load_before": load,
+            "load_after": os.getloadavg()[0]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=448,
+                    help="fleet size (the default takes about a minute on one worker)")
+    ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
+    ap.add_argument("--workers", default="1,2", help="worker counts to run, comma-separated")
+    ap.add_argument("--batch-size", type=int, default=16)
+    ap.add_argument("--model-dir", type=Path, default=None,
+                    help="classifiers [default: none — the whole prior ranges]")
+    args = ap.parse_args()
+    if args.model_dir is None:
+        os.environ["IMPCTL_MODEL_DIR"] = str(args.data / "no-models")  # → the prior ranges
+    sys.path.insert(0, str(Path(__file__).parent))
+    from fleet import make_fleet
+
+    data = make_fleet(args.households, args.data)
+    counts = [int(w) for w in args.workers.split(",")]
+    print(f"command: {shlex.join([Path(sys.executable).name, *sys.argv])}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+          f"input {data} ({args.households} households, 8 nights of 5-minute rows each)")
+    results = []
+    with tempfile.TemporaryDirectory(prefix="fleet-cluster-") as tmp:
+        for w in counts:
+            r = run(data, w, args.batch_size, args.model_dir, Path(tmp))
+            results.append(r)
+            peaks = ", ".join(f"{mb:.0f}" for mb in r["peaks"].values())
+            print(f"{r['workers']} worker(s): {r['households']} households {r['counts']} in "
+                  f"{r['wall_s']:.1f} s wall → {r['rate']:.2f} households/s = "
+                  f"{r['rate'] * 3600:,.0f} households/hour; {r['cpu_s']:.3f} CPU-s per "
+                  f"household in the batches; peak RSS per worker [MB]: {peaks}; load average "
+                  f"{r['load_before']:.1f} before, {r['load_after']:.1f} after")
+    if len(results) > 1:
+        base = results[0]
+        for r in results[1:]:
+            print(f"throughput {r['workers']} against {base['workers']} worker(s): "
+                  f"{r['rate'] / base['rate']:.2f}×")
+        best = max(results, key=lambda r: r["rate"])
+        print(f"10,000 households at {best['rate']:.2f} households/s: "
+              f"{10_000 / best['rate'] / 60:.1f} min")
+
+
+if __name__ == "__main__":
+    main()
