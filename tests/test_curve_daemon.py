@@ -86,7 +86,9 @@ def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_pat
             wait_until(lambda: _points(sim.port) == owner, 30, "the owner's curve back",
                        proc=d.proc)
             wait_until(lambda: not _curve_journal(db), 10, "the journal closed")
-            assert "the owner's heating curve restored" in d.output()
+            # logged just after the journal closes
+            wait_until(lambda: "the owner's heating curve restored" in d.output(), 10,
+                       "the restore said", proc=d.proc)
 
             # and asks for it again; a stop gives the owner's points back
             res = run_cli("curve", "--apply", "--config", str(config))

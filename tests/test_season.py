@@ -84,7 +84,7 @@ def test_the_season_fit_finds_the_house_and_its_interval_holds_it(season):
 def test_too_few_owner_nights_are_said_not_fitted(season):
     nights = [n for n in household_nights(season, 0) if n.kind != "owner"]
     assert fit_nights(nights) == (None, None)
-    few = household_nights(season, 0, upto_sample=4 * 288)
+    few = household_nights(season, 0, upto_sample=2 * 288)
     fit, note = fit_nights(few)
     assert fit is None and "fewer than 5" in note
 
