@@ -127,13 +127,13 @@ def test_the_fit_leaves_owner_nights_out_and_says_so(tmp_path, imp_nights):
     alone = read_nights(_file(tmp_path / "imp.csv", _imp_frame(imp_nights)), TZ)
     with_owner, without = choose_nights(both), choose_nights(alone)
     assert [n.night_id for n in with_owner.chosen] == [n.night_id for n in without.chosen]
-    assert with_owner.note == f"{OWNER_NOTE} (2 left out)" and without.note is None
+    assert with_owner.note == f"{OWNER_NOTE} (2)" and without.note is None
     assert all(n.kind != "owner" for n in with_owner.nights + with_owner.all_nights)
     # impctl fit on the file: the same fit, the note printed
     res = run_cli("fit", "--nights", str(tmp_path / "both.csv"), "--json",
                   str(tmp_path / "fit.json"), model_dir=tmp_path / "none")
     assert res.returncode == 0, res.stderr
-    assert f"{OWNER_NOTE} (2 left out)" in res.stdout
+    assert f"{OWNER_NOTE} (2)" in res.stdout
     fitted = json.loads((tmp_path / "fit.json").read_text())
     assert fitted["lumped"]["hlc"]["value"] > 0
     assert sorted(n["night_id"] for n in fitted["per_night"]) == sorted(

@@ -101,8 +101,8 @@ class NightSamples:
         return float(self.time_s[-1] - self.time_s[0]) / 3600.0 if len(self.time_s) else 0.0
 
 
-#: Why the fit leaves owner nights out (one line, printed once).
-OWNER_NOTE = "owner nights: fitted by the season model"
+#: Why the IMP fit, the classifiers and the campaign leave owner nights out (one line, once).
+OWNER_NOTE = "owner nights: read by the season model, not by the IMP fit"
 
 
 def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | None]:
@@ -110,4 +110,4 @@ def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | N
     classifiers and ``impctl campaign next`` take; the owner nights are the season model's."""
     imp = [n for n in nights if n.kind != "owner"]
     left = len(nights) - len(imp)
-    return imp, (None if not left else f"{OWNER_NOTE} ({left} left out)")
+    return imp, (None if not left else f"{OWNER_NOTE} ({left})")
