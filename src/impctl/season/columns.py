@@ -88,6 +88,7 @@ class Design:
     sun: Array          # (n, days): each day's sun shape
     defrost: Array
     n_days: int
+    knots: Array        # (n, k): the slow gain's hat functions (linear between daily knots)
 
     @classmethod
     def of(cls, rec: SeasonRecord) -> Design:
@@ -101,7 +102,7 @@ class Design:
         sun[np.arange(rec.n), days] = sun_shape(h)
         return cls(rec, seg, _runs(seg), stretch, _runs(stretch), ta, to,
                    rec.usable_blocks(), night, sun,
-                   np.nan_to_num(rec.defrost), n_days)
+                   np.nan_to_num(rec.defrost), n_days, gain_knots(rec))
 
     def block_day(self) -> NDArray[np.int64]:
         """Local day of each usable block (the clusters of the interval)."""
@@ -117,6 +118,25 @@ class Design:
         return xb[self.blocks]
 
 
+#: Spacing of the slow gain's knots [s]: the occupants' heat wanders from day to day.
+KNOT_S = 86400.0
+
+
+def gain_knots(rec: SeasonRecord) -> Array:
+    """Hat functions of the slow gain (n, k): piecewise linear between knots every
+    :data:`KNOT_S` at local midnight, so a night sits on one knot and the level never jumps."""
+    t = rec.day + rec.hour / 24.0                     # local days since the first midnight
+    k = int(np.ceil(t.max())) + 1
+    x = np.clip(t * 86400.0 / KNOT_S, 0, k - 1)
+    lo = np.floor(x).astype(int)
+    frac = x - lo
+    out = np.zeros((rec.n, k))
+    out[np.arange(rec.n), lo] = 1.0 - frac
+    out[np.arange(rec.n), np.minimum(lo + 1, k - 1)] += frac
+    used = out.any(axis=0)
+    return out[:, used]
+
+
 def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array, Array, list[str]]:
     """(X, y, names): the block means of the regressors and of the emitter-lagged meter reading
     for nonlinear parameters ``theta`` (:data:`THETA`), over the usable blocks."""
@@ -125,11 +145,12 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     ta, to = d.t_air_c, d.t_out_c
     # One pass of each filter over all its inputs: the mass's and the emitter's.
     mass_in = np.concatenate([(w * ta + (1.0 - w) * to)[:, None], d.night[:, None],
-                              1.0 - d.night[:, None], d.sun], axis=1)
+                              1.0 - d.night[:, None], d.sun, d.knots], axis=1)
     m = lowpass(mass_in, tau_mm, dt, d.stretch)
     e = lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, seg)
     n_s, n_e = len(d.stretch_runs), len(d.runs)
-    X = np.zeros((r.n, len(BETA) + n_s + n_e + d.n_days))
+    n_k = d.knots.shape[1]
+    X = np.zeros((r.n, len(BETA) + n_s + n_e + d.n_days + n_k))
     X[:, 0] = ta - to
     X[:, 1] = ta - m[:, 0]
     for k, level in enumerate((d.night, 1.0 - d.night)):
@@ -146,9 +167,11 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     for lo, hi in d.runs:
         X[lo:hi, col] = decay_e ** np.arange(hi - lo)
         col += 1
-    X[:, col:] = -(f_sun * d.sun + w * (1.0 - f_sun) * m[:, 3:])
+    X[:, col:col + d.n_days] = -(f_sun * d.sun + w * (1.0 - f_sun) * m[:, 3:3 + d.n_days])
+    col += d.n_days
+    X[:, col:] = -(AIR_SHARE * d.knots + w * (1.0 - AIR_SHARE) * m[:, 3 + d.n_days:])
     names = [*BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
-             *(f"sun_{i}_w" for i in range(d.n_days))]
+             *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(n_k))]
     return d.block_mean(X), d.block_mean(e[:, 0]), names
 
 

@@ -25,6 +25,8 @@ THETA_BOUNDS = ((1.0 * 3600, 400.0 * 3600), (0.02, 0.995), (60.0, 3.0 * 3600), (
 START_GRID = tuple((t, w) for t in (3.0, 8.0, 24.0, 80.0) for w in (0.7, 0.9, 0.97))
 #: Ridge weight of the daily sun amplitudes about their mean, per block [-].
 SUN_RIDGE = 0.05
+#: Weight of the slow gain's day-to-day steps, per block [-] (its random-walk prior).
+GAIN_RW = float(__import__("os").environ.get("GAIN_RW", "0.05"))
 #: Residual scale [W] (the search is scale-free; this keeps the numbers near 1).
 W_SCALE = 100.0
 
@@ -76,8 +78,22 @@ def project(theta, d: Design) -> Projection:
         lam = math.sqrt(SUN_RIDGE * len(y))
         centre = np.eye(ns) - 1.0 / ns
         rows[:, sun] = lam * centre / scale[sun] * np.median(scale[sun])
+    gain = np.array([n.startswith("gain_") for n in names])
+    ng = int(gain.sum())
+    if ng > 1 and GAIN_RW > 0:
+        lam = math.sqrt(GAIN_RW * len(y))
+        g = np.zeros((ng, p))
+        step = np.eye(ng - 1, ng, 1) - np.eye(ng - 1, ng)
+        g[: ng - 1, gain] = lam * step / scale[gain] * np.median(scale[gain])
+        # the knots' mean is the gain levels' business: a weak pull to zero fixes it
+        g[ng - 1, gain] = 1e-3 * lam / scale[gain] * np.median(scale[gain])
+        rows = np.concatenate([rows, g])
+    elif ng:
+        g = np.zeros((ng, p))
+        g[:, gain] = 1e3 * np.eye(ng) / scale[gain]
+        rows = np.concatenate([rows, g])
     A = np.concatenate([Xs, rows])
-    b = np.concatenate([y, np.zeros(ns)])
+    b = np.concatenate([y, np.zeros(len(rows))])
     coef, *_ = np.linalg.lstsq(A, b, rcond=None)
     beta = coef / scale
     return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
