@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..imp.night import NightSamples
-from .record import STEP_S, SeasonRecord, exclude_after
+from .record import BLOCK_S, STEP_S, SeasonRecord, exclude_after
 
 #: After a hot-water charge the emitter refills: steps left out [s].
 DHW_AFTER_S = 3600.0
@@ -39,7 +39,8 @@ def record_from_nights(nights: Sequence[NightSamples], step_s: float = STEP_S) -
         raise ValueError("no nights")
     tz = nights[0].start.tz
     t_abs = [pd.Timestamp(n.start).timestamp() + np.asarray(n.time_s, float) for n in nights]
-    t0 = float(np.floor(min(t[0] for t in t_abs) / step_s) * step_s)
+    # the grid starts on a block boundary (:00 or :30): the gains switch at whole hours
+    t0 = float(np.floor(min(t[0] for t in t_abs) / BLOCK_S) * BLOCK_S)
     t1 = max(t[-1] for t in t_abs)
     n_steps = int((t1 - t0) // step_s) + 1
     sums = {k: np.zeros(n_steps) for k in ("t_air", "t_out", "q_hc", "defrost", "dhw", "n",
