@@ -67,9 +67,11 @@ MIN_NIGHTS = 24
 #: Fewest usable nights on each side of a step.
 MIN_SIDE = 6
 #: The alarm threshold on the largest |t| [-] (module docstring).
-THRESHOLD = 4.2
+THRESHOLD = 4.0
 #: Scale of the size's interval [-] (module docstring).
 SIZE_SCALE = 1.0
+#: Usable owner nights after a change for the season model to read only those.
+REFIT_MIN_NIGHTS = 10
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
 
@@ -84,18 +86,23 @@ class NightRows:
     fall_k: np.ndarray
     defrost: np.ndarray
     memory_k: np.ndarray
+    p_house_w: np.ndarray
 
     def __len__(self) -> int:
         return len(self.dates)
 
     def design(self) -> np.ndarray:
-        """The regressors without the step: 1, dt, fall, defrost, the memories."""
-        return np.c_[np.ones(len(self)), self.dt_k, self.fall_k, self.defrost, self.memory_k]
+        """The regressors without the step: 1, dt, fall, defrost, the memories, and the
+        household electricity where every night has it (the internal gains as they wander)."""
+        cols = [np.ones(len(self)), self.dt_k, self.fall_k, self.defrost, self.memory_k]
+        if len(self) and np.isfinite(self.p_house_w).all():
+            cols.append(self.p_house_w)
+        return np.column_stack(cols)
 
     def head(self, n: int) -> NightRows:
         """The first ``n`` nights."""
         return NightRows(self.dates[:n], self.q_w[:n], self.dt_k[:n], self.fall_k[:n],
-                         self.defrost[:n], self.memory_k[:n])
+                         self.defrost[:n], self.memory_k[:n], self.p_house_w[:n])
 
 
 @dataclass(frozen=True)
@@ -172,7 +179,7 @@ def night_rows(nights: Sequence[NightSamples]) -> NightRows:
     per_window = int(round((WINDOW_H[1] - WINDOW_H[0]) * 12))
     owner = [n for n in nights if n.kind == "owner" and not n.label and len(n.time_s) >= 2]
     if not owner:
-        return NightRows([], *(np.zeros(0) for _ in range(4)), np.zeros((0, len(MEMORY_H))))
+        return _no_rows()
     t0, hourly = _hourly(nights)
     memories = [_memory(hourly, tau) for tau in MEMORY_H]
     for n in owner:
@@ -209,15 +216,21 @@ def night_rows(nights: Sequence[NightSamples]) -> NightRows:
             continue
         defrost = (float(np.nanmean(np.asarray(n.defrost_share, float)[win]))
                    if n.defrost_share is not None else 0.0)
-        rows.append((str(day.date()), float(np.mean(q[win])), dt, fall, defrost, mem))
+        rows.append((str(day.date()), float(np.mean(q[win])), dt, fall, defrost, mem,
+                     float(n.p_house_w)))
     rows.sort(key=lambda r: r[0])
     if rows:
         typical = float(np.median([r[1] for r in rows]))
         rows = [r for r in rows if r[1] > MIN_HEAT_SHARE * typical and r[1] > 0]
     if not rows:
-        return NightRows([], *(np.zeros(0) for _ in range(4)), np.zeros((0, len(MEMORY_H))))
+        return _no_rows()
     return NightRows([r[0] for r in rows], *(np.array([r[i] for r in rows], float)
-                                             for i in range(1, 6)))
+                                             for i in range(1, 7)))
+
+
+def _no_rows() -> NightRows:
+    z = np.zeros(0)
+    return NightRows([], z, z, z, z, np.zeros((0, len(MEMORY_H))), z)
 
 
 def _days(dates: list[str]) -> np.ndarray:
