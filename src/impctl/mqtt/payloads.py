@@ -106,8 +106,10 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
     (``determined: false``) has ``value: null`` and keeps its interval: it is never shown as
     measured. Where the fit carries the season model (owner nights recorded), its value and
     interval are shown instead, with ``source: season model`` and the count of owner nights
-    behind them (``owner_nights``). ``coast_h`` comes from the fit's ``flexibility`` block,
-    null when absent.
+    behind them (``owner_nights``). The season HLC also says whether the house changed
+    (``changed_since``: the date of the first night after a step in its heat loss, null when
+    none was found; ``change_w_per_k`` with ``change_low``/``change_high``: the step [W/K]).
+    ``coast_h`` comes from the fit's ``flexibility`` block, null when absent.
     """
     if fit is None:
         return {name: {"value": None} for name in ("hlc", "c_m", "tau", "coast_h")}
@@ -134,6 +136,8 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
                              source="season model",
                              owner_nights=result["season"].get("owner_nights"))
             determined = True
+            if name == "hlc":
+                out[name].update(_change_attributes(result["season"].get("change")))
         if name == "hlc" and determined and out[name]["value"] is not None:
             out[name]["heat_loss"] = heat_loss_words(out[name]["value"])
     flex = result.get("flexibility") or {}
@@ -142,6 +146,17 @@ def fit_payloads(fit: tuple[datetime, list[int], dict] | None) -> dict[str, dict
                       "low": flex.get("coast_h_low"), "high": flex.get("coast_h_high"),
                       "rebound_kwh": flex.get("rebound_kwh"), "unit": "h", **common}
     return out
+
+
+def _change_attributes(change: dict | None) -> dict:
+    """The season HLC's change attributes from the fit JSON's ``season.change`` (nulls when
+    the test found no change, or did not run)."""
+    c = change or {}
+    found = bool(c.get("changed"))
+    return {"changed_since": c.get("since_date") if found else None,
+            "change_w_per_k": c.get("delta_hlc_w_k") if found else None,
+            "change_low": c.get("lo") if found else None,
+            "change_high": c.get("hi") if found else None}
 
 
 #: The season block's key of each sensor's quantity.

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .change import REFIT_MIN_NIGHTS, Change, detect_change
 from .columns import lumped
 from .record import SeasonRecord
 from .solve import LUMPED, beta_dict, covariance, lumped_log_se, search
@@ -52,6 +53,8 @@ class SeasonFit:
     beta : the fixed linear parameters (K_ao, K_am [W/K], gains levels [W], defrost [W])
     signature_hlc_w_per_k : the energy signature's slope on the same owner nights [W/K]
         (NaN with fewer than three)
+    change : the change test on the owner nights (:mod:`.change`), None when not run
+    after_change : the fit read only the nights from the change on (``change.since_date``)
     """
 
     values: dict[str, float]
@@ -64,6 +67,8 @@ class SeasonFit:
     theta: tuple[float, ...] = ()
     beta: dict[str, float] = field(default_factory=dict)
     signature_hlc_w_per_k: float = float("nan")
+    change: Change | None = None
+    after_change: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -79,6 +84,10 @@ class SeasonFit:
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
             "interval": f"95 %: day-clustered sandwich × {INTERVAL_SCALE:g} with a model-error "
                         "floor, both estimated on simulated seasons",
+            **({"change": {**self.change.as_dict(), "fit_reads": (
+                "nights after the change" if self.after_change else
+                "nights before and after the change" if self.change.changed else
+                "all nights")}} if self.change is not None else {}),
         }
 
 
@@ -153,15 +162,28 @@ def signature(rec: SeasonRecord) -> float:
 def fit_nights(nights) -> tuple[SeasonFit | None, str | None]:
     """(the season fit, None) of a household's nights (NightSamples of every kind), or
     (None, why not) — no owner nights, too few usable ones, or no usable record."""
+    import pandas as pd
+
     from .nights import record_from_nights
 
     owner = [n for n in nights if n.kind == "owner"]
     if not owner:
         return None, None
+    nights = list(nights)
+    found = detect_change(nights)
+    after = found.changed and found.nights_after >= REFIT_MIN_NIGHTS
+    if after:
+        # The house changed: the model of the house as it is now, from the noon before the
+        # first night after the change on.
+        tz = nights[0].start.tz
+        since = pd.Timestamp(f"{found.since_date} 12:00").tz_localize(tz)
+        nights = [n for n in nights if n.start >= since]
     try:
-        return fit_season(record_from_nights(list(nights))), None
+        fit = fit_season(record_from_nights(nights))
     except (ValueError, np.linalg.LinAlgError) as exc:
         return None, f"season model not fitted: {exc}"
+    fit.change, fit.after_change = found, after
+    return fit, None
 
 
 def format_season(fit: SeasonFit) -> list[str]:
@@ -180,6 +202,14 @@ def format_season(fit: SeasonFit) -> list[str]:
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")
+    c = fit.change
+    if c is not None and c.changed:
+        lines.append(f"  changed since {c.since_date}: heat loss {c.delta_hlc_w_k:+.0f} W/K "
+                     f"(95 % {c.low_w_k:+.0f} – {c.high_w_k:+.0f}), {c.nights_after} owner "
+                     "nights after it; " + (
+                         "the model reads only those" if fit.after_change else
+                         f"fewer than {REFIT_MIN_NIGHTS}: the model mixes the house before "
+                         "and after"))
     if fit.left_out_h:
         lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"
                                                for k, h in sorted(fit.left_out_h.items())))

@@ -15,6 +15,11 @@ a season in one pass at 60 s, closed loop where the gateway decides:
   its trend, :class:`.realistic._GatewayStop`); a spare slot runs only while a household still
   lacks its valid constrained nights and has invalid nights to spare, else it is an owner night.
 * **Owner nights**: every other night, recorded read-only.
+* **A change to the house** (optional, ``hlc_step_w_k`` and ``step_night``): from local noon
+  before a given night on, a household's HLC is changed by a given amount [W/K] and stays so —
+  a rise through the air path to outside (H_ve: a window left open), a fall through the opaque
+  envelope's outer conductance (H_tr,em: loft insulation added); the rest of the network, the
+  heat pump's curve and its controller are left as they were (:func:`step_network`).
 
 Every 300 s the gateway's log is kept for whole days — the room sensor's T_air, the outdoor
 sensor's T_out, the heat meter's interval mean, the setpoint and the hot-water and defrost flags,
@@ -24,7 +29,7 @@ the household electricity a meter would read — so a fit may take the window it
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -40,6 +45,7 @@ from ...imp.protocol import (
 )
 from ...model import HouseParameters
 from ...plant import PlantCore, PlantParams
+from ...plant.building.envelope import Network, Solver
 from ...plant.building.gains import internal_gains_w, solar_gains_w
 from ...weather import DEFAULT_TZ, WinterClimate, winter_weather
 from .realistic import _GatewayStop
@@ -161,13 +167,38 @@ def _weather(n: int, days: int, cfg: SeasonConfig, seed: int) -> pd.DataFrame:
     return pd.DataFrame(cols, index=s.index)
 
 
+def step_network(net: Network, delta_w_per_k: np.ndarray) -> Network:
+    """``net`` with each house's steady-state HLC changed by ``delta_w_per_k`` [W/K] (0: as it
+    was): a rise on H_ve (the air path to outside), a fall on H_tr,em (the opaque envelope's
+    outer conductance, solved so the series network loses exactly that much). Raises ValueError
+    for a fall the opaque path cannot give (more than its whole conductance)."""
+    d = np.asarray(delta_w_per_k, float)
+    h_ve = net.h_ve + np.maximum(d, 0.0)
+    # HLC = H_ve + H_is·A/(H_is + A), A = H_w + H_ms·H_em/(H_ms + H_em): invert for H_em.
+    a_old = net.h_w + net.h_ms * net.h_em / (net.h_ms + net.h_em)
+    tr_new = net.h_is * a_old / (net.h_is + a_old) + np.minimum(d, 0.0)
+    b_new = net.h_is * tr_new / (net.h_is - tr_new) - net.h_w
+    if np.any((d < 0) & ~((b_new > 0) & (b_new < net.h_ms))):
+        raise ValueError("an HLC fall larger than the opaque envelope's conductance")
+    h_em = np.where(d < 0, 1.0 / (1.0 / np.where(d < 0, b_new, 1.0) - 1.0 / net.h_ms),
+                    net.h_em)
+    return replace(net, h_ve=h_ve, h_em=h_em)
+
+
 def simulate_season(houses: HouseParameters, params: PlantParams,
                     config: SeasonConfig | None = None, seed: int = 0,
-                    gains: bool = True) -> Season:
+                    gains: bool = True, hlc_step_w_k=0.0, step_night=None) -> Season:
     """Run ``houses`` (arrays over n) on the realistic plant through a season (module
-    docstring); ``gains=False`` runs them without internal and solar gains."""
+    docstring); ``gains=False`` runs them without internal and solar gains.
+
+    ``hlc_step_w_k`` (a number or one per household [W/K]; 0: no change) changes a household's
+    HLC from local noon before its night ``step_night`` (a number or one per household; 0 =
+    the first night after the spin-up) to the season's end (:func:`step_network`). Nothing
+    else in the run depends on them: the same seed gives the same weather, owner and campaign
+    with or without a change."""
     cfg = config or SeasonConfig()
     n = houses.n_houses or 1
+    step_w = np.broadcast_to(np.asarray(hlc_step_w_k, float), (n,))
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EA5]))
     days = cfg.spinup_days + cfg.nights + 1
     weather = _weather(n, days, cfg, seed)
@@ -224,6 +255,15 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
 
     core = PlantCore(houses, params, int(rng.integers(2**31)))
     core.start_steady(sp_day, te[0])
+    # The change to the house: per plant step, the households whose HLC changes there.
+    changes: dict[int, np.ndarray] = {}
+    if np.any(step_w != 0):
+        at_night = np.broadcast_to(np.asarray(0 if step_night is None else step_night, int),
+                                   (n,))
+        noon = int(round((WINDOW_START_H - 12.0) * 3600 / STEP_S))
+        for h in np.flatnonzero(step_w != 0):
+            at = win0[int(at_night[h])] - noon
+            changes[at] = changes.get(at, np.zeros(n, bool)) | (np.arange(n) == h)
     stride = int(round(cfg.sample_s / STEP_S))
     n_samp = n_steps // stride
     rec = {k: np.zeros((n_samp, n)) for k in ("t_air_c", "t_out_c", "q_hc_w", "setpoint_c",
@@ -255,6 +295,9 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
                       "t_mass_c", "defrost", "heat_pump_w"})
     sensed_air = core.sensed_air
     for i in range(n_steps):
+        if i in changes:
+            core.network = step_network(core.network, np.where(changes[i], step_w, 0.0))
+            core.solver = Solver(core.network)
         j = j_of_step[i]
         if j >= 0 and j != night_j:   # the pre-heat of night j begins: the gateway decides
             night_j = j

@@ -1,0 +1,234 @@
+"""Change detection on simulated winters: is a step in the HLC found, how late, how often falsely?
+
+The same held-out households, seed and plant as bench/season.py (realistic plant, the IMP
+campaign every other night, the owner's nights between, cold and mild spells, setback, hot
+water, defrosts, owner changes, the gains wandering). Half of them get a step in the HLC from
+noon before a night drawn in [``--first``, nights − ``--last``): half of those −14 W/K (loft
+insulation added) and half ``--window-w-k`` (a window left open; default +20 W/K, a tilted
+window's ≈ 60 m³/h at 0.34 Wh/(m³K)); the other half nothing. Each household's export
+(season_nights.household_nights, as the gateway writes it) is read by
+``impctl.season.change`` night after night as the gateway would run it: the first night it says
+"changed" is the alarm.
+
+Figures: detection rate per kind of step (an alarm on a night after the step), the delay in
+nights from the step to the alarm (median, P90), false alarms per house-season (a household
+without a step that alarms at all; and alarms before the step in the others), the error of the
+step's night and size, the coverage of the size's 95 % interval — each with a 95 % bootstrap
+interval over households. ``--method cusum`` runs the alternative measured before choosing: a
+two-sided CUSUM on the residuals of the same night model fitted to a reference window.
+
+    python bench/season_change.py --households 200
+    python bench/season_change.py --households 200 --method cusum
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 cores
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from impctl.population.households import sample_households  # noqa: E402
+from impctl.population.imp_run.season import SeasonConfig, simulate_season  # noqa: E402
+from impctl.population.imp_run.season_nights import household_nights  # noqa: E402
+from impctl.population.realism import sample_params  # noqa: E402
+from impctl.season import change  # noqa: E402
+
+_SEASON = None
+#: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
+#: for ≤ 1 in 20 false alarms on the calibration seasons).
+CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
+
+
+def steps(n: int, nights: int, seed: int, window_w_k: float, first: int,
+          last: int) -> tuple[np.ndarray, np.ndarray]:
+    """(step [W/K], step night) per household: a quarter −14, a quarter ``window_w_k``, half 0."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC4A6]))
+    kind = rng.permutation(np.arange(n) % 4)
+    size = np.where(kind == 0, -14.0, np.where(kind == 1, window_w_k, 0.0))
+    return size, rng.integers(first, nights - last, n)
+
+
+def cusum_sequence(rows: change.NightRows) -> tuple[int, int]:
+    """(nights read at the alarm, -1 if none; the night the CUSUM last left zero) of a
+    two-sided CUSUM tuned to ±:data:`CUSUM_STEP_W_K` on the residuals of the night model
+    fitted to the first :data:`CUSUM_REF` nights."""
+    n = len(rows)
+    if n <= CUSUM_REF + 1:
+        return -1, -1
+    X = rows.design()
+    keep = np.r_[True, np.ptp(X[:CUSUM_REF, 1:], axis=0) > 1e-9]
+    X = X[:, keep]
+    beta, *_ = np.linalg.lstsq(X[:CUSUM_REF], rows.q_w[:CUSUM_REF], rcond=None)
+    r_ref = rows.q_w[:CUSUM_REF] - X[:CUSUM_REF] @ beta
+    sigma = max(math.sqrt(float(r_ref @ r_ref) / max(CUSUM_REF - X.shape[1], 1)), 1e-9)
+    up = down = 0.0
+    since_up = since_down = CUSUM_REF
+    for t in range(CUSUM_REF, n):
+        r = (rows.q_w[t] - X[t] @ beta) / sigma
+        m = CUSUM_STEP_W_K * rows.dt_k[t] / sigma       # the step's shift, in σ
+        up, down = max(0.0, up + m * r - m * m / 2), max(0.0, down - m * r - m * m / 2)
+        since_up = t + 1 if up == 0 else since_up
+        since_down = t + 1 if down == 0 else since_down
+        if up >= CUSUM_H or down >= CUSUM_H:
+            return t + 1, min(since_up if up >= CUSUM_H else since_down, n - 1)
+    return -1, -1
+
+
+def _run(job: tuple[int, str]) -> dict:
+    h, method = job
+    s = _SEASON
+    t0 = time.perf_counter()
+    rows = change.night_rows(household_nights(s, h))
+    row: dict = {"household": h, "nights": len(rows)}
+    if method == "glr":
+        at, c = change.detect_sequence(rows)
+        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
+                   since_date=c.since_date if at > 0 else None,
+                   delta_w_k=c.delta_hlc_w_k if at > 0 else None,
+                   low_w_k=c.low_w_k if at > 0 else None,
+                   high_w_k=c.high_w_k if at > 0 else None)
+    else:
+        at, k = cusum_sequence(rows)
+        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
+                   since_date=rows.dates[k] if at > 0 else None,
+                   delta_w_k=None, low_w_k=None, high_w_k=None)
+    row["test_s"] = time.perf_counter() - t0
+    return row
+
+
+def _boot(x: np.ndarray, stat, rng: np.random.Generator, n: int = 2000) -> tuple:
+    if len(x) == 0:
+        return (math.nan, math.nan)
+    idx = rng.integers(0, len(x), (n, len(x)))
+    vals = np.array([stat(x[i]) for i in idx])
+    return float(np.percentile(vals, 2.5)), float(np.percentile(vals, 97.5))
+
+
+def _day(d: str) -> int:
+    return dt.date.fromisoformat(d).toordinal()
+
+
+def summarize(rows: list[dict], size: np.ndarray, night: np.ndarray, dates: list[str]) -> dict:
+    """Detection, delay, false alarms and the step's estimate (module docstring)."""
+    rng = np.random.default_rng(0)
+    out: dict = {}
+    by_h = {r["household"]: r for r in rows}
+    null = [by_h[h] for h in np.flatnonzero(size == 0)]
+    fa = np.array([r["alarm_date"] is not None for r in null], float)
+    out["false_alarms"] = {"rate": float(fa.mean()), "ci": _boot(fa, np.mean, rng),
+                           "households": len(null),
+                           "tested": int(sum(r["nights"] >= change.MIN_NIGHTS for r in null))}
+    for kind in sorted({float(x) for x in size[size != 0]}):
+        hs = np.flatnonzero(size == kind)
+        det, delay, early, since_err, d_err, cover = [], [], [], [], [], []
+        for h in hs:
+            r, step_date = by_h[h], dates[night[h]]
+            alarm = r["alarm_date"]
+            if alarm is not None and alarm < step_date:
+                early.append(1.0)
+                det.append(0.0)
+                continue
+            early.append(0.0)
+            det.append(float(alarm is not None))
+            if alarm is None:
+                continue
+            delay.append(_day(alarm) - _day(step_date))
+            since_err.append(_day(r["since_date"]) - _day(step_date))
+            if r["delta_w_k"] is not None:
+                d_err.append(r["delta_w_k"] - kind)
+                cover.append(float(r["low_w_k"] <= kind <= r["high_w_k"]))
+        det_a, delay_a = np.array(det), np.array(delay, float)
+        out[f"{kind:+g}"] = {
+            "households": len(hs), "detected": float(det_a.mean()),
+            "detected_ci": _boot(det_a, np.mean, rng),
+            "delay_median": float(np.median(delay_a)) if len(delay_a) else math.nan,
+            "delay_median_ci": _boot(delay_a, np.median, rng),
+            "delay_p90": float(np.percentile(delay_a, 90)) if len(delay_a) else math.nan,
+            "delay_p90_ci": _boot(delay_a, lambda x: np.percentile(x, 90), rng),
+            "early_alarms": float(np.mean(early)),
+            "since_abs_err_median": (float(np.median(np.abs(since_err))) if since_err
+                                     else math.nan),
+            "size_err_median": float(np.median(d_err)) if d_err else math.nan,
+            "size_coverage": float(np.mean(cover)) if cover else math.nan,
+        }
+    # False alarms per house-season: the no-step houses, and the step houses before the step.
+    early_all = [1.0 if (by_h[h]["alarm_date"] is not None
+                         and by_h[h]["alarm_date"] < dates[night[h]]) else 0.0
+                 for h in np.flatnonzero(size != 0)]
+    out["early_alarms"] = float(np.mean(early_all)) if early_all else math.nan
+    return out
+
+
+def _fmt(ci: tuple, digits: int = 0, scale: float = 1.0) -> str:
+    return f"[{ci[0] * scale:.{digits}f}, {ci[1] * scale:.{digits}f}]"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--households", type=int, default=200)
+    ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
+    ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--window-w-k", type=float, default=20.0,
+                    help="the open window's step in HLC [W/K]")
+    ap.add_argument("--first", type=int, default=25, help="earliest step night")
+    ap.add_argument("--last", type=int, default=20, help="nights kept after the latest step")
+    ap.add_argument("--method", choices=("glr", "cusum"), default="glr")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--json", default=None, help="write the rows and the summary here")
+    args = ap.parse_args(argv)
+    global _SEASON
+    n = args.households
+    houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
+    size, night = steps(n, args.nights, args.seed, args.window_w_k, args.first, args.last)
+    t0 = time.perf_counter()
+    print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
+    _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed,
+                              hlc_step_w_k=size, step_night=night)
+    sim_s = time.perf_counter() - t0
+    dates = [d for d, *_ in _SEASON.nights]
+    rows: list[dict] = []
+    with mp.get_context("fork").Pool(args.workers) as pool:
+        for i, row in enumerate(pool.imap_unordered(_run, [(h, args.method) for h in range(n)],
+                                                    chunksize=2), 1):
+            rows.append(row)
+            if i % 20 == 0 or i == n:
+                print(f"  {i}/{n} households, {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr, flush=True)
+    sm = summarize(rows, size, night, dates)
+    print(f"$ python bench/season_change.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+    print(f"{n} households (realistic plant, seed {args.seed}, {args.nights} nights), "
+          f"method {args.method}; season simulated in {sim_s:.0f} s, the test "
+          f"{np.median([r['test_s'] for r in rows]):.1f} s per household-season (median)")
+    fa = sm["false_alarms"]
+    print(f"false alarms per house-season (no step): {100 * fa['rate']:.1f} % "
+          f"{_fmt(fa['ci'], 1, 100)} of {fa['households']} ({fa['tested']} with enough "
+          f"nights to test); before the step in the others: {100 * sm['early_alarms']:.1f} %")
+    print(f"{'step W/K':>9} {'houses':>6} {'detected % [95 % CI]':>22} "
+          f"{'delay nights median [CI]':>26} {'P90 [CI]':>16} {'since ±nights':>13} "
+          f"{'size err W/K':>12} {'coverage':>8}")
+    for key, q in sm.items():
+        if not isinstance(q, dict) or "detected" not in q:
+            continue
+        print(f"{key:>9} {q['households']:>6} {100 * q['detected']:7.0f} "
+              f"{_fmt(q['detected_ci'], 0, 100):>14} {q['delay_median']:8.0f} "
+              f"{_fmt(q['delay_median_ci']):>17} {q['delay_p90']:5.0f} "
+              f"{_fmt(q['delay_p90_ci']):>10} {q['since_abs_err_median']:13.0f} "
+              f"{q['size_err_median']:12.1f} {100 * q['size_coverage']:7.0f}%")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"rows": rows, "summary": sm, "args": vars(args),
+                       "size_w_k": size.tolist(), "step_night": night.tolist()}, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

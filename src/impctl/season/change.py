@@ -1,0 +1,333 @@
+"""Has the house changed? A step in the heat-loss coefficient, found in the owner's nights.
+
+A window left open for days raises the HLC; loft insulation lowers it. Either shows in the
+owner's ordinary nights as more (or less) heat for the same indoor–outdoor difference. This
+module reads the owner records (kind ``owner``, one per local day, noon to noon), keeps the
+usable nights (no label: not a night the owner changed the setpoint, switched the heating off
+or was away; no hot-water charge from 23:00 to 05:00; the window's rows recorded) and takes
+one row per night over :data:`WINDOW_H` (00:00–05:00: no sun, the household asleep):
+
+* ``q_w`` — the mean heat read by the meter [W];
+* ``dt_k`` — the mean T_air − T_out [K];
+* ``fall_k`` — how far the room fell over the window [K] (heat the air, furniture and mass give
+  back: a setback night);
+* ``memory_k`` — the evening's mean T_air − T_out less the night's [K] (the mass still warm from
+  a mild day, or cold from a cold one: the turn of a cold spell);
+* ``defrost`` — the share of the window the heat pump defrosted [-] (the meter reads a defrost
+  as no heat).
+
+The night's heat balance as a grey-box expert writes it,
+``q = H·dt − Φ + b_f·fall + b_m·memory + b_d·defrost``, with the gains Φ and the three b's the
+house's own, is fitted to all usable nights with a step in H from night k on. The test is the
+generalised likelihood ratio for one step at an unknown night (:func:`glr`): the largest
+|δ̂_k / se(δ̂_k)| over k, by generalised least squares whose error correlation (the gains
+wandering over days, :func:`whitener`) is the house's own; where the nights carry the household
+electricity it stands in for the internal gains. The house has changed when the statistic
+passes :data:`THRESHOLD`. Run night after night
+(:func:`detect_sequence`), it alarms at most once per house-season in 20 when nothing changed
+(:data:`THRESHOLD` is set on simulated seasons not used by ``bench/season_change.py``, which
+measures it). The step's night is the k of the largest statistic; its size δ̂_k [W/K] has a
+95 % interval of ±z·se at that k, widened by :data:`SIZE_SCALE` (set on the same seasons).
+
+Measured against the alternative, a two-sided CUSUM on the residuals of the same night model
+fitted to a 20-night reference window (``bench/season_change.py --method cusum``): on the
+calibration seasons, at matched false alarms, they detected about as often; the GLR needs no
+reference window (a change in the first weeks is found too) and gives the step's night and
+size with an interval. Units in the names.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..imp.night import NightSamples
+
+#: The night window: local hours after midnight [h].
+WINDOW_H = (0.0, 5.0)
+#: The evening before it, for ``memory_k``: local hours before midnight [h].
+EVENING_H = 6.0
+#: Time constants of the house's memory of the days before [h] (module docstring).
+MEMORY_H = (12.0, 48.0, 168.0)
+#: The grid of the slow part's day-to-day correlation φ [-] and its variance ratio to a
+#: night's own noise [-] (:func:`whitener`).
+AR_PHI = (0.5, 0.7, 0.8, 0.9, 0.95)
+AR_RATIO = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)
+#: A night is used with at least this share of its window's 5-min rows recorded [-].
+MIN_ROWS_SHARE = 0.9
+#: A night is used when its heat is at least this share of the house's median night [-]
+#: (below it the heating hardly ran: a deep setback coasting, nothing to compare).
+MIN_HEAT_SHARE = 0.25
+#: Hot water from this hour of the evening on spoils the night [h before midnight].
+DHW_BEFORE_H = 1.0
+#: A hot-water row: this share of its interval or more [-].
+DHW_SHARE = 0.05
+#: Usable nights before the test is run at all.
+MIN_NIGHTS = 24
+#: Fewest usable nights on each side of a step.
+MIN_SIDE = 6
+#: The alarm threshold on the largest |t| [-] (module docstring).
+THRESHOLD = 4.0
+#: Scale of the size's interval [-] (module docstring).
+SIZE_SCALE = 1.0
+#: Usable owner nights after a change for the season model to read only those.
+REFIT_MIN_NIGHTS = 10
+#: Normal quantile of a two-sided 95 % interval.
+Z95 = 1.959964
+
+
+@dataclass(frozen=True)
+class NightRows:
+    """One row per usable owner night (module docstring), arrays in night order."""
+
+    dates: list[str]
+    q_w: np.ndarray
+    dt_k: np.ndarray
+    fall_k: np.ndarray
+    defrost: np.ndarray
+    memory_k: np.ndarray
+    p_house_w: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.dates)
+
+    def design(self) -> np.ndarray:
+        """The regressors without the step: 1, dt, fall, defrost, the memories, and the
+        household electricity where every night has it (the internal gains as they wander)."""
+        cols = [np.ones(len(self)), self.dt_k, self.fall_k, self.defrost, self.memory_k]
+        if len(self) and np.isfinite(self.p_house_w).all():
+            cols.append(self.p_house_w)
+        return np.column_stack(cols)
+
+    def head(self, n: int) -> NightRows:
+        """The first ``n`` nights."""
+        return NightRows(self.dates[:n], self.q_w[:n], self.dt_k[:n], self.fall_k[:n],
+                         self.defrost[:n], self.memory_k[:n], self.p_house_w[:n])
+
+
+@dataclass(frozen=True)
+class Change:
+    """The change test's answer (:func:`detect_change`).
+
+    Attributes
+    ----------
+    changed : the statistic passed :data:`THRESHOLD`
+    since_date : the first night after the step (ISO date of the evening), or None
+    delta_hlc_w_k, low_w_k, high_w_k : the step in HLC and its 95 % interval [W/K] (the largest
+        statistic's step, also when not changed; NaN with too few nights)
+    nights_after : usable owner nights from ``since_date`` on
+    nights : usable owner nights read
+    statistic : the largest |δ̂/se| [-]
+    """
+
+    changed: bool
+    since_date: str | None
+    delta_hlc_w_k: float
+    low_w_k: float
+    high_w_k: float
+    nights_after: int
+    nights: int
+    statistic: float
+
+    def as_dict(self) -> dict:
+        """JSON-ready (the fit JSON's ``season.change``), units in the names."""
+        def num(x: float) -> float | None:
+            return round(float(x), 2) if math.isfinite(x) else None
+        return {"changed": self.changed, "since_date": self.since_date if self.changed else None,
+                "delta_hlc_w_k": num(self.delta_hlc_w_k) if self.changed else None,
+                "lo": num(self.low_w_k) if self.changed else None,
+                "hi": num(self.high_w_k) if self.changed else None,
+                "nights_after": self.nights_after if self.changed else 0,
+                "nights": self.nights, "statistic": num(self.statistic),
+                "threshold": THRESHOLD}
+
+
+def _hourly(nights: Sequence[NightSamples]) -> tuple[float, np.ndarray]:
+    """(epoch seconds of the first hour, hourly mean T_air − T_out [K], NaN where nothing was
+    recorded) of every row of ``nights``, whatever their kind."""
+    t, d = [], []
+    for n in nights:
+        ok = np.isfinite(n.t_air_c) & np.isfinite(n.t_out_c)
+        t.append(pd.Timestamp(n.start).timestamp() + np.asarray(n.time_s, float)[ok])
+        d.append(np.asarray(n.t_air_c, float)[ok] - np.asarray(n.t_out_c, float)[ok])
+    ta, da = np.concatenate(t), np.concatenate(d)
+    t0 = math.floor(ta.min() / 3600.0) * 3600.0
+    k = ((ta - t0) // 3600.0).astype(int)
+    cnt = np.bincount(k)
+    with np.errstate(invalid="ignore"):
+        return t0, np.bincount(k, da) / np.where(cnt > 0, cnt, np.nan)
+
+
+def _memory(hourly: np.ndarray, tau_h: float) -> np.ndarray:
+    """Exponential mean of ``hourly`` with time constant ``tau_h`` [h] at the end of each
+    hour, over the hours recorded (a gap carries no weight)."""
+    a = math.exp(-1.0 / tau_h)
+    s = w = 0.0
+    out = np.empty(len(hourly))
+    for i, x in enumerate(hourly):
+        s, w = a * s, a * w
+        if x == x:  # recorded
+            s += (1 - a) * x
+            w += 1 - a
+        out[i] = s / w if w > 0 else math.nan
+    return out
+
+
+def night_rows(nights: Sequence[NightSamples]) -> NightRows:
+    """The usable owner nights of ``nights`` as rows (module docstring), in night order."""
+    rows: list[tuple] = []
+    per_window = int(round((WINDOW_H[1] - WINDOW_H[0]) * 12))
+    owner = [n for n in nights if n.kind == "owner" and not n.label and len(n.time_s) >= 2]
+    if not owner:
+        return _no_rows()
+    t0, hourly = _hourly(nights)
+    memories = [_memory(hourly, tau) for tau in MEMORY_H]
+    for n in owner:
+        start = pd.Timestamp(n.start)
+        day = (start - pd.Timedelta(hours=12)).normalize()
+        midnight = day + pd.Timedelta(days=1)
+        h = ((start - midnight).total_seconds() + np.asarray(n.time_s, float)) / 3600.0
+        ok = np.isfinite(n.t_air_c) & np.isfinite(n.t_out_c) & np.isfinite(n.q_hc_w)
+        win = ok & (h >= WINDOW_H[0]) & (h < WINDOW_H[1])
+        if win.sum() < MIN_ROWS_SHARE * per_window:
+            continue
+        ta, to, q = (np.asarray(x, float) for x in (n.t_air_c, n.t_out_c, n.q_hc_w))
+        if n.dhw is not None:
+            hot = np.asarray(n.dhw, float) > DHW_SHARE
+            if WINDOW_H[1] - WINDOW_H[0] < 12:
+                if (hot & (h >= WINDOW_H[0] - DHW_BEFORE_H) & (h < WINDOW_H[1])).any():
+                    continue
+            else:
+                # Over a whole day the space heat a charge pauses is made up after it: the
+                # meter's reading during the charge (the tank's, or nothing) is no space heat.
+                q = np.where(hot, 0.0, q)
+        dt = float(np.mean(ta[win] - to[win]))
+        first = win & (h < WINDOW_H[0] + 0.5)
+        last = win & (h >= WINDOW_H[1] - 0.5)
+        if not first.any() or not last.any():
+            continue
+        fall = float(np.mean(ta[first]) - np.mean(ta[last]))
+        # the hour ending at the window's start
+        at = int((midnight.timestamp() + WINDOW_H[0] * 3600 - t0) // 3600.0) - 1
+        if not 0 <= at < len(hourly):
+            continue
+        mem = [float(m[at]) - dt for m in memories]
+        if not all(math.isfinite(x) for x in mem):
+            continue
+        defrost = (float(np.nanmean(np.asarray(n.defrost_share, float)[win]))
+                   if n.defrost_share is not None else 0.0)
+        rows.append((str(day.date()), float(np.mean(q[win])), dt, fall, defrost, mem,
+                     float(n.p_house_w)))
+    rows.sort(key=lambda r: r[0])
+    if rows:
+        typical = float(np.median([r[1] for r in rows]))
+        rows = [r for r in rows if r[1] > MIN_HEAT_SHARE * typical and r[1] > 0]
+    if not rows:
+        return _no_rows()
+    return NightRows([r[0] for r in rows], *(np.array([r[i] for r in rows], float)
+                                             for i in range(1, 7)))
+
+
+def _no_rows() -> NightRows:
+    z = np.zeros(0)
+    return NightRows([], z, z, z, z, np.zeros((0, len(MEMORY_H))), z)
+
+
+def _days(dates: list[str]) -> np.ndarray:
+    """Day numbers of ISO ``dates`` [d]."""
+    return np.array([np.datetime64(d, "D").astype(np.int64) for d in dates], float)
+
+
+def whitener(rows: NightRows, X: np.ndarray) -> np.ndarray:
+    """The inverse Cholesky factor of the nights' error correlation: a slow part, the gains
+    wandering (an AR(1) over days, φ^|Δd|), on top of each night's own noise; φ and the parts'
+    ratio are the maximum-likelihood ones on a grid, for the design ``X`` without a step."""
+    d = _days(rows.dates)
+    lag = np.abs(d[:, None] - d[None, :])
+    n = len(d)
+    best, best_l = -np.inf, np.eye(n)
+    for phi in AR_PHI:
+        corr = phi ** lag
+        for ratio in AR_RATIO:
+            s = np.eye(n) + ratio * corr
+            try:
+                c = np.linalg.cholesky(s)
+            except np.linalg.LinAlgError:
+                continue
+            w = np.linalg.inv(c)
+            xw, yw = w @ X, w @ rows.q_w
+            beta, *_ = np.linalg.lstsq(xw, yw, rcond=None)
+            rss = float(np.sum((yw - xw @ beta) ** 2))
+            ll = -0.5 * n * math.log(max(rss / n, 1e-300)) - float(np.sum(np.log(np.diag(c))))
+            if ll > best:
+                best, best_l = ll, w
+    return best_l
+
+
+def glr(rows: NightRows) -> tuple[float, int, float, float]:
+    """(largest |t|, its night index k, δ̂_k [W/K], se(δ̂_k) [W/K]) of a step in H from night k
+    on, over every k with :data:`MIN_SIDE` nights on each side; (NaN, -1, NaN, NaN) with too
+    few nights. Generalised least squares with the correlation of :func:`whitener`."""
+    n = len(rows)
+    if n < max(MIN_NIGHTS, 2 * MIN_SIDE):
+        return math.nan, -1, math.nan, math.nan
+    X0 = rows.design()
+    # A regressor the nights do not move (no defrost, no setback) is left out: no column of
+    # zeros, whose coefficient nothing determines.
+    keep = np.r_[True, np.ptp(X0[:, 1:], axis=0) > 1e-9]
+    X0 = X0[:, keep]
+    w = whitener(rows, X0)
+    x0w, yw = w @ X0, w @ rows.q_w
+    best = (0.0, -1, math.nan, math.nan)
+    for k in range(MIN_SIDE, n - MIN_SIDE + 1):
+        xs = w @ np.where(np.arange(n) >= k, rows.dt_k, 0.0)
+        X = np.c_[x0w, xs]
+        beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
+        r = yw - X @ beta
+        dof = n - X.shape[1]
+        if dof < 2:
+            continue
+        sigma = max(math.sqrt(float(r @ r) / dof), 1e-9)
+        try:
+            cov = np.linalg.inv(X.T @ X) * sigma ** 2
+        except np.linalg.LinAlgError:
+            continue
+        se = math.sqrt(max(cov[-1, -1], 0.0))
+        if se <= 0:
+            continue
+        t = abs(beta[-1]) / se
+        if t > best[0]:
+            best = (t, k, float(beta[-1]), se)
+    return best
+
+
+def detect_change(nights: Sequence[NightSamples]) -> Change:
+    """The change test on ``nights`` (a household's nights of any kind; module docstring)."""
+    return change_of(night_rows(nights))
+
+
+def change_of(rows: NightRows) -> Change:
+    """The change test on ``rows`` (:func:`night_rows`)."""
+    stat, k, delta, se = glr(rows)
+    n = len(rows)
+    if k < 0:
+        return Change(False, None, math.nan, math.nan, math.nan, 0, n,
+                      stat if math.isfinite(stat) else math.nan)
+    half = Z95 * SIZE_SCALE * se
+    changed = bool(stat >= THRESHOLD)
+    return Change(changed, rows.dates[k], delta, delta - half, delta + half, n - k, n, stat)
+
+
+def detect_sequence(rows: NightRows) -> tuple[int, Change]:
+    """The test run after each usable night as the gateway would: (the number of nights read
+    when it first alarmed, -1 if never; the answer then, or at the last night)."""
+    last = change_of(rows)
+    for m in range(max(MIN_NIGHTS, 2 * MIN_SIDE), len(rows) + 1):
+        c = change_of(rows.head(m))
+        if c.changed:
+            return m, c
+    return -1, last
