@@ -12,6 +12,11 @@ intervals; the fit's wall time.
 
     python bench/season.py --households 200 --owner-nights 14,28
     python bench/season.py --households 40 --variant signed
+    python bench/season.py --calibrate --households 60 --seed 31   # the intervals' scale, floor
+
+``--calibrate`` fits households of another seed with the raw intervals and prints, per
+quantity, the sandwich scale and model-error floor that give 95 % coverage with the narrowest
+median interval (the constants of ``impctl.season.fit``).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import multiprocessing as mp
 import os
 import sys
 import time
+from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 cores
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -33,9 +39,12 @@ from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.imp_run.season import SeasonConfig, simulate_season  # noqa: E402
 from impctl.population.imp_run.season_nights import household_nights  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
-from impctl.season.fit import LUMPED, fit_nights  # noqa: E402
+from impctl.season.fit import LUMPED, Z95, fit_nights, fit_season  # noqa: E402
+from impctl.season.nights import record_from_nights  # noqa: E402
 
 _SEASON = None
+_RAW = False
+_P_HOUSE = False
 QUANTITIES = {"hlc_w_per_k": "HLC", "tau_h": "tau", "c_m_j_per_k": "C_m"}
 
 
@@ -59,7 +68,17 @@ def _fit(job: tuple[int, int]) -> dict:
     if end is None:
         return {**row, "status": "season too short"}
     t0 = time.perf_counter()
-    fit, note = fit_nights(household_nights(s, h, upto_sample=end))
+    nights = household_nights(s, h, upto_sample=end)
+    if not _P_HOUSE:   # most gateways do not read the household electricity
+        nights = [replace(n, p_house_w=math.nan) for n in nights]
+    if _RAW:
+        try:
+            fit = fit_season(record_from_nights(nights), calibrated=False)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            return {**row, "status": str(exc)}
+        row["se"] = {k: math.log(fit.high[k] / fit.values[k]) / Z95 for k in LUMPED}
+    else:
+        fit, note = fit_nights(nights)
     row["fit_s"] = time.perf_counter() - t0
     if fit is None:
         return {**row, "status": note or "no fit"}
@@ -108,6 +127,31 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
     return out
 
 
+def calibrate(rows: list[dict], truth: dict[str, np.ndarray]) -> dict[str, tuple]:
+    """Per quantity (scale, floor): the raw standard error times the scale, combined with the
+    floor, covers 95 % of the households with the narrowest median half-width."""
+    out = {}
+    for k, name in QUANTITIES.items():
+        ok = [r for r in rows if r["status"] == "ok" and r.get(k) is not None
+              and math.isfinite(r[k]) and math.isfinite(r["se"][k])]
+        err = np.abs(np.log([r[k] / truth[k][r["household"]] for r in ok]))
+        se = np.array([r["se"][k] for r in ok])
+        best = None
+        for scale in (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0):
+            lo, hi = 0.0, 2.0
+            for _ in range(50):           # the smallest floor with 95 % coverage
+                mid = (lo + hi) / 2
+                cover = np.mean(err <= Z95 * np.hypot(scale * se, mid))
+                lo, hi = (lo, mid) if cover >= 0.95 else (mid, hi)
+            half = float(np.median(Z95 * np.hypot(scale * se, hi)))
+            if best is None or half < best[2]:
+                best = (scale, hi, half)
+        out[name] = best
+        print(f"{name:>4}: scale {best[0]:.2f}, floor {best[1]:.3f} (log units), median "
+              f"half-width {100 * best[2]:.1f} % over {len(ok)} fits")
+    return out
+
+
 def _fmt(ci: tuple) -> str:
     return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
 
@@ -118,12 +162,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--owner-nights", default="14,28")
     ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
     ap.add_argument("--seed", type=int, default=4242)
-    ap.add_argument("--variant", choices=("realistic", "signed"), default="realistic",
-                    help="signed: the heat meter reads a defrost's draw as negative heat")
+    ap.add_argument("--variant", choices=("realistic", "signed", "p_house"), default="realistic",
+                    help="signed: the heat meter reads a defrost's draw as negative heat; "
+                         "p_house: the household electricity is measured ([inputs])")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="raw intervals: print the scale and floor for 95 %% coverage")
     args = ap.parse_args(argv)
-    global _SEASON
+    global _SEASON, _RAW, _P_HOUSE
+    _RAW, _P_HOUSE = args.calibrate, args.variant == "p_house"
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
     if args.variant == "signed":
@@ -144,6 +192,13 @@ def main(argv: list[str] | None = None) -> None:
             if i % 20 == 0 or i == len(jobs):
                 print(f"  {i}/{len(jobs)} fits, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
+    if args.calibrate:
+        print(f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+        calibrate(rows, truth)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"rows": rows, "args": vars(args)}, fh, indent=1)
+        return
     summaries = [summarize(rows, truth, k) for k in ns]
     print(f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}")
     print(f"{n} households ({args.variant} plant, seed {args.seed}), season simulated in "

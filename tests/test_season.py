@@ -113,6 +113,25 @@ def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
         q = season_json[k]
         assert q["value"] == pytest.approx(expected.values[k], rel=1e-6)
         assert q["low"] < q["value"] < q["high"]
+    # the estimate against the owner nights: the first 7, then all of them
+    assert "against owner nights" in res.stdout and "  7 nights: HLC" in res.stdout
+    curve = season_json["convergence"]
+    assert [r["owner_nights"] for r in curve] == [7, expected.owner_nights]
+    assert curve[-1]["hlc_w_per_k"]["value"] == pytest.approx(expected.values["hlc_w_per_k"])
+
+
+def test_the_convergence_curve_is_the_fit_of_the_first_nights(season):
+    from impctl.season.convergence import convergence
+
+    nights = household_nights(season, 0)
+    owner = sorted((n for n in nights if n.kind == "owner" and not n.label),
+                   key=lambda n: n.start)
+    assert len(owner) > 7
+    first = convergence(nights)[0]
+    end = owner[6].start + pd.Timedelta(seconds=float(owner[6].time_s[-1]))
+    cut = fit_season(record_from_nights([n for n in nights if n.start < end]))
+    assert first["owner_nights"] == 7 and cut.owner_nights <= 7 + 1
+    assert first["hlc_w_per_k"]["value"] == pytest.approx(cut.values["hlc_w_per_k"])
 
 
 def test_a_fleet_row_carries_the_season_model(tmp_path, season, monkeypatch):

@@ -95,9 +95,9 @@ def test_impctl_fit_prints_the_change_and_the_json_carries_it(tmp_path, season):
     assert c["changed"] is True and abs(c["delta_hlc_w_k"] - WINDOW_W_K) <= 15.0
     assert abs(_days(season.nights[STEP_NIGHT][0], c["since_date"])) <= 2
     assert f"changed since {c['since_date']}: heat loss +" in res.stdout
-    assert c["nights_after"] >= change.REFIT_MIN_NIGHTS
-    assert c["fit_reads"] == "nights after the change"
-    assert "the model reads only those" in res.stdout
+    assert c["nights_after"] >= 1
+    assert c["fit_reads"] == "all nights"
+    assert "the estimate above still reads the nights before it" in res.stdout
 
 
 def test_the_fit_json_says_nothing_changed_where_nothing_did(season):

@@ -74,8 +74,6 @@ MIN_SIDE = 6
 THRESHOLD = 4.0
 #: Scale of the size's interval [-] (module docstring).
 SIZE_SCALE = 1.0
-#: Usable owner nights after a change for the season model to read only those.
-REFIT_MIN_NIGHTS = 10
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
 

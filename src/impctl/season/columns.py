@@ -50,7 +50,9 @@ AIR_SHARE = 0.5
 #: Names of the nonlinear parameters (θ), in order, with their units.
 THETA = ("tau_mm_s", "w", "tau_e_s", "f_sun")
 #: Names of the fixed linear parameters (β) before the per-day and per-segment ones.
-BETA = ("k_ao_w_per_k", "k_am_w_per_k", "g_night_w", "g_day_w", "defrost_w")
+BETA = ("k_ao_w_per_k", "k_am_w_per_k", "g_night_w", "g_day_w", "defrost_w", "p_house_share")
+#: Fewest usable blocks with the household electricity measured for it to be read [-].
+P_HOUSE_MIN_SHARE = 0.8
 
 
 def lowpass(x: Array, tau_s: float, step_s: float, segments: NDArray[np.int64]) -> Array:
@@ -91,7 +93,8 @@ class Design:
     t_air_c: Array                    # bridged
     t_out_c: Array
     blocks: NDArray[np.bool_]         # usable blocks
-    gains_b: Array      # (m, nb) block means of the gains' shapes: night, day, suns, knots
+    gains_b: Array      # (m, nb) block means of the gains' shapes: night, day, suns, knots,
+    #                     the household electricity [W] (zeros when not measured)
     n_days: int
     n_knots: int
     dt_b: Array         # (nu,) block mean of T_air − T_out at the usable blocks [K]
@@ -116,7 +119,7 @@ class Design:
         days = rec.day - rec.day.min()
         n_days = int(days.max()) + 1
         knots = gain_knots(rec)
-        shapes = np.zeros((2 + n_days + knots.shape[1], nb))
+        shapes = np.zeros((3 + n_days + knots.shape[1], nb))
 
         def mean(x: Array) -> Array:
             return x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
@@ -126,8 +129,13 @@ class Design:
         sun = sun_shape(h)
         shapes[2:2 + n_days] = np.stack([mean(np.where(days == i, sun, 0.0))
                                          for i in range(n_days)])
-        shapes[2 + n_days:] = mean(knots).T
+        shapes[2 + n_days:-1] = mean(knots).T
         blocks = rec.usable_blocks() & (sb >= 0)
+        if len(rec.p_house_w) == rec.n:
+            # the household electricity ends as heat in the house: a measured gain
+            p = mean(rec.p_house_w)
+            if np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
+                shapes[-1] = np.where(np.isfinite(p), p, np.nanmean(p[blocks]))
         return cls(rec, seg, _runs(seg), aligned, _runs(sb), ta, to, blocks,
                    np.ascontiguousarray(shapes), n_days, knots.shape[1],
                    mean(ta - to)[blocks], mean(ta)[blocks], np.nan_to_num(rec.defrost))
@@ -202,6 +210,7 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     X[:, 1] = d.ta_b - m_t
     X[:, 2:4] = -(AIR_SHARE * shapes[0:2] + w * (1.0 - AIR_SHARE) * g[0:2]).T
     X[:, 4] = e[:, 1]
+    X[:, 5] = -(AIR_SHARE * shapes[-1] + w * (1.0 - AIR_SHARE) * g[-1])
     # Each stretch's own initial heat store: a free offset of the mass, decaying with τ_mm;
     # each run of the meter its own initial emitter: the filter starts at the run's first
     # reading, the water and the screed at whatever a pre-heat or a gap left them.
@@ -218,8 +227,8 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     sun = slice(2, 2 + d.n_days)
     X[:, col:col + d.n_days] = -(f_sun * shapes[sun] + w * (1.0 - f_sun) * g[sun]).T
     col += d.n_days
-    X[:, col:] = -(AIR_SHARE * shapes[2 + d.n_days:]
-                   + w * (1.0 - AIR_SHARE) * g[2 + d.n_days:]).T
+    X[:, col:] = -(AIR_SHARE * shapes[2 + d.n_days:-1]
+                   + w * (1.0 - AIR_SHARE) * g[2 + d.n_days:-1]).T
     names = [*BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
              *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(d.n_knots))]
     return X, e[:, 0], names

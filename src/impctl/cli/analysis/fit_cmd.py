@@ -159,14 +159,17 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 
 def _season(nights: list):
     """The season model of the owner nights and the IMP nights together, printed."""
+    from ...season.convergence import convergence, format_convergence
     from ...season.fit import fit_nights, format_season
 
     if not any(n.kind == "owner" for n in nights):
         return None, None
     with _ticking("the season model"):
         season, note = fit_nights(nights)
+        curve = convergence(nights, season) if season is not None else []
     if season is not None:
-        click.echo("\n".join(format_season(season)))
+        click.echo("\n".join(format_season(season) + format_convergence(curve)))
+        season.convergence = curve
     return season, note
 
 
