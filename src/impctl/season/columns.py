@@ -18,15 +18,18 @@ positive-only meter did not read (D·defrost share):
     LP_τe(Φ_meter − D·defrost) = Φ_room.
 
 The gains Φ = G_night or G_day (people asleep or about; the level also takes in the sensors'
-offsets times the HLC — it is an intercept, not the gain) split half to the air, half to the
-mass, plus each day's sun a_d·shape(hour) split f_s to the air and 1 − f_s to the mass.
+offsets times the HLC — it is an intercept, not the gain) plus a slow part g(t) wandering from
+day to day (linear between values g_k at local midnights; :mod:`.solve` puts a random-walk
+prior on their steps) plus, where measured, the household electricity times a share s_p, all
+split half to the air, half to the mass; plus each day's sun a_d·shape(hour) split f_s to the
+air and 1 − f_s to the mass.
 
 For given nonlinear parameters θ = (τ_mm, w, τ_e, f_s) the balance is *linear* in
-β = (K_ao, K_am, G_night, G_day, D, a_1 … a_days, one initial mass and emitter state per
-segment), so the fit
-solves β by least squares inside the search over θ (variable projection). :func:`columns` builds
-the regressors on the 5-min grid, filters there (the mass sees the switch-off within a block), and
-averages them to the likelihood's 30-min blocks.
+β = (K_ao, K_am, G_night, G_day, D, s_p, one initial mass and emitter state per segment,
+a_1 … a_days, g_1 … g_k), so the fit solves β by least squares inside the search over θ
+(variable projection). :func:`columns` filters the measured temperatures and the meter on the
+5-min grid (the mass sees the switch-off within a block) and the gains' known shapes at the
+likelihood's 30-min block scale (:func:`held_lowpass`), and gives the block means.
 
 Derived: HLC = K_ao + K_am·(1 − w); K_mo = K_am·(1 − w)/w; C_m = τ_mm·K_am/w;
 τ = C_m/(K_mo + K_am·K_ao/(K_am + K_ao)) (ISO's free-running time constant).
