@@ -1,9 +1,10 @@
 """How the season estimate settles as owner nights accrue: the fit on the first N of them.
 
 :func:`convergence` refits the season model on the record cut after the 7th, 14th, 28th and
-56th usable owner night (those fewer than the record holds) and gives each cut's HLC, τ and C_m
-with their 95 % intervals — the curve an owner or an aggregator reads to see whether more
-nights would still move the number. Units in every name.
+56th usable owner night (those fewer than the record holds), each search warm-started at the
+full fit's time constants, and gives each cut's HLC, τ and C_m with their 95 % intervals —
+the curve an owner or an aggregator reads to see whether more nights would still move the
+number. Units in every name.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def convergence(nights, full: SeasonFit | None = None) -> list[dict]:
         end = owner[n - 1].start + _span(owner[n - 1])
         cut = [x for x in nights if x.start < end]
         try:
-            fit = fit_season(record_from_nights(cut))
+            fit = fit_season(record_from_nights(cut),
+                             start=full.theta if full is not None and full.theta else None)
         except (ValueError, np.linalg.LinAlgError):
             continue
         out.append(_row(n, fit))

@@ -108,9 +108,11 @@ def nights_used(rec: SeasonRecord, used: np.ndarray) -> tuple[int, int]:
     return len(owner), len(imp)
 
 
-def fit_season(rec: SeasonRecord, calibrated: bool = True) -> SeasonFit:
+def fit_season(rec: SeasonRecord, calibrated: bool = True,
+               start: tuple | None = None) -> SeasonFit:
     """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
-    intervals (the bench calibrates on them). Raises ValueError when fewer than
+    intervals (the bench calibrates on them); ``start`` warm-starts the search at a known θ
+    (:attr:`SeasonFit.theta` of a fit of the same house). Raises ValueError when fewer than
     :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
     from .columns import Design
 
@@ -119,7 +121,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True) -> SeasonFit:
     if owner < MIN_OWNER_NIGHTS:
         raise ValueError(f"{owner} owner nights with usable rows, fewer than "
                          f"{MIN_OWNER_NIGHTS}")
-    theta, pr, res = search(d)
+    theta, pr, res = search(d, start=start)
     b = beta_dict(pr)
     values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
     se = lumped_log_se(res.x, pr, covariance(res.x, pr, d))

@@ -117,13 +117,19 @@ def _residual(u: Array, d: Design) -> Array:
     return np.concatenate([pr.residual_w, pr.penalty]) / W_SCALE
 
 
-def search(d: Design, n_starts: int = 2, max_nfev: int = 60) -> tuple[tuple, Projection, object]:
-    """Best θ, its projection and the optimiser's result (least squares over θ)."""
-    scored = []
-    for tau_h, w in START_GRID:
-        u = to_u((tau_h * 3600, w, 1800.0, 0.3))
-        scored.append((float(np.sum(_residual(u, d) ** 2)), u))
-    scored.sort(key=lambda t: t[0])
+def search(d: Design, n_starts: int = 2, max_nfev: int = 60,
+           start: tuple | None = None) -> tuple[tuple, Projection, object]:
+    """Best θ, its projection and the optimiser's result (least squares over θ); from the
+    best ``n_starts`` of a small grid, or from ``start`` alone (a warm start: yesterday's θ,
+    or the full season's for a part of it)."""
+    if start is not None:
+        scored = [(0.0, to_u(start))]
+    else:
+        scored = []
+        for tau_h, w in START_GRID:
+            u = to_u((tau_h * 3600, w, 1800.0, 0.3))
+            scored.append((float(np.sum(_residual(u, d) ** 2)), u))
+        scored.sort(key=lambda t: t[0])
     best = None
     for _, u0 in scored[:n_starts]:
         res = least_squares(_residual, u0, args=(d,), method="lm", max_nfev=max_nfev,
