@@ -19,6 +19,7 @@ from zoneinfo import ZoneInfo
 from reliability_fixtures import daemon_rig, run_virtual
 
 from impctl.cli.device.status import collect_status, format_status
+from impctl.clock import VirtualClock
 from impctl.controller.record_labels import record_day
 from impctl.heatpump import WriteBudget
 from impctl.imp.nights_csv import read_nights
@@ -178,3 +179,42 @@ def test_recording_off_records_nothing(tmp_path):
     assert records == []
     assert "recording: off (record.enabled = false)" in status
     assert "owner:     no owner record yet" in status
+
+
+class _LaggingWall:
+    """The daemon's wall-clock source: the loop's, ``lag_s`` behind once set [s of the loop]."""
+
+    def __init__(self, base) -> None:
+        self.base = base
+        self.lag_s = 0.0
+
+    def __call__(self) -> float:
+        return self.base() - self.lag_s
+
+
+def test_recording_goes_on_when_the_clock_lands_milliseconds_short_of_each_snapshot(tmp_path):
+    """The daemon's wall clock steps back 5 ms (far below a step the recorder notes, 120 s):
+    every bounded wait (one snapshot interval) then lands 5 ms short of its snapshot instant —
+    as on a long run of the virtual-time loop, whose float time drifts that far from the grid
+    after ~50 simulated days. The recorder waits the 5 ms and goes on: a row every 5 min."""
+    walls: list[_LaggingWall] = []
+
+    def lagging(house: VirtualClock) -> VirtualClock:
+        walls.append(_LaggingWall(house._wall))
+        return VirtualClock(house.epoch, house.factor, house.wall_epoch_s, wall=walls[0],
+                            monotonic=house._wall)
+
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED, daemon_clock=lagging,
+                              record={"enabled": True}) as rig:
+            await rig.sim_minutes(20)
+            walls[0].lag_s = 0.005 / SPEED  # 5 simulated ms
+            stepped = rig.clock.now()
+            await rig.sim_minutes(120)
+            records = rig.store.owner_records()
+            return stepped, [s for n in records for s in rig.store.samples(n.id)]
+
+    stepped, rows = run_virtual(scenario(), 86400)
+    after = [s for s in rows if s.ts > stepped]
+    assert len(after) >= 22, [s.ts.isoformat() for s in rows]  # 2 h of 5-min rows
+    assert _in_order(rows) and all(s.snapshots == 5 for s in after[:-1]), after

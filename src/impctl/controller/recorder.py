@@ -33,12 +33,9 @@ from ..store import Store
 from ..store.house_inputs import HouseInputRow
 from .record_labels import Span, judge, night_part, night_setpoint, record_day, record_window
 from .record_rows import RowBuilder, row_start
-from .timing import NightTime, describe_step
+from .timing import REACHED_S, NightTime, describe_step
 
 _LOG = logging.getLogger("impctl.record")
-#: Closer than this [simulated s], an instant counts as come (ten times the timing module's
-#: reach tolerance).
-_SOON_S = 0.01
 
 
 class OwnerRecorder:
@@ -79,14 +76,16 @@ class OwnerRecorder:
 
     # -- time ------------------------------------------------------------------------------
     def next_poll(self) -> datetime:
-        """The next snapshot instant on the grid of the snapshot interval, after now."""
+        """The next snapshot instant on the grid of the snapshot interval that has not come
+        (:meth:`NightTime.reached`)."""
         now = self.clock.now_s()
         step = self.sample_interval_s
         nxt = (math.floor(now / step) + 1) * step
-        # An instant closer than a wait can be (the clock a rounding error short of it, POSIX
-        # seconds as floats carry ~0.2 µs) counts as come: the next one, else this instant
-        # would be "reached" without waiting, for ever.
-        while nxt - now <= _SOON_S:
+        # An instant within the reach tolerance (the clock a rounding error short of it) has
+        # come: the next one, else it would be "reached" without waiting, for ever. Not one
+        # further: the bounded wait (one interval) after a clock a few milliseconds short of
+        # an instant skipped as come lands as short of the next, for ever — no snapshot at all.
+        while nxt - now <= REACHED_S:
             nxt += step
         return datetime.fromtimestamp(nxt, UTC)
 
