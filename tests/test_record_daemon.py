@@ -16,13 +16,17 @@ import os
 from datetime import datetime, timedelta
 from zoneinfo import ZoneInfo
 
+import numpy as np
+import pandas as pd
 from reliability_fixtures import daemon_rig, run_virtual
 
 from impctl.cli.device.status import collect_status, format_status
 from impctl.clock import VirtualClock
 from impctl.controller.record_labels import record_day
 from impctl.heatpump import WriteBudget
+from impctl.imp.night import split_owner
 from impctl.imp.nights_csv import read_nights
+from impctl.season import record_from_nights
 from impctl.store.export import export_nights
 
 TZ = ZoneInfo("Europe/Ljubljana")
@@ -125,6 +129,7 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
             noon = datetime(2026, 1, 13, 13, 0, tzinfo=TZ)
             await rig.until(lambda: rig.clock.now() >= noon, 600)
             record = rig.store.owner_records()[0]
+            export_nights(rig.store, tmp_path / "nights.csv", "csv", valid_only=False)
             return dict(night=rig.store.night(night_id), record=record,
                         rows=rig.store.samples(record.id),
                         fc06=rig.proxy.stats.requests[6])
@@ -142,6 +147,22 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
     after = [s for s in rows if s.ts >= night.ended]
     assert before and after and after[0].ts < night.ended + timedelta(minutes=10)
     assert all(s.loop_mode == 1 for s in rows)  # the owner's own mode, before and after
+    # Exported: the night's pre-heat as its first rows, read as a piece of the night that
+    # only the season model takes; the night itself from its window, as the IMP fit reads it.
+    read = read_nights(tmp_path / "nights.csv", "Europe/Ljubljana")
+    mine = [n for n in read if n.night_id == str(night.id)]
+    assert [(n.kind, n.phase) for n in mine] == [("constrained", "preheat"), ("constrained", "")]
+    pre, window = mine
+    pre_ts = pre.start + pd.to_timedelta(pre.time_s, unit="s")
+    assert pre_ts[0] >= night.started and pre_ts[-1] < night.window_start <= window.start
+    assert len(pre.time_s) >= 5 and pre.setpoint_c == 22.5  # T_max, as read
+    assert [n.night_id for n in split_owner(read)[0]] == [str(night.id)]
+    # the season model's grid: no step missing from the owner's last row before the night
+    # to the window's end
+    rec = record_from_nights(read)
+    t = rec.t0_s + np.arange(rec.n) * rec.step_s
+    span = (t >= before[-1].ts.timestamp()) & (t < night.window_end.timestamp())
+    assert span.sum() >= 12 and np.isfinite(rec.t_air_c[span]).all(), rec.kind[span]
 
 
 def _dst_record(tmp_path, day: str) -> tuple:
