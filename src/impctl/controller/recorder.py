@@ -43,7 +43,8 @@ class OwnerRecorder:
 
     Parameters
     ----------
-    client : HeatPumpClient (read only: :meth:`~HeatPumpClient.snapshot`)
+    client : HeatPumpClient (read only: :meth:`~HeatPumpClient.snapshot`); None for a
+        recorder that only closes records (:meth:`close`)
     store : Store
     clock : VirtualClock (the daemon's)
     tz : the gateway's time zone (records run from local noon to noon)
@@ -54,7 +55,7 @@ class OwnerRecorder:
     inputs_row : optional, the house's own sensors at a snapshot (``[inputs]``)
     """
 
-    def __init__(self, client: HeatPumpClient, store: Store, clock: VirtualClock, *, tz: str,
+    def __init__(self, client: HeatPumpClient | None, store: Store, clock: VirtualClock, *, tz: str,
                  window_minutes: tuple[int, int], interval_s: float, sample_interval_s: float,
                  min_coverage: float,
                  inputs_row: Callable[[Snapshot], HouseInputRow] | None = None):
