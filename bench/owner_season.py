@@ -85,7 +85,9 @@ async def season(work: Path, days: int, keep_days: int, sample_s: float,
             while clock.now() < until:
                 if task.done():
                     raise RuntimeError(f"the daemon stopped: {task!r}")
-                await asyncio.sleep(60.0)  # the loop's time
+                # the loop's time: 50 simulated min, so a figure is taken at its day, not
+                # up to two days after it
+                await asyncio.sleep(1.0)
             store = daemon.store
             summary = store.owner_summary()
             rss, fds = _proc()
