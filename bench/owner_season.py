@@ -1,7 +1,7 @@
 """The owner recording over a season: the store's size, retention, the daemon's memory.
 
 Run:  nice .venv/bin/python bench/owner_season.py [--days 200] [--keep-days 100]
-          [--sample-s 300] [--inputs]
+          [--sample-s 300] [--inputs] [--runs both|all|kept]
 
 The real daemon (:class:`~impctl.daemon.service.Daemon`) against the in-process simulator
 (the ideal plant with 5-min steps, a winter's weather) on the virtual-time loop records the
@@ -85,7 +85,9 @@ async def season(work: Path, days: int, keep_days: int, sample_s: float,
             while clock.now() < until:
                 if task.done():
                     raise RuntimeError(f"the daemon stopped: {task!r}")
-                await asyncio.sleep(60.0)  # the loop's time
+                # the loop's time: 50 simulated min, so a figure is taken at its day, not
+                # up to two days after it
+                await asyncio.sleep(1.0)
             store = daemon.store
             summary = store.owner_summary()
             rss, fds = _proc()
@@ -109,10 +111,16 @@ def main() -> None:
     parser.add_argument("--keep-days", type=int, default=100)
     parser.add_argument("--sample-s", type=float, default=300.0)
     parser.add_argument("--inputs", action="store_true")
+    parser.add_argument("--runs", choices=("both", "all", "kept"), default="both",
+                        help="the season kept all, kept --keep-days, or both in turn")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-    for keep in (10 * args.days, args.keep_days):
+    runs = {"all": [10 * args.days], "kept": [args.keep_days],
+            "both": [10 * args.days, args.keep_days]}[args.runs]
+    if args.keep_days > args.days and args.runs == "both":
+        runs = runs[:1]  # kept longer than the season: the same run twice
+    for keep in runs:
         what = "kept all season" if keep > args.days else f"kept {keep} days"
         print(f"owner recording, {args.days} simulated days, rows of 300 s, "
               f"{what}{', with [inputs]' if args.inputs else ''}:", flush=True)

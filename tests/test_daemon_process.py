@@ -187,7 +187,10 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             n_samples = store_query(db, lambda s: s.sample_count(1))
             in_window = [x.ts for x in store_query(db, lambda s: s.samples(1))
                          if night.window_start <= x.ts <= night.window_end]
+            preheat = [x.ts for x in store_query(db, lambda s: s.samples(1))
+                       if x.ts < night.window_start]
             assert 0 < len(in_window) < n_samples  # the preheat is sampled too
+            assert len(preheat) + len(in_window) <= n_samples  # not after the window
 
             # impctl status / nights / export / restore on the result.
             while True:  # a status taken within one simulated (UTC) day
@@ -216,10 +219,15 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             exp = run_cli("export", "--format", "csv", "--out", str(out), "--config",
                           str(config))
             assert exp.returncode == 0, exp.stderr
-            assert exp.stdout.strip() == f"wrote {len(in_window)} samples to {out}"
-            # The measured-data format of `impctl fit`: the window's samples, from its start.
-            [read] = read_nights(out)
+            wrote = len(preheat) + len(in_window)
+            assert exp.stdout.strip() == f"wrote {wrote} samples to {out}"
+            # The measured-data format of `impctl fit`: the window's samples, from its start;
+            # before them the pre-heat, read as a piece of the night the season model takes.
+            [pre, read] = read_nights(out)
+            assert (pre.night_id, pre.kind, pre.phase) == ("1", "normal", "preheat")
+            assert pre.start == preheat[0] and len(pre.time_s) == len(preheat)
             assert read.kind == "normal" and len(read.time_s) == len(in_window)
+            assert read.phase == ""
             assert read.start == in_window[0] and read.time_s[0] == 0.0
             nothing = run_cli("restore", "--config", str(config))
             assert nothing.returncode == 0 and nothing.stdout.strip() == "nothing to restore"

@@ -16,12 +16,17 @@ import os
 from datetime import datetime, timedelta
 from zoneinfo import ZoneInfo
 
+import numpy as np
+import pandas as pd
 from reliability_fixtures import daemon_rig, run_virtual
 
 from impctl.cli.device.status import collect_status, format_status
+from impctl.clock import VirtualClock
 from impctl.controller.record_labels import record_day
 from impctl.heatpump import WriteBudget
+from impctl.imp.night import split_owner
 from impctl.imp.nights_csv import read_nights
+from impctl.season import record_from_nights
 from impctl.store.export import export_nights
 
 TZ = ZoneInfo("Europe/Ljubljana")
@@ -124,6 +129,7 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
             noon = datetime(2026, 1, 13, 13, 0, tzinfo=TZ)
             await rig.until(lambda: rig.clock.now() >= noon, 600)
             record = rig.store.owner_records()[0]
+            export_nights(rig.store, tmp_path / "nights.csv", "csv", valid_only=False)
             return dict(night=rig.store.night(night_id), record=record,
                         rows=rig.store.samples(record.id),
                         fc06=rig.proxy.stats.requests[6])
@@ -141,6 +147,22 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
     after = [s for s in rows if s.ts >= night.ended]
     assert before and after and after[0].ts < night.ended + timedelta(minutes=10)
     assert all(s.loop_mode == 1 for s in rows)  # the owner's own mode, before and after
+    # Exported: the night's pre-heat as its first rows, read as a piece of the night that
+    # only the season model takes; the night itself from its window, as the IMP fit reads it.
+    read = read_nights(tmp_path / "nights.csv", "Europe/Ljubljana")
+    mine = [n for n in read if n.night_id == str(night.id)]
+    assert [(n.kind, n.phase) for n in mine] == [("constrained", "preheat"), ("constrained", "")]
+    pre, window = mine
+    pre_ts = pre.start + pd.to_timedelta(pre.time_s, unit="s")
+    assert pre_ts[0] >= night.started and pre_ts[-1] < night.window_start <= window.start
+    assert len(pre.time_s) >= 5 and pre.setpoint_c == 22.5  # T_max, as read
+    assert [n.night_id for n in split_owner(read)[0]] == [str(night.id)]
+    # the season model's grid: no step missing from the owner's last row before the night
+    # to the window's end
+    rec = record_from_nights(read)
+    t = rec.t0_s + np.arange(rec.n) * rec.step_s
+    span = (t >= before[-1].ts.timestamp()) & (t < night.window_end.timestamp())
+    assert span.sum() >= 12 and np.isfinite(rec.t_air_c[span]).all(), rec.kind[span]
 
 
 def _dst_record(tmp_path, day: str) -> tuple:
@@ -178,3 +200,42 @@ def test_recording_off_records_nothing(tmp_path):
     assert records == []
     assert "recording: off (record.enabled = false)" in status
     assert "owner:     no owner record yet" in status
+
+
+class _LaggingWall:
+    """The daemon's wall-clock source: the loop's, ``lag_s`` behind once set [s of the loop]."""
+
+    def __init__(self, base) -> None:
+        self.base = base
+        self.lag_s = 0.0
+
+    def __call__(self) -> float:
+        return self.base() - self.lag_s
+
+
+def test_recording_goes_on_when_the_clock_lands_milliseconds_short_of_each_snapshot(tmp_path):
+    """The daemon's wall clock steps back 5 ms (far below a step the recorder notes, 120 s):
+    every bounded wait (one snapshot interval) then lands 5 ms short of its snapshot instant —
+    as on a long run of the virtual-time loop, whose float time drifts that far from the grid
+    after ~50 simulated days. The recorder waits the 5 ms and goes on: a row every 5 min."""
+    walls: list[_LaggingWall] = []
+
+    def lagging(house: VirtualClock) -> VirtualClock:
+        walls.append(_LaggingWall(house._wall))
+        return VirtualClock(house.epoch, house.factor, house.wall_epoch_s, wall=walls[0],
+                            monotonic=house._wall)
+
+    async def scenario():
+        async with daemon_rig(tmp_path, speed=SPEED, daemon_clock=lagging,
+                              record={"enabled": True}) as rig:
+            await rig.sim_minutes(20)
+            walls[0].lag_s = 0.005 / SPEED  # 5 simulated ms
+            stepped = rig.clock.now()
+            await rig.sim_minutes(120)
+            records = rig.store.owner_records()
+            return stepped, [s for n in records for s in rig.store.samples(n.id)]
+
+    stepped, rows = run_virtual(scenario(), 86400)
+    after = [s for s in rows if s.ts > stepped]
+    assert len(after) >= 22, [s.ts.isoformat() for s in rows]  # 2 h of 5-min rows
+    assert _in_order(rows) and all(s.snapshots == 5 for s in after[:-1]), after

@@ -306,7 +306,7 @@ def _check_adaptive(camp: CampaignConfig, bad) -> None:
 #: rows start on the hour and at local noon, where an owner record starts.
 RECORD_INTERVAL_S = (60.0, 3600.0)
 #: ``[record] keep_days``: at least a day; at most ten years (a season is ~200 days; the store
-#: grows by about 8.5 MB per 100 days at the defaults, docs/explanation/benchmarks.md).
+#: grows by about 3.7 MB per 100 days at the defaults, docs/explanation/benchmarks.md).
 RECORD_KEEP_DAYS = (1, 3660)
 
 

@@ -33,12 +33,9 @@ from ..store import Store
 from ..store.house_inputs import HouseInputRow
 from .record_labels import Span, judge, night_part, night_setpoint, record_day, record_window
 from .record_rows import RowBuilder, row_start
-from .timing import NightTime, describe_step
+from .timing import REACHED_S, NightTime, describe_step
 
 _LOG = logging.getLogger("impctl.record")
-#: Closer than this [simulated s], an instant counts as come (ten times the timing module's
-#: reach tolerance).
-_SOON_S = 0.01
 
 
 class OwnerRecorder:
@@ -46,7 +43,8 @@ class OwnerRecorder:
 
     Parameters
     ----------
-    client : HeatPumpClient (read only: :meth:`~HeatPumpClient.snapshot`)
+    client : HeatPumpClient (read only: :meth:`~HeatPumpClient.snapshot`); None for a
+        recorder that only closes records (:meth:`close`)
     store : Store
     clock : VirtualClock (the daemon's)
     tz : the gateway's time zone (records run from local noon to noon)
@@ -57,7 +55,7 @@ class OwnerRecorder:
     inputs_row : optional, the house's own sensors at a snapshot (``[inputs]``)
     """
 
-    def __init__(self, client: HeatPumpClient, store: Store, clock: VirtualClock, *, tz: str,
+    def __init__(self, client: HeatPumpClient | None, store: Store, clock: VirtualClock, *, tz: str,
                  window_minutes: tuple[int, int], interval_s: float, sample_interval_s: float,
                  min_coverage: float,
                  inputs_row: Callable[[Snapshot], HouseInputRow] | None = None):
@@ -79,14 +77,16 @@ class OwnerRecorder:
 
     # -- time ------------------------------------------------------------------------------
     def next_poll(self) -> datetime:
-        """The next snapshot instant on the grid of the snapshot interval, after now."""
+        """The next snapshot instant on the grid of the snapshot interval that has not come
+        (:meth:`NightTime.reached`)."""
         now = self.clock.now_s()
         step = self.sample_interval_s
         nxt = (math.floor(now / step) + 1) * step
-        # An instant closer than a wait can be (the clock a rounding error short of it, POSIX
-        # seconds as floats carry ~0.2 µs) counts as come: the next one, else this instant
-        # would be "reached" without waiting, for ever.
-        while nxt - now <= _SOON_S:
+        # An instant within the reach tolerance (the clock a rounding error short of it) has
+        # come: the next one, else it would be "reached" without waiting, for ever. Not one
+        # further: the bounded wait (one interval) after a clock a few milliseconds short of
+        # an instant skipped as come lands as short of the next, for ever — no snapshot at all.
+        while nxt - now <= REACHED_S:
             nxt += step
         return datetime.fromtimestamp(nxt, UTC)
 

@@ -25,7 +25,10 @@ from ..clock import VirtualClock
 STEP_TOLERANCE_S = 120.0
 #: An instant closer than this counts as come [simulated s]: a wait computed from floats can
 #: fall short by a rounding error, and a timer that short would not advance the loop's time.
-_REACHED_S = 1e-3
+#: Whatever picks the next instant to wait for must skip exactly the instants this counts as
+#: come, no more: an instant it skipped although not yet come is missed at every turn when each
+#: wait, capped at one interval, lands the same few milliseconds short of the next one.
+REACHED_S = 1e-3
 
 
 def describe_step(step_s: float) -> str:
@@ -81,13 +84,13 @@ class NightTime:
 
     def reached(self, when: datetime) -> bool:
         """Whether ``when`` has come on either clock."""
-        return self.left_s(when) <= _REACHED_S
+        return self.left_s(when) <= REACHED_S
 
     async def sleep_until(self, when: datetime, *wake: asyncio.Event) -> None:
         """Sleep until ``when``, at most one sample interval, or until an event in ``wake``
         is set; the caller checks the clock (and the events) again after it."""
         left = min(self.left_s(when), self.interval_s)
-        delay = self.clock.wall_seconds(left) if left > _REACHED_S else 0.0
+        delay = self.clock.wall_seconds(left) if left > REACHED_S else 0.0
         if 0 < delay <= 1.0 and wake:  # short: an abort is seen at the next check anyway
             try:
                 await asyncio.wait_for(wake[0].wait(), timeout=delay)

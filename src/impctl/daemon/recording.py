@@ -17,7 +17,11 @@ import contextlib
 import logging
 from datetime import UTC, datetime
 
+from ..clock import VirtualClock
+from ..config import Config
 from ..controller.recorder import OwnerRecorder
+from ..heatpump import HeatPumpClient
+from ..store import Store
 from .running import RunningDaemon
 
 _LOG = logging.getLogger("impctl.record")
@@ -28,14 +32,29 @@ RETENTION_EVERY_S = 86400.0
 def make_recorder(daemon: RunningDaemon) -> OwnerRecorder:
     """The recorder the configuration asks for (``[record]``, the night's min_coverage and
     window, the house's own sensors when ``[inputs]`` is configured)."""
-    cfg = daemon.cfg
     inputs = daemon.house_inputs
+    return _recorder(daemon.cfg, daemon.client, daemon.store, daemon.clock,
+                     None if inputs is None else (lambda snap: inputs.row(None, snap)))
+
+
+def _recorder(cfg: Config, client: HeatPumpClient | None, store: Store, clock: VirtualClock,
+              inputs_row=None) -> OwnerRecorder:
     return OwnerRecorder(
-        daemon.client, daemon.store, daemon.clock, tz=cfg.timezone,
-        window_minutes=cfg.window_minutes, interval_s=cfg.record.interval_s,
+        client, store, clock, tz=cfg.timezone, window_minutes=cfg.window_minutes,
+        interval_s=cfg.record.interval_s,
         sample_interval_s=cfg.record.snapshot_interval_s(cfg.night),
-        min_coverage=cfg.night.min_coverage,
-        inputs_row=None if inputs is None else (lambda snap: inputs.row(None, snap)))
+        min_coverage=cfg.night.min_coverage, inputs_row=inputs_row)
+
+
+def close_for_good(cfg: Config, store: Store, clock: VirtualClock) -> int:
+    """Close every record still recording, its day over or not, labelled from the rows it
+    has (a day cut short says "data missing"): the recording has ended for good — the
+    demo's end. A daemon that stops leaves the current day open for its next start."""
+    recorder = _recorder(cfg, None, store, clock)
+    records = store.owner_records(states=["recording"])
+    for record in records:
+        recorder.close(record.id)
+    return len(records)
 
 
 def busy(daemon: RunningDaemon) -> str | None:

@@ -43,6 +43,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
     """
     from impctl_sim import KronotermSimulator, SimConfig
 
+    from ..daemon.recording import close_for_good
     from ..daemon.service import Daemon
 
     campaign_start = datetime.fromisoformat(opts.start).replace(tzinfo=ZoneInfo(TZ))
@@ -109,6 +110,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
             raise DemoError(f"the daemon stopped: {task.exception()!r} (see demo.log)")
         with Store(cfg.db_path) as store:
             left = store.journal_pending()
+            close_for_good(cfg, store, clock)  # the demo's last owner day ends with it
         if left:
             raise DemoError("the heat pump was not restored: " +
                             ", ".join(e.register for e in left))

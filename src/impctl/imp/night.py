@@ -25,7 +25,8 @@ class NightSamples:
         means over [timestamp, timestamp + the row interval)). The fit leaves owner nights
         out (:func:`split_owner`): they are the season model's.
     start : pandas.Timestamp
-        Time zone-aware start of the window (time 0 of ``time_s``).
+        Time zone-aware start of the window (time 0 of ``time_s``); of a pre-heat, its first
+        sample.
     time_s : ndarray
         Sample times since ``start`` [s], increasing.
     t_air_c, t_out_c : ndarray
@@ -70,6 +71,11 @@ class NightSamples:
     label : str
         Why an owner night is not the owner's ordinary night ("owner changed the setpoint:
         …; data missing: …"); "" when it is, and on IMP nights.
+    phase : str
+        ``"preheat"``: these are an IMP night's pre-heat (the NIGHTS column ``phase``), the
+        heat pump raised to T_max before a constrained night or held at the setpoint before a
+        normal one; ``night_id`` and ``kind`` are the night's, ``start`` is the first row. Read
+        by the season model, left out by the IMP fit (:func:`split_owner`). "" otherwise.
     """
 
     night_id: str
@@ -94,6 +100,7 @@ class NightSamples:
     dhw: np.ndarray | None = None
     defrost_share: np.ndarray | None = None
     label: str = ""
+    phase: str = ""
 
     @property
     def duration_h(self) -> float:
@@ -107,7 +114,9 @@ OWNER_NOTE = "owner nights: read by the season model, not by the IMP fit"
 
 def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | None]:
     """(the IMP nights, a note when owner nights were left out): what the fit, the
-    classifiers and ``impctl campaign next`` take; the owner nights are the season model's."""
-    imp = [n for n in nights if n.kind != "owner"]
-    left = len(nights) - len(imp)
+    classifiers and ``impctl campaign next`` take; the owner nights and the IMP nights'
+    pre-heats (``phase``; part of their nights, not nights of their own) are the season
+    model's."""
+    imp = [n for n in nights if n.kind != "owner" and not n.phase]
+    left = sum(n.kind == "owner" for n in nights)
     return imp, (None if not left else f"{OWNER_NOTE} ({left})")

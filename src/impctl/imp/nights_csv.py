@@ -23,6 +23,8 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``t_flow_c``, ``t_return_c``, ``t_flow_target_c``, ``dhw``, ``label`` (optional) — supply,
   return and target flow water [°C], the share of time charging hot water, an owner night's
   label (:mod:`.night_series`: a bad value there refuses the file).
+* ``phase`` (optional, with ``night``) — ``preheat`` on an IMP night's first rows, its pre-heat,
+  read as a piece of its own that only the season model takes (:mod:`.night_phase`).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
@@ -46,6 +48,7 @@ from .features import Q_ON_W
 from .held import not_held
 from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
+from .night_phase import PHASE, PREHEAT, check_phases, split_preheat
 from .night_series import LABEL, SERIES_COLUMNS, check_labels, check_series, series_fields
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
 from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
@@ -188,7 +191,7 @@ def read_nights(
 _NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating", *SERIES_COLUMNS)
 #: numeric columns whose empty cells are missing values
 _MAY_BE_EMPTY = ("setpoint", *SERIES_COLUMNS)
-_TEXT = ("night", "kind", LABEL)
+_TEXT = ("night", "kind", LABEL, PHASE)
 # read as text, then each cell a number or missing (:mod:`.night_extras`), never a refusal
 _OPTIONAL = (*_TEXT, *EXTRA_COLUMNS)
 
@@ -224,6 +227,7 @@ def nights_from_table(
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
     stamps = table["timestamp"]
     stamp_ns = pd.DatetimeIndex(stamps).as_unit("ns").asi8
+    starts: dict = {}  # without ``night``: each window's start (else a night's first row)
     if explicit:
         ids = table["night"].to_numpy(dtype=object)
         change = np.ones(len(ids), bool)
@@ -235,7 +239,6 @@ def nights_from_table(
             i = int(first[np.argmax(dup)])
             raise InputError(f"night {ids[i]!r} is split: its rows must be contiguous",
                              path, _row(i))
-        starts = {n: stamps.iloc[int(i)] for n, i in zip(ids[first], first, strict=True)}
         bounds = np.append(first, len(ids))
         groups = [(ids[a], np.arange(a, b)) for a, b in zip(bounds[:-1], bounds[1:],
                                                               strict=True)]
@@ -248,6 +251,8 @@ def nights_from_table(
     kinds_all = table["kind"].to_numpy() if "kind" in table else None
     check_labels(table, groups, lambda _, idx: None if kinds_all is None else kinds_all[idx[0]],
                  path, _row)
+    check_phases(table, groups if explicit else None,
+                 lambda idx: None if kinds_all is None else kinds_all[idx[0]], path, _row)
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
     extras = extra_columns(table)
@@ -259,44 +264,31 @@ def nights_from_table(
     for night_id, idx in groups:
         if night_id == "":
             continue
-        if len(idx) < 2:
+        pre, idx = split_preheat(table, idx)
+        if len(idx) == 1 or len(pre) + len(idx) < 2:
             if explicit:
-                raise InputError(f"night {night_id!r} has only one sample", path, _row(idx[0]))
+                raise InputError(f"night {night_id!r} has only one sample", path,
+                                 _row(idx[0] if len(idx) else pre[0]))
             continue
-        start = starts[night_id]
-        time_s = (stamp_ns[idx] - pd.Timestamp(start).as_unit("ns").value) / 1e9
         if kinds_all is not None:
-            kinds = kinds_all[idx]
+            whole = np.r_[pre, idx]
+            kinds = kinds_all[whole]
             changed = kinds != kinds[0]
             if changed.any():
                 raise InputError(f"night {night_id!r} changes kind from {kinds[0]!r}",
-                                 path, _row(idx[int(np.argmax(changed))]))
-            kind = str(kinds[0])
-        else:
-            kind = _infer_kind(time_s, off[idx])
-            more_held = {"not_held": not_held(kind, time_s, values["t_air"][idx], off[idx],
-                                              "heating" in table, values["q_hc"][idx])}
-        setpoint = np.nan
-        if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
-            setpoint = float(np.nanmedian(setpoint_all[idx]))
-        t_air, more = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
-        more |= defrost_fields(extras, idx, time_s, values["q_hc"][idx], Q_ON_W)
-        if extras.get("defrost") is not None:
-            more["defrost_share"] = np.asarray(extras["defrost"][idx], float)
-        if kinds_all is None:
-            more |= more_held
-        nights.append(NightSamples(
-            night_id=str(night_id),
-            kind=kind,  # type: ignore[arg-type]
-            start=start,
-            time_s=time_s,
-            t_air_c=t_air,
-            t_out_c=values["t_out"][idx],
-            q_hc_w=values["q_hc"][idx],
-            setpoint_c=setpoint,
-            **more,
-            **series_fields(table, idx),
-        ))
+                                 path, _row(whole[int(np.argmax(changed))]))
+        # The pre-heat: the night's id and kind, a piece of its own (the IMP fit's night
+        # starts at the window); its kind, without a kind column, that of the window's rows.
+        night = None
+        if len(idx):
+            start = starts[night_id] if not explicit else stamps.iloc[int(idx[0])]
+            night = _samples(night_id, idx, start, table, stamp_ns, off, kinds_all,
+                             setpoint_all, values, extras)
+            nights.append(night)
+        if len(pre):
+            nights.append(_samples(night_id, pre, stamps.iloc[int(pre[0])], table, stamp_ns,
+                                   off, kinds_all, setpoint_all, values, extras,
+                                   kind=None if night is None else night.kind))
     if not nights:
         what = "no night with two or more samples" if explicit else (
             f"no two samples inside one {window[0]:%H:%M}–{window[1]:%H:%M} window")
@@ -304,17 +296,57 @@ def nights_from_table(
     return sorted(nights, key=lambda n: n.start)
 
 
+def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame,
+             stamp_ns: np.ndarray, off: np.ndarray, kinds_all, setpoint_all, values: dict,
+             extras: dict, kind: str | None = None) -> NightSamples:
+    """The night (or its pre-heat, ``phase`` set) of the rows ``idx``, time 0 at ``start``."""
+    pre = PHASE in table and table[PHASE].iloc[int(idx[0])] == PREHEAT
+    time_s = (stamp_ns[idx] - pd.Timestamp(start).as_unit("ns").value) / 1e9
+    more: dict = {}
+    if kinds_all is not None:
+        kind = str(kinds_all[idx[0]])
+    elif kind is None:
+        kind = _infer_kind(time_s, off[idx])
+        if not pre:
+            more["not_held"] = not_held(kind, time_s, values["t_air"][idx], off[idx],
+                                        "heating" in table, values["q_hc"][idx])
+    setpoint = np.nan
+    if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
+        setpoint = float(np.nanmedian(setpoint_all[idx]))
+    t_air, extra = night_extras(extras, idx, values["t_air"][idx], values["t_out"][idx])
+    more |= extra
+    more |= defrost_fields(extras, idx, time_s, values["q_hc"][idx], Q_ON_W)
+    if extras.get("defrost") is not None:
+        more["defrost_share"] = np.asarray(extras["defrost"][idx], float)
+    return NightSamples(
+        night_id=str(night_id),
+        kind=kind,  # type: ignore[arg-type]
+        start=start,
+        time_s=time_s,
+        t_air_c=t_air,
+        t_out_c=values["t_out"][idx],
+        q_hc_w=values["q_hc"][idx],
+        setpoint_c=setpoint,
+        phase=PREHEAT if pre else "",
+        **more,
+        **series_fields(table, idx),
+    )
+
+
 def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
     """Write nights as NIGHTS.csv (all optional columns; timestamps with their UTC offset).
 
-    ``heating`` is 1 on normal nights and, on constrained nights, 1 only where Q_HC shows the
-    heating back on. :func:`read_nights` reads the file back into the same nights.
+    ``heating`` is 1 on normal nights and pre-heats and, on constrained nights, 1 only where
+    Q_HC shows the heating back on. A pre-heat (``phase``) goes right before its night, as
+    :func:`read_nights` gives them. :func:`read_nights` reads the file back into the same
+    nights.
     """
     frames = []
     for night in nights:
         stamps = night.start + pd.to_timedelta(np.asarray(night.time_s, float), unit="s")
         q = np.asarray(night.q_hc_w, float)
-        heating = np.ones(len(q), int) if night.kind == "normal" else (q > Q_ON_W).astype(int)
+        held = night.kind == "normal" or night.phase == PREHEAT  # the heating enabled
+        heating = np.ones(len(q), int) if held else (q > Q_ON_W).astype(int)
         frame = pd.DataFrame({
             "timestamp": stamps.map(lambda t: t.isoformat()),
             "t_air": night.t_air_c, "t_out": night.t_out_c, "q_hc": q,
@@ -327,6 +359,8 @@ def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
                 frame[col] = values
         if night.kind == "owner":
             frame["label"] = night.label
+        if any(n.phase for n in nights):
+            frame[PHASE] = night.phase
         frames.append(frame)
     path = Path(path)
     pd.concat(frames, ignore_index=True).to_csv(path, index=False, float_format="%.9g")

@@ -96,7 +96,7 @@ def implied_hlc(nights: Sequence[NightSamples]) -> float | None:
     normal night has a difference of at least :data:`MIN_DELTA_T_K`."""
     ratios = []
     for n in nights:
-        if n.kind != "normal" or len(n.time_s) < 2:
+        if n.kind != "normal" or n.phase or len(n.time_s) < 2:  # not a pre-heat
             continue
         dt_k = float(np.mean(np.asarray(n.t_air_c) - np.asarray(n.t_out_c)))
         if dt_k >= MIN_DELTA_T_K:

@@ -2,8 +2,10 @@
 
 Columns: ``timestamp`` (ISO 8601, UTC offset), ``t_air`` and ``t_out`` [°C], ``q_hc`` [W thermal],
 ``setpoint`` [°C], ``heating`` (1 normal night, 0 constrained), ``night`` (id), ``kind``.
-Only samples inside each night's window are written (not the preheat before it), and those
-with a missing T_air, T_out or Q_HC are left out.
+An IMP night's samples are those of its window and, before them, of its pre-heat (the heat
+pump raised to T_max before a constrained night's switch-off, or held at the setpoint before a
+normal night), marked ``phase`` = ``preheat`` with the setpoint and ``heating`` the heat pump
+read; samples with a missing T_air, T_out or Q_HC are left out.
 
 The owner records (``kind`` owner: the house recorded read-only between IMP nights, one per
 local day from noon to noon) are written whole, every row the mean over [timestamp, timestamp
@@ -34,7 +36,7 @@ from .db import Store
 
 COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind",
            "p_house_w", "t_rooms_c", "t_out_ref_c", "occupants", "defrost", "p_el_w",
-           "t_flow_c", "t_return_c", "t_flow_target_c", "dhw", "label")
+           "t_flow_c", "t_return_c", "t_flow_target_c", "dhw", "label", "phase")
 #: The ``house_inputs`` column behind each export column of the house's own sensors.
 HOUSE_COLUMNS = ("p_house_w", "t_rooms_c", "t_out_ref_c", "occupants")
 #: Export columns that are numbers (empty where missing).
@@ -69,18 +71,22 @@ def _night_rows(store: Store, night) -> list[dict]:
     label = "; ".join(night.reasons) if owner else ""
     rows = []
     for s in store.samples(night.id):
-        # Only the window: the preheat before it (heating on, also on constrained nights)
-        # is not part of the night; `impctl fit` takes a night's first row as its start
-        # (the switch-off of a constrained night). An owner record is its window.
-        if not night.window_start <= s.ts <= night.window_end:
+        # An IMP night samples from the moment it raises the setpoint: its pre-heat comes
+        # first, marked, for the season model (the house is no gap there); `impctl fit`
+        # reads the window alone, whose first row is the switch-off of a constrained night.
+        # Nothing after the window. An owner record is its window.
+        preheat = not owner and s.ts < night.window_start
+        if s.ts > night.window_end or (owner and s.ts < night.window_start):
             continue
         if s.t_air_c is None or s.t_out_c is None or s.q_hc_w is None:
             continue
-        if owner:
+        if owner or preheat:  # as the heat pump ran it, read at the row
             heating, setpoint = int(not (s.loop_mode == 0 or s.system_on == 0)), s.setpoint_c
-            dhw = s.dhw_share
         else:
             heating, setpoint = int(night.kind == "normal"), night.setpoint_c
+        if owner:
+            dhw = s.dhw_share
+        else:
             dhw = None if s.dhw_active is None else int(s.dhw_active)
         rows.append({
             "_ts": s.ts, "timestamp": s.ts.isoformat(), "t_air": s.t_air_c, "t_out": s.t_out_c,
@@ -90,6 +96,7 @@ def _night_rows(store: Store, night) -> list[dict]:
             "defrost": None if s.defrost is None else int(s.defrost),
             "p_el_w": s.p_el_w, "t_flow_c": s.t_supply_c, "t_return_c": s.t_return_c,
             "t_flow_target_c": s.t_flow_target_c, "dhw": dhw, "label": label,
+            "phase": "preheat" if preheat else "",
         })
     return rows
 
