@@ -126,3 +126,16 @@ def test_a_phase_that_cannot_be_right_is_refused_in_one_line(tmp_path, imp_night
         line), line
     line = _refused(tmp_path, good.drop(columns=["night"]), "no-night")
     assert "pre-heat rows need the 'night' column" in line and f"row {first + 2}" in line, line
+
+
+def test_the_heating_curve_does_not_read_a_preheat(tmp_path, imp_nights):
+    from impctl.curve.rows import read_rows
+
+    normal = next(i for i, n in enumerate(imp_nights) if n.kind == "normal")
+    path = tmp_path / "pre.csv"
+    frame = _with_preheat(imp_nights, normal)
+    frame.to_csv(path, index=False)
+    rows = read_rows(path, TZ)
+    # impctl's raised setpoint is neither the curve the heat pump runs nor the owner's need
+    assert len(rows) == len(frame) - PREHEAT_ROWS
+    assert not (rows["setpoint"] == 23.5).any() and not (rows["t_flow_target_c"] == 47.0).any()

@@ -42,7 +42,7 @@ CURVE_COLUMNS: dict[str, tuple[float, float]] = {
     "heating": (0.0, 1.0),
 }
 #: Text columns kept as they are.
-TEXT_COLUMNS = ("kind", "night", "label")
+TEXT_COLUMNS = ("kind", "night", "label", "phase")
 #: Night kinds whose rows have the heating on at the owner's or a held setpoint.
 HEATED_KINDS = frozenset({"normal", "owner", "held"})
 
@@ -90,7 +90,7 @@ def rows_from_table(table: pd.DataFrame, source: str | Path) -> pd.DataFrame:
     stamps = table["timestamp"]
     back = (stamps.diff().dt.total_seconds() <= 0).to_numpy()
     if "night" in table:  # labelled nights may overlap (simulated ones): each must increase
-        back &= (table["night"] == table["night"].shift()).to_numpy()
+        back = back & (table["night"] == table["night"].shift()).to_numpy()
     if back.any():
         raise InputError("timestamps must increase: sort the rows by timestamp", source,
                          f"row {int(np.argmax(back)) + 2}")
@@ -106,4 +106,6 @@ def rows_from_table(table: pd.DataFrame, source: str | Path) -> pd.DataFrame:
         out[col] = values
     for col in TEXT_COLUMNS:
         out[col] = table[col].astype(str).str.strip() if col in table else ""
-    return out
+    # An IMP night's pre-heat runs the heat pump at impctl's raised setpoint, not the owner's:
+    # neither the curve it runs nor the house's need at the owner's setpoint.
+    return out[(out["phase"] != "preheat").to_numpy()].reset_index(drop=True)
