@@ -162,9 +162,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--owner-nights", default="14,28")
     ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
     ap.add_argument("--seed", type=int, default=4242)
-    ap.add_argument("--variant", choices=("realistic", "signed", "p_house"), default="realistic",
+    ap.add_argument("--variant", choices=("realistic", "signed", "p_house", "ideal"),
+                    default="realistic",
                     help="signed: the heat meter reads a defrost's draw as negative heat; "
-                         "p_house: the household electricity is measured ([inputs])")
+                         "p_house: the household electricity is measured ([inputs]); "
+                         "ideal: the ideal 5R1C (no emitter, furniture, sensor faults)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     ap.add_argument("--calibrate", action="store_true",
@@ -176,6 +178,10 @@ def main(argv: list[str] | None = None) -> None:
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
     if args.variant == "signed":
         params = params.with_section("sensors", meter_positive_only=0)
+    elif args.variant == "ideal":     # ISO 13790's 5R1C itself, the gains as on every plant
+        from impctl.plant.params import PlantParams
+
+        params = PlantParams.ideal().with_section("gains", **vars(params.gains))
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
     _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed)
