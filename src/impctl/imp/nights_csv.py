@@ -223,6 +223,10 @@ def nights_from_table(
 ) -> list[NightSamples]:
     """Checked table (``timestamp`` tz-aware, numbers float) → nights; see :func:`read_nights`."""
     _check_values(table, path)
+    # The timestamp texts kept for messages would be deep-copied by every column taken below
+    # (a season's file: seconds per read); the messages from here on name rows by number.
+    table = table.copy(deep=False)
+    table.attrs = {}
     explicit = "night" in table
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
     stamps = table["timestamp"]
