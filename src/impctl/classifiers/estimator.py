@@ -104,6 +104,9 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     feature_names_in_ : ndarray of str (when fitted on a DataFrame)
     """
 
+    #: models pickled before this setting existed unpickle without it: theirs was None
+    max_samples: int | float | None = None
+
     def __init__(
         self,
         ranges: tuple[tuple[float, float], ...] = DEFAULT_RANGES["floor_area"],
