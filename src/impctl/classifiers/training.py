@@ -53,7 +53,7 @@ class TrainConfig:
     small_campaign: tuple[int, int] = (2, 6)
     #: small campaigns drawn per test household (one draw moves c_f's accuracy by points)
     test_campaigns: int = 5
-    #: 100 trees, each on half the rows: a fifth of 300 full trees' CPU, the same classes,
+    #: 100 trees, each on half the rows: about a quarter of 300 full trees' CPU, the same classes,
     #: probabilities and search ranges over three seeds (bench/classify_paired.py; decision
     #: record 0030)
     n_estimators: int = 100
