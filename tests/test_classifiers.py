@@ -69,6 +69,14 @@ def test_range_classifier_is_a_scikit_learn_estimator():
     proba = RangeClassifier(n_estimators=10).fit(x[only_big], values[only_big]).predict_proba(x)
     assert proba.shape == (400, 3) and np.all(proba[:, 0] == 0)
     np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+    # A model pickled before ``max_samples`` existed (its state has no such key) still
+    # describes itself, as every bootstrap-sized forest did.
+    state = dict(model.__getstate__())
+    del state["max_samples"]
+    older = RangeClassifier.__new__(RangeClassifier)
+    older.__setstate__(state)
+    assert older.get_params()["max_samples"] is None and "RangeClassifier(" in repr(older)
+    np.testing.assert_array_equal(older.predict(x[:20]), model.predict(x[:20]))
 
 
 def test_household_split_keeps_households_whole():

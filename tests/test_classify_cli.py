@@ -214,3 +214,29 @@ def test_classify_leaves_out_nights_at_setpoints_never_trained_on(model_dir, nig
                                    str(model_dir)), "no night ran at a setpoint")
     assert f"normal nights at {'/'.join(f'{s:g}' for s in DEFAULT_SETPOINTS_C)} °C" in line
     assert f"constrained nights at {DEFAULT_CONSTRAINED_SETPOINT_C:g} °C" in line
+
+
+#: Runs the CLI, then names on its last stderr line which heavy libraries it had loaded.
+_LOADED = ("import sys\ntry:\n    from impctl.cli import main\n    main()\nfinally:\n"
+           "    print('loaded:', *sorted(m for m in ('sklearn', 'torch') if m in sys.modules),"
+           " file=sys.stderr)")
+
+
+def refused_and_loaded(*args: str) -> tuple[str, str]:
+    """(the one error line, the last line naming the heavy libraries loaded) of a refused
+    command."""
+    done = subprocess.run([sys.executable, "-c", _LOADED, *args], capture_output=True,
+                          text=True, timeout=300)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and done.stdout == "" and len(lines) == 2, done.stderr
+    return lines[0], lines[1]
+
+
+def test_bad_input_is_refused_before_scikit_learn_is_loaded(tmp_path):
+    """A mistyped option is told in a moment, not after scikit-learn's and torch's imports."""
+    error, loaded = refused_and_loaded("train", "--households", "5", "--out",
+                                       str(tmp_path / "out"))
+    assert "--households" in error and loaded == "loaded:"
+    error, loaded = refused_and_loaded("fit", "--nights", str(tmp_path / "n.csv"),
+                                       "--night-gain-sd-w", "40")
+    assert "--night-gain-w" in error and loaded == "loaded:"

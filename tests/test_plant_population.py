@@ -130,7 +130,8 @@ def test_schedule_without_gains_keeps_every_other_draw():
     from impctl.population.imp_run.synth import imp_schedule, run_schedule_plant
 
     houses, params = sample_households(2, seed=4), sample_params(2, 4)
-    sched = imp_schedule(2, seed=4)
+    # one night of each kind after a day's spin-up: days and nights, the gains of both
+    sched = imp_schedule(2, seed=4, n_constrained=1, n_normal=1, spinup_days=1)
     keep = ("t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "heat_pump_w", "gains_w")
     on, _ = run_schedule_plant(houses, sched, params, seed=4, outputs=keep)
     off, _ = run_schedule_plant(houses, sched, params, seed=4, outputs=keep, gains=False)

@@ -157,9 +157,11 @@ def test_too_little_weather_is_refused():
 
 def test_dataset_is_reproducible_and_round_trips(tmp_path):
     cfg = ImpSimConfig(days=2)
-    a = generate_dataset(130, seed=9, imp=cfg)               # two vectorised blocks
-    b = generate_dataset(130, seed=9, imp=cfg)
+    a = generate_dataset(130, seed=9, imp=cfg, workers=2)    # two vectorised blocks
+    # one worker process per block, or the blocks one after the other: the same dataset
+    b = generate_dataset(130, seed=9, imp=cfg, workers=1)
     pd.testing.assert_frame_equal(a.nights, b.nights)
+    pd.testing.assert_frame_equal(a.households, b.households)
     assert len(a.nights) == 130 * 2 * len(cfg.plans()) and a.nights["household"].nunique() == 130
     m = a.manifest
     assert m["seed"] == 9 and m["n_households"] == 130 and m["imp"]["days"] == 2

@@ -60,6 +60,9 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         forests the size they had when the forest saw 80 % of the households (5): on a
         development population 30 % fewer nodes, Brier equal or better on every class.
     max_features : {"sqrt", "log2"}, int, float or None, default "sqrt"
+    max_samples : int, float or None, default None
+        Rows drawn (with replacement) for each tree: a count, a fraction of the training rows,
+        or None for as many as there are (scikit-learn's bootstrap).
     random_state : int or None
     n_jobs : int or None
         Trees built in parallel (``-1``: all cores).
@@ -101,12 +104,16 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     feature_names_in_ : ndarray of str (when fitted on a DataFrame)
     """
 
+    #: models pickled before this setting existed unpickle without it: theirs was None
+    max_samples: int | float | None = None
+
     def __init__(
         self,
         ranges: tuple[tuple[float, float], ...] = DEFAULT_RANGES["floor_area"],
         n_estimators: int = 300,
         min_samples_leaf: int = 8,
         max_features: str | int | float | None = "sqrt",
+        max_samples: int | float | None = None,
         random_state: int | None = None,
         n_jobs: int | None = None,
         calibration: str | None = "isotonic",
@@ -117,6 +124,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         self.n_estimators = n_estimators
         self.min_samples_leaf = min_samples_leaf
         self.max_features = max_features
+        self.max_samples = max_samples
         self.random_state = random_state
         self.n_jobs = n_jobs
         self.calibration = calibration
@@ -138,6 +146,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
             n_estimators=self.n_estimators,
             min_samples_leaf=self.min_samples_leaf,
             max_features=self.max_features,
+            max_samples=self.max_samples,
             random_state=self.random_state,
             n_jobs=self.n_jobs,
         )

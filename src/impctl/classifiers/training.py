@@ -53,8 +53,13 @@ class TrainConfig:
     small_campaign: tuple[int, int] = (2, 6)
     #: small campaigns drawn per test household (one draw moves c_f's accuracy by points)
     test_campaigns: int = 5
-    n_estimators: int = 300
+    #: 100 trees, each on half the rows: about a quarter of 300 full trees' CPU, the same classes,
+    #: probabilities and search ranges over three seeds (bench/classify_paired.py; decision
+    #: record 0030)
+    n_estimators: int = 100
     min_samples_leaf: int = 8
+    #: rows drawn for each tree (a fraction of the training rows; None: all, bootstrapped)
+    max_samples: float | None = 0.5
     n_jobs: int = -1
     #: calibration map of the class probabilities (:class:`RangeClassifier`); isotonic was
     #: chosen on a development population (seed 1): mean Brier 0.334 against sigmoid's 0.338,
@@ -173,7 +178,8 @@ def bootstrap_ci(per_group: np.ndarray, n_boot: int = 2000, seed: int = 0
 
 def _forest(cfg: TrainConfig, ranges, seed: int) -> RangeClassifier:
     return RangeClassifier(ranges, n_estimators=cfg.n_estimators,
-                           min_samples_leaf=cfg.min_samples_leaf, random_state=seed,
+                           min_samples_leaf=cfg.min_samples_leaf,
+                           max_samples=cfg.max_samples, random_state=seed,
                            n_jobs=cfg.n_jobs, calibration=cfg.calibration)
 
 

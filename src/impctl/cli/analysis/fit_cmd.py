@@ -95,6 +95,12 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     what determines each (the data, or only the class range / physical bounds), and the heat
     demand and T_air validation per night.
     """
+    if ach_infl + ach_vent <= 0:
+        raise InputError("--ach-infl and --ach-vent must have a positive sum")
+    if night_gain_sd_w is not None and night_gain_w is None:
+        raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
+                         "too")
+    # torch (the fit) only now: a bad option is refused in a moment
     from ...fit.estimator import NightFit
     from ...fit.household import (
         FitOptions,
@@ -107,12 +113,6 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     from ...fit.result.plot import plot_fit
     from ...fit.result.report import fit_to_dict
     from ...fit.result.table import format_table
-
-    if ach_infl + ach_vent <= 0:
-        raise InputError("--ach-infl and --ach-vent must have a positive sum")
-    if night_gain_sd_w is not None and night_gain_w is None:
-        raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
-                         "too")
     from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")

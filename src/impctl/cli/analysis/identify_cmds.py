@@ -42,10 +42,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
     Table III), then prints the report.
     """
-    from ...classifiers.report import format_report
-    from ...classifiers.saved import default_model_dir, save_models
-    from ...classifiers.training import TrainConfig, train_classifiers
-    from ...population.dataset import generate_dataset
+    from ...classifiers.saved import default_model_dir
     from ...population.imp_run.setup import ImpSimConfig, usable_nights
     from ...weather import read_weather
 
@@ -64,6 +61,11 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     out = out if out is not None else default_model_dir()
     if out.exists() and not out.is_dir():
         raise InputError("--out must be a directory", out)
+    # scikit-learn and the population's modules only now: a bad input is refused in a moment
+    from ...classifiers.report import format_report
+    from ...classifiers.saved import save_models
+    from ...classifiers.training import TrainConfig, train_classifiers
+    from ...population.dataset import generate_dataset
 
     with click.progressbar(length=households, label="simulating households",
                            file=sys.stderr) as bar:
