@@ -36,13 +36,8 @@ from impctl.population.dataset import generate_dataset
 from impctl.population.imp_run.setup import ImpSimConfig
 from impctl.population.ranges import bin_values
 
-
-def _ece(proba: np.ndarray, y: np.ndarray, n_bins: int = 10) -> float:
-    top = proba.max(axis=1)
-    hit = (proba.argmax(axis=1) == y).astype(float)
-    idx = np.minimum((top * n_bins).astype(int), n_bins - 1)
-    return float(sum(abs(hit[idx == b].mean() - top[idx == b].mean()) * np.mean(idx == b)
-                     for b in range(n_bins) if np.any(idx == b)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from benchlib.calibration import ece  # noqa: E402
 
 
 def main() -> None:
@@ -105,7 +100,7 @@ def main() -> None:
         major = (y == counts.argmax()).astype(float)
         briers = " / ".join(f"{np.mean(np.sum((p - onehot) ** 2, axis=1)):.3f}"
                             for p in (p_out, p_cal, p_votes, p_prior))
-        eces = " / ".join(f"{_ece(p, y):.3f}" for p in (p_out, p_cal, p_votes))
+        eces = " / ".join(f"{ece(p, y):.3f}" for p in (p_out, p_cal, p_votes))
         det = "yes" if getattr(model, "determined_", True) else "no"
         if hasattr(model, "cv_margin_low_"):
             det += (f" (out-of-fold {model.cv_accuracy_:.1%} vs {model.cv_majority_:.1%}, "

@@ -47,18 +47,15 @@ from impctl.population.dataset import generate_dataset
 from impctl.population.imp_run.setup import ImpSimConfig
 from impctl.population.ranges import bin_values
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from benchlib.calibration import ece  # noqa: E402
+
 
 def _cpu_s() -> float:
     use = resource.getrusage(resource.RUSAGE_SELF)
     return use.ru_utime + use.ru_stime
 
 
-def _ece(proba: np.ndarray, y: np.ndarray, n_bins: int = 10) -> float:
-    top = proba.max(axis=1)
-    hit = (proba.argmax(axis=1) == y).astype(float)
-    idx = np.minimum((top * n_bins).astype(int), n_bins - 1)
-    return float(sum(abs(hit[idx == b].mean() - top[idx == b].mean()) * np.mean(idx == b)
-                     for b in range(n_bins) if np.any(idx == b)))
 
 
 def _scores(model, x: pd.DataFrame, values: np.ndarray) -> dict[str, np.ndarray]:
@@ -136,7 +133,7 @@ def _table(trained: dict, other: str, x: pd.DataFrame, truth: pd.DataFrame, test
         print(f"| {name} | {det} | {a['hit'].mean() * 100:.1f} / {b['hit'].mean() * 100:.1f}"
               f" | {ci(b['hit'] - a['hit'], 100, '+.1f')} | {a['brier'].mean():.3f} / "
               f"{b['brier'].mean():.3f} | {ci(b['brier'] - a['brier'], 1, '+.3f')} | "
-              f"{_ece(a['proba'], a['y']):.3f} / {_ece(b['proba'], b['y']):.3f} | "
+              f"{ece(a['proba'], a['y']):.3f} / {ece(b['proba'], b['y']):.3f} | "
               f"{a['cover'].mean() * 100:.1f} / {b['cover'].mean() * 100:.1f} | "
               f"{ci(b['cover'] - a['cover'], 100, '+.1f')} | "
               f"{np.median(a['width']):.2f} / {np.median(b['width']):.2f} |", flush=True)

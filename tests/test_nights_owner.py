@@ -30,7 +30,7 @@ def run_cli(*args: str, model_dir: Path) -> subprocess.CompletedProcess:
 
     env = {**os.environ, "IMPCTL_MODEL_DIR": str(model_dir)}
     return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=300, env=env)
+                          capture_output=True, text=True, timeout=600, env=env)
 
 
 @pytest.fixture(scope="module")

@@ -8,13 +8,11 @@ through the product's own reader; ``impctl fit`` run as a real subprocess.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
+from test_nights_owner import run_cli
 
 from impctl.imp.night import NightSamples
 from impctl.imp.nights_csv import read_nights, write_nights
@@ -101,10 +99,8 @@ def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
     assert sum(n.kind == "owner" for n in back) == sum(n.kind == "owner" for n in nights)
     expected, _ = fit_nights(back)
     out = tmp_path / "fit.json"
-    env = {**os.environ, "IMPCTL_MODEL_DIR": str(tmp_path / "no-models")}
-    res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", "fit",
-                          "--nights", str(csv), "--json", str(out)], capture_output=True,
-                         text=True, timeout=600, env=env)
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
+                  model_dir=tmp_path / "no-models")
     assert res.returncode == 0, res.stderr
     assert "season model:" in res.stdout and "energy signature" in res.stdout
     season_json = json.loads(out.read_text())["season"]

@@ -10,13 +10,11 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import json
-import os
-import subprocess
-import sys
 from datetime import datetime
 
 import numpy as np
 import pytest
+from test_nights_owner import run_cli
 
 from impctl.imp.nights_csv import write_nights
 from impctl.mqtt.payloads import fit_payloads
@@ -86,10 +84,8 @@ def test_no_alarm_through_a_cold_spell_and_a_week_away(season):
 def test_impctl_fit_prints_the_change_and_the_json_carries_it(tmp_path, season):
     csv = write_nights(household_nights(season, 0), tmp_path / "nights.csv")
     out = tmp_path / "fit.json"
-    env = {**os.environ, "IMPCTL_MODEL_DIR": str(tmp_path / "no-models")}
-    res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", "fit",
-                          "--nights", str(csv), "--json", str(out)], capture_output=True,
-                         text=True, timeout=600, env=env)
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
+                  model_dir=tmp_path / "no-models")
     assert res.returncode == 0, res.stderr
     c = json.loads(out.read_text())["season"]["change"]
     assert c["changed"] is True and abs(c["delta_hlc_w_k"] - WINDOW_W_K) <= 15.0
