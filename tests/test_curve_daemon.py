@@ -118,8 +118,9 @@ def test_the_watch_raises_a_curve_that_leaves_the_room_short(tmp_path):
                        "the comfort watch to raise the curve", proc=d.proc)
             raised = _points(sim.port)
             assert raised[0] >= 280 and raised[1] >= 230
-            events = store_query(db, lambda s: s.events(50))
-            assert any("raised by 2 K" in message for _, _, message in events)
+            wait_until(lambda: any("raised by 2 K" in message for _, _, message
+                                   in store_query(db, lambda s: s.events(50))),
+                       10, "the raise stored as an event", proc=d.proc)
         finally:
             stop_process(d.proc)
 

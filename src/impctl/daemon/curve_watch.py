@@ -144,8 +144,7 @@ class CurveWatch:
     # -- setting -------------------------------------------------------------------------------
     def _refuse(self, why: str) -> None:
         if why != self._refused:
-            _LOG.warning("heating curve not set: %s; it stays advice", why)
-            self.daemon.store.add_event("warning", f"heating curve not set: {why}")
+            self._say("warning", f"heating curve not set: {why}; it stays advice")
             self._refused = why
 
     async def _set(self, curve: dict | None) -> None:
@@ -180,8 +179,7 @@ class CurveWatch:
         self.held, self.raised_k, self._refused = points, 0.0, None
         text = (f"heating curve set to {points[0]:.1f} °C at −15 °C and {points[1]:.1f} °C at "
                 f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
-        _LOG.warning(text)
-        d.store.add_event("info", text)
+        self._say("info", text)
 
     async def _write(self, points: tuple[float, float]) -> None:
         client = self.daemon.client
@@ -191,6 +189,11 @@ class CurveWatch:
                                     writes=replace(writes, loop1_curve_c=CURVE_FLOW_BOUNDS_C))
         for ma, value in zip(CURVE_REGISTERS, points, strict=True):
             await client.write(ma, value)
+
+    def _say(self, level: str, text: str) -> None:
+        # stored before it is logged: whoever reads the log finds the event already there
+        self.daemon.store.add_event(level, text)
+        _LOG.warning(text)
 
     def _keep(self, held: bool) -> None:
         ctl = self.daemon.controller
@@ -206,8 +209,7 @@ class CurveWatch:
         self.held, self._verify, self._short_since = None, None, None
         self._keep(False)
         text = f"the owner's heating curve restored ({why})"
-        _LOG.warning(text)
-        d.store.add_event("info", text)
+        self._say("info", text)
 
     # -- after it is set -------------------------------------------------------------------------
     async def _follow(self, curve: dict | None) -> None:
@@ -240,8 +242,8 @@ class CurveWatch:
         if max(abs(a - b) for a, b in zip(new, self.held, strict=True)) >= MOVE_K:
             await self._write(new)
             self.held = new
-            _LOG.warning("heating curve moved to %.1f / %.1f °C (a new fit)", *new)
-            d.store.add_event("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C")
+            self._say("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C "
+                              "(a new fit)")
         await self._comfort()
 
     def _owner_changed(self, now: dict) -> None:
@@ -254,8 +256,7 @@ class CurveWatch:
         set_intent(d.cfg.state_dir, False, "the owner changed the curve points")
         text = ("the owner changed the heating curve: their points are kept, impctl sets no "
                 "curve until asked again (impctl curve --apply)")
-        _LOG.warning(text)
-        d.store.add_event("warning", text)
+        self._say("warning", text)
 
     async def _comfort(self) -> None:
         d = self.daemon
@@ -284,8 +285,7 @@ class CurveWatch:
         self.held, self.raised_k = raised, self.raised_k + cfg.raise_k
         text = f"{why}: heating curve raised by {cfg.raise_k:g} K to " \
                f"{raised[0]:.1f} / {raised[1]:.1f} °C"
-        _LOG.warning(text)
-        d.store.add_event("warning", text)
+        self._say("warning", text)
 
 
 def start_curve_watch(daemon: RunningDaemon) -> CurveWatch:
