@@ -265,9 +265,9 @@ class _Predictor:
         # t(G + k − 1)/t(G − 1).
         if self.n_nights < 2 or added < 1:
             return 1.0
-        from scipy.stats import t as student_t
-        return float(student_t.ppf(0.975, self.n_nights + added - 1)
-                     / student_t.ppf(0.975, self.n_nights - 1))
+        from scipy.special import stdtrit
+        return float(stdtrit(self.n_nights + added - 1, 0.975)
+                     / stdtrit(self.n_nights - 1, 0.975))
 
     def after(self, nights: Sequence[tuple[np.ndarray, float]]
               ) -> tuple[dict[str, float], dict[str, float]]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .gain import GainSource
 from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
@@ -43,7 +43,7 @@ def nuisance_check(result: lm.LMResult, lay: dict, best_simple: int,
     Returns the problem to report and the ``nuisance_check_`` record."""
     best_nuis = best_of(result, lay, 0)
     drop = float(result.loss[best_simple] - result.loss[best_nuis])
-    threshold = float(chi2.ppf(0.95, n_nuisance))
+    threshold = float(chdtri(n_nuisance, 0.05))
     selected = drop > threshold
     check = {"applied": True, "chi2": drop, "threshold": threshold, "selected": selected}
     return (best_nuis if selected else best_simple), check
@@ -66,7 +66,7 @@ def class_check(ctx: lm.Context, rows: lm.Rows, result: lm.LMResult, lay: dict,
                if not lo <= float(x[PARAM_NAMES.index(n)]) <= hi]
     # The prior problems carry the nuisance terms; against a class fit without them the
     # test has those extra degrees of freedom too.
-    threshold = (float(chi2.ppf(0.95, 1 + n_nuisance)) if best_class in lay["simple"]
+    threshold = (float(chdtri(1 + n_nuisance, 0.05)) if best_class in lay["simple"]
                  else CLASS_REJECT_CHI2)
     rejected = drop > threshold
     check = {"applied": True, "chi2": drop, "threshold": threshold,

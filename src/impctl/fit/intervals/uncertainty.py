@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from scipy.stats import t as student_t
+from scipy.special import stdtrit
 
 from ..nights.data import Estimate, lag1_autocorrelation
 from ..nights.quality import residual_blocks
@@ -104,7 +104,7 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
     # A cluster-robust covariance from G nights is itself uncertain: its interval takes the
     # Student-t quantile with G − 1 degrees of freedom (the usual small-G correction) instead
     # of the normal one — about 20 % wider with 8 nights.
-    sd_sandwich = sd_sandwich * float(student_t.ppf(0.975, max(n_rows - 1, 1))) / Z95
+    sd_sandwich = sd_sandwich * float(stdtrit(max(n_rows - 1, 1), 0.975)) / Z95
     if n_rows < MIN_SANDWICH_NIGHTS:
         # With G = 2 nights the cluster covariance has one degree of freedom, t(1) = 12.7, and
         # gives intervals of hundreds of %: not a statement about the house. Model-based

@@ -192,7 +192,7 @@ def adequacy(sigma_fit: dict[str, float], sigma_data: dict[str, float],
     (constrained, normal_t_air, normal_power); ``t_air_resolution`` [K] the readings' quantum;
     ``mean_power_w`` [W] the held nights' mean heat power (the power tolerance's scale).
     """
-    from scipy.stats import chi2
+    from scipy.special import chdtrc
 
     keys = {"constrained": "constrained_t_air_k", "normal_power": "normal_power_w"}
     groups, problems = {}, []
@@ -219,7 +219,7 @@ def adequacy(sigma_fit: dict[str, float], sigma_data: dict[str, float],
         hour = float(np.sqrt(b["lf"] / b["n_blocked"]))   # RMS of the hour means [unit]
         tol = (T_AIR_TOLERANCE_K if unit == "K"
                else POWER_TOLERANCE * mean_power_w if mean_power_w else None)
-        p_white = float(chi2.sf(b["lf"] / s2, b["blocks"]))
+        p_white = float(chdtrc(b["blocks"], b["lf"] / s2))
         g.update(blocks=b["blocks"], low_frequency_ratio=ratio, whiteness_p=p_white,
                  hour_scale_residual=hour, tolerance=tol, reading_noise=noise,
                  rmse_over_reading_noise=float(np.sqrt(s2)) / noise)

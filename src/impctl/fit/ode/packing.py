@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from ...imp.night import NightSamples
 from ..nights.quality import reading_noise, residual_blocks, t_air_resolution_k
@@ -125,7 +125,7 @@ def held_driver(t: np.ndarray, t_air: np.ndarray, width_s: float) -> np.ndarray:
     hours = residual_blocks((y - y.mean())[None], np.ones((1, len(y)), bool), t[None])
     if hours["blocks"] < 2 or noise <= 0.0:
         return smoothed
-    if hours["lf"] / noise ** 2 <= chi2.ppf(HELD_FLAT_LEVEL, hours["blocks"] - 1):
+    if hours["lf"] / noise ** 2 <= chdtri(hours["blocks"] - 1, 1.0 - HELD_FLAT_LEVEL):
         return np.full_like(y, y.mean())
     return smoothed
 
