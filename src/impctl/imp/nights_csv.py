@@ -74,7 +74,7 @@ def _row(index: int) -> str:
     return f"row {index + 2}"
 
 
-def _check_values(table: pd.DataFrame, path: Path) -> None:
+def _check_values(table: pd.DataFrame, path: Path, stamp_text: np.ndarray | None) -> None:
     # A file in °F: its rooms are warmer than any room in °C, yet mostly inside t_air's range.
     fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
     if fahrenheit is not None:
@@ -115,7 +115,7 @@ def _check_values(table: pd.DataFrame, path: Path) -> None:
     if back.any():
         from .csv_hints import order_problem  # only on the failure path
 
-        text, i = order_problem(table["timestamp"], back, table.attrs.get(TIMESTAMP_TEXT))
+        text, i = order_problem(table["timestamp"], back, stamp_text)
         raise InputError(text, path, _row(i))
 
 
@@ -222,11 +222,12 @@ def nights_from_table(
     window: tuple[dt.time, dt.time] = DEFAULT_WINDOW,
 ) -> list[NightSamples]:
     """Checked table (``timestamp`` tz-aware, numbers float) → nights; see :func:`read_nights`."""
-    _check_values(table, path)
     # The timestamp texts kept for messages would be deep-copied by every column taken below
-    # (a season's file: seconds per read); the messages from here on name rows by number.
+    # (a season's file: a second per read): they go to the one message that quotes them.
+    stamp_text = table.attrs.get(TIMESTAMP_TEXT)
     table = table.copy(deep=False)
     table.attrs = {}
+    _check_values(table, path, stamp_text)
     explicit = "night" in table
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
     stamps = table["timestamp"]

@@ -38,7 +38,7 @@ Derived: HLC = K_ao + K_am·(1 − w); K_mo = K_am·(1 − w)/w; C_m = τ_mm·K_
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -103,6 +103,17 @@ class Design:
     dt_b: Array         # (nu,) block mean of T_air − T_out at the usable blocks [K]
     ta_b: Array         # (nu,) block mean of T_air [°C]
     defrost: Array
+    # the filtered series of the last few θ: a finite-difference step moves one coordinate of
+    # θ, so most of its filters are the base point's (a third of the search's work)
+    filtered: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def cached(self, key: tuple, make):
+        """``make()``, remembered under ``key`` for the next few calls."""
+        if key not in self.filtered:
+            if len(self.filtered) >= FILTERED_KEPT:
+                self.filtered.pop(next(iter(self.filtered)))
+            self.filtered[key] = make()
+        return self.filtered[key]
 
     @classmethod
     def of(cls, rec: SeasonRecord) -> Design:
@@ -157,6 +168,8 @@ class Design:
         return xb[self.blocks]
 
 
+#: Filtered series a :class:`Design` keeps (a base point and its four steps) [-].
+FILTERED_KEPT = 12
 #: Spacing of the slow gain's knots [s]: the occupants' heat wanders from day to day.
 KNOT_S = 86400.0
 
@@ -201,9 +214,12 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
     for nonlinear parameters ``theta`` (:data:`THETA`), over the usable blocks."""
     tau_mm, w, tau_e, f_sun = theta
     r, dt, k = d.rec, d.rec.step_s, d.rec.per_block
-    m_t = d.block_mean(lowpass(w * d.t_air_c + (1.0 - w) * d.t_out_c, tau_mm, dt, d.stretch))
-    e = d.block_mean(lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, d.segments))
-    g = held_lowpass(d.gains_b, tau_mm, k * dt, d.block_runs)[:, d.blocks]
+    m_t = d.cached(("mass", tau_mm, w), lambda: d.block_mean(
+        lowpass(w * d.t_air_c + (1.0 - w) * d.t_out_c, tau_mm, dt, d.stretch)))
+    e = d.cached(("emitter", tau_e), lambda: d.block_mean(
+        lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, d.segments)))
+    g = d.cached(("gains", tau_mm), lambda: held_lowpass(
+        d.gains_b, tau_mm, k * dt, d.block_runs)[:, d.blocks])
     shapes = d.gains_b[:, d.blocks]
     first = np.flatnonzero(d.blocks) * k            # first step of each usable block
     n_s, n_e = len(d.block_runs), len(d.runs)
