@@ -106,6 +106,13 @@ class Design:
     # the filtered series of the last few θ: a finite-difference step moves one coordinate of
     # θ, so most of its filters are the base point's (a third of the search's work)
     filtered: dict = field(default_factory=dict, repr=False, compare=False)
+    fixed: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def once(self, key: str, make):
+        """``make()``, computed on the first call (what depends on the record alone)."""
+        if key not in self.fixed:
+            self.fixed[key] = make()
+        return self.fixed[key]
 
     def cached(self, key: tuple, make):
         """``make()``, remembered under ``key`` for the next few calls."""
@@ -204,9 +211,26 @@ def held_lowpass(u: Array, tau_s: float, block_s: float,
     return out
 
 
-def _block_decay(beta: float, k: int, first: NDArray[np.int64], step0: int) -> Array:
-    """Block means of β^(i − step0) over blocks whose first step is ``first`` (steps)."""
-    return beta ** (first - step0) * (1.0 - beta ** k) / (k * (1.0 - beta))
+def _block_decay(beta: float, k: int, steps: NDArray[np.int64]) -> Array:
+    """Block means of β^i over blocks whose first step is ``steps`` after the run's start."""
+    return beta ** steps * (1.0 - beta ** k) / (k * (1.0 - beta))
+
+
+def _run_blocks(d: Design, stretches: bool) -> list[tuple[NDArray[np.int64], NDArray[np.int64]]]:
+    """Per run of the heat store (``stretches``) or of the meter: the usable blocks inside it
+    (indices) and their first steps counted from the run's start."""
+    k = d.rec.per_block
+    first = np.flatnonzero(d.blocks) * k            # first step of each usable block
+    out = []
+    if stretches:  # block runs: a block is inside when it starts inside
+        for lo, hi in d.block_runs:
+            sel = np.flatnonzero((first >= lo * k) & (first < hi * k))
+            out.append((sel, first[sel] - lo * k))
+    else:  # step runs: a block is inside when all its steps are
+        for lo, hi in d.runs:
+            sel = np.flatnonzero((first >= lo) & (first + k <= hi))
+            out.append((sel, first[sel] - lo))
+    return out
 
 
 def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array, Array, list[str]]:
@@ -220,36 +244,34 @@ def columns(theta: tuple[float, float, float, float], d: Design) -> tuple[Array,
         lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, d.segments)))
     g = d.cached(("gains", tau_mm), lambda: held_lowpass(
         d.gains_b, tau_mm, k * dt, d.block_runs)[:, d.blocks])
-    shapes = d.gains_b[:, d.blocks]
-    first = np.flatnonzero(d.blocks) * k            # first step of each usable block
+    shapes = d.once("shapes", lambda: d.gains_b[:, d.blocks])
     n_s, n_e = len(d.block_runs), len(d.runs)
-    nu = len(first)
-    X = np.zeros((nu, len(BETA) + n_s + n_e + d.n_days + d.n_knots))
-    X[:, 0] = d.dt_b
-    X[:, 1] = d.ta_b - m_t
-    X[:, 2:4] = -(AIR_SHARE * shapes[0:2] + w * (1.0 - AIR_SHARE) * g[0:2]).T
-    X[:, 4] = e[:, 1]
-    X[:, 5] = -(AIR_SHARE * shapes[-1] + w * (1.0 - AIR_SHARE) * g[-1])
+    # Built row by row as Xᵀ: every write contiguous (X is handed on as its transpose).
+    XT = np.zeros((len(BETA) + n_s + n_e + d.n_days + d.n_knots, int(d.blocks.sum())))
+    XT[0] = d.dt_b
+    XT[1] = d.ta_b - m_t
+    XT[2:4] = -(AIR_SHARE * shapes[0:2] + w * (1.0 - AIR_SHARE) * g[0:2])
+    XT[4] = e[:, 1]
+    XT[5] = -(AIR_SHARE * shapes[-1] + w * (1.0 - AIR_SHARE) * g[-1])
     # Each stretch's own initial heat store: a free offset of the mass, decaying with τ_mm;
     # each run of the meter its own initial emitter: the filter starts at the run's first
     # reading, the water and the screed at whatever a pre-heat or a gap left them.
     decay, decay_e = math.exp(-dt / tau_mm), math.exp(-dt / tau_e)
     col = len(BETA)
-    for lo, hi in d.block_runs:
-        sel = (first >= lo * k) & (first < hi * k)
-        X[sel, col] = -_block_decay(decay, k, first[sel], lo * k)
+    for sel, steps in d.once("stretch_blocks", lambda: _run_blocks(d, True)):
+        XT[col, sel] = -_block_decay(decay, k, steps)
         col += 1
-    for lo, hi in d.runs:
-        sel = (first >= lo) & (first + k <= hi)
-        X[sel, col] = _block_decay(decay_e, k, first[sel], lo)
+    for sel, steps in d.once("meter_blocks", lambda: _run_blocks(d, False)):
+        XT[col, sel] = _block_decay(decay_e, k, steps)
         col += 1
     sun = slice(2, 2 + d.n_days)
-    X[:, col:col + d.n_days] = -(f_sun * shapes[sun] + w * (1.0 - f_sun) * g[sun]).T
+    XT[col:col + d.n_days] = -(f_sun * shapes[sun] + w * (1.0 - f_sun) * g[sun])
     col += d.n_days
-    X[:, col:] = -(AIR_SHARE * shapes[2 + d.n_days:-1]
-                   + w * (1.0 - AIR_SHARE) * g[2 + d.n_days:-1]).T
-    names = [*BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
-             *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(d.n_knots))]
+    XT[col:] = -(AIR_SHARE * shapes[2 + d.n_days:-1] + w * (1.0 - AIR_SHARE) * g[2 + d.n_days:-1])
+    X = XT.T
+    names = d.once("names", lambda: [
+        *BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
+        *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(d.n_knots))])
     return X, e[:, 0], names
 
 

@@ -71,8 +71,10 @@ def project(theta, d: Design) -> Projection:
     """β by ridge least squares at ``theta`` (module docstring)."""
     X, y, names = columns(theta, d)
     p = X.shape[1]
-    sun = np.array([n.startswith("sun_") for n in names])
-    scale = np.sqrt(np.mean(X ** 2, axis=0)) + 1e-12
+    sun, gain = d.once("kinds", lambda: (
+        np.array([n.startswith("sun_") for n in names]),
+        np.array([n.startswith("gain_") for n in names])))
+    scale = np.sqrt(np.einsum("ij,ij->j", X, X) / len(X)) + 1e-12
     Xs = X / scale
     ns = int(sun.sum())
     rows = np.zeros((ns, p))
@@ -80,7 +82,6 @@ def project(theta, d: Design) -> Projection:
         lam = math.sqrt(SUN_RIDGE * len(y))
         centre = np.eye(ns) - 1.0 / ns
         rows[:, sun] = lam * centre / scale[sun] * np.median(scale[sun])
-    gain = np.array([n.startswith("gain_") for n in names])
     ng = int(gain.sum())
     if ng > 1 and GAIN_RW > 0:
         lam = math.sqrt(GAIN_RW * len(y))
@@ -94,22 +95,22 @@ def project(theta, d: Design) -> Projection:
         g = np.zeros((ng, p))
         g[:, gain] = 1e3 * np.eye(ng) / scale[gain]
         rows = np.concatenate([rows, g])
-    A = np.concatenate([Xs, rows])
-    b = np.concatenate([y, np.zeros(len(rows))])
-    coef = _solve(A, b)
+    coef = _solve(Xs, rows, y)
     beta = coef / scale
     return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
 
 
-def _solve(A: Array, b: Array) -> Array:
-    """Least squares by the normal equations (the columns are scaled and the ridge rows keep
-    them well posed; four times faster than an SVD), an SVD if they are singular."""
-    ata = A.T @ A
+def _solve(Xs: Array, rows: Array, y: Array) -> Array:
+    """Least squares of ``y`` on ``Xs`` with the ridge ``rows`` (their target is zero) by the
+    normal equations (the columns are scaled and the ridge rows keep them well posed; four
+    times faster than an SVD), an SVD if they are singular."""
+    ata = Xs.T @ Xs + rows.T @ rows
     ata[np.diag_indices_from(ata)] += 1e-10 * np.trace(ata) / len(ata)
     try:
-        return cho_solve(cho_factor(ata, check_finite=False), A.T @ b, check_finite=False)
+        return cho_solve(cho_factor(ata, check_finite=False), Xs.T @ y, check_finite=False)
     except np.linalg.LinAlgError:
-        return np.linalg.lstsq(A, b, rcond=None)[0]
+        A = np.concatenate([Xs, rows])
+        return np.linalg.lstsq(A, np.r_[y, np.zeros(len(rows))], rcond=None)[0]
 
 
 def _residual(u: Array, d: Design) -> Array:
