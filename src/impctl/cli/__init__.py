@@ -27,6 +27,7 @@ def _register() -> None:
     __import__(f"{__name__}.analysis.fleet_cmd")  # impctl fleet fit, impctl flex
     __import__(f"{__name__}.analysis.campaign_cmd")  # impctl campaign next
     __import__(f"{__name__}.analysis.curve_cmd")  # impctl curve
+    __import__(f"{__name__}.analysis.season_cmd")  # impctl season
     from .checks import ascii_numbers
 
     ascii_numbers(cli)  # '２２' is not 22 (click's number types call float() and int())

@@ -74,6 +74,8 @@ class OwnerRecorder:
         self._link_problem: str | None = None
         self._store_problem: str | None = None
         self._dropped_since: datetime | None = None  # rows not stored: not after the newest
+        #: records closed without a label since the start (the daemon refits on a new one)
+        self.closed_usable = 0
 
     # -- time ------------------------------------------------------------------------------
     def next_poll(self) -> datetime:
@@ -229,6 +231,7 @@ class OwnerRecorder:
         self._records = {d: i for d, i in self._records.items() if i != record_id}
         verdict = "usable" if not labels and not notes else "labelled: " + "; ".join(
             [*labels, *notes])
+        self.closed_usable += not labels and not notes
         _LOG.info("owner record %d (%s, %d rows) closed, %s", record_id, day.isoformat(),
                   len(rows), verdict)
 

@@ -84,14 +84,11 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
     work.mkdir(parents=True, exist_ok=True)
     nights_csv, out_json, next_json = work / "nights.csv", work / "fit.json", work / "next.json"
     ids = [n.id for n in store.nights(valid=True)]
-    # Niced: the fit (torch, a core for seconds to minutes) never slows tonight's sampling.
-    base = [sys.executable, "-c", f"import os; os.nice({FIT_NICE}); "
-            "from impctl.cli import main; main()"]
+    base = _base()
     model_dir = cfg.model_dir or str(Path(cfg.state_dir) / "models")
     steps = [
         # The IMP nights and the owner records: the fit runs the season model on them all.
-        [*base, "export", "--db", str(cfg.db_path), "--format", "csv",
-         "--out", str(nights_csv), "--force"],
+        _export(base, cfg, nights_csv),
         [*base, *fit_arguments(cfg, nights_csv, out_json, model_dir)],
     ]
     for cmd in steps:
@@ -108,6 +105,65 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
     if cfg.campaign.adaptive:
         await _predict(store, cfg, fit_id, base, out_json, nights_csv, next_json)
     return result
+
+
+def _base() -> list[str]:
+    # Niced: the fit (torch, a core for seconds to minutes) never slows tonight's sampling.
+    return [sys.executable, "-c", f"import os; os.nice({FIT_NICE}); "
+            "from impctl.cli import main; main()"]
+
+
+def _export(base: list[str], cfg: Config, nights_csv: Path) -> list[str]:
+    return [*base, "export", "--db", str(cfg.db_path), "--format", "csv", "--out",
+            str(nights_csv), "--force"]
+
+
+def season_refreshable(store: Store) -> int | None:
+    """The newest fit's id when it holds a season model a morning refit can start from."""
+    newest = store.newest_fit()
+    if newest is None:
+        return None
+    theta = (newest[1].get("season") or {}).get("theta")
+    return newest[0] if isinstance(theta, dict) else None
+
+
+async def refresh_season(store: Store, cfg: Config) -> dict | None:
+    """The morning refit: the season model alone (``impctl season``, no torch), its search
+    started where the newest fit's ended, on every recorded night; its result replaces that
+    fit's season block. None when there is nothing to start from, a step failed (logged, an
+    event kept) or a full fit stored a newer result meanwhile."""
+    fit_id = season_refreshable(store)
+    if fit_id is None:
+        return None
+    work = Path(cfg.state_dir) / "fit"
+    work.mkdir(parents=True, exist_ok=True)
+    nights_csv, last_json, out_json = (work / "season_nights.csv", work / "season_from.json",
+                                       work / "season.json")
+    last_json.write_text(json.dumps(store.newest_fit()[1]))
+    base = _base()
+    steps = [_export(base, cfg, nights_csv),
+             [*base, "season", "--nights", str(nights_csv), "--warm-start", str(last_json),
+              "--json", str(out_json), "--tz", cfg.timezone]]
+    for cmd in steps:
+        code, last = await _step(cmd)
+        if code != 0:
+            _LOG.error("season refit step %s failed (%d): %s", cmd[3], code, last)
+            store.add_event("error", f"season refit failed at {cmd[3]}")
+            return None
+    block = json.loads(out_json.read_text())["season"]
+    if not store.refresh_fit_season(fit_id, block):
+        _LOG.info("season refit dropped: a newer fit was stored meanwhile")
+        return None
+    text = (f"season model refreshed: {block['owner_nights']} owner nights, HLC "
+            f"{_value(block, 'hlc_w_per_k')} W/K")
+    store.add_event("info", text)
+    _LOG.info("%s (search %.2f s from the last fit's)", text, block["search"]["time_s"])
+    return block
+
+
+def _value(block: dict, key: str) -> str:
+    v = (block.get(key) or {}).get("value")
+    return "—" if v is None else f"{v:.0f}"
 
 
 async def _curve(cfg: Config, base: list[str], nights_csv: Path, fit_json: Path,

@@ -96,6 +96,7 @@ async def record_house(daemon: RunningDaemon, recorder: OwnerRecorder) -> None:
     _safely(recorder.close_due)  # records an earlier run left open past their day
     recorder.purge(cfg.record.keep_days)
     purged_at = daemon.clock.monotonic_s()
+    usable = recorder.closed_usable
     failed: str | None = None
     try:
         while not daemon.stop.is_set():
@@ -115,6 +116,9 @@ async def record_house(daemon: RunningDaemon, recorder: OwnerRecorder) -> None:
                     if busy(daemon) is not None:
                         continue
                     await recorder.poll()
+                if recorder.closed_usable != usable:  # a new owner night: the morning refit
+                    usable = recorder.closed_usable
+                    daemon.want_season()
                 state.set("recording")
                 if daemon.clock.monotonic_s() - purged_at >= RETENTION_EVERY_S:
                     recorder.purge(cfg.record.keep_days)

@@ -43,6 +43,10 @@ class RunningDaemon(Protocol):
         """True from a night's first action (its pre-heat) to the end of its restore."""
         ...
 
+    def want_season(self) -> None:
+        """A new usable owner night: refresh the season model (the morning refit)."""
+        ...
+
     def _status(self, text: str) -> None:
         """Tell systemd (STATUS=) and Home Assistant what the daemon does."""
         ...

@@ -24,7 +24,7 @@ from . import adaptive
 from .configured import clock_from_config, open_client, policy_from_config
 from .curve_watch import KEEP as CURVE_KEEP
 from .curve_watch import start_curve_watch
-from .fitting import fit_ready, needs_fit, run_fit
+from .fitting import fit_ready, needs_fit, refresh_season, run_fit
 from .hplock import HeatPumpLock
 from .lock import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
@@ -367,6 +367,19 @@ class Daemon:
         if self._fit_task is None or self._fit_task.done():
             self._fit_task = asyncio.create_task(self._fits(), name="fit")
             self._fit_task.add_done_callback(_log_crash)
+
+    def want_season(self) -> None:
+        """A new usable owner night: the morning refit of the season model, in the fit's slot
+        (one subprocess chain at a time; a running fit reads every night itself)."""
+        if self._fit_task is None or self._fit_task.done():
+            self._fit_task = asyncio.create_task(self._season(), name="season refit")
+            self._fit_task.add_done_callback(_log_crash)
+
+    async def _season(self) -> None:
+        await refresh_season(self.store, self.cfg)
+        camp = self.cfg.campaign
+        if (camp.adaptive or camp.fit_when_complete) and needs_fit(self.store):
+            await self._fits()  # a valid night ended while the refit ran: its full fit now
 
     async def _fits(self) -> None:
         while needs_fit(self.store):

@@ -23,7 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .change import Change, detect_change
-from .columns import lumped
+from .columns import THETA, lumped
 from .record import SeasonRecord
 from .solve import LUMPED, beta_dict, covariance, lumped_log_se, search
 
@@ -87,10 +87,26 @@ class SeasonFit:
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
             "interval": "95 %: day-clustered sandwich, scaled, with a model-error floor, both "
                         "estimated on simulated seasons",
+            # the search's own coordinates: a later fit of the same house starts from them
+            **({"theta": dict(zip(THETA, self.theta, strict=True))}
+               if len(self.theta) == len(THETA) else {}),
             **({"change": {**self.change.as_dict(), "fit_reads": "all nights"}}
                if self.change is not None else {}),
             **({"convergence": self.convergence} if self.convergence else {}),
         }
+
+
+def theta_of(result: dict) -> tuple[float, ...] | None:
+    """The season model's θ in a fit JSON (``season.theta``, :data:`~.columns.THETA` units),
+    None when it has none or it is not a set of finite positive numbers."""
+    block = (result.get("season") or {}).get("theta") if isinstance(result, dict) else None
+    if not isinstance(block, dict):
+        return None
+    try:
+        theta = tuple(float(block[k]) for k in THETA)
+    except (KeyError, TypeError, ValueError):
+        return None
+    return theta if all(math.isfinite(t) and t > 0 for t in theta) else None
 
 
 def _num(x: float) -> float | None:
@@ -166,9 +182,10 @@ def signature(rec: SeasonRecord) -> float:
     return float(np.linalg.lstsq(A, np.asarray(y), rcond=None)[0][0])
 
 
-def fit_nights(nights) -> tuple[SeasonFit | None, str | None]:
+def fit_nights(nights, start: tuple | None = None) -> tuple[SeasonFit | None, str | None]:
     """(the season fit, None) of a household's nights (NightSamples of every kind), or
-    (None, why not) — no owner nights, too few usable ones, or no usable record."""
+    (None, why not) — no owner nights, too few usable ones, or no usable record. ``start``:
+    θ of an earlier fit of the same house (:func:`theta_of`), the search's only start."""
     from .nights import record_from_nights
 
     owner = [n for n in nights if n.kind == "owner"]
@@ -179,7 +196,7 @@ def fit_nights(nights) -> tuple[SeasonFit | None, str | None]:
     # A change is reported, not acted on: the test's false alarms (about 1 season in 11 on
     # held-out houses) would otherwise throw away weeks of good nights.
     try:
-        fit = fit_season(record_from_nights(nights))
+        fit = fit_season(record_from_nights(nights), start=start)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return None, f"season model not fitted: {exc}"
     fit.change = found

@@ -24,6 +24,10 @@ Array = NDArray[np.float64]
 THETA_BOUNDS = ((1.0 * 3600, 400.0 * 3600), (0.02, 0.995), (60.0, 3.0 * 3600), (0.02, 0.98))
 #: Start grid of (τ_mm [h], w): the search starts from the best few.
 START_GRID = tuple((t, w) for t in (3.0, 8.0, 24.0, 80.0) for w in (0.7, 0.9, 0.97))
+#: τ_e [s] and f_sun [-] of the start grid's points: near where the fits end (τ_e 2–3 h,
+#: f_sun ≲ 0.1), so that the grid's costs rank τ_mm and w — from 30 min and 0.3 the ranking
+#: sent some houses into a corner (w at its bound, τ 10× off) whose cost was 3× the best.
+START_TAU_E_S, START_F_SUN = 7200.0, 0.05
 #: Ridge weight of the daily sun amplitudes about their mean, per block [-].
 SUN_RIDGE = 0.05
 #: Weight of the slow gain's day-to-day steps, per block [-]: its random-walk prior. Set on
@@ -128,7 +132,7 @@ def search(d: Design, n_starts: int = 2, max_nfev: int = 60,
     else:
         scored = []
         for tau_h, w in START_GRID:
-            u = to_u((tau_h * 3600, w, 1800.0, 0.3))
+            u = to_u((tau_h * 3600, w, START_TAU_E_S, START_F_SUN))
             scored.append((float(np.sum(_residual(u, d) ** 2)), u))
         scored.sort(key=lambda t: t[0])
     best = None

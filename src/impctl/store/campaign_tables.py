@@ -93,6 +93,25 @@ class CampaignTables:
             reached=bool(r["reached"]), forecast_t_out_c=r["forecast_t_out_c"],
             forecast_source=r["forecast_source"]) for r in rows]
 
+    def newest_fit(self) -> tuple[int, dict] | None:
+        """The newest fit's (id, result), or None."""
+        row = self._db.execute("SELECT id, result FROM fits ORDER BY id DESC LIMIT 1").fetchone()
+        return None if row is None else (int(row[0]), json.loads(row[1]))
+
+    def refresh_fit_season(self, fit_id: int, season: dict) -> bool:
+        """Put a newer season model into fit ``fit_id``'s result, when that fit is still the
+        newest (else a full fit has stored a newer one meanwhile, which read every night
+        itself): the IMP fit's fields are left as they were. True when stored."""
+        with self._immediate():
+            newest = self.newest_fit()
+            if newest is None or newest[0] != fit_id:
+                return False
+            result = newest[1]
+            result["season"] = season
+            self._db.execute("UPDATE fits SET result = ? WHERE id = ?",
+                             (json.dumps(result), fit_id))
+        return True
+
     def last_fit(self) -> tuple[datetime, list[int], dict] | None:
         """The newest fit: (created, night ids, result), or None."""
         row = self._db.execute("SELECT * FROM fits ORDER BY id DESC LIMIT 1").fetchone()

@@ -1,0 +1,129 @@
+"""The season model alone and its morning refit: ``impctl season`` as a real subprocess, the
+daemon's refit (:func:`impctl.daemon.fitting.refresh_season`) on a real SQLite store whose owner
+records hold a simulated winter of a realistic household.
+
+What is promised: a search started where the last fit ended finds what the full search finds
+(the same house, one night more); its result replaces the newest fit's season block and nothing
+else of it; a full fit stored meanwhile wins; a start that is not a season result is one line,
+exit status 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from datetime import timedelta
+
+import pytest
+from test_nights_owner import run_cli
+
+from impctl.config import load_config
+from impctl.daemon.fitting import refresh_season
+from impctl.imp.nights_csv import read_nights, write_nights
+from impctl.population.households import sample_households
+from impctl.population.imp_run.season import SeasonConfig, simulate_season
+from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.realism import sample_params
+from impctl.season.fit import fit_nights
+from impctl.store import Store
+from impctl.store.records import Sample
+
+TZ = "Europe/Ljubljana"
+KEYS = ("hlc_w_per_k", "tau_h", "c_m_j_per_k")
+
+
+@pytest.fixture(scope="module")
+def owner_nights():
+    houses, params = sample_households(1, seed=7), sample_params(1, 7)
+    s = simulate_season(houses, params, SeasonConfig(nights=24), seed=7)
+    nights = [n for n in household_nights(s, 0) if n.kind == "owner"]
+    assert sum(not n.label for n in nights) >= 8
+    return nights
+
+
+def _store_records(store: Store, nights) -> None:
+    """Each owner night as the recorder would have stored and closed it."""
+    for n in nights:
+        start = n.start.to_pydatetime()
+        rid = store.open_owner_record(start, start + timedelta(days=1))
+        for i, t in enumerate(n.time_s):
+            dhw = 0.0 if n.dhw is None else float(n.dhw[i])
+            store.add_owner_row(Sample(
+                night_id=rid, ts=start + timedelta(seconds=float(t)),
+                t_air_c=float(n.t_air_c[i]), t_out_c=float(n.t_out_c[i]),
+                q_hc_w=float(n.q_hc_w[i]), setpoint_c=21.0, dhw_share=dhw,
+                defrost=bool(n.defrost_share[i] > 0) if n.defrost_share is not None else False,
+                snapshots=3))
+        end = start + timedelta(seconds=float(n.time_s[-1]) + 300.0)
+        store.close_owner_record(rid, [n.label] if n.label else [], 21.0, start, end)
+
+
+def test_impctl_season_warm_starts_where_the_last_result_ended(tmp_path, owner_nights):
+    csv = write_nights(owner_nights, tmp_path / "nights.csv")
+    first, warm = tmp_path / "first.json", tmp_path / "warm.json"
+    res = run_cli("season", "--nights", str(csv), "--json", str(first),
+                  model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "season model:" in res.stdout and "against owner nights" in res.stdout
+    a = json.loads(first.read_text())["season"]
+    assert set(a["theta"]) == {"tau_mm_s", "w", "tau_e_s", "f_sun"}
+    assert a["search"]["warm_start"] is False
+    res = run_cli("season", "--nights", str(csv), "--warm-start", str(first), "--json",
+                  str(warm), "--no-convergence", model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "the search started from" in res.stdout and "against owner nights" not in res.stdout
+    b = json.loads(warm.read_text())["season"]
+    assert b["search"]["warm_start"] is True and "convergence" not in b
+    for k in KEYS:
+        assert b[k]["value"] == pytest.approx(a[k]["value"], rel=1e-3)
+
+
+@pytest.mark.parametrize("content, words", [
+    ('{"season": {"hlc_w_per_k": {"value": 150}}}', "season.theta missing"),
+    ("not json", "not a readable JSON result"),
+])
+def test_a_start_that_is_no_season_result_is_one_line_and_exit_2(tmp_path, owner_nights,
+                                                                  content, words):
+    csv = write_nights(owner_nights[:6], tmp_path / "nights.csv")
+    bad = tmp_path / "start.json"
+    bad.write_text(content)
+    out = tmp_path / "out.json"
+    res = run_cli("season", "--nights", str(csv), "--warm-start", str(bad), "--json", str(out),
+                  model_dir=tmp_path / "no-models")
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(bad) in lines[0] and "--warm-start" in lines[0]
+    assert words in lines[0]
+    assert not out.exists()
+
+
+def test_the_morning_refit_replaces_the_newest_fits_season_and_nothing_else(tmp_path,
+                                                                           owner_nights):
+    state = tmp_path / "state"
+    state.mkdir()
+    config = tmp_path / "config.toml"
+    config.write_text(f'state_dir = "{state}"\n[heatpump]\nhost = "127.0.0.1"\n')
+    cfg = load_config(config)
+    earlier, _ = fit_nights(owner_nights[:-1])  # yesterday's fit: one owner night fewer
+    with Store(cfg.db_path) as store:
+        _store_records(store, owner_nights)
+        # a fit without a season model: nothing to start from, nothing run
+        store.add_fit([], {"hlc": "imp"})
+        assert asyncio.run(refresh_season(store, cfg)) is None
+        fit_id = store.add_fit([3, 5], {"hlc": "imp", "season": earlier.as_dict()})
+        block = asyncio.run(refresh_season(store, cfg))
+        assert block is not None and block["search"]["warm_start"] is True
+        newest_id, result = store.newest_fit()
+        assert newest_id == fit_id and result["hlc"] == "imp"  # the IMP fit's fields stay
+        assert store.last_fit()[1] == [3, 5]
+        season = result["season"]
+        # what the full search finds on every night, as the refit's export wrote them
+        everything, _ = fit_nights(read_nights(state / "fit" / "season_nights.csv", TZ))
+        assert season["owner_nights"] == everything.owner_nights == earlier.owner_nights + 1
+        for k in KEYS:
+            assert season[k]["value"] == pytest.approx(everything.values[k], rel=5e-3)
+        assert any(m.startswith("season model refreshed") for _, _, m in store.events(5))
+        # a full fit stored while a refit ran wins: the refit's block is dropped
+        newer = store.add_fit([3, 5, 7], {"hlc": "imp2", "season": earlier.as_dict()})
+        assert not store.refresh_fit_season(fit_id, block)
+        assert store.newest_fit() == (newer, {"hlc": "imp2", "season": earlier.as_dict()})
