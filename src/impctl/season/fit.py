@@ -33,6 +33,9 @@ INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 1.5, "c_m_j_per_k": 2.5}
 MODEL_FLOOR = {"hlc_w_per_k": 0.020, "tau_h": 0.129, "c_m_j_per_k": 0.141}
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
+#: Widest 95 % interval given, as the log of its high/value ratio [-] (a factor of 1000 up
+#: and down): wider, the nights do not determine the quantity and it is missing.
+MAX_LOG_HALF_WIDTH = math.log(1000.0)
 #: Fewest owner nights the season model is run on.
 MIN_OWNER_NIGHTS = 5
 #: The signature's window: local hours after midnight [h] (heat and ΔT means over it).
@@ -153,6 +156,9 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             continue
         half = Z95 * (math.hypot(INTERVAL_SCALE[k] * se[k], MODEL_FLOOR[k]) if calibrated
                       else se[k])
+        if half > MAX_LOG_HALF_WIDTH:  # the data leave it open: not a value either
+            values[k] = low[k] = high[k] = float("nan")
+            continue
         low[k], high[k] = values[k] * math.exp(-half), values[k] * math.exp(half)
     return SeasonFit({k: float(values[k]) for k in LUMPED}, low, high, owner, imp,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
