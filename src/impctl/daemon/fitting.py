@@ -57,6 +57,17 @@ async def _step(cmd: list[str]) -> tuple[int, str]:
     return proc.returncode, lines[-1] if lines else ""
 
 
+async def _steps(store: Store, steps: list[list[str]], what: str) -> bool:
+    """Run the subprocesses in turn; False at the first that fails (logged, an event kept)."""
+    for cmd in steps:
+        code, last = await _step(cmd)
+        if code != 0:
+            _LOG.error("%s step %s failed (%d): %s", what, cmd[3], code, last)
+            store.add_event("error", f"{what} failed at {cmd[3]}")
+            return False
+    return True
+
+
 def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str) -> list[str]:
     """``impctl fit`` arguments of the daemon's fit: what the config tells it about the house
     (``[fit] night_gain_w`` and ``night_gain_sd_w``, a declared night gain [W]; not set: not
@@ -91,12 +102,8 @@ async def run_fit(store: Store, cfg: Config) -> dict | None:
         _export(base, cfg, nights_csv),
         [*base, *fit_arguments(cfg, nights_csv, out_json, model_dir)],
     ]
-    for cmd in steps:
-        code, last = await _step(cmd)
-        if code != 0:
-            _LOG.error("fit step %s failed (%d): %s", cmd[3], code, last)
-            store.add_event("error", f"fit failed at {cmd[3]}")
-            return None
+    if not await _steps(store, steps, "fit"):
+        return None
     result = json.loads(out_json.read_text())
     fit_id = store.add_fit(ids, result)
     store.add_event("info", f"fit stored ({len(ids)} nights)")
@@ -144,12 +151,8 @@ async def refresh_season(store: Store, cfg: Config) -> dict | None:
     steps = [_export(base, cfg, nights_csv),
              [*base, "season", "--nights", str(nights_csv), "--warm-start", str(last_json),
               "--json", str(out_json), "--tz", cfg.timezone]]
-    for cmd in steps:
-        code, last = await _step(cmd)
-        if code != 0:
-            _LOG.error("season refit step %s failed (%d): %s", cmd[3], code, last)
-            store.add_event("error", f"season refit failed at {cmd[3]}")
-            return None
+    if not await _steps(store, steps, "season refit"):
+        return None
     block = json.loads(out_json.read_text())["season"]
     if not store.refresh_fit_season(fit_id, block):
         _LOG.info("season refit dropped: a newer fit was stored meanwhile")
