@@ -13,6 +13,16 @@ intervals; the fit's wall time.
     python bench/season.py --households 200 --owner-nights 14,28
     python bench/season.py --households 40 --variant signed
     python bench/season.py --calibrate --households 60 --seed 31   # the intervals' scale, floor
+    python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
+    python bench/season.py --from-json saved.json --figure curve.png   # redraw, no fits
+
+``--owner-nights`` may hold 0: the household's IMP nights alone (the whole campaign, no owner
+record) fitted on ``impctl fit``'s path with the true class ranges (benchlib/season_imp.py),
+the same households as the other counts. ``--figure`` draws the error against the owner nights
+(benchlib/season_figure.py) after the run or, with ``--from-json``, from a saved ``--json``
+without refitting; a run without its own 0-night point draws bench/fit.py's figure of record
+there, marked as other households. A saved JSON the figure cannot use is refused in one line
+naming the file and the key, exit status 2, nothing written.
 
 ``--calibrate`` fits households of another seed with the raw intervals and prints, per
 quantity, the sandwich scale and model-error floor that give 95 % coverage with the narrowest
@@ -34,15 +44,20 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 c
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from benchlib.season_figure import (  # noqa: E402
+    SavedError,
+    check_target,
+    draw,
+    format_published,
+    load_saved,
+)
 
-from impctl.population.households import sample_households  # noqa: E402
-from impctl.population.imp_run.season import SeasonConfig, simulate_season  # noqa: E402
-from impctl.population.imp_run.season_nights import household_nights  # noqa: E402
-from impctl.population.realism import sample_params  # noqa: E402
-from impctl.season.fit import LUMPED, Z95, fit_nights, fit_season  # noqa: E402
-from impctl.season.nights import record_from_nights  # noqa: E402
+# The simulation's and the fits' modules (seconds to import) load in run() and the fit
+# functions only: --from-json redraws a saved run without them. The workers are forked after
+# run() loaded them.
 
 _SEASON = None
+_HOUSES = None
 _RAW = False
 _P_HOUSE = False
 QUANTITIES = {"hlc_w_per_k": "HLC", "tau_h": "tau", "c_m_j_per_k": "C_m"}
@@ -61,9 +76,14 @@ def cutoff(s, h: int, n_owner: int) -> int | None:
 
 
 def _fit(job: tuple[int, int]) -> dict:
+    from impctl.population.imp_run.season_nights import household_nights
+    from impctl.season.fit import LUMPED, Z95, fit_nights, fit_season
+    from impctl.season.nights import record_from_nights
+
     h, n_owner = job
     s = _SEASON
-    end = cutoff(s, h, n_owner)
+    # 0: the whole season, whose IMP nights alone are fitted (the campaign ends in its first weeks)
+    end = cutoff(s, h, n_owner) if n_owner else s.t_air_c.shape[0]
     row = {"household": h, "owner_nights": n_owner}
     if end is None:
         return {**row, "status": "season too short"}
@@ -71,6 +91,8 @@ def _fit(job: tuple[int, int]) -> dict:
     nights = household_nights(s, h, upto_sample=end)
     if not _P_HOUSE:   # most gateways do not read the household electricity
         nights = [replace(n, p_house_w=math.nan) for n in nights]
+    if n_owner == 0:
+        return _fit_imp(row, h, nights, t0)
     if _RAW:
         try:
             fit = fit_season(record_from_nights(nights), calibrated=False)
@@ -88,6 +110,17 @@ def _fit(job: tuple[int, int]) -> dict:
                **{f"{k}_low": fit.low[k] for k in LUMPED},
                **{f"{k}_high": fit.high[k] for k in LUMPED})
     return row
+
+
+def _fit_imp(row: dict, h: int, nights: list, t0: float) -> dict:
+    """The 0-owner-night row: household ``h``'s IMP nights alone (benchlib/season_imp.py)."""
+    from benchlib.season_imp import fit_imp_nights
+
+    out, note = fit_imp_nights(nights, _HOUSES.take(h))
+    row["fit_s"] = time.perf_counter() - t0
+    if out is None:
+        return {**row, "status": note or "no fit"}
+    return {**row, "status": "ok", "signature_hlc_w_per_k": math.nan, **out}
 
 
 def _boot_ci(x: np.ndarray, q: float, rng: np.random.Generator, n: int = 2000) -> tuple:
@@ -121,6 +154,9 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
                      "coverage": float(cover.mean()), "half_width_pct": float(np.median(half))}
     sig = np.array([r["signature_hlc_w_per_k"] for r in ok])
     good = np.isfinite(sig)
+    if not good.any():   # no owner night: the IMP fit alone
+        out["signature"] = None
+        return out
     err = 100 * np.abs(sig[good] / truth["hlc_w_per_k"][h[good]] - 1)
     out["signature"] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
                         "p90_pct": float(np.percentile(err, 90)), "n": int(good.sum())}
@@ -130,6 +166,8 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
 def calibrate(rows: list[dict], truth: dict[str, np.ndarray]) -> dict[str, tuple]:
     """Per quantity (scale, floor): the raw standard error times the scale, combined with the
     floor, covers 95 % of the households with the narrowest median half-width."""
+    from impctl.season.fit import Z95
+
     out = {}
     for k, name in QUANTITIES.items():
         ok = [r for r in rows if r["status"] == "ok" and r.get(k) is not None
@@ -156,10 +194,28 @@ def _fmt(ci: tuple) -> str:
     return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
 
 
+def _refuse(exc: SavedError) -> None:
+    """One line on stderr, exit status 2 (nothing has been written)."""
+    print(f"bench/season.py: {exc}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def _owner_nights(text: str) -> list[int]:
+    try:
+        ns = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give counts of nights, e.g. 0,7,14") from None
+    if any(n < 0 for n in ns) or len(set(ns)) != len(ns):
+        raise argparse.ArgumentTypeError(f"{text!r}: give distinct counts of 0 or more nights")
+    return ns
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=200)
-    ap.add_argument("--owner-nights", default="14,28")
+    ap.add_argument("--owner-nights", type=_owner_nights, default=[14, 28],
+                    help="counts of owner nights to fit at (comma-separated; 0: the IMP "
+                         "nights alone on impctl fit's path)")
     ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
     ap.add_argument("--seed", type=int, default=4242)
     ap.add_argument("--variant", choices=("realistic", "signed", "p_house", "ideal"),
@@ -169,13 +225,49 @@ def main(argv: list[str] | None = None) -> None:
                          "ideal: the ideal 5R1C (no emitter, furniture, sensor faults)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
+    ap.add_argument("--figure", default=None,
+                    help="draw the error against the owner nights into this PNG")
+    ap.add_argument("--from-json", default=None, metavar="SAVED",
+                    help="draw --figure from a saved --json run, without fitting")
     ap.add_argument("--calibrate", action="store_true",
                     help="raw intervals: print the scale and floor for 95 %% coverage")
     args = ap.parse_args(argv)
-    global _SEASON, _RAW, _P_HOUSE
+    if args.from_json is not None and args.figure is None:
+        ap.error("--from-json draws a figure: give --figure FILE.png")
+    if args.calibrate and (args.figure is not None or 0 in args.owner_nights):
+        ap.error("--calibrate fits the season model only: no --figure, no 0 owner nights")
+    try:
+        if args.figure is not None:
+            check_target(args.figure)
+        if args.from_json is not None:
+            saved = load_saved(args.from_json)
+            _draw(saved["summary"], saved["args"], args.figure)
+            return
+    except SavedError as exc:
+        _refuse(exc)
+    run(args, argv)
+
+
+def _draw(summary: list[dict], run_args: dict, path: str) -> None:
+    if draw(summary, run_args, path):
+        print(format_published())
+    print(f"figure written to {path}")
+
+
+def run(args: argparse.Namespace, argv: list[str] | None) -> None:
+    """Simulate, fit, print the table; the JSON and the figure when asked."""
+    global _SEASON, _HOUSES, _RAW, _P_HOUSE
+    import impctl.season.fit  # noqa: F401  (loaded once, before the workers fork)
+    from impctl.population.households import sample_households
+    from impctl.population.imp_run.season import SeasonConfig, simulate_season
+    from impctl.population.realism import sample_params
+
+    if 0 in args.owner_nights:
+        import benchlib.season_imp  # noqa: F401
     _RAW, _P_HOUSE = args.calibrate, args.variant == "p_house"
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
+    _HOUSES = houses
     if args.variant == "signed":
         params = params.with_section("sensors", meter_positive_only=0)
     elif args.variant == "ideal":     # ISO 13790's 5R1C itself, the gains as on every plant
@@ -189,7 +281,7 @@ def main(argv: list[str] | None = None) -> None:
     truth = {"hlc_w_per_k": np.asarray(houses.hlc_w_per_k, float),
              "tau_h": np.asarray(houses.tau_h, float),
              "c_m_j_per_k": np.asarray(houses.c_m_j_per_k, float)}
-    ns = [int(x) for x in args.owner_nights.split(",")]
+    ns = sorted(args.owner_nights)
     jobs = [(h, k) for k in ns for h in range(n)]
     rows: list[dict] = []
     with mp.get_context("fork").Pool(args.workers) as pool:
@@ -198,35 +290,41 @@ def main(argv: list[str] | None = None) -> None:
             if i % 20 == 0 or i == len(jobs):
                 print(f"  {i}/{len(jobs)} fits, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
+    command = f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}"
+    saved_args = {**vars(args), "owner_nights": ",".join(str(k) for k in ns)}
     if args.calibrate:
-        print(f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+        print(command)
         calibrate(rows, truth)
         if args.json:
             with open(args.json, "w") as fh:
-                json.dump({"rows": rows, "args": vars(args)}, fh, indent=1)
+                json.dump({"rows": rows, "args": saved_args}, fh, indent=1)
         return
     summaries = [summarize(rows, truth, k) for k in ns]
-    print(f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+    print(command)
     print(f"{n} households ({args.variant} plant, seed {args.seed}), season simulated in "
           f"{sim_s:.0f} s; the fits: {args.workers} processes")
     print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
           f"{'coverage':>8} {'half-width %':>12}")
     for sm in summaries:
+        label = sm["owner_nights"] or "0 (IMP)"
         for name in QUANTITIES.values():
             q = sm[name]
-            print(f"{sm['owner_nights']:>12} {name:>4} {q['median_pct']:6.1f} "
+            print(f"{label:>12} {name:>4} {q['median_pct']:6.1f} "
                   f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
                   f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}"
                   + (f"  ({sm[name + '_missing']} without)" if sm[name + "_missing"] else ""))
         sg = sm["signature"]
-        print(f"{sm['owner_nights']:>12} {'sig':>4} {sg['median_pct']:6.1f} "
-              f"{_fmt(sg['median_ci']):>15} {sg['p90_pct']:6.1f} {'':>15}   (energy "
-              f"signature HLC, {sg['n']} households)")
+        if sg is not None:
+            print(f"{label:>12} {'sig':>4} {sg['median_pct']:6.1f} "
+                  f"{_fmt(sg['median_ci']):>15} {sg['p90_pct']:6.1f} {'':>15}   (energy "
+                  f"signature HLC, {sg['n']} households)")
         print(f"{'':>12} fitted {sm['fitted']}/{sm['households']}, median fit "
               f"{sm['fit_s_median']:.1f} s")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"rows": rows, "summary": summaries, "args": vars(args)}, fh, indent=1)
+            json.dump({"rows": rows, "summary": summaries, "args": saved_args}, fh, indent=1)
+    if args.figure:
+        _draw(summaries, saved_args, args.figure)
 
 
 if __name__ == "__main__":
