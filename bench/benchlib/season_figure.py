@@ -140,12 +140,13 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
 
     rows = sorted(summary, key=lambda r: r["owner_nights"])
     own_zero = any(r["owner_nights"] == 0 for r in rows)
-    season = [r for r in rows if r["owner_nights"] > 0]
+    # the run's own 0-night point is one curve with the rest (the same households)
+    season = rows if own_zero else [r for r in rows if r["owner_nights"] > 0]
     # equal steps per count: the usual counts double (7, 14, 28, 56), a log scale with 0 on it
-    ticks = [0, *[r["owner_nights"] for r in season]]
+    ticks = [0, *[r["owner_nights"] for r in season if r["owner_nights"] > 0]]
     pos = {n: i for i, n in enumerate(ticks)}
-    labels = [str(r["owner_nights"]) for r in season]
-    zero_label = ("0\n(IMP only)" if own_zero
+    labels = [str(n) for n in ticks[1:]]
+    zero_label = ("0\n(the IMP fit alone)" if own_zero
                   else "8 IMP nights,\nother households\n(bench/fit.py)")
     fig = plt.figure(figsize=(14, 9.2))
     grid = fig.add_gridspec(2, 6, height_ratios=(1.35, 1.0))
@@ -159,7 +160,8 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
             err = [_yerr(r[name][f"{key}_pct"], r[name][f"{key}_ci"]) for r in season]
             ax.errorbar(xs, ys, yerr=[[e[0][0] for e in err], [e[1][0] for e in err]],
                         fmt=style, color=colors[name], capsize=3, label=f"season model, {what}")
-        _zero_point(ax, rows, name, own_zero, colors[name])
+        if not own_zero:
+            _published_point(ax, name, colors[name])
         if name == "HLC":
             sig = [r for r in season if r.get("signature")]
             sx = [pos[r["owner_nights"]] for r in sig]
@@ -182,16 +184,16 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
             key, scale = (("coverage", 100.0) if ax is bottom[0] else ("half_width_pct", 1.0))
             ax.plot(xs, [scale * r[name][key] for r in season], "-o", color=colors[name],
                     label=QUANTITIES[name].split(" ")[0])
-            zero = _zero_values(rows, name, own_zero)
-            if zero is not None:
-                ax.plot([0], [scale * zero[key]], "o" if own_zero else "D",
-                        color=colors[name], mfc=colors[name] if own_zero else "white")
+            if not own_zero:
+                ax.plot([0], [scale * IMP_ONLY_PUBLISHED[name][key]], "D", color=colors[name],
+                        mfc="white")
     if not own_zero:
         for ax in bottom:
             ax.plot([], [], "D", color="0.3", mfc="white", label="IMP fit alone (bench/fit.py)")
     bottom[0].axhline(95.0, color="k", lw=0.8, ls=":", label="nominal 95 %")
     bottom[0].set_ylabel("coverage of the 95 % intervals [%]")
-    bottom[0].set_ylim(50, 102)
+    lowest = min(100.0 * r[n]["coverage"] for r in season for n in QUANTITIES)
+    bottom[0].set_ylim(min(50.0, lowest - 5.0), 102)
     bottom[1].set_ylabel("median half-width of the 95 % intervals [%]")
     bottom[1].set_ylim(bottom=0)
     for ax in [*top, *bottom]:
@@ -220,25 +222,10 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
     return not own_zero
 
 
-def _zero_values(rows: list[dict], name: str, own_zero: bool) -> dict | None:
-    if own_zero:
-        return next(r for r in rows if r["owner_nights"] == 0)[name]
-    return IMP_ONLY_PUBLISHED[name]
-
-
-def _zero_point(ax, rows: list[dict], name: str, own_zero: bool, color: str) -> None:
-    """The IMP fit alone at 0 owner nights: joined to the curve when the run fitted it on its
-    own households, hollow and unjoined when it is bench/fit.py's published figure."""
-    q = _zero_values(rows, name, own_zero)
-    if own_zero:
-        first = next((r for r in rows if r["owner_nights"] > 0), None)
-        for key, style in (("median", "-o"), ("p90", "--s")):
-            ax.errorbar([0], [q[f"{key}_pct"]], yerr=_yerr(q[f"{key}_pct"], q[f"{key}_ci"]),
-                        fmt=style[-1], color=color, capsize=3)
-            if first is not None:
-                ax.plot([0, 1], [q[f"{key}_pct"], first[name][f"{key}_pct"]], style[:-1],
-                        color=color, alpha=0.5)
-        return
+def _published_point(ax, name: str, color: str) -> None:
+    """bench/fit.py's published IMP fit at 0 owner nights: hollow, not joined to the curve
+    (other households; no bootstrap intervals were published)."""
+    q = IMP_ONLY_PUBLISHED[name]
     ax.plot([0], [q["median_pct"]], "D", color=color, mfc="white",
             label="IMP fit alone (bench/fit.py), median")
     ax.plot([0], [q["p90_pct"]], "v", color=color, mfc="white",
