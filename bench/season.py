@@ -136,7 +136,9 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
     out: dict = {"owner_nights": n_owner, "households": sum(r["owner_nights"] == n_owner
                                                            for r in rows),
                  "fitted": len(ok),
-                 "fit_s_median": float(np.median([r["fit_s"] for r in ok])) if ok else math.nan}
+                 "fit_s_median": float(np.median([r["fit_s"] for r in ok])) if ok else math.nan,
+                 # the IMP fit alone: households without a valid constrained night
+                 "unidentified": sum(r.get("identified") is False for r in ok)}
     h = np.array([r["household"] for r in ok], int)
     for k, name in QUANTITIES.items():
         est = np.array([r[k] if r[k] is not None else np.nan for r in ok], float)
@@ -319,7 +321,9 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
                   f"{_fmt(sg['median_ci']):>15} {sg['p90_pct']:6.1f} {'':>15}   (energy "
                   f"signature HLC, {sg['n']} households)")
         print(f"{'':>12} fitted {sm['fitted']}/{sm['households']}, median fit "
-              f"{sm['fit_s_median']:.1f} s")
+              f"{sm['fit_s_median']:.1f} s"
+              + (f"; {sm['unidentified']} without a valid constrained night (their normal "
+                 "nights fitted, τ and C_m from the class ranges)" if sm["unidentified"] else ""))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"rows": rows, "summary": summaries, "args": saved_args}, fh, indent=1)

@@ -146,8 +146,12 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
     ticks = [0, *[r["owner_nights"] for r in season if r["owner_nights"] > 0]]
     pos = {n: i for i, n in enumerate(ticks)}
     labels = [str(n) for n in ticks[1:]]
-    zero_label = ("0\n(the IMP fit alone)" if own_zero
-                  else "8 IMP nights,\nother households\n(bench/fit.py)")
+    zero_label = "8 IMP nights,\nother households\n(bench/fit.py)"
+    if own_zero:
+        zero = rows[0]
+        zero_label = "0\n(the IMP fit alone)" + (
+            f"\n{zero['unidentified']} of {zero.get('fitted', '?')} without\na constrained night"
+            if zero.get("unidentified") else "")
     fig = plt.figure(figsize=(14, 9.2))
     grid = fig.add_gridspec(2, 6, height_ratios=(1.35, 1.0))
     top = [fig.add_subplot(grid[0, 2 * i:2 * i + 2]) for i in range(3)]

@@ -1,7 +1,10 @@
 """The 0-owner-night point of bench/season.py: a season household's IMP nights alone, fitted on
 ``impctl fit``'s path (:mod:`impctl.fit.household`: the nights chosen, the night fit, a fit no
 house gives refused) with the true class ranges, as bench/fit.py's figure of record
-(``--ranges true``) — the IMP fit the season model adds owner nights to.
+(``--ranges true``) — the IMP fit the season model adds owner nights to. A household whose
+campaign left no valid constrained night is one the gateway does not identify (``impctl fit``
+refuses it); as bench/fit.py, the bench still fits its normal nights — τ and C_m then rest on
+the class ranges — and counts it, marked ``identified`` False.
 
 torch is imported when a fit runs (the season model's runs never load it).
 """
@@ -30,7 +33,7 @@ def fit_imp_nights(nights: list, house: HouseParameters) -> tuple[dict | None, s
     options = FitOptions(timestamps="interval")
     chosen = choose_nights(imp, options.max_nights)
     refusal = chosen.too_little()
-    if refusal is not None:
+    if refusal is not None and "normal" in chosen.missing:
         return None, refusal.problem
     try:
         fit = NightFit(**options.estimator_params()).fit(chosen.nights, true_ranges(house))
@@ -39,7 +42,7 @@ def fit_imp_nights(nights: list, house: HouseParameters) -> tuple[dict | None, s
     refused = fit_refusal(fit)
     if refused is not None:
         return None, f"{refused.reason}: {refused.problem}"
-    out: dict = {"imp_nights": len(chosen.chosen)}
+    out: dict = {"imp_nights": len(chosen.chosen), "identified": refusal is None}
     for name, short in LUMPED_NAMES.items():
         est = fit.lumped_[short]
         finite = all(math.isfinite(x) for x in (est.value, est.low, est.high))
