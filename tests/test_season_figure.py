@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -59,6 +61,9 @@ def test_figure_from_a_saved_run(tmp_path: Path, owner_nights, published) -> Non
     assert done.returncode == 0, done.stderr
     width, height = _is_png(out)
     assert width > 1000 and height > 600
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~umask   # a plain new file's mode
     assert f"figure written to {out}" in done.stdout
     # without its own 0-night point the figure draws bench/fit.py's, and says so
     assert ("bench/fit.py's figure of record" in done.stdout) is published

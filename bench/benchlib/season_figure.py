@@ -166,21 +166,22 @@ def draw(summary: list[dict], args: dict, path: str | Path) -> bool:
                         fmt=style, color=colors[name], capsize=3, label=f"season model, {what}")
         if not own_zero:
             _published_point(ax, name, colors[name])
-        if name == "HLC":
-            sig = [r for r in season if r.get("signature")]
+        sig = [r for r in season if r.get("signature")] if name == "HLC" else []
+        if sig:
             sx = [pos[r["owner_nights"]] for r in sig]
             med = [r["signature"]["median_pct"] for r in sig]
             err = [_yerr(r["signature"]["median_pct"], r["signature"]["median_ci"])
                    for r in sig]
             ax.errorbar(sx, med, yerr=[[e[0][0] for e in err], [e[1][0] for e in err]],
                         fmt="-o", color="0.45", capsize=3, label="energy signature, median")
-            if sig:   # P90s of 80-100 %: said in the legend, not drawn (the panel would flatten)
-                p90 = " / ".join(f"{r['signature']['p90_pct']:.0f}" for r in sig)
-                ax.plot([], [], " ", label=f"energy signature, P90: {p90} %")
+            # P90s of 80-100 %: said in the legend, not drawn (the panel would flatten)
+            p90 = " / ".join(f"{r['signature']['p90_pct']:.0f}" for r in sig)
+            ax.plot([], [], " ", label=f"energy signature, P90: {p90} %")
         ax.set_title(f"{label}: |error| against the owner nights", fontsize=10)
         ax.set_ylabel("|error| [%]")
         # head room for the legend above the curves
-        top_pct = max(y for line in ax.get_lines() for y in line.get_ydata() if math.isfinite(y))
+        top_pct = max((y for line in ax.get_lines() for y in line.get_ydata()
+                       if math.isfinite(y)), default=10.0)
         ax.set_ylim(0, (2.4 if name == "HLC" else 1.6) * top_pct)
         ax.legend(fontsize=7.5, loc="upper right")
     for ax in bottom:
@@ -243,6 +244,9 @@ def _save(fig, path: str | Path) -> None:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=110, format="png")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)   # as an ordinary new file, not mkstemp's 0600
         os.replace(tmp, target)
     except BaseException:
         if os.path.exists(tmp):
