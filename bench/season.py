@@ -12,6 +12,7 @@ intervals; the fit's wall time.
 
     python bench/season.py --households 200 --owner-nights 14,28
     python bench/season.py --households 40 --variant signed
+    python bench/season.py --households 100 --imp constrained   # a campaign without normal nights
     python bench/season.py --calibrate --households 60 --seed 31   # the intervals' scale, floor
     python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
     python bench/season.py --from-json saved.json --figure curve.png   # redraw, no fits
@@ -60,6 +61,7 @@ _SEASON = None
 _HOUSES = None
 _RAW = False
 _P_HOUSE = False
+_IMP = "all"
 QUANTITIES = {"hlc_w_per_k": "HLC", "tau_h": "tau", "c_m_j_per_k": "C_m"}
 
 
@@ -91,6 +93,9 @@ def _fit(job: tuple[int, int]) -> dict:
     nights = household_nights(s, h, upto_sample=end)
     if not _P_HOUSE:   # most gateways do not read the household electricity
         nights = [replace(n, p_house_w=math.nan) for n in nights]
+    if _IMP != "all" and n_owner:  # the campaign shrunk: which IMP nights the model reads
+        keep = ("constrained",) if _IMP == "constrained" else ()
+        nights = [n for n in nights if n.kind == "owner" or n.kind in keep]
     if n_owner == 0:
         return _fit_imp(row, h, nights, t0)
     if _RAW:
@@ -225,6 +230,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="signed: the heat meter reads a defrost's draw as negative heat; "
                          "p_house: the household electricity is measured ([inputs]); "
                          "ideal: the ideal 5R1C (no emitter, furniture, sensor faults)")
+    ap.add_argument("--imp", choices=("all", "constrained", "none"), default="all",
+                    help="the IMP nights the season model reads: all of them, the constrained "
+                         "ones only (a campaign without normal nights), none")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     ap.add_argument("--figure", default=None,
@@ -258,7 +266,7 @@ def _draw(summary: list[dict], run_args: dict, path: str) -> None:
 
 def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     """Simulate, fit, print the table; the JSON and the figure when asked."""
-    global _SEASON, _HOUSES, _RAW, _P_HOUSE
+    global _SEASON, _HOUSES, _RAW, _P_HOUSE, _IMP
     import impctl.season.fit  # noqa: F401  (loaded once, before the workers fork)
     from impctl.population.households import sample_households
     from impctl.population.imp_run.season import SeasonConfig, simulate_season
@@ -266,7 +274,7 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
 
     if 0 in args.owner_nights:
         import benchlib.season_imp  # noqa: F401
-    _RAW, _P_HOUSE = args.calibrate, args.variant == "p_house"
+    _RAW, _P_HOUSE, _IMP = args.calibrate, args.variant == "p_house", args.imp
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
     _HOUSES = houses
@@ -304,7 +312,7 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     summaries = [summarize(rows, truth, k) for k in ns]
     print(command)
     print(f"{n} households ({args.variant} plant, seed {args.seed}), season simulated in "
-          f"{sim_s:.0f} s; the fits: {args.workers} processes")
+          f"{sim_s:.0f} s; the fits: {args.workers} processes; IMP nights read: {args.imp}")
     print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
           f"{'coverage':>8} {'half-width %':>12}")
     for sm in summaries:
