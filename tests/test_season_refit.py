@@ -75,8 +75,12 @@ def test_impctl_season_warm_starts_where_the_last_result_ended(tmp_path, owner_n
     assert "the search started from" in res.stdout and "against owner nights" not in res.stdout
     b = json.loads(warm.read_text())["season"]
     assert b["search"]["warm_start"] is True and "convergence" not in b
-    for k in KEYS:
-        assert b[k]["value"] == pytest.approx(a[k]["value"], rel=1e-3)
+    assert b["hlc_w_per_k"]["value"] == pytest.approx(a["hlc_w_per_k"]["value"], rel=1e-3)
+    # owner nights alone: τ and C_m not given, and why (their intervals need the IMP nights)
+    for k in ("tau_h", "c_m_j_per_k"):
+        assert a[k]["value"] is b[k]["value"] is b[k]["low"] is None
+        assert "needs the IMP nights" in b[k]["why_missing"]
+    assert "tau          — h      needs the IMP nights" in res.stdout
 
 
 @pytest.mark.parametrize("content, words", [
@@ -121,8 +125,8 @@ def test_the_morning_refit_replaces_the_newest_fits_season_and_nothing_else(tmp_
         # what the full search finds on every night, as the refit's export wrote them
         everything, _ = fit_nights(read_nights(state / "fit" / "season_nights.csv", TZ))
         assert season["owner_nights"] == everything.owner_nights == earlier.owner_nights + 1
-        for k in KEYS:
-            assert season[k]["value"] == pytest.approx(everything.values[k], rel=5e-3)
+        assert season["hlc_w_per_k"]["value"] == pytest.approx(
+            everything.values["hlc_w_per_k"], rel=5e-3)
         assert any(m.startswith("season model refreshed") for _, _, m in store.events(5))
         # a full fit stored while a refit ran wins: the refit's block is dropped
         newer = store.add_fit([3, 5, 7], {"hlc": "imp2", "season": earlier.as_dict()})

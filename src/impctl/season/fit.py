@@ -36,6 +36,9 @@ Z95 = 1.959964
 #: Widest 95 % interval given, as the log of its high/value ratio [-] (a factor of 1000 up
 #: and down): wider, the nights do not determine the quantity and it is missing.
 MAX_LOG_HALF_WIDTH = math.log(1000.0)
+#: Why τ and C_m are not given from owner nights alone.
+NEEDS_IMP = ("needs the IMP nights, a constrained and a normal one: without them its interval "
+             "does not hold (on the bench 50–74 % of the houses inside, not 95 %)")
 #: Fewest owner nights the season model is run on.
 MIN_OWNER_NIGHTS = 5
 #: The signature's window: local hours after midnight [h] (heat and ΔT means over it).
@@ -61,6 +64,8 @@ class SeasonFit:
     change : the change test on the owner nights (:mod:`.change`), None when not run
     convergence : the estimate against the number of owner nights
         (:func:`~.convergence.convergence`), empty when not computed
+    missing : why a quantity is not given (NaN), when it is for a reason other than the fit's
+        own (τ and C_m without the IMP nights: :data:`NEEDS_IMP`)
     """
 
     values: dict[str, float]
@@ -75,13 +80,16 @@ class SeasonFit:
     signature_hlc_w_per_k: float = float("nan")
     change: Change | None = None
     convergence: list[dict] = field(default_factory=list)
+    missing: dict[str, str] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
         return {
             "model": "season 5R1C, demand form (variable projection)",
             **{k: {"value": _num(self.values[k]), "low": _num(self.low[k]),
-                   "high": _num(self.high[k])} for k in LUMPED},
+                   "high": _num(self.high[k]),
+                   **({"why_missing": self.missing[k]} if k in self.missing else {})}
+               for k in LUMPED},
             "owner_nights": self.owner_nights,
             "imp_nights": self.imp_nights,
             "used_h": round(self.used_h, 2),
@@ -128,6 +136,13 @@ def nights_used(rec: SeasonRecord, used: np.ndarray) -> tuple[int, int]:
     return len(owner), len(imp)
 
 
+def imp_kinds(rec: SeasonRecord, used: np.ndarray) -> set[str]:
+    """The IMP night kinds with at least one step in the likelihood's blocks."""
+    k = rec.per_block
+    steps = np.repeat(used, k)
+    return set(np.unique(rec.kind[: len(used) * k][steps])) & {"constrained", "normal"}
+
+
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
                start: tuple | None = None) -> SeasonFit:
     """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
@@ -160,10 +175,17 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             values[k] = low[k] = high[k] = float("nan")
             continue
         low[k], high[k] = values[k] * math.exp(-half), values[k] * math.exp(half)
+    missing = {}
+    if calibrated and imp_kinds(rec, d.blocks) != {"constrained", "normal"}:
+        # The intervals' floors were set on seasons with the IMP campaign in them; without a
+        # constrained and a normal night τ's cover half the houses: not given, HLC's hold.
+        for k in ("tau_h", "c_m_j_per_k"):
+            values[k] = low[k] = high[k] = float("nan")
+            missing[k] = NEEDS_IMP
     return SeasonFit({k: float(values[k]) for k in LUMPED}, low, high, owner, imp,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
-                     signature(rec))
+                     signature(rec), missing=missing)
 
 
 def signature(rec: SeasonRecord) -> float:
@@ -218,7 +240,8 @@ def format_season(fit: SeasonFit) -> list[str]:
                                    ("c_m_j_per_k", "C_m", "kWh/K", 1 / 3.6e6)):
         v = fit.values[key]
         if not math.isfinite(v):
-            lines.append(f"  {name:<5}{'—':>9} {unit:<6} not determined by the model")
+            why = fit.missing.get(key, "not determined by the model")
+            lines.append(f"  {name:<5}{'—':>9} {unit:<6} {why}")
             continue
         lines.append(f"  {name:<5}{v * scale:9.2f} {unit:<6} 95 % {fit.low[key] * scale:.2f} – "
                      f"{fit.high[key] * scale:.2f}")
