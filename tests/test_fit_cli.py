@@ -26,6 +26,25 @@ def run_cli(*args: str, env_model_dir: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300, env=env)
 
 
+#: Runs the CLI, then says on its last stderr line whether it had loaded torch.
+_TORCH = ("import sys\ntry:\n    from impctl.cli import main\n    main()\nfinally:\n"
+          "    print('torch loaded:', 'torch' in sys.modules, file=sys.stderr)")
+
+
+def refused(*args: str, env_model_dir: Path) -> str:
+    """The one error line of a refused ``impctl`` command, which must not have loaded torch:
+    a file with too little in it is refused before the seconds torch takes to load."""
+    import os
+
+    env = {**os.environ, "IMPCTL_MODEL_DIR": str(env_model_dir)}
+    res = subprocess.run([sys.executable, "-c", _TORCH, *args], capture_output=True, text=True,
+                         timeout=300, env=env)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and res.stdout == "" and len(lines) == 2, res.stderr
+    assert lines[1] == "torch loaded: False", res.stderr
+    return lines[0]
+
+
 def write_nights(path: Path, nights, labelled: bool = True) -> Path:
     frames = []
     for n in nights:
@@ -82,11 +101,9 @@ def test_fit_prints_table_writes_json_and_plot(tmp_path, nights):
 def test_fit_refuses_nights_without_a_constrained_one(tmp_path, nights):
     csv = write_nights(tmp_path / "normal.csv", [n for n in nights if n.kind == "normal"])
     out = tmp_path / "fit.json"
-    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
-                  env_model_dir=tmp_path / "no-models")
-    assert res.returncode == 2
-    assert "constrained night" in res.stderr and "τ" in res.stderr
-    assert len(res.stderr.strip().splitlines()) == 1
+    error = refused("fit", "--nights", str(csv), "--json", str(out),
+                    env_model_dir=tmp_path / "no-models")
+    assert "constrained night" in error and "τ" in error
     assert not out.exists()
 
 
@@ -99,9 +116,8 @@ def test_fit_refuses_a_too_short_constrained_night(tmp_path, nights):
                         n.t_out_c[keep], n.q_hc_w[keep])
         short.append(n)
     csv = write_nights(tmp_path / "short.csv", short)
-    res = run_cli("fit", "--nights", str(csv), env_model_dir=tmp_path / "no-models")
-    assert res.returncode == 2
-    assert "under the 3 h minimum" in res.stderr
+    error = refused("fit", "--nights", str(csv), env_model_dir=tmp_path / "no-models")
+    assert "under the 3 h minimum" in error
 
 
 def test_fit_reads_hourly_unlabelled_nights(tmp_path):
