@@ -26,6 +26,25 @@ def run_cli(*args: str, env_model_dir: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300, env=env)
 
 
+#: Runs the CLI, then says on its last stderr line whether it had loaded torch.
+_TORCH = ("import sys\ntry:\n    from impctl.cli import main\n    main()\nfinally:\n"
+          "    print('torch loaded:', 'torch' in sys.modules, file=sys.stderr)")
+
+
+def refused(*args: str, env_model_dir: Path) -> str:
+    """The one error line of a refused ``impctl`` command, which must not have loaded torch:
+    a file with too little in it is refused before the seconds torch takes to load."""
+    import os
+
+    env = {**os.environ, "IMPCTL_MODEL_DIR": str(env_model_dir)}
+    res = subprocess.run([sys.executable, "-c", _TORCH, *args], capture_output=True, text=True,
+                         timeout=300, env=env)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and res.stdout == "" and len(lines) == 2, res.stderr
+    assert lines[1] == "torch loaded: False", res.stderr
+    return lines[0]
+
+
 def write_nights(path: Path, nights, labelled: bool = True) -> Path:
     frames = []
     for n in nights:
@@ -82,11 +101,9 @@ def test_fit_prints_table_writes_json_and_plot(tmp_path, nights):
 def test_fit_refuses_nights_without_a_constrained_one(tmp_path, nights):
     csv = write_nights(tmp_path / "normal.csv", [n for n in nights if n.kind == "normal"])
     out = tmp_path / "fit.json"
-    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
-                  env_model_dir=tmp_path / "no-models")
-    assert res.returncode == 2
-    assert "constrained night" in res.stderr and "τ" in res.stderr
-    assert len(res.stderr.strip().splitlines()) == 1
+    error = refused("fit", "--nights", str(csv), "--json", str(out),
+                    env_model_dir=tmp_path / "no-models")
+    assert "constrained night" in error and "τ" in error
     assert not out.exists()
 
 
@@ -99,9 +116,8 @@ def test_fit_refuses_a_too_short_constrained_night(tmp_path, nights):
                         n.t_out_c[keep], n.q_hc_w[keep])
         short.append(n)
     csv = write_nights(tmp_path / "short.csv", short)
-    res = run_cli("fit", "--nights", str(csv), env_model_dir=tmp_path / "no-models")
-    assert res.returncode == 2
-    assert "under the 3 h minimum" in res.stderr
+    error = refused("fit", "--nights", str(csv), env_model_dir=tmp_path / "no-models")
+    assert "under the 3 h minimum" in error
 
 
 def test_fit_reads_hourly_unlabelled_nights(tmp_path):
@@ -170,16 +186,25 @@ def test_the_configured_night_gain_reaches_the_fit_and_is_stated(tmp_path, night
     assert bad.returncode == 2 and "--night-gain-w" in bad.stderr
 
 
-def test_declared_zero_gain_is_known_and_its_sd_only_when_given(tmp_path, nights):
+@pytest.fixture(scope="module")
+def zero_gain(tmp_path_factory, nights) -> tuple[subprocess.CompletedProcess, dict, Path]:
+    """``impctl fit --night-gain-w 0`` on the nights (result, its JSON, the nights file): the
+    one run of these options that the two tests below each read (a fit takes seconds)."""
+    tmp = tmp_path_factory.mktemp("zero-gain")
+    csv, out = write_nights(tmp / "nights.csv", nights), tmp / "fit.json"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0",
+                  env_model_dir=tmp / "no-models")
+    assert res.returncode == 0, res.stderr
+    return res, json.loads(out.read_text()), csv
+
+
+def test_declared_zero_gain_is_known_and_its_sd_only_when_given(tmp_path, zero_gain):
     """``--night-gain-w 0`` (an empty house) is 0 ± 0 W, declared — not 0 ± 87 W; with
     ``--night-gain-sd-w`` the declared SD is carried into the intervals."""
-    csv = write_nights(tmp_path / "nights.csv", nights)
+    res, data, csv = zero_gain
     out = tmp_path / "fit.json"
-    res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0",
-                  env_model_dir=tmp_path / "no-models")
-    assert res.returncode == 0, res.stderr
     assert "± 87" not in res.stdout and "night gain declared 0 W (known, ± 0 W)" in res.stdout
-    gain = json.loads(out.read_text())["fit"]["night_gain"]
+    gain = data["fit"]["night_gain"]
     assert (gain["value_w"], gain["sd_w"], gain["source"]) == (0.0, 0.0, "declared")
     res = run_cli("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0",
                   "--night-gain-sd-w", "40", env_model_dir=tmp_path / "no-models")
@@ -192,17 +217,14 @@ def test_declared_zero_gain_is_known_and_its_sd_only_when_given(tmp_path, nights
     assert alone.returncode == 2 and "--night-gain-w" in alone.stderr
 
 
-def test_the_instruments_are_assumed_unless_declared(tmp_path, nights):
+def test_the_instruments_are_assumed_unless_declared(tmp_path, zero_gain):
     """Sensor offsets and the meter's error: assumed (and printed so) unless the installer
     declares them; a declared value is used, said to be declared, and moves the intervals."""
-    csv = write_nights(tmp_path / "nights.csv", nights)
+    assumed, wide, csv = zero_gain  # nothing declared but the gain
     out = tmp_path / "fit.json"
     base = ("fit", "--nights", str(csv), "--json", str(out), "--night-gain-w", "0")
-    assumed = run_cli(*base, env_model_dir=tmp_path / "no-models")
-    assert assumed.returncode == 0, assumed.stderr
     assert ("type B in the intervals: T_air sensor offset SD 0.5 K (assumed), T_out sensor 1 K "
             "(assumed), heat meter ±5 % (assumed); declare what you know") in assumed.stdout
-    wide = json.loads(out.read_text())
     declared = run_cli(*base, "--t-air-offset-sd-k", "0.1", "--t-out-offset-sd-k", "0.2",
                        "--meter-error", "0.01", env_model_dir=tmp_path / "no-models")
     assert declared.returncode == 0, declared.stderr

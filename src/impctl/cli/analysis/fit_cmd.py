@@ -100,8 +100,6 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if night_gain_sd_w is not None and night_gain_w is None:
         raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
                          "too")
-    # torch (the fit) only now: a bad option is refused in a moment
-    from ...fit.estimator import NightFit
     from ...fit.household import (
         FitOptions,
         choose_nights,
@@ -109,10 +107,6 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         household_classes,
         read_household,
     )
-    from ...fit.prior import with_class_probabilities
-    from ...fit.result.plot import plot_fit
-    from ...fit.result.report import fit_to_dict
-    from ...fit.result.table import format_table
     from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")
@@ -129,6 +123,14 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     refusal = chosen.too_little(nights_path)
     if refusal is not None:
         raise refusal
+    # torch (the fit) only now: a bad option or a file with too little in it is refused
+    # without the seconds loading it takes
+    from ...fit.estimator import NightFit
+    from ...fit.prior import with_class_probabilities
+    from ...fit.result.plot import plot_fit
+    from ...fit.result.report import fit_to_dict
+    from ...fit.result.table import format_table
+
     classes = household_classes(chosen.cut, model_dir)
     notes = [*classes.notes, *([chosen.note] if chosen.note else [])]
     click.echo(f"fitting {len(chosen.chosen)} nights "

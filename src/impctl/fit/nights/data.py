@@ -23,7 +23,7 @@ from ...imp.night import NightSamples
 from ...imp.plan import EMISSION_LAG_H
 from ...imp.protocol import MIN_NIGHT_H
 from ...model.house import H_MS, LAMBDA_AT, am_factor
-from ..ode.parameters import CLASSIFIED, PARAM_NAMES, PHYSICAL_BOUNDS, eq63_margin
+from ..ode.names import CLASSIFIED, PARAM_NAMES, PHYSICAL_BOUNDS, eq63_margin
 from .quality import power_usable
 
 
