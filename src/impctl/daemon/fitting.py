@@ -125,13 +125,14 @@ def _export(base: list[str], cfg: Config, nights_csv: Path) -> list[str]:
             str(nights_csv), "--force"]
 
 
-def season_refreshable(store: Store) -> int | None:
-    """The newest fit's id when it holds a season model a morning refit can start from."""
+def season_refreshable(store: Store) -> tuple[int, dict] | None:
+    """The newest fit's (id, result) when it holds a season model a morning refit can start
+    from."""
     newest = store.newest_fit()
     if newest is None:
         return None
     theta = (newest[1].get("season") or {}).get("theta")
-    return newest[0] if isinstance(theta, dict) else None
+    return newest if isinstance(theta, dict) else None
 
 
 async def refresh_season(store: Store, cfg: Config) -> dict | None:
@@ -139,14 +140,15 @@ async def refresh_season(store: Store, cfg: Config) -> dict | None:
     started where the newest fit's ended, on every recorded night; its result replaces that
     fit's season block. None when there is nothing to start from, a step failed (logged, an
     event kept) or a full fit stored a newer result meanwhile."""
-    fit_id = season_refreshable(store)
-    if fit_id is None:
+    newest = season_refreshable(store)
+    if newest is None:
         return None
+    fit_id, last = newest
     work = Path(cfg.state_dir) / "fit"
     work.mkdir(parents=True, exist_ok=True)
     nights_csv, last_json, out_json = (work / "season_nights.csv", work / "season_from.json",
                                        work / "season.json")
-    last_json.write_text(json.dumps(store.newest_fit()[1]))
+    last_json.write_text(json.dumps(last))
     base = _base()
     steps = [_export(base, cfg, nights_csv),
              [*base, "season", "--nights", str(nights_csv), "--warm-start", str(last_json),
