@@ -186,3 +186,21 @@ def test_the_daemon_refits_the_season_when_an_owner_night_closes(tmp_path, owner
     # open, which the refit stores as missing (the values are the store-level test's)
     assert all(season[k]["value"] is None or season[k]["low"] < season[k]["value"]
                for k in KEYS)
+
+
+def test_a_record_of_one_row_is_not_exported_and_the_file_reads(tmp_path, owner_nights):
+    """A daemon started a minute before noon leaves a record of one row: the export leaves it
+    out, else the NIGHTS reader refuses the whole file and no fit runs again."""
+    from impctl.store.export import export_nights
+
+    with Store(tmp_path / "impctl.db") as store:
+        _store_records(store, owner_nights[:6])
+        start = owner_nights[5].start.to_pydatetime() + timedelta(days=1)
+        rid = store.open_owner_record(start, start + timedelta(days=1))
+        store.add_owner_row(Sample(night_id=rid, ts=start, t_air_c=21.0, t_out_c=0.0,
+                                   q_hc_w=2000.0, setpoint_c=21.0, dhw_share=0.0,
+                                   defrost=False, snapshots=1))
+        store.close_owner_record(rid, ["data missing"], 21.0, start, start)
+        n = export_nights(store, tmp_path / "nights.csv", "csv")
+    nights = read_nights(tmp_path / "nights.csv", TZ)
+    assert len(nights) == 6 and n == sum(len(x.time_s) for x in owner_nights[:6])

@@ -47,14 +47,15 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
                 valid_only: bool = True, owner: bool = True) -> list[dict]:
     """One dict per usable sample of the selected nights (valid ones by default) and, with
     ``owner``, of every owner record (labelled or not; with ``night_ids`` those among them),
-    nights and records in the order of their first row."""
+    nights and records in the order of their first row. A night or record with a single row
+    is left out: nothing can be read from one row, and the NIGHTS reader refuses it."""
     kinds = ("constrained", "normal", "owner") if owner else ("constrained", "normal")
     nights = [n for n in store.nights(ids=night_ids, kinds=kinds)
               if n.kind == "owner" or not valid_only or n.valid]
     blocks = []
     for night in nights:
         rows = _night_rows(store, night)
-        if rows:
+        if len(rows) >= 2:  # e.g. a daemon started a minute before its record's noon
             blocks.append(rows)
     blocks.sort(key=lambda rows: rows[0]["_ts"])
     out = []
