@@ -204,3 +204,27 @@ def test_a_record_of_one_row_is_not_exported_and_the_file_reads(tmp_path, owner_
         n = export_nights(store, tmp_path / "nights.csv", "csv")
     nights = read_nights(tmp_path / "nights.csv", TZ)
     assert len(nights) == 6 and n == sum(len(x.time_s) for x in owner_nights[:6])
+
+
+def test_a_record_still_recording_is_not_exported(tmp_path, owner_nights):
+    """The day being recorded has no labels yet (a setpoint change, hot water, missing data
+    are found when it closes): the export and so every fit wait until it is closed."""
+    from impctl.store.export import export_nights
+
+    with Store(tmp_path / "impctl.db") as store:
+        _store_records(store, owner_nights[:6])
+        last = owner_nights[6]
+        start = last.start.to_pydatetime()
+        rid = store.open_owner_record(start, start + timedelta(days=1))
+        for i, t in enumerate(last.time_s[:20]):
+            store.add_owner_row(Sample(
+                night_id=rid, ts=start + timedelta(seconds=float(t)),
+                t_air_c=float(last.t_air_c[i]), t_out_c=float(last.t_out_c[i]),
+                q_hc_w=float(last.q_hc_w[i]), setpoint_c=21.0, dhw_share=0.0,
+                defrost=False, snapshots=3))
+        n_open = export_nights(store, tmp_path / "open.csv", "csv")
+        store.close_owner_record(rid, [], 21.0, start, start + timedelta(hours=2))
+        n_closed = export_nights(store, tmp_path / "closed.csv", "csv")
+    assert len(read_nights(tmp_path / "open.csv", TZ)) == 6
+    assert n_open == sum(len(x.time_s) for x in owner_nights[:6])
+    assert len(read_nights(tmp_path / "closed.csv", TZ)) == 7 and n_closed == n_open + 20

@@ -46,12 +46,14 @@ NUMBER_COLUMNS = (*HOUSE_COLUMNS, "p_el_w", "t_flow_c", "t_return_c", "t_flow_ta
 def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
                 valid_only: bool = True, owner: bool = True) -> list[dict]:
     """One dict per usable sample of the selected nights (valid ones by default) and, with
-    ``owner``, of every owner record (labelled or not; with ``night_ids`` those among them),
-    nights and records in the order of their first row. A night or record with a single row
-    is left out: nothing can be read from one row, and the NIGHTS reader refuses it."""
+    ``owner``, of every closed owner record (labelled or not; with ``night_ids`` those among
+    them), nights and records in the order of their first row. A record still recording is
+    left out: its labels (a setpoint changed, hot water, data missing) come when it closes. A
+    night or record with a single row is left out: nothing can be read from one row, and the
+    NIGHTS reader refuses it."""
     kinds = ("constrained", "normal", "owner") if owner else ("constrained", "normal")
     nights = [n for n in store.nights(ids=night_ids, kinds=kinds)
-              if n.kind == "owner" or not valid_only or n.valid]
+              if (n.state == "done" if n.kind == "owner" else not valid_only or n.valid)]
     blocks = []
     for night in nights:
         rows = _night_rows(store, night)
