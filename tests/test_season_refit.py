@@ -228,3 +228,20 @@ def test_a_record_still_recording_is_not_exported(tmp_path, owner_nights):
     assert len(read_nights(tmp_path / "open.csv", TZ)) == 6
     assert n_open == sum(len(x.time_s) for x in owner_nights[:6])
     assert len(read_nights(tmp_path / "closed.csv", TZ)) == 7 and n_closed == n_open + 20
+
+
+def test_impctl_fit_computes_the_season_beside_the_imp_fit_and_alone_alike(owner_nights):
+    """``impctl fit`` runs the season model in a forked process while torch loads; what comes
+    back is what the model gives in the command's own process, and a child that dies is
+    computed again in the parent."""
+    from impctl.cli.analysis.fit_cmd import _season, _SeasonJob
+
+    alone, _, curve = _season(owner_nights)
+    job = _SeasonJob(owner_nights)
+    beside, note = job.result()
+    assert job._proc is not None and job._proc.exitcode == 0 and note is None
+    assert beside.as_dict() == {**alone.as_dict(), "convergence": curve}
+    killed = _SeasonJob(owner_nights)
+    killed._proc.kill()
+    again, _ = killed.result()
+    assert killed._proc.exitcode != 0 and again.as_dict() == beside.as_dict()

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import multiprocessing
 import os
 import tempfile
 import threading
@@ -123,6 +124,8 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     refusal = chosen.too_little(nights_path)
     if refusal is not None:
         raise refusal
+    # The season model needs no torch: it runs beside the loading of torch and the IMP fit.
+    season_job = _SeasonJob(nights)
     # torch (the fit) only now: a bad option or a file with too little in it is refused
     # without the seconds loading it takes
     from ...fit.estimator import NightFit
@@ -146,7 +149,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         raise refusal
     summary = fit_to_dict(estimator, classes.classes, notes)
     click.echo(format_table(summary))
-    season, season_note = _season(nights)
+    season, season_note = season_job.result()
     if season is not None:
         summary["season"] = season.as_dict()
     elif season_note is not None:
@@ -159,20 +162,71 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         click.echo(f"plot written to {plot_path}")
 
 
-def _season(nights: list):
-    """The season model of the owner nights and the IMP nights together, printed."""
-    from ...season.convergence import convergence, format_convergence
-    from ...season.fit import fit_nights, format_season
+class _SeasonJob:
+    """The season model of the owner nights and the IMP nights together, computed in a forked
+    process while the parent loads torch and fits the IMP nights (two cores: the season's
+    seconds vanish from the wall time), or here when there is no fork or the child failed."""
 
-    if not any(n.kind == "owner" for n in nights):
-        return None, None
-    with _ticking("the season model"):
-        season, note = fit_nights(nights)
-        curve = convergence(nights, season) if season is not None else []
-    if season is not None:
-        click.echo("\n".join(format_season(season) + format_convergence(curve)))
-        season.convergence = curve
-    return season, note
+    def __init__(self, nights: list) -> None:
+        self._nights = nights
+        self._conn = self._proc = None
+        if not any(n.kind == "owner" for n in nights):
+            return
+        try:
+            ctx = multiprocessing.get_context("fork")
+        except ValueError:  # no fork on this platform
+            return
+        # imported once, here: the child inherits them and the parent formats with them
+        from ...season import convergence, fit  # noqa: F401
+        parent, child = ctx.Pipe(duplex=False)
+        # daemon: the child dies with the command (Ctrl-C, an error in the IMP fit)
+        self._proc = ctx.Process(target=_season_child, args=(nights, child), daemon=True)
+        self._proc.start()
+        child.close()
+        self._conn = parent
+
+    def result(self):
+        """(the season fit or None, a note or None), printed."""
+        if not any(n.kind == "owner" for n in self._nights):
+            return None, None
+        out = None
+        if self._conn is not None:
+            with _ticking("the season model"):
+                try:
+                    out = self._conn.recv()
+                except (EOFError, OSError):  # the child died: compute it here
+                    out = None
+            self._proc.join()
+        if out is None:
+            with _ticking("the season model"):
+                out = _season(self._nights)
+        season, note, curve = out
+        if season is not None:
+            from ...season.convergence import format_convergence
+            from ...season.fit import format_season
+
+            click.echo("\n".join(format_season(season) + format_convergence(curve)))
+            season.convergence = curve
+        return season, note
+
+
+def _season(nights: list) -> tuple:
+    """(season fit or None, note or None, convergence rows)."""
+    from ...season.convergence import convergence
+    from ...season.fit import fit_nights
+
+    season, note = fit_nights(nights)
+    curve = convergence(nights, season) if season is not None else []
+    return season, note, curve
+
+
+def _season_child(nights: list, conn) -> None:
+    try:
+        conn.send(_season(nights))
+    except Exception:  # noqa: BLE001 - the parent computes it again and sees the error itself
+        conn.send(None)
+    finally:
+        conn.close()
 
 
 @contextlib.contextmanager
