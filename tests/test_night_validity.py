@@ -61,3 +61,55 @@ def test_the_gateway_and_the_fit_agree_on_usable_hours(tmp_path, minutes, q_of, 
     assert kept is fit_keeps
     short = any("h of data after the emission lag" in r for r in reasons)
     assert short is (not fit_keeps), reasons
+
+
+def _stored_night(store: Store, minutes, missing=()) -> int:
+    """One constrained night, cooling from 23 °C, ended at its last sample; assessed."""
+    from impctl.controller.assess import record_end
+    from impctl.controller.plan import NightRequest
+
+    nid = store.create_night("constrained", 21.0, START, START + timedelta(hours=7))
+    for m in minutes:
+        store.add_sample(Sample(nid, START + timedelta(minutes=m),
+                                t_air_c=None if m in missing else 23.0 - 0.01 * m,
+                                t_out_c=-3.0, q_hc_w=0.0, p_el_w=0.0, working_function=0,
+                                defrost=False, error_bits=0, loop_mode=0, setpoint_c=21.0,
+                                dhw_active=False))
+    req = NightRequest("constrained", 21.0, START, START + timedelta(hours=7))
+    record_end(store, NightPolicy(sample_interval_s=300), nid, req, "done",
+               ["reached T_min 20.0 °C"], START + timedelta(minutes=minutes[-1]))
+    return nid
+
+
+def test_a_night_too_short_for_the_fit_and_right_otherwise_is_the_season_models(tmp_path):
+    """Reached T_min after 100 min: too short for the IMP fit, not valid — yet its cooling is
+    exported, labelled, read as a constrained night and left out of the IMP fit; a short night
+    with a sensor missing too is not exported at all."""
+    from impctl.imp.night import SHORT_NOTE, split_owner
+    from impctl.imp.nights_csv import read_nights
+    from impctl.imp.protocol import SHORT_NIGHT
+    from impctl.store.export import export_nights
+
+    minutes = list(np.arange(0, 101, 5.0))
+    with Store(tmp_path / "impctl.sqlite") as store:
+        short = _stored_night(store, minutes)
+        blind = _stored_night(store, minutes, missing=set(minutes[5:10]))
+        nights = {x.id: x for x in store.nights()}
+        n = export_nights(store, tmp_path / "nights.csv", "csv")
+    assert not nights[short].valid and SHORT_NIGHT in nights[short].reasons, nights[short]
+    assert not nights[blind].valid and SHORT_NIGHT not in nights[blind].reasons
+    assert n == len(minutes)
+    [read] = read_nights(tmp_path / "nights.csv", "UTC")
+    assert (read.kind, read.label, len(read.time_s)) == ("constrained", SHORT_NIGHT, n)
+    imp, note = split_owner([read])
+    assert imp == [] and note == f"{SHORT_NOTE} (1)"
+
+
+def test_a_night_ended_at_t_min_is_covered_up_to_its_end(tmp_path):
+    """Through the gateway's own end of night (record_end): 4½ h of cooling to T_min is a
+    valid night — its coverage counts up to where it ended, not to the window's end (it was
+    judged before its end was stored, and every night ended early was called not valid)."""
+    with Store(tmp_path / "impctl.sqlite") as store:
+        nid = _stored_night(store, list(np.arange(0, 271, 5.0)))
+        night = store.night(nid)
+    assert night.valid and night.reasons == ("reached T_min 20.0 °C",), night

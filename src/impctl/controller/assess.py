@@ -6,7 +6,7 @@ import sqlite3
 from datetime import datetime
 
 from ..errors import sqlite_problem
-from ..imp.protocol import MIN_NIGHT_H, Q_ON_W
+from ..imp.protocol import MIN_NIGHT_H, Q_ON_W, SHORT_NIGHT
 from ..store import Night, Store
 from .heat_output import heat_output_problems
 from .plan import NightPolicy, NightRequest
@@ -15,8 +15,10 @@ from .plan import NightPolicy, NightRequest
 _DHW = 1
 
 
-def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool, list[str]]:
-    """Judge the samples of one night inside its window.
+def assess_night(store: Store, night_id: int, policy: NightPolicy,
+                 ended: datetime | None = None) -> tuple[bool, list[str]]:
+    """Judge the samples of one night inside its window, ended at ``ended`` (default: the
+    stored end; the window's end when there is none).
 
     Returns
     -------
@@ -27,13 +29,16 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     defrost and DHW each ≤ 10 % of the samples;
     no error bits; T_air, T_out and Q_HC each missing in ≤ 10 % of the samples; Q_HC
     believable against electrical power, COP and compressor state, not stuck, within capacity
-    (:mod:`.heat_output`).
+    (:mod:`.heat_output`). A constrained night whose only failing check is its length is
+    marked :data:`~impctl.imp.protocol.SHORT_NIGHT`: its cooling is the season model's.
     """
     night = store.night(night_id)
     samples = [s for s in store.samples(night_id)
                if night.window_start <= s.ts <= night.window_end]
     reasons: list[str] = []
-    end = night.ended or night.window_end
+    # The end as it happened: a night ended at T_min is covered up to there, not to the
+    # window's end (the verdict is judged before the end is stored with it).
+    end = ended or night.ended or night.window_end
     covered_until = min(end, night.window_end)
     span_s = max(0.0, (covered_until - night.window_start).total_seconds())
     expected = span_s / policy.sample_interval_s
@@ -44,10 +49,11 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
     # never one the fit then skips.
     usable_s = _usable_s([s for s in samples if s.ts <= end], night.kind,
                          policy.emission_lag_h)
+    short = None
     if usable_s < MIN_NIGHT_H * 3600 - 1e-6:
         after = " after the emission lag" if night.kind == "constrained" else ""
-        reasons.append(f"only {max(usable_s, 0) / 3600:.1f} h of data{after} "
-                       f"(< {MIN_NIGHT_H:g} h)")
+        short = f"only {max(usable_s, 0) / 3600:.1f} h of data{after} (< {MIN_NIGHT_H:g} h)"
+        reasons.append(short)
     if expected > 0:
         coverage = len(samples) / (expected + 1)
         if coverage < policy.min_coverage:
@@ -73,6 +79,8 @@ def assess_night(store: Store, night_id: int, policy: NightPolicy) -> tuple[bool
         if frac > 0.10:
             reasons.append(f"{label} missing in {frac:.0%} of samples")
     reasons.extend(heat_output_problems(samples))
+    if night.kind == "constrained" and len(reasons) == 1 and reasons[0] == short:
+        reasons.append(SHORT_NIGHT)
     return not reasons, reasons
 
 
@@ -104,7 +112,7 @@ def record_end(store: Store, policy: NightPolicy, night_id: int, req: NightReque
         if state == "refused":
             store.end_night(night_id, state, ended, False, reasons)
         else:
-            valid, why = assess_night(store, night_id, policy)
+            valid, why = assess_night(store, night_id, policy, ended)
             store.end_night(night_id, state, ended, valid and state == "done", reasons + why)
         return store.night(night_id), None
     except sqlite3.Error as exc:

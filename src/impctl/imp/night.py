@@ -110,13 +110,18 @@ class NightSamples:
 
 #: Why the IMP fit, the classifiers and the campaign leave owner nights out (one line, once).
 OWNER_NOTE = "owner nights: read by the season model, not by the IMP fit"
+#: ... and the constrained nights that reached T_min too soon for them (label SHORT_NIGHT).
+SHORT_NOTE = "short constrained nights: read by the season model, not by the IMP fit"
 
 
 def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | None]:
-    """(the IMP nights, a note when owner nights were left out): what the fit, the
-    classifiers and ``impctl campaign next`` take; the owner nights and the IMP nights'
-    pre-heats (``phase``; part of their nights, not nights of their own) are the season
-    model's."""
-    imp = [n for n in nights if n.kind != "owner" and not n.phase]
+    """(the IMP nights, a note when nights were left out): what the fit, the classifiers and
+    ``impctl campaign next`` take; the owner nights, the IMP nights' pre-heats (``phase``;
+    part of their nights, not nights of their own) and the short constrained nights
+    (``label``: :data:`~impctl.imp.protocol.SHORT_NIGHT`) are the season model's."""
+    imp = [n for n in nights if n.kind != "owner" and not n.phase and not n.label]
     left = sum(n.kind == "owner" for n in nights)
-    return imp, (None if not left else f"{OWNER_NOTE} ({left})")
+    short = sum(n.kind != "owner" and not n.phase and bool(n.label) for n in nights)
+    notes = [*([f"{OWNER_NOTE} ({left})"] if left else []),
+             *([f"{SHORT_NOTE} ({short})"] if short else [])]
+    return imp, ("; ".join(notes) or None)

@@ -5,8 +5,10 @@ pump's curve: the heating water and the hot water, and an owner night's label.
 * ``t_flow_target_c`` — the heat pump's calculated flow target [°C] (2128): the heating
   curve it runs;
 * ``dhw`` — share of the row's time charging hot water (0–1; a single reading 0 or 1);
-* ``label`` — why an owner night is not the owner's ordinary night, empty when it is; only
-  owner nights carry one, the same on every row of the night.
+* ``label`` — why an owner night is not the owner's ordinary night, empty when it is; the
+  same on every row of the night. A constrained night carries one label only,
+  :data:`~impctl.imp.protocol.SHORT_NIGHT` (it reached T_min too soon for the IMP fit: the
+  season model reads it, the IMP fit does not); a normal night none.
 
 Unlike the columns of :mod:`.night_extras` these are checked: a cell that is not a number or
 lies outside its range refuses the file with one line naming the row (an empty cell is
@@ -19,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
+from .protocol import SHORT_NIGHT
 
 #: Per-sample columns and their ranges: heating water between freezing and boiling.
 SERIES_COLUMNS: dict[str, tuple[float, float, str]] = {
@@ -45,8 +48,9 @@ def check_series(table: pd.DataFrame, path, row) -> None:
 
 
 def check_labels(table: pd.DataFrame, groups, kind_of, path, row) -> None:
-    """Refuse a ``label`` on a night that is not an owner night, or one that changes within a
-    night. ``groups``: (night id, row indices); ``kind_of(night id, indices)``: its kind."""
+    """Refuse a ``label`` on a night that is not an owner night (but a constrained night's
+    :data:`~impctl.imp.protocol.SHORT_NIGHT`), or one that changes within a night.
+    ``groups``: (night id, row indices); ``kind_of(night id, indices)``: its kind."""
     if LABEL not in table:
         return
     labels = table[LABEL].to_numpy(dtype=object)
@@ -58,9 +62,12 @@ def check_labels(table: pd.DataFrame, groups, kind_of, path, row) -> None:
         if changed.any():
             raise InputError(f"night {night_id!r} changes label from {mine[0]!r}", path,
                              row(int(idx[int(np.argmax(changed))])))
-        if mine[0] and kind_of(night_id, idx) != "owner":
-            raise InputError(f"column 'label': only owner nights carry a label (night "
-                             f"{night_id!r} is not one)", path, row(int(idx[0])))
+        kind = kind_of(night_id, idx) if mine[0] else None
+        if mine[0] and kind != "owner" and not (kind == "constrained"
+                                                 and mine[0] == SHORT_NIGHT):
+            raise InputError(f"column 'label': only owner nights carry a label, and a "
+                             f"constrained night {SHORT_NIGHT!r} (night {night_id!r} is "
+                             f"{kind or 'of no kind'})", path, row(int(idx[0])))
 
 
 def series_fields(table: pd.DataFrame, idx: np.ndarray) -> dict:

@@ -33,6 +33,13 @@ Q_ON_W = 100.0
 #: (:func:`impctl.controller.assess.assess_night`), the fit's shortest night
 #: (``NightFit(min_night_h)``) and the bench's gateway nights read it (issue 14, branch h14w).
 MIN_NIGHT_H = 3.0
+#: A constrained night that reached T_min before MIN_NIGHT_H of cooling and failed nothing
+#: else: too short for the IMP fit, yet the house cooling from T_max is what gives the season
+#: model its time constant (in a house that cools fast, the only constrained nights there
+#: are). The gateway's verdict (a reason of the stored night) and the NIGHTS ``label`` of
+#: such a night: the season model reads it, the IMP fit, the classifiers and the campaign
+#: leave it out (:func:`impctl.imp.night.split_owner`).
+SHORT_NIGHT = "short night (read by the season model only)"
 #: How a constrained night ends on the gateway before T_min (:class:`impctl.controller.plan.
 #: NightPolicy`, mirrored by the simulations; the rule itself is :func:`anticipates_t_min`): the
 #: least-squares trend of T_air over the last TREND_WINDOW_S [s] (at least MIN_TREND_SPAN_S)

@@ -32,6 +32,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ..errors import InputError
+from ..imp.protocol import SHORT_NIGHT
 from .db import Store
 
 COLUMNS = ("timestamp", "t_air", "t_out", "q_hc", "setpoint", "heating", "night", "kind",
@@ -47,13 +48,16 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
                 valid_only: bool = True, owner: bool = True) -> list[dict]:
     """One dict per usable sample of the selected nights (valid ones by default) and, with
     ``owner``, of every closed owner record (labelled or not; with ``night_ids`` those among
-    them), nights and records in the order of their first row. A record still recording is
+    them), nights and records in the order of their first row. A constrained night too short
+    for the IMP fit and wrong in nothing else comes too, labelled
+    :data:`~impctl.imp.protocol.SHORT_NIGHT` (the season model's). A record still recording is
     left out: its labels (a setpoint changed, hot water, data missing) come when it closes. A
     night or record with a single row is left out: nothing can be read from one row, and the
     NIGHTS reader refuses it."""
     kinds = ("constrained", "normal", "owner") if owner else ("constrained", "normal")
     nights = [n for n in store.nights(ids=night_ids, kinds=kinds)
-              if (n.state == "done" if n.kind == "owner" else not valid_only or n.valid)]
+              if (n.state == "done" if n.kind == "owner"
+                  else not valid_only or n.valid or _short(n))]
     blocks = []
     for night in nights:
         rows = _night_rows(store, night)
@@ -68,10 +72,16 @@ def nights_rows(store: Store, night_ids: Iterable[int] | None = None,
     return out
 
 
+def _short(night) -> bool:
+    """A constrained night that reached T_min too soon for the IMP fit and failed nothing
+    else: exported, labelled, for the season model."""
+    return night.kind == "constrained" and night.state == "done" and SHORT_NIGHT in night.reasons
+
+
 def _night_rows(store: Store, night) -> list[dict]:
     house = {r.ts: r for r in store.house_inputs(night.id)}
     owner = night.kind == "owner"
-    label = "; ".join(night.reasons) if owner else ""
+    label = "; ".join(night.reasons) if owner else SHORT_NIGHT if _short(night) else ""
     rows = []
     for s in store.samples(night.id):
         # An IMP night samples from the moment it raises the setpoint: its pre-heat comes

@@ -3,8 +3,9 @@
 The daemon records the house read-only whenever no IMP night runs, nor its pre-heat: one owner
 record per local day from noon to noon, the IMP night's own span left out, labelled with what
 spoiled its night (:attr:`Season.labels`). The IMP nights are their window's rows — a constrained
-night up to where the gateway ended it; an invalid constrained night is not exported (the
-store's export keeps valid nights). Rows are interval means (``timestamps = "interval"``).
+night up to where the gateway ended it; one that reached T_min too soon for the IMP fit is
+labelled :data:`~impctl.imp.protocol.SHORT_NIGHT` (the store's export keeps valid nights and
+those). Rows are interval means (``timestamps = "interval"``).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from ...imp.night import NightSamples
+from ...imp.protocol import SHORT_NIGHT
 from .season import Season
 
 
@@ -36,11 +38,12 @@ def household_nights(s: Season, h: int, upto_sample: int | None = None) -> list[
         if kind == "constrained" and s.stop_sample[j, h] >= 0:
             end = int(s.stop_sample[j, h])
         imp[max(a - preheat, 0):min(end, n)] = True
-        if kind == "constrained" and not s.valid[j, h]:
-            continue
+        # switched off and ended by T_min before the IMP fit's hours (else it never started)
+        label = SHORT_NIGHT if kind == "constrained" and not s.valid[j, h] else ""
         if end - a >= 2 and end <= n:
-            spans.append((a, end, kind, date, float(s.t_set_c[j, h])))
-    out = [_night(s, h, a, b, kind, f"{date} {kind}", sp, "") for a, b, kind, date, sp in spans]
+            spans.append((a, end, kind, date, float(s.t_set_c[j, h]), label))
+    out = [_night(s, h, a, b, kind, f"{date} {kind}", sp, lab)
+           for a, b, kind, date, sp, lab in spans]
     hours = (s.index.hour + s.index.minute / 60.0).to_numpy()
     noon = np.flatnonzero(hours[:n] == 12.0)
     edges = [0, *[int(x) for x in noon if x > 0], n]
