@@ -24,8 +24,8 @@ generalised likelihood ratio for one step at an unknown night (:func:`glr`): the
 wandering over days, :func:`whitener`, by restricted maximum likelihood) is the house's own;
 where the nights carry the household electricity it stands in for the internal gains. The house
 has changed when the statistic passes :data:`THRESHOLD`. Run night after night
-(:func:`detect_sequence`), it alarms at most once per house-season in 20 when nothing changed:
-:data:`THRESHOLD` is the 95th percentile of the whole season's largest statistic on 640
+(:func:`detect_sequence`), it is set to alarm at most once per house-season in 20 when nothing
+changed: :data:`THRESHOLD` is the 95th percentile of the whole season's largest statistic on 640
 simulated house-seasons without a change (``bench/season_change.py --calibrate``, seeds 9001
 and 9002), none of them the bench's held-out households, which measure it. The step's night is
 the k of the largest statistic; its size δ̂_k [W/K] has a 95 % interval of ±z·se at that k,
