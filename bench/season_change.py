@@ -17,8 +17,17 @@ step's night and size, the coverage of the size's 95 % interval — each with a 
 interval over households. ``--method cusum`` runs the alternative measured before choosing: a
 two-sided CUSUM on the residuals of the same night model fitted to a reference window.
 
+``--calibrate`` sets the threshold instead: households without a step (seed 9001 by default,
+never the bench's 4242), the test run night after night through the whole season without
+stopping at an alarm, the season's largest statistic per household; the threshold is the 95th
+percentile of those (at most one house-season in 20 alarms), printed with the false alarms at
+:data:`impctl.season.change.THRESHOLD` and where in the season the largest statistics fall.
+``--no-house-electricity`` drops the household electricity from every night (most gateways
+record none), in either mode.
+
     python bench/season_change.py --households 200
     python bench/season_change.py --households 200 --method cusum
+    python bench/season_change.py --calibrate --households 640
 """
 
 from __future__ import annotations
@@ -37,6 +46,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from impctl.plant.params import RADIATORS, UNDERFLOOR  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.imp_run.season import SeasonConfig, simulate_season  # noqa: E402
 from impctl.population.imp_run.season_nights import household_nights  # noqa: E402
@@ -44,6 +54,10 @@ from impctl.population.realism import sample_params  # noqa: E402
 from impctl.season import change  # noqa: E402
 
 _SEASON = None
+#: The bench's held-out households' seed, and the calibration's (never the same).
+BENCH_SEED, CALIBRATION_SEED = 4242, 9001
+#: The false alarms per house-season the threshold is set for [-].
+FALSE_ALARM_TARGET = 0.05
 #: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
 #: for ≤ 1 in 20 false alarms on the calibration seasons).
 CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
@@ -84,13 +98,39 @@ def cusum_sequence(rows: change.NightRows) -> tuple[int, int]:
     return -1, -1
 
 
-def _run(job: tuple[int, str]) -> dict:
-    h, method = job
+def without_house_electricity(rows: change.NightRows) -> change.NightRows:
+    """``rows`` as a gateway without a household electricity meter exports them."""
+    return change.NightRows(rows.dates, rows.q_w, rows.dt_k, rows.fall_k, rows.defrost,
+                            rows.memory_k, np.full(len(rows), np.nan))
+
+
+def season_max(rows: change.NightRows) -> dict:
+    """The largest statistic over a whole season run night after night (no stop at an alarm):
+    its value [-], the nights read then, the step's night index k, and the first nights read
+    at which the statistic passed :data:`impctl.season.change.THRESHOLD` (None if never)."""
+    best: dict = {"max_stat": 0.0, "at_nights": None, "k": None, "first_alarm_nights": None}
+    for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
+        stat, k, _, _ = change.glr(rows.head(m))
+        if not math.isfinite(stat):
+            continue
+        if stat >= change.THRESHOLD and best["first_alarm_nights"] is None:
+            best["first_alarm_nights"] = m
+        if stat > best["max_stat"]:
+            best.update(max_stat=float(stat), at_nights=m, k=int(k))
+    return best
+
+
+def _run(job: tuple[int, str, bool]) -> dict:
+    h, method, no_house = job
     s = _SEASON
     t0 = time.perf_counter()
     rows = change.night_rows(household_nights(s, h))
+    if no_house:
+        rows = without_house_electricity(rows)
     row: dict = {"household": h, "nights": len(rows)}
-    if method == "glr":
+    if method == "calibrate":
+        row.update(season_max(rows))
+    elif method == "glr":
         at, c = change.detect_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
                    since_date=c.since_date if at > 0 else None,
@@ -169,6 +209,53 @@ def summarize(rows: list[dict], size: np.ndarray, night: np.ndarray, dates: list
     return out
 
 
+def calibrate_summary(rows: list[dict], hlc_w_k: np.ndarray, emitter: np.ndarray) -> dict:
+    """The threshold for :data:`FALSE_ALARM_TARGET` false alarms per house-season (the
+    season's largest statistic's 95th percentile, with a bootstrap interval), the false alarms
+    at the current threshold, and where they come from: emitter, house size, when in the
+    season, how many nights on the short side of the step."""
+    rng = np.random.default_rng(0)
+    by_h = sorted(rows, key=lambda r: r["household"])
+    mx = np.array([r["max_stat"] for r in by_h])
+    alarm = np.array([r["first_alarm_nights"] is not None for r in by_h], float)
+    q = 1.0 - FALSE_ALARM_TARGET
+    out: dict = {"households": len(mx), "threshold_now": change.THRESHOLD,
+                 "threshold_q95": float(np.quantile(mx, q)),
+                 "threshold_q95_ci": _boot(mx, lambda x: np.quantile(x, q), rng),
+                 "false_alarms_now": float(alarm.mean()),
+                 "false_alarms_now_ci": _boot(alarm, np.mean, rng)}
+    thirds = np.quantile(hlc_w_k, [1 / 3, 2 / 3])
+    groups = {"radiators": emitter == RADIATORS, "underfloor": emitter == UNDERFLOOR,
+              f"HLC < {thirds[0]:.0f} W/K": hlc_w_k < thirds[0],
+              f"HLC {thirds[0]:.0f}–{thirds[1]:.0f} W/K": (hlc_w_k >= thirds[0])
+              & (hlc_w_k < thirds[1]),
+              f"HLC ≥ {thirds[1]:.0f} W/K": hlc_w_k >= thirds[1]}
+    out["by_group"] = {k: {"households": int(g.sum()), "false_alarms": float(alarm[g].mean()),
+                           "q95": float(np.quantile(mx[g], q))} for k, g in groups.items()}
+    first = [r["first_alarm_nights"] for r in by_h if r["first_alarm_nights"] is not None]
+    out["first_alarm_nights"] = sorted(first)
+    short = [min(r["k"], r["at_nights"] - r["k"]) for r in by_h
+             if r["first_alarm_nights"] is not None]
+    out["short_side_nights_at_max"] = sorted(short)
+    return out
+
+
+def print_calibration(sm: dict, n: int, args: argparse.Namespace, sim_s: float) -> None:
+    """The calibration's figures (:func:`calibrate_summary`)."""
+    print(f"{n} households without a step (realistic plant, seed {args.seed}, {args.nights} "
+          f"nights{', no household electricity' if args.no_house_electricity else ''}); "
+          f"season simulated in {sim_s:.0f} s")
+    print(f"threshold for ≤ {100 * FALSE_ALARM_TARGET:.0f} % false alarms per house-season: "
+          f"{sm['threshold_q95']:.2f} {_fmt(sm['threshold_q95_ci'], 2)} (now "
+          f"{sm['threshold_now']:.2f}: {100 * sm['false_alarms_now']:.1f} % "
+          f"{_fmt(sm['false_alarms_now_ci'], 1, 100)} false alarms)")
+    for k, g in sm["by_group"].items():
+        print(f"  {k:>22}: {g['households']:4d} households, false alarms "
+              f"{100 * g['false_alarms']:5.1f} %, 95th percentile {g['q95']:.2f}")
+    print(f"  nights read at the first false alarm: {sm['first_alarm_nights']}")
+    print(f"  nights on the short side of the step then: {sm['short_side_nights_at_max']}")
+
+
 def _fmt(ci: tuple, digits: int = 0, scale: float = 1.0) -> str:
     return f"[{ci[0] * scale:.{digits}f}, {ci[1] * scale:.{digits}f}]"
 
@@ -177,19 +264,33 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=200)
     ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
-    ap.add_argument("--seed", type=int, default=4242)
+    ap.add_argument("--seed", type=int, default=None,
+                    help=f"default {BENCH_SEED}; with --calibrate {CALIBRATION_SEED}")
     ap.add_argument("--window-w-k", type=float, default=20.0,
                     help="the open window's step in HLC [W/K]")
     ap.add_argument("--first", type=int, default=25, help="earliest step night")
     ap.add_argument("--last", type=int, default=20, help="nights kept after the latest step")
     ap.add_argument("--method", choices=("glr", "cusum"), default="glr")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="set the threshold on households without a step (module docstring)")
+    ap.add_argument("--no-house-electricity", action="store_true",
+                    help="drop the household electricity from every night")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     args = ap.parse_args(argv)
+    if args.seed is None:
+        args.seed = CALIBRATION_SEED if args.calibrate else BENCH_SEED
+    if args.calibrate and args.seed == BENCH_SEED:
+        ap.exit(2, f"season_change.py: --seed {BENCH_SEED} is the bench's held-out seed; "
+                   "calibrate on another\n")
     global _SEASON
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
-    size, night = steps(n, args.nights, args.seed, args.window_w_k, args.first, args.last)
+    if args.calibrate:
+        size, night = np.zeros(n), np.zeros(n, int)
+        args.method = "calibrate"
+    else:
+        size, night = steps(n, args.nights, args.seed, args.window_w_k, args.first, args.last)
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
     _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed,
@@ -197,15 +298,23 @@ def main(argv: list[str] | None = None) -> None:
     sim_s = time.perf_counter() - t0
     dates = [d for d, *_ in _SEASON.nights]
     rows: list[dict] = []
+    jobs = [(h, args.method, args.no_house_electricity) for h in range(n)]
     with mp.get_context("fork").Pool(args.workers) as pool:
-        for i, row in enumerate(pool.imap_unordered(_run, [(h, args.method) for h in range(n)],
-                                                    chunksize=2), 1):
+        for i, row in enumerate(pool.imap_unordered(_run, jobs, chunksize=2), 1):
             rows.append(row)
             if i % 20 == 0 or i == n:
                 print(f"  {i}/{n} households, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
-    sm = summarize(rows, size, night, dates)
     print(f"$ python bench/season_change.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+    if args.calibrate:
+        sm = calibrate_summary(rows, np.asarray(houses.hlc_w_per_k, float),
+                               np.asarray(params.emitter.kind))
+        print_calibration(sm, n, args, sim_s)
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"rows": rows, "summary": sm, "args": vars(args)}, fh, indent=1)
+        return
+    sm = summarize(rows, size, night, dates)
     print(f"{n} households (realistic plant, seed {args.seed}, {args.nights} nights), "
           f"method {args.method}; season simulated in {sim_s:.0f} s, the test "
           f"{np.median([r['test_s'] for r in rows]):.1f} s per household-season (median)")
