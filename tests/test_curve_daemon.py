@@ -66,7 +66,9 @@ def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_pat
             # the owner's points journaled before the first write
             journal = {e.register: e.raw_value for e in _curve_journal(db)}
             assert journal == {"loop1_curve_cold": owner[0], "loop1_curve_mild": owner[1]}
-            assert "heating curve set to" in d.output()
+            # the line comes after the read-back of the written points
+            wait_until(lambda: "heating curve set to" in d.output(), 30, "the line",
+                       proc=d.proc)
             # the controller follows: its flow target came down with the curve, and the
             # check at the next look left the curve set
             wait_until(lambda: modbus_read(sim.port, 2128)[0] <= target_before - 20, 30,
