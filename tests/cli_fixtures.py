@@ -11,6 +11,7 @@ real subprocess.
 from __future__ import annotations
 
 import contextlib
+import logging
 import subprocess
 import sys
 import traceback
@@ -26,9 +27,23 @@ def run_impctl(*args: str, env: Mapping[str, str | None] | None = None,
     """``impctl ARGS`` in this process: ``env`` overrides ``os.environ`` for the call (None
     removes a variable), ``cwd`` is the working directory for the call; an exception that
     escapes ``main`` is printed on stderr with exit status 1, as the interpreter would."""
-    from impctl.cli import main
 
     argv = [str(a) for a in args]
+    # a command that sets up logging (basicConfig(force=True)) must not leave its handler,
+    # writing to this call's stderr, on the test process's root logger
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    try:
+        return _run(argv, env, cwd, input)
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
+
+
+def _run(argv: list[str], env: Mapping[str, str | None] | None, cwd: Path | str | None,
+         input: str | None) -> subprocess.CompletedProcess:
+    from impctl.cli import main
+
     with CliRunner().isolation(input=input, env=env) as (out, err, _):
         with contextlib.chdir(cwd) if cwd is not None else contextlib.nullcontext():
             try:
