@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from daemon_fixtures import run_cli
+from cli_fixtures import run_impctl
 from test_reliability_input import cli
 
 from impctl.errors import InputError
@@ -72,7 +72,7 @@ def test_the_configuration_window_takes_ascii_digits_only(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text(f'state_dir = "{tmp_path / "s"}"\n[heatpump]\nhost = "192.168.1.50"\n'
                    '[night]\nwindow = "２２:00-05:00"\n')
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 2, result.stdout
     assert result.stderr.splitlines() == [
         f"impctl: {cfg}: key 'night.window': '２２:00-05:00' holds '２' (FULLWIDTH DIGIT TWO): "

@@ -1,4 +1,5 @@
-"""``impctl train`` and ``impctl classify`` end to end, run as real subprocesses."""
+"""``impctl train`` and ``impctl classify`` end to end: run in this process where the output
+is checked, as real subprocesses where what the process imported is."""
 
 from __future__ import annotations
 
@@ -9,28 +10,24 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.imp import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C, write_nights
 from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
 
 def run_cli(*args: str, env_home: Path | None = None) -> subprocess.CompletedProcess:
-    env = None
-    if env_home is not None:
-        import os
-
-        env = {**os.environ, "XDG_DATA_HOME": str(env_home), "IMPCTL_MODEL_DIR": ""}
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=300, env=env)
+    # in this process: these tests check the output (refused_and_loaded() runs a subprocess
+    # where what the process imported is checked)
+    env = None if env_home is None else {"XDG_DATA_HOME": str(env_home), "IMPCTL_MODEL_DIR": ""}
+    return run_impctl(*args, env=env)
 
 
 @pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("models")
-    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(out))
-    assert done.returncode == 0, done.stderr
+def model_dir(trained_models) -> Path:
+    done = trained_models.run
     assert "paper train/test" in done.stdout and "floor_area" in done.stdout
-    return out
+    return trained_models.out
 
 
 @pytest.fixture(scope="module")

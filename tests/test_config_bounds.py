@@ -13,6 +13,7 @@ from dataclasses import fields
 from typing import Any
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import run_cli
 
 from impctl.config import ClockConfig, NightConfig, config_from_mapping
@@ -47,7 +48,7 @@ preheat_h = 12
 constrained_nights = 1000000
 max_nights = 1000000
 """)
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 2 and result.stdout == ""
     assert "Traceback" not in result.stderr
     lines = _lines(result, cfg)
@@ -184,7 +185,7 @@ def test_a_non_utf8_systemd_credential_is_one_line_and_exit_2(tmp_path, monkeypa
     creds.mkdir()
     (creds / "mqtt.password").write_bytes(b"s\xe9cret\n")
     monkeypatch.setenv("CREDENTIALS_DIRECTORY", str(creds))
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 2, result.stdout + result.stderr
     assert "Traceback" not in result.stderr
     assert _lines(result, cfg) == [
@@ -194,15 +195,15 @@ def test_a_non_utf8_systemd_credential_is_one_line_and_exit_2(tmp_path, monkeypa
 
 def test_a_password_file_others_can_read_is_a_warning(tmp_path):
     cfg, pw = _mqtt_config(tmp_path, b"secret\n", 0o644)
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 0, result.stderr
     assert (f"warning:   {pw}: the MQTT password file is readable by other users (mode 0644): "
             f"chmod 600 {pw}") in result.stdout
-    result = run_cli("status", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("status", "--config", str(cfg))
     assert f"impctl: warning: {pw}: the MQTT password file is readable" in result.stderr
     os.chmod(pw, 0o600)
     from impctl.config import config_warnings, load_config
 
     assert config_warnings(load_config(cfg)) == []
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 0 and "warning" not in result.stdout

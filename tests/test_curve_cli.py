@@ -1,4 +1,4 @@
-"""``impctl curve`` end to end, as a real subprocess, on rows the realistic plant recorded."""
+"""``impctl curve`` end to end (run in this process), on rows the realistic plant recorded."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.curve.synth import owner_rows
 from impctl.model import default_house
@@ -15,8 +16,7 @@ from impctl.plant import HeatPump, PlantParams
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=120)
+    return run_impctl(*args)  # in this process: the tests check the output, not the process
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     daemon_mapping,
     modbus_read,
@@ -77,12 +78,12 @@ def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_pat
                        proc=d.proc)
             assert "did not follow" not in d.output() and _points(sim.port) == want
             # set on the owner's word, watched: held, not a restore waiting
-            st = run_cli("status", "--config", str(config))
+            st = run_impctl("status", "--config", str(config))
             assert "impctl's heating curve is set" in st.stdout
             assert "restore:" not in st.stdout and "RESTORE PENDING" not in st.stdout
 
             # the owner takes it back while the daemon runs
-            res = run_cli("curve", "--restore", "--config", str(config))
+            res = run_impctl("curve", "--restore", "--config", str(config))
             assert res.returncode == 0, res.stderr
             assert "the running daemon gives your heating curve back" in res.stdout
             wait_until(lambda: _points(sim.port) == owner, 30, "the owner's curve back",
@@ -93,7 +94,7 @@ def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_pat
                        "the restore said", proc=d.proc)
 
             # and asks for it again; a stop gives the owner's points back
-            res = run_cli("curve", "--apply", "--config", str(config))
+            res = run_impctl("curve", "--apply", "--config", str(config))
             assert res.returncode == 0 and "Your heating runs hot." in res.stdout
             wait_until(lambda: _points(sim.port) == want, 30, "the curve set again",
                        proc=d.proc)
@@ -158,7 +159,7 @@ def test_no_curve_is_set_on_a_compact_controller_or_without_the_owners_word(tmp_
         try:  # [curve] apply not set, no impctl curve --apply: advice only
             wait_until(lambda: "next night job at" in d.output(), 30, "the daemon",
                        proc=d.proc)
-            res = run_cli("curve", "--restore", "--config", str(tmp_path / "b.toml"))
+            res = run_impctl("curve", "--restore", "--config", str(tmp_path / "b.toml"))
             assert res.returncode == 0
             assert _points(sim.port) == owner and not _curve_journal(state / "impctl.db")
         finally:
@@ -238,7 +239,7 @@ def test_curve_restore_gives_the_points_back_when_no_daemon_runs(tmp_path):
         finally:
             stop_process(d.proc)
         assert len(_curve_journal(db)) == 2
-        res = run_cli("curve", "--restore", "--config", str(config))
+        res = run_impctl("curve", "--restore", "--config", str(config))
         assert res.returncode == 0, res.stderr
         assert "your heating curve is back" in res.stdout
         assert _points(sim.port) == owner and not _curve_journal(db)

@@ -9,6 +9,7 @@ import sqlite3
 from datetime import UTC, datetime, timedelta
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import run_cli
 
 from impctl.campaign import Decision
@@ -263,7 +264,7 @@ def test_check_config_names_the_campaign_and_its_first_night(tmp_path):
     cfg.write_text('state_dir = "%s"\n[heatpump]\nhost = "192.168.1.50"\n[campaign]\n'
                    'mode = "adaptive"\ntarget_rel_halfwidth = {hlc = 0.1, tau = 0.2}\n'
                    % (tmp_path / "state"))
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert ("campaign:  adaptive: until HLC ±10% and τ ±20%, at most 5 nights, a fit after "
@@ -287,13 +288,12 @@ def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
         store.add_fit([a, b], wide)
         state = adaptive.campaign_state(store, cfg)
         assert state.hlc_rel_pct is None and state.tau_rel_pct is None
-    text = run_cli("status", "--config", str(cfg_path), timeout_s=30)
+    text = run_impctl("status", "--config", str(cfg_path))
     assert text.returncode == 0, text.stderr
     line = next(x for x in text.stdout.splitlines() if "after 2 valid nights" in x)
     assert "interval: too few nights yet" in line and "HLC 180 W/K" in line
     assert "%" not in line
-    as_json = json.loads(run_cli("status", "--json", "--config", str(cfg_path),
-                                 timeout_s=30).stdout)
+    as_json = json.loads(run_impctl("status", "--json", "--config", str(cfg_path)).stdout)
     [entry] = as_json["campaign"]["intervals"]
     assert entry["interval_note"] == "too few nights yet"
     with Store(cfg.db_path) as store:
@@ -309,7 +309,7 @@ def test_status_says_too_few_nights_instead_of_a_t1_interval(tmp_path):
                               "model-based (Laplace curvature)"}}
         store.add_fit([a, b], based)
         assert adaptive.campaign_state(store, cfg).hlc_rel_pct == pytest.approx(16.7, abs=0.1)
-    text = run_cli("status", "--config", str(cfg_path), timeout_s=30).stdout
+    text = run_impctl("status", "--config", str(cfg_path)).stdout
     assert ("after 2 valid nights: HLC 180 W/K ±16.7 %, τ 50 h ±20.0 % (target ±5 % / ±8 %); "
             "interval: too few nights yet: model-based") in text
 
@@ -422,12 +422,11 @@ def test_fixed_plan_retries_an_invalid_constrained_night_after_a_normal_one(tmp_
         # not the same cold spell again: the first normal night of the plan comes first
         second = nxt(store)
         assert (second.kind, second.setpoint_c, second.campaign_seq) == (*normals[0], 2)
-        status = json.loads(run_cli("status", "--json", "--config", str(cfg_path),
-                                    timeout_s=30).stdout)
+        status = json.loads(run_impctl("status", "--json", "--config", str(cfg_path)).stdout)
         assert status["next_night"]["kind"] == "normal"
         assert status["next_night"]["retry_waits"] is True
         assert [e["valid"] for e in status["campaign"]["entries"]] == [False] + [None] * 4
-        text = run_cli("status", "--config", str(cfg_path), timeout_s=30).stdout
+        text = run_impctl("status", "--config", str(cfg_path)).stdout
         assert ("next:      normal night (held at 22 °C, campaign; the invalid constrained "
                 "night is retried after a normal one)") in text
         # a manual --tonight request still comes first

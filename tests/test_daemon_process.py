@@ -20,6 +20,7 @@ from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -130,7 +131,7 @@ def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):
         with contextlib.closing(sqlite3.connect(db)) as con:
             assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         assert len(store_query(db, lambda s: s.journal_pending())) == 2
-        status = run_cli("status", "--config", str(config))
+        status = run_impctl("status", "--config", str(config))
         assert status.returncode == 0, status.stderr
         assert "RESTORE PENDING: loop1_setpoint, loop1_mode" in status.stdout
         assert "night:     1 constrained T_set 21 °C, active" in status.stdout
@@ -172,7 +173,7 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             # The running daemon takes it up: the heat pump goes to 22 °C.
             wait_until(lambda: owner_state(sim.port)[0] == 220, GUARD_S, "the triggered night",
                        proc=d.proc)
-            live = run_cli("status", "--config", str(config))
+            live = run_impctl("status", "--config", str(config))
             assert live.returncode == 0, live.stderr
             assert "night:     1 normal T_set 22 °C, active" in live.stdout
             # issue 15: the generation and where it comes from (set in this config)
@@ -195,7 +196,7 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             # impctl status / nights / export / restore on the result.
             while True:  # a status taken within one simulated (UTC) day
                 day = sim.clock.now().date()
-                st = run_cli("status", "--json", "--config", str(config))
+                st = run_impctl("status", "--json", "--config", str(config))
                 if sim.clock.now().date() == day:
                     break
             assert st.returncode == 0, st.stderr
@@ -210,13 +211,13 @@ def test_trigger_now_then_status_nights_export_restore(tmp_path):
             used = 2 if day == night.ended.date() else 0
             assert status["writes_today"] == {"2187": {"used": used, "limit": 12},
                                               "2042": {"used": 0, "limit": 12}}
-            nights = run_cli("nights", "--config", str(config))
+            nights = run_impctl("nights", "--config", str(config))
             assert nights.returncode == 0, nights.stderr
             row = nights.stdout.splitlines()[1].split()
             assert row[:3] == ["1", "normal", "22.0"] and row[6:9] == ["done", "yes",
                                                                         str(n_samples)]
             out = tmp_path / "nights.csv"
-            exp = run_cli("export", "--format", "csv", "--out", str(out), "--config",
+            exp = run_impctl("export", "--format", "csv", "--out", str(out), "--config",
                           str(config))
             assert exp.returncode == 0, exp.stderr
             wrote = len(preheat) + len(in_window)

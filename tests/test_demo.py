@@ -8,9 +8,12 @@ import subprocess
 import sys
 
 import pytest
+from cli_fixtures import run_impctl
 
 
 def run_cli(*args: str, timeout: float = 1200) -> subprocess.CompletedProcess:
+    """The demo in its own process (it starts and stops the simulator and the daemon);
+    refused options and ``impctl report`` run in this process (run_impctl)."""
     # a guard against a hang, not an expectation: a busy two-core machine runs the demo
     # many times slower than a quiet one
     return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
@@ -138,7 +141,7 @@ def test_demo_adaptive_campaign(demo, tmp_path):
 def test_demo_adaptive_options_are_checked(tmp_path):
     for args, place in ((("--adaptive", "--nights", "1+1"), "--nights"),
                         (("--adaptive", "--target", "5,8"), "--target")):
-        proc = run_cli("demo", *args, "--out", str(tmp_path / "d"), timeout=60)
+        proc = run_impctl("demo", *args, "--out", str(tmp_path / "d"))
         assert proc.returncode == 2 and place in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists()
@@ -160,29 +163,28 @@ def test_demo_report_is_self_contained(demo):
 def test_report_command_from_store(demo, tmp_path):
     out, proc = demo
     assert proc.returncode == 0
-    again = run_cli("report", "--db", str(out / "state" / "impctl.db"), "--out",
-                    str(tmp_path / "rep"), timeout=120)
+    again = run_impctl("report", "--db", str(out / "state" / "impctl.db"), "--out",
+                       str(tmp_path / "rep"))
     assert again.returncode == 0, again.stderr
     assert (tmp_path / "rep" / "report.html").exists()
 
 
 def test_report_without_store_is_one_line_exit_2(tmp_path):
-    proc = run_cli("report", "--db", str(tmp_path / "none.db"), "--out", str(tmp_path / "r"),
-                   timeout=60)
+    proc = run_impctl("report", "--db", str(tmp_path / "none.db"), "--out", str(tmp_path / "r"))
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "no impctl store" in proc.stderr
     assert not (tmp_path / "none.db").exists() and not (tmp_path / "r").exists()
 
 
 def test_demo_rejects_bad_nights_option(tmp_path):
-    proc = run_cli("demo", "--nights", "three", "--out", str(tmp_path / "d"), timeout=60)
+    proc = run_impctl("demo", "--nights", "three", "--out", str(tmp_path / "d"))
     assert proc.returncode == 2 and "--nights" in proc.stderr
 
 
 @pytest.mark.parametrize("value, words", [("2", "expected BEFORE+AFTER"),
                                           ("7+30", "after in 0–21"), ("-1+2", "days before")])
 def test_demo_rejects_bad_owner_days(tmp_path, value, words):
-    proc = run_cli("demo", "--owner-days", value, "--out", str(tmp_path / "d"), timeout=60)
+    proc = run_impctl("demo", "--owner-days", value, "--out", str(tmp_path / "d"))
     assert proc.returncode == 2 and "--owner-days" in proc.stderr and words in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not (tmp_path / "d").exists()
     assert not (tmp_path / "d").exists()

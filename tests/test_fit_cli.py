@@ -1,4 +1,5 @@
-"""``impctl fit`` end to end on NIGHTS.csv files, run as a real subprocess."""
+"""``impctl fit`` end to end on NIGHTS.csv files: run in this process where the output is
+checked, as a real subprocess where what the process imported is."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import synth_nights
@@ -19,11 +21,8 @@ HOUSE = HouseParameters(floor_area=120.0, wall_height=2.7, walls_area=160.0, win
 
 
 def run_cli(*args: str, env_model_dir: Path) -> subprocess.CompletedProcess:
-    import os
-
-    env = {**os.environ, "IMPCTL_MODEL_DIR": str(env_model_dir)}
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=300, env=env)
+    # in this process: these tests check the output, not the process (refused() below does)
+    return run_impctl(*args, env={"IMPCTL_MODEL_DIR": str(env_model_dir)})
 
 
 #: Runs the CLI, then says on its last stderr line whether it had loaded torch.

@@ -7,12 +7,12 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 from dask_fixtures import dask_cluster
 
 from impctl.imp import write_nights
@@ -27,16 +27,13 @@ HOUSES = HouseParameters(
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=600)
+    # in this process: the tests check the output; the fits run in the Dask workers' processes
+    return run_impctl(*args)
 
 
 @pytest.fixture(scope="module")
-def models(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("models")
-    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(out))
-    assert done.returncode == 0, done.stderr
-    return out
+def models(trained_models) -> Path:
+    return trained_models.out
 
 
 @pytest.fixture(scope="module")

@@ -7,13 +7,13 @@ run, and its programs end cleanly."""
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import psutil
 import pytest
+from cli_fixtures import run_impctl
 from dask_fixtures import dask_cluster
 
 from impctl.imp import write_nights
@@ -31,16 +31,14 @@ RUN_COLUMNS = ["worker", "worker_rss_mb", "wall_s_per_household", "cpu_s_per_hou
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=600)
+    # in this process: the batches run in the Dask workers' processes either way
+    return run_impctl(*args)
 
 
 @pytest.fixture(scope="module")
-def inputs(tmp_path_factory) -> tuple[Path, Path]:
+def inputs(tmp_path_factory, trained_models) -> tuple[Path, Path]:
     """(folder of three households' NIGHTS files, trained classifiers)."""
-    models = tmp_path_factory.mktemp("models")
-    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(models))
-    assert done.returncode == 0, done.stderr
+    models = trained_models.out
     sched = imp_schedule(3, n_constrained=2, n_normal=3, seed=5)
     sim, sp = run_schedule(HOUSES, sched)
     folder = tmp_path_factory.mktemp("fleet")

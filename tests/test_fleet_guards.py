@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.imp import write_nights
 from impctl.model import HouseParameters
@@ -38,11 +39,17 @@ MAX_NIGHTS = "4"
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-def run_cli(*args: str, cwd: Path | None = None, env: dict | None = None
-            ) -> subprocess.CompletedProcess:
+def run_impctl_process(*args: str, cwd: Path | None = None, env: dict | None = None
+                       ) -> subprocess.CompletedProcess:
+    """A real ``impctl`` process: where its environment (math-library threads) or what its
+    interpreter prints (warnings) is part of the check."""
     return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
                           capture_output=True, text=True, timeout=600, cwd=cwd,
                           env={**os.environ, **(env or {})})
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return run_impctl(*args, cwd=cwd)  # in this process: the output is checked
 
 
 def start_cli(*args: str, cwd: Path) -> subprocess.Popen:
@@ -58,12 +65,10 @@ def nights():
 
 
 @pytest.fixture(scope="module")
-def pickled_models(tmp_path_factory) -> Path:
+def pickled_models(tmp_path_factory, trained_models) -> Path:
     """Trained classifiers without their compact arrays: the workers load the pickled
     scikit-learn forests (the path that warned in every batch)."""
-    out = tmp_path_factory.mktemp("models")
-    done = run_cli("train", "--households", "20", "--seed", "4", "--out", str(out))
-    assert done.returncode == 0, done.stderr
+    out = shutil.copytree(trained_models.out, tmp_path_factory.mktemp("models") / "models")
     (out / "forests.npz").unlink()
     meta = json.loads((out / "models.json").read_text())
     meta.pop("compact", None)
@@ -110,8 +115,9 @@ def work(tmp_path_factory, nights) -> Path:
 
 @pytest.fixture(scope="module")
 def fleet(work, pickled_models):
-    done = run_cli("fleet", "fit", "in", "--out", "FLEET.parquet", "--workers", "1",
-                   "--model-dir", str(pickled_models), "--max-nights", MAX_NIGHTS, cwd=work)
+    done = run_impctl_process("fleet", "fit", "in", "--out", "FLEET.parquet", "--workers",
+                              "1", "--model-dir", str(pickled_models), "--max-nights",
+                              MAX_NIGHTS, cwd=work)
     assert done.returncode == 0, done.stderr
     table = pd.read_parquet(work / "FLEET.parquet").set_index("household")
     return table, done
@@ -149,9 +155,9 @@ def test_a_fleet_row_equals_impctl_fit_on_the_same_file(fleet, work, pickled_mod
     the worker's one math-library thread they are the same to the last digits (with numpy's
     BLAS on two threads impctl fit's HLC here differs in the 5th digit, 3e-5)."""
     table, _ = fleet
-    alone = run_cli("fit", "--nights", f"in/{household}.csv", "--model-dir",
-                    str(pickled_models), "--max-nights", MAX_NIGHTS, "--json",
-                    str(tmp_path / "fit.json"), cwd=work, env=ONE_THREAD)
+    alone = run_impctl_process("fit", "--nights", f"in/{household}.csv", "--model-dir",
+                               str(pickled_models), "--max-nights", MAX_NIGHTS, "--json",
+                               str(tmp_path / "fit.json"), cwd=work, env=ONE_THREAD)
     assert alone.returncode == 0, alone.stderr
     fit = json.loads((tmp_path / "fit.json").read_text())
     row = table.loc[household]

@@ -13,9 +13,9 @@ import json
 from datetime import datetime
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     daemon_mapping,
-    run_cli,
     sim_process,
     start_daemon,
     stop_process,
@@ -132,7 +132,7 @@ def test_a_night_records_the_houses_sensors_and_exports_them(tmp_path):
 
     # The export carries them as NIGHTS columns, row for row.
     out = tmp_path / "nights.csv"
-    done = run_cli("export", "--config", str(config), "--out", str(out))
+    done = run_impctl("export", "--config", str(config), "--out", str(out))
     assert done.returncode == 0, done.stderr
     with out.open() as fh:
         table = list(csv.DictReader(fh))
@@ -147,15 +147,15 @@ def test_a_night_records_the_houses_sensors_and_exports_them(tmp_path):
     assert table[-1]["occupants"] == ""
 
     # The heat pump's outdoor sensor reads 2.5 K below the reference all night: reported.
-    check = run_cli("check-config", "--config", str(config))
+    check = run_impctl("check-config", "--config", str(config))
     assert check.returncode == 0, check.stderr
     warn = [ln for ln in check.stdout.splitlines() if ln.startswith("WARNING:")]
     assert len(warn) == 1 and "-2.5 K against the reference" in warn[0], check.stdout
     assert "persistent offset over 1.5 K" in warn[0]
     assert "2 room sensors" in check.stdout
-    text = run_cli("status", "--config", str(config)).stdout
+    text = run_impctl("status", "--config", str(config)).stdout
     assert "inputs:    household power minus the heat pump's own" in text, text
     assert "outdoor ref 2.5 °C" in text and "persistent offset over 1.5 K" in text, text
-    status = json.loads(run_cli("status", "--json", "--config", str(config)).stdout)
+    status = json.loads(run_impctl("status", "--json", "--config", str(config)).stdout)
     off = status["inputs"]["t_out_offset"]
     assert off["persistent"] and off["offset_k"] == -2.5 and off["pairs"] >= len(rows)

@@ -9,7 +9,8 @@ import json
 from datetime import timedelta
 
 import pytest
-from daemon_fixtures import run_cli, write_config
+from cli_fixtures import run_impctl
+from daemon_fixtures import write_config
 
 from impctl.model import default_house
 from impctl.population.imp_run.synth import synth_nights
@@ -34,10 +35,9 @@ def _export_and_fit(tmp_path, add_rows):
             for k, t_s in enumerate(night.time_s):
                 add_rows(store, nid, night, k, start + timedelta(seconds=float(t_s)))
     out = tmp_path / "nights.csv"
-    done = run_cli("export", "--config", str(config), "--out", str(out))
+    done = run_impctl("export", "--config", str(config), "--out", str(out))
     assert done.returncode == 0, done.stderr
-    fitted = run_cli("fit", "--nights", str(out), "--json", str(tmp_path / "fit.json"),
-                     timeout_s=300)
+    fitted = run_impctl("fit", "--nights", str(out), "--json", str(tmp_path / "fit.json"))
     assert fitted.returncode == 0, fitted.stderr
     return json.loads((tmp_path / "fit.json").read_text()), fitted.stdout, out.read_text()
 

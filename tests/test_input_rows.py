@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import run_cli
 
 from impctl.errors import InputError
@@ -50,14 +51,14 @@ def _one_line(result, prefix: str) -> str:
 def test_simulate_checks_the_plant_tables(tmp_path, table, expected):
     house = tmp_path / "house.toml"
     house.write_text(HOUSE + table)
-    result = run_cli("simulate", "--house", str(house), "--days", "1", timeout_s=120)
+    result = run_impctl("simulate", "--house", str(house), "--days", "1")
     assert _one_line(result, f"impctl: {house}: ").startswith(expected)
 
 
 def test_simulate_says_good_plant_tables_are_not_used(tmp_path):
     house = tmp_path / "house.toml"
     house.write_text(HOUSE + "[plant.emitter]\ndesign_water_c = 40.0\n")
-    result = run_cli("simulate", "--house", str(house), "--days", "1", timeout_s=120)
+    result = run_impctl("simulate", "--house", str(house), "--days", "1")
     assert result.returncode == 0, result.stderr
     assert result.stderr.strip() == (
         f"note: {house}: [plant.emitter] checked but not used: impctl simulate runs the ideal "
@@ -155,6 +156,6 @@ def test_unsorted_rows_say_sort(tmp_path):
 
 def test_the_cli_prints_the_cause_in_one_line(tmp_path):
     path = _csv(tmp_path / "eu.csv", ROWS, sep=";", decimal=",")
-    result = run_cli("fit", "--nights", str(path), timeout_s=120)
+    result = run_impctl("fit", "--nights", str(path))
     assert _one_line(result, f"impctl: {path}: row 1: ").startswith(
         "separator ';' and decimal commas detected")

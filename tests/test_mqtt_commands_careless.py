@@ -27,6 +27,7 @@ from zoneinfo import ZoneInfo
 
 import paho.mqtt.client as paho
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -86,8 +87,8 @@ def _lines(d, text: str) -> list[str]:
 
 
 def _status(config) -> tuple[dict, str]:
-    as_json = run_cli("status", "--json", "--config", str(config))
-    as_text = run_cli("status", "--config", str(config))
+    as_json = run_impctl("status", "--json", "--config", str(config))
+    as_text = run_impctl("status", "--config", str(config))
     assert as_json.returncode == 0 and as_text.returncode == 0, as_json.stderr + as_text.stderr
     return json.loads(as_json.stdout), as_text.stdout
 

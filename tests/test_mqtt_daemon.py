@@ -15,6 +15,7 @@ from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -215,14 +216,14 @@ def test_broker_outage_mid_night_loses_no_sample(tmp_path):
             wait_until(lambda: store_query(db, lambda s: s.sample_count(1)) >= 5, 20,
                        "samples", proc=d.proc)
 
-            up = json.loads(run_cli("status", "--json", "--config", str(config)).stdout)
+            up = json.loads(run_impctl("status", "--json", "--config", str(config)).stdout)
             assert up["mqtt"]["connected"] is True, up["mqtt"]
             b.stop()  # the broker goes away mid-night
             before = store_query(db, lambda s: s.sample_count(1))
             wall = time.monotonic()
             time.sleep(2.0)
             during = store_query(db, lambda s: s.sample_count(1)) - before
-            down = run_cli("status", "--config", str(config)).stdout
+            down = run_impctl("status", "--config", str(config)).stdout
             line = next(ln for ln in down.splitlines() if ln.startswith("mqtt:"))
             assert f"127.0.0.1:{b.port} UNAVAILABLE since" in line, down
             b.start()
@@ -234,7 +235,7 @@ def test_broker_outage_mid_night_loses_no_sample(tmp_path):
                                    for s in _states(ha, restarted)), 20,
                        "values after the restart", proc=d.proc)
             assert ha.latest(f"{BASE}/availability").payload == b"online"
-            again = json.loads(run_cli("status", "--json", "--config", str(config)).stdout)
+            again = json.loads(run_impctl("status", "--json", "--config", str(config)).stdout)
             assert again["mqtt"]["connected"] is True and again["mqtt"]["since"] > \
                 up["mqtt"]["since"], again["mqtt"]
             wait_until(lambda: store_query(db, lambda s: s.night(1).valid) is not None, 30,

@@ -18,10 +18,10 @@ from pathlib import Path
 from zoneinfo import ZoneInfo
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     daemon_mapping,
     free_port,
-    run_cli,
     sim_process,
     start_daemon,
     stop_process,
@@ -81,7 +81,7 @@ def _config(work: Path, mqtt: dict, heatpump_port: int = 502, clock=None) -> Pat
 
 
 def _check(config: Path) -> subprocess.CompletedProcess:
-    return run_cli("check-config", "--config", str(config), timeout_s=30)
+    return run_impctl("check-config", "--config", str(config))
 
 
 # -- impctl check-config loads what the bridge will load -------------------------------------
@@ -145,7 +145,7 @@ def test_a_password_over_plain_tcp_to_another_machine_is_a_warning(tmp_path):
                "(mqtt.tls = false): anyone on the network path can read it; set mqtt.tls = "
                "true (the broker's TLS port, usually 8883) or run the broker on this machine")
     assert f"warning:   {warning}" in result.stdout
-    status = run_cli("status", "--config", str(config), timeout_s=30)
+    status = run_impctl("status", "--config", str(config))
     assert f"impctl: warning: {warning}" in status.stderr
     assert PASSWORD not in result.stdout + result.stderr + status.stdout + status.stderr
     # the password from the systemd credential the unit loads (check-config cannot see it)
@@ -195,8 +195,8 @@ def test_the_daemon_connects_with_a_client_certificate(tmp_path, pki, tls_broker
             wait_until(lambda: (m := ha.latest(f"{BASE}/availability"))
                        and m.payload == b"online", 20, "online over TLS", proc=d.proc)
             assert ha.latest("homeassistant/sensor/gw1/t_air/config") is not None
-            status = run_cli("status", "--json", "--config", str(config), timeout_s=30)
-            text = run_cli("status", "--config", str(config), timeout_s=30)
+            status = run_impctl("status", "--json", "--config", str(config))
+            text = run_impctl("status", "--config", str(config))
             check = _check(config)
             assert check.returncode == 0 and "warning" not in check.stdout, check
         finally:

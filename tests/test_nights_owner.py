@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.fit.household import choose_nights
 from impctl.imp.night import OWNER_NOTE
@@ -26,11 +26,8 @@ TZ = "Europe/Ljubljana"
 
 
 def run_cli(*args: str, model_dir: Path) -> subprocess.CompletedProcess:
-    import os
-
-    env = {**os.environ, "IMPCTL_MODEL_DIR": str(model_dir)}
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", *args],
-                          capture_output=True, text=True, timeout=600, env=env)
+    # in this process: the tests check the output, not the process
+    return run_impctl(*args, env={"IMPCTL_MODEL_DIR": str(model_dir)})
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ traceback); the bounds are also tried with hypothesis on the parser itself.
 from __future__ import annotations
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import ROOT, run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -72,7 +73,7 @@ def test_missing_heatpump_section_and_missing_host_are_errors(tmp_path):
     assert _lines(result, cfg) == ["[heatpump]: missing section: set transport and host (tcp) "
                                    "or serial_port (rtu) of the heat pump"]
     cfg.write_text(f'state_dir = "{tmp_path / "s"}"\n[heatpump]\nport = 502\n')
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 2
     assert _lines(result, cfg) == ["[heatpump] key 'host': missing (required)"]
     assert not (tmp_path / "s").exists()
@@ -83,7 +84,7 @@ def test_bounds_and_bom(tmp_path):
     body = (f'state_dir = "{tmp_path / "s"}"\n[heatpump]\nhost = "192.168.1.50"\n'
             "[night]\nlink_lost_limit_s = 1e9\nmin_coverage = 0.01\nmax_comfort_band_k = 50\n")
     cfg.write_bytes(b"\xef\xbb\xbf" + body.encode())  # what Windows editors write
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 2
     assert _lines(result, cfg) == [
         "key 'night.max_comfort_band_k': must lie in (0, 3] K: further below the owner's "
@@ -95,12 +96,12 @@ def test_bounds_and_bom(tmp_path):
     # The same file with a BOM and good values is accepted.
     good = body.split("[night]")[0]
     cfg.write_bytes(b"\xef\xbb\xbf" + good.encode())
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 0, result.stderr
 
 
 def test_check_config_says_what_runs_tonight():
-    result = run_cli("check-config", "--config", str(EXAMPLE), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(EXAMPLE))
     # The example's state_dir (/var/lib/impctl) may not be creatable by the test user; every
     # other key is fine.
     if result.returncode == 2:
@@ -116,7 +117,7 @@ def test_check_config_with_a_writable_state_dir(tmp_path):
     cfg = tmp_path / "c.toml"
     cfg.write_text(EXAMPLE.read_text().replace('"/var/lib/impctl"',
                                                f'"{tmp_path / "state"}"'))
-    result = run_cli("check-config", "--config", str(cfg), timeout_s=30)
+    result = run_impctl("check-config", "--config", str(cfg))
     assert result.returncode == 0, result.stderr
     assert "daemon:    NOT RUNNING (never started on this store)" in result.stdout
     assert "next:      constrained night from the campaign" in result.stdout

@@ -18,6 +18,7 @@ import time
 from datetime import datetime
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -44,7 +45,7 @@ STAMP = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}[+-]\d\d:\d\d ")
 
 
 def _status(config) -> dict:
-    done = run_cli("status", "--json", "--config", str(config))
+    done = run_impctl("status", "--json", "--config", str(config))
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
@@ -83,7 +84,7 @@ def test_second_daemon_refused_and_status_tells_a_dead_daemon(tmp_path):
             assert st["next_night"]["kind"] == "constrained"
             assert st["next_night"]["source"] == "schedule"
             assert st["writes_today"]["2042"] == {"used": 1, "limit": 12}
-            text = run_cli("status", "--config", str(config)).stdout
+            text = run_impctl("status", "--config", str(config)).stdout
             assert f"daemon:    running (PID {d.proc.pid}, heartbeat" in text
             assert "next:      constrained night (T_max 22.5 → T_min 19.5 °C, campaign)" in text
 
@@ -94,13 +95,13 @@ def test_second_daemon_refused_and_status_tells_a_dead_daemon(tmp_path):
         st = _status(config)
         assert st["daemon"]["running"] is False and st["daemon"]["pid"] == d.proc.pid
         assert st["current_night"]["supervised"] is False
-        text = run_cli("status", "--config", str(config)).stdout
+        text = run_impctl("status", "--config", str(config)).stdout
         assert f"daemon:    NOT RUNNING: nothing watches the heat pump (last PID {d.proc.pid}" \
             in text
         assert "night 1 is NOT supervised" in text
         assert "RESTORE PENDING: loop1_setpoint, loop1_mode" in text
         # nights --json: machine-readable, the night as the dead daemon left it.
-        nights = json.loads(run_cli("nights", "--json", "--config", str(config)).stdout)
+        nights = json.loads(run_impctl("nights", "--json", "--config", str(config)).stdout)
         assert [(n["id"], n["kind"], n["state"]) for n in nights] == [(1, "constrained",
                                                                       "active")]
         assert nights[0]["samples"] > 0 and nights[0]["window_start"].endswith("+00:00")

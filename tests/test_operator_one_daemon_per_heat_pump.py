@@ -19,6 +19,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from zoneinfo import ZoneInfo
 
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -42,8 +43,8 @@ REGISTERS = ["loop1_setpoint", "loop1_mode"]
 
 
 def _status(config: Path) -> tuple[dict, str]:
-    as_json = run_cli("status", "--json", "--config", str(config))
-    as_text = run_cli("status", "--config", str(config))
+    as_json = run_impctl("status", "--json", "--config", str(config))
+    as_text = run_impctl("status", "--config", str(config))
     assert as_json.returncode == 0 and as_text.returncode == 0, as_json.stderr + as_text.stderr
     return json.loads(as_json.stdout), as_text.stdout
 

@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from cli_fixtures import run_impctl
 from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
@@ -89,7 +90,7 @@ def test_impctl_restore_without_the_store(tmp_path, size):
         assert (state / "owner-values.json").stat().st_mode & 0o777 == 0o640
         _truncate(state, size)
         if size == 100:  # the store does not open: status says what is still to restore
-            status = run_cli("status", "--config", str(config))
+            status = run_impctl("status", "--config", str(config))
             assert status.returncode == 2 and status.stderr.count("\n") == 1, status
             assert "lists loop1_setpoint, loop1_mode to restore (run impctl restore)" in \
                 status.stderr, status.stderr

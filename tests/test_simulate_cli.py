@@ -1,14 +1,14 @@
-"""House files and ``impctl simulate`` end to end, run as a real subprocess."""
+"""House files and ``impctl simulate`` end to end, run in this process."""
 
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.errors import InputError
 from impctl.model import HouseParameters, load_house, simulate
@@ -27,10 +27,7 @@ ach_infl = 0.3
 
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-c", "from impctl.cli import main; main()", *args],
-        capture_output=True, text=True, cwd=cwd, timeout=120,
-    )
+    return run_impctl(*args, cwd=cwd)  # in this process: the tests check the output
 
 
 @pytest.fixture
