@@ -238,12 +238,17 @@ def test_a_malformed_scheduler_is_one_line(work, address):
     assert not (work / "F3").exists()
 
 
+CTRL_C_HOUSES = 8
+
+
 def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models):
     from impctl.fleet.report import write_fleet_report
 
     src = tmp_path / "in"
     src.mkdir()
-    for i in range(4):
+    # eight households, one at a time: the Ctrl-C after the first lands with work left
+    # however late the loaded machine delivers it
+    for i in range(CTRL_C_HOUSES):
         write_nights(nights[i % 2], src / f"h{i}.csv")
     out = tmp_path / "FLEET.parquet"
     args = ("fleet", "fit", "in", "--out", "FLEET.parquet", "--workers", "1", "--batch-size",
@@ -258,23 +263,23 @@ def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models
     assert proc.returncode == 130, stdout + stderr
     manifest = json.loads((out / "_manifest.json").read_text())
     rows = len(pd.read_parquet(out))
-    assert manifest["complete"] is False and manifest["households"] == 4
-    assert manifest["done"] == rows and 1 <= rows < 4
-    assert f"interrupted: partial: {rows} of 4 households" in stdout
+    assert manifest["complete"] is False and manifest["households"] == CTRL_C_HOUSES
+    assert manifest["done"] == rows and 1 <= rows < CTRL_C_HOUSES
+    assert f"interrupted: partial: {rows} of {CTRL_C_HOUSES} households" in stdout
     # the advice printed is the command that finishes it
     assert f"impctl fleet fit {src.resolve()} --out FLEET.parquet --resume" in stdout
     flex = run_cli("flex", "FLEET.parquet", cwd=tmp_path)
     assert flex.returncode == 0, flex.stderr
-    assert f"partial: {rows} of 4 households" in flex.stdout.splitlines()[0]
+    assert f"partial: {rows} of {CTRL_C_HOUSES} households" in flex.stdout.splitlines()[0]
     as_json = run_cli("flex", "FLEET.parquet", "--json", cwd=tmp_path)
-    assert f"partial: {rows} of 4 households" in as_json.stderr
+    assert f"partial: {rows} of {CTRL_C_HOUSES} households" in as_json.stderr
     json.loads(as_json.stdout)  # stdout stays JSON
     page = write_fleet_report(out, tmp_path / "report").read_text()
-    assert f"partial: {rows} of 4 households" in page
+    assert f"partial: {rows} of {CTRL_C_HOUSES} households" in page
     resumed = run_cli(*args, "--resume", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr
     assert json.loads((out / "_manifest.json").read_text())["complete"] is True
-    assert sorted(pd.read_parquet(out)["household"]) == ["h0", "h1", "h2", "h3"]
+    assert sorted(pd.read_parquet(out)["household"]) == [f"h{i}" for i in range(CTRL_C_HOUSES)]
     flex = run_cli("flex", "FLEET.parquet", cwd=tmp_path)
     assert "partial" not in flex.stdout + flex.stderr
     shutil.rmtree(tmp_path / "report")
