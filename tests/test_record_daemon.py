@@ -24,8 +24,9 @@ from impctl.cli.device.status import collect_status, format_status
 from impctl.clock import VirtualClock
 from impctl.controller.record_labels import record_day
 from impctl.heatpump import WriteBudget
-from impctl.imp.night import split_owner
+from impctl.imp.night import SHORT_NOTE, split_owner
 from impctl.imp.nights_csv import read_nights
+from impctl.imp.protocol import SHORT_NIGHT
 from impctl.season import record_from_nights
 from impctl.store.export import export_nights
 
@@ -150,7 +151,8 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
     assert before and after and after[0].ts < night.ended + timedelta(minutes=10)
     assert all(s.loop_mode == 1 for s in rows)  # the owner's own mode, before and after
     # Exported: the night's pre-heat as its first rows, read as a piece of the night that
-    # only the season model takes; the night itself from its window, as the IMP fit reads it.
+    # only the season model takes; the night itself from its window — an hour of cooling,
+    # too short for the IMP fit: labelled the season model's, which the IMP fit leaves out.
     read = read_nights(tmp_path / "nights.csv", "Europe/Ljubljana")
     mine = [n for n in read if n.night_id == str(night.id)]
     assert [(n.kind, n.phase) for n in mine] == [("constrained", "preheat"), ("constrained", "")]
@@ -158,7 +160,9 @@ def test_an_imp_night_is_its_own_record_not_the_owners(tmp_path):
     pre_ts = pre.start + pd.to_timedelta(pre.time_s, unit="s")
     assert pre_ts[0] >= night.started and pre_ts[-1] < night.window_start <= window.start
     assert len(pre.time_s) >= 5 and pre.setpoint_c == 22.5  # T_max, as read
-    assert [n.night_id for n in split_owner(read)[0]] == [str(night.id)]
+    imp, note = split_owner(read)
+    assert window.label == pre.label == SHORT_NIGHT and SHORT_NIGHT in night.reasons
+    assert str(night.id) not in [n.night_id for n in imp] and SHORT_NOTE in note
     # the season model's grid: no step missing from the owner's last row before the night
     # to the window's end
     rec = record_from_nights(read)
