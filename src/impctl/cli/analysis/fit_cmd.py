@@ -190,15 +190,14 @@ class _SeasonJob:
         if not any(n.kind == "owner" for n in self._nights):
             return None, None
         out = None
-        if self._conn is not None:
-            with _ticking("the season model"):
+        with _ticking("the season model"):
+            if self._conn is not None:
                 try:
                     out = self._conn.recv()
-                except (EOFError, OSError):  # the child died: compute it here
-                    out = None
-            self._proc.join()
-        if out is None:
-            with _ticking("the season model"):
+                except (EOFError, OSError):  # the child died: computed here below
+                    pass
+                self._proc.join()
+            if out is None:
                 out = _season(self._nights)
         season, note, curve = out
         if season is not None:
