@@ -98,6 +98,8 @@ def test_discovery_values_abort_and_last_will_with_authentication(tmp_path):
                        proc=d.proc)
             configs = _configs(ha)
             assert check_discovery(configs) == []
+            # The fit values follow the configs and availability in the same announcement.
+            wait_until(lambda: ha.on(f"{BASE}/fit/hlc"), 10, "the fit values", proc=d.proc)
             # Retained: what Home Assistant gets when it (re)subscribes later.
             kept = retained(b.port, username="ha", password="ha-secret")
             assert set(configs) <= set(kept)
