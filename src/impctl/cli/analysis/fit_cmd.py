@@ -151,7 +151,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     click.echo(format_table(summary))
     season, season_note = season_job.result()
     if season is not None:
-        summary["season"] = season.as_dict()
+        summary["season"] = season
     elif season_note is not None:
         click.echo(season_note)
     if json_path is not None:
@@ -165,7 +165,12 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
 class _SeasonJob:
     """The season model of the owner nights and the IMP nights together, computed in a forked
     process while the parent loads torch and fits the IMP nights (two cores: the season's
-    seconds vanish from the wall time), or here when there is no fork or the child failed."""
+    seconds vanish from the wall time), or here when there is no fork or the child failed.
+
+    The child imports the season model itself (scipy's optimiser and filters, a second and a
+    half) and sends back what is printed and written — the JSON block and the text lines — so
+    the parent never imports it unless it has to compute it itself.
+    """
 
     def __init__(self, nights: list) -> None:
         self._nights = nights
@@ -176,8 +181,6 @@ class _SeasonJob:
             ctx = multiprocessing.get_context("fork")
         except ValueError:  # no fork on this platform
             return
-        # imported once, here: the child inherits them and the parent formats with them
-        from ...season import convergence, fit  # noqa: F401
         parent, child = ctx.Pipe(duplex=False)
         # daemon: the child dies with the command (Ctrl-C, an error in the IMP fit)
         self._proc = ctx.Process(target=_season_child, args=(nights, child), daemon=True)
@@ -185,8 +188,8 @@ class _SeasonJob:
         child.close()
         self._conn = parent
 
-    def result(self):
-        """(the season fit or None, a note or None), printed."""
+    def result(self) -> tuple[dict | None, str | None]:
+        """(the season fit's JSON block or None, a note or None), the fit printed."""
         if not any(n.kind == "owner" for n in self._nights):
             return None, None
         out = None
@@ -199,24 +202,24 @@ class _SeasonJob:
                 self._proc.join()
             if out is None:
                 out = _season(self._nights)
-        season, note, curve = out
-        if season is not None:
-            from ...season.convergence import format_convergence
-            from ...season.fit import format_season
-
-            click.echo("\n".join(format_season(season) + format_convergence(curve)))
-            season.convergence = curve
-        return season, note
+        block, note, lines = out
+        if lines:
+            click.echo("\n".join(lines))
+        return block, note
 
 
-def _season(nights: list) -> tuple:
-    """(season fit or None, note or None, convergence rows)."""
-    from ...season.convergence import convergence
-    from ...season.fit import fit_nights
+def _season(nights: list) -> tuple[dict | None, str | None, list[str]]:
+    """(the season fit's JSON block with its convergence, or None; a note or None; the text
+    lines printed for it)."""
+    from ...season.convergence import convergence, format_convergence
+    from ...season.fit import fit_nights, format_season
 
     season, note = fit_nights(nights)
-    curve = convergence(nights, season) if season is not None else []
-    return season, note, curve
+    if season is None:
+        return None, note, []
+    curve = convergence(nights, season)
+    season.convergence = curve
+    return season.as_dict(), note, format_season(season) + format_convergence(curve)
 
 
 def _season_child(nights: list, conn) -> None:
