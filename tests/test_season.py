@@ -7,6 +7,7 @@ through the product's own reader; ``impctl fit`` run as a real subprocess.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -174,3 +175,41 @@ def test_a_value_the_model_cannot_give_is_missing_not_a_number():
     assert data["tau_h"] == {"value": None, "low": None, "high": None}
     assert data["hlc_w_per_k"]["value"] == 120.0
     assert any("tau" in line and "not determined" in line for line in format_season(fit))
+
+
+def _thinned(night: NightSamples, every: int) -> NightSamples:
+    """``night`` with every ``every``-th row kept (a gateway sampling less often)."""
+    n = len(night.time_s)
+    fields = {f.name: getattr(night, f.name) for f in dataclasses.fields(night)}
+    return dataclasses.replace(night, **{
+        k: np.asarray(v)[::every] for k, v in fields.items()
+        if isinstance(v, np.ndarray) and v.ndim == 1 and len(v) == n})
+
+
+def test_a_gateway_sampling_every_ten_minutes_gets_the_season_model(season):
+    """Rows 10 min apart leave every second step of a 5-min grid empty: the record takes the
+    rows' own interval, and the fit lands where the 5-min rows' does."""
+    nights = household_nights(season, 0)
+    every5 = fit_season(record_from_nights(nights))
+    thin = [_thinned(n, 2) for n in nights]
+    assert record_from_nights(thin).step_s == 600.0
+    fit, note = fit_nights(thin)
+    assert note is None and fit.owner_nights >= 5
+    hlc = fit.values["hlc_w_per_k"]
+    assert abs(hlc / every5.values["hlc_w_per_k"] - 1) < 0.1
+    assert fit.low["hlc_w_per_k"] < season.houses.hlc_w_per_k[0] < fit.high["hlc_w_per_k"]
+
+
+def test_a_week_the_gateway_did_not_record_leaves_the_fit_standing(season):
+    """Days without a row in the middle of the season (the gateway off for a week) give the
+    slow gain's knots there no data: the fit must still find the house."""
+    nights = household_nights(season, 1)
+    first = nights[0].start.normalize()
+    kept = [n for n in nights
+            if n.kind != "owner" or not 5 <= (n.start.normalize() - first).days < 12]
+    assert len(kept) < len(nights)
+    fit, note = fit_nights(kept)
+    assert note is None
+    true = float(season.houses.hlc_w_per_k[1])
+    assert abs(fit.values["hlc_w_per_k"] / true - 1) < 0.15
+    assert fit.low["hlc_w_per_k"] < true < fit.high["hlc_w_per_k"]

@@ -155,7 +155,7 @@ class Design:
         if len(rec.p_house_w) == rec.n:
             # the household electricity ends as heat in the house: a measured gain
             p = mean(rec.p_house_w)
-            if np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
+            if blocks.any() and np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
                 shapes[-1] = np.where(np.isfinite(p), p, np.nanmean(p[blocks]))
         return cls(rec, seg, _runs(seg), aligned, _runs(sb), ta, to, blocks,
                    np.ascontiguousarray(shapes), n_days, knots.shape[1],

@@ -1,8 +1,10 @@
 """A household's nights (NIGHTS.csv, the store's export) as one season record.
 
 Every row the gateway logged — the owner's days and nights (kind ``owner``), the constrained
-and the normal IMP nights — goes onto one regular 5-min grid (:class:`~.record.SeasonRecord`):
-the means of the samples whose time falls in each step. What the season model leaves out, and
+and the normal IMP nights — goes onto one regular grid (:class:`~.record.SeasonRecord`): the
+means of the samples whose time falls in each step. The grid is 5 min, or the next whole part
+of the likelihood's 30-min block (10, 15, 30 min) at or above the rows' own interval, so that
+every step of a gateway sampling every 10 min holds a reading. What the season model leaves out, and
 why, is said per step:
 
 * a hot-water charge and the hour after it (the meter may read the tank; the emitter refills);
@@ -29,14 +31,31 @@ DHW_AFTER_S = 3600.0
 SETTLE_S = 1800.0
 #: A row counts as a hot-water charge from this share of its time on [-].
 DHW_SHARE = 0.05
+#: The record's possible steps: whole parts of the likelihood's block [s].
+GRID_STEPS_S = (STEP_S, 600.0, 900.0, BLOCK_S)
 #: Labels whose record the model does not read at all.
 DROP_LABELS = ("clock stepped",)
 
 
-def record_from_nights(nights: Sequence[NightSamples], step_s: float = STEP_S) -> SeasonRecord:
-    """The season record of ``nights`` (module docstring); raises ValueError with no samples."""
+def grid_step_s(nights: Sequence[NightSamples]) -> float:
+    """The record's step for these rows [s]: :data:`~.record.STEP_S`, or the smallest of
+    :data:`GRID_STEPS_S` at or above the rows' median interval."""
+    gaps = np.concatenate([np.diff(np.asarray(n.time_s, float)) for n in nights])
+    gaps = gaps[gaps > 0]
+    if not len(gaps):
+        return STEP_S
+    row_s = float(np.median(gaps))
+    return next((s for s in GRID_STEPS_S if s >= row_s * 0.99), GRID_STEPS_S[-1])
+
+
+def record_from_nights(nights: Sequence[NightSamples],
+                       step_s: float | None = None) -> SeasonRecord:
+    """The season record of ``nights`` (module docstring) on a grid of ``step_s`` [s]
+    (default: :func:`grid_step_s`); raises ValueError with no samples."""
     if not nights:
         raise ValueError("no nights")
+    if step_s is None:
+        step_s = grid_step_s(nights)
     tz = nights[0].start.tz
     t_abs = [pd.Timestamp(n.start).timestamp() + np.asarray(n.time_s, float) for n in nights]
     # the grid starts on a block boundary (:00 or :30): the gains switch at whole hours

@@ -78,7 +78,11 @@ def project(theta, d: Design) -> Projection:
     sun, gain = d.once("kinds", lambda: (
         np.array([n.startswith("sun_") for n in names]),
         np.array([n.startswith("gain_") for n in names])))
-    scale = np.sqrt(np.einsum("ij,ij->j", X, X) / len(X)) + 1e-12
+    scale = np.sqrt(np.einsum("ij,ij->j", X, X) / len(X))
+    # A column no usable block touches (a day's knot inside a gap of days the gateway did not
+    # record, the sun of nights-only rows) keeps its natural unit: scaled by ~0 its ridge rows
+    # would swamp every other column's.
+    scale = np.where(scale > 1e-9, scale, 1.0)
     Xs = X / scale
     ns = int(sun.sum())
     rows = np.zeros((ns, p))
