@@ -23,8 +23,8 @@ run night after night through the whole season without stopping at an alarm, the
 largest statistic per household — once on the nights as exported, with the household
 electricity, and once without it (most gateways record none), the two designs
 :func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
-of its statistics (at most one house-season in 20 alarms), printed with the false alarms at
-the current one and where they come from. ``--no-house-electricity`` drops the household
+of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
+the false alarms at the current one and where they come from. ``--no-house-electricity`` drops the household
 electricity from every night of the bench's households.
 
     python bench/season_change.py --households 200
@@ -59,8 +59,9 @@ from impctl.season import change  # noqa: E402
 _SEASON = None
 #: The bench's held-out households' seed, and the calibration's (never the same).
 BENCH_SEED, CALIBRATION_SEEDS = 4242, (9001, 9002)
-#: The false alarms per house-season the threshold is set for [-].
-FALSE_ALARM_TARGET = 0.05
+#: The false alarms per house-season the threshold is set for [-], and the step the threshold
+#: is rounded up to [-].
+FALSE_ALARM_TARGET, THRESHOLD_STEP = 0.05, 0.05
 #: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
 #: for ≤ 1 in 20 false alarms on the calibration seasons).
 CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
@@ -228,6 +229,9 @@ def calibrate_summary(rows: list[dict], hlc_w_k: np.ndarray, emitter: np.ndarray
     q = 1.0 - FALSE_ALARM_TARGET
     out: dict = {"households": len(mx), "threshold_now": threshold_now,
                  "threshold_q95": float(np.quantile(mx, q)),
+                 # the constant: the percentile rounded up to THRESHOLD_STEP (never above target)
+                 "threshold_set": math.ceil(float(np.quantile(mx, q)) / THRESHOLD_STEP - 1e-9)
+                 * THRESHOLD_STEP,
                  "threshold_q95_ci": _boot(mx, lambda x: np.quantile(x, q), rng),
                  "false_alarms_now": float(alarm.mean()),
                  "false_alarms_now_ci": _boot(alarm, np.mean, rng)}
@@ -251,7 +255,8 @@ def print_calibration(sm: dict, design: str) -> None:
     """The calibration's figures for one design (:func:`calibrate_summary`)."""
     print(f"{design}:")
     print(f"threshold for ≤ {100 * FALSE_ALARM_TARGET:.0f} % false alarms per house-season: "
-          f"{sm['threshold_q95']:.2f} {_fmt(sm['threshold_q95_ci'], 2)} (now "
+          f"{sm['threshold_q95']:.2f} {_fmt(sm['threshold_q95_ci'], 2)}, rounded up "
+          f"{sm['threshold_set']:.2f} (now "
           f"{sm['threshold_now']:.2f}: {100 * sm['false_alarms_now']:.1f} % "
           f"{_fmt(sm['false_alarms_now_ci'], 1, 100)} false alarms)")
     for k, g in sm["by_group"].items():
