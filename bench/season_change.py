@@ -24,8 +24,8 @@ largest statistic per household — once on the nights as exported, with the hou
 electricity, and once without it (most gateways record none), the two designs
 :func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
 of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
-the false alarms at the current one and where they come from. ``--no-house-electricity`` drops the household
-electricity from every night of the bench's households.
+the false alarms at the current one and where they come from. ``--no-house-electricity``
+drops the household electricity from every night of the bench's households.
 
     python bench/season_change.py --households 200
     python bench/season_change.py --households 200 --no-house-electricity
