@@ -17,17 +17,20 @@ step's night and size, the coverage of the size's 95 % interval — each with a 
 interval over households. ``--method cusum`` runs the alternative measured before choosing: a
 two-sided CUSUM on the residuals of the same night model fitted to a reference window.
 
-``--calibrate`` sets the threshold instead: households without a step (seed 9001 by default,
-never the bench's 4242), the test run night after night through the whole season without
-stopping at an alarm, the season's largest statistic per household; the threshold is the 95th
-percentile of those (at most one house-season in 20 alarms), printed with the false alarms at
-:data:`impctl.season.change.THRESHOLD` and where in the season the largest statistics fall.
-``--no-house-electricity`` drops the household electricity from every night (most gateways
-record none), in either mode.
+``--calibrate`` sets the thresholds instead: households without a step (``--seeds``, by
+default 9001 and 9002, never the bench's 4242; every household has its own weather), the test
+run night after night through the whole season without stopping at an alarm, the season's
+largest statistic per household — once on the nights as exported, with the household
+electricity, and once without it (most gateways record none), the two designs
+:func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
+of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
+the false alarms at the current one and where they come from. ``--no-house-electricity``
+drops the household electricity from every night of the bench's households.
 
     python bench/season_change.py --households 200
+    python bench/season_change.py --households 200 --no-house-electricity
     python bench/season_change.py --households 200 --method cusum
-    python bench/season_change.py --calibrate --households 640
+    python bench/season_change.py --calibrate --households 320 --seeds 9001,9002
 """
 
 from __future__ import annotations
@@ -55,9 +58,10 @@ from impctl.season import change  # noqa: E402
 
 _SEASON = None
 #: The bench's held-out households' seed, and the calibration's (never the same).
-BENCH_SEED, CALIBRATION_SEED = 4242, 9001
-#: The false alarms per house-season the threshold is set for [-].
-FALSE_ALARM_TARGET = 0.05
+BENCH_SEED, CALIBRATION_SEEDS = 4242, (9001, 9002)
+#: The false alarms per house-season the threshold is set for [-], and the step the threshold
+#: is rounded up to [-].
+FALSE_ALARM_TARGET, THRESHOLD_STEP = 0.05, 0.05
 #: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
 #: for ≤ 1 in 20 false alarms on the calibration seasons).
 CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
@@ -107,13 +111,15 @@ def without_house_electricity(rows: change.NightRows) -> change.NightRows:
 def season_max(rows: change.NightRows) -> dict:
     """The largest statistic over a whole season run night after night (no stop at an alarm):
     its value [-], the nights read then, the step's night index k, and the first nights read
-    at which the statistic passed :data:`impctl.season.change.THRESHOLD` (None if never)."""
+    at which the statistic passed the rows' threshold (:func:`impctl.season.change.threshold_for`;
+    None if never)."""
     best: dict = {"max_stat": 0.0, "at_nights": None, "k": None, "first_alarm_nights": None}
+    threshold = change.threshold_for(rows)
     for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
         stat, k, _, _ = change.glr(rows.head(m))
         if not math.isfinite(stat):
             continue
-        if stat >= change.THRESHOLD and best["first_alarm_nights"] is None:
+        if stat >= threshold and best["first_alarm_nights"] is None:
             best["first_alarm_nights"] = m
         if stat > best["max_stat"]:
             best.update(max_stat=float(stat), at_nights=m, k=int(k))
@@ -130,6 +136,7 @@ def _run(job: tuple[int, str, bool]) -> dict:
     row: dict = {"household": h, "nights": len(rows)}
     if method == "calibrate":
         row.update(season_max(rows))
+        row["no_house"] = season_max(without_house_electricity(rows))
     elif method == "glr":
         at, c = change.detect_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -209,18 +216,22 @@ def summarize(rows: list[dict], size: np.ndarray, night: np.ndarray, dates: list
     return out
 
 
-def calibrate_summary(rows: list[dict], hlc_w_k: np.ndarray, emitter: np.ndarray) -> dict:
+def calibrate_summary(rows: list[dict], hlc_w_k: np.ndarray, emitter: np.ndarray,
+                      threshold_now: float) -> dict:
     """The threshold for :data:`FALSE_ALARM_TARGET` false alarms per house-season (the
     season's largest statistic's 95th percentile, with a bootstrap interval), the false alarms
-    at the current threshold, and where they come from: emitter, house size, when in the
-    season, how many nights on the short side of the step."""
+    at ``threshold_now``, and where they come from: emitter, house size, when in the season,
+    how many nights on the short side of the step. ``rows`` in the order of ``hlc_w_k``."""
     rng = np.random.default_rng(0)
-    by_h = sorted(rows, key=lambda r: r["household"])
+    by_h = rows
     mx = np.array([r["max_stat"] for r in by_h])
     alarm = np.array([r["first_alarm_nights"] is not None for r in by_h], float)
     q = 1.0 - FALSE_ALARM_TARGET
-    out: dict = {"households": len(mx), "threshold_now": change.THRESHOLD,
+    out: dict = {"households": len(mx), "threshold_now": threshold_now,
                  "threshold_q95": float(np.quantile(mx, q)),
+                 # the constant: the percentile rounded up to THRESHOLD_STEP (never above target)
+                 "threshold_set": math.ceil(float(np.quantile(mx, q)) / THRESHOLD_STEP - 1e-9)
+                 * THRESHOLD_STEP,
                  "threshold_q95_ci": _boot(mx, lambda x: np.quantile(x, q), rng),
                  "false_alarms_now": float(alarm.mean()),
                  "false_alarms_now_ci": _boot(alarm, np.mean, rng)}
@@ -240,13 +251,12 @@ def calibrate_summary(rows: list[dict], hlc_w_k: np.ndarray, emitter: np.ndarray
     return out
 
 
-def print_calibration(sm: dict, n: int, args: argparse.Namespace, sim_s: float) -> None:
-    """The calibration's figures (:func:`calibrate_summary`)."""
-    print(f"{n} households without a step (realistic plant, seed {args.seed}, {args.nights} "
-          f"nights{', no household electricity' if args.no_house_electricity else ''}); "
-          f"season simulated in {sim_s:.0f} s")
+def print_calibration(sm: dict, design: str) -> None:
+    """The calibration's figures for one design (:func:`calibrate_summary`)."""
+    print(f"{design}:")
     print(f"threshold for ≤ {100 * FALSE_ALARM_TARGET:.0f} % false alarms per house-season: "
-          f"{sm['threshold_q95']:.2f} {_fmt(sm['threshold_q95_ci'], 2)} (now "
+          f"{sm['threshold_q95']:.2f} {_fmt(sm['threshold_q95_ci'], 2)}, rounded up "
+          f"{sm['threshold_set']:.2f} (now "
           f"{sm['threshold_now']:.2f}: {100 * sm['false_alarms_now']:.1f} % "
           f"{_fmt(sm['false_alarms_now_ci'], 1, 100)} false alarms)")
     for k, g in sm["by_group"].items():
@@ -260,62 +270,102 @@ def _fmt(ci: tuple, digits: int = 0, scale: float = 1.0) -> str:
     return f"[{ci[0] * scale:.{digits}f}, {ci[1] * scale:.{digits}f}]"
 
 
+def _seeds(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give seeds, e.g. 9001,9002") from None
+
+
+def _test_all(n: int, method: str, no_house: bool, workers: int, t0: float) -> list[dict]:
+    """The test on every household of :data:`_SEASON` (forked workers), in household order."""
+    print(f"testing {n} households …", file=sys.stderr, flush=True)
+    rows: list[dict] = []
+    jobs = [(h, method, no_house) for h in range(n)]
+    with mp.get_context("fork").Pool(workers) as pool:
+        for i, row in enumerate(pool.imap_unordered(_run, jobs, chunksize=2), 1):
+            rows.append(row)
+            if i % 20 == 0 or i == n:
+                print(f"  {i}/{n} households, {time.perf_counter() - t0:.0f} s",
+                      file=sys.stderr, flush=True)
+    return sorted(rows, key=lambda r: r["household"])
+
+
+def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
+    """Households without a step of every seed of ``args.seeds``, both designs (module
+    docstring): the thresholds and where the false alarms come from."""
+    global _SEASON
+    n, rows, hlc, emitter = args.households, [], [], []
+    t0 = time.perf_counter()
+    for seed in args.seeds:
+        houses, params = sample_households(n, seed=seed), sample_params(n, seed)
+        print(f"seed {seed}: simulating {n} households × {args.nights} nights …",
+              file=sys.stderr, flush=True)
+        _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=seed,
+                                  hlc_step_w_k=np.zeros(n), step_night=np.zeros(n, int))
+        rows += [{**r, "seed": seed} for r in _test_all(n, "calibrate", False, args.workers, t0)]
+        hlc.append(np.asarray(houses.hlc_w_per_k, float))
+        emitter.append(np.asarray(params.emitter.kind))
+    hlc_a, em_a = np.concatenate(hlc), np.concatenate(emitter)
+    print(f"$ python bench/season_change.py {' '.join(argv if argv is not None else sys.argv[1:])}")
+    print(f"{len(rows)} households without a step (realistic plant, seeds "
+          f"{', '.join(map(str, args.seeds))}, {args.nights} nights, each its own weather); "
+          f"{time.perf_counter() - t0:.0f} s")
+    with_house = [{k: v for k, v in r.items() if k != "no_house"} for r in rows]
+    no_house = [r["no_house"] for r in rows]
+    summary = {}
+    for design, rs, now in (("with household electricity", with_house, change.THRESHOLD),
+                            ("without household electricity", no_house,
+                             change.THRESHOLD_NO_HOUSE)):
+        summary[design] = calibrate_summary(rs, hlc_a, em_a, now)
+        print_calibration(summary[design], design)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"rows": rows, "summary": summary, "args": vars(args)}, fh, indent=1)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=200)
     ap.add_argument("--nights", type=int, default=80, help="nights simulated per household")
-    ap.add_argument("--seed", type=int, default=None,
-                    help=f"default {BENCH_SEED}; with --calibrate {CALIBRATION_SEED}")
+    ap.add_argument("--seed", type=int, default=BENCH_SEED, help="the bench's households")
+    ap.add_argument("--seeds", type=_seeds, default=CALIBRATION_SEEDS,
+                    help="with --calibrate: the seeds of the households, --households each "
+                         f"(default {','.join(map(str, CALIBRATION_SEEDS))})")
     ap.add_argument("--window-w-k", type=float, default=20.0,
                     help="the open window's step in HLC [W/K]")
     ap.add_argument("--first", type=int, default=25, help="earliest step night")
     ap.add_argument("--last", type=int, default=20, help="nights kept after the latest step")
     ap.add_argument("--method", choices=("glr", "cusum"), default="glr")
     ap.add_argument("--calibrate", action="store_true",
-                    help="set the threshold on households without a step (module docstring)")
+                    help="set the thresholds on households without a step (module docstring)")
     ap.add_argument("--no-house-electricity", action="store_true",
-                    help="drop the household electricity from every night")
+                    help="drop the household electricity from every night (the calibration "
+                         "runs both designs)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     args = ap.parse_args(argv)
-    if args.seed is None:
-        args.seed = CALIBRATION_SEED if args.calibrate else BENCH_SEED
-    if args.calibrate and args.seed == BENCH_SEED:
-        ap.exit(2, f"season_change.py: --seed {BENCH_SEED} is the bench's held-out seed; "
-                   "calibrate on another\n")
+    if args.calibrate:
+        if BENCH_SEED in args.seeds:
+            ap.exit(2, f"season_change.py: --seeds: {BENCH_SEED} is the bench's held-out seed; "
+                       "calibrate on others\n")
+        calibrate(args, argv)
+        return
     global _SEASON
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
-    if args.calibrate:
-        size, night = np.zeros(n), np.zeros(n, int)
-        args.method = "calibrate"
-    else:
-        size, night = steps(n, args.nights, args.seed, args.window_w_k, args.first, args.last)
+    size, night = steps(n, args.nights, args.seed, args.window_w_k, args.first, args.last)
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
     _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed,
                               hlc_step_w_k=size, step_night=night)
     sim_s = time.perf_counter() - t0
     dates = [d for d, *_ in _SEASON.nights]
-    rows: list[dict] = []
-    jobs = [(h, args.method, args.no_house_electricity) for h in range(n)]
-    with mp.get_context("fork").Pool(args.workers) as pool:
-        for i, row in enumerate(pool.imap_unordered(_run, jobs, chunksize=2), 1):
-            rows.append(row)
-            if i % 20 == 0 or i == n:
-                print(f"  {i}/{n} households, {time.perf_counter() - t0:.0f} s",
-                      file=sys.stderr, flush=True)
+    rows = _test_all(n, args.method, args.no_house_electricity, args.workers, t0)
     print(f"$ python bench/season_change.py {' '.join(argv if argv is not None else sys.argv[1:])}")
-    if args.calibrate:
-        sm = calibrate_summary(rows, np.asarray(houses.hlc_w_per_k, float),
-                               np.asarray(params.emitter.kind))
-        print_calibration(sm, n, args, sim_s)
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump({"rows": rows, "summary": sm, "args": vars(args)}, fh, indent=1)
-        return
     sm = summarize(rows, size, night, dates)
-    print(f"{n} households (realistic plant, seed {args.seed}, {args.nights} nights), "
+    print(f"{n} households (realistic plant, seed {args.seed}, {args.nights} nights"
+          f"{', no household electricity' if args.no_house_electricity else ''}), "
           f"method {args.method}; season simulated in {sim_s:.0f} s, the test "
           f"{np.median([r['test_s'] for r in rows]):.1f} s per household-season (median)")
     fa = sm["false_alarms"]

@@ -103,6 +103,22 @@ def test_the_fit_json_says_nothing_changed_where_nothing_did(season):
     assert c["changed"] is False and c["since_date"] is None and c["delta_hlc_w_k"] is None
 
 
+def test_nights_without_the_household_electricity_have_their_own_higher_threshold(season):
+    nights = household_nights(season, 2)
+    with_house = change.detect_change(nights)
+    without = change.detect_change([dataclasses.replace(n, p_house_w=float("nan"))
+                                    for n in nights])
+    assert change.THRESHOLD_NO_HOUSE > change.THRESHOLD
+    assert with_house.as_dict()["threshold"] == change.THRESHOLD
+    assert without.as_dict()["threshold"] == change.THRESHOLD_NO_HOUSE
+    # Night after night, the gateway without the meter alarms only past its own threshold.
+    rows = change.night_rows([dataclasses.replace(n, p_house_w=float("nan"))
+                              for n in household_nights(season, 0)])
+    for m in range(change.MIN_NIGHTS, len(rows) + 1):
+        c = change.change_of(rows.head(m))
+        assert c.changed == (c.statistic >= change.THRESHOLD_NO_HOUSE), (m, c)
+
+
 def test_home_assistant_shows_since_when_the_house_changed():
     created = datetime(2027, 1, 20, 6, tzinfo=dt.UTC)
     season = {"hlc_w_per_k": {"value": 150.0, "low": 130.0, "high": 170.0}, "owner_nights": 40,
