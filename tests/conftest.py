@@ -3,10 +3,13 @@ worker processes of one run."""
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
+import pickle
 import subprocess
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,17 +25,25 @@ class Trained:
     run: subprocess.CompletedProcess
 
 
+@contextlib.contextmanager
+def _once_per_run(tmp_path_factory, name: str) -> Iterator[Path]:
+    """The run's folder (above each xdist worker's own), held under the lock ``name``: the
+    first worker to get it builds what is missing there, the others wait and read it."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield root
+
+
 @pytest.fixture(scope="session")
 def trained_models(tmp_path_factory) -> Trained:
     """The classifiers that ``impctl train --households 20 --seed 4`` writes, trained once per
     test run and read by every module that classifies or fits with them. Read-only: a test
     that changes the files works on a copy."""
-    root = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        root = root.parent  # the run's folder, above each worker's own: one training per run
-    out, record = root / "trained-models", root / "trained-models.run.json"
-    with open(root / "trained-models.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # the other workers wait for the first one's training
+    with _once_per_run(tmp_path_factory, "trained-models") as root:
+        out, record = root / "trained-models", root / "trained-models.run.json"
         if not record.exists():
             done = run_impctl("train", "--households", "20", "--seed", "4", "--out", str(out))
             assert done.returncode == 0, done.stderr
@@ -40,3 +51,31 @@ def trained_models(tmp_path_factory) -> Trained:
                                           "stderr": done.stderr}))
         run = json.loads(record.read_text())
     return Trained(out, subprocess.CompletedProcess(run["args"], 0, run["stdout"], run["stderr"]))
+
+
+#: The shared winter: households, seed and nights of :func:`winter_season`.
+WINTER_HOUSEHOLDS, WINTER_SEED, WINTER_NIGHTS = 2, 31, 20
+
+
+@pytest.fixture(scope="session")
+def winter_season(tmp_path_factory):
+    """A short winter of two realistic households (``simulate_season``: 20 nights from 20
+    November 2026, the IMP campaign every other night from the first, the owner's nights
+    between, hot water, defrosts), simulated once per test run (about 9 CPU-s, the same for
+    one household as for two) and read by the season model's tests. Read-only: each worker
+    unpickles its own copy."""
+    with _once_per_run(tmp_path_factory, "winter-season") as root:
+        path = root / "winter-season.pickle"
+        if not path.exists():
+            from impctl.population.households import sample_households
+            from impctl.population.imp_run.season import SeasonConfig, simulate_season
+            from impctl.population.realism import sample_params
+
+            houses = sample_households(WINTER_HOUSEHOLDS, seed=WINTER_SEED)
+            params = sample_params(WINTER_HOUSEHOLDS, WINTER_SEED)
+            season = simulate_season(houses, params, SeasonConfig(nights=WINTER_NIGHTS),
+                                     seed=WINTER_SEED)
+            part = path.with_suffix(".part")  # a worker killed mid-write leaves no pickle
+            part.write_bytes(pickle.dumps(season))
+            part.rename(path)
+        return pickle.loads(path.read_bytes())

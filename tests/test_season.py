@@ -1,8 +1,8 @@
 """The season model: the record it reads, the fit, and ``impctl fit`` with owner nights.
 
-A short winter of two realistic households (the IMP campaign every other night, the owner's own
-nights between, hot water, defrosts) simulated once; NIGHTS.csv files written and read back
-through the product's own reader; ``impctl fit`` run as a real subprocess.
+The run's short winter of two realistic households (``winter_season`` in conftest.py: the IMP
+campaign every other night, the owner's own nights between, hot water, defrosts); NIGHTS.csv
+files written and read back through the product's own reader; ``impctl fit`` run on them.
 """
 
 from __future__ import annotations
@@ -17,10 +17,7 @@ from test_nights_owner import run_cli
 
 from impctl.imp.night import NightSamples
 from impctl.imp.nights_csv import read_nights, write_nights
-from impctl.population.households import sample_households
-from impctl.population.imp_run.season import SeasonConfig, simulate_season
 from impctl.population.imp_run.season_nights import household_nights
-from impctl.population.realism import sample_params
 from impctl.season import fit_season, record_from_nights
 from impctl.season.fit import fit_nights, signature
 
@@ -28,9 +25,8 @@ TZ = "Europe/Ljubljana"
 
 
 @pytest.fixture(scope="module")
-def season():
-    houses, params = sample_households(2, seed=31), sample_params(2, 31)
-    return simulate_season(houses, params, SeasonConfig(nights=20), seed=31)
+def season(winter_season):
+    return winter_season
 
 
 def _owner(day: str, hours: float, step_s: float = 300.0, label: str = "",

@@ -1,6 +1,7 @@
 """The season model alone and its morning refit: ``impctl season`` as a real subprocess, the
 daemon's refit (:func:`impctl.daemon.fitting.refresh_season`) on a real SQLite store whose owner
-records hold a simulated winter of a realistic household.
+records hold a simulated winter of a realistic household (the first of the run's shared winter,
+``winter_season`` in conftest.py: its owner nights, one of them labelled).
 
 What is promised: a search started where the last fit ended finds what the full search finds
 (the same house, one night more); its result replaces the newest fit's season block and nothing
@@ -21,10 +22,7 @@ from test_nights_owner import run_cli
 from impctl.config import load_config
 from impctl.daemon.fitting import refresh_season
 from impctl.imp.nights_csv import read_nights, write_nights
-from impctl.population.households import sample_households
-from impctl.population.imp_run.season import SeasonConfig, simulate_season
 from impctl.population.imp_run.season_nights import household_nights
-from impctl.population.realism import sample_params
 from impctl.season.fit import fit_nights
 from impctl.store import Store
 from impctl.store.records import Sample
@@ -34,10 +32,8 @@ KEYS = ("hlc_w_per_k", "tau_h", "c_m_j_per_k")
 
 
 @pytest.fixture(scope="module")
-def owner_nights():
-    houses, params = sample_households(1, seed=7), sample_params(1, 7)
-    s = simulate_season(houses, params, SeasonConfig(nights=24), seed=7)
-    nights = [n for n in household_nights(s, 0) if n.kind == "owner"]
+def owner_nights(winter_season):
+    nights = [n for n in household_nights(winter_season, 0) if n.kind == "owner"]
     assert sum(not n.label for n in nights) >= 8
     return nights
 
