@@ -216,6 +216,9 @@ def test_the_search_finds_a_house_without_a_slow_emitter():
     at hours alone the search stayed in that basin (τ off by a fifth and by three times the
     truth on these houses, HLC by 13 %)."""
     from impctl.plant.params import PlantParams
+    from impctl.population.households import sample_households
+    from impctl.population.imp_run.season import SeasonConfig, simulate_season
+    from impctl.population.realism import sample_params
 
     houses, params = sample_households(4, seed=4242), sample_params(4, 4242)
     ideal = PlantParams.ideal().with_section("gains", **vars(params.gains))
