@@ -28,7 +28,7 @@ START_GRID = tuple((t, w) for t in (3.0, 8.0, 24.0, 80.0) for w in (0.7, 0.9, 0.
 #: τ_e, and the search starts from the best point of each: the emitter's lag has two basins —
 #: near 2–3 h where most realistic houses end (a screed, the furniture and the air's capacity
 #: read as lag), and near zero (radiators, ISO 13790's own model, which has no emitter). From
-#: 2 h alone, houses of the second kind stuck with τ_e at hours and τ up to twice the truth.
+#: 2 h alone, houses of the second kind stuck with τ_e at hours and τ up to 3× the truth.
 #: f_sun ≲ 0.1 — from 0.3 the ranking sent some houses into a corner (w at its bound, τ 10×
 #: off) whose cost was 3× the best.
 START_TAU_E_S, START_F_SUN = (7200.0, 300.0), 0.05
