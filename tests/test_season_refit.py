@@ -63,7 +63,7 @@ def test_impctl_season_warm_starts_where_the_last_result_ended(tmp_path, owner_n
     assert res.returncode == 0, res.stderr
     assert "season model:" in res.stdout and "against owner nights" in res.stdout
     a = json.loads(first.read_text())["season"]
-    assert set(a["theta"]) == {"tau_mm_s", "w", "tau_e_s", "f_sun"}
+    assert set(a["theta"]) == {"tau_mm_s", "w", "tau_e_s", "f_sun", "tau_r_s"}
     assert a["search"]["warm_start"] is False
     res = run_cli("season", "--nights", str(csv), "--warm-start", str(first), "--json",
                   str(warm), "--no-convergence", model_dir=tmp_path / "no-models")

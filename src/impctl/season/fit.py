@@ -57,7 +57,7 @@ class SeasonFit:
     imp_nights : IMP nights with rows it used
     used_h : hours of rows in the likelihood [h]
     left_out_h : hours left out, by reason [h]
-    theta : the nonlinear parameters (τ_mm [s], w [-], τ_e [s], f_sun [-])
+    theta : the nonlinear parameters (τ_mm [s], w [-], τ_e [s], f_sun [-], τ_r [s])
     beta : the fixed linear parameters (K_ao, K_am [W/K], gains levels [W], defrost [W])
     signature_hlc_w_per_k : the energy signature's slope on the same owner nights [W/K]
         (NaN with fewer than three)

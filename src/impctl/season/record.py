@@ -99,7 +99,8 @@ class SeasonRecord:
 
     def stretches(self) -> tuple[NDArray[np.int64], Array, Array]:
         """(stretch number of each step, -1 outside; T_air and T_out with the bridged gaps
-        interpolated [°C]): the heat store runs on through gaps up to :data:`MAX_BRIDGE_S`."""
+        interpolated [°C], T_air's steps undone by :func:`unstep`): the heat store runs on
+        through gaps up to :data:`MAX_BRIDGE_S`."""
         ok = np.isfinite(self.t_air_c) & np.isfinite(self.t_out_c)
         idx = np.flatnonzero(ok)
         stretch = np.full(self.n, -1)
@@ -113,7 +114,7 @@ class SeasonRecord:
             lo, hi = int(mine[0]), int(mine[-1]) + 1
             stretch[lo:hi] = k
             span = np.arange(lo, hi)
-            ta[lo:hi] = np.interp(span, mine, self.t_air_c[mine])
+            ta[lo:hi] = unstep(np.interp(span, mine, self.t_air_c[mine]))
             to[lo:hi] = np.interp(span, mine, self.t_out_c[mine])
         return stretch, ta, to
 
@@ -140,3 +141,28 @@ def exclude_after(flag: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
         return flag.copy()
     window = np.convolve(flag.astype(float), np.ones(steps + 1), mode="full")[: len(flag)]
     return window > 0
+
+
+def unstep(t_c: Array) -> Array:
+    """A room sensor's steps undone: the temperature between its readings [°C].
+
+    Some room units report whole half kelvins. Read as it is, a room held at 20.2 °C is
+    20.0 °C for hours and then, for a tenth of a kelvin, 20.5 °C — a jump the model has to
+    explain with a kilowatt into the mass. The reading changes when the air crosses the
+    midpoint between two values: this puts each change's midpoint at the change and each
+    run of equal readings' value at the run's middle, linear between (on the bench's
+    households with 0.5 K sensors: HLC P90 29 → 22 %). A reading that changes at every
+    step comes back as it was.
+    """
+    y = np.asarray(t_c, dtype=float)
+    if len(y) < 2:
+        return y.copy()
+    change = np.flatnonzero(np.diff(y) != 0) + 1   # the first step of each later run
+    starts = np.r_[0, change]
+    ends = np.r_[change, len(y)]
+    # knots in time order: run middle, change, run middle, …
+    t = np.empty(len(starts) + len(change))
+    v = np.empty_like(t)
+    t[0::2], v[0::2] = (starts + ends - 1) / 2.0, y[starts]
+    t[1::2], v[1::2] = change - 0.5, (y[change - 1] + y[change]) / 2.0
+    return np.interp(np.arange(len(y), dtype=float), t, v)
