@@ -98,6 +98,23 @@ def test_a_start_that_is_no_season_result_is_one_line_and_exit_2(tmp_path, owner
     assert not out.exists()
 
 
+def test_a_start_from_an_earlier_version_of_the_model_is_a_full_search(tmp_path,
+                                                                        owner_nights):
+    """A fit stored before the model's θ gained a coordinate (the room's lag) is no bad
+    input: the morning refit after an update searches afresh and says why."""
+    csv = write_nights(owner_nights[:6], tmp_path / "nights.csv")
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps({"season": {"theta": {
+        "tau_mm_s": 90000.0, "w": 0.9, "tau_e_s": 7200.0, "f_sun": 0.05}}}))
+    out = tmp_path / "out.json"
+    res = run_cli("season", "--nights", str(csv), "--warm-start", str(old), "--json", str(out),
+                  "--no-convergence", model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "an earlier version's" in res.stdout and "tau_r_s" in res.stdout
+    assert "the search started from" not in res.stdout
+    assert json.loads(out.read_text())["season"]["search"]["warm_start"] is False
+
+
 def test_the_morning_refit_replaces_the_newest_fits_season_and_nothing_else(tmp_path,
                                                                            owner_nights):
     state = tmp_path / "state"

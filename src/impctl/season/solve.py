@@ -145,7 +145,8 @@ def search(d: Design, max_nfev: int = 60,
     else:
         starts = []
         for tau_e in START_TAU_E_S:
-            grid = [to_u((tau_h * 3600, w, tau_e, START_F_SUN, START_TAU_R_S)) for tau_h, w in START_GRID]
+            grid = [to_u((tau_h * 3600, w, tau_e, START_F_SUN, START_TAU_R_S))
+                    for tau_h, w in START_GRID]
             starts.append(min(grid, key=lambda u: float(np.sum(_residual(u, d) ** 2))))
     best = None
     for u0 in starts:

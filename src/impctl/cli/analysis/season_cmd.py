@@ -28,7 +28,8 @@ from .fit_cmd import _write_json
               default=None,
               help="An earlier `impctl fit --json` or `impctl season --json` result of the same "
                    "house: the search starts only where its season model ended (a fraction of "
-                   "a full search; a result without one is refused).")
+                   "a full search; a result without one is refused, one of an earlier "
+                   "version of the model starts a full search).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Write the result as JSON ({\"season\": …}) here.")
 @click.option("--convergence/--no-convergence", default=True, show_default=True,
@@ -73,8 +74,9 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
         click.echo(f"JSON written to {json_path}")
 
 
-def _warm_start(path: Path) -> tuple[float, ...]:
-    """θ of an earlier result (refused in one line when it has none)."""
+def _warm_start(path: Path) -> tuple[float, ...] | None:
+    """θ of an earlier result (refused in one line when it has none; None, a full search,
+    when it is an earlier version of the model's)."""
     from ...season.fit import theta_of
 
     try:
@@ -82,7 +84,28 @@ def _warm_start(path: Path) -> tuple[float, ...]:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"not a readable JSON result ({exc})", path, "--warm-start") from None
     theta = theta_of(result)
+    if theta is None and _earlier_model(result):
+        # a result from before an update of the model: a start it cannot use, not bad input
+        click.echo(f"{path}: its season model is an earlier version's (season.theta "
+                   f"without {', '.join(_missing_theta(result))}): a full search")
+        return None
     if theta is None:
         raise InputError("no season model to start from (season.theta missing or not "
                          "positive numbers)", path, "--warm-start")
     return theta
+
+
+def _missing_theta(result: dict) -> list[str]:
+    from ...season.columns import THETA
+
+    return [k for k in THETA if k not in result["season"]["theta"]]
+
+
+def _earlier_model(result) -> bool:
+    """A season.theta of finite positive numbers under names this model does not all have."""
+    block = (result.get("season") or {}).get("theta") if isinstance(result, dict) else None
+    if not isinstance(block, dict) or not block:
+        return False
+    ok = all(isinstance(v, int | float) and not isinstance(v, bool) and v > 0
+             and v == v and v != float("inf") for v in block.values())
+    return ok and bool(_missing_theta(result))
