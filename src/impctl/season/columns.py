@@ -32,7 +32,7 @@ prior on their steps) plus, where measured, the household electricity times a sh
 split half to the air, half to the mass; plus each day's sun a_d·shape(hour) split f_s to the
 air and 1 − f_s to the mass.
 
-For given nonlinear parameters θ = (τ_mm, w, τ_e, f_s) the balance is *linear* in
+For given nonlinear parameters θ = (τ_mm, w, τ_e, f_s, τ_r) the balance is *linear* in
 β = (K_ao, K_am, G_night, G_day, D, s_p, one initial mass and emitter state per segment,
 a_1 … a_days, g_1 … g_k), so the fit solves β by least squares inside the search over θ
 (variable projection). :func:`columns` filters the measured temperatures and the meter on the
@@ -183,7 +183,7 @@ class Design:
         return xb[self.blocks]
 
 
-#: Filtered series a :class:`Design` keeps (a base point and its four steps) [-].
+#: Filtered series a :class:`Design` keeps (a base point and its five steps) [-].
 FILTERED_KEPT = 12
 #: Spacing of the slow gain's knots [s]: the occupants' heat wanders from day to day.
 KNOT_S = 86400.0
