@@ -1,14 +1,14 @@
 """Expected information of the next night (impctl.campaign.design) against real refits on an
-ideal 5R1C house, and ``impctl campaign next`` as a real subprocess."""
+ideal 5R1C house, and what ``impctl campaign next`` prints, writes and returns."""
 
 from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
+from cli_fixtures import run_impctl
 
 from impctl.campaign import FitSummary, parse_candidates, parse_outlook
 from impctl.campaign.design import Z95, Protocol, predict, predict_candidates
@@ -87,9 +87,7 @@ def test_prediction_ranks_nights_as_a_real_refit_does(campaign):
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()",
-                           "campaign", "next", *args], capture_output=True, text=True,
-                          timeout=120)
+    return run_impctl("campaign", "next", *args)  # in this process: the output is checked
 
 
 def test_cli_writes_candidates_the_policy_reads(tmp_path, campaign):

@@ -309,11 +309,8 @@ def test_resume_with_other_options_is_refused(tmp_path, nights):
         "normal_model": "demand", "timestamps": "instant", "ach_infl": 0.01, "ach_vent": 0.0,
         "max_nights": 30, "night_gain_w": 250.0, "tz": "Europe/Ljubljana",
         "model_dir": "prior"}))
-    env_dir = str(tmp_path / "no-models")
-    done = subprocess.run(
-        [sys.executable, "-c", "from impctl.cli import main; main()", "fleet", "fit", "in",
-         "--out", "F", "--resume", "--max-nights", "10"], capture_output=True, text=True,
-        timeout=300, cwd=tmp_path, env={**os.environ, "IMPCTL_MODEL_DIR": env_dir})
+    done = run_impctl("fleet", "fit", "in", "--out", "F", "--resume", "--max-nights", "10",
+                      cwd=tmp_path, env={"IMPCTL_MODEL_DIR": str(tmp_path / "no-models")})
     assert done.returncode == 2, done.stderr
     assert "max_nights 30" in done.stderr and "give a new --out" in done.stderr
     assert not list(out.glob("part-*"))

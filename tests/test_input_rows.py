@@ -12,7 +12,6 @@ from pathlib import Path
 
 import pytest
 from cli_fixtures import run_impctl
-from daemon_fixtures import run_cli
 
 from impctl.errors import InputError
 from impctl.imp import read_nights
@@ -77,7 +76,7 @@ def test_simulate_says_good_plant_tables_are_not_used(tmp_path):
     (("demo", "--speed", "nan"), "--speed: must lie in (0, 30000]"),
 ])
 def test_non_finite_options_are_one_line(args, expected):
-    result = run_cli(*args, timeout_s=60)
+    result = run_impctl(*args)
     assert _one_line(result, "impctl: ").startswith(expected)
 
 

@@ -186,15 +186,10 @@ def _summary(lumped, at) -> dict:
 def test_fleet_fit_takes_the_declared_gain_options(tmp_path):
     """``impctl fleet fit`` has ``--night-gain-w``/``--night-gain-sd-w`` as ``impctl fit``:
     an SD without a declared gain is one line, exit 2, nothing written."""
-    import subprocess
-    import sys
+    from cli_fixtures import run_impctl
 
     out = tmp_path / "FLEET.parquet"
-    res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()", "fleet",
-                          "fit", str(tmp_path), "--out", str(out), "--night-gain-sd-w", "10"],
-                         capture_output=True, text=True, timeout=120)
+    res = run_impctl("fleet", "fit", str(tmp_path), "--out", str(out), "--night-gain-sd-w", "10")
     assert res.returncode == 2 and "--night-gain-w" in res.stderr and not out.exists()
-    helped = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()",
-                             "fleet", "fit", "--help"], capture_output=True, text=True,
-                            timeout=120)
+    helped = run_impctl("fleet", "fit", "--help")
     assert "--night-gain-w" in helped.stdout and "night_gain_source" in helped.stdout

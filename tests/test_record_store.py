@@ -121,10 +121,8 @@ def test_export_writes_owner_records_in_time_order_with_their_labels(tmp_path):
     """``impctl export``: the valid IMP nights and every owner record, sorted by time; an
     owner row's own setpoint, heating and hot-water share; ``--no-owner`` leaves them out;
     the file reads back."""
-    import subprocess
-    import sys
-
     import pandas as pd
+    from cli_fixtures import run_impctl
 
     from impctl.imp.nights_csv import read_nights
 
@@ -155,9 +153,7 @@ def test_export_writes_owner_records_in_time_order_with_their_labels(tmp_path):
 
     def export(*extra: str) -> pd.DataFrame:
         out = tmp_path / f"n{len(extra)}.csv"
-        res = subprocess.run([sys.executable, "-c", "from impctl.cli import main; main()",
-                              "export", "--db", str(db), "--out", str(out), *extra],
-                             capture_output=True, text=True, timeout=60)
+        res = run_impctl("export", "--db", str(db), "--out", str(out), *extra)
         assert res.returncode == 0, res.stderr
         return pd.read_csv(out, keep_default_na=False)
 
