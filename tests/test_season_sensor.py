@@ -15,7 +15,7 @@ import numpy as np
 
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season.fit import fit_nights
-from impctl.season.record import unstep
+from impctl.season.record import resolution_k, unstep
 
 STEP_S = 300.0
 
@@ -59,19 +59,25 @@ def test_half_kelvin_steps_are_undone_to_within_a_fraction_of_a_step():
     rng = np.random.default_rng(1)
     air = 20.2 + 0.6 * np.sin(2 * np.pi * t_s / 86400.0) + 0.01 * rng.normal(size=len(t_s))
     read = np.round(air / 0.5) * 0.5
+    assert resolution_k(read) == 0.5
     rms = lambda x: float(np.sqrt(np.mean((x - air) ** 2)))  # noqa: E731
     assert rms(read) > 0.14
-    assert rms(unstep(read)) < 0.5 * rms(read)
+    smooth = unstep(read, 0.5)
+    assert rms(smooth) < 0.5 * rms(read)
     # where the reading steps, the air crossed the midpoint
     k = int(np.flatnonzero(np.diff(read) != 0)[0]) + 1
-    assert unstep(read)[k - 1] < (read[k - 1] + read[k]) / 2 < unstep(read)[k] or \
-        unstep(read)[k - 1] > (read[k - 1] + read[k]) / 2 > unstep(read)[k]
+    half = (read[k - 1] + read[k]) / 2
+    assert min(smooth[k - 1], smooth[k]) < half < max(smooth[k - 1], smooth[k])
 
 
-def test_a_reading_that_changes_every_step_is_left_as_it_is():
-    x = 20.0 + np.cumsum(np.full(50, 0.01))
-    assert np.array_equal(unstep(x), x)
-    assert np.array_equal(unstep(np.array([21.0])), np.array([21.0]))
+def test_a_new_setpoint_stays_a_jump_and_a_fine_sensor_is_left_as_it_is():
+    held = np.r_[np.full(36, 20.0), np.full(36, 21.0)]          # a setpoint step, 1 K
+    assert np.array_equal(unstep(held, 0.5), held)
+    x = 20.0 + np.cumsum(np.full(50, 0.013))
+    assert resolution_k(x) is None
+    assert np.array_equal(unstep(x, None), x)
+    # a room held on round values some of the time, moving between them the rest, is not coarse
+    assert resolution_k(np.r_[held, x]) is None
 
 
 def test_the_season_record_reads_the_room_without_its_steps(winter_season):

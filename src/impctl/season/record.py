@@ -107,6 +107,7 @@ class SeasonRecord:
         ta, to = self.t_air_c.copy(), self.t_out_c.copy()
         if not len(idx):
             return stretch, ta, to
+        resolution = resolution_k(self.t_air_c)
         jump = np.diff(idx) * self.step_s > MAX_BRIDGE_S + self.step_s
         number = np.r_[0, np.cumsum(jump)]
         for k in range(int(number[-1]) + 1):
@@ -114,7 +115,7 @@ class SeasonRecord:
             lo, hi = int(mine[0]), int(mine[-1]) + 1
             stretch[lo:hi] = k
             span = np.arange(lo, hi)
-            ta[lo:hi] = unstep(np.interp(span, mine, self.t_air_c[mine]))
+            ta[lo:hi] = unstep(np.interp(span, mine, self.t_air_c[mine]), resolution)
             to[lo:hi] = np.interp(span, mine, self.t_out_c[mine])
         return stretch, ta, to
 
@@ -143,26 +144,49 @@ def exclude_after(flag: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
     return window > 0
 
 
-def unstep(t_c: Array) -> Array:
-    """A room sensor's steps undone: the temperature between its readings [°C].
+#: Resolutions a coarse room sensor reports in, largest first [K].
+COARSE_RESOLUTIONS_K = (1.0, 0.5, 0.25, 0.2)
+#: Share of the readings on a resolution's grid for the sensor to be read as that coarse [-].
+ON_GRID_SHARE = 0.99
+
+
+def resolution_k(t_c: Array) -> float | None:
+    """The room sensor's resolution [K] when it is coarse (at least :data:`ON_GRID_SHARE` of the
+    finite readings on one of :data:`COARSE_RESOLUTIONS_K`), else None."""
+    y = np.asarray(t_c, dtype=float)
+    y = y[np.isfinite(y)]
+    if len(y) < 2:
+        return None
+    for q in COARSE_RESOLUTIONS_K:
+        if np.mean(np.abs(y / q - np.round(y / q)) < 1e-6) >= ON_GRID_SHARE:
+            return q
+    return None
+
+
+def unstep(t_c: Array, resolution: float | None) -> Array:
+    """A coarse room sensor's steps undone: the temperature between its readings [°C].
 
     Some room units report whole half kelvins. Read as it is, a room held at 20.2 °C is
     20.0 °C for hours and then, for a tenth of a kelvin, 20.5 °C — a jump the model has to
-    explain with a kilowatt into the mass. The reading changes when the air crosses the
-    midpoint between two values: this puts each change's midpoint at the change and each
-    run of equal readings' value at the run's middle, linear between (on the bench's
-    households with 0.5 K sensors: HLC P90 29 → 22 %). A reading that changes at every
-    step comes back as it was.
+    explain with a kilowatt into the mass. A reading that moves by one step of the sensor's
+    ``resolution`` [K] changed when the air crossed the midpoint of the two values: this puts
+    that midpoint at the change and the run of equal readings on each side at its value in its
+    middle, linear between (on the bench's households with 0.5 K sensors: HLC P90 29 → 22 %).
+    A larger jump (a new setpoint) stays a jump; without a coarse resolution (None) the
+    readings come back as they were.
     """
-    y = np.asarray(t_c, dtype=float)
-    if len(y) < 2:
-        return y.copy()
+    y = np.asarray(t_c, dtype=float).copy()
+    if resolution is None or len(y) < 2:
+        return y
     change = np.flatnonzero(np.diff(y) != 0) + 1   # the first step of each later run
-    starts = np.r_[0, change]
-    ends = np.r_[change, len(y)]
-    # knots in time order: run middle, change, run middle, …
-    t = np.empty(len(starts) + len(change))
-    v = np.empty_like(t)
-    t[0::2], v[0::2] = (starts + ends - 1) / 2.0, y[starts]
-    t[1::2], v[1::2] = change - 0.5, (y[change - 1] + y[change]) / 2.0
-    return np.interp(np.arange(len(y), dtype=float), t, v)
+    one = np.isclose(np.abs(y[change] - y[change - 1]), resolution)
+    starts, ends = np.r_[0, change], np.r_[change, len(y)]
+    mid = (starts + ends - 1) / 2.0
+    # each run: its value from its middle towards a one-step change, from its end otherwise
+    left = np.where(np.r_[False, one], mid, starts)
+    right = np.where(np.r_[one, False], mid, ends - 1)
+    t = np.concatenate([left, right, change[one] - 0.5])
+    v = np.concatenate([y[starts], y[starts],
+                        (y[change[one] - 1] + y[change[one]]) / 2.0])
+    order = np.argsort(t, kind="stable")
+    return np.interp(np.arange(len(y), dtype=float), t[order], v[order])
