@@ -16,6 +16,10 @@ without a step that alarms at all; and alarms before the step in the others), th
 step's night and size, the coverage of the size's 95 % interval — each with a 95 % bootstrap
 interval over households. ``--method cusum`` runs the alternative measured before choosing: a
 two-sided CUSUM on the residuals of the same night model fitted to a reference window.
+``--method glr-level`` runs the alternative measured and not adopted (decision record 0036): the
+same GLR with a free step in the gains level at the step's night, the statistic the slope
+step's |t| given it, at its own thresholds (:data:`LEVEL_THRESHOLDS`, set by ``--calibrate
+--method glr-level``).
 
 ``--calibrate`` sets the thresholds instead: households without a step (``--seeds``, by
 default 9001 and 9002, never the bench's 4242; every household has its own weather), the test
@@ -30,7 +34,10 @@ drops the household electricity from every night of the bench's households.
     python bench/season_change.py --households 200
     python bench/season_change.py --households 200 --no-house-electricity
     python bench/season_change.py --households 200 --method cusum
+    python bench/season_change.py --households 200 --seed 4343
+    python bench/season_change.py --households 200 --method glr-level
     python bench/season_change.py --calibrate --households 320 --seeds 9001,9002
+    python bench/season_change.py --calibrate --households 320 --seeds 9001,9002 --method glr-level
 """
 
 from __future__ import annotations
@@ -57,14 +64,19 @@ from impctl.population.realism import sample_params  # noqa: E402
 from impctl.season import change  # noqa: E402
 
 _SEASON = None
-#: The bench's held-out households' seed, and the calibration's (never the same).
+#: The bench's held-out households' seed, the calibration's (never the same), and the other
+#: held-out seeds that measured the false alarms again (never calibrated on either).
 BENCH_SEED, CALIBRATION_SEEDS = 4242, (9001, 9002)
+HELD_OUT_SEEDS = (BENCH_SEED, 4343, 4444)
 #: The false alarms per house-season the threshold is set for [-], and the step the threshold
 #: is rounded up to [-].
 FALSE_ALARM_TARGET, THRESHOLD_STEP = 0.05, 0.05
 #: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
 #: for ≤ 1 in 20 false alarms on the calibration seasons).
 CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
+#: ``--method glr-level``: its thresholds with and without the household electricity [-], set
+#: like the product's (``--calibrate --method glr-level``, the 640 calibration seasons).
+LEVEL_THRESHOLDS = (4.50, 4.35)
 
 
 def steps(n: int, nights: int, seed: int, window_w_k: float, first: int,
@@ -108,15 +120,54 @@ def without_house_electricity(rows: change.NightRows) -> change.NightRows:
                             rows.memory_k, np.full(len(rows), np.nan))
 
 
-def season_max(rows: change.NightRows) -> dict:
+def glr_given_level(rows: change.NightRows) -> tuple[float, int, float, float]:
+    """:func:`impctl.season.change.glr` with a free step in the gains level Φ at the same
+    night as the step in H: (largest |t| of the slope's step given the level's, its night
+    index k, δ̂_k [W/K], se(δ̂_k) [W/K]). A gains step (heat off by the same watts whatever
+    T_air − T_out) goes into the level; what is left is a change of heat in proportion to
+    T_air − T_out. Same whitener and night range as the product's statistic."""
+    n = len(rows)
+    if n < max(change.MIN_NIGHTS, 2 * change.MIN_SIDE):
+        return math.nan, -1, math.nan, math.nan
+    X0 = rows.design()
+    keep = np.r_[True, np.ptp(X0[:, 1:], axis=0) > 1e-9]
+    X0 = X0[:, keep]
+    w = change.whitener(rows, X0)
+    x0w, yw = w @ X0, w @ rows.q_w
+    best = (0.0, -1, math.nan, math.nan)
+    for k in range(change.MIN_SIDE, n - change.MIN_SIDE + 1):
+        after = (np.arange(n) >= k).astype(float)
+        X = np.c_[x0w, w @ after, w @ (after * rows.dt_k)]
+        beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
+        r = yw - X @ beta
+        dof = n - X.shape[1]
+        if dof < 2:
+            continue
+        sigma = max(math.sqrt(float(r @ r) / dof), 1e-9)
+        se = sigma * math.sqrt(max(float(np.linalg.inv(X.T @ X)[-1, -1]), 0.0))
+        if se > 0 and abs(beta[-1]) / se > best[0]:
+            best = (abs(beta[-1]) / se, k, float(beta[-1]), se)
+    return best
+
+
+def threshold_of(rows: change.NightRows, method: str) -> float:
+    """The alarm threshold [-] of ``method`` for ``rows``' design: the product's
+    (:func:`impctl.season.change.threshold_for`), or :data:`LEVEL_THRESHOLDS`."""
+    if method == "glr-level":
+        return LEVEL_THRESHOLDS[0 if rows.has_house_electricity else 1]
+    return change.threshold_for(rows)
+
+
+def season_max(rows: change.NightRows, method: str = "glr") -> dict:
     """The largest statistic over a whole season run night after night (no stop at an alarm):
     its value [-], the nights read then, the step's night index k, and the first nights read
-    at which the statistic passed the rows' threshold (:func:`impctl.season.change.threshold_for`;
-    None if never)."""
+    at which the statistic passed the rows' threshold (:func:`threshold_of`; None if never).
+    ``method`` "glr" is the product's statistic, "glr-level" :func:`glr_given_level`."""
     best: dict = {"max_stat": 0.0, "at_nights": None, "k": None, "first_alarm_nights": None}
-    threshold = change.threshold_for(rows)
+    threshold = threshold_of(rows, method)
+    statistic = glr_given_level if method == "glr-level" else change.glr
     for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
-        stat, k, _, _ = change.glr(rows.head(m))
+        stat, k, _, _ = statistic(rows.head(m))
         if not math.isfinite(stat):
             continue
         if stat >= threshold and best["first_alarm_nights"] is None:
@@ -126,17 +177,28 @@ def season_max(rows: change.NightRows) -> dict:
     return best
 
 
-def _run(job: tuple[int, str, bool]) -> dict:
-    h, method, no_house = job
+def level_sequence(rows: change.NightRows) -> tuple[int, int, float, float]:
+    """:func:`impctl.season.change.detect_sequence` with :func:`glr_given_level`: (nights read
+    at the first alarm, -1 if none; the step's night index, δ̂ [W/K], se [W/K] then)."""
+    threshold = threshold_of(rows, "glr-level")
+    for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
+        stat, k, delta, se = glr_given_level(rows.head(m))
+        if math.isfinite(stat) and stat >= threshold:
+            return m, k, delta, se
+    return -1, -1, math.nan, math.nan
+
+
+def _run(job: tuple[int, str, bool, bool]) -> dict:
+    h, method, no_house, calibrating = job
     s = _SEASON
     t0 = time.perf_counter()
     rows = change.night_rows(household_nights(s, h))
     if no_house:
         rows = without_house_electricity(rows)
     row: dict = {"household": h, "nights": len(rows)}
-    if method == "calibrate":
-        row.update(season_max(rows))
-        row["no_house"] = season_max(without_house_electricity(rows))
+    if calibrating:
+        row.update(season_max(rows, method))
+        row["no_house"] = season_max(without_house_electricity(rows), method)
     elif method == "glr":
         at, c = change.detect_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -144,6 +206,14 @@ def _run(job: tuple[int, str, bool]) -> dict:
                    delta_w_k=c.delta_hlc_w_k if at > 0 else None,
                    low_w_k=c.low_w_k if at > 0 else None,
                    high_w_k=c.high_w_k if at > 0 else None)
+    elif method == "glr-level":
+        at, k, delta, se = level_sequence(rows)
+        half = change.Z95 * change.SIZE_SCALE * se
+        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
+                   since_date=rows.dates[k] if at > 0 else None,
+                   delta_w_k=delta if at > 0 else None,
+                   low_w_k=delta - half if at > 0 else None,
+                   high_w_k=delta + half if at > 0 else None)
     else:
         at, k = cusum_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -277,11 +347,12 @@ def _seeds(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"{text!r}: give seeds, e.g. 9001,9002") from None
 
 
-def _test_all(n: int, method: str, no_house: bool, workers: int, t0: float) -> list[dict]:
+def _test_all(n: int, method: str, no_house: bool, workers: int, t0: float,
+              calibrating: bool = False) -> list[dict]:
     """The test on every household of :data:`_SEASON` (forked workers), in household order."""
     print(f"testing {n} households …", file=sys.stderr, flush=True)
     rows: list[dict] = []
-    jobs = [(h, method, no_house) for h in range(n)]
+    jobs = [(h, method, no_house, calibrating) for h in range(n)]
     with mp.get_context("fork").Pool(workers) as pool:
         for i, row in enumerate(pool.imap_unordered(_run, jobs, chunksize=2), 1):
             rows.append(row)
@@ -303,7 +374,8 @@ def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
               file=sys.stderr, flush=True)
         _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=seed,
                                   hlc_step_w_k=np.zeros(n), step_night=np.zeros(n, int))
-        rows += [{**r, "seed": seed} for r in _test_all(n, "calibrate", False, args.workers, t0)]
+        rows += [{**r, "seed": seed} for r in _test_all(n, args.method, False, args.workers, t0,
+                                                      calibrating=True)]
         hlc.append(np.asarray(houses.hlc_w_per_k, float))
         emitter.append(np.asarray(params.emitter.kind))
     hlc_a, em_a = np.concatenate(hlc), np.concatenate(emitter)
@@ -314,10 +386,11 @@ def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
     with_house = [{k: v for k, v in r.items() if k != "no_house"} for r in rows]
     no_house = [r["no_house"] for r in rows]
     summary = {}
-    for design, rs, now in (("with household electricity", with_house, change.THRESHOLD),
-                            ("without household electricity", no_house,
-                             change.THRESHOLD_NO_HOUSE)):
-        summary[design] = calibrate_summary(rs, hlc_a, em_a, now)
+    now = LEVEL_THRESHOLDS if args.method == "glr-level" else (change.THRESHOLD,
+                                                               change.THRESHOLD_NO_HOUSE)
+    for design, rs, now_d in (("with household electricity", with_house, now[0]),
+                              ("without household electricity", no_house, now[1])):
+        summary[design] = calibrate_summary(rs, hlc_a, em_a, now_d)
         print_calibration(summary[design], design)
     if args.json:
         with open(args.json, "w") as fh:
@@ -336,7 +409,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="the open window's step in HLC [W/K]")
     ap.add_argument("--first", type=int, default=25, help="earliest step night")
     ap.add_argument("--last", type=int, default=20, help="nights kept after the latest step")
-    ap.add_argument("--method", choices=("glr", "cusum"), default="glr")
+    ap.add_argument("--method", choices=("glr", "glr-level", "cusum"), default="glr",
+                    help="the product's statistic, the alternative with a free step in the "
+                         "gains level at the same night, or a CUSUM (module docstring)")
     ap.add_argument("--calibrate", action="store_true",
                     help="set the thresholds on households without a step (module docstring)")
     ap.add_argument("--no-house-electricity", action="store_true",
@@ -346,9 +421,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     args = ap.parse_args(argv)
     if args.calibrate:
-        if BENCH_SEED in args.seeds:
-            ap.exit(2, f"season_change.py: --seeds: {BENCH_SEED} is the bench's held-out seed; "
-                       "calibrate on others\n")
+        if args.method == "cusum":
+            ap.exit(2, "season_change.py: --calibrate sets the GLR's thresholds: --method glr "
+                       "or glr-level\n")
+        held = sorted(set(args.seeds) & set(HELD_OUT_SEEDS))
+        if held:
+            ap.exit(2, f"season_change.py: --seeds: {held[0]} is a held-out seed "
+                       f"({', '.join(map(str, HELD_OUT_SEEDS))}); calibrate on others\n")
         calibrate(args, argv)
         return
     global _SEASON
