@@ -50,6 +50,7 @@ import multiprocessing as mp
 import os
 import sys
 import time
+from dataclasses import dataclass
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 cores
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -120,14 +121,35 @@ def without_house_electricity(rows: change.NightRows) -> change.NightRows:
                             rows.memory_k, np.full(len(rows), np.nan))
 
 
-def glr_given_level(rows: change.NightRows) -> tuple[float, int, float, float]:
-    """:func:`impctl.season.change.glr` with a free step in the gains level Φ at the same
-    night as the step in H: (largest |t| of the slope's step given the level's, its night
-    index k, δ̂_k [W/K], se(δ̂_k) [W/K]). A gains step (heat off by the same watts whatever
-    T_air − T_out) goes into the level; what is left is a change of heat in proportion to
-    T_air − T_out. Same whitener and night range as the product's statistic."""
+@dataclass(frozen=True)
+class Variant:
+    """A variant of the product's statistic the bench measures (``--method glr-level``,
+    ``--min-side``, ``--thresholds``): a free step in the gains level at the step's night or
+    not, the fewest usable nights before and after the step, the thresholds [-] with and
+    without the household electricity."""
+
+    level: bool
+    before: int
+    after: int
+    thresholds: tuple[float, float]
+
+    def threshold(self, rows: change.NightRows) -> float:
+        """The alarm threshold [-] for ``rows``' design."""
+        return self.thresholds[0 if rows.has_house_electricity else 1]
+
+
+#: The variant the workers run (set before they fork); None: the product's test itself.
+_VARIANT: Variant | None = None
+
+
+def glr_variant(rows: change.NightRows, v: Variant) -> tuple[float, int, float, float]:
+    """:func:`impctl.season.change.glr` as ``v`` has it: (largest |t| of the step in H — given
+    a free step in the gains level at the same night with ``v.level`` —, its night index k,
+    δ̂_k [W/K], se(δ̂_k) [W/K]) over every k with ``v.before`` nights before and ``v.after``
+    from k on. A gains step (heat off by the same watts whatever T_air − T_out) goes into the
+    level; what is left is a change of heat in proportion to T_air − T_out. Same whitener."""
     n = len(rows)
-    if n < max(change.MIN_NIGHTS, 2 * change.MIN_SIDE):
+    if n < max(change.MIN_NIGHTS, v.before + v.after):
         return math.nan, -1, math.nan, math.nan
     X0 = rows.design()
     keep = np.r_[True, np.ptp(X0[:, 1:], axis=0) > 1e-9]
@@ -135,9 +157,10 @@ def glr_given_level(rows: change.NightRows) -> tuple[float, int, float, float]:
     w = change.whitener(rows, X0)
     x0w, yw = w @ X0, w @ rows.q_w
     best = (0.0, -1, math.nan, math.nan)
-    for k in range(change.MIN_SIDE, n - change.MIN_SIDE + 1):
+    for k in range(v.before, n - v.after + 1):
         after = (np.arange(n) >= k).astype(float)
-        X = np.c_[x0w, w @ after, w @ (after * rows.dt_k)]
+        cols = [x0w, w @ after] if v.level else [x0w]
+        X = np.column_stack([*cols, w @ (after * rows.dt_k)])
         beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
         r = yw - X @ beta
         dof = n - X.shape[1]
@@ -150,24 +173,23 @@ def glr_given_level(rows: change.NightRows) -> tuple[float, int, float, float]:
     return best
 
 
-def threshold_of(rows: change.NightRows, method: str) -> float:
-    """The alarm threshold [-] of ``method`` for ``rows``' design: the product's
-    (:func:`impctl.season.change.threshold_for`), or :data:`LEVEL_THRESHOLDS`."""
-    if method == "glr-level":
-        return LEVEL_THRESHOLDS[0 if rows.has_house_electricity else 1]
-    return change.threshold_for(rows)
+def _statistic(rows: change.NightRows) -> tuple[float, int, float, float]:
+    return change.glr(rows) if _VARIANT is None else glr_variant(rows, _VARIANT)
 
 
-def season_max(rows: change.NightRows, method: str = "glr") -> dict:
+def _threshold(rows: change.NightRows) -> float:
+    return change.threshold_for(rows) if _VARIANT is None else _VARIANT.threshold(rows)
+
+
+def season_max(rows: change.NightRows) -> dict:
     """The largest statistic over a whole season run night after night (no stop at an alarm):
     its value [-], the nights read then, the step's night index k, and the first nights read
-    at which the statistic passed the rows' threshold (:func:`threshold_of`; None if never).
-    ``method`` "glr" is the product's statistic, "glr-level" :func:`glr_given_level`."""
+    at which the statistic passed the rows' threshold (:func:`impctl.season.change.threshold_for`,
+    or the variant's; None if never)."""
     best: dict = {"max_stat": 0.0, "at_nights": None, "k": None, "first_alarm_nights": None}
-    threshold = threshold_of(rows, method)
-    statistic = glr_given_level if method == "glr-level" else change.glr
+    threshold = _threshold(rows)
     for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
-        stat, k, _, _ = statistic(rows.head(m))
+        stat, k, _, _ = _statistic(rows.head(m))
         if not math.isfinite(stat):
             continue
         if stat >= threshold and best["first_alarm_nights"] is None:
@@ -177,12 +199,12 @@ def season_max(rows: change.NightRows, method: str = "glr") -> dict:
     return best
 
 
-def level_sequence(rows: change.NightRows) -> tuple[int, int, float, float]:
-    """:func:`impctl.season.change.detect_sequence` with :func:`glr_given_level`: (nights read
-    at the first alarm, -1 if none; the step's night index, δ̂ [W/K], se [W/K] then)."""
-    threshold = threshold_of(rows, "glr-level")
+def variant_sequence(rows: change.NightRows, v: Variant) -> tuple[int, int, float, float]:
+    """:func:`impctl.season.change.detect_sequence` with :func:`glr_variant`: (nights read at
+    the first alarm, -1 if none; the step's night index, δ̂ [W/K], se [W/K] then)."""
+    threshold = v.threshold(rows)
     for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
-        stat, k, delta, se = glr_given_level(rows.head(m))
+        stat, k, delta, se = glr_variant(rows.head(m), v)
         if math.isfinite(stat) and stat >= threshold:
             return m, k, delta, se
     return -1, -1, math.nan, math.nan
@@ -197,8 +219,16 @@ def _run(job: tuple[int, str, bool, bool]) -> dict:
         rows = without_house_electricity(rows)
     row: dict = {"household": h, "nights": len(rows)}
     if calibrating:
-        row.update(season_max(rows, method))
-        row["no_house"] = season_max(without_house_electricity(rows), method)
+        row.update(season_max(rows))
+        row["no_house"] = season_max(without_house_electricity(rows))
+    elif method in ("glr", "glr-level") and _VARIANT is not None:
+        at, k, delta, se = variant_sequence(rows, _VARIANT)
+        half = change.Z95 * change.SIZE_SCALE * se
+        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
+                   since_date=rows.dates[k] if at > 0 else None,
+                   delta_w_k=delta if at > 0 else None,
+                   low_w_k=delta - half if at > 0 else None,
+                   high_w_k=delta + half if at > 0 else None)
     elif method == "glr":
         at, c = change.detect_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -206,14 +236,6 @@ def _run(job: tuple[int, str, bool, bool]) -> dict:
                    delta_w_k=c.delta_hlc_w_k if at > 0 else None,
                    low_w_k=c.low_w_k if at > 0 else None,
                    high_w_k=c.high_w_k if at > 0 else None)
-    elif method == "glr-level":
-        at, k, delta, se = level_sequence(rows)
-        half = change.Z95 * change.SIZE_SCALE * se
-        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
-                   since_date=rows.dates[k] if at > 0 else None,
-                   delta_w_k=delta if at > 0 else None,
-                   low_w_k=delta - half if at > 0 else None,
-                   high_w_k=delta + half if at > 0 else None)
     else:
         at, k = cusum_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -340,6 +362,16 @@ def _fmt(ci: tuple, digits: int = 0, scale: float = 1.0) -> str:
     return f"[{ci[0] * scale:.{digits}f}, {ci[1] * scale:.{digits}f}]"
 
 
+def _pair(kind: type):
+    def parse(text: str) -> tuple:
+        try:
+            a, b = (kind(x) for x in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: give two numbers, e.g. 12,12") from None
+        return a, b
+    return parse
+
+
 def _seeds(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(x) for x in text.split(","))
@@ -386,8 +418,8 @@ def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
     with_house = [{k: v for k, v in r.items() if k != "no_house"} for r in rows]
     no_house = [r["no_house"] for r in rows]
     summary = {}
-    now = LEVEL_THRESHOLDS if args.method == "glr-level" else (change.THRESHOLD,
-                                                               change.THRESHOLD_NO_HOUSE)
+    now = (_VARIANT.thresholds if _VARIANT is not None
+           else (change.THRESHOLD, change.THRESHOLD_NO_HOUSE))
     for design, rs, now_d in (("with household electricity", with_house, now[0]),
                               ("without household electricity", no_house, now[1])):
         summary[design] = calibrate_summary(rs, hlc_a, em_a, now_d)
@@ -412,6 +444,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--method", choices=("glr", "glr-level", "cusum"), default="glr",
                     help="the product's statistic, the alternative with a free step in the "
                          "gains level at the same night, or a CUSUM (module docstring)")
+    ap.add_argument("--min-side", type=_pair(int), default=None, metavar="BEFORE,AFTER",
+                    help="a variant: the fewest usable nights before and after the step "
+                         f"(the product: {change.MIN_SIDE},{change.MIN_SIDE})")
+    ap.add_argument("--thresholds", type=_pair(float), default=None, metavar="WITH,WITHOUT",
+                    help="the variant's thresholds with and without the household electricity "
+                         f"(the product: {change.THRESHOLD},{change.THRESHOLD_NO_HOUSE}; "
+                         f"glr-level: {LEVEL_THRESHOLDS[0]},{LEVEL_THRESHOLDS[1]})")
     ap.add_argument("--calibrate", action="store_true",
                     help="set the thresholds on households without a step (module docstring)")
     ap.add_argument("--no-house-electricity", action="store_true",
@@ -420,6 +459,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     args = ap.parse_args(argv)
+    global _VARIANT
+    if args.method == "glr-level" or args.min_side or args.thresholds:
+        if args.method == "cusum":
+            ap.exit(2, "season_change.py: --min-side and --thresholds are the GLR's\n")
+        level = args.method == "glr-level"
+        before, after = args.min_side or (change.MIN_SIDE, change.MIN_SIDE)
+        _VARIANT = Variant(level, before, after, args.thresholds or (
+            LEVEL_THRESHOLDS if level else (change.THRESHOLD, change.THRESHOLD_NO_HOUSE)))
     if args.calibrate:
         if args.method == "cusum":
             ap.exit(2, "season_change.py: --calibrate sets the GLR's thresholds: --method glr "
