@@ -16,15 +16,17 @@ without a step that alarms at all; and alarms before the step in the others), th
 step's night and size, the coverage of the size's 95 % interval — each with a 95 % bootstrap
 interval over households. ``--method cusum`` runs the alternative measured before choosing: a
 two-sided CUSUM on the residuals of the same night model fitted to a reference window.
-``--method glr-level`` runs the alternative measured and not adopted (decision record 0036): the
-same GLR with a free step in the gains level at the step's night, the statistic the slope
-step's |t| given it, at its own thresholds (:data:`LEVEL_THRESHOLDS`, set by ``--calibrate
---method glr-level``).
+Two more alternatives were measured and not adopted (decision record 0036): ``--method
+glr-level``, the same GLR with a free step in the gains level at the step's night, the statistic
+the slope step's |t| given it, at its own thresholds (:data:`LEVEL_THRESHOLDS`, set by
+``--calibrate --method glr-level``); and ``--min-side BEFORE,AFTER``, the fewest usable nights
+on each side of the step, with the thresholds its calibration sets (``--thresholds
+WITH,WITHOUT``).
 
 ``--calibrate`` sets the thresholds instead: households without a step (``--seeds``, by
-default 9001 and 9002, never the bench's 4242; every household has its own weather), the test
-run night after night through the whole season without stopping at an alarm, the season's
-largest statistic per household — once on the nights as exported, with the household
+default 9001 and 9002, never a held-out seed: 4242, 4343, 4444; every household has its own
+weather), the test run night after night through the whole season without stopping at an
+alarm, the season's largest statistic per household — once on the nights as exported, with the household
 electricity, and once without it (most gateways record none), the two designs
 :func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
 of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
@@ -38,6 +40,8 @@ drops the household electricity from every night of the bench's households.
     python bench/season_change.py --households 200 --method glr-level
     python bench/season_change.py --calibrate --households 320 --seeds 9001,9002
     python bench/season_change.py --calibrate --households 320 --seeds 9001,9002 --method glr-level
+    python bench/season_change.py --calibrate --households 320 --seeds 9001,9002 --min-side 12,12
+    python bench/season_change.py --households 200 --min-side 12,12 --thresholds 3.35,3.50
 """
 
 from __future__ import annotations
