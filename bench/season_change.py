@@ -26,8 +26,8 @@ WITH,WITHOUT``).
 ``--calibrate`` sets the thresholds instead: households without a step (``--seeds``, by
 default 9001 and 9002, never a held-out seed: 4242, 4343, 4444; every household has its own
 weather), the test run night after night through the whole season without stopping at an
-alarm, the season's largest statistic per household — once on the nights as exported, with the household
-electricity, and once without it (most gateways record none), the two designs
+alarm, the season's largest statistic per household — once on the nights as exported, with the
+household electricity, and once without it (most gateways record none), the two designs
 :func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
 of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
 the false alarms at the current one and where they come from. ``--no-house-electricity``
