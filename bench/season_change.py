@@ -14,14 +14,21 @@ Figures: detection rate per kind of step (an alarm on a night after the step), t
 nights from the step to the alarm (median, P90), false alarms per house-season (a household
 without a step that alarms at all; and alarms before the step in the others), the error of the
 step's night and size, the coverage of the size's 95 % interval — each with a 95 % bootstrap
-interval over households. ``--method cusum`` runs the alternative measured before choosing: a
+interval over households (bench/season_change_alternatives.py has the alternatives).
+``--method cusum`` runs the alternative measured before choosing: a
 two-sided CUSUM on the residuals of the same night model fitted to a reference window.
+Two more alternatives were measured and not adopted (decision record 0036): ``--method
+glr-level``, the same GLR with a free step in the gains level at the step's night, the statistic
+the slope step's |t| given it, at its own thresholds (``LEVEL_THRESHOLDS``, set by
+``--calibrate --method glr-level``); and ``--min-side BEFORE,AFTER``, the fewest usable nights
+on each side of the step, with the thresholds its calibration sets (``--thresholds
+WITH,WITHOUT``).
 
 ``--calibrate`` sets the thresholds instead: households without a step (``--seeds``, by
-default 9001 and 9002, never the bench's 4242; every household has its own weather), the test
-run night after night through the whole season without stopping at an alarm, the season's
-largest statistic per household — once on the nights as exported, with the household
-electricity, and once without it (most gateways record none), the two designs
+default 9001 and 9002, never a held-out seed: 4242, 4343, 4444; every household has its own
+weather), the test run night after night through the whole season without stopping at an
+alarm, the season's largest statistic per household — once on the nights as exported, with the
+household electricity, and once without it (most gateways record none), the two designs
 :func:`impctl.season.change.threshold_for` tells apart. Each threshold is the 95th percentile
 of its statistics (at most one house-season in 20 alarms) rounded up to 0.05, printed with
 the false alarms at the current one and where they come from. ``--no-house-electricity``
@@ -30,7 +37,12 @@ drops the household electricity from every night of the bench's households.
     python bench/season_change.py --households 200
     python bench/season_change.py --households 200 --no-house-electricity
     python bench/season_change.py --households 200 --method cusum
+    python bench/season_change.py --households 200 --seed 4343
+    python bench/season_change.py --households 200 --method glr-level
     python bench/season_change.py --calibrate --households 320 --seeds 9001,9002
+    python bench/season_change.py --calibrate --households 320 --seeds 9001,9002 --method glr-level
+    python bench/season_change.py --calibrate --households 320 --seeds 9001,9002 --min-side 12,12
+    python bench/season_change.py --households 200 --min-side 12,12 --thresholds 3.35,3.50
 """
 
 from __future__ import annotations
@@ -48,6 +60,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 c
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from season_change_alternatives import (  # noqa: E402  (bench/: the alternatives measured)
+    LEVEL_THRESHOLDS,
+    Variant,
+    cusum_sequence,
+    glr_variant,
+    variant_sequence,
+)
 
 from impctl.plant.params import RADIATORS, UNDERFLOOR  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
@@ -57,14 +76,14 @@ from impctl.population.realism import sample_params  # noqa: E402
 from impctl.season import change  # noqa: E402
 
 _SEASON = None
-#: The bench's held-out households' seed, and the calibration's (never the same).
+#: The bench's held-out households' seed, the calibration's (never the same), and the other
+#: held-out seeds that measured the false alarms again (never calibrated on either).
 BENCH_SEED, CALIBRATION_SEEDS = 4242, (9001, 9002)
+HELD_OUT_SEEDS = (BENCH_SEED, 4343, 4444)
 #: The false alarms per house-season the threshold is set for [-], and the step the threshold
 #: is rounded up to [-].
 FALSE_ALARM_TARGET, THRESHOLD_STEP = 0.05, 0.05
-#: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
-#: for ≤ 1 in 20 false alarms on the calibration seasons).
-CUSUM_REF, CUSUM_STEP_W_K, CUSUM_H = 20, 14.0, 120.0
+
 
 
 def steps(n: int, nights: int, seed: int, window_w_k: float, first: int,
@@ -76,47 +95,33 @@ def steps(n: int, nights: int, seed: int, window_w_k: float, first: int,
     return size, rng.integers(first, nights - last, n)
 
 
-def cusum_sequence(rows: change.NightRows) -> tuple[int, int]:
-    """(nights read at the alarm, -1 if none; the night the CUSUM last left zero) of a
-    two-sided CUSUM tuned to ±:data:`CUSUM_STEP_W_K` on the residuals of the night model
-    fitted to the first :data:`CUSUM_REF` nights."""
-    n = len(rows)
-    if n <= CUSUM_REF + 1:
-        return -1, -1
-    X = rows.design()
-    keep = np.r_[True, np.ptp(X[:CUSUM_REF, 1:], axis=0) > 1e-9]
-    X = X[:, keep]
-    beta, *_ = np.linalg.lstsq(X[:CUSUM_REF], rows.q_w[:CUSUM_REF], rcond=None)
-    r_ref = rows.q_w[:CUSUM_REF] - X[:CUSUM_REF] @ beta
-    sigma = max(math.sqrt(float(r_ref @ r_ref) / max(CUSUM_REF - X.shape[1], 1)), 1e-9)
-    up = down = 0.0
-    since_up = since_down = CUSUM_REF
-    for t in range(CUSUM_REF, n):
-        r = (rows.q_w[t] - X[t] @ beta) / sigma
-        m = CUSUM_STEP_W_K * rows.dt_k[t] / sigma       # the step's shift, in σ
-        up, down = max(0.0, up + m * r - m * m / 2), max(0.0, down - m * r - m * m / 2)
-        since_up = t + 1 if up == 0 else since_up
-        since_down = t + 1 if down == 0 else since_down
-        if up >= CUSUM_H or down >= CUSUM_H:
-            return t + 1, min(since_up if up >= CUSUM_H else since_down, n - 1)
-    return -1, -1
-
-
 def without_house_electricity(rows: change.NightRows) -> change.NightRows:
     """``rows`` as a gateway without a household electricity meter exports them."""
     return change.NightRows(rows.dates, rows.q_w, rows.dt_k, rows.fall_k, rows.defrost,
                             rows.memory_k, np.full(len(rows), np.nan))
 
 
+#: The variant the workers run (set before they fork); None: the product's test itself.
+_VARIANT: Variant | None = None
+
+
+def _statistic(rows: change.NightRows) -> tuple[float, int, float, float]:
+    return change.glr(rows) if _VARIANT is None else glr_variant(rows, _VARIANT)
+
+
+def _threshold(rows: change.NightRows) -> float:
+    return change.threshold_for(rows) if _VARIANT is None else _VARIANT.threshold(rows)
+
+
 def season_max(rows: change.NightRows) -> dict:
     """The largest statistic over a whole season run night after night (no stop at an alarm):
     its value [-], the nights read then, the step's night index k, and the first nights read
-    at which the statistic passed the rows' threshold (:func:`impctl.season.change.threshold_for`;
-    None if never)."""
+    at which the statistic passed the rows' threshold (:func:`impctl.season.change.threshold_for`,
+    or the variant's; None if never)."""
     best: dict = {"max_stat": 0.0, "at_nights": None, "k": None, "first_alarm_nights": None}
-    threshold = change.threshold_for(rows)
+    threshold = _threshold(rows)
     for m in range(max(change.MIN_NIGHTS, 2 * change.MIN_SIDE), len(rows) + 1):
-        stat, k, _, _ = change.glr(rows.head(m))
+        stat, k, _, _ = _statistic(rows.head(m))
         if not math.isfinite(stat):
             continue
         if stat >= threshold and best["first_alarm_nights"] is None:
@@ -126,17 +131,25 @@ def season_max(rows: change.NightRows) -> dict:
     return best
 
 
-def _run(job: tuple[int, str, bool]) -> dict:
-    h, method, no_house = job
+def _run(job: tuple[int, str, bool, bool]) -> dict:
+    h, method, no_house, calibrating = job
     s = _SEASON
     t0 = time.perf_counter()
     rows = change.night_rows(household_nights(s, h))
     if no_house:
         rows = without_house_electricity(rows)
     row: dict = {"household": h, "nights": len(rows)}
-    if method == "calibrate":
+    if calibrating:
         row.update(season_max(rows))
         row["no_house"] = season_max(without_house_electricity(rows))
+    elif method in ("glr", "glr-level") and _VARIANT is not None:
+        at, k, delta, se = variant_sequence(rows, _VARIANT)
+        half = change.Z95 * change.SIZE_SCALE * se
+        row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
+                   since_date=rows.dates[k] if at > 0 else None,
+                   delta_w_k=delta if at > 0 else None,
+                   low_w_k=delta - half if at > 0 else None,
+                   high_w_k=delta + half if at > 0 else None)
     elif method == "glr":
         at, c = change.detect_sequence(rows)
         row.update(alarm_date=rows.dates[at - 1] if at > 0 else None,
@@ -270,6 +283,16 @@ def _fmt(ci: tuple, digits: int = 0, scale: float = 1.0) -> str:
     return f"[{ci[0] * scale:.{digits}f}, {ci[1] * scale:.{digits}f}]"
 
 
+def _pair(kind: type):
+    def parse(text: str) -> tuple:
+        try:
+            a, b = (kind(x) for x in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: give two numbers, e.g. 12,12") from None
+        return a, b
+    return parse
+
+
 def _seeds(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(x) for x in text.split(","))
@@ -277,11 +300,12 @@ def _seeds(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"{text!r}: give seeds, e.g. 9001,9002") from None
 
 
-def _test_all(n: int, method: str, no_house: bool, workers: int, t0: float) -> list[dict]:
+def _test_all(n: int, method: str, no_house: bool, workers: int, t0: float,
+              calibrating: bool = False) -> list[dict]:
     """The test on every household of :data:`_SEASON` (forked workers), in household order."""
     print(f"testing {n} households …", file=sys.stderr, flush=True)
     rows: list[dict] = []
-    jobs = [(h, method, no_house) for h in range(n)]
+    jobs = [(h, method, no_house, calibrating) for h in range(n)]
     with mp.get_context("fork").Pool(workers) as pool:
         for i, row in enumerate(pool.imap_unordered(_run, jobs, chunksize=2), 1):
             rows.append(row)
@@ -303,7 +327,8 @@ def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
               file=sys.stderr, flush=True)
         _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=seed,
                                   hlc_step_w_k=np.zeros(n), step_night=np.zeros(n, int))
-        rows += [{**r, "seed": seed} for r in _test_all(n, "calibrate", False, args.workers, t0)]
+        rows += [{**r, "seed": seed} for r in _test_all(n, args.method, False, args.workers, t0,
+                                                      calibrating=True)]
         hlc.append(np.asarray(houses.hlc_w_per_k, float))
         emitter.append(np.asarray(params.emitter.kind))
     hlc_a, em_a = np.concatenate(hlc), np.concatenate(emitter)
@@ -314,10 +339,11 @@ def calibrate(args: argparse.Namespace, argv: list[str] | None) -> None:
     with_house = [{k: v for k, v in r.items() if k != "no_house"} for r in rows]
     no_house = [r["no_house"] for r in rows]
     summary = {}
-    for design, rs, now in (("with household electricity", with_house, change.THRESHOLD),
-                            ("without household electricity", no_house,
-                             change.THRESHOLD_NO_HOUSE)):
-        summary[design] = calibrate_summary(rs, hlc_a, em_a, now)
+    now = (_VARIANT.thresholds if _VARIANT is not None
+           else (change.THRESHOLD, change.THRESHOLD_NO_HOUSE))
+    for design, rs, now_d in (("with household electricity", with_house, now[0]),
+                              ("without household electricity", no_house, now[1])):
+        summary[design] = calibrate_summary(rs, hlc_a, em_a, now_d)
         print_calibration(summary[design], design)
     if args.json:
         with open(args.json, "w") as fh:
@@ -336,7 +362,16 @@ def main(argv: list[str] | None = None) -> None:
                     help="the open window's step in HLC [W/K]")
     ap.add_argument("--first", type=int, default=25, help="earliest step night")
     ap.add_argument("--last", type=int, default=20, help="nights kept after the latest step")
-    ap.add_argument("--method", choices=("glr", "cusum"), default="glr")
+    ap.add_argument("--method", choices=("glr", "glr-level", "cusum"), default="glr",
+                    help="the product's statistic, the alternative with a free step in the "
+                         "gains level at the same night, or a CUSUM (module docstring)")
+    ap.add_argument("--min-side", type=_pair(int), default=None, metavar="BEFORE,AFTER",
+                    help="a variant: the fewest usable nights before and after the step "
+                         f"(the product: {change.MIN_SIDE},{change.MIN_SIDE})")
+    ap.add_argument("--thresholds", type=_pair(float), default=None, metavar="WITH,WITHOUT",
+                    help="the variant's thresholds with and without the household electricity "
+                         f"(the product: {change.THRESHOLD},{change.THRESHOLD_NO_HOUSE}; "
+                         f"glr-level: {LEVEL_THRESHOLDS[0]},{LEVEL_THRESHOLDS[1]})")
     ap.add_argument("--calibrate", action="store_true",
                     help="set the thresholds on households without a step (module docstring)")
     ap.add_argument("--no-house-electricity", action="store_true",
@@ -345,10 +380,22 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     args = ap.parse_args(argv)
+    global _VARIANT
+    if args.method == "glr-level" or args.min_side or args.thresholds:
+        if args.method == "cusum":
+            ap.exit(2, "season_change.py: --min-side and --thresholds are the GLR's\n")
+        level = args.method == "glr-level"
+        before, after = args.min_side or (change.MIN_SIDE, change.MIN_SIDE)
+        _VARIANT = Variant(level, before, after, args.thresholds or (
+            LEVEL_THRESHOLDS if level else (change.THRESHOLD, change.THRESHOLD_NO_HOUSE)))
     if args.calibrate:
-        if BENCH_SEED in args.seeds:
-            ap.exit(2, f"season_change.py: --seeds: {BENCH_SEED} is the bench's held-out seed; "
-                       "calibrate on others\n")
+        if args.method == "cusum":
+            ap.exit(2, "season_change.py: --calibrate sets the GLR's thresholds: --method glr "
+                       "or glr-level\n")
+        held = sorted(set(args.seeds) & set(HELD_OUT_SEEDS))
+        if held:
+            ap.exit(2, f"season_change.py: --seeds: {held[0]} is a held-out seed "
+                       f"({', '.join(map(str, HELD_OUT_SEEDS))}); calibrate on others\n")
         calibrate(args, argv)
         return
     global _SEASON
