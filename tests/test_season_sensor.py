@@ -60,6 +60,10 @@ def test_half_kelvin_steps_are_undone_to_within_a_fraction_of_a_step():
     air = 20.2 + 0.6 * np.sin(2 * np.pi * t_s / 86400.0) + 0.01 * rng.normal(size=len(t_s))
     read = np.round(air / 0.5) * 0.5
     assert resolution_k(read) == 0.5
+    # an IMP night's 1-min samples, averaged into 5-min rows, fall between the steps
+    mixed = read.copy()
+    mixed[::10] += 0.1
+    assert resolution_k(mixed) == 0.5
     rms = lambda x: float(np.sqrt(np.mean((x - air) ** 2)))  # noqa: E731
     assert rms(read) > 0.14
     smooth = unstep(read, 0.5)
