@@ -32,7 +32,7 @@ from .solve import LUMPED, beta_dict, covariance, lumped_log_se, search
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
 INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 2.5, "c_m_j_per_k": 3.0}
 #: Model-error floor of each log quantity [-] (estimated, module docstring).
-MODEL_FLOOR = {"hlc_w_per_k": 0.026, "tau_h": 0.038, "c_m_j_per_k": 0.048}
+MODEL_FLOOR = {"hlc_w_per_k": 0.026, "tau_h": 0.037, "c_m_j_per_k": 0.048}
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
 #: Widest 95 % interval given, as the log of its high/value ratio [-] (a factor of 1000 up
