@@ -8,6 +8,7 @@ a season's record.
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -106,6 +107,6 @@ def _earlier_model(result) -> bool:
     block = (result.get("season") or {}).get("theta") if isinstance(result, dict) else None
     if not isinstance(block, dict) or not block:
         return False
-    ok = all(isinstance(v, int | float) and not isinstance(v, bool) and v > 0
-             and v == v and v != float("inf") for v in block.values())
+    ok = all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+             and v > 0 for v in block.values())
     return ok and bool(_missing_theta(result))
