@@ -46,10 +46,17 @@ GAIN_RW = 5.0
 W_SCALE = 100.0
 
 
-def to_u(theta) -> Array:
+def bounds_for(tau_e_max_s: float) -> tuple[tuple[float, float], ...]:
+    """:data:`THETA_BOUNDS` with the emitter's lag up to ``tau_e_max_s`` [s]."""
+    b = list(THETA_BOUNDS)
+    b[2] = (b[2][0], float(tau_e_max_s))
+    return tuple(b)
+
+
+def to_u(theta, bounds=THETA_BOUNDS) -> Array:
     """Physical θ → unconstrained coordinates (log of the times, logit of the shares)."""
     out = []
-    for (lo, hi), v in zip(THETA_BOUNDS, theta, strict=True):
+    for (lo, hi), v in zip(bounds, theta, strict=True):
         f = (math.log(v) - math.log(lo)) / (math.log(hi) - math.log(lo)) if lo > 1 else \
             (v - lo) / (hi - lo)
         f = min(max(f, 1e-6), 1 - 1e-6)
@@ -57,10 +64,10 @@ def to_u(theta) -> Array:
     return np.array(out)
 
 
-def from_u(u: Array) -> tuple[float, ...]:
+def from_u(u: Array, bounds=THETA_BOUNDS) -> tuple[float, ...]:
     """Unconstrained coordinates → physical θ."""
     out = []
-    for (lo, hi), x in zip(THETA_BOUNDS, u, strict=True):
+    for (lo, hi), x in zip(bounds, u, strict=True):
         f = 1.0 / (1.0 + math.exp(-float(np.clip(x, -30, 30))))
         out.append(math.exp(math.log(lo) + f * (math.log(hi) - math.log(lo))) if lo > 1
                    else lo + f * (hi - lo))
@@ -130,31 +137,33 @@ def _solve(Xs: Array, rows: Array, y: Array) -> Array:
         return np.linalg.lstsq(A, np.r_[y, np.zeros(len(rows))], rcond=None)[0]
 
 
-def _residual(u: Array, d: Design) -> Array:
-    pr = project(from_u(u), d)
+def _residual(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
+    pr = project(from_u(u, bounds), d)
     return np.concatenate([pr.residual_w, pr.penalty]) / W_SCALE
 
 
-def search(d: Design, max_nfev: int = 60,
-           start: tuple | None = None) -> tuple[tuple, Projection, object]:
+def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
+           bounds=THETA_BOUNDS) -> tuple[tuple, Projection, object]:
     """Best θ, its projection and the optimiser's result (least squares over θ); from the
     grid's best point at each of :data:`START_TAU_E_S`, or from ``start`` alone (a warm start:
     yesterday's θ, or the full season's for a part of it)."""
     if start is not None:
-        starts = [to_u(start)]
+        # a start outside these bounds (another emitter's) is moved onto them
+        starts = [to_u(tuple(min(max(v, lo), hi) for v, (lo, hi) in
+                             zip(start, bounds, strict=True)), bounds)]
     else:
         starts = []
         for tau_e in START_TAU_E_S:
-            grid = [to_u((tau_h * 3600, w, tau_e, START_F_SUN, START_TAU_R_S))
+            grid = [to_u((tau_h * 3600, w, tau_e, START_F_SUN, START_TAU_R_S), bounds)
                     for tau_h, w in START_GRID]
-            starts.append(min(grid, key=lambda u: float(np.sum(_residual(u, d) ** 2))))
+            starts.append(min(grid, key=lambda u: float(np.sum(_residual(u, d, bounds) ** 2))))
     best = None
     for u0 in starts:
-        res = least_squares(_residual, u0, args=(d,), method="lm", max_nfev=max_nfev,
+        res = least_squares(_residual, u0, args=(d, bounds), method="lm", max_nfev=max_nfev,
                             diff_step=1e-4, x_scale=1.0)
         if best is None or res.cost < best.cost:
             best = res
-    theta = from_u(best.x)
+    theta = from_u(best.x, bounds)
     return theta, project(theta, d), best
 
 
@@ -167,22 +176,22 @@ def beta_dict(pr: Projection) -> dict[str, float]:
 FD_STEP = 1e-4
 
 
-def _fixed_residual(u: Array, beta: Array, d: Design) -> Array:
-    X, y, _ = columns(from_u(u), d)
+def _fixed_residual(u: Array, beta: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
+    X, y, _ = columns(from_u(u, bounds), d)
     return y - X @ beta
 
 
-def covariance(u: Array, pr: Projection, d: Design) -> Array:
+def covariance(u: Array, pr: Projection, d: Design, bounds=THETA_BOUNDS) -> Array:
     """Covariance of (u, β) by the day-clustered sandwich: the bread from the Jacobian of the
     block residuals (the ridge rows included), the meat from each local day's summed scores —
     residuals of one day share its weather, its sun and its owner, so they are not independent.
     """
-    r0 = _fixed_residual(u, pr.beta, d)
+    r0 = _fixed_residual(u, pr.beta, d, bounds)
     ju = np.empty((len(r0), len(u)))
     for k in range(len(u)):
         du = np.zeros_like(u)
         du[k] = FD_STEP
-        ju[:, k] = (_fixed_residual(u + du, pr.beta, d) - r0) / FD_STEP
+        ju[:, k] = (_fixed_residual(u + du, pr.beta, d, bounds) - r0) / FD_STEP
     J = np.concatenate([ju, -pr.X], axis=1)
     ns = pr.penalty.shape[0]
     Jp = np.zeros((ns, J.shape[1]))
@@ -209,7 +218,8 @@ def _penalty_rows(pr: Projection) -> Array:
 LUMPED = ("hlc_w_per_k", "tau_h", "c_m_j_per_k")
 
 
-def lumped_log_se(u: Array, pr: Projection, cov: Array) -> dict[str, float]:
+def lumped_log_se(u: Array, pr: Projection, cov: Array,
+                  bounds=THETA_BOUNDS) -> dict[str, float]:
     """Standard errors of log HLC, log τ and log C_m by the delta method (finite differences
     over θ's coordinates and the two conductances; every other β enters none of them)."""
     ia, im = pr.names.index("k_ao_w_per_k"), pr.names.index("k_am_w_per_k")
@@ -217,7 +227,7 @@ def lumped_log_se(u: Array, pr: Projection, cov: Array) -> dict[str, float]:
     idx = list(range(nu)) + [nu + ia, nu + im]
 
     def f(p: Array) -> Array:
-        L = lumped(from_u(p[:nu]), p[nu], p[nu + 1])
+        L = lumped(from_u(p[:nu], bounds), p[nu], p[nu + 1])
         return np.log(np.maximum([L[k] for k in LUMPED], 1e-12))
 
     p0 = np.r_[u, pr.beta[ia], pr.beta[im]]
