@@ -359,7 +359,9 @@ def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
             "night": night.night_id, "kind": night.kind,
         })
         # The per-sample series the season model reads, where the night carries them.
-        for col, values in (("dhw", night.dhw), ("defrost", night.defrost_share)):
+        for col, values in (("dhw", night.dhw), ("defrost", night.defrost_share),
+                            ("t_flow_c", night.t_flow_c), ("t_return_c", night.t_return_c),
+                            ("t_flow_target_c", night.t_flow_target_c)):
             if values is not None:
                 frame[col] = values
         if night.kind == "owner":

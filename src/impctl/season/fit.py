@@ -26,8 +26,9 @@ from threadpoolctl import threadpool_limits
 
 from .change import Change, detect_change
 from .columns import THETA, lumped
+from .emitter import REFERENCE_DT_K, emitter_kind, tau_e_max_s, water_excess_k
 from .record import SeasonRecord
-from .solve import LUMPED, beta_dict, covariance, lumped_log_se, search
+from .solve import LUMPED, beta_dict, bounds_for, covariance, lumped_log_se, search
 
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
 INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 2.5, "c_m_j_per_k": 3.0}
@@ -68,6 +69,9 @@ class SeasonFit:
         (:func:`~.convergence.convergence`), empty when not computed
     missing : why a quantity is not given (NaN), when it is for a reason other than the fit's
         own (τ and C_m without the IMP nights: :data:`NEEDS_IMP`)
+    emitter : "radiators" or "underfloor" as read from the heating water
+        (:mod:`.emitter`), None when the record has no water temperatures to read it from
+    water_excess_k : the water's excess over the room at the reference load [K] (NaN: unknown)
     """
 
     values: dict[str, float]
@@ -83,6 +87,8 @@ class SeasonFit:
     change: Change | None = None
     convergence: list[dict] = field(default_factory=list)
     missing: dict[str, str] = field(default_factory=dict)
+    emitter: str | None = None
+    water_excess_k: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -98,6 +104,7 @@ class SeasonFit:
             "left_out_h": {k: round(v, 2) for k, v in self.left_out_h.items()},
             "baseline_signature_hlc_w_per_k": (None if not math.isfinite(
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
+            "emitter": self.emitter_dict(),
             "interval": "95 %: day-clustered sandwich, scaled, with a model-error floor, both "
                         "estimated on simulated seasons",
             # the search's own coordinates: a later fit of the same house starts from them
@@ -107,6 +114,17 @@ class SeasonFit:
                if self.change is not None else {}),
             **({"convergence": self.convergence} if self.convergence else {}),
         }
+
+
+    def emitter_dict(self) -> dict:
+        """The emitter the lag's bound was chosen for, and whether measured or assumed."""
+        if self.emitter is None:
+            return {"kind": None, "tau_e_max_h": tau_e_max_s(None) / 3600.0,
+                    "source": "assumed: no heating-water temperatures recorded, the radiators' "
+                              "bound on the emitter's lag"}
+        return {"kind": self.emitter, "water_excess_k": round(self.water_excess_k, 1),
+                "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
+                "source": "measured: the heating water's excess over the room"}
 
 
 def theta_of(result: dict) -> tuple[float, ...] | None:
@@ -155,16 +173,28 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
 
     d = Design.of(rec)
     owner, imp = nights_used(rec, d.blocks)
+    sig = signature(rec)
     if owner < MIN_OWNER_NIGHTS:
         raise ValueError(f"{owner} owner nights with usable rows, fewer than "
                          f"{MIN_OWNER_NIGHTS}")
     # Small matrices (thousands × hundreds): BLAS threads only contend — three times slower
     # with two threads on a 2-core gateway, more beside torch's.
     with threadpool_limits(limits=1, user_api="blas"):
-        theta, pr, res = search(d, start=start)
+        # The emitter from the water (:mod:`.emitter`), scaled by this fit's HLC (the energy
+        # signature of a few weeks can be off by half); a screed gets its longer lag and a
+        # second search from the first one's θ.
+        bounds = bounds_for(tau_e_max_s(None))
+        theta, pr, res = search(d, start=start, bounds=bounds)
         b = beta_dict(pr)
         values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
-        se = lumped_log_se(res.x, pr, covariance(res.x, pr, d))
+        excess = water_excess_k(rec, values["hlc_w_per_k"])
+        kind = emitter_kind(excess)
+        if tau_e_max_s(kind) != tau_e_max_s(None):
+            bounds = bounds_for(tau_e_max_s(kind))
+            theta, pr, res = search(d, start=theta, bounds=bounds)
+            b = beta_dict(pr)
+            values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
+        se = lumped_log_se(res.x, pr, covariance(res.x, pr, d, bounds), bounds)
     low, high = {}, {}
     for k in LUMPED:
         if not (math.isfinite(values[k]) and values[k] > 0 and math.isfinite(se[k])):
@@ -187,7 +217,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
     return SeasonFit({k: float(values[k]) for k in LUMPED}, low, high, owner, imp,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
-                     signature(rec), missing=missing)
+                     sig, missing=missing, emitter=kind, water_excess_k=excess)
 
 
 def signature(rec: SeasonRecord) -> float:
@@ -247,6 +277,14 @@ def format_season(fit: SeasonFit) -> list[str]:
             continue
         lines.append(f"  {name:<5}{v * scale:9.2f} {unit:<6} 95 % {fit.low[key] * scale:.2f} – "
                      f"{fit.high[key] * scale:.2f}")
+    if fit.emitter is None:
+        lines.append("  emitter: not known (assumed: its lag up to "
+                     f"{tau_e_max_s(None) / 3600:.0f} h, as radiators; no heating-water "
+                     "temperatures recorded)")
+    else:
+        lines.append(f"  emitter: {fit.emitter} (measured: the water {fit.water_excess_k:.0f} K "
+                     f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors; its lag up to "
+                     f"{tau_e_max_s(fit.emitter) / 3600:.0f} h)")
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")

@@ -63,7 +63,8 @@ def record_from_nights(nights: Sequence[NightSamples],
     t1 = max(t[-1] for t in t_abs)
     n_steps = int((t1 - t0) // step_s) + 1
     sums = {k: np.zeros(n_steps) for k in ("t_air", "t_out", "q_hc", "defrost", "dhw", "n",
-                                           "n_def", "n_dhw", "p_house", "n_p")}
+                                           "n_def", "n_dhw", "p_house", "n_p", "water",
+                                           "n_w")}
     kind = np.full(n_steps, "", dtype=object)
     night_id = np.full(n_steps, "", dtype=object)
     dropped = np.zeros(n_steps, bool)
@@ -83,6 +84,11 @@ def record_from_nights(nights: Sequence[NightSamples],
                 sums[name] += np.bincount(k[good], np.asarray(x, float)[good], n_steps)
                 sums["n_" + ("def" if name == "defrost" else "dhw")] += np.bincount(
                     k[good], minlength=n_steps)
+        if n.t_flow_c is not None and n.t_return_c is not None:
+            water = (np.asarray(n.t_flow_c, float) + np.asarray(n.t_return_c, float)) / 2.0
+            good = ok & np.isfinite(water)
+            sums["water"] += np.bincount(k[good], water[good], n_steps)
+            sums["n_w"] += np.bincount(k[good], minlength=n_steps)
         if np.isfinite(n.p_house_w):
             sums["p_house"] += np.bincount(kk, np.full(len(kk), n.p_house_w), n_steps)
             sums["n_p"] += np.bincount(kk, minlength=n_steps)
@@ -96,6 +102,8 @@ def record_from_nights(nights: Sequence[NightSamples],
         defrost = np.where(sums["n_def"] > 0, sums["defrost"] / sums["n_def"], 0.0)
         dhw = np.where(sums["n_dhw"] > 0, sums["dhw"] / sums["n_dhw"], 0.0)
         p_house = np.where(sums["n_p"] > 0, sums["p_house"] / sums["n_p"], np.nan)
+        water = (np.where(sums["n_w"] > 0, sums["water"] / sums["n_w"], np.nan)
+                 if sums["n_w"].any() else np.zeros(0))
     t_air[dropped] = t_out[dropped] = q_hc[dropped] = np.nan
     excluded = np.full(n_steps, "", dtype=object)
     excluded[exclude_after(dhw > DHW_SHARE, int(DHW_AFTER_S // step_s))] = "hot water"
@@ -105,8 +113,10 @@ def record_from_nights(nights: Sequence[NightSamples],
     hour = (index.hour + index.minute / 60.0).to_numpy() + step_s / 7200.0
     local_day = index.tz_localize(None).normalize()
     day = np.asarray((local_day - local_day[0]).days, dtype=np.int64)
+    if len(water):
+        water[dropped] = np.nan
     rec = SeasonRecord(t0, step_s, hour, day, t_air, t_out, q_hc, defrost,
-                       kind.astype(str), night_id, excluded, p_house)
+                       kind.astype(str), night_id, excluded, p_house, water)
     _settle(rec, int(SETTLE_S // step_s))
     return rec
 

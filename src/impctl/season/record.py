@@ -64,6 +64,8 @@ class SeasonRecord:
     night_id : per step the record (night) it belongs to ("" when none)
     excluded : per step why its block is left out of the likelihood ("" when used)
     p_house_w : household electricity, step mean [W] (NaN when not measured)
+    t_water_c : the heating water's mean temperature, (flow + return)/2, step mean [°C]
+        (NaN where the heat pump did not report both; empty when no row did)
     """
 
     t0_s: float
@@ -78,6 +80,7 @@ class SeasonRecord:
     night_id: NDArray[np.object_]
     excluded: NDArray[np.object_]
     p_house_w: Array = field(default_factory=lambda: np.zeros(0))
+    t_water_c: Array = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n(self) -> int:

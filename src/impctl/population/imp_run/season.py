@@ -119,6 +119,8 @@ class Season:
     setpoint_c : the loop-1 setpoint as read [°C]; NaN where the heating loop is off
     dhw, defrost : a hot-water charge / a defrost in the interval
     p_house_w : household electricity a meter reads, interval mean [W]
+    t_flow_c, t_return_c : the heating water leaving and coming back, interval means [°C]
+        (None in a season simulated before they were recorded)
     t_air_true_c, t_mass_c : the truth (room air, the building mass) [°C]
     nights : per night (date, kind per household (n,), first sample, end sample (exclusive))
         — kinds "constrained", "normal", "owner", and the constrained nights' gateway verdicts in
@@ -148,6 +150,8 @@ class Season:
     houses: HouseParameters
     params: PlantParams
     config: SeasonConfig
+    t_flow_c: np.ndarray | None = None
+    t_return_c: np.ndarray | None = None
 
 
 def _local(index: pd.DatetimeIndex) -> tuple[np.ndarray, np.ndarray]:
@@ -268,7 +272,8 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
     n_samp = n_steps // stride
     rec = {k: np.zeros((n_samp, n)) for k in ("t_air_c", "t_out_c", "q_hc_w", "setpoint_c",
                                                "p_house_w", "t_air_true_c", "t_mass_c",
-                                               "q_true_w", "gains_w")}
+                                               "q_true_w", "gains_w", "t_flow_c",
+                                               "t_return_c")}
     flags = {k: np.zeros((n_samp, n), bool) for k in ("dhw", "defrost")}
 
     # Campaign state per household.
@@ -292,7 +297,7 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
     cons = np.zeros(n, bool)
     started = np.zeros(n, bool)
     want = frozenset({"t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "t_air_c",
-                      "t_mass_c", "defrost", "heat_pump_w"})
+                      "t_mass_c", "defrost", "heat_pump_w", "t_supply_c", "t_return_c"})
     sensed_air = core.sensed_air
     for i in range(n_steps):
         if i in changes:
@@ -354,6 +359,8 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
             if q == 0:
                 rec["setpoint_c"][r] = np.where(enabled, sp_c, np.nan)
             rec["q_hc_w"][r] += out["heat_meter_w"] / stride
+            rec["t_flow_c"][r] += out["t_supply_c"] / stride
+            rec["t_return_c"][r] += out["t_return_c"] / stride
             rec["q_true_w"][r] += out["heat_pump_w"] / stride
             rec["gains_w"][r] += (g_int[i] + g_sol[i]) / stride
             rec["p_house_w"][r] += g_int[i] * meter / stride
@@ -375,4 +382,5 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
     return Season(samp_index, cfg.sample_s, rec["t_air_c"], rec["t_out_c"], rec["q_hc_w"],
                   rec["setpoint_c"], flags["dhw"], flags["defrost"], rec["p_house_w"],
                   rec["t_air_true_c"], rec["t_mass_c"], nights, valid, stop_sample, labels,
-                  t_set, rec["q_true_w"], rec["gains_w"], houses, params, cfg)
+                  t_set, rec["q_true_w"], rec["gains_w"], houses, params, cfg,
+                  rec["t_flow_c"], rec["t_return_c"])

@@ -1,0 +1,95 @@
+"""The emitter the season model allows for, read from the heating water the gateway records.
+
+Steady nights of a house with a known emitter law (synthetic: the water's excess over the room
+at each night's load), and the run's short realistic winter (``winter_season``: underfloor
+houses) through the fit and ``impctl fit``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_nights_owner import run_cli
+
+from impctl.imp.night import NightSamples
+from impctl.imp.nights_csv import write_nights
+from impctl.population.imp_run.season_nights import household_nights
+from impctl.season import record_from_nights
+from impctl.season.emitter import (
+    RADIATOR_EXCESS_K,
+    TAU_E_MAX_RADIATORS_S,
+    TAU_E_MAX_UNDERFLOOR_S,
+    emitter_kind,
+    water_excess_k,
+)
+from impctl.season.fit import fit_nights
+
+TZ = "Europe/Ljubljana"
+HLC_W_PER_K, GAINS_W = 150.0, 250.0
+
+
+def _nights(design_water_c: float, exponent: float, t_out_c: list[float]) -> list[NightSamples]:
+    """Owner records (noon to noon) of a house held at 20 °C whose emitter is sized to give
+    the design load at ``design_water_c`` mean water, 10 °C below the design outdoor −10 °C."""
+    k = HLC_W_PER_K * 30.0 / (design_water_c - 20.0) ** exponent
+    out = []
+    for i, te in enumerate(t_out_c):
+        start = pd.Timestamp("2026-12-01 12:00", tz=TZ) + pd.Timedelta(days=i)
+        t = np.arange(0.0, 24 * 3600, 300.0)
+        q = np.full(len(t), HLC_W_PER_K * (20.0 - te) - GAINS_W)
+        water = 20.0 + (q / k) ** (1.0 / exponent)
+        out.append(NightSamples(f"{start.date()} owner", "owner", start, t, 20.0 + 0 * t,
+                                te + 0 * t, q, t_flow_c=water + 2.5, t_return_c=water - 2.5))
+    return out
+
+
+@pytest.mark.parametrize(("design_water_c", "exponent", "kind"),
+                         [(33.0, 1.1, "underfloor"), (38.0, 1.1, "underfloor"),
+                          (45.0, 1.3, "radiators"), (40.0, 1.3, "radiators")])
+def test_the_water_tells_radiators_from_a_screed_in_cold_and_mild_weather(
+        design_water_c, exponent, kind):
+    cold = record_from_nights(_nights(design_water_c, exponent, [-8, -6, -5, -4]))
+    mild = record_from_nights(_nights(design_water_c, exponent, [4, 5, 6, 7]))
+    ex_cold, ex_mild = water_excess_k(cold, HLC_W_PER_K), water_excess_k(mild, HLC_W_PER_K)
+    # one load: a mild night's low water and a cold night's high water give one number
+    assert ex_mild == pytest.approx(ex_cold, rel=0.15)
+    assert emitter_kind(ex_cold) == emitter_kind(ex_mild) == kind
+
+
+def test_without_the_water_or_enough_nights_the_emitter_is_unknown():
+    nights = _nights(45.0, 1.3, [-5, 0, 3, 5])
+    dry = [dataclasses.replace(n, t_flow_c=None, t_return_c=None) for n in nights]
+    assert np.isnan(water_excess_k(record_from_nights(dry), HLC_W_PER_K))
+    assert np.isnan(water_excess_k(record_from_nights(nights[:2]), HLC_W_PER_K))
+    assert np.isnan(water_excess_k(record_from_nights(nights), float("nan")))
+    assert emitter_kind(float("nan")) is None
+    assert water_excess_k(record_from_nights(nights), HLC_W_PER_K) > RADIATOR_EXCESS_K
+
+
+def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_season):
+    assert (winter_season.params.emitter.kind == 1).all()     # the run's houses: underfloor
+    nights = household_nights(winter_season, 0)
+    fit, _ = fit_nights(nights)
+    emitter = fit.as_dict()["emitter"]
+    assert fit.emitter == "underfloor" and emitter["source"].startswith("measured")
+    assert emitter["tau_e_max_h"] == TAU_E_MAX_UNDERFLOOR_S / 3600
+    assert fit.water_excess_k < RADIATOR_EXCESS_K
+    dry, _ = fit_nights([dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+                         for n in nights])
+    assert dry.emitter is None and dry.theta[2] <= TAU_E_MAX_RADIATORS_S + 1e-6
+    assert dry.as_dict()["emitter"]["source"].startswith("assumed")
+
+
+def test_impctl_fit_reads_the_emitter_from_the_nights_file(tmp_path, winter_season):
+    csv = write_nights(household_nights(winter_season, 1), tmp_path / "nights.csv")
+    out = tmp_path / "fit.json"
+    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
+                  model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    emitter = json.loads(out.read_text())["season"]["emitter"]
+    assert emitter["kind"] == "underfloor" and emitter["water_excess_k"] < RADIATOR_EXCESS_K
+    assert "underfloor" in res.stdout
