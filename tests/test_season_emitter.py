@@ -21,8 +21,8 @@ from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
     RADIATOR_EXCESS_K,
-    TAU_E_MAX_RADIATORS_S,
     TAU_E_MAX_UNDERFLOOR_S,
+    TAU_E_MAX_UNKNOWN_S,
     emitter_kind,
     water_excess_k,
 )
@@ -80,7 +80,7 @@ def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_sea
     assert fit.water_excess_k < RADIATOR_EXCESS_K
     dry, _ = fit_nights([dataclasses.replace(n, t_flow_c=None, t_return_c=None)
                          for n in nights])
-    assert dry.emitter is None and dry.theta[2] <= TAU_E_MAX_RADIATORS_S + 1e-6
+    assert dry.emitter is None and dry.theta[2] <= TAU_E_MAX_UNKNOWN_S + 1e-6
     assert dry.as_dict()["emitter"]["source"].startswith("assumed")
 
 

@@ -6,8 +6,9 @@ interval: the day-clustered sandwich covariance carried to log HLC, log τ and l
 delta method, scaled by :data:`INTERVAL_SCALE` and combined with a model-error floor
 (:data:`MODEL_FLOOR`) — more nights shrink the statistical part, not what the model leaves out
 of a real house (a second thermal mass, the furniture, the sun's real shape, the emitter's own
-capacity). Both are estimated per quantity on simulated seasons of 60 realistic households that
-the bench does not use (``bench/season.py --calibrate --households 60 --seed 31``): 95 %
+capacity). Both are estimated per quantity on simulated seasons of 150 realistic households
+that the bench does not use, each cut after 7, 14, 28 and 56 owner nights (``bench/season.py
+--calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 --nights 90``): 95 %
 coverage with a median interval within a tenth of the narrowest, and of those the largest
 scale — the sandwich part grows on a house the model fits worse than the simulated ones,
 which a floor does not.
@@ -26,14 +27,20 @@ from threadpoolctl import threadpool_limits
 
 from .change import Change, detect_change
 from .columns import THETA, lumped
-from .emitter import REFERENCE_DT_K, emitter_kind, tau_e_max_s, water_excess_k
+from .emitter import (
+    REFERENCE_DT_K,
+    emitter_kind,
+    tau_e_max_s,
+    water_excess_k,
+    water_recorded,
+)
 from .record import SeasonRecord
 from .solve import LUMPED, beta_dict, bounds_for, covariance, lumped_log_se, search
 
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
-INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 2.5, "c_m_j_per_k": 3.0}
+INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 3.0, "c_m_j_per_k": 4.0}
 #: Model-error floor of each log quantity [-] (estimated, module docstring).
-MODEL_FLOOR = {"hlc_w_per_k": 0.026, "tau_h": 0.037, "c_m_j_per_k": 0.048}
+MODEL_FLOOR = {"hlc_w_per_k": 0.014, "tau_h": 0.044, "c_m_j_per_k": 0.057}
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
 #: Widest 95 % interval given, as the log of its high/value ratio [-] (a factor of 1000 up
@@ -181,15 +188,17 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
     # with two threads on a 2-core gateway, more beside torch's.
     with threadpool_limits(limits=1, user_api="blas"):
         # The emitter from the water (:mod:`.emitter`), scaled by this fit's HLC (the energy
-        # signature of a few weeks can be off by half); a screed gets its longer lag and a
-        # second search from the first one's θ.
-        bounds = bounds_for(tau_e_max_s(None))
+        # signature of a few weeks can be off by half): searched first as radiators where the
+        # water is recorded, and again from that θ when it is a screed or not to be read.
+        first = tau_e_max_s("radiators" if water_recorded(rec) else None)
+        bounds = bounds_for(first)
         theta, pr, res = search(d, start=start, bounds=bounds)
         b = beta_dict(pr)
         values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
-        excess = water_excess_k(rec, values["hlc_w_per_k"])
+        excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
+                  else float("nan"))
         kind = emitter_kind(excess)
-        if tau_e_max_s(kind) != tau_e_max_s(None):
+        if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
             theta, pr, res = search(d, start=theta, bounds=bounds)
             b = beta_dict(pr)
