@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
-from .columns import BETA, Design, columns, lumped
+from .columns import BETA, Design, column_names, columns, lumped
+from .gram import fitted, normal_equations
 
 Array = NDArray[np.float64]
 
@@ -88,58 +89,115 @@ class Projection:
 
 
 def project(theta, d: Design) -> Projection:
-    """β by ridge least squares at ``theta`` (module docstring)."""
+    """β by ridge least squares at ``theta`` (module docstring), from X itself."""
     X, y, names = columns(theta, d)
-    p = X.shape[1]
-    sun, gain = d.once("kinds", lambda: (
-        np.array([n.startswith("sun_") for n in names]),
-        np.array([n.startswith("gain_") for n in names])))
-    scale = np.sqrt(np.einsum("ij,ij->j", X, X) / len(X))
-    # A column no usable block touches (a day's knot inside a gap of days the gateway did not
-    # record, the sun of nights-only rows) keeps its natural unit: scaled by ~0 its ridge rows
-    # would swamp every other column's.
-    scale = np.where(scale > 1e-9, scale, 1.0)
+    scale = _scale(np.einsum("ij,ij->j", X, X), len(X))
+    rows = _ridge_rows(scale, d, len(y))
     Xs = X / scale
-    ns = int(sun.sum())
-    rows = np.zeros((ns, p))
-    if ns > 1:
-        lam = math.sqrt(SUN_RIDGE * len(y))
-        centre = np.eye(ns) - 1.0 / ns
-        rows[:, sun] = lam * centre / scale[sun] * np.median(scale[sun])
-    ng = int(gain.sum())
-    if ng > 1 and GAIN_RW > 0:
-        lam = math.sqrt(GAIN_RW * len(y))
-        g = np.zeros((ng, p))
-        step = np.eye(ng - 1, ng, 1) - np.eye(ng - 1, ng)
-        g[: ng - 1, gain] = lam * step / scale[gain] * np.median(scale[gain])
-        # the knots' mean is the gain levels' business: their sum is pulled to zero
-        g[ng - 1, gain] = lam / math.sqrt(ng) / scale[gain] * np.median(scale[gain])
-        rows = np.concatenate([rows, g])
-    elif ng:
-        g = np.zeros((ng, p))
-        g[:, gain] = 1e3 * np.eye(ng) / scale[gain]
-        rows = np.concatenate([rows, g])
-    coef = _solve(Xs, rows, y)
+    coef = _solve(Xs.T @ Xs, rows.T @ rows, Xs.T @ y,
+                  lambda: np.linalg.lstsq(np.concatenate([Xs, rows]),
+                                          np.r_[y, np.zeros(len(rows))], rcond=None)[0])
     beta = coef / scale
     return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
 
 
-def _solve(Xs: Array, rows: Array, y: Array) -> Array:
-    """Least squares of ``y`` on ``Xs`` with the ridge ``rows`` (their target is zero) by the
-    normal equations (the columns are scaled and the ridge rows keep them well posed; four
-    times faster than an SVD), an SVD if they are singular."""
-    ata = Xs.T @ Xs + rows.T @ rows
+def _scale(sum_sq: Array, n: int) -> Array:
+    """Each column's RMS over the blocks (the solve's units)."""
+    scale = np.sqrt(sum_sq / n)
+    # A column no usable block touches (a day's knot inside a gap of days the gateway did not
+    # record, the sun of nights-only rows) keeps its natural unit: scaled by ~0 its ridge rows
+    # would swamp every other column's.
+    return np.where(scale > 1e-9, scale, 1.0)
+
+
+def _ridge_unit(d: Design, n: int) -> Array:
+    """The ridge rows for ``n`` blocks before each column's weight (:func:`_ridge_weight`):
+    the daily sun amplitudes about their mean, the slow gain's steps and its knots' sum."""
+    sun, gain = _kinds(d)
+    p = len(sun)
+    ns = int(sun.sum())
+    rows = np.zeros((ns, p))
+    if ns > 1:
+        rows[:, sun] = math.sqrt(SUN_RIDGE * n) * (np.eye(ns) - 1.0 / ns)
+    ng = int(gain.sum())
+    if ng > 1 and GAIN_RW > 0:
+        lam = math.sqrt(GAIN_RW * n)
+        g = np.zeros((ng, p))
+        g[: ng - 1, gain] = lam * (np.eye(ng - 1, ng, 1) - np.eye(ng - 1, ng))
+        # the knots' mean is the gain levels' business: their sum is pulled to zero
+        g[ng - 1, gain] = lam / math.sqrt(ng)
+        rows = np.concatenate([rows, g])
+    elif ng:
+        g = np.zeros((ng, p))
+        g[:, gain] = 1e3 * np.eye(ng)
+        rows = np.concatenate([rows, g])
+    return rows
+
+
+def _kinds(d: Design) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    names = column_names(d)
+    return d.once("kinds", lambda: (np.array([n.startswith("sun_") for n in names]),
+                                    np.array([n.startswith("gain_") for n in names])))
+
+
+def _ridge_weight(scale: Array, d: Design) -> Array:
+    """Each column's factor in the ridge rows: the sun's and the slow gain's columns in their
+    set's median unit (a column scaled by ~0 would otherwise swamp the others)."""
+    sun, gain = _kinds(d)
+    v = np.zeros(len(scale))
+    if sun.sum() > 1:
+        v[sun] = np.median(scale[sun]) / scale[sun]
+    if gain.sum() > 1 and GAIN_RW > 0:
+        v[gain] = np.median(scale[gain]) / scale[gain]
+    elif gain.any():
+        v[gain] = 1.0 / scale[gain]
+    return v
+
+
+def _ridge_rows(scale: Array, d: Design, n: int) -> Array:
+    """The ridge rows (their target is zero) in the columns scaled by ``scale``."""
+    return _ridge_unit(d, n) * _ridge_weight(scale, d)
+
+
+def _solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback) -> Array:
+    """Least squares from the scaled normal equations ``xtx_s``, ``xty_s`` with the ridge
+    rows' ``rtr`` (the columns are scaled and the ridge rows keep them well posed; four times
+    faster than an SVD); ``fallback()`` (an SVD) if they are singular."""
+    ata = xtx_s + rtr
     ata[np.diag_indices_from(ata)] += 1e-10 * np.trace(ata) / len(ata)
     try:
-        return cho_solve(cho_factor(ata, check_finite=False), Xs.T @ y, check_finite=False)
+        return cho_solve(cho_factor(ata, check_finite=False), xty_s, check_finite=False)
     except np.linalg.LinAlgError:
-        A = np.concatenate([Xs, rows])
-        return np.linalg.lstsq(A, np.r_[y, np.zeros(len(rows))], rcond=None)[0]
+        return fallback()
+
+
+def projected_residual(theta, d: Design) -> Array:
+    """The block residuals and the ridge rows' of :func:`project` at ``theta`` [W], from the
+    normal equations' parts (:mod:`.gram`: X is never formed; its columns in the order
+    ``perm``)."""
+    ne = normal_equations(theta, d)
+    n = len(ne.y)
+    unit, unit_sq = d.once("ridge_perm", lambda: _permuted_ridge(d, n, ne.perm))
+    scale_p = _scale(np.diag(ne.xtx).copy(), n)
+    scale = np.empty_like(scale_p)
+    scale[ne.perm] = scale_p
+    v = _ridge_weight(scale, d)[ne.perm]
+    failed = []
+    coef = _solve(ne.xtx / np.outer(scale_p, scale_p), unit_sq * np.outer(v, v),
+                  ne.xty / scale_p, lambda: failed.append(True))
+    if failed:
+        pr = project(theta, d)
+        return np.concatenate([pr.residual_w, pr.penalty])
+    return np.concatenate([ne.y - ne.fitted(coef / scale_p, d), unit @ (v * coef)])
+
+
+def _permuted_ridge(d: Design, n: int, perm: NDArray[np.int64]) -> tuple[Array, Array]:
+    unit = _ridge_unit(d, n)[:, perm]
+    return unit, unit.T @ unit
 
 
 def _residual(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
-    pr = project(from_u(u, bounds), d)
-    return np.concatenate([pr.residual_w, pr.penalty]) / W_SCALE
+    return projected_residual(from_u(u, bounds), d) / W_SCALE
 
 
 def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
@@ -177,8 +235,8 @@ FD_STEP = 1e-4
 
 
 def _fixed_residual(u: Array, beta: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
-    X, y, _ = columns(from_u(u, bounds), d)
-    return y - X @ beta
+    y, fit = fitted(from_u(u, bounds), d, beta)
+    return y - fit
 
 
 def covariance(u: Array, pr: Projection, d: Design, bounds=THETA_BOUNDS) -> Array:
