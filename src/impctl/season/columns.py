@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter, lfilter_zi
+from scipy.signal import lfilter
 
 from .record import NIGHT_HOURS, SeasonRecord, sun_shape
 
@@ -78,7 +78,8 @@ def lowpass(x: Array, tau_s: float, step_s: float, runs: list[tuple[int, int]],
     if then_tau_s is not None:
         b2 = math.exp(-step_s / max(then_tau_s, 1e-9))
         num, den = [(1.0 - b) * (1.0 - b2)], [1.0, -(b + b2), b * b2]
-    rest = lfilter_zi(num, den)
+    # the filter's state at rest at a unit input (scipy.signal.lfilter_zi's, in closed form)
+    rest = np.array([1.0 - num[0], *(-np.asarray(den[2:]))])
     out = np.full(x.shape, np.nan)
     for lo, hi in runs:
         seg = x[..., lo:hi]

@@ -63,7 +63,7 @@ class _Run:
     start: NDArray[np.int64]    # each one's window's first block
     end: NDArray[np.int64]      # its last: after it, the low-pass is a geometric tail
     at: NDArray[np.int64]       # (local · width,) the windows' blocks, clipped to the stretch
-    inside: Array               # (local, width) 1 inside the stretch
+    used_win: Array             # (local, width) 1 at a usable block inside the stretch
     s_win: Array                # (local, width) the shapes on their windows, 0 past the end
     s_win_used: Array           # the same at usable blocks only
     dense: NDArray[np.int64]    # shapes kept as whole rows
@@ -125,8 +125,9 @@ def _layout(d: Design) -> list[_Run]:
         u0, u1 = np.searchsorted(used, [lo, hi])
         rows = np.r_[local, dense]
         out.append(_Run(
-            n, mask, slice(int(u0), int(u1)), used[u0:u1] - lo, local, start, end, at, inside,
-            s_win, s_win * mask[at].reshape(nl, width), dense, x[dense],
+            n, mask, slice(int(u0), int(u1)), used[u0:u1] - lo, local, start, end, at,
+            inside * mask[at].reshape(nl, width), s_win, s_win * mask[at].reshape(nl, width),
+            dense, x[dense],
             np.take(x[dense], at, axis=1).reshape(len(dense), nl, width),
             np.concatenate(pi) if pi else np.zeros(0, int),
             np.concatenate(pk) if pk else np.zeros(0, int),
@@ -195,7 +196,7 @@ def _gain_gram(tau_mm: float, d: Design) -> GainGram:
         g_win = x + (prev - x) * f
         e = run.end
         tail = g_win[np.arange(nl), e - run.start]
-        gw = g_win * run.inside * run.mask[run.at].reshape(nl, -1)
+        gw = g_win * run.used_win
         g_dense = held_lowpass(run.s_dense, tau_mm, block_s, [(0, run.n)])
         filtered.append(_Filtered(gw, tail, g_dense))
         # over the windows' overlaps
@@ -243,24 +244,27 @@ def _outer_used(d: Design) -> Array:
     return s @ s.T
 
 
-def _cross(gram: GainGram, d: Design, rows: Array) -> tuple[Array, Array]:
-    """(rows·Sᵀ, rows·Gᵀ): products of series over the usable blocks with every shape and its
-    low-pass."""
+def _cross(gram: GainGram, d: Design, rows: Array, shapes: bool) -> Array:
+    """Products of series over the usable blocks with every shape's low-pass (rows·Gᵀ) or,
+    with ``shapes``, with the shapes themselves (rows·Sᵀ)."""
     m = d.gains_b.shape[0]
-    rs, rg = np.zeros((len(rows), m)), np.zeros((len(rows), m))
+    out = np.zeros((len(rows), m))
     for run, fl in zip(d.once("gram_layout", lambda: _layout(d)), gram.runs, strict=True):
         r = np.zeros((len(rows), run.n))
         r[:, run.used_at] = rows[:, run.used]
         nl = len(run.local)
         r_at = np.take(r, run.at, axis=1).reshape(len(rows), nl, -1)
         li, di = run.local, run.dense
-        rs[:, li] += np.einsum("qkw,kw->qk", r_at, run.s_win_used)
-        rg[:, li] += (np.einsum("qkw,kw->qk", r_at, fl.g_win_used)
-                      + fl.tail[None, :] * _after(r, gram.rho)[:, run.end])
+        if shapes:
+            out[:, li] += np.einsum("qkw,kw->qk", r_at, run.s_win_used)
+            if len(di):
+                out[:, di] += r @ run.s_dense.T
+            continue
+        out[:, li] += (np.einsum("qkw,kw->qk", r_at, fl.g_win_used)
+                       + fl.tail[None, :] * _after(r, gram.rho)[:, run.end])
         if len(di):
-            rs[:, di] += r @ run.s_dense.T
-            rg[:, di] += r @ fl.g_dense.T
-    return rs, rg
+            out[:, di] += r @ fl.g_dense.T
+    return out
 
 
 @dataclass
@@ -273,24 +277,18 @@ class Normal:
     y: Array
     perm: NDArray[np.int64]
     theta: tuple[float, ...]
+    q: Array            # (nq, blocks) the regressors outside the gains' family
 
     def fitted(self, coef: Array, d: Design) -> Array:
         """X·coef over the usable blocks (``coef`` in the order ``perm``)."""
-        full = np.empty_like(coef)
-        full[self.perm] = coef
-        return fitted(self.theta, d, full)[1]
+        nq = len(self.q)
+        return coef[:nq] @ self.q + _gains_fitted(self.theta, d, coef[nq:])
 
 
 def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Array]:
     """(y, X·coef) at ``theta`` over the usable blocks, without X (``coef`` in X's order)."""
     gcols, _ = gain_family(d)
-    a, b = gain_coefficients(theta, d)
-    cg = coef[gcols]
-    shapes_t, used_t = d.once("shapes_sparse", lambda: (
-        csr_matrix(d.gains_b.T), csr_matrix(d.gains_b[:, d.blocks].T)))
-    out = used_t @ (a * cg) + held_lowpass(
-        (shapes_t @ (b * cg))[None, :], theta[0], d.rec.per_block * d.rec.step_s,
-        d.block_runs)[0, d.blocks]
+    out = _gains_fitted(theta, d, coef[gcols])
     y = None
     for _key, rows, cols in dense_groups(theta, d):
         for row, col in zip(rows, cols, strict=True):
@@ -301,36 +299,54 @@ def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Arr
     return y, out
 
 
+def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
+    """The gains' family's columns times their coefficients ``cg``."""
+    a, b = gain_coefficients(theta, d)
+    shapes_t, used_t = d.once("shapes_sparse", lambda: (
+        csr_matrix(d.gains_b.T), csr_matrix(d.gains_b[:, d.blocks].T)))
+    return used_t @ (a * cg) + held_lowpass(
+        (shapes_t @ (b * cg))[None, :], theta[0], d.rec.per_block * d.rec.step_s,
+        d.block_runs)[0, d.blocks]
+
+
+def _products(d: Design, groups: list, keys: list[tuple], make) -> Array:
+    """The groups' products (:func:`_cross`), those not remembered under ``keys`` made in one
+    call of ``make`` on their rows."""
+    new = [i for i, k in enumerate(keys) if d.remembered(k) is None]
+    if new:
+        made = make(np.concatenate([groups[i][1] for i in new]))
+        at = 0
+        for i in new:
+            n = len(groups[i][1])
+            d.cached(keys[i], lambda at=at, n=n: made[at:at + n])
+            at += n
+    return np.concatenate([d.remembered(k) for k in keys])
+
+
 def normal_equations(theta: tuple[float, ...], d: Design) -> Normal:
     """XᵀX and Xᵀy of :func:`~.columns.columns` at ``theta``, from the parts (module
     docstring), X's columns in the order :attr:`Normal.perm`."""
     tau_mm = theta[0]
     gram = gain_gram(tau_mm, d)
     groups = dense_groups(theta, d)
-    # products with the shapes: only the groups this θ changed (a step of the Jacobian moves
-    # one coordinate), in one pass
-    keys = [("cross " + key[0], tau_mm, *key[1:]) for key, _, _ in groups]
-    new = [i for i, k in enumerate(keys) if d.remembered(k) is None]
-    if new:
-        rs, rg = _cross(gram, d, np.concatenate([groups[i][1] for i in new]))
-        at = 0
-        for i in new:
-            n = len(groups[i][1])
-            d.cached(keys[i], lambda at=at, n=n: (rs[at:at + n], rg[at:at + n]))
-            at += n
-    parts = [d.remembered(k) for k in keys]
+    # products with the shapes and their low-pass: only of the groups this θ changed (a step
+    # of the Jacobian moves one coordinate), in one pass each
+    rs = _products(d, groups, [("S " + key[0], *key[1:]) for key, _, _ in groups],
+                   lambda rows: _cross(gram, d, rows, shapes=True))
+    rg = _products(d, groups, [("G " + key[0], tau_mm, *key[1:]) for key, _, _ in groups],
+                   lambda rows: _cross(gram, d, rows, shapes=False))
     cols = np.concatenate([c for _, _, c in groups])
     qy = np.concatenate([rows for _, rows, _ in groups])
-    rs = np.concatenate([p[0] for p in parts])
-    rg = np.concatenate([p[1] for p in parts])
     iy = int(np.flatnonzero(cols < 0)[0])
     keep = cols >= 0
     q, y = qy[keep], qy[iy]
     gcols, _ = gain_family(d)
     a, b = gain_coefficients(theta, d)
-    gains = (np.outer(a, a) * gram.ss + np.outer(a, b) * gram.sg
-             + np.outer(b, a) * gram.sg.T + np.outer(b, b) * gram.gg)
+    # (a step of τ_e or τ_r keeps it)
+    gains = d.cached(("gains gram", tau_mm, theta[1], theta[3]), lambda: (
+        np.outer(a, a) * gram.ss + np.outer(a, b) * gram.sg + np.outer(b, a) * gram.sg.T
+        + np.outer(b, b) * gram.gg))
     cross = rs[keep] * a[None, :] + rg[keep] * b[None, :]                   # Qᵀ·gains
     xtx = np.block([[q @ q.T, cross], [cross.T, gains]])
     xty = np.r_[q @ y, rs[iy] * a + rg[iy] * b]
-    return Normal(xtx, xty, y, np.r_[cols[keep], gcols], tuple(theta))
+    return Normal(xtx, xty, y, np.r_[cols[keep], gcols], tuple(theta), q)
