@@ -120,3 +120,64 @@ def test_the_search_lands_where_the_search_on_x_lands(designs):
         for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
             assert got[k] == pytest.approx(want[k], rel=1e-3), (name, k)
         np.testing.assert_allclose(theta, ref_theta, rtol=1e-3)
+
+
+def test_the_shapes_block_means_are_the_means_of_the_steps(designs):
+    """Each day's sun and the slow gain's knots, summed per block without the (steps × knots)
+    matrix: the block means of :func:`gain_knots` and of the day-masked sun shape."""
+    from impctl.season.columns import gain_knots
+    from impctl.season.record import sun_shape
+
+    for name, d in designs.items():
+        rec, k = d.rec, d.rec.per_block
+        nb = len(d.blocks)
+
+        def mean(x, nb=nb, k=k):
+            return x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
+
+        days = rec.day - rec.day.min()
+        sun = np.stack([mean(np.where(days == i, sun_shape(rec.hour), 0.0))
+                        for i in range(d.n_days)])
+        np.testing.assert_allclose(d.gains_b[2:2 + d.n_days], sun, rtol=0, atol=1e-14,
+                                   err_msg=name)
+        np.testing.assert_allclose(d.gains_b[2 + d.n_days:-1], mean(gain_knots(rec)).T,
+                                   rtol=0, atol=1e-14, err_msg=name)
+
+
+def test_the_sandwich_is_that_of_the_jacobian_with_x(designs):
+    """The covariance from the normal equations' parts against the sandwich written out with
+    J = [∂r/∂u, −X] and each day's summed scores."""
+    from impctl.season.solve import FD_STEP, covariance, projection
+
+    for name in ("house 0", "house 1, a week not recorded"):
+        d = designs[name]
+        theta = THETAS[0]
+        u = to_u(theta)
+        pr = projection(theta, d)
+        ref_pr = project(theta, d)
+        np.testing.assert_allclose(pr.beta, ref_pr.beta, rtol=1e-7,
+                                   atol=1e-9 * np.abs(ref_pr.beta).max())
+        X, y, _ = columns(theta, d)
+        r0 = y - X @ pr.beta
+        ju = np.empty((len(r0), len(u)))
+        for k in range(len(u)):
+            du = np.zeros_like(u)
+            du[k] = FD_STEP
+            X2, y2, _ = columns(from_u(u + du), d)
+            ju[:, k] = ((y2 - X2 @ pr.beta) - r0) / FD_STEP
+        J = np.concatenate([ju, -X], axis=1)
+        Jp = np.zeros((len(pr.penalty), J.shape[1]))
+        Jp[:, len(u):] = -pr.ridge
+        bread = np.linalg.pinv(J.T @ J + Jp.T @ Jp)
+        day = d.block_day()
+        scores = J * r0[:, None]
+        meat = sum(np.outer(g, g) for g in (scores[day == c].sum(axis=0)
+                                            for c in np.unique(day)))
+        n_c = len(np.unique(day))
+        ref = bread @ meat @ bread * (n_c / (n_c - 1))
+        cov = covariance(u, pr, d)
+        # the θ block and the two conductances: what the intervals are taken from
+        idx = [0, 1, 2, 3, 4, len(u) + 0, len(u) + 1]
+        np.testing.assert_allclose(cov[np.ix_(idx, idx)], ref[np.ix_(idx, idx)], rtol=1e-5,
+                                   atol=1e-8 * np.abs(ref[np.ix_(idx, idx)]).max(),
+                                   err_msg=name)

@@ -162,18 +162,18 @@ class Design:
         night = ((h >= NIGHT_HOURS[0]) | (h < NIGHT_HOURS[1])).astype(float)
         days = rec.day - rec.day.min()
         n_days = int(days.max()) + 1
-        knots = gain_knots(rec)
-        shapes = np.zeros((3 + n_days + knots.shape[1], nb))
+        knots = knot_block_means(rec, nb)
+        shapes = np.zeros((3 + n_days + len(knots), nb))
 
         def mean(x: Array) -> Array:
             return x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
 
         shapes[0] = mean(night)
         shapes[1] = 1.0 - shapes[0]
-        sun = sun_shape(h)
-        shapes[2:2 + n_days] = np.stack([mean(np.where(days == i, sun, 0.0))
-                                         for i in range(n_days)])
-        shapes[2 + n_days:-1] = mean(knots).T
+        # each day's sun, block means (a block of another day's hours holds zeros)
+        shapes[2:2 + n_days] = _block_sums(days[: nb * k], sun_shape(h)[: nb * k], n_days,
+                                           nb, k) / k
+        shapes[2 + n_days:-1] = knots
         blocks = rec.usable_blocks() & (sb >= 0)
         if len(rec.p_house_w) == rec.n:
             # the household electricity ends as heat in the house: a measured gain
@@ -181,7 +181,7 @@ class Design:
             if blocks.any() and np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
                 shapes[-1] = np.where(np.isfinite(p), p, np.nanmean(p[blocks]))
         return cls(rec, seg, _runs(seg), aligned, _runs(sb), ta, to, blocks,
-                   np.ascontiguousarray(shapes), n_days, knots.shape[1],
+                   np.ascontiguousarray(shapes), n_days, len(knots),
                    mean(ta - to)[blocks], mean(ta)[blocks], np.nan_to_num(rec.defrost))
 
     def block_day(self) -> NDArray[np.int64]:
@@ -218,6 +218,28 @@ def gain_knots(rec: SeasonRecord) -> Array:
     out[np.arange(rec.n), np.minimum(lo + 1, k - 1)] += frac
     used = out.any(axis=0)
     return out[:, used]
+
+
+def _block_sums(row: NDArray[np.int64], w: Array, rows: int, nb: int, k: int) -> Array:
+    """(rows, nb): the sums of weights ``w`` of the steps in each row (``row``) and block."""
+    block = np.arange(len(w)) // k
+    return np.bincount(row * nb + block, weights=w, minlength=rows * nb).reshape(rows, nb)
+
+
+def knot_block_means(rec: SeasonRecord, nb: int) -> Array:
+    """Block means of :func:`gain_knots` (knots, nb), without the (steps × knots) matrix."""
+    t = rec.day + rec.hour / 24.0
+    k = int(np.ceil(t.max())) + 1
+    x = np.clip(t * 86400.0 / KNOT_S, 0, k - 1)
+    lo = np.floor(x).astype(int)
+    frac = x - lo
+    hi = np.minimum(lo + 1, k - 1)
+    used = (np.bincount(lo, weights=1.0 - frac, minlength=k)
+            + np.bincount(hi, weights=frac, minlength=k)) > 0
+    m = nb * rec.per_block
+    sums = (_block_sums(lo[:m], 1.0 - frac[:m], k, nb, rec.per_block)
+            + _block_sums(hi[:m], frac[:m], k, nb, rec.per_block))
+    return sums[used] / rec.per_block
 
 
 def held_lowpass(u: Array, tau_s: float, block_s: float,

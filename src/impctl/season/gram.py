@@ -28,7 +28,14 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter
 from scipy.sparse import csr_matrix
 
-from .columns import Design, dense_groups, gain_coefficients, gain_family, held_lowpass
+from .columns import (
+    Design,
+    column_names,
+    dense_groups,
+    gain_coefficients,
+    gain_family,
+    held_lowpass,
+)
 
 Array = NDArray[np.float64]
 
@@ -244,27 +251,30 @@ def _outer_used(d: Design) -> Array:
     return s @ s.T
 
 
-def _cross(gram: GainGram, d: Design, rows: Array, shapes: bool) -> Array:
-    """Products of series over the usable blocks with every shape's low-pass (rows·Gᵀ) or,
-    with ``shapes``, with the shapes themselves (rows·Sᵀ)."""
+def _cross(gram: GainGram, d: Design, rows: Array) -> Array:
+    """rows·Gᵀ: products of series over the usable blocks with every shape's low-pass."""
     m = d.gains_b.shape[0]
     out = np.zeros((len(rows), m))
     for run, fl in zip(d.once("gram_layout", lambda: _layout(d)), gram.runs, strict=True):
         r = np.zeros((len(rows), run.n))
         r[:, run.used_at] = rows[:, run.used]
-        nl = len(run.local)
-        r_at = np.take(r, run.at, axis=1).reshape(len(rows), nl, -1)
-        li, di = run.local, run.dense
-        if shapes:
-            out[:, li] += np.einsum("qkw,kw->qk", r_at, run.s_win_used)
-            if len(di):
-                out[:, di] += r @ run.s_dense.T
-            continue
-        out[:, li] += (np.einsum("qkw,kw->qk", r_at, fl.g_win_used)
-                       + fl.tail[None, :] * _after(r, gram.rho)[:, run.end])
-        if len(di):
-            out[:, di] += r @ fl.g_dense.T
+        r_at = np.take(r, run.at, axis=1).reshape(len(rows), len(run.local), -1)
+        out[:, run.local] += (np.einsum("qkw,kw->qk", r_at, fl.g_win_used)
+                              + fl.tail[None, :] * _after(r, gram.rho)[:, run.end])
+        if len(run.dense):
+            out[:, run.dense] += r @ fl.g_dense.T
     return out
+
+
+def _shapes_t(d: Design) -> tuple[csr_matrix, csr_matrix]:
+    """The shapes, sparse, time × shape: at every block and at the usable ones."""
+    return d.once("shapes_sparse", lambda: (csr_matrix(d.gains_b.T),
+                                             csr_matrix(d.gains_b[:, d.blocks].T)))
+
+
+def _shape_products(d: Design, rows: Array) -> Array:
+    """rows·Sᵀ: products of series over the usable blocks with every shape."""
+    return (_shapes_t(d)[1].T @ rows.T).T
 
 
 @dataclass
@@ -302,11 +312,24 @@ def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Arr
 def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
     """The gains' family's columns times their coefficients ``cg``."""
     a, b = gain_coefficients(theta, d)
-    shapes_t, used_t = d.once("shapes_sparse", lambda: (
-        csr_matrix(d.gains_b.T), csr_matrix(d.gains_b[:, d.blocks].T)))
+    shapes_t, used_t = _shapes_t(d)
     return used_t @ (a * cg) + held_lowpass(
         (shapes_t @ (b * cg))[None, :], theta[0], d.rec.per_block * d.rec.step_s,
         d.block_runs)[0, d.blocks]
+
+
+def x_products(theta: tuple[float, ...], d: Design, rows: Array) -> Array:
+    """rows·X at ``theta`` (rows × X's columns, in X's order) for series ``rows`` over the
+    usable blocks, without X."""
+    gram = gain_gram(theta[0], d)
+    gcols, _ = gain_family(d)
+    a, b = gain_coefficients(theta, d)
+    out = np.empty((len(rows), len(column_names(d))))
+    out[:, gcols] = a * _shape_products(d, rows) + b * _cross(gram, d, rows)
+    for _key, q, cols in dense_groups(theta, d):
+        keep = cols >= 0
+        out[:, cols[keep]] = rows @ q[keep].T
+    return out
 
 
 def _products(d: Design, groups: list, keys: list[tuple], make) -> Array:
@@ -332,9 +355,9 @@ def normal_equations(theta: tuple[float, ...], d: Design) -> Normal:
     # products with the shapes and their low-pass: only of the groups this θ changed (a step
     # of the Jacobian moves one coordinate), in one pass each
     rs = _products(d, groups, [("S " + key[0], *key[1:]) for key, _, _ in groups],
-                   lambda rows: _cross(gram, d, rows, shapes=True))
+                   lambda rows: _shape_products(d, rows))
     rg = _products(d, groups, [("G " + key[0], tau_mm, *key[1:]) for key, _, _ in groups],
-                   lambda rows: _cross(gram, d, rows, shapes=False))
+                   lambda rows: _cross(gram, d, rows))
     cols = np.concatenate([c for _, _, c in groups])
     qy = np.concatenate([rows for _, rows, _ in groups])
     iy = int(np.flatnonzero(cols < 0)[0])

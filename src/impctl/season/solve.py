@@ -17,7 +17,7 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from .columns import BETA, Design, column_names, columns, lumped
-from .gram import fitted, normal_equations
+from .gram import fitted, normal_equations, x_products
 
 Array = NDArray[np.float64]
 
@@ -82,7 +82,7 @@ class Projection:
     beta: Array
     names: list[str]
     residual_w: Array
-    X: Array
+    X: Array | None     # None from :func:`projection` (the search's: X never formed)
     y: Array
     penalty: Array
     ridge: Array
@@ -180,8 +180,19 @@ def _solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback) -> Array:
 
 def projected_residual(theta, d: Design) -> Array:
     """The block residuals and the ridge rows' of :func:`project` at ``theta`` [W], from the
-    normal equations' parts (:mod:`.gram`: X is never formed; its columns in the order
-    ``perm``)."""
+    normal equations' parts (:mod:`.gram`: X is never formed)."""
+    solved = _solve_parts(theta, d)
+    if solved is None:
+        pr = project(theta, d)
+        return np.concatenate([pr.residual_w, pr.penalty])
+    ne, coef, scale, v, unit = solved
+    return np.concatenate([ne.y - ne.fitted(coef / scale, d), unit @ (v * coef)])
+
+
+def _solve_parts(theta, d: Design):
+    """(normal equations, coef, scale, ridge weights, ridge rows' unit) of the ridge least
+    squares at ``theta`` in the order of the normal equations' columns (``perm``), or None when
+    they are singular."""
     ne = normal_equations(theta, d)
     n = len(ne.y)
     unit, unit_sq = d.once("ridge_perm", lambda: _permuted_ridge(d, n, ne.perm))
@@ -192,10 +203,25 @@ def projected_residual(theta, d: Design) -> Array:
     failed = []
     coef = _solve(ne.xtx / np.outer(scale_p, scale_p), unit_sq * np.outer(v, v),
                   ne.xty / scale_p, lambda: failed.append(True))
-    if failed:
-        pr = project(theta, d)
-        return np.concatenate([pr.residual_w, pr.penalty])
-    return np.concatenate([ne.y - ne.fitted(coef / scale_p, d), unit @ (v * coef)])
+    return None if failed else (ne, coef, scale_p, v, unit)
+
+
+def projection(theta, d: Design) -> Projection:
+    """:func:`project` from the normal equations' parts (its ``X`` is None)."""
+    solved = _solve_parts(theta, d)
+    if solved is None:
+        return project(theta, d)
+    ne, coef, scale, v, unit = solved
+    beta = np.empty_like(coef)
+    beta[ne.perm] = coef / scale
+    rows = np.empty_like(unit)
+    rows[:, ne.perm] = unit * v
+    full = np.empty_like(coef)
+    full[ne.perm] = coef
+    scale_x = np.empty_like(scale)
+    scale_x[ne.perm] = scale
+    return Projection(beta, column_names(d), ne.y - ne.fitted(coef / scale, d), None, ne.y,
+                      rows @ full, rows * scale_x)
 
 
 def _permuted_ridge(d: Design, n: int, perm: NDArray[np.int64]) -> tuple[Array, Array]:
@@ -229,7 +255,7 @@ def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
         if best is None or res.cost < best.cost:
             best = res
     theta = from_u(best.x, bounds)
-    return theta, project(theta, d), best
+    return theta, projection(theta, d), best
 
 
 def beta_dict(pr: Projection) -> dict[str, float]:
@@ -250,28 +276,31 @@ def covariance(u: Array, pr: Projection, d: Design, bounds=THETA_BOUNDS) -> Arra
     """Covariance of (u, β) by the day-clustered sandwich: the bread from the Jacobian of the
     block residuals (the ridge rows included), the meat from each local day's summed scores —
     residuals of one day share its weather, its sun and its owner, so they are not independent.
-    """
+    The Jacobian J = [∂r/∂u, −X] enters as JᵀJ and per-day sums of J·r only: from the normal
+    equations' parts (:mod:`.gram`), X never formed."""
+    theta = from_u(u, bounds)
     r0 = _fixed_residual(u, pr.beta, d, bounds)
     ju = np.empty((len(r0), len(u)))
     for k in range(len(u)):
         du = np.zeros_like(u)
         du[k] = FD_STEP
         ju[:, k] = (_fixed_residual(u + du, pr.beta, d, bounds) - r0) / FD_STEP
-    J = np.concatenate([ju, -pr.X], axis=1)
-    ns = pr.penalty.shape[0]
-    Jp = np.zeros((ns, J.shape[1]))
-    if ns:
-        Jp[:, len(u):] = -_penalty_rows(pr)
-    bread = np.linalg.pinv(J.T @ J + Jp.T @ Jp)
-    day = d.block_day()
-    scores = J * r0[:, None]
-    meat = np.zeros((J.shape[1], J.shape[1]))
-    days = np.unique(day)
-    for c in days:
-        g = scores[day == c].sum(axis=0)
-        meat += np.outer(g, g)
+    ne = normal_equations(theta, d)
+    xtx = np.empty_like(ne.xtx)
+    xtx[np.ix_(ne.perm, ne.perm)] = ne.xtx
+    xt_ju = x_products(theta, d, ju.T).T
+    jtj = np.block([[ju.T @ ju, -xt_ju.T], [-xt_ju, xtx]])
+    nu = len(u)
+    if pr.penalty.shape[0]:
+        ridge = _penalty_rows(pr)
+        jtj[nu:, nu:] += ridge.T @ ridge
+    bread = np.linalg.pinv(jtj)
+    days, which = np.unique(d.block_day(), return_inverse=True)
+    on_day = np.zeros((len(days), len(r0)))         # each day's residuals, 0 elsewhere
+    on_day[which, np.arange(len(r0))] = r0
+    g = np.concatenate([on_day @ ju, -x_products(theta, d, on_day)], axis=1)  # day's scores
     n_c = len(days)
-    return bread @ meat @ bread * (n_c / max(n_c - 1, 1))
+    return bread @ (g.T @ g) @ bread * (n_c / max(n_c - 1, 1))
 
 
 def _penalty_rows(pr: Projection) -> Array:
