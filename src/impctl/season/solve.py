@@ -4,6 +4,9 @@ For each θ (:data:`~.columns.THETA`) the linear parameters β come from a ridge
 solve (the daily sun amplitudes are shrunk towards their mean: a cloudy week leaves few blocks to
 tell them apart); the search over θ — five numbers in transformed coordinates — is a bounded
 trust-region least squares on the projected residual, started from a small grid. No torch.
+
+The search solves from the normal equations' parts (:mod:`.gram`) and never forms X;
+:func:`project` forms it — the straightforward computation the tests hold the search to.
 """
 
 from __future__ import annotations
