@@ -6,6 +6,7 @@ Run:  .venv/bin/python bench/fit.py [--households 50] [--ranges classifier|true|
           [--setpoints C,C,C] [--constrained-setpoint C|cycle] [--band-k K] [--valid-h H]
           [--no-anticipate] [--no-stop-at-t-min]
       .venv/bin/python bench/fit.py --speed [--demo-csv impctl-demo/nights.csv]
+      .venv/bin/python bench/fit.py --season-speed 6 [--repeat 3]
 
 ``--plant realistic`` (the default): the same houses, weather and schedule on the realistic plant
 (:mod:`impctl.plant`; realism options drawn by ``impctl.population.realism.sample_params`` with the
@@ -87,9 +88,9 @@ first N households at steps under 5 minutes. The issue-14 table, re-runnable as 
 Here: the runs (fit and baselines per household, the variants, the virtual-IMP cross-check) and
 the command line; the protocol (houses, schedule, simulation, demand truth) is in
 ``bench/benchlib/fit_protocol.py``, the printed tables in ``bench/benchlib/fit_tables.py``,
-``--speed`` in ``bench/benchlib/fit_speed.py``, ``--compare`` and ``--virtual-imp`` in
-``bench/benchlib/fit_variants.py``. The other bench scripts import the protocol from here (``from
-fit import ...``).
+``--speed`` and ``--season-speed`` in ``bench/benchlib/fit_speed.py``, ``--compare`` and
+``--virtual-imp`` in ``bench/benchlib/fit_variants.py``. The other bench scripts import the
+protocol from here (``from fit import ...``).
 """
 
 from __future__ import annotations
@@ -119,7 +120,7 @@ from benchlib.fit_protocol import (  # also imported from here by the other benc
     val_schedule,
     window_energy,
 )
-from benchlib.fit_speed import speed
+from benchlib.fit_speed import season_speed, speed
 from benchlib.fit_tables import (
     dump,
     gateway_lines,
@@ -296,6 +297,10 @@ def main() -> None:
                          "(bench/calibrate_intervals.py's table)")
     ap.add_argument("--speed", action="store_true",
                     help="only the speed figures (impctl fit wall time, in-process time)")
+    ap.add_argument("--season-speed", type=int, default=0, metavar="H",
+                    help="only the season model's speed figures on H households (CPU s of the "
+                         "fit, its curve and the morning refit; impctl fit and impctl season "
+                         "wall time)")
     ap.add_argument("--repeat", type=int, default=3,
                     help="--speed: run each impctl fit command this many times")
     ap.add_argument("--demo-csv", default=None,
@@ -380,6 +385,9 @@ def main() -> None:
           f"{platform.python_version()}, torch {torch.__version__}, 1 thread")
     if args.speed:
         speed(args)
+        return
+    if args.season_speed:
+        season_speed(args)
         return
     sources = []
     for source in args.ranges.split(","):

@@ -1,5 +1,5 @@
 """bench/fit.py --speed: the issue's speed figures (``impctl fit`` wall time per file, the
-in-process fit per household)."""
+in-process fit per household); --season-speed: the season model's (:func:`season_speed`)."""
 
 from __future__ import annotations
 
@@ -89,3 +89,105 @@ def speed(args) -> None:
           f"| median {np.median(cpu):.2f}, max {np.max(cpu):.2f} | – |")
     print(f"load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores "
           "(other work slows every figure)")
+
+
+#: The season speed figures' winter: households' seed, nights, and the owner nights fitted.
+SEASON_SEED, SEASON_NIGHTS, SEASON_OWNER_NIGHTS = 31, 70, 56
+
+
+def season_speed(args) -> None:
+    """The season model's speed (``--season-speed H``): H households of a simulated winter
+    (``bench/season.py``'s export, seed 31, 70 nights), each fitted on its IMP nights and its
+    first 56 owner nights. In process, one BLAS thread, CPU seconds (``time.process_time``:
+    what the load does not change), the median of ``--repeat`` runs: the fit, the estimate
+    against the owner nights (the refits at 7/14/28/56 nights), the morning refit with one more
+    owner night warm-started at the fit's θ and its own curve. Then, on the first household's
+    nights as NIGHTS.csv, ``impctl fit`` (the IMP fit and the season model) and the morning
+    refit ``impctl season --warm-start`` as commands: wall seconds, min / median."""
+    import json
+    import os
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    from season import cutoff  # bench/season.py: the cut after the N-th owner night
+    from threadpoolctl import threadpool_limits
+
+    from impctl.imp.nights_csv import write_nights
+    from impctl.population.imp_run.season import SeasonConfig, simulate_season
+    from impctl.population.imp_run.season_nights import household_nights
+    from impctl.population.realism import sample_params
+    from impctl.season.convergence import convergence
+    from impctl.season.fit import fit_nights
+
+    n = args.season_speed
+    houses = sample_households(n, seed=SEASON_SEED)
+    season = simulate_season(houses, sample_params(n, SEASON_SEED),
+                             SeasonConfig(nights=SEASON_NIGHTS), seed=SEASON_SEED)
+    print(f"\n### the season model: IMP + {SEASON_OWNER_NIGHTS} owner nights, {n} households "
+          f"(seed {SEASON_SEED}), CPU s in process, median of {args.repeat} (targets: the fit "
+          "≤ 1 s, the morning refit ≤ 0.3 s)")
+    print("| household | IMP / owner nights | fit | against owner nights | morning refit "
+          "(+1 night, warm) | its curve |")
+    print("|---|---|---|---|---|---|")
+
+    def cpu(f):
+        times, out = [], None
+        for _ in range(args.repeat):
+            c0 = time.process_time()
+            out = f()
+            times.append(time.process_time() - c0)
+        return float(np.median(times)), out
+
+    cols: list[list[float]] = [[], [], [], []]
+    first = None
+    with threadpool_limits(limits=1, user_api="blas"):
+        for h in range(n):
+            end, more = (cutoff(season, h, SEASON_OWNER_NIGHTS),
+                         cutoff(season, h, SEASON_OWNER_NIGHTS + 1))
+            if more is None:
+                print(f"| {h} | season too short | | | | |")
+                continue
+            nights = household_nights(season, h, upto_sample=end)
+            later = household_nights(season, h, upto_sample=more)
+            t_fit, (fit, _) = cpu(lambda nights=nights: fit_nights(nights))
+            t_curve, _ = cpu(lambda nights=nights, fit=fit: convergence(nights, fit))
+            t_warm, (warm, _) = cpu(lambda later=later, fit=fit: fit_nights(
+                later, start=fit.theta))
+            t_warm_curve, _ = cpu(lambda later=later, warm=warm: convergence(later, warm))
+            for col, t in zip(cols, (t_fit, t_curve, t_warm, t_warm_curve), strict=True):
+                col.append(t)
+            first = first or (nights, later)
+            print(f"| {h} | {fit.imp_nights} / {fit.owner_nights} | {t_fit:.2f} | {t_curve:.2f} "
+                  f"| {t_warm:.2f} | {t_warm_curve:.2f} |", flush=True)
+    print("| median / max | | " + " | ".join(f"{np.median(c):.2f} / {np.max(c):.2f}"
+                                         for c in cols) + " |")
+    if first is None:
+        return
+    tmp = Path(tempfile.mkdtemp(prefix="impctl-bench-season-"))
+    csv, csv_more = (write_nights(first[0], tmp / "nights.csv"),
+                     write_nights(first[1], tmp / "nights-more.csv"))
+    impctl = str(Path(sys.executable).parent / "impctl")
+    env = dict(os.environ, OMP_NUM_THREADS="1", IMPCTL_MODEL_DIR=str(tmp / "no-models"))
+    cmds = [("impctl fit (IMP fit and season model, curve included)",
+             [impctl, "fit", "--nights", str(csv), "--json", str(tmp / "fit.json")]),
+            ("impctl season --warm-start (the morning refit, curve included)",
+             [impctl, "season", "--nights", str(csv_more), "--warm-start",
+              str(tmp / "fit.json"), "--json", str(tmp / "season.json")])]
+    print(f"\n| command, household 0 | wall s min / median of {args.repeat} | search s (JSON) |")
+    print("|---|---|---|")
+    for label, cmd in cmds:
+        walls = []
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            walls.append(time.perf_counter() - t0)
+            if done.returncode != 0:
+                print(f"| {label} | failed: {done.stderr.strip().splitlines()[-1]} | |")
+                return
+        search = ""
+        if "season" in cmd[1]:
+            block = json.loads((tmp / "season.json").read_text())["season"]["search"]
+            search = f"{block['time_s']:.2f} + curve {block['convergence_time_s']:.2f}"
+        print(f"| {label} | {min(walls):.2f} / {np.median(walls):.2f} | {search} |", flush=True)
+    print(f"load average: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

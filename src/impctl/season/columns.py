@@ -66,15 +66,24 @@ BETA = ("k_ao_w_per_k", "k_am_w_per_k", "g_night_w", "g_day_w", "defrost_w", "p_
 P_HOUSE_MIN_SHARE = 0.8
 
 
-def lowpass(x: Array, tau_s: float, step_s: float, segments: NDArray[np.int64]) -> Array:
+def lowpass(x: Array, tau_s: float, step_s: float, runs: list[tuple[int, int]],
+            then_tau_s: float | None = None) -> Array:
     """First-order low-pass y' = (x − y)/τ on each segment, starting at its first value
-    (exact for inputs held over each step). ``x`` (n,) or (n, m); NaN outside segments."""
+    (exact for inputs held over each step), then, with ``then_tau_s``, a second one on its
+    output (one second-order filter: both start at rest at the first value). ``x`` (n,) or
+    (m, n): time on the last axis; ``runs`` (start, end) of the segments (:func:`_runs`); NaN
+    outside them."""
     b = math.exp(-step_s / max(tau_s, 1e-9))
+    num, den = [1.0 - b], [1.0, -b]
+    if then_tau_s is not None:
+        b2 = math.exp(-step_s / max(then_tau_s, 1e-9))
+        num, den = [(1.0 - b) * (1.0 - b2)], [1.0, -(b + b2), b * b2]
+    # the filter's state at rest at a unit input (scipy.signal.lfilter_zi's, in closed form)
+    rest = np.array([1.0 - num[0], *(-np.asarray(den[2:]))])
     out = np.full(x.shape, np.nan)
-    for lo, hi in _runs(segments):
-        seg = x[lo:hi]
-        zi = b * seg[:1]
-        out[lo:hi] = lfilter([1.0 - b], [1.0, -b], seg, axis=0, zi=zi)[0]
+    for lo, hi in runs:
+        seg = x[..., lo:hi]
+        out[..., lo:hi] = lfilter(num, den, seg, axis=-1, zi=seg[..., :1] * rest)[0]
     return out
 
 
@@ -122,13 +131,19 @@ class Design:
             self.fixed[key] = make()
         return self.fixed[key]
 
+    def remembered(self, key: tuple):
+        """What :meth:`cached` keeps under ``key``, or None."""
+        return self.filtered.get(key[0], {}).get(key)
+
     def cached(self, key: tuple, make):
-        """``make()``, remembered under ``key`` for the next few calls."""
-        if key not in self.filtered:
-            if len(self.filtered) >= FILTERED_KEPT:
-                self.filtered.pop(next(iter(self.filtered)))
-            self.filtered[key] = make()
-        return self.filtered[key]
+        """``make()``, remembered under ``key`` for the next few calls (the last
+        :data:`FILTERED_KEPT` of each kind, ``key[0]``)."""
+        kind = self.filtered.setdefault(key[0], {})
+        if key not in kind:
+            if len(kind) >= FILTERED_KEPT:
+                kind.pop(next(iter(kind)))
+            kind[key] = make()
+        return kind[key]
 
     @classmethod
     def of(cls, rec: SeasonRecord) -> Design:
@@ -147,18 +162,18 @@ class Design:
         night = ((h >= NIGHT_HOURS[0]) | (h < NIGHT_HOURS[1])).astype(float)
         days = rec.day - rec.day.min()
         n_days = int(days.max()) + 1
-        knots = gain_knots(rec)
-        shapes = np.zeros((3 + n_days + knots.shape[1], nb))
+        knots = knot_block_means(rec, nb)
+        shapes = np.zeros((3 + n_days + len(knots), nb))
 
         def mean(x: Array) -> Array:
             return x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
 
         shapes[0] = mean(night)
         shapes[1] = 1.0 - shapes[0]
-        sun = sun_shape(h)
-        shapes[2:2 + n_days] = np.stack([mean(np.where(days == i, sun, 0.0))
-                                         for i in range(n_days)])
-        shapes[2 + n_days:-1] = mean(knots).T
+        # each day's sun, block means (a block of another day's hours holds zeros)
+        shapes[2:2 + n_days] = _block_sums(days[: nb * k], sun_shape(h)[: nb * k], n_days,
+                                           nb, k) / k
+        shapes[2 + n_days:-1] = knots
         blocks = rec.usable_blocks() & (sb >= 0)
         if len(rec.p_house_w) == rec.n:
             # the household electricity ends as heat in the house: a measured gain
@@ -166,7 +181,7 @@ class Design:
             if blocks.any() and np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
                 shapes[-1] = np.where(np.isfinite(p), p, np.nanmean(p[blocks]))
         return cls(rec, seg, _runs(seg), aligned, _runs(sb), ta, to, blocks,
-                   np.ascontiguousarray(shapes), n_days, knots.shape[1],
+                   np.ascontiguousarray(shapes), n_days, len(knots),
                    mean(ta - to)[blocks], mean(ta)[blocks], np.nan_to_num(rec.defrost))
 
     def block_day(self) -> NDArray[np.int64]:
@@ -176,14 +191,15 @@ class Design:
         return (self.rec.day[: nb * k].reshape(nb, k)[:, 0])[self.blocks]
 
     def block_mean(self, x: Array) -> Array:
-        """Means of ``x`` over the usable likelihood blocks."""
+        """Means of ``x`` ((n,) or (m, n): time on the last axis) over the usable likelihood
+        blocks."""
         k = self.rec.per_block
         nb = len(self.blocks)
-        xb = x[: nb * k].reshape((nb, k) + x.shape[1:]).mean(axis=1)
-        return xb[self.blocks]
+        xb = x[..., : nb * k].reshape(x.shape[:-1] + (nb, k)).mean(axis=-1)
+        return xb[..., self.blocks]
 
 
-#: Filtered series a :class:`Design` keeps (a base point and its five steps) [-].
+#: Filtered series a :class:`Design` keeps of each kind (a base point and its five steps) [-].
 FILTERED_KEPT = 12
 #: Spacing of the slow gain's knots [s]: the occupants' heat wanders from day to day.
 KNOT_S = 86400.0
@@ -202,6 +218,28 @@ def gain_knots(rec: SeasonRecord) -> Array:
     out[np.arange(rec.n), np.minimum(lo + 1, k - 1)] += frac
     used = out.any(axis=0)
     return out[:, used]
+
+
+def _block_sums(row: NDArray[np.int64], w: Array, rows: int, nb: int, k: int) -> Array:
+    """(rows, nb): the sums of weights ``w`` of the steps in each row (``row``) and block."""
+    block = np.arange(len(w)) // k
+    return np.bincount(row * nb + block, weights=w, minlength=rows * nb).reshape(rows, nb)
+
+
+def knot_block_means(rec: SeasonRecord, nb: int) -> Array:
+    """Block means of :func:`gain_knots` (knots, nb), without the (steps × knots) matrix."""
+    t = rec.day + rec.hour / 24.0
+    k = int(np.ceil(t.max())) + 1
+    x = np.clip(t * 86400.0 / KNOT_S, 0, k - 1)
+    lo = np.floor(x).astype(int)
+    frac = x - lo
+    hi = np.minimum(lo + 1, k - 1)
+    used = (np.bincount(lo, weights=1.0 - frac, minlength=k)
+            + np.bincount(hi, weights=frac, minlength=k)) > 0
+    m = nb * rec.per_block
+    sums = (_block_sums(lo[:m], 1.0 - frac[:m], k, nb, rec.per_block)
+            + _block_sums(hi[:m], frac[:m], k, nb, rec.per_block))
+    return sums[used] / rec.per_block
 
 
 def held_lowpass(u: Array, tau_s: float, block_s: float,
@@ -241,47 +279,91 @@ def _run_blocks(d: Design, stretches: bool) -> list[tuple[NDArray[np.int64], NDA
     return out
 
 
+def column_names(d: Design) -> list[str]:
+    """Names of :func:`columns`' regressors, in order."""
+    return d.once("names", lambda: [
+        *BETA, *(f"mass0_{i}" for i in range(len(d.block_runs))),
+        *(f"emitter0_{i}" for i in range(len(d.runs))),
+        *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(d.n_knots))])
+
+
+def gain_family(d: Design) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """(column of each of ``d.gains_b``'s shapes in X, whether it is a day's sun). A shape's
+    column is −(a·shape + w·(1 − a)·held_lowpass(shape)): a = f_sun for the sun, else
+    :data:`AIR_SHARE` — the shape at the air, its low-pass (τ_mm) at the mass."""
+    def make():
+        n_s, n_e, nd = len(d.block_runs), len(d.runs), d.n_days
+        first = len(BETA) + n_s + n_e
+        col = np.r_[2, 3, first + np.arange(nd), first + nd + np.arange(d.n_knots), 5]
+        sun = np.zeros(len(col), bool)
+        sun[2:2 + nd] = True
+        return col, sun
+    return d.once("gain_family", make)
+
+
+def gain_coefficients(theta: tuple[float, ...], d: Design) -> tuple[Array, Array]:
+    """(α, β) of each shape's column α·shape + β·held_lowpass(shape) (:func:`gain_family`)."""
+    w, f_sun = theta[1], theta[3]
+    _, sun = gain_family(d)
+    a = np.where(sun, f_sun, AIR_SHARE)
+    return -a, -w * (1.0 - a)
+
+
+def dense_groups(theta: tuple[float, ...], d: Design) -> list[tuple[tuple, Array, Array]]:
+    """The regressors outside the gains' family, by what they depend on: (key, rows over the
+    usable blocks, their columns in X; −1 marks y, the emitter-lagged meter reading). The
+    temperature difference; the mass (τ_mm, w); the defrost and y (τ_e, τ_r); each stretch's
+    initial heat store (τ_mm); each meter run's initial emitter (τ_e)."""
+    tau_mm, w, tau_e, _f_sun, tau_r = theta
+    r, dt, k = d.rec, d.rec.step_s, d.rec.per_block
+    m_t = d.cached(("mass", tau_mm, w), lambda: d.block_mean(
+        lowpass(w * d.t_air_c + (1.0 - w) * d.t_out_c, tau_mm, dt,
+                d.once("stretch_runs", lambda: _runs(d.stretch)))))
+    e = d.cached(("emitter", tau_e, tau_r), lambda: d.block_mean(lowpass(
+        d.once("meter", lambda: np.stack([r.q_hc_w, d.defrost])), tau_e, dt, d.runs, tau_r)))
+    n_s, n_e = len(d.block_runs), len(d.runs)
+
+    def decays(which: str, beta: float, sign: float) -> Array:
+        # Each stretch's own initial heat store: a free offset of the mass, decaying with
+        # τ_mm; each run of the meter its own initial emitter: the filter starts at the run's
+        # first reading, the water and the screed at whatever a pre-heat or a gap left them.
+        runs = d.once(which, lambda: _run_blocks(d, which == "stretch_blocks"))
+        out = np.zeros((len(runs), int(d.blocks.sum())))
+        for i, (sel, steps) in enumerate(runs):
+            out[i, sel] = sign * _block_decay(beta, k, steps)
+        return out
+
+    first = len(BETA)
+    return [
+        (("dt",), d.dt_b[None, :], np.array([0])),
+        (("mass", tau_mm, w), (d.ta_b - m_t)[None, :], np.array([1])),
+        (("emitter", tau_e, tau_r), e[::-1], np.array([4, -1])),
+        (("stretch", tau_mm), d.cached(("stretch", tau_mm), lambda: decays(
+            "stretch_blocks", math.exp(-dt / tau_mm), -1.0)), first + np.arange(n_s)),
+        (("meter", tau_e), d.cached(("meter", tau_e), lambda: decays(
+            "meter_blocks", math.exp(-dt / tau_e), 1.0)), first + n_s + np.arange(n_e)),
+    ]
+
+
 def columns(theta: tuple[float, ...], d: Design) -> tuple[Array, Array, list[str]]:
     """(X, y, names): the block means of the regressors and of the emitter-lagged meter reading
     for nonlinear parameters ``theta`` (:data:`THETA`), over the usable blocks."""
-    tau_mm, w, tau_e, f_sun, tau_r = theta
-    r, dt, k = d.rec, d.rec.step_s, d.rec.per_block
-    m_t = d.cached(("mass", tau_mm, w), lambda: d.block_mean(
-        lowpass(w * d.t_air_c + (1.0 - w) * d.t_out_c, tau_mm, dt, d.stretch)))
-    e = d.cached(("emitter", tau_e, tau_r), lambda: d.block_mean(lowpass(
-        lowpass(np.stack([r.q_hc_w, d.defrost], axis=1), tau_e, dt, d.segments),
-        tau_r, dt, d.segments)))
+    tau_mm = theta[0]
     g = d.cached(("gains", tau_mm), lambda: held_lowpass(
-        d.gains_b, tau_mm, k * dt, d.block_runs)[:, d.blocks])
+        d.gains_b, tau_mm, d.rec.per_block * d.rec.step_s, d.block_runs)[:, d.blocks])
     shapes = d.once("shapes", lambda: d.gains_b[:, d.blocks])
-    n_s, n_e = len(d.block_runs), len(d.runs)
+    gcols, _ = gain_family(d)
+    alpha, beta = gain_coefficients(theta, d)
     # Built row by row as Xᵀ: every write contiguous (X is handed on as its transpose).
-    XT = np.zeros((len(BETA) + n_s + n_e + d.n_days + d.n_knots, int(d.blocks.sum())))
-    XT[0] = d.dt_b
-    XT[1] = d.ta_b - m_t
-    XT[2:4] = -(AIR_SHARE * shapes[0:2] + w * (1.0 - AIR_SHARE) * g[0:2])
-    XT[4] = e[:, 1]
-    XT[5] = -(AIR_SHARE * shapes[-1] + w * (1.0 - AIR_SHARE) * g[-1])
-    # Each stretch's own initial heat store: a free offset of the mass, decaying with τ_mm;
-    # each run of the meter its own initial emitter: the filter starts at the run's first
-    # reading, the water and the screed at whatever a pre-heat or a gap left them.
-    decay, decay_e = math.exp(-dt / tau_mm), math.exp(-dt / tau_e)
-    col = len(BETA)
-    for sel, steps in d.once("stretch_blocks", lambda: _run_blocks(d, True)):
-        XT[col, sel] = -_block_decay(decay, k, steps)
-        col += 1
-    for sel, steps in d.once("meter_blocks", lambda: _run_blocks(d, False)):
-        XT[col, sel] = _block_decay(decay_e, k, steps)
-        col += 1
-    sun = slice(2, 2 + d.n_days)
-    XT[col:col + d.n_days] = -(f_sun * shapes[sun] + w * (1.0 - f_sun) * g[sun])
-    col += d.n_days
-    XT[col:] = -(AIR_SHARE * shapes[2 + d.n_days:-1] + w * (1.0 - AIR_SHARE) * g[2 + d.n_days:-1])
-    X = XT.T
-    names = d.once("names", lambda: [
-        *BETA, *(f"mass0_{i}" for i in range(n_s)), *(f"emitter0_{i}" for i in range(n_e)),
-        *(f"sun_{i}_w" for i in range(d.n_days)), *(f"gain_{i}_w" for i in range(d.n_knots))])
-    return X, e[:, 0], names
+    XT = np.empty((len(column_names(d)), len(d.dt_b)))
+    for _key, rows, cols in dense_groups(theta, d):
+        for row, col in zip(rows, cols, strict=True):
+            if col >= 0:
+                XT[col] = row
+            else:
+                y = row
+    XT[gcols] = alpha[:, None] * shapes + beta[:, None] * g
+    return XT.T, y, column_names(d)
 
 
 def lumped(theta: tuple[float, ...], k_ao: float, k_am: float) -> dict[str, float]:

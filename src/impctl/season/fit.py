@@ -158,8 +158,8 @@ def nights_used(rec: SeasonRecord, used: np.ndarray) -> tuple[int, int]:
     nb = len(used)
     steps = np.repeat(used, k)
     ids, kinds = rec.night_id[: nb * k][steps], rec.kind[: nb * k][steps]
-    owner = {i for i, kd in zip(ids, kinds, strict=True) if kd == "owner" and i}
-    imp = {i for i, kd in zip(ids, kinds, strict=True) if kd in ("constrained", "normal")}
+    owner = {i for i in set(ids[kinds == "owner"].tolist()) if i}
+    imp = set(ids[(kinds == "constrained") | (kinds == "normal")].tolist())
     return len(owner), len(imp)
 
 

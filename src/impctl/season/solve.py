@@ -4,6 +4,9 @@ For each θ (:data:`~.columns.THETA`) the linear parameters β come from a ridge
 solve (the daily sun amplitudes are shrunk towards their mean: a cloudy week leaves few blocks to
 tell them apart); the search over θ — five numbers in transformed coordinates — is a bounded
 trust-region least squares on the projected residual, started from a small grid. No torch.
+
+The search solves from the normal equations' parts (:mod:`.gram`) and never forms X;
+:func:`project` forms it — the straightforward computation the tests hold the search to.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from numpy.typing import NDArray
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
-from .columns import BETA, Design, columns, lumped
+from .columns import BETA, Design, column_names, columns, lumped
+from .gram import fitted, normal_equations, x_products
 
 Array = NDArray[np.float64]
 
@@ -81,65 +85,155 @@ class Projection:
     beta: Array
     names: list[str]
     residual_w: Array
-    X: Array
+    X: Array | None     # None from :func:`projection` (the search's: X never formed)
     y: Array
     penalty: Array
     ridge: Array
 
 
 def project(theta, d: Design) -> Projection:
-    """β by ridge least squares at ``theta`` (module docstring)."""
+    """β by ridge least squares at ``theta`` (module docstring), from X itself."""
     X, y, names = columns(theta, d)
-    p = X.shape[1]
-    sun, gain = d.once("kinds", lambda: (
-        np.array([n.startswith("sun_") for n in names]),
-        np.array([n.startswith("gain_") for n in names])))
-    scale = np.sqrt(np.einsum("ij,ij->j", X, X) / len(X))
-    # A column no usable block touches (a day's knot inside a gap of days the gateway did not
-    # record, the sun of nights-only rows) keeps its natural unit: scaled by ~0 its ridge rows
-    # would swamp every other column's.
-    scale = np.where(scale > 1e-9, scale, 1.0)
+    scale = _scale(np.einsum("ij,ij->j", X, X), len(X))
+    rows = _ridge_rows(scale, d, len(y))
     Xs = X / scale
-    ns = int(sun.sum())
-    rows = np.zeros((ns, p))
-    if ns > 1:
-        lam = math.sqrt(SUN_RIDGE * len(y))
-        centre = np.eye(ns) - 1.0 / ns
-        rows[:, sun] = lam * centre / scale[sun] * np.median(scale[sun])
-    ng = int(gain.sum())
-    if ng > 1 and GAIN_RW > 0:
-        lam = math.sqrt(GAIN_RW * len(y))
-        g = np.zeros((ng, p))
-        step = np.eye(ng - 1, ng, 1) - np.eye(ng - 1, ng)
-        g[: ng - 1, gain] = lam * step / scale[gain] * np.median(scale[gain])
-        # the knots' mean is the gain levels' business: their sum is pulled to zero
-        g[ng - 1, gain] = lam / math.sqrt(ng) / scale[gain] * np.median(scale[gain])
-        rows = np.concatenate([rows, g])
-    elif ng:
-        g = np.zeros((ng, p))
-        g[:, gain] = 1e3 * np.eye(ng) / scale[gain]
-        rows = np.concatenate([rows, g])
-    coef = _solve(Xs, rows, y)
+    coef = _solve(Xs.T @ Xs, rows.T @ rows, Xs.T @ y,
+                  lambda: np.linalg.lstsq(np.concatenate([Xs, rows]),
+                                          np.r_[y, np.zeros(len(rows))], rcond=None)[0])
     beta = coef / scale
     return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
 
 
-def _solve(Xs: Array, rows: Array, y: Array) -> Array:
-    """Least squares of ``y`` on ``Xs`` with the ridge ``rows`` (their target is zero) by the
-    normal equations (the columns are scaled and the ridge rows keep them well posed; four
-    times faster than an SVD), an SVD if they are singular."""
-    ata = Xs.T @ Xs + rows.T @ rows
+def _scale(sum_sq: Array, n: int) -> Array:
+    """Each column's RMS over the blocks (the solve's units)."""
+    scale = np.sqrt(sum_sq / n)
+    # A column no usable block touches (a day's knot inside a gap of days the gateway did not
+    # record, the sun of nights-only rows) keeps its natural unit: scaled by ~0 its ridge rows
+    # would swamp every other column's.
+    return np.where(scale > 1e-9, scale, 1.0)
+
+
+def _ridge_unit(d: Design, n: int) -> Array:
+    """The ridge rows for ``n`` blocks before each column's weight (:func:`_ridge_weight`):
+    the daily sun amplitudes about their mean, the slow gain's steps and its knots' sum."""
+    sun, gain = _kinds(d)
+    p = len(sun)
+    ns = int(sun.sum())
+    rows = np.zeros((ns, p))
+    if ns > 1:
+        rows[:, sun] = math.sqrt(SUN_RIDGE * n) * (np.eye(ns) - 1.0 / ns)
+    ng = int(gain.sum())
+    if ng > 1 and GAIN_RW > 0:
+        lam = math.sqrt(GAIN_RW * n)
+        g = np.zeros((ng, p))
+        g[: ng - 1, gain] = lam * (np.eye(ng - 1, ng, 1) - np.eye(ng - 1, ng))
+        # the knots' mean is the gain levels' business: their sum is pulled to zero
+        g[ng - 1, gain] = lam / math.sqrt(ng)
+        rows = np.concatenate([rows, g])
+    elif ng:
+        g = np.zeros((ng, p))
+        g[:, gain] = 1e3 * np.eye(ng)
+        rows = np.concatenate([rows, g])
+    return rows
+
+
+def _kinds(d: Design) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    names = column_names(d)
+    return d.once("kinds", lambda: (np.array([n.startswith("sun_") for n in names]),
+                                    np.array([n.startswith("gain_") for n in names])))
+
+
+def _ridge_weight(scale: Array, d: Design) -> Array:
+    """Each column's factor in the ridge rows: the sun's and the slow gain's columns in their
+    set's median unit (a column scaled by ~0 would otherwise swamp the others)."""
+    sun, gain = _kinds(d)
+    v = np.zeros(len(scale))
+    if sun.sum() > 1:
+        v[sun] = _median(scale[sun]) / scale[sun]
+    if gain.sum() > 1 and GAIN_RW > 0:
+        v[gain] = _median(scale[gain]) / scale[gain]
+    elif gain.any():
+        v[gain] = 1.0 / scale[gain]
+    return v
+
+
+def _median(x: Array) -> float:
+    """np.median's value without its overhead (the search calls it twice per θ)."""
+    s = np.sort(x)
+    n = len(s)
+    return float((s[(n - 1) // 2] + s[n // 2]) / 2.0)
+
+
+def _ridge_rows(scale: Array, d: Design, n: int) -> Array:
+    """The ridge rows (their target is zero) in the columns scaled by ``scale``."""
+    return _ridge_unit(d, n) * _ridge_weight(scale, d)
+
+
+def _solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback) -> Array:
+    """Least squares from the scaled normal equations ``xtx_s``, ``xty_s`` with the ridge
+    rows' ``rtr`` (the columns are scaled and the ridge rows keep them well posed; four times
+    faster than an SVD); ``fallback()`` (an SVD) if they are singular."""
+    ata = xtx_s + rtr
     ata[np.diag_indices_from(ata)] += 1e-10 * np.trace(ata) / len(ata)
     try:
-        return cho_solve(cho_factor(ata, check_finite=False), Xs.T @ y, check_finite=False)
+        return cho_solve(cho_factor(ata, check_finite=False), xty_s, check_finite=False)
     except np.linalg.LinAlgError:
-        A = np.concatenate([Xs, rows])
-        return np.linalg.lstsq(A, np.r_[y, np.zeros(len(rows))], rcond=None)[0]
+        return fallback()
+
+
+def projected_residual(theta, d: Design) -> Array:
+    """The block residuals and the ridge rows' of :func:`project` at ``theta`` [W], from the
+    normal equations' parts (:mod:`.gram`: X is never formed)."""
+    solved = _solve_parts(theta, d)
+    if solved is None:
+        pr = project(theta, d)
+        return np.concatenate([pr.residual_w, pr.penalty])
+    ne, coef, scale, v, unit = solved
+    return np.concatenate([ne.y - ne.fitted(coef / scale, d), unit @ (v * coef)])
+
+
+def _solve_parts(theta, d: Design):
+    """(normal equations, coef, scale, ridge weights, ridge rows' unit) of the ridge least
+    squares at ``theta`` in the order of the normal equations' columns (``perm``), or None when
+    they are singular."""
+    ne = normal_equations(theta, d)
+    n = len(ne.y)
+    unit, unit_sq = d.once("ridge_perm", lambda: _permuted_ridge(d, n, ne.perm))
+    scale_p = _scale(np.diag(ne.xtx).copy(), n)
+    scale = np.empty_like(scale_p)
+    scale[ne.perm] = scale_p
+    v = _ridge_weight(scale, d)[ne.perm]
+    failed = []
+    coef = _solve(ne.xtx / np.outer(scale_p, scale_p), unit_sq * np.outer(v, v),
+                  ne.xty / scale_p, lambda: failed.append(True))
+    return None if failed else (ne, coef, scale_p, v, unit)
+
+
+def projection(theta, d: Design) -> Projection:
+    """:func:`project` from the normal equations' parts (its ``X`` is None)."""
+    solved = _solve_parts(theta, d)
+    if solved is None:
+        return project(theta, d)
+    ne, coef, scale, v, unit = solved
+    beta = np.empty_like(coef)
+    beta[ne.perm] = coef / scale
+    rows = np.empty_like(unit)
+    rows[:, ne.perm] = unit * v
+    full = np.empty_like(coef)
+    full[ne.perm] = coef
+    scale_x = np.empty_like(scale)
+    scale_x[ne.perm] = scale
+    return Projection(beta, column_names(d), ne.y - ne.fitted(coef / scale, d), None, ne.y,
+                      rows @ full, rows * scale_x)
+
+
+def _permuted_ridge(d: Design, n: int, perm: NDArray[np.int64]) -> tuple[Array, Array]:
+    unit = _ridge_unit(d, n)[:, perm]
+    return unit, unit.T @ unit
 
 
 def _residual(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
-    pr = project(from_u(u, bounds), d)
-    return np.concatenate([pr.residual_w, pr.penalty]) / W_SCALE
+    return projected_residual(from_u(u, bounds), d) / W_SCALE
 
 
 def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
@@ -164,7 +258,7 @@ def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
         if best is None or res.cost < best.cost:
             best = res
     theta = from_u(best.x, bounds)
-    return theta, project(theta, d), best
+    return theta, projection(theta, d), best
 
 
 def beta_dict(pr: Projection) -> dict[str, float]:
@@ -177,36 +271,39 @@ FD_STEP = 1e-4
 
 
 def _fixed_residual(u: Array, beta: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
-    X, y, _ = columns(from_u(u, bounds), d)
-    return y - X @ beta
+    y, fit = fitted(from_u(u, bounds), d, beta)
+    return y - fit
 
 
 def covariance(u: Array, pr: Projection, d: Design, bounds=THETA_BOUNDS) -> Array:
     """Covariance of (u, β) by the day-clustered sandwich: the bread from the Jacobian of the
     block residuals (the ridge rows included), the meat from each local day's summed scores —
     residuals of one day share its weather, its sun and its owner, so they are not independent.
-    """
+    The Jacobian J = [∂r/∂u, −X] enters as JᵀJ and per-day sums of J·r only: from the normal
+    equations' parts (:mod:`.gram`), X never formed."""
+    theta = from_u(u, bounds)
     r0 = _fixed_residual(u, pr.beta, d, bounds)
     ju = np.empty((len(r0), len(u)))
     for k in range(len(u)):
         du = np.zeros_like(u)
         du[k] = FD_STEP
         ju[:, k] = (_fixed_residual(u + du, pr.beta, d, bounds) - r0) / FD_STEP
-    J = np.concatenate([ju, -pr.X], axis=1)
-    ns = pr.penalty.shape[0]
-    Jp = np.zeros((ns, J.shape[1]))
-    if ns:
-        Jp[:, len(u):] = -_penalty_rows(pr)
-    bread = np.linalg.pinv(J.T @ J + Jp.T @ Jp)
-    day = d.block_day()
-    scores = J * r0[:, None]
-    meat = np.zeros((J.shape[1], J.shape[1]))
-    days = np.unique(day)
-    for c in days:
-        g = scores[day == c].sum(axis=0)
-        meat += np.outer(g, g)
+    ne = normal_equations(theta, d)
+    xtx = np.empty_like(ne.xtx)
+    xtx[np.ix_(ne.perm, ne.perm)] = ne.xtx
+    xt_ju = x_products(theta, d, ju.T).T
+    jtj = np.block([[ju.T @ ju, -xt_ju.T], [-xt_ju, xtx]])
+    nu = len(u)
+    if pr.penalty.shape[0]:
+        ridge = _penalty_rows(pr)
+        jtj[nu:, nu:] += ridge.T @ ridge
+    bread = np.linalg.pinv(jtj)
+    days, which = np.unique(d.block_day(), return_inverse=True)
+    on_day = np.zeros((len(days), len(r0)))         # each day's residuals, 0 elsewhere
+    on_day[which, np.arange(len(r0))] = r0
+    g = np.concatenate([on_day @ ju, -x_products(theta, d, on_day)], axis=1)  # day's scores
     n_c = len(days)
-    return bread @ meat @ bread * (n_c / max(n_c - 1, 1))
+    return bread @ (g.T @ g) @ bread * (n_c / max(n_c - 1, 1))
 
 
 def _penalty_rows(pr: Projection) -> Array:
