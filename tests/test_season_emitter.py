@@ -93,3 +93,26 @@ def test_impctl_fit_reads_the_emitter_from_the_nights_file(tmp_path, winter_seas
     emitter = json.loads(out.read_text())["season"]["emitter"]
     assert emitter["kind"] == "underfloor" and emitter["water_excess_k"] < RADIATOR_EXCESS_K
     assert "underfloor" in res.stdout
+
+
+def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_season,
+                                                                         monkeypatch):
+    import impctl.season.fit as season_fit
+
+    nights = household_nights(winter_season, 0)
+    full, _ = fit_nights(nights)
+    calls = []
+    search = season_fit.search
+
+    def counted(*args, **kw):
+        calls.append(kw["bounds"][2][1])
+        return search(*args, **kw)
+
+    monkeypatch.setattr(season_fit, "search", counted)
+    assert full.theta[2] > 1.5 * 3600      # the screed's lag, past the radiators' bound
+    refit, _ = fit_nights(nights, start=full.theta)
+    assert calls == [TAU_E_MAX_UNDERFLOOR_S] and refit.emitter == "underfloor"
+    assert refit.values["hlc_w_per_k"] == pytest.approx(full.values["hlc_w_per_k"], rel=1e-3)
+    calls.clear()
+    fit_nights(nights)                     # a full search: radiators first, then the screed
+    assert calls == [1.5 * 3600, TAU_E_MAX_UNDERFLOOR_S]

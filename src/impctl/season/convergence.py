@@ -18,6 +18,10 @@ from .solve import LUMPED
 
 #: The owner-night counts the curve is given at [-].
 STEPS = (7, 14, 28, 56)
+#: Evaluations a cut's search may take from the full fit's θ [-]: on 6 simulated households
+#: (8 IMP + 56 owner nights) 30 changed no value or bound by more than 0.05 % and took one
+#: curve 1.31 → 0.92 CPU-s; 20 moved them by up to 2 %.
+CUT_MAX_NFEV = 30
 
 _NAMES = {"hlc_w_per_k": ("HLC", "W/K", 1.0), "tau_h": ("tau", "h", 1.0),
           "c_m_j_per_k": ("C_m", "kWh/K", 1 / 3.6e6)}
@@ -44,7 +48,8 @@ def convergence(nights, full: SeasonFit | None = None) -> list[dict]:
         cut = [x for x in nights if x.start < end]
         try:
             fit = fit_season(record_from_nights(cut),
-                             start=full.theta if full is not None and full.theta else None)
+                             start=full.theta if full is not None and full.theta else None,
+                             max_nfev=CUT_MAX_NFEV)
         except (ValueError, np.linalg.LinAlgError):
             continue
         out.append(_row(n, fit))

@@ -171,9 +171,10 @@ def imp_kinds(rec: SeasonRecord, used: np.ndarray) -> set[str]:
 
 
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
-               start: tuple | None = None) -> SeasonFit:
+               start: tuple | None = None, max_nfev: int = 60) -> SeasonFit:
     """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
-    intervals (the bench calibrates on them); ``start`` warm-starts the search at a known θ
+    intervals (the bench calibrates on them); ``max_nfev`` caps each search's evaluations of
+    the residual; ``start`` warm-starts the search at a known θ
     (:attr:`SeasonFit.theta` of a fit of the same house). Raises ValueError when fewer than
     :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
     from .columns import Design
@@ -191,8 +192,11 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
         first = tau_e_max_s("radiators" if water_recorded(rec) else None)
+        if start is not None and water_recorded(rec) and start[2] > first:
+            # an earlier fit of this house read a screed: one search under its bound
+            first = tau_e_max_s("underfloor")
         bounds = bounds_for(first)
-        theta, pr, res = search(d, start=start, bounds=bounds)
+        theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
         b = beta_dict(pr)
         values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
@@ -200,7 +204,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         kind = emitter_kind(excess)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
-            theta, pr, res = search(d, start=theta, bounds=bounds)
+            theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds)
             b = beta_dict(pr)
             values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
         se = lumped_log_se(res.x, pr, covariance(res.x, pr, d, bounds), bounds)
