@@ -112,6 +112,10 @@ def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
     counts = [r["owner_nights"] for r in curve]
     assert counts[0] == 7 and counts[-1] == expected.owner_nights and counts == sorted(counts)
     assert curve[-1]["hlc_w_per_k"]["value"] == pytest.approx(expected.values["hlc_w_per_k"])
+    # the emitter, read from the file's flow and return water (the run's houses: underfloor)
+    assert season_json["emitter"]["kind"] == "underfloor" == expected.emitter
+    assert season_json["emitter"]["source"].startswith("measured")
+    assert "emitter: underfloor (measured" in res.stdout
 
 
 def test_the_convergence_curve_is_the_fit_of_the_first_nights(season):

@@ -2,21 +2,18 @@
 
 Steady nights of a house with a known emitter law (synthetic: the water's excess over the room
 at each night's load), and the run's short realistic winter (``winter_season``: underfloor
-houses) through the fit and ``impctl fit``.
+houses) through the fit; ``impctl fit``'s emitter line and JSON: test_season.py.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 import pandas as pd
 import pytest
-from test_nights_owner import run_cli
 
 from impctl.imp.night import NightSamples
-from impctl.imp.nights_csv import write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
@@ -82,17 +79,6 @@ def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_sea
                          for n in nights])
     assert dry.emitter is None and dry.theta[2] <= TAU_E_MAX_UNKNOWN_S + 1e-6
     assert dry.as_dict()["emitter"]["source"].startswith("assumed")
-
-
-def test_impctl_fit_reads_the_emitter_from_the_nights_file(tmp_path, winter_season):
-    csv = write_nights(household_nights(winter_season, 1), tmp_path / "nights.csv")
-    out = tmp_path / "fit.json"
-    res = run_cli("fit", "--nights", str(csv), "--json", str(out),
-                  model_dir=tmp_path / "no-models")
-    assert res.returncode == 0, res.stderr
-    emitter = json.loads(out.read_text())["season"]["emitter"]
-    assert emitter["kind"] == "underfloor" and emitter["water_excess_k"] < RADIATOR_EXCESS_K
-    assert "underfloor" in res.stdout
 
 
 def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_season,
