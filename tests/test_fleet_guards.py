@@ -52,8 +52,15 @@ def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return run_impctl(*args, cwd=cwd)  # in this process: the output is checked
 
 
+#: The command's Ctrl-C as a terminal gives it: a test run started in the background
+#: (``cmd &`` in a script, nohup) passes SIGINT on ignored, and Python then keeps it ignored —
+#: the run finished with the signal lost.
+_CLI = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        "from impctl.cli import main; main()")
+
+
 def start_cli(*args: str, cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", "from impctl.cli import main; main()", *args],
+    return subprocess.Popen([sys.executable, "-c", _CLI, *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
 
 
