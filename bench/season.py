@@ -14,7 +14,8 @@ intervals; the fit's wall time.
     python bench/season.py --households 40 --variant signed
     python bench/season.py --households 100 --imp constrained   # a campaign without normal nights
     python bench/season.py --households 100 --constrained-hours 3   # shorter constrained nights
-    python bench/season.py --calibrate --households 150 --seed 31 --owner-nights 7,14,28,56
+    python bench/season.py --calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 \
+        --nights 90   # the intervals' scale and floor
     python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
     python bench/season.py --from-json saved.json --figure curve.png   # redraw, no fits
 
