@@ -1,7 +1,8 @@
 """The season search's normal equations from the regressors' structure against X itself.
 
-The search never forms X (:mod:`impctl.season.gram`); these tests form it
-(:func:`impctl.season.columns.columns`) and check that the products, the fitted values, the
+The search never forms X (:mod:`impctl.season.projection.gram`); these tests form it
+(:func:`impctl.season.projection.columns.columns`) and check that the products, the fitted
+values, the
 projected residual and the fit's result are those of the straightforward computation — on the
 run's short winter (``winter_season``), with the household electricity measured (a dense
 row), with a week the gateway did not record (several stretches of the heat store) and with
@@ -18,9 +19,9 @@ from scipy.optimize import least_squares
 
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import record_from_nights
-from impctl.season.columns import Design, columns, lumped
-from impctl.season.gram import fitted, normal_equations
-from impctl.season.solve import (
+from impctl.season.projection.columns import Design, columns, lumped
+from impctl.season.projection.gram import fitted, normal_equations
+from impctl.season.projection.solve import (
     W_SCALE,
     beta_dict,
     from_u,
@@ -125,7 +126,7 @@ def test_the_search_lands_where_the_search_on_x_lands(designs):
 def test_the_shapes_block_means_are_the_means_of_the_steps(designs):
     """Each day's sun and the slow gain's knots, summed per block without the (steps × knots)
     matrix: the block means of :func:`gain_knots` and of the day-masked sun shape."""
-    from impctl.season.columns import gain_knots
+    from impctl.season.projection.columns import gain_knots
     from impctl.season.record import sun_shape
 
     for name, d in designs.items():
@@ -147,7 +148,7 @@ def test_the_shapes_block_means_are_the_means_of_the_steps(designs):
 def test_the_sandwich_is_that_of_the_jacobian_with_x(designs):
     """The covariance from the normal equations' parts against the sandwich written out with
     J = [∂r/∂u, −X] and each day's summed scores."""
-    from impctl.season.solve import FD_STEP, covariance, projection
+    from impctl.season.projection.solve import FD_STEP, covariance, projection
 
     for name in ("house 0", "house 1, a week not recorded"):
         d = designs[name]

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from .fit import SeasonFit, fit_season
-from .solve import LUMPED
+from .projection.solve import LUMPED
 
 #: The owner-night counts the curve is given at [-].
 STEPS = (7, 14, 28, 56)

@@ -1,14 +1,15 @@
 """What the emitter is, read from the heating water the gateway records: radiators or a screed.
 
-The season model lags the meter's heat by the emitter's time constant τ_e (:mod:`.columns`), and
-how far the search may take it decides how well τ and C_m come out. τ_e takes in more than the
-emitter — the air's and the furniture's capacity read as lag too — and where it is free it
-trades with the mass's own time constant. The bound is set by what the emitter is: a radiator's
-water and steel answer within the hour, an underfloor screed in 3–7 h (real-houses §2). On the
-development households (seed 31, 100 households, IMP + 28 owner nights), against one bound of
-3 h for all: underfloor houses with 5 h, HLC 4.4 → 2.8 %, P90 14 → 10 %, τ 5.5 → 3.3 %;
-radiator houses with 1.5 h, τ's P90 18 → 16 %, C_m 9.4 → 7.4 % (bias +7.8 → +0.5 %, P90
-25 → 16 %; 1.0 / 2.0 h: C_m's P90 24 / 18 %). A house whose emitter is not known keeps the 3 h.
+The season model lags the meter's heat by the emitter's time constant τ_e
+(:mod:`.projection.columns`), and how far the search may take it decides how well τ and C_m come
+out. τ_e takes in more than the emitter — the air's and the furniture's capacity read as lag too
+— and where it is free it trades with the mass's own time constant. The bound is set by what the
+emitter is: a radiator's water and steel answer within the hour, an underfloor screed in 3–7 h
+(real-houses §2). On the development households (seed 31, 100 households, IMP + 28 owner
+nights), against one bound of 3 h for all: underfloor houses with 5 h, HLC 4.4 → 2.8 %, P90 14 →
+10 %, τ 5.5 → 3.3 %; radiator houses with 1.5 h, τ's P90 18 → 16 %, C_m 9.4 → 7.4 % (bias +7.8 →
++0.5 %, P90 25 → 16 %; 1.0 / 2.0 h: C_m's P90 24 / 18 %). A house whose emitter is not known
+keeps the 3 h.
 
 The water tells them apart. An underfloor loop delivers the house's heat a few kelvins of water
 above the room (design mean water 28–38 °C), a radiator 20–35 K above it (40–55 °C; real-houses

@@ -1,17 +1,17 @@
 """The season fit: HLC, τ and C_m of a house from everything the gateway recorded.
 
 :func:`fit_season` reads a :class:`~.record.SeasonRecord` (:func:`~.nights.record_from_nights`)
-with the demand-form 5R1C (:mod:`.columns`, :mod:`.solve`) and gives each quantity a 95 %
-interval: the day-clustered sandwich covariance carried to log HLC, log τ and log C_m by the
-delta method, scaled by :data:`INTERVAL_SCALE` and combined with a model-error floor
-(:data:`MODEL_FLOOR`) — more nights shrink the statistical part, not what the model leaves out
-of a real house (a second thermal mass, the furniture, the sun's real shape, the emitter's own
-capacity). Both are estimated per quantity on simulated seasons of 150 realistic households
+with the demand-form 5R1C (:mod:`.projection.columns`, :mod:`.projection.solve`) and gives each
+quantity a 95 % interval: the day-clustered sandwich covariance carried to log HLC, log τ and
+log C_m by the delta method, scaled by :data:`INTERVAL_SCALE` and combined with a model-error
+floor (:data:`MODEL_FLOOR`) — more nights shrink the statistical part, not what the model leaves
+out of a real house (a second thermal mass, the furniture, the sun's real shape, the emitter's
+own capacity). Both are estimated per quantity on simulated seasons of 150 realistic households
 that the bench does not use, each cut after 7, 14, 28 and 56 owner nights (``bench/season.py
---calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 --nights 90``): 95 %
-coverage with a median interval within a tenth of the narrowest, and of those the largest
-scale — the sandwich part grows on a house the model fits worse than the simulated ones,
-which a floor does not.
+--calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 --nights 90``): 95 % coverage
+with a median interval within a tenth of the narrowest, and of those the largest scale — the
+sandwich part grows on a house the model fits worse than the simulated ones, which a floor does
+not.
 
 The energy signature on the same owner nights (:func:`signature`) is reported beside it: the
 baseline the season model has to beat. Units in every name.
@@ -26,7 +26,6 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .change import Change, detect_change
-from .columns import THETA, lumped
 from .emitter import (
     REFERENCE_DT_K,
     emitter_kind,
@@ -34,8 +33,9 @@ from .emitter import (
     water_excess_k,
     water_recorded,
 )
+from .projection.columns import THETA, lumped
+from .projection.solve import LUMPED, beta_dict, bounds_for, covariance, lumped_log_se, search
 from .record import SeasonRecord
-from .solve import LUMPED, beta_dict, bounds_for, covariance, lumped_log_se, search
 
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
 INTERVAL_SCALE = {"hlc_w_per_k": 3.0, "tau_h": 3.0, "c_m_j_per_k": 4.0}
@@ -61,7 +61,7 @@ class SeasonFit:
 
     Attributes
     ----------
-    values : HLC [W/K], τ [h], C_m [J/K] (keys of :data:`~.solve.LUMPED`)
+    values : HLC [W/K], τ [h], C_m [J/K] (keys of :data:`~.projection.solve.LUMPED`)
     low, high : their 95 % interval bounds, same keys and units
     owner_nights : owner nights (local days) with rows the likelihood used
     imp_nights : IMP nights with rows it used
@@ -135,8 +135,9 @@ class SeasonFit:
 
 
 def theta_of(result: dict) -> tuple[float, ...] | None:
-    """The season model's θ in a fit JSON (``season.theta``, :data:`~.columns.THETA` units),
-    None when it has none or it is not a set of finite positive numbers."""
+    """The season model's θ in a fit JSON (``season.theta``,
+    :data:`~.projection.columns.THETA` units), None when it has none or it is not a set of
+    finite positive numbers."""
     block = (result.get("season") or {}).get("theta") if isinstance(result, dict) else None
     if not isinstance(block, dict):
         return None
@@ -177,7 +178,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
     the residual; ``start`` warm-starts the search at a known θ
     (:attr:`SeasonFit.theta` of a fit of the same house). Raises ValueError when fewer than
     :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
-    from .columns import Design
+    from .projection.columns import Design
 
     d = Design.of(rec)
     owner, imp = nights_used(rec, d.blocks)

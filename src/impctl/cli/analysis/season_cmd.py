@@ -97,7 +97,7 @@ def _warm_start(path: Path) -> tuple[float, ...] | None:
 
 
 def _missing_theta(result: dict) -> list[str]:
-    from ...season.columns import THETA
+    from ...season.projection.columns import THETA
 
     return [k for k in THETA if k not in result["season"]["theta"]]
 

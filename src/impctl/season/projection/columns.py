@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from .record import NIGHT_HOURS, SeasonRecord, sun_shape
+from ..record import NIGHT_HOURS, SeasonRecord, sun_shape
 
 Array = NDArray[np.float64]
 
