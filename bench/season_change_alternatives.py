@@ -73,29 +73,7 @@ def glr_variant(rows: change.NightRows, v: Variant) -> tuple[float, int, float, 
     δ̂_k [W/K], se(δ̂_k) [W/K]) over every k with ``v.before`` nights before and ``v.after``
     from k on. A gains step (heat off by the same watts whatever T_air − T_out) goes into the
     level; what is left is a change of heat in proportion to T_air − T_out. Same whitener."""
-    n = len(rows)
-    if n < max(change.MIN_NIGHTS, v.before + v.after):
-        return math.nan, -1, math.nan, math.nan
-    X0 = rows.design()
-    keep = np.r_[True, np.ptp(X0[:, 1:], axis=0) > 1e-9]
-    X0 = X0[:, keep]
-    w = change.whitener(rows, X0)
-    x0w, yw = w @ X0, w @ rows.q_w
-    best = (0.0, -1, math.nan, math.nan)
-    for k in range(v.before, n - v.after + 1):
-        after = (np.arange(n) >= k).astype(float)
-        cols = [x0w, w @ after] if v.level else [x0w]
-        X = np.column_stack([*cols, w @ (after * rows.dt_k)])
-        beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
-        r = yw - X @ beta
-        dof = n - X.shape[1]
-        if dof < 2:
-            continue
-        sigma = max(math.sqrt(float(r @ r) / dof), 1e-9)
-        se = sigma * math.sqrt(max(float(np.linalg.inv(X.T @ X)[-1, -1]), 0.0))
-        if se > 0 and abs(beta[-1]) / se > best[0]:
-            best = (abs(beta[-1]) / se, k, float(beta[-1]), se)
-    return best
+    return change.glr(rows, v.before, v.after, v.level)
 
 
 def variant_sequence(rows: change.NightRows, v: Variant) -> tuple[int, int, float, float]:

@@ -294,12 +294,15 @@ def whitener(rows: NightRows, X: np.ndarray) -> np.ndarray:
     return best_l
 
 
-def glr(rows: NightRows) -> tuple[float, int, float, float]:
+def glr(rows: NightRows, before: int = MIN_SIDE, after: int = MIN_SIDE,
+        level: bool = False) -> tuple[float, int, float, float]:
     """(largest |t|, its night index k, δ̂_k [W/K], se(δ̂_k) [W/K]) of a step in H from night k
-    on, over every k with :data:`MIN_SIDE` nights on each side; (NaN, -1, NaN, NaN) with too
-    few nights. Generalised least squares with the correlation of :func:`whitener`."""
+    on, over every k with ``before`` nights before it and ``after`` from it on; (NaN, -1, NaN,
+    NaN) with too few nights. Generalised least squares with the correlation of
+    :func:`whitener`. ``level``: a free step in the gains level at the same night beside it
+    (measured and not adopted, decision record 0036)."""
     n = len(rows)
-    if n < max(MIN_NIGHTS, 2 * MIN_SIDE):
+    if n < max(MIN_NIGHTS, before + after):
         return math.nan, -1, math.nan, math.nan
     X0 = rows.design()
     # A regressor the nights do not move (no defrost, no setback) is left out: no column of
@@ -309,9 +312,9 @@ def glr(rows: NightRows) -> tuple[float, int, float, float]:
     w = whitener(rows, X0)
     x0w, yw = w @ X0, w @ rows.q_w
     best = (0.0, -1, math.nan, math.nan)
-    for k in range(MIN_SIDE, n - MIN_SIDE + 1):
-        xs = w @ np.where(np.arange(n) >= k, rows.dt_k, 0.0)
-        X = np.c_[x0w, xs]
+    for k in range(before, n - after + 1):
+        step = (np.arange(n) >= k).astype(float)
+        X = np.column_stack([x0w, *([w @ step] if level else []), w @ (step * rows.dt_k)])
         beta, *_ = np.linalg.lstsq(X, yw, rcond=None)
         r = yw - X @ beta
         dof = n - X.shape[1]
