@@ -52,22 +52,15 @@ TAU_E_MAX_UNKNOWN_S = 3.0 * 3600
 
 def water_excess_k(rec: SeasonRecord, hlc_w_per_k: float) -> float:
     """The mean water's excess over the room at the reference load [K] (module docstring): the
-    median over the owner nights with the water, the room, the outdoor temperature and the
-    meter read through :data:`HOURS` and nothing left out. NaN without the water temperatures,
-    a finite positive ``hlc_w_per_k`` [W/K] or :data:`MIN_NIGHTS` such nights."""
+    median over the owner nights with the water, the room and the meter read through
+    :data:`HOURS` and nothing left out (:meth:`~.record.SeasonRecord.owner_windows`). NaN
+    without the water temperatures, a finite positive ``hlc_w_per_k`` [W/K] or
+    :data:`MIN_NIGHTS` such nights."""
     if len(rec.t_water_c) != rec.n or not (math.isfinite(hlc_w_per_k) and hlc_w_per_k > 0):
         return float("nan")
-    h0, h1 = HOURS
-    inside = (rec.hour >= h0) & (rec.hour < h1) & (rec.kind == "owner")
-    ok = inside & (rec.excluded == "") & np.isfinite(rec.t_air_c) & np.isfinite(rec.q_hc_w) \
-        & np.isfinite(rec.t_water_c)
-    want = int(round((h1 - h0) * 3600 / rec.step_s))
     q_ref = hlc_w_per_k * REFERENCE_DT_K
     out = []
-    for day in np.unique(rec.day[inside]):
-        sel = ok & (rec.day == day)
-        if sel.sum() < want or (inside & (rec.day == day) & ~ok).any():
-            continue
+    for sel in rec.owner_windows(HOURS, (rec.t_water_c,)):
         q = float(np.mean(rec.q_hc_w[sel]))
         excess = float(np.mean(rec.t_water_c[sel] - rec.t_air_c[sel]))
         if q < MIN_LOAD_SHARE * q_ref or excess <= 0:

@@ -238,16 +238,8 @@ def signature(rec: SeasonRecord) -> float:
     """The energy signature's HLC [W/K]: per owner night the mean heat over
     :data:`SIGNATURE_HOURS` against the mean (T_air − T_out), least squares; nights with a
     left-out or missing row in the window are skipped. NaN with fewer than three nights."""
-    h0, h1 = SIGNATURE_HOURS
-    inside = (rec.hour >= h0) & (rec.hour < h1) & (rec.kind == "owner")
-    ok = (inside & (rec.excluded == "") & np.isfinite(rec.t_air_c) & np.isfinite(rec.q_hc_w)
-          & np.isfinite(rec.t_out_c))
-    want = int(round((h1 - h0) * 3600 / rec.step_s))
     x, y = [], []
-    for day in np.unique(rec.day[inside]):
-        sel = ok & (rec.day == day)
-        if sel.sum() < want or (inside & (rec.day == day) & ~ok).any():
-            continue
+    for sel in rec.owner_windows(SIGNATURE_HOURS, (rec.t_out_c,)):
         x.append(float(np.mean(rec.t_air_c[sel] - rec.t_out_c[sel])))
         y.append(float(np.mean(rec.q_hc_w[sel])))
     if len(x) < 3:

@@ -131,6 +131,24 @@ class SeasonRecord:
         whole = (seg >= 0).all(axis=1) & (seg == seg[:, :1]).all(axis=1)
         return whole & ~exc.any(axis=1)
 
+    def owner_windows(self, hours: tuple[float, float],
+                      also: tuple[Array, ...] = ()) -> list[NDArray[np.bool_]]:
+        """Per owner night whose window of local ``hours`` [h] is whole — every step there
+        recorded (T_air, the meter and each of ``also`` finite) and none left out — the mask of
+        its steps, in day order."""
+        h0, h1 = hours
+        inside = (self.hour >= h0) & (self.hour < h1) & (self.kind == "owner")
+        ok = inside & (self.excluded == "") & np.isfinite(self.t_air_c) & np.isfinite(self.q_hc_w)
+        for x in also:
+            ok &= np.isfinite(x)
+        want = int(round((h1 - h0) * 3600 / self.step_s))
+        out = []
+        for day in np.unique(self.day[inside]):
+            sel = ok & (self.day == day)
+            if sel.sum() >= want and not (inside & (self.day == day) & ~ok).any():
+                out.append(sel)
+        return out
+
     def exclusion_counts(self) -> dict[str, float]:
         """Hours left out of the likelihood, by reason [h]."""
         out: dict[str, float] = {}
