@@ -226,13 +226,15 @@ class CurveWatch:
                 expected = line_flow_c(self.held, t_out) - line_flow_c(self.owner, t_out)
                 self._verify = None
                 if abs(moved - expected) > FOLLOW_TOL_K:
+                    # The decision is kept first: a restart between the two finds the
+                    # journal and restores, and does not set the curve again.
+                    set_intent(d.cfg.state_dir, False, "the controller did not follow")
                     await self._give_back(
                         f"the controller did not follow the curve points: its flow target "
                         f"moved {moved:+.1f} K where the line moved {expected:+.1f} K at "
                         f"{t_out:.1f} °C outside")
                     self._refuse("the controller does not follow its curve points as "
                                  "documented")
-                    set_intent(d.cfg.state_dir, False, "the controller did not follow")
                     return
                 _LOG.info("heating curve followed: the flow target moved %+.1f K where the "
                           "line moved %+.1f K at %.1f °C outside", moved, expected, t_out)
