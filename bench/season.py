@@ -95,7 +95,7 @@ def _fit(job: tuple[int, int]) -> dict:
     t0 = time.perf_counter()
     nights = household_nights(s, h, upto_sample=end)
     if not _P_HOUSE:   # most gateways do not read the household electricity
-        nights = [replace(n, p_house_w=math.nan) for n in nights]
+        nights = [replace(n, p_house_w=math.nan, p_house_series_w=None) for n in nights]
     if _IMP != "all" and n_owner:  # the campaign shrunk: which IMP nights the model reads
         keep = ("constrained",) if _IMP == "constrained" else ()
         nights = [n for n in nights if n.kind == "owner" or n.kind in keep]
@@ -115,7 +115,7 @@ def _fit(job: tuple[int, int]) -> dict:
     row["fit_s"] = time.perf_counter() - t0
     if fit is None:
         return {**row, "status": note or "no fit"}
-    row.update(status="ok", imp_nights=fit.imp_nights,
+    row.update(status="ok", imp_nights=fit.imp_nights, emitter=fit.emitter,
                signature_hlc_w_per_k=fit.signature_hlc_w_per_k,
                **{f"{k}": fit.values[k] for k in LUMPED},
                **{f"{k}_low": fit.low[k] for k in LUMPED},

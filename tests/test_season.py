@@ -56,6 +56,25 @@ def test_a_short_gap_is_bridged_for_the_heat_store_a_long_one_is_not():
     assert set(stretch[stretch >= 0]) == {0, 1}
 
 
+def test_the_record_keeps_when_in_the_day_the_household_electricity_falls(tmp_path):
+    """The household's electricity row by row reaches the season record — through NIGHTS.csv
+    too — not the night's mean on every row: the day's evening peak is where it was."""
+    night = _owner("2026-12-01", 24.0)
+    hour = (12.0 + night.time_s / 3600.0) % 24.0
+    p = np.where((hour >= 17) & (hour < 22), 900.0, 150.0)
+    night = dataclasses.replace(night, p_house_w=float(p.mean()), p_house_series_w=p)
+    back = read_nights(write_nights([night], tmp_path / "nights.csv"), TZ)
+    for nights in ([night], back):
+        rec = record_from_nights(nights)
+        evening = (rec.hour >= 17.5) & (rec.hour < 21.5) & np.isfinite(rec.p_house_w)
+        assert evening.sum() >= 40
+        np.testing.assert_allclose(rec.p_house_w[evening], 900.0)
+        np.testing.assert_allclose(rec.p_house_w[(rec.hour >= 1) & (rec.hour < 5)], 150.0)
+    # a night whose mean is not measured carries no rows either (the bench strips the mean)
+    rec = record_from_nights([dataclasses.replace(night, p_house_w=float("nan"))])
+    assert np.isnan(rec.p_house_w).all()
+
+
 def test_a_record_whose_clock_stepped_is_not_read():
     rec = record_from_nights([_owner("2026-12-01", 24.0),
                               _owner("2026-12-02", 24.0, label="clock stepped by −3.0 h")])

@@ -38,6 +38,10 @@ class NightSamples:
     p_house_w : float
         Mean household electricity not used by the heat pump over the night [W] (the
         NIGHTS column ``p_house_w``); NaN if not measured.
+    p_house_series_w : ndarray or None
+        The same electricity per sample [W] (NaN where a row has none), where the rows carry
+        it: the season model reads when in the day the gain falls, the IMP fit the night's
+        mean.
     occupants : float
         Mean number of sleepers over the night (the column ``occupants``); NaN if not given.
     night_gain_w : float
@@ -87,6 +91,7 @@ class NightSamples:
     q_hc_w: np.ndarray
     setpoint_c: float = float("nan")
     p_house_w: float = float("nan")
+    p_house_series_w: np.ndarray | None = None
     occupants: float = float("nan")
     night_gain_w: float = float("nan")
     t_air_offset_k: float = float("nan")

@@ -56,19 +56,22 @@ def _present(x: np.ndarray) -> bool:
 
 
 def night_extras(extras: dict[str, np.ndarray], idx: np.ndarray, t_air_c: np.ndarray,
-                 t_out_c: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+                 t_out_c: np.ndarray) -> tuple[np.ndarray, dict]:
     """The rows ``idx`` of one night: (its indoor temperature [°C], the NightSamples fields
-    ``p_house_w``, ``occupants``, ``night_gain_w``, ``t_air_offset_k``, ``t_out_offset_k``).
+    ``p_house_w`` (and its rows, ``p_house_series_w``), ``occupants``, ``night_gain_w``,
+    ``t_air_offset_k``, ``t_out_offset_k``).
 
     The indoor temperature is the room sensors' mean where ``t_rooms_c`` is present on the
     night (its missing rows filled with ``t_air_c`` less the night's mean offset), else the
     controller's ``t_air_c``. A column counts for a night only when at least
     :data:`PRESENT_FRACTION` of its rows carry a value."""
-    fields: dict[str, float] = {}
+    fields: dict = {}
     for col in ("p_house_w", "occupants", "night_gain_w"):
         x = extras.get(col)
         if x is not None and _present(x[idx]):
             fields[col] = float(np.nanmean(x[idx]))
+    if "p_house_w" in fields:
+        fields["p_house_series_w"] = np.asarray(extras["p_house_w"][idx], float)
     rooms = extras.get("t_rooms_c")
     if rooms is not None and _present(rooms[idx]):
         r = rooms[idx]

@@ -364,6 +364,10 @@ def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
                             ("t_flow_target_c", night.t_flow_target_c)):
             if values is not None:
                 frame[col] = values
+        if night.p_house_series_w is not None:
+            frame["p_house_w"] = night.p_house_series_w
+        elif np.isfinite(night.p_house_w):
+            frame["p_house_w"] = night.p_house_w
         if night.kind == "owner":
             frame["label"] = night.label
         if any(n.phase for n in nights):

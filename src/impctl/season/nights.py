@@ -89,7 +89,13 @@ def record_from_nights(nights: Sequence[NightSamples],
             good = ok & np.isfinite(water)
             sums["water"] += np.bincount(k[good], water[good], n_steps)
             sums["n_w"] += np.bincount(k[good], minlength=n_steps)
-        if np.isfinite(n.p_house_w):
+        if np.isfinite(n.p_house_w) and n.p_house_series_w is not None:
+            # the rows' own readings: when in the day the household's heat falls
+            p = np.asarray(n.p_house_series_w, float)
+            good = ok & np.isfinite(p)
+            sums["p_house"] += np.bincount(k[good], p[good], n_steps)
+            sums["n_p"] += np.bincount(k[good], minlength=n_steps)
+        elif np.isfinite(n.p_house_w):
             sums["p_house"] += np.bincount(kk, np.full(len(kk), n.p_house_w), n_steps)
             sums["n_p"] += np.bincount(kk, minlength=n_steps)
         span = np.unique(k)

@@ -66,6 +66,7 @@ def _night(s: Season, h: int, a, b, kind: str, night_id: str, setpoint: float,
         night_id=night_id, kind=kind, start=start, time_s=t,  # type: ignore[arg-type]
         t_air_c=s.t_air_c[rows, h], t_out_c=s.t_out_c[rows, h], q_hc_w=s.q_hc_w[rows, h],
         setpoint_c=setpoint, p_house_w=float(np.mean(s.p_house_w[rows, h])),
+        p_house_series_w=s.p_house_w[rows, h],
         dhw=s.dhw[rows, h].astype(float), defrost_share=s.defrost[rows, h].astype(float),
         label=label,
         t_flow_c=None if s.t_flow_c is None else s.t_flow_c[rows, h],
