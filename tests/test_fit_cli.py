@@ -265,3 +265,28 @@ def test_the_configured_instruments_reach_the_fit_arguments(tmp_path):
     cfg_path.write_text(text.replace("# meter_error = 0.05", "meter_error = 0.5"))
     with pytest.raises(ConfigError, match=r"fit\.meter_error': must lie in \[0, 0\.2\]"):
         load_config(cfg_path)
+
+
+def test_a_declared_emitter_reaches_the_fit_and_the_season_refit(tmp_path):
+    """``[fit] emitter`` of the example config → ``--emitter`` on the daemon's ``impctl fit``
+    and on its morning ``impctl season``; absent, nothing is declared; a kind the season model
+    does not know, one clear line naming the key; the config's kinds are the model's."""
+    from impctl.config import ConfigError, load_config
+    from impctl.config.sections import EMITTER_KINDS
+    from impctl.daemon.fitting import emitter_arguments, fit_arguments
+    from impctl.season.emitter import EMITTER_KINDS as MODEL_KINDS
+
+    assert EMITTER_KINDS == MODEL_KINDS
+    text = (Path(__file__).parents[1] / "deploy" / "config.example.toml").read_text()
+    cfg_path = tmp_path / "impctl.toml"
+    cfg_path.write_text(text)
+    csv, out = tmp_path / "n.csv", tmp_path / "f.json"
+    assert "--emitter" not in fit_arguments(load_config(cfg_path), csv, out, "m")
+    cfg_path.write_text(text.replace('# emitter = "underfloor"', 'emitter = "underfloor"'))
+    cfg = load_config(cfg_path)
+    assert fit_arguments(cfg, csv, out, "m")[-2:] == ["--emitter", "underfloor"]
+    assert emitter_arguments(cfg) == ["--emitter", "underfloor"]
+    cfg_path.write_text(text.replace('# emitter = "underfloor"', 'emitter = "screed"'))
+    with pytest.raises(ConfigError, match=r"fit\.emitter': must be one of 'radiators', "
+                                          r"'underfloor'.*got 'screed'"):
+        load_config(cfg_path)

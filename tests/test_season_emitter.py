@@ -102,3 +102,46 @@ def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_
     calls.clear()
     fit_nights(nights)                     # a full search: radiators first, then the screed
     assert calls == [1.5 * 3600, TAU_E_MAX_UNDERFLOOR_S]
+
+
+def test_a_declared_emitter_is_known_searched_once_and_a_disagreeing_water_is_said(
+        winter_season, monkeypatch):
+    """The installer's word comes before the water: one search under the declared emitter's
+    bound, the JSON says "declared", and where the water reads another emitter both the JSON
+    and the text say so."""
+    import impctl.season.fit as season_fit
+
+    nights = household_nights(winter_season, 0)              # a screed house
+    dry = [dataclasses.replace(n, t_flow_c=None, t_return_c=None) for n in nights]
+    calls = []
+    search = season_fit.search
+
+    def counted(*args, **kw):
+        calls.append(kw["bounds"][2][1])
+        return search(*args, **kw)
+
+    monkeypatch.setattr(season_fit, "search", counted)
+    known, _ = fit_nights(dry, emitter="underfloor")
+    assert calls == [TAU_E_MAX_UNDERFLOOR_S]
+    assert known.emitter == "underfloor" and known.theta[2] > TAU_E_MAX_UNKNOWN_S
+    block = known.as_dict()["emitter"]
+    assert block["source"] == "declared" and "water_reads" not in block
+    assert "declared" in "\n".join(season_fit.format_season(known))
+    calls.clear()
+    wrong, _ = fit_nights(nights, emitter="radiators")
+    assert calls == [1.5 * 3600] and wrong.theta[2] <= 1.5 * 3600 + 1e-6
+    assert wrong.as_dict()["emitter"]["water_reads"] == "underfloor"
+    assert "the heating water reads underfloor" in "\n".join(season_fit.format_season(wrong))
+    with pytest.raises(ValueError, match="emitter 'screed'"):
+        season_fit.fit_season(record_from_nights(nights), emitter="screed")
+
+
+def test_impctl_fits_season_job_passes_the_declared_emitter_to_its_child(winter_season):
+    """``impctl fit --emitter``: the season model runs in a forked child beside the IMP fit;
+    the declaration reaches it."""
+    from impctl.cli.analysis.fit_cmd import _SeasonJob
+
+    nights = household_nights(winter_season, 0)
+    block, _ = _SeasonJob(nights, "radiators").result()
+    assert block["emitter"]["source"] == "declared" and block["emitter"]["kind"] == "radiators"
+    assert block["emitter"]["water_reads"] == "underfloor"

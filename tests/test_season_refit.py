@@ -259,3 +259,19 @@ def test_impctl_fit_computes_the_season_beside_the_imp_fit_and_alone_alike(owner
     killed._proc.kill()
     again, _ = killed.result()
     assert killed._proc.exitcode != 0 and again == beside
+
+
+def test_impctl_season_takes_a_declared_emitter_and_refuses_an_unknown_one(tmp_path,
+                                                                           owner_nights):
+    csv = write_nights(owner_nights, tmp_path / "nights.csv")
+    out = tmp_path / "season.json"
+    res = run_cli("season", "--nights", str(csv), "--json", str(out), "--no-convergence",
+                  "--emitter", "underfloor", model_dir=tmp_path / "no-models")
+    assert res.returncode == 0, res.stderr
+    assert "emitter: underfloor (declared" in res.stdout
+    emitter = json.loads(out.read_text())["season"]["emitter"]
+    assert emitter["source"] == "declared" and emitter["tau_e_max_h"] == 5.0
+    bad = tmp_path / "bad.json"
+    res = run_cli("season", "--nights", str(csv), "--json", str(bad), "--emitter", "screed",
+                  model_dir=tmp_path / "no-models")
+    assert res.returncode == 2 and "--emitter" in res.stderr and not bad.exists()

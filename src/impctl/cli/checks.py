@@ -159,3 +159,16 @@ def instrument_options(command: Callable) -> Callable:
              "class 3; about 0.01 for the electric power of resistive heaters), declared. Not "
              f"given: assumed {ASSUMED_METER_ERROR:g}. It scales HLC and C_m one to one; "
              f"{m_lo:g}–{m_hi:g}.")(command)
+
+
+def emitter_option(command: Callable) -> Callable:
+    """``--emitter`` of ``impctl fit`` and ``impctl season``: the emitter as the installer
+    declares it (known), the season model's bound on its lag."""
+    from ..config.sections import EMITTER_KINDS
+
+    return click.option(
+        "--emitter", type=click.Choice(EMITTER_KINDS), default=None,
+        help="The heating's emitter, declared: radiators (the season model's emitter lag up to "
+             "1.5 h) or underfloor (up to 5 h; a house with both: underfloor). Not given: read "
+             "from the heating water (t_flow_c, t_return_c), else assumed (up to 3 h), said "
+             "so.")(command)

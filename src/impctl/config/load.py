@@ -19,6 +19,7 @@ from ..mqtt.config import mqtt_from_mapping
 from ..mqtt.inputs import inputs_from_mapping, own_topic
 from ..numtext import non_ascii_problem
 from .sections import (
+    EMITTER_KINDS,
     CampaignConfig,
     ClockConfig,
     Config,
@@ -172,6 +173,9 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
             bad(f"fit.{key}", f"must lie in [{low:g}, {high:g}]{unit}, got {value:g}")
     if cfg.fit.night_gain_sd_w is not None and cfg.fit.night_gain_w is None:
         bad("fit.night_gain_sd_w", "is the SD of a declared gain: set fit.night_gain_w too")
+    if cfg.fit.emitter not in ("", *EMITTER_KINDS):
+        bad("fit.emitter", f"must be one of {', '.join(map(repr, EMITTER_KINDS))} (a mixed "
+            f"house: 'underfloor'), got {cfg.fit.emitter!r}")
     if (cfg.inputs is not None and cfg.inputs.house_power_includes_heat_pump
             and cfg.heatpump.generation == "compact"):
         bad("inputs.house_power_includes_heat_pump", "a compact controller does not report "

@@ -72,7 +72,8 @@ def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str)
     """``impctl fit`` arguments of the daemon's fit: what the config tells it about the house
     (``[fit] night_gain_w`` and ``night_gain_sd_w``, a declared night gain [W]; not set: not
     declared, the fit measures, estimates or assumes it and says which; ``t_air_offset_sd_k``,
-    ``t_out_offset_sd_k``, ``meter_error``, the instruments' declared uncertainty)."""
+    ``t_out_offset_sd_k``, ``meter_error``, the instruments' declared uncertainty;
+    ``emitter``, the declared emitter)."""
     args = ["fit", "--nights", str(nights_csv), "--json", str(out_json), "--model-dir",
             model_dir]
     if cfg.fit.night_gain_w is not None:
@@ -83,7 +84,13 @@ def fit_arguments(cfg: Config, nights_csv: Path, out_json: Path, model_dir: str)
     for key in ("t_air_offset_sd_k", "t_out_offset_sd_k", "meter_error"):
         if getattr(cfg.fit, key) is not None:
             args += ["--" + key.replace("_", "-"), repr(getattr(cfg.fit, key))]
-    return args
+    return args + emitter_arguments(cfg)
+
+
+def emitter_arguments(cfg: Config) -> list[str]:
+    """``--emitter KIND`` when ``[fit] emitter`` declares it (``impctl fit`` and
+    ``impctl season`` alike); nothing when not: the season model reads the heating water."""
+    return ["--emitter", cfg.fit.emitter] if cfg.fit.emitter else []
 
 
 async def run_fit(store: Store, cfg: Config) -> dict | None:
@@ -152,7 +159,7 @@ async def refresh_season(store: Store, cfg: Config) -> dict | None:
     base = _base()
     steps = [_export(base, cfg, nights_csv),
              [*base, "season", "--nights", str(nights_csv), "--warm-start", str(last_json),
-              "--json", str(out_json), "--tz", cfg.timezone]]
+              "--json", str(out_json), "--tz", cfg.timezone, *emitter_arguments(cfg)]]
     if not await _steps(store, steps, "season refit"):
         return None
     block = json.loads(out_json.read_text())["season"]

@@ -49,7 +49,9 @@ def convergence(nights, full: SeasonFit | None = None) -> list[dict]:
         try:
             fit = fit_season(record_from_nights(cut),
                              start=full.theta if full is not None and full.theta else None,
-                             max_nfev=CUT_MAX_NFEV)
+                             max_nfev=CUT_MAX_NFEV,
+                             emitter=full.emitter if full is not None and full.emitter_declared
+                             else None)
         except (ValueError, np.linalg.LinAlgError):
             continue
         out.append(_row(n, fit))

@@ -27,6 +27,7 @@ from threadpoolctl import threadpool_limits
 
 from .change import Change, detect_change
 from .emitter import (
+    EMITTER_KINDS,
     REFERENCE_DT_K,
     emitter_kind,
     tau_e_max_s,
@@ -76,9 +77,10 @@ class SeasonFit:
         (:func:`~.convergence.convergence`), empty when not computed
     missing : why a quantity is not given (NaN), when it is for a reason other than the fit's
         own (τ and C_m without the IMP nights: :data:`NEEDS_IMP`)
-    emitter : "radiators" or "underfloor" as read from the heating water
-        (:mod:`.emitter`), None when the record has no water temperatures to read it from
+    emitter : "radiators" or "underfloor": declared (``emitter_declared``) or read from the
+        heating water (:mod:`.emitter`); None when neither tells it
     water_excess_k : the water's excess over the room at the reference load [K] (NaN: unknown)
+    emitter_declared : True when the emitter was declared (known), not read from the water
     """
 
     values: dict[str, float]
@@ -96,6 +98,7 @@ class SeasonFit:
     missing: dict[str, str] = field(default_factory=dict)
     emitter: str | None = None
     water_excess_k: float = float("nan")
+    emitter_declared: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -124,11 +127,18 @@ class SeasonFit:
 
 
     def emitter_dict(self) -> dict:
-        """The emitter the lag's bound was chosen for, and whether measured or assumed."""
+        """The emitter the lag's bound was chosen for, and whether declared, measured or
+        assumed."""
+        if self.emitter_declared:
+            read = emitter_kind(self.water_excess_k)
+            return {"kind": self.emitter, "water_excess_k": _num(round(self.water_excess_k, 1)),
+                    "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
+                    "source": "declared", **({"water_reads": read} if read not in
+                                             (None, self.emitter) else {})}
         if self.emitter is None:
             return {"kind": None, "tau_e_max_h": tau_e_max_s(None) / 3600.0,
-                    "source": "assumed: no heating-water temperatures recorded, the radiators' "
-                              "bound on the emitter's lag"}
+                    "source": "assumed: no heating-water temperatures recorded and none "
+                              "declared, a bound between the radiators' and the screed's"}
         return {"kind": self.emitter, "water_excess_k": round(self.water_excess_k, 1),
                 "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
                 "source": "measured: the heating water's excess over the room"}
@@ -172,12 +182,17 @@ def imp_kinds(rec: SeasonRecord, used: np.ndarray) -> set[str]:
 
 
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
-               start: tuple | None = None, max_nfev: int = 60) -> SeasonFit:
+               start: tuple | None = None, max_nfev: int = 60,
+               emitter: str | None = None) -> SeasonFit:
     """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
     intervals (the bench calibrates on them); ``max_nfev`` caps each search's evaluations of
     the residual; ``start`` warm-starts the search at a known θ
-    (:attr:`SeasonFit.theta` of a fit of the same house). Raises ValueError when fewer than
+    (:attr:`SeasonFit.theta` of a fit of the same house); ``emitter`` ("radiators" or
+    "underfloor"): the emitter as the installer declares it, known — its bound on the lag
+    whatever the water reads (:mod:`.emitter`). Raises ValueError when fewer than
     :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
+    if emitter not in (None, *EMITTER_KINDS):
+        raise ValueError(f"emitter {emitter!r}: give one of {', '.join(EMITTER_KINDS)}")
     from .projection.columns import Design
 
     d = Design.of(rec)
@@ -193,7 +208,9 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
         first = tau_e_max_s("radiators" if water_recorded(rec) else None)
-        if start is not None and water_recorded(rec) and start[2] > first:
+        if emitter is not None:
+            first = tau_e_max_s(emitter)
+        elif start is not None and water_recorded(rec) and start[2] > first:
             # an earlier fit of this house read a screed: one search under its bound
             first = tau_e_max_s("underfloor")
         bounds = bounds_for(first)
@@ -202,7 +219,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
                   else float("nan"))
-        kind = emitter_kind(excess)
+        kind = emitter if emitter is not None else emitter_kind(excess)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
             theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds)
@@ -231,7 +248,8 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
     return SeasonFit({k: float(values[k]) for k in LUMPED}, low, high, owner, imp,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
-                     sig, missing=missing, emitter=kind, water_excess_k=excess)
+                     sig, missing=missing, emitter=kind, water_excess_k=excess,
+                     emitter_declared=emitter is not None)
 
 
 def signature(rec: SeasonRecord) -> float:
@@ -248,10 +266,12 @@ def signature(rec: SeasonRecord) -> float:
     return float(np.linalg.lstsq(A, np.asarray(y), rcond=None)[0][0])
 
 
-def fit_nights(nights, start: tuple | None = None) -> tuple[SeasonFit | None, str | None]:
+def fit_nights(nights, start: tuple | None = None,
+               emitter: str | None = None) -> tuple[SeasonFit | None, str | None]:
     """(the season fit, None) of a household's nights (NightSamples of every kind), or
     (None, why not) — no owner nights, too few usable ones, or no usable record. ``start``:
-    θ of an earlier fit of the same house (:func:`theta_of`), the search's only start."""
+    θ of an earlier fit of the same house (:func:`theta_of`), the search's only start;
+    ``emitter``: the declared emitter (:func:`fit_season`)."""
     from .nights import record_from_nights
 
     owner = [n for n in nights if n.kind == "owner"]
@@ -262,7 +282,7 @@ def fit_nights(nights, start: tuple | None = None) -> tuple[SeasonFit | None, st
     # A change is reported, not acted on: the test's false alarms (about 1 season in 11 on
     # held-out houses) would otherwise throw away weeks of good nights.
     try:
-        fit = fit_season(record_from_nights(nights), start=start)
+        fit = fit_season(record_from_nights(nights), start=start, emitter=emitter)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return None, f"season model not fitted: {exc}"
     fit.change = found
@@ -285,8 +305,14 @@ def format_season(fit: SeasonFit) -> list[str]:
                      f"{fit.high[key] * scale:.2f}")
     if fit.emitter is None:
         lines.append("  emitter: not known (assumed: its lag up to "
-                     f"{tau_e_max_s(None) / 3600:.0f} h, as radiators; no heating-water "
-                     "temperatures recorded)")
+                     f"{tau_e_max_s(None) / 3600:.0f} h; no heating-water temperatures recorded "
+                     "and none declared)")
+    elif fit.emitter_declared:
+        read = emitter_kind(fit.water_excess_k)
+        lines.append(f"  emitter: {fit.emitter} (declared; its lag up to "
+                     f"{tau_e_max_s(fit.emitter) / 3600:.0f} h)"
+                     + (f" — the heating water reads {read}: is the declaration right?"
+                        if read not in (None, fit.emitter) else ""))
     else:
         lines.append(f"  emitter: {fit.emitter} (measured: the water {fit.water_excess_k:.0f} K "
                      f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors; its lag up to "

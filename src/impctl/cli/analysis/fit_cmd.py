@@ -20,7 +20,15 @@ from ...errors import InputError
 from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .. import cli
-from ..checks import MAX_FILE_MB, bounded, file_mb, house_limit, instrument_options, time_zone
+from ..checks import (
+    MAX_FILE_MB,
+    bounded,
+    emitter_option,
+    file_mb,
+    house_limit,
+    instrument_options,
+    time_zone,
+)
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -85,11 +93,13 @@ def _write_json(path: Path, data: dict) -> None:
               callback=bounded(NIGHT_GAIN_LIMITS_W, "W"),
               help="SD of the declared night gain [W] (default 0: known exactly).")
 @instrument_options
+@emitter_option
 def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         plot_path: Path | None, tz: str, timestamps: str, normal_model: str, ach_infl: float,
         ach_vent: float, max_nights: int, night_gain_w: float | None,
         night_gain_sd_w: float | None, t_air_offset_sd_k: float | None,
-        t_out_offset_sd_k: float | None, meter_error: float | None) -> None:
+        t_out_offset_sd_k: float | None, meter_error: float | None,
+        emitter: str | None) -> None:
     """Fit the house's 5R1C parameters to its IMP nights (the paper's step 4).
 
     Prints the lumped HLC, C_m and τ with 95 % intervals, the seven physical parameters with
@@ -125,7 +135,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if refusal is not None:
         raise refusal
     # The season model needs no torch: it runs beside the loading of torch and the IMP fit.
-    season_job = _SeasonJob(nights)
+    season_job = _SeasonJob(nights, emitter)
     # torch (the fit) only now: a bad option or a file with too little in it is refused
     # without the seconds loading it takes
     from ...fit.estimator import NightFit
@@ -172,8 +182,8 @@ class _SeasonJob:
     the parent never imports it unless it has to compute it itself.
     """
 
-    def __init__(self, nights: list) -> None:
-        self._nights = nights
+    def __init__(self, nights: list, emitter: str | None = None) -> None:
+        self._nights, self._emitter = nights, emitter
         self._conn = self._proc = None
         if not any(n.kind == "owner" for n in nights):
             return
@@ -183,7 +193,8 @@ class _SeasonJob:
             return
         parent, child = ctx.Pipe(duplex=False)
         # daemon: the child dies with the command (Ctrl-C, an error in the IMP fit)
-        self._proc = ctx.Process(target=_season_child, args=(nights, child), daemon=True)
+        self._proc = ctx.Process(target=_season_child, args=(nights, emitter, child),
+                                 daemon=True)
         self._proc.start()
         child.close()
         self._conn = parent
@@ -201,20 +212,20 @@ class _SeasonJob:
                     pass
                 self._proc.join()
             if out is None:
-                out = _season(self._nights)
+                out = _season(self._nights, self._emitter)
         block, note, lines = out
         if lines:
             click.echo("\n".join(lines))
         return block, note
 
 
-def _season(nights: list) -> tuple[dict | None, str | None, list[str]]:
+def _season(nights: list, emitter: str | None) -> tuple[dict | None, str | None, list[str]]:
     """(the season fit's JSON block with its convergence, or None; a note or None; the text
-    lines printed for it)."""
+    lines printed for it); ``emitter``: declared (``--emitter``), or None."""
     from ...season.convergence import convergence, format_convergence
     from ...season.fit import fit_nights, format_season
 
-    season, note = fit_nights(nights)
+    season, note = fit_nights(nights, emitter=emitter)
     if season is None:
         return None, note, []
     curve = convergence(nights, season)
@@ -222,9 +233,9 @@ def _season(nights: list) -> tuple[dict | None, str | None, list[str]]:
     return season.as_dict(), note, format_season(season) + format_convergence(curve)
 
 
-def _season_child(nights: list, conn) -> None:
+def _season_child(nights: list, emitter: str | None, conn) -> None:
     try:
-        conn.send(_season(nights))
+        conn.send(_season(nights, emitter))
     except Exception:  # noqa: BLE001 - the parent computes it again and sees the error itself
         conn.send(None)
     finally:

@@ -16,7 +16,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
-from ..checks import time_zone
+from ..checks import emitter_option, time_zone
 from .fit_cmd import _write_json
 
 
@@ -37,8 +37,9 @@ from .fit_cmd import _write_json
               help="Refit at 7, 14, 28 and 56 owner nights: the estimate against the nights.")
 @click.option("--tz", default="Europe/Ljubljana", show_default=True, callback=time_zone,
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
+@emitter_option
 def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
-           convergence: bool, tz: str) -> None:
+           convergence: bool, tz: str, emitter: str | None) -> None:
     """Fit the season model to a house's recorded nights: HLC [W/K], τ [h] and C_m with 95 %
     intervals, the energy signature of the same owner nights beside them.
     """
@@ -56,7 +57,7 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
         raise InputError("no owner nights (kind=owner): the season model reads the owner's "
                          "own nights", nights_path)
     began = time.perf_counter()
-    fit, note = fit_nights(nights, start=start)
+    fit, note = fit_nights(nights, start=start, emitter=emitter)
     if fit is None:
         raise InputError(note or "the season model was not fitted", nights_path)
     fit_s = time.perf_counter() - began
