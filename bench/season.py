@@ -28,8 +28,10 @@ there, marked as other households. A saved JSON the figure cannot use is refused
 naming the file and the key, exit status 2, nothing written.
 
 ``--calibrate`` fits households of another seed with the raw intervals and prints, per
-quantity, the sandwich scale and model-error floor that give 95 % coverage with the narrowest
-median interval (the constants of ``impctl.season.fit``).
+quantity, the sandwich scale and model-error floor (benchlib/season_calibration.py: at least
+92 % coverage at every owner-night count, the narrowest median interval);
+``--calibrate-from A.json,B.json`` pools saved ``--calibrate --json`` runs (the constants of
+``impctl.season.fit``).
 """
 
 from __future__ import annotations
@@ -189,45 +191,6 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
     return out
 
 
-#: Of the (scale, floor) pairs whose median half-width is within this share of the narrowest,
-#: the calibration takes the largest scale [-]: the sandwich part grows on a house the model
-#: fits worse than the simulated ones, a floor does not (on the twin houses the narrowest
-#: pair's HLC interval missed both references, the largest near-narrowest pair's held them).
-NEAR_NARROWEST = 0.10
-
-
-def calibrate(rows: list[dict], truth: dict[str, np.ndarray]) -> dict[str, tuple]:
-    """Per quantity (scale, floor): the raw standard error times the scale, combined with the
-    floor, covers 95 % of the households; of the pairs whose median half-width is within
-    :data:`NEAR_NARROWEST` of the narrowest, the one with the largest scale."""
-    from impctl.season.fit import Z95
-
-    out = {}
-    for k, name in QUANTITIES.items():
-        ok = [r for r in rows if r["status"] == "ok" and r.get(k) is not None
-              and math.isfinite(r[k]) and math.isfinite(r["se"][k])]
-        err = np.abs(np.log([r[k] / truth[k][r["household"]] for r in ok]))
-        se = np.array([r["se"][k] for r in ok])
-        pairs, table = [], []
-        for scale in (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0):
-            lo, hi = 0.0, 2.0
-            for _ in range(50):           # the smallest floor with 95 % coverage
-                mid = (lo + hi) / 2
-                cover = np.mean(err <= Z95 * np.hypot(scale * se, mid))
-                lo, hi = (lo, mid) if cover >= 0.95 else (mid, hi)
-            half = float(np.median(Z95 * np.hypot(scale * se, hi)))
-            table.append(f"{scale:.2f}/{hi:.3f}: ±{100 * half:.1f} %")
-            pairs.append((scale, hi, half))
-        narrowest = min(p[2] for p in pairs)
-        best = max((p for p in pairs if p[2] <= (1 + NEAR_NARROWEST) * narrowest),
-                   key=lambda p: p[0])
-        out[name] = best
-        print(f"{name:>4}: scale/floor → median half-width: " + ", ".join(table))
-        print(f"{name:>4}: scale {best[0]:.2f}, floor {best[1]:.3f} (log units), median "
-              f"half-width {100 * best[2]:.1f} % over {len(ok)} fits")
-    return out
-
-
 def _fmt(ci: tuple) -> str:
     return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
 
@@ -274,8 +237,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--from-json", default=None, metavar="SAVED",
                     help="draw --figure from a saved --json run, without fitting")
     ap.add_argument("--calibrate", action="store_true",
-                    help="raw intervals: print the scale and floor for 95 %% coverage")
+                    help="raw intervals: print the scale and floor of the intervals")
+    ap.add_argument("--calibrate-from", default=None, metavar="RUNS",
+                    help="the scale and floor from saved --calibrate --json runs "
+                         "(comma-separated), pooled; no fits")
     args = ap.parse_args(argv)
+    if args.calibrate_from is not None:
+        from benchlib.season_calibration import from_saved
+
+        from_saved(args.calibrate_from.split(","))
+        return
     if args.from_json is not None and args.figure is None:
         ap.error("--from-json draws a figure: give --figure FILE.png")
     if args.calibrate and (args.figure is not None or 0 in args.owner_nights):
@@ -338,8 +309,10 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     command = f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}"
     saved_args = {**vars(args), "owner_nights": ",".join(str(k) for k in ns)}
     if args.calibrate:
+        from benchlib.season_calibration import arrays, calibrate
+
         print(command)
-        calibrate(rows, truth)
+        calibrate(arrays(rows, truth, args.variant))
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump({"rows": rows, "args": saved_args}, fh, indent=1)
