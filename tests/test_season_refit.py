@@ -249,7 +249,7 @@ def test_impctl_fit_computes_the_season_beside_the_imp_fit_and_alone_alike(owner
     computed again in the parent."""
     from impctl.cli.analysis.fit_cmd import _season, _SeasonJob
 
-    alone, _, lines = _season(owner_nights)
+    alone, _, lines = _season(owner_nights, None)
     assert "convergence" in alone and lines
     job = _SeasonJob(owner_nights)
     beside, note = job.result()
