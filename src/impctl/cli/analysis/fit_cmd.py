@@ -114,6 +114,12 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
                          ach_vent=ach_vent, max_nights=max_nights, night_gain_w=night_gain_w,
                          night_gain_sd_w=night_gain_sd_w, t_air_offset_sd_k=t_air_offset_sd_k,
                          t_out_offset_sd_k=t_out_offset_sd_k, meter_error=meter_error)
+    # Loaded once, before the worker forks: pandas and the nights' types (this process reads
+    # with them, the worker fits them) and scipy.special (the fit's, and the season model's)
+    import scipy.special  # noqa: F401
+
+    from ...imp import nights_csv  # noqa: F401
+
     # torch (the fit) loads in a worker while this process reads the file: a bad file is
     # refused here without waiting for it, and this process never loads it (.fit_worker)
     with FitWorker() as worker:
