@@ -12,6 +12,7 @@ import contextlib
 import json
 import multiprocessing
 import os
+import signal
 import tempfile
 import threading
 import time
@@ -221,6 +222,8 @@ def _season(nights: list) -> tuple[dict | None, str | None, list[str]]:
 
 
 def _season_child(nights: list, conn) -> None:
+    # Ctrl-C reaches the whole process group: the command ends the child (a daemon) itself
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         conn.send(_season(nights))
     except Exception:  # noqa: BLE001 - the parent computes it again and sees the error itself

@@ -14,6 +14,7 @@ the worker died.
 from __future__ import annotations
 
 import multiprocessing
+import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -125,12 +126,14 @@ def _work(conn) -> None:
     """The worker: load torch and the fit, wait for a request, reply with the outcome, a
     refusal, or None when anything else went wrong (the command then fits again itself and
     shows the error)."""
+    # Ctrl-C reaches the whole process group: the command stops the worker itself
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         from ...fit import estimator, household, prior  # noqa: F401 - loaded while the file is read
         from ...fit.result import plot, report  # noqa: F401
 
         request = conn.recv()
-    except (EOFError, OSError, KeyboardInterrupt):  # the command is done without a fit
+    except (EOFError, OSError):  # the command is done without a fit
         return
     except Exception:  # noqa: BLE001 - the command loads it again and sees the error itself
         request = None
