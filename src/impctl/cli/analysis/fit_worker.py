@@ -147,6 +147,8 @@ def _work(conn) -> None:
         conn.send(reply)
     except (OSError, ValueError):  # the command stopped waiting
         pass
+    except Exception:  # noqa: BLE001 - a reply that does not pickle: the command fits itself
+        conn.send(None)
     finally:
         conn.close()
 
