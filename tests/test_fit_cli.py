@@ -143,6 +143,70 @@ def test_the_cli_module_imports_without_torch():
     assert res.returncode == 0, res.stderr
 
 
+def _without_time(data: dict) -> dict:
+    data["fit"].pop("time_s")  # the one figure that differs between two runs
+    return data
+
+
+def test_the_fit_runs_in_a_worker_and_gives_what_it_gives_in_the_command(tmp_path, nights):
+    """torch loads in a worker forked before the file is read (the command's own process never
+    loads it); the worker's fit is the one this process computes itself (torch loaded here)."""
+    import os
+
+    csv = write_nights(tmp_path / "nights.csv", nights)
+    out, png = tmp_path / "worker.json", tmp_path / "worker.png"
+    env = {**os.environ, "IMPCTL_MODEL_DIR": str(tmp_path / "no-models")}
+    res = subprocess.run([sys.executable, "-c", _TORCH, "fit", "--nights", str(csv), "--json",
+                          str(out), "--plot", str(png)], capture_output=True, text=True,
+                         timeout=300, env=env)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.strip().splitlines()[-1] == "torch loaded: False", res.stderr
+    assert png.stat().st_size > 10_000
+    here = tmp_path / "here.json"
+    assert run_cli("fit", "--nights", str(csv), "--json", str(here),
+                   env_model_dir=tmp_path / "no-models").returncode == 0
+    assert _without_time(json.loads(out.read_text())) == _without_time(
+        json.loads(here.read_text()))
+
+
+#: In a fresh process (torch not loaded): a request the fit refuses comes back as the refusal
+#: from a worker that replied; a worker killed before it replied is fitted again here.
+_WORKER = """
+import json, sys
+from impctl.cli.analysis.fit_worker import FitRequest, FitWorker, fit_request
+from impctl.errors import InputError
+from impctl.fit.household import FitOptions, choose_nights, prior_classes, read_household
+classes = prior_classes("test")
+def request(nights):
+    return FitRequest(nights, classes.ranges, {}, classes.classes, [],
+                      FitOptions().estimator_params(), "x.csv")
+with FitWorker() as worker:
+    proc = worker._proc
+    try:
+        worker.fit(request([]))
+    except InputError as exc:
+        print("refused:", exc, "exit", proc.exitcode, "torch", "torch" in sys.modules)
+nights = choose_nights(read_household(sys.argv[1], "Europe/Ljubljana")).nights
+with FitWorker() as worker:
+    worker._proc.kill()
+    again = worker.fit(request(nights)).summary
+again["fit"].pop("time_s")
+alone = fit_request(request(nights)).summary
+alone["fit"].pop("time_s")
+print("killed: fitted here", json.dumps(again) == json.dumps(alone))
+"""
+
+
+def test_the_fit_worker_sends_back_a_refusal_and_a_dead_one_is_fitted_again(tmp_path, nights):
+    csv = write_nights(tmp_path / "nights.csv", nights)
+    res = subprocess.run([sys.executable, "-c", _WORKER, str(csv)], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == [
+        "refused: no usable night to fit (no nights given) exit 0 torch False",
+        "killed: fitted here True"], res.stdout
+
+
 def test_the_configured_night_gain_reaches_the_fit_and_is_stated(tmp_path, nights):
     """``[fit] night_gain_w`` of a real config file → the daemon's ``impctl fit`` arguments →
     the fit: declared, known (± 0 W), and its JSON and table say so; the key absent (the

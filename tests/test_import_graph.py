@@ -191,3 +191,41 @@ def test_no_import_circles_between_modules():
 
     for node in sorted(graph):
         visit(node, [])
+
+
+def _commands_in(path: Path) -> set[str]:
+    """The names of the commands and groups ``path`` adds to the ``impctl`` group (read from
+    its ``@cli.command(…)`` / ``@cli.group(…)`` decorators)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.FunctionDef):
+            continue
+        for dec in node.decorator_list:
+            if (isinstance(dec, ast.Call) and isinstance(dec.func, ast.Attribute)
+                    and isinstance(dec.func.value, ast.Name) and dec.func.value.id == "cli"
+                    and dec.func.attr in ("command", "group")):
+                names.add(dec.args[0].value if dec.args else node.name.replace("_", "-"))
+    return names
+
+
+def test_each_command_is_looked_up_in_the_module_that_adds_it():
+    """``impctl NAME`` imports the one module :data:`impctl.cli.COMMAND_MODULES` names: every
+    command of the source must be there, in the module whose decorator adds it."""
+    from impctl.cli import COMMAND_MODULES
+
+    found = {}
+    for path in (SRC / "cli").rglob("*.py"):
+        module = ".".join(path.relative_to(SRC / "cli").with_suffix("").parts)
+        found.update(dict.fromkeys(_commands_in(path), module))
+    assert found == COMMAND_MODULES
+
+
+def test_a_command_starts_without_the_other_commands_imports():
+    """``impctl fit`` does not load the device side (asyncio, the daemon's commands)."""
+    code = ("import sys\nfrom impctl.cli import main\ntry:\n    main(['fit', '--help'])\n"
+            "except SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m == 'asyncio' or m.startswith("
+            "'impctl.cli.device')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=60).stdout
+    assert out.strip().splitlines()[-1] == "[]"

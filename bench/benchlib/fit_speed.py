@@ -103,7 +103,8 @@ def season_speed(args) -> None:
     against the owner nights (the refits at 7/14/28/56 nights), the morning refit with one more
     owner night warm-started at the fit's θ and its own curve. Then, on the first household's
     nights as NIGHTS.csv, ``impctl fit`` (the IMP fit and the season model) and the morning
-    refit ``impctl season --warm-start`` as commands: wall seconds, min / median."""
+    refit ``impctl season --warm-start`` as commands: wall seconds, min / median, and the CPU
+    seconds of the command and the processes it forks (median)."""
     import json
     import os
     import subprocess
@@ -174,20 +175,26 @@ def season_speed(args) -> None:
             ("impctl season --warm-start (the morning refit, curve included)",
              [impctl, "season", "--nights", str(csv_more), "--warm-start",
               str(tmp / "fit.json"), "--json", str(tmp / "season.json")])]
-    print(f"\n| command, household 0 | wall s min / median of {args.repeat} | search s (JSON) |")
-    print("|---|---|---|")
+    print(f"\n| command, household 0 | wall s min / median of {args.repeat} "
+          "| CPU s (user+sys, its processes) median | search s (JSON) |")
+    print("|---|---|---|---|")
     for label, cmd in cmds:
-        walls = []
+        walls, cpus = [], []
         for _ in range(args.repeat):
+            before = os.times()
             t0 = time.perf_counter()
             done = subprocess.run(cmd, env=env, capture_output=True, text=True)
             walls.append(time.perf_counter() - t0)
+            after = os.times()
+            cpus.append(after.children_user - before.children_user
+                        + after.children_system - before.children_system)
             if done.returncode != 0:
-                print(f"| {label} | failed: {done.stderr.strip().splitlines()[-1]} | |")
+                print(f"| {label} | failed: {done.stderr.strip().splitlines()[-1]} | | |")
                 return
         search = ""
         if "season" in cmd[1]:
             block = json.loads((tmp / "season.json").read_text())["season"]["search"]
             search = f"{block['time_s']:.2f} + curve {block['convergence_time_s']:.2f}"
-        print(f"| {label} | {min(walls):.2f} / {np.median(walls):.2f} | {search} |", flush=True)
+        print(f"| {label} | {min(walls):.2f} / {np.median(walls):.2f} | {np.median(cpus):.2f} "
+              f"| {search} |", flush=True)
     print(f"load average: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

@@ -20,14 +20,41 @@ def cli() -> None:
     """Identify a house's 5R1C thermal parameters from night-time heat-pump experiments."""
 
 
-def _register() -> None:
-    # Each subcommand module adds itself to the group; keep imports light (no torch here).
-    from .analysis import demo_cmd, fit_cmd, identify_cmds, simulate_cmd  # noqa: F401
-    from .device import check_config, commands, restore_cmd  # noqa: F401
-    __import__(f"{__name__}.analysis.fleet_cmd")  # impctl fleet fit, impctl flex
-    __import__(f"{__name__}.analysis.campaign_cmd")  # impctl campaign next
-    __import__(f"{__name__}.analysis.curve_cmd")  # impctl curve
-    __import__(f"{__name__}.analysis.season_cmd")  # impctl season
+#: The module of each subcommand: ``impctl NAME …`` imports that one alone, so a command does
+#: not start by loading every other command's imports (asyncio, the device side …).
+COMMAND_MODULES = {
+    "check-config": "device.check_config", "daemon": "device.commands",
+    "export": "device.commands", "nights": "device.commands", "restore": "device.restore_cmd",
+    "status": "device.commands", "trigger": "device.commands",
+    "campaign": "analysis.campaign_cmd", "classify": "analysis.identify_cmds",
+    "curve": "analysis.curve_cmd", "demo": "analysis.demo_cmd", "fit": "analysis.fit_cmd",
+    "fleet": "analysis.fleet_cmd", "flex": "analysis.fleet_cmd", "report": "analysis.demo_cmd",
+    "season": "analysis.season_cmd", "simulate": "analysis.simulate_cmd",
+    "train": "analysis.identify_cmds",
+}
+
+
+def _register(command: str | None = None) -> None:
+    """Add the subcommands to the group: ``command``'s alone when it is one of
+    :data:`COMMAND_MODULES`, else every one (help, a typo). Each subcommand module adds itself
+    when imported; keep imports light (no torch here)."""
+    module = COMMAND_MODULES.get(command or "")
+    if module is not None:
+        import importlib
+
+        importlib.import_module(f"{__name__}.{module}")
+    else:
+        from .analysis import (  # noqa: F401
+            campaign_cmd,
+            curve_cmd,
+            demo_cmd,
+            fit_cmd,
+            fleet_cmd,
+            identify_cmds,
+            season_cmd,
+            simulate_cmd,
+        )
+        from .device import check_config, commands, restore_cmd  # noqa: F401
     from .checks import ascii_numbers
 
     ascii_numbers(cli)  # '２２' is not 22 (click's number types call float() and int())
@@ -58,5 +85,6 @@ def run_group(group: click.Group, argv: list[str] | None, prog: str,
 
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: run the CLI, turning bad input into one line and exit status 2."""
-    _register()
+    args = sys.argv[1:] if argv is None else argv
+    _register(args[0] if args else None)
     run_group(cli, argv, "impctl")

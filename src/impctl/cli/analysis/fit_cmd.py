@@ -1,6 +1,9 @@
 """``impctl fit``: the night-time Neural-ODE fit of a house's 5R1C parameters.
 
-torch is imported inside the command only, so the CLI (and the daemon) start without it.
+The command's own process reads the file, runs the season model (in a forked child) and writes
+the results; the IMP fit, with torch, runs in a worker forked before the file is read
+(:mod:`.fit_worker`). So the CLI (and the daemon) start without torch, and a refused file is
+refused without loading it.
 """
 
 from __future__ import annotations
@@ -9,6 +12,7 @@ import contextlib
 import json
 import multiprocessing
 import os
+import signal
 import tempfile
 import threading
 import time
@@ -29,6 +33,7 @@ from ..checks import (
     instrument_options,
     time_zone,
 )
+from .fit_worker import FitRequest, FitWorker, draw_outcome
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -111,13 +116,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     if night_gain_sd_w is not None and night_gain_w is None:
         raise InputError("--night-gain-sd-w is the SD of a declared gain: give --night-gain-w "
                          "too")
-    from ...fit.household import (
-        FitOptions,
-        choose_nights,
-        fit_refusal,
-        household_classes,
-        read_household,
-    )
+    from ...fit.household import FitOptions, choose_nights, household_classes, read_household
     from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")
@@ -126,38 +125,38 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
                          ach_vent=ach_vent, max_nights=max_nights, night_gain_w=night_gain_w,
                          night_gain_sd_w=night_gain_sd_w, t_air_offset_sd_k=t_air_offset_sd_k,
                          t_out_offset_sd_k=t_out_offset_sd_k, meter_error=meter_error)
-    # the same path as every household of impctl fleet fit (impctl.fit.household)
-    if 1.0 <= file_mb(nights_path) <= MAX_FILE_MB:  # ~25,000 rows: reading takes seconds
-        click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)
-    nights = read_household(nights_path, tz)
-    chosen = choose_nights(nights, options.max_nights)
-    refusal = chosen.too_little(nights_path)
-    if refusal is not None:
-        raise refusal
-    # The season model needs no torch: it runs beside the loading of torch and the IMP fit.
-    season_job = _SeasonJob(nights, emitter)
-    # torch (the fit) only now: a bad option or a file with too little in it is refused
-    # without the seconds loading it takes
-    from ...fit.estimator import NightFit
-    from ...fit.prior import with_class_probabilities
-    from ...fit.result.plot import plot_fit
-    from ...fit.result.report import fit_to_dict
+    # Loaded once, before the worker forks: pandas and the nights' types (this process reads
+    # with them, the worker fits them) and scipy.special (the fit's, and the season model's)
+    import scipy.special  # noqa: F401
+
+    from ...imp import nights_csv  # noqa: F401
+
+    # torch (the fit) loads in a worker while this process reads the file: a bad file is
+    # refused here without waiting for it, and this process never loads it (.fit_worker)
+    with FitWorker() as worker:
+        # the same path as every household of impctl fleet fit (impctl.fit.household)
+        if 1.0 <= file_mb(nights_path) <= MAX_FILE_MB:  # ~25,000 rows: reading takes seconds
+            click.echo(f"reading {nights_path} ({file_mb(nights_path):.0f} MB) …", err=True)
+        nights = read_household(nights_path, tz)
+        chosen = choose_nights(nights, options.max_nights)
+        refusal = chosen.too_little(nights_path)
+        if refusal is not None:
+            raise refusal
+        # The season model needs no torch: it runs beside the IMP fit.
+        season_job = _SeasonJob(nights, emitter)
+        classes = household_classes(chosen.cut, model_dir)
+        notes = [*classes.notes, *([chosen.note] if chosen.note else [])]
+        click.echo(f"fitting {len(chosen.chosen)} nights "
+                   f"({sum(n.kind == 'constrained' for n in chosen.chosen)} constrained) …",
+                   err=True)
+        request = FitRequest(chosen.nights, classes.ranges, classes.probabilities,
+                             classes.classes, notes, options.estimator_params(),
+                             str(nights_path), plot=plot_path is not None)
+        with _ticking("fitting"):
+            outcome = worker.fit(request)
     from ...fit.result.table import format_table
 
-    classes = household_classes(chosen.cut, model_dir)
-    notes = [*classes.notes, *([chosen.note] if chosen.note else [])]
-    click.echo(f"fitting {len(chosen.chosen)} nights "
-               f"({sum(n.kind == 'constrained' for n in chosen.chosen)} constrained) …", err=True)
-    estimator = NightFit(**options.estimator_params())
-    # the population prior mixes the classes by the classifiers' probabilities
-    estimator.prior = with_class_probabilities(estimator.prior, classes.probabilities)
-    with _ticking("fitting"):
-        estimator.fit(chosen.nights, classes.ranges)
-    # A fit no house gives is a unit or column problem: refuse it, write nothing.
-    refusal = fit_refusal(estimator, nights_path)
-    if refusal is not None:
-        raise refusal
-    summary = fit_to_dict(estimator, classes.classes, notes)
+    summary = outcome.summary
     click.echo(format_table(summary))
     season, season_note = season_job.result()
     if season is not None:
@@ -168,7 +167,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         _write_json(json_path, summary)
         click.echo(f"JSON written to {json_path}")
     if plot_path is not None:
-        plot_fit(estimator, plot_path)
+        draw_outcome(outcome, plot_path)
         click.echo(f"plot written to {plot_path}")
 
 
@@ -234,6 +233,8 @@ def _season(nights: list, emitter: str | None) -> tuple[dict | None, str | None,
 
 
 def _season_child(nights: list, emitter: str | None, conn) -> None:
+    # Ctrl-C reaches the whole process group: the command ends the child (a daemon) itself
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         conn.send(_season(nights, emitter))
     except Exception:  # noqa: BLE001 - the parent computes it again and sees the error itself

@@ -105,11 +105,23 @@ def _padded(values: np.ndarray) -> tuple[float, float]:
 
 def plot_fit(fit, path: str | Path) -> None:
     """Measured vs fitted T_air (the paper's Fig. 5) and heat power per night, as a grid."""
-    import matplotlib.pyplot as plt
+    save_figure(*figure_of(fit), path)
 
+
+def figure_of(fit) -> tuple[list[dict], str]:
+    """What :func:`plot_fit` draws of a fitted NightFit: its curves per night (numpy arrays,
+    as fitted: not the JSON's rounded lists) and the figure's title — plain data, which a
+    process without torch can draw (:func:`save_figure`)."""
     hlc = fit.lumped_["hlc"]
     title = (f"5R1C night fit: HLC {hlc.value:.0f} W/K [{hlc.low:.0f}–{hlc.high:.0f}], "
              f"τ {fit.lumped_['tau'].value:.1f} h")
-    fig = draw_nights(list(fit.predictions_), title)
+    return list(fit.predictions_), title
+
+
+def save_figure(preds: list[dict], title: str, path: str | Path) -> None:
+    """:func:`draw_nights` of ``preds`` under ``title``, written to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = draw_nights(preds, title)
     fig.savefig(path)
     plt.close(fig)
