@@ -164,7 +164,7 @@ def instrument_options(command: Callable) -> Callable:
 def emitter_option(command: Callable) -> Callable:
     """``--emitter`` of ``impctl fit`` and ``impctl season``: the emitter as the installer
     declares it (known), the season model's bound on its lag."""
-    from ..config.sections import EMITTER_KINDS
+    from ..imp.protocol import EMITTER_KINDS
 
     return click.option(
         "--emitter", type=click.Choice(EMITTER_KINDS), default=None,

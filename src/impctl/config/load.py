@@ -15,11 +15,11 @@ from ..errors import InputError
 from ..fit.instruments import METER_ERROR_LIMITS, SENSOR_OFFSET_LIMITS_K
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
+from ..imp.protocol import EMITTER_KINDS
 from ..mqtt.config import mqtt_from_mapping
 from ..mqtt.inputs import inputs_from_mapping, own_topic
 from ..numtext import non_ascii_problem
 from .sections import (
-    EMITTER_KINDS,
     CampaignConfig,
     ClockConfig,
     Config,

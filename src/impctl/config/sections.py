@@ -105,14 +105,11 @@ class FitConfig:
     t_air_offset_sd_k: float | None = None
     t_out_offset_sd_k: float | None = None
     meter_error: float | None = None
-    # the emitter, declared: one of EMITTER_KINDS (known; a mixed house declares the slower,
-    # underfloor). "" (the key absent): read from the heating water, else assumed, said so
+    # the emitter, declared: one of impctl.imp.protocol.EMITTER_KINDS (known; a mixed house
+    # declares the slower, underfloor). "" (the key absent): read from the heating water, else
+    # assumed, said so
     emitter: str = ""
 
-
-#: The emitters ``[fit] emitter`` may declare (the season model's, :mod:`impctl.season.emitter`;
-#: kept here so that the daemon's config imports no numpy).
-EMITTER_KINDS = ("radiators", "underfloor")
 
 
 @dataclass(frozen=True)

@@ -65,3 +65,9 @@ def anticipates_t_min(t_air_c, slope_k_per_s, t_min_c, within_k=ANTICIPATE_WITHI
     """
     return ((t_air_c <= t_min_c + within_k) & (slope_k_per_s < 0)
             & (t_air_c + slope_k_per_s * ahead_s <= t_min_c))
+
+
+#: The emitters an installer may declare (``[fit] emitter``, ``--emitter``): the season model's
+#: bound on the emitter's lag follows it (:mod:`impctl.season.emitter`). A mixed house (a
+#: screed downstairs, radiators upstairs) declares the slower, underfloor: its bound holds both.
+EMITTER_KINDS = ("radiators", "underfloor")

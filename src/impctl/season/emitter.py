@@ -25,11 +25,9 @@ import math
 
 import numpy as np
 
+from ..imp.protocol import EMITTER_KINDS  # noqa: F401  (the kinds a house may declare)
 from .record import SeasonRecord
 
-#: The emitters an installer may declare (``[fit] emitter``): a mixed house (a screed downstairs,
-#: radiators upstairs) declares the slower, underfloor — its bound holds both lags.
-EMITTER_KINDS = ("radiators", "underfloor")
 #: Load the excess is scaled to: the heat lost at this indoor–outdoor difference [K].
 REFERENCE_DT_K = 20.0
 #: Emitter exponent the scaling assumes [-] (radiators 1.3, underfloor 1.1: the middle).
