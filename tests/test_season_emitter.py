@@ -81,13 +81,12 @@ def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_sea
     assert dry.as_dict()["emitter"]["source"].startswith("assumed")
 
 
-def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_season,
-                                                                         monkeypatch):
+@pytest.fixture
+def searches(monkeypatch) -> list[float]:
+    """The upper bound on the emitter's lag [s] of each search the season fit runs, in turn."""
     import impctl.season.fit as season_fit
 
-    nights = household_nights(winter_season, 0)
-    full, _ = fit_nights(nights)
-    calls = []
+    calls: list[float] = []
     search = season_fit.search
 
     def counted(*args, **kw):
@@ -95,6 +94,15 @@ def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_
         return search(*args, **kw)
 
     monkeypatch.setattr(season_fit, "search", counted)
+    return calls
+
+
+def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_season,
+                                                                         searches):
+    nights = household_nights(winter_season, 0)
+    full, _ = fit_nights(nights)
+    calls = searches
+    calls.clear()
     assert full.theta[2] > 1.5 * 3600      # the screed's lag, past the radiators' bound
     refit, _ = fit_nights(nights, start=full.theta)
     assert calls == [TAU_E_MAX_UNDERFLOOR_S] and refit.emitter == "underfloor"
@@ -105,7 +113,7 @@ def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_
 
 
 def test_a_declared_emitter_is_known_searched_once_and_a_disagreeing_water_is_said(
-        winter_season, monkeypatch):
+        winter_season, searches):
     """The installer's word comes before the water: one search under the declared emitter's
     bound, the JSON says "declared", and where the water reads another emitter both the JSON
     and the text say so."""
@@ -113,14 +121,7 @@ def test_a_declared_emitter_is_known_searched_once_and_a_disagreeing_water_is_sa
 
     nights = household_nights(winter_season, 0)              # a screed house
     dry = [dataclasses.replace(n, t_flow_c=None, t_return_c=None) for n in nights]
-    calls = []
-    search = season_fit.search
-
-    def counted(*args, **kw):
-        calls.append(kw["bounds"][2][1])
-        return search(*args, **kw)
-
-    monkeypatch.setattr(season_fit, "search", counted)
+    calls = searches
     known, _ = fit_nights(dry, emitter="underfloor")
     assert calls == [TAU_E_MAX_UNDERFLOOR_S]
     assert known.emitter == "underfloor" and known.theta[2] > TAU_E_MAX_UNKNOWN_S
