@@ -245,7 +245,8 @@ def test_a_malformed_scheduler_is_one_line(work, address):
     assert not (work / "F3").exists()
 
 
-CTRL_C_HOUSES = 8
+#: Households of the interrupted run: each costs a fit (~2 CPU-s) in the run or its resume.
+CTRL_C_HOUSES = 4
 
 
 def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models):
@@ -253,8 +254,9 @@ def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models
 
     src = tmp_path / "in"
     src.mkdir()
-    # eight households, one at a time: the Ctrl-C after the first lands with work left
-    # however late the loaded machine delivers it
+    # four households, one at a time: the Ctrl-C, sent within 50 ms of the first part, lands
+    # with work left however late the loaded machine delivers it (it would have to wait for
+    # three more fits of ~2 CPU-s each to find none)
     for i in range(CTRL_C_HOUSES):
         write_nights(nights[i % 2], src / f"h{i}.csv")
     out = tmp_path / "FLEET.parquet"

@@ -51,8 +51,9 @@ def _in_order(rows) -> bool:
 
 
 def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
-    """Three days and a half (03:00 on day 0 to 15:00 on day 3): 120-s snapshots, 5-min rows,
-    records kept for 1 day."""
+    """Two days and a half (03:00 on day 0 to 15:00 on day 2): 120-s snapshots, 5-min rows,
+    records kept for 1 day. Enough for every promise: the partial first record deleted, a
+    whole day's record closed, the next one open."""
     async def scenario():
         async with daemon_rig(tmp_path, speed=SPEED, night={"sample_interval_s": 120},
                               record={"keep_days": 1}) as rig:
@@ -60,8 +61,8 @@ def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
             await rig.sim_minutes(15)
             budget_before = _stat(cfg.budget_path)
             start = rig.clock.now()
-            end = start + timedelta(days=3, hours=12)
-            await rig.until(lambda: rig.clock.now() >= end, timeout_s=4 * 86400 / SPEED)
+            end = start + timedelta(days=2, hours=12)
+            await rig.until(lambda: rig.clock.now() >= end, timeout_s=3 * 86400 / SPEED)
             st = collect_status(cfg)
             return dict(
                 fc06=rig.proxy.stats.requests[6], sim_writes=dict(rig.sim.stats.writes),
@@ -73,7 +74,7 @@ def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
                 export=export_nights(rig.store, tmp_path / "nights.csv", "csv"),
                 warnings=rig.logs.lines(), start=start)
 
-    r = run_virtual(scenario(), 5 * 86400 / SPEED)
+    r = run_virtual(scenario(), 4 * 86400 / SPEED)
     # Read only: not one write request crossed the wire, none reached the heat pump, and the
     # write-budget file is as the daemon's start left it.
     assert r["fc06"] == 0 and r["sim_writes"] == {}
@@ -83,10 +84,10 @@ def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
     assert r["nights"] == [] and r["pending"] == []
     assert r["warnings"] == [], r["warnings"]
     # Kept one day, deleted once a day (at 03:00 here, 24 h after the start): the records
-    # that ended before 03:00 yesterday (11 Jan from 03:00 on the 12th, 12 Jan) are gone; the
-    # records of 13 and 14 Jan are closed, the one of 15 Jan recording.
+    # that ended before 03:00 yesterday (11 Jan from 03:00 on the 12th) are gone; the records
+    # of 12 and 13 Jan are closed, the one of 14 Jan recording.
     days = [record_day(n.window_start, TZ).isoformat() for n in r["records"]]
-    assert days == ["2026-01-13", "2026-01-14", "2026-01-15"], days
+    assert days == ["2026-01-12", "2026-01-13", "2026-01-14"], days
     _, closed, current = r["records"]
     assert (closed.state, closed.valid, closed.reasons) == ("done", True, ()), closed
     assert current.state == "recording" and current.valid is None
@@ -113,7 +114,7 @@ def test_days_of_recording_write_nothing_and_keep_labelled_records(tmp_path):
     # impctl status: recording now, the records kept, the store's size
     assert r["st"]["state"] == "recording" and r["st"]["records"] == 3
     assert "recording: on (a snapshot every 120 s, rows of 300 s)" in r["status"]
-    assert "owner:     3 records kept (2026-01-13 … 2026-01-15, 1 open), 0 labelled" in (
+    assert "owner:     3 records kept (2026-01-12 … 2026-01-14, 1 open), 0 labelled" in (
         r["status"])
     assert "store:     " in r["status"]
 

@@ -30,8 +30,10 @@ STEP_NIGHT, WINDOW_W_K = 22, 50.0
 
 @pytest.fixture(scope="module")
 def season():
+    """40 nights: the step found 11 days after it (the test allows 16), the third house with
+    29 nights for its verdict (MIN_NIGHTS 24); each night more costs ~0.5 CPU-s."""
     houses, params = sample_households(3, seed=31), sample_params(3, 31)
-    return simulate_season(houses, params, SeasonConfig(nights=48), seed=31,
+    return simulate_season(houses, params, SeasonConfig(nights=40), seed=31,
                            hlc_step_w_k=[WINDOW_W_K, 0.0, 0.0], step_night=STEP_NIGHT)
 
 
