@@ -16,27 +16,6 @@ from pathlib import Path
 import pytest
 from cli_fixtures import run_impctl
 
-#: The modules that take most of a run's CPU (each ≥ 20 CPU-s on the 2-core reference
-#: machine; docs/explanation/benchmarks.md), costliest first. They run first: with the
-#: README's ``-n 4 --dist loadfile --no-loadscope-reorder`` each xdist worker takes the next
-#: whole module, so the long ones start at once and the many short ones fill the end of the
-#: run instead of one long module running alone at its end. Not test_season_refit: its
-#: daemon runs on the wall clock and waits for a niced refit, which beside these modules got
-#: a sliver of a core while the simulator ran on (232 s and 53 CPU-s instead of 38 s and 14).
-FIRST = ("test_demo", "test_fleet_guards", "test_season", "test_record_daemon",
-         "test_daemon_campaign", "test_fleet", "test_reliability_crash",
-         "test_fit", "test_season_figure", "test_daemon_campaign_adaptive",
-         "test_season_change", "test_fleet_cluster", "test_fit_noise", "test_mqtt_daemon",
-         "test_reliability_comfort", "test_mqtt_commands_careless", "test_demo_determinism",
-         "test_curve_daemon", "test_reliability_comfort_plant")
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The modules of :data:`FIRST` first, in that order; the rest as collected (a stable
-    sort: each module's tests keep their order)."""
-    rank = {name: i for i, name in enumerate(FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.stem, len(FIRST)))
-
 
 @dataclass(frozen=True)
 class Trained:
