@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 
-from ..imp.protocol import EMITTER_KINDS  # noqa: F401  (the kinds a house may declare)
 from .record import SeasonRecord
 
 #: Load the excess is scaled to: the heat lost at this indoor–outdoor difference [K].

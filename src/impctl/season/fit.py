@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..imp.protocol import EMITTER_KINDS
 from .change import Change, detect_change
 from .emitter import (
-    EMITTER_KINDS,
     REFERENCE_DT_K,
     emitter_kind,
     tau_e_max_s,
