@@ -7,7 +7,7 @@ households at EVERY owner-night count of every variant (plain, household electri
 of the runs; of those pairs, the one with the narrowest
 median half-width. Every count, not the counts pooled: the sandwich part shrinks with the
 nights and what the model leaves out of a house does not, so a pooled 95 % hides too-narrow
-intervals at 56 nights behind too-wide ones at 7. 92 % per count, not 95: the issue's band is
+intervals at 56 nights behind too-wide ones at 7. 92 % per count, not 95: the target band is
 90–97 %, and each count's coverage of a few hundred households scatters by 1–2 points.
 """
 
