@@ -5,7 +5,8 @@ Run:  .venv/bin/python bench/fleet_cluster.py [--households 448] [--data DIR]
           [--workers 1,2] [--batch-size 16] [--model-dir DIR]
 
 For every worker count W, as on a real cluster: ``dask scheduler`` and ``dask worker
---nworkers W --nthreads 1`` (``MALLOC_ARENA_MAX=2``, as docs/how-to/fleet-dask.md starts them)
+--nworkers W --nthreads 1`` (``MALLOC_ARENA_MAX=2``, Dask's profiler off, as
+docs/how-to/fleet-dask.md starts them)
 are started as separate programs on loopback TCP, the fleet is fitted through the scheduler's
 address (:func:`impctl.fleet.fit_fleet` with ``scheduler=``, as ``impctl fleet fit
 --scheduler`` does), and the programs are stopped. Measured per run:
@@ -42,7 +43,7 @@ import pandas as pd
 
 DASK = str(Path(sys.executable).with_name("dask"))
 #: The worker programs' environment, as the how-to starts them.
-WORKER_ENV = {"MALLOC_ARENA_MAX": "2"}
+WORKER_ENV = {"MALLOC_ARENA_MAX": "2", "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
 
 
 def _free_port() -> int:

@@ -204,20 +204,30 @@ def test_local_cluster_on_a_parquet_dataset(tmp_path, nights, monkeypatch):
     assert row["household"] == "only" and row["status"] == "ok"
 
 
-def test_local_cluster_workers_run_with_two_malloc_arenas():
+def _profiler_enabled() -> bool:
+    import dask
+
+    return bool(dask.config.get("distributed.worker.profile.enabled"))
+
+
+def test_local_cluster_workers_run_with_two_malloc_arenas_and_no_profiler():
     """The default cluster's worker processes start with MALLOC_ARENA_MAX=2 (their memory
-    stays flat over a run; README "Fleets"): read from the real worker processes."""
+    stays flat over a run; README "Fleets") and without Dask's statistical profiler (it
+    samples every 10 ms for a dashboard nobody reads): read from the real worker processes."""
 
     from impctl.fleet.run import _client
 
     client, cluster = _client(None, 1)
     try:
         seen = client.run(os.environ.get, "MALLOC_ARENA_MAX")
+        profiling = client.run(_profiler_enabled)
         pids = client.run(os.getpid)
     finally:
         client.close()
         cluster.close()
     assert list(seen.values()) == ["2"], seen
+    assert list(profiling.values()) == [False], profiling
+    assert _profiler_enabled()  # this process's default: the setting is the workers' own
     assert os.getpid() not in pids.values()  # a separate process, not this one
 
 
