@@ -70,15 +70,27 @@ class RowModel:
     lag_rate: torch.Tensor | None = None   # (R, K) τ_e/h_k [-]: 0 where there is no lag
     lag_extra: torch.Tensor | None = None  # (R, K) C_e·dT_air/dt [W] on the interval
 
-    def predict(self) -> torch.Tensor:
+    def predict(self, z: torch.Tensor | None = None) -> torch.Tensor:
         """Model output at the nodes, (R, K) (interval means where ``mean_next`` says so;
-        plus τ_e·ΔP/h on DEMAND rows with the emitter lag)."""
-        y = self.out_c[:, None] * self.ode.integrate(self.z0) + self.out_v
-        out = y if self.mean_next is None else 0.5 * (y + torch.gather(y, 1, self.mean_next))
-        if self.lag_rate is not None:
-            out = out + self.lag_rate * (torch.gather(y, 1, self.lag_next) - y)
+        plus τ_e·ΔP/h on DEMAND rows with the emitter lag); ``z`` the states at the nodes when
+        they are integrated already."""
+        if z is None:
+            z = self.ode.integrate(self.z0)
+        out = self.observe(self.out_c[:, None] * z + self.out_v)
         if self.lag_extra is not None:
             out = out + self.lag_extra
+        return out
+
+    def observe(self, y: torch.Tensor) -> torch.Tensor:
+        """The compared values of node values ``y`` (R, K), or of F columns at once (R, F, K):
+        the linear part of :meth:`predict` (the analytic Jacobian maps its columns with it)."""
+        def at(index):
+            return torch.gather(y, -1, index if y.dim() == 2 else index[:, None].expand_as(y))
+
+        out = y if self.mean_next is None else 0.5 * (y + at(self.mean_next))
+        if self.lag_rate is not None:
+            lag = self.lag_rate if y.dim() == 2 else self.lag_rate[:, None]
+            out = out + lag * (at(self.lag_next) - y)
         return out
 
 
@@ -225,19 +237,13 @@ def build_rows(
         phi_w = phi_w + x
 
     # DEMAND rows: θ_m driven by measured T_air, T_out; surface node balance without Φ_st.
-    s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
-    a_dem = (net.h_tr_ms * (net.h_tr_ms / s - 1.0) - net.h_tr_em) / net.c_m_j_per_k
-    b_air = net.h_tr_ms * net.h_tr_is / s / net.c_m_j_per_k
-    b_e = (net.h_tr_ms * net.h_tr_w / s + net.h_tr_em) / net.c_m_j_per_k
-    c_air = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
-    c_e = -net.h_ve - net.h_tr_is * net.h_tr_w / s
-    c_m = -net.h_tr_is * net.h_tr_ms / s
+    a_dem, b_air, b_e, gain_rate, c_m, c_air, c_e, gain_heat = _demand_scalars(
+        net, gain, g_dem_rate, g_dem_heat)
     u0_dem = u1_dem = out_dem = None
     if any_dem:
-        u0_dem = b_air[:, None] * ta + b_e[:, None] * te + (g_dem_rate * gain)[:, None]
+        u0_dem = b_air[:, None] * ta + b_e[:, None] * te + gain_rate[:, None]
         u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
-        out_dem = (c_air[:, None] * ta + c_e[:, None] * te - (g_dem_heat * gain)[:, None]
-                   + q_fur)
+        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain_heat[:, None] + q_fur
 
     mean_next = None
     if not any_air:  # DEMAND rows only (lm builds each row type on its own rows)
@@ -278,6 +284,39 @@ def build_rows(
         lag_rate=lag_rate,
         lag_extra=lag_extra,
     )
+
+
+def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
+    """The per-row numbers through which the parameters enter a DEMAND row, each (R,):
+    dθ_m/dt = a·θ_m + b_air·T_air + b_e·T_out + gain_rate and
+    Φ_HC = c_m·θ_m + c_air·T_air + c_e·T_out − gain_heat + q_fur
+    (a, b in 1/s, c in W/K, the gain terms in K/s and W)."""
+    s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
+    a_dem = (net.h_tr_ms * (net.h_tr_ms / s - 1.0) - net.h_tr_em) / net.c_m_j_per_k
+    b_air = net.h_tr_ms * net.h_tr_is / s / net.c_m_j_per_k
+    b_e = (net.h_tr_ms * net.h_tr_w / s + net.h_tr_em) / net.c_m_j_per_k
+    c_air = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
+    c_e = -net.h_ve - net.h_tr_is * net.h_tr_w / s
+    c_m = -net.h_tr_is * net.h_tr_ms / s
+    return a_dem, b_air, b_e, g_dem_rate * gain, c_m, c_air, c_e, g_dem_heat * gain
+
+
+def demand_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor,
+                   ach_vent: float, ach_infl: float) -> torch.Tensor:
+    """(R, 9) what a DEMAND row's residuals depend on, as :func:`build_rows` computes it:
+    the 8 numbers of :func:`_demand_scalars` and the furniture's capacity C_fur [J/K]
+    (its heat is C_fur·dT_fur/dt). Without the emitter lag (its emitter splits C_m)."""
+    net = network(params, ach_vent, ach_infl)
+    gain = torch.zeros_like(net.c_m_j_per_k)
+    fur = torch.zeros_like(gain)
+    if params.shape[-1] > FUR_COLUMN:
+        fur = params[:, FUR_COLUMN] * params[:, 0]
+    if params.shape[-1] > len(PARAM_NAMES):
+        gain = params[:, len(PARAM_NAMES)]
+        if packed.gain_w is not None:
+            gain = gain + packed.gain_w[night_index]
+    _, _, g_dem_rate, g_dem_heat = _gain_split(net)
+    return torch.stack([*_demand_scalars(net, gain, g_dem_rate, g_dem_heat), fur], dim=1)
 
 
 def _emitter_release(c_e: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor,

@@ -30,6 +30,7 @@ import torch
 from ..ode.node import ROW_DEMAND
 from ..ode.parameters import DTYPE, PARAM_NAMES
 from ..prior import penalty as prior_penalty
+from .jacobian import demand_row_terms
 from .priors import MergedPrior
 from .problem import Context, Rows, residuals, sum_rows
 
@@ -136,12 +137,12 @@ def _gain_prior(prior: tuple[float, float], u: torch.Tensor, box: torch.Tensor, 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
     demand = rows.row_type == ROW_DEMAND
     if bool(demand.all()) or not bool(demand.any()):
-        terms = _row_terms(ctx, rows, u, t_m0)
+        terms = _row_terms(ctx, rows, u, t_m0, demand=bool(demand.any()))
     else:
         # Each row type on its own (build_rows skips the other type's arithmetic), split
         # once here rather than in every one of the Jacobian's copies.
         idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
-        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i])
+        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i], demand=j == 0)
                  for j, i in enumerate(idx)]
         order = torch.argsort(torch.cat(idx))
         terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
@@ -153,8 +154,15 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
     return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
 
 
-def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
-    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call)."""
+def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+               demand: bool = False):
+    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call;
+    ``demand``: all rows are DEMAND rows, whose Jacobian is analytic where it can be,
+    :mod:`.jacobian`)."""
+    if demand:
+        terms = demand_row_terms(ctx, rows, u, t_m0, _H_U)
+        if terms is not None:
+            return terms
     n_rows = len(t_m0)
     N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
