@@ -195,23 +195,17 @@ def build_rows(
             dm if dem.dim() == 2 or air.dim() == 2 else demand, dem, air)
 
     # AIR rows: eq. 5/6 in the shifted state z = T_air − k_Φ·Φ_HC.
-    a_air = _unit(net, 0)
-    b, c, d = _unit(net, 1), _unit(net, 2), _unit(net, 3)
-    k_phi = air_temperature(0.0, 0.0, 1.0, net)
+    a_air, b, c, d, k_phi = _air_coefficients(net)
     u0_air = u1_air = z0_air = None
     if any_air:
         u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
         u1_air = b[:, None] * te_s
         z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
-    gain = torch.zeros_like(a_air)
+    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
     q_fur = torch.zeros_like(te)
     if params.shape[-1] > FUR_COLUMN:
         # heat the air/furniture capacity takes from the air node [W]
-        q_fur = (params[:, FUR_COLUMN] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
-    if params.shape[-1] > len(PARAM_NAMES):
-        gain = params[:, len(PARAM_NAMES)]
-        if packed.gain_w is not None:   # measured nights: each its own gain
-            gain = gain + packed.gain_w[night_index]
+        q_fur = c_fur[:, None] * packed.t_fur_slope[night_index]
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
     g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
     if params.shape[-1] > len(PARAM_NAMES) and any_air:
@@ -220,8 +214,6 @@ def build_rows(
         # Extra heat to the air node, x(t) = the emitter's release on constrained nights
         # (− the furniture's uptake), linear between the nodes: it enters like Φ_HC (z stays
         # continuous).
-        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
-        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
         cons = packed.constrained[night_index][:, None]
         x = torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
@@ -286,6 +278,49 @@ def build_rows(
     )
 
 
+def _air_coefficients(net) -> tuple:
+    """AIR rows' dz/dt = a·z + b·T_out + c·dT_out/dt + d·Φ_HC (eq. 5/6) and the air node's
+    instantaneous share of the heat input k_Φ = ∂T_air/∂Φ_HC [K/W], each (R,)."""
+    return _unit(net, 0), _unit(net, 1), _unit(net, 2), _unit(net, 3), air_temperature(
+        0.0, 0.0, 1.0, net)
+
+
+def _nuisance(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None
+              ) -> tuple:
+    """Per row (R,): the night's gain [W] (the campaign's, plus a measured night's own unless
+    ``night_index`` is None), the emitter's release [W] and its time constant [s], the
+    air/furniture capacity C_fur [J/K]; zeros (and τ 60 s) without the nuisance terms."""
+    zero = torch.zeros_like(params[:, 0])
+    gain, em_w, em_tau_s, c_fur = zero, zero, torch.full_like(zero, 60.0), zero
+    if params.shape[-1] > FUR_COLUMN:
+        c_fur = params[:, FUR_COLUMN] * params[:, 0]
+    if params.shape[-1] > len(PARAM_NAMES):
+        gain = params[:, len(PARAM_NAMES)]
+        if packed.gain_w is not None and night_index is not None:
+            gain = gain + packed.gain_w[night_index]   # measured nights: each its own gain
+        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
+        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
+    return gain, em_w, em_tau_s, c_fur
+
+
+def air_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None,
+                ach_vent: float, ach_infl: float) -> torch.Tensor:
+    """What an AIR row's residuals depend on, as :func:`build_rows` computes it, (R, 12):
+    the rate a [1/s]; the initial state z0 = α·θ_m,0 + β·T_out,0 + z_gain as α, β [-] and
+    z_gain [K]; the forcing weights b [1/s], c [-] and coef = a·k_Φ + d [K/J] of T_out,
+    dT_out/dt and the heat input; the gain's rate [K/s]; k_Φ [K/W]; the emitter's release [W]
+    and time constant [s]; C_fur [J/K]. Rows may be problems (``night_index`` None) where
+    no night has a gain of its own. Without the emitter lag (its emitter splits C_m)."""
+    net = network(params, ach_vent, ach_infl)
+    a_air, b, c, d, k_phi = _air_coefficients(net)
+    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
+    g_air_rate, g_air_level, _, _ = _gain_split(net)
+    return torch.stack([a_air, air_temperature(1.0, 0.0, 0.0, net),
+                        air_temperature(0.0, 1.0, 0.0, net), g_air_level * gain, b, c,
+                        a_air * k_phi + d, g_air_rate * gain, k_phi, em_w, em_tau_s, c_fur],
+                       dim=1)
+
+
 def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
     """The per-row numbers through which the parameters enter a DEMAND row, each (R,):
     dθ_m/dt = a·θ_m + b_air·T_air + b_e·T_out + gain_rate and
@@ -301,20 +336,15 @@ def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
     return a_dem, b_air, b_e, g_dem_rate * gain, c_m, c_air, c_e, g_dem_heat * gain
 
 
-def demand_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor,
-                   ach_vent: float, ach_infl: float) -> torch.Tensor:
+def demand_scalars(packed: PackedNights, params: torch.Tensor,
+                   night_index: torch.Tensor | None, ach_vent: float, ach_infl: float
+                   ) -> torch.Tensor:
     """(R, 9) what a DEMAND row's residuals depend on, as :func:`build_rows` computes it:
     the 8 numbers of :func:`_demand_scalars` and the furniture's capacity C_fur [J/K]
-    (its heat is C_fur·dT_fur/dt). Without the emitter lag (its emitter splits C_m)."""
+    (its heat is C_fur·dT_fur/dt). Rows may be problems (``night_index`` None) where no
+    night has a gain of its own. Without the emitter lag (its emitter splits C_m)."""
     net = network(params, ach_vent, ach_infl)
-    gain = torch.zeros_like(net.c_m_j_per_k)
-    fur = torch.zeros_like(gain)
-    if params.shape[-1] > FUR_COLUMN:
-        fur = params[:, FUR_COLUMN] * params[:, 0]
-    if params.shape[-1] > len(PARAM_NAMES):
-        gain = params[:, len(PARAM_NAMES)]
-        if packed.gain_w is not None:
-            gain = gain + packed.gain_w[night_index]
+    gain, _, _, fur = _nuisance(packed, params, night_index)
     _, _, g_dem_rate, g_dem_heat = _gain_split(net)
     return torch.stack([*_demand_scalars(net, gain, g_dem_rate, g_dem_heat), fur], dim=1)
 

@@ -7,9 +7,10 @@ all of them are integrated together in one ``odeint`` call per iteration.
 
 Two optimisers on the same residuals:
 
-* :func:`levenberg_marquardt` (the default): the Jacobian comes from forward differences whose
-  perturbed copies ride in the same batched ``odeint`` call, so one iteration costs one
-  integration. The per-row θ_m,0 are eliminated by a Schur complement (a block-arrow system),
+* :func:`levenberg_marquardt` (the default): the Jacobian is analytic — the night ODE is linear,
+  so each column is a sum of a few responses of the one integration (:mod:`.jacobian`; forward
+  differences whose copies ride in the same batched call where that form does not apply). The
+  per-row θ_m,0 are eliminated by a Schur complement (a block-arrow system),
   so problems with any number of nights share one vectorised 7×7 solve.
 * :func:`adam`: the paper's way — Adam on the loss with gradients by direct backpropagation
   through the solver (no adjoint). Kept for comparison; it needs hundreds of iterations where
@@ -30,13 +31,11 @@ import torch
 from ..ode.node import ROW_DEMAND
 from ..ode.parameters import DTYPE, PARAM_NAMES
 from ..prior import penalty as prior_penalty
-from .jacobian import demand_row_terms
+from .jacobian import row_terms
 from .priors import MergedPrior
 from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7
-_H_U = 1e-6     # forward-difference step in u
-_H_M = 1e-3     # … and in θ_m,0 [K] (the residuals are affine in it, so any step is exact)
 _MAX_STEP_U = 2.0
 _U_LIMIT = 8.0
 
@@ -137,12 +136,12 @@ def _gain_prior(prior: tuple[float, float], u: torch.Tensor, box: torch.Tensor, 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
     demand = rows.row_type == ROW_DEMAND
     if bool(demand.all()) or not bool(demand.any()):
-        terms = _row_terms(ctx, rows, u, t_m0, demand=bool(demand.any()))
+        terms = row_terms(ctx, rows, u, t_m0, one_type=len(demand) > 0)
     else:
         # Each row type on its own (build_rows skips the other type's arithmetic), split
         # once here rather than in every one of the Jacobian's copies.
         idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
-        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i], demand=j == 0)
+        parts = [row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i], one_type=True)
                  for j, i in enumerate(idx)]
         order = torch.argsort(torch.cat(idx))
         terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
@@ -152,41 +151,6 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
     h = sum_rows(jtj, rows) + p_h
     g = sum_rows(g_rows, rows) + p_g
     return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
-
-
-def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
-               demand: bool = False):
-    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call;
-    ``demand``: all rows are DEMAND rows, whose Jacobian is analytic where it can be,
-    :mod:`.jacobian`)."""
-    if demand:
-        terms = demand_row_terms(ctx, rows, u, t_m0, _H_U)
-        if terms is not None:
-            return terms
-    n_rows = len(t_m0)
-    N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
-    eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
-    u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
-    # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
-    # column: its copy is left out for those rows (the simple and per-night problems).
-    live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
-    every = slice(None)
-    sel = ([every] + [every if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
-                      for j in range(N_PARAMS)] + [every])
-    m_all = torch.cat([t_m0[s] for s in sel[:-1]] + [t_m0 + _H_M])
-    r_all = residuals(ctx, rows.copies(sel), u_all, m_all)
-    r0 = r_all[:n_rows]
-    ends = torch.tensor([n_rows if s is every else len(s) for s in sel]).cumsum(0).tolist()
-    # (R, 7, K): each row's Jacobian transposed, contiguous for the batched products below
-    jt = torch.zeros(n_rows, N_PARAMS, r0.shape[1], dtype=DTYPE)
-    for j in range(N_PARAMS):
-        s, part = sel[j + 1], r_all[ends[j]:ends[j + 1]]
-        jt[s, j] = (part - r0[s]) / _H_U
-    j_m = (r_all[ends[-2]:] - r0) / _H_M                                 # (R, K)
-    both = torch.stack([r0, j_m], dim=2)                                 # (R, K, 2)
-    jt_rm = torch.bmm(jt, both)                                          # (R, 7, 2)
-    return ((r0 ** 2).sum(1), torch.bmm(jt, jt.transpose(1, 2)), jt_rm[..., 0], jt_rm[..., 1],
-            (j_m ** 2).sum(1), (j_m * r0).sum(1), r0)
 
 
 def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
