@@ -195,9 +195,9 @@ def build_rows(
             dm if dem.dim() == 2 or air.dim() == 2 else demand, dem, air)
 
     # AIR rows: eq. 5/6 in the shifted state z = T_air − k_Φ·Φ_HC.
-    a_air, b, c, d, k_phi = _air_coefficients(net)
-    u0_air = u1_air = z0_air = None
+    a_air = b = c = d = k_phi = u0_air = u1_air = z0_air = None
     if any_air:
+        a_air, b, c, d, k_phi = _air_coefficients(net)
         u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
         u1_air = b[:, None] * te_s
         z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)

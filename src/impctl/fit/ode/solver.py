@@ -60,14 +60,11 @@ class NightODE(torch.nn.Module):
         super().__init__()
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
-        self.method = method
-        # one grid for all rows (K,) or one per row (R, K)
-        self.grid_s = grid_s if grid_s.dim() == 2 else grid_s[None]
-        self.a_per_s = a_per_s
-        self.u0 = u0
-        self.u1 = u1
-        self.h_s = torch.diff(self.grid_s, dim=1)
-        self.n_sub = 1
+        grid_s = grid_s if grid_s.dim() == 2 else grid_s[None]   # (K,) for all rows, or (R, K)
+        # plain attributes, not through nn.Module.__setattr__: its Parameter checks cost more
+        # than the rest of a fleet batch's row building (one ODE per optimiser evaluation)
+        self.__dict__.update(method=method, grid_s=grid_s, a_per_s=a_per_s, u0=u0, u1=u1,
+                             h_s=torch.diff(grid_s, dim=1), n_sub=1)
 
     def forward(self, t: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         grid = self.grid_s.expand(len(z), -1).contiguous()
