@@ -70,6 +70,15 @@ class RowModel:
     lag_rate: torch.Tensor | None = None   # (R, K) τ_e/h_k [-]: 0 where there is no lag
     lag_extra: torch.Tensor | None = None  # (R, K) C_e·dT_air/dt [W] on the interval
 
+    def take(self, sel: torch.Tensor) -> RowModel:
+        """The rows ``sel`` (indices)."""
+        ode = self.ode
+        return RowModel(NightODE(ode.grid_s[sel], ode.a_per_s[sel], ode.u0[sel], ode.u1[sel],
+                                 ode.method),
+                        *(None if x is None else x[sel] for x in (
+                            self.z0, self.out_c, self.out_v, self.measured, self.mask,
+                            self.mean_next, self.lag_next, self.lag_rate, self.lag_extra)))
+
     def predict(self, z: torch.Tensor | None = None) -> torch.Tensor:
         """Model output at the nodes, (R, K) (interval means where ``mean_next`` says so;
         plus τ_e·ΔP/h on DEMAND rows with the emitter lag); ``z`` the states at the nodes when

@@ -173,7 +173,7 @@ def chain_responses(a_per_s: torch.Tensor, h_s: torch.Tensor, u0: torch.Tensor,
         return None
     x = a_per_s[:, None] * h_s
     log_p = torch.cumsum(x, dim=1)
-    if float(log_p.min()) <= -600.0:
+    if log_p.numel() and float(log_p.min()) <= -600.0:
         return None
     p = torch.exp(log_p)
     inv_a = (1.0 / a_per_s)[:, None, None]

@@ -20,9 +20,11 @@ such households as much (decision record 0018).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
-from ..ode.node import ROW_DEMAND, air_scalars, build_rows, demand_scalars
+from ..ode.node import ROW_DEMAND, RowModel, air_scalars, build_rows, demand_scalars
 from ..ode.parameters import DTYPE, EMC_COLUMN, to_physical
 from ..ode.solver import chain_rate_derivative, chain_responses
 from .problem import Context, Rows, residuals
@@ -33,15 +35,124 @@ H_M = 1e-3     # … and in θ_m,0 [K] (the residuals are affine in it, so any s
 H_NUMBERS = 1e-5
 
 
+@dataclass
+class Evaluated:
+    """Rows of one type evaluated at a point: their scaled residuals now, the Jacobian's
+    products when asked (:func:`terms`), so that an optimiser pays for the Jacobian only of
+    the steps it takes."""
+
+    rows: Rows
+    t_m0: torch.Tensor                 # (R,) [°C]
+    r0: torch.Tensor                   # (R, K) scaled residuals
+    demand: bool | None = None         # the rows' type for the analytic Jacobian, or None
+    model: RowModel | None = None      # … and the built rows and their states
+    z: torch.Tensor | None = None
+    fd: tuple | None = None            # forward differences: every term, already
+
+    def take(self, sel: torch.Tensor) -> Evaluated:
+        """The rows ``sel`` (indices; problems keep their numbers)."""
+        if self.fd is not None:
+            return Evaluated(self.rows.at(sel), self.t_m0[sel], self.r0[sel],
+                             fd=tuple(x[sel] for x in self.fd))
+        return Evaluated(self.rows.at(sel), self.t_m0[sel], self.r0[sel], self.demand,
+                         self.model.take(sel), self.z[sel])
+
+
+def evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor
+             ) -> list[tuple[torch.Tensor | None, Evaluated]]:
+    """The rows' residuals at (u, t_m0), each row type on its own rows (build_rows skips the
+    other type's arithmetic): [(row ids, or None for all rows, :class:`Evaluated`)]."""
+    demand = rows.row_type == ROW_DEMAND
+    if bool(demand.all()) or not bool(demand.any()):
+        kind = bool(demand[0]) if len(demand) else None
+        return [(None, _evaluate_one(ctx, rows, u, t_m0, kind))]
+    idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
+    return [(i, _evaluate_one(ctx, rows.at(i, phi=j == 1), u, t_m0[i], j == 0))
+            for j, i in enumerate(idx)]
+
+
+def loss_rows(parts: list[tuple[torch.Tensor | None, Evaluated]]) -> torch.Tensor:
+    """(R,) Σ r² of each row of :func:`evaluate`'s parts."""
+    if parts[0][0] is None:
+        return (parts[0][1].r0 ** 2).sum(1)
+    out = torch.empty(sum(len(i) for i, _ in parts), dtype=DTYPE)
+    for i, ev in parts:
+        out[i] = (ev.r0 ** 2).sum(1)
+    return out
+
+
+def assemble(ctx: Context, parts: list[tuple[torch.Tensor | None, Evaluated]],
+             u: torch.Tensor, sel: torch.Tensor | None = None) -> tuple:
+    """:func:`terms` of :func:`evaluate`'s parts, in row order, of the rows ``sel`` (bool, R)
+    or of all rows."""
+    if parts[0][0] is None:
+        return terms(ctx, parts[0][1], u, None if sel is None else sel.nonzero()[:, 0])
+    outs, ids = [], []
+    for i, ev in parts:
+        s = None if sel is None else sel[i].nonzero()[:, 0]
+        if s is not None and not len(s):   # no row of this type is wanted
+            continue
+        outs.append(terms(ctx, ev, u, s))
+        ids.append(i if s is None else i[s])
+    order = torch.argsort(torch.cat(ids))
+    return tuple(torch.cat(pair)[order] for pair in zip(*outs, strict=True))
+
+
+def terms(ctx: Context, ev: Evaluated, u: torch.Tensor, sel: torch.Tensor | None = None
+          ) -> tuple:
+    """Per row of ``ev`` (or of its rows ``sel``): Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm,
+    Jmᵀ r, r."""
+    if sel is not None:
+        ev = ev.take(sel)
+    if ev.fd is not None:
+        return ev.fd
+    out = _analytic(ctx, ev, u)
+    return out if out is not None else _forward_differences(ctx, ev.rows, u, ev.t_m0)
+
+
 def row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
-              one_type: bool = False):
-    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r. Rows all of one type
-    (``one_type``) take the analytic Jacobian where it applies (:func:`analytic_row_terms`);
-    the others forward differences, every perturbed copy in one batched integration."""
-    if one_type:
-        terms = analytic_row_terms(ctx, rows, u, t_m0, bool(rows.row_type[0] == ROW_DEMAND))
-        if terms is not None:
-            return terms
+              one_type: bool = False) -> tuple:
+    """:func:`terms` of ``rows`` at (u, t_m0): the analytic Jacobian where the rows are all
+    of one type (``one_type``) and it applies, else forward differences."""
+    kind = bool(rows.row_type[0] == ROW_DEMAND) if one_type and len(t_m0) else None
+    return terms(ctx, _evaluate_one(ctx, rows, u, t_m0, kind), u)
+
+
+def analytic_row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+                       demand: bool) -> tuple | None:
+    """:func:`row_terms` with the analytic Jacobian, or None where it does not apply (rk4,
+    the emitter lag, a rate outside :func:`~..ode.solver.chain_responses`'s range).
+
+    Parameters
+    ----------
+    ctx, rows : the problems and their rows (all ``ROW_DEMAND`` if ``demand``, else all
+        ``ROW_AIR``)
+    u : (P, n) unconstrained parameters
+    t_m0 : (R,) initial mass temperatures [°C]
+    demand : the rows' type
+    """
+    ev = _evaluate_one(ctx, rows, u, t_m0, demand)
+    return None if ev.fd is not None else _analytic(ctx, ev, u)
+
+
+def _evaluate_one(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+                  demand: bool | None) -> Evaluated:
+    if demand is None or ctx.solver != "exact" or (ctx.packed.emitter_lag
+                                                   and u.shape[1] > EMC_COLUMN):
+        fd = _forward_differences(ctx, rows, u, t_m0)
+        return Evaluated(rows, t_m0, fd[6], fd=fd)
+    params = to_physical(u, rows.box)[rows.problem]
+    model = build_rows(ctx.packed, params, t_m0, rows.night, rows.row_type, rows.phi_w,
+                       rows.phi_in_w, ctx.ach_vent, ctx.ach_infl, ctx.solver)
+    z = model.ode.integrate(model.z0)
+    # the arithmetic of problem.residuals, bit for bit
+    r0 = torch.where(model.mask, model.predict(z) - model.measured, 0.0) * rows.scale[:, None]
+    return Evaluated(rows, t_m0, r0, demand, model, z)
+
+
+def _forward_differences(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor
+                         ) -> tuple:
+    """:func:`terms` by forward differences, every perturbed copy in one batched call."""
     n_rows = len(t_m0)
     N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
     eye = torch.eye(N_PARAMS, dtype=DTYPE) * H_U
@@ -68,28 +179,12 @@ def row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
             (j_m ** 2).sum(1), (j_m * r0).sum(1), r0)
 
 
-def analytic_row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
-                       demand: bool):
-    """:func:`row_terms` of rows that are all of one type, or None where this form does
-    not apply (rk4, the emitter lag, a rate outside :func:`~..ode.solver.chain_responses`'s
-    range): then the caller takes forward differences.
-
-    Parameters
-    ----------
-    ctx, rows : the problems and their rows (all ``ROW_DEMAND`` if ``demand``, else all
-        ``ROW_AIR``)
-    u : (P, n) unconstrained parameters
-    t_m0 : (R,) initial mass temperatures [°C]
-    demand : the rows' type
-    """
-    packed = ctx.packed
+def _analytic(ctx: Context, ev: Evaluated, u: torch.Tensor) -> tuple | None:
+    """:func:`terms` of analytically evaluated rows; None where a rate leaves
+    :func:`~..ode.solver.chain_responses`'s range."""
+    packed, rows, model, z, r0, demand = ctx.packed, ev.rows, ev.model, ev.z, ev.r0, ev.demand
     n = u.shape[1]
-    if ctx.solver != "exact" or (packed.emitter_lag and n > EMC_COLUMN):
-        return None
     night = rows.night
-    params = to_physical(u, rows.box)[rows.problem]
-    model = build_rows(packed, params, t_m0, night, rows.row_type, rows.phi_w, rows.phi_in_w,
-                       ctx.ach_vent, ctx.ach_infl, ctx.solver)
     ode = model.ode
     forcing = _demand_forcings if demand else _air_forcings
     # The row numbers at u and at u ± h·e_j: their Jacobian (·, m, n) in u by central
@@ -116,9 +211,6 @@ def analytic_row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Te
     if resp is None:
         return None
     p, z_f, gamma_f = resp
-    z = ode.integrate(model.z0)
-    scale = rows.scale[:, None]
-    r0 = torch.where(model.mask, model.predict(z) - model.measured, 0.0) * scale
     m = sc.shape[1]
     cols = torch.empty(len(night), m + 2, z.shape[1], dtype=DTYPE)
     # ∂(node output)/∂(each number) in the numbers' order, then θ_m,0's column, then the
@@ -128,7 +220,7 @@ def analytic_row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Te
     dz_da = chain_rate_derivative(z, ode.a_per_s, ode.h_s, ode.u0[:, :-1], ode.u1[:, :-1],
                                   gamma, p)
     (_demand_columns if demand else _air_columns)(cols, sc, z, dz_da, p, z_f, packed, night,
-                                                  model, t_m0)
+                                                  model, ev.t_m0)
     _compare(cols[:, :m + 1], model, rows.scale)
     cols[:, m + 1] = r0
     # Jθ = columns·∂numbers/∂u, so Jθᵀ Jθ = ∂ᵀ·(columnsᵀ columns)·∂ from one Gram product of
