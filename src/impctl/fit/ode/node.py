@@ -1,13 +1,15 @@
 """The night-time 5R1C dynamics as a torch module (the paper's eq. 5 and 6), batched over nights.
 
 One *row* is one night under one parameter set; each row keeps its night's own sample times
-(nights padded to the longest one). A whole fit — every start, every night, both modes, the
-finite-difference copies of the Jacobian — is integrated by one ``torchdiffeq.odeint`` call with
-``rk4``: the dynamics are linear, so every sample interval of every row is integrated at once in
-its own normalised time (its response to the state it starts from and to its own inputs), and the
-intervals are chained by the exact linear recurrence (:class:`NightODE`). The Python cost is a
-few solver steps per call instead of one step per sample (21 s → about 2 s for the demo's
-export), and each interval sees only its own inputs by construction (the "left-closed lookup per
+(nights padded to the longest one). A whole fit — every start, every night, both modes — is
+integrated in one batched call: by the exact discretisation (the default, :mod:`.solver`), whose
+responses also give the optimiser its analytic Jacobian (:mod:`..optim.jacobian`), or by one
+``torchdiffeq.odeint`` call with ``rk4`` (then the Jacobian's finite-difference copies ride in
+the same call). The dynamics are linear, so every sample interval of every row is integrated at
+once (its response to the state it starts from and to its own inputs), and the intervals are
+chained by the exact linear recurrence (:class:`NightODE`). The Python cost is a few tensor
+operations per call instead of one step per sample (21 s → about 2 s for the demo's export),
+and each interval sees only its own inputs by construction (the "left-closed lookup per
 step" of identifiability.md §7). float64 throughout, direct backprop through the solver when
 gradients are wanted (no adjoint).
 
