@@ -313,24 +313,6 @@ def _nuisance(packed: PackedNights, params: torch.Tensor, night_index: torch.Ten
     return gain, em_w, em_tau_s, c_fur
 
 
-def air_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None,
-                ach_vent: float, ach_infl: float) -> torch.Tensor:
-    """What an AIR row's residuals depend on, as :func:`build_rows` computes it, (R, 12):
-    the rate a [1/s]; the initial state z0 = α·θ_m,0 + β·T_out,0 + z_gain as α, β [-] and
-    z_gain [K]; the forcing weights b [1/s], c [-] and coef = a·k_Φ + d [K/J] of T_out,
-    dT_out/dt and the heat input; the gain's rate [K/s]; k_Φ [K/W]; the emitter's release [W]
-    and time constant [s]; C_fur [J/K]. Rows may be problems (``night_index`` None) where
-    no night has a gain of its own. Without the emitter lag (its emitter splits C_m)."""
-    net = network(params, ach_vent, ach_infl)
-    a_air, b, c, d, k_phi = _air_coefficients(net)
-    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
-    g_air_rate, g_air_level, _, _ = _gain_split(net)
-    unit = torch.eye(2, dtype=params.dtype)[:, :, None]
-    alpha, beta = air_temperature(unit[0], unit[1], 0.0, net)
-    return torch.stack([a_air, alpha, beta, g_air_level * gain, b, c, a_air * k_phi + d,
-                        g_air_rate * gain, k_phi, em_w, em_tau_s, c_fur], dim=1)
-
-
 def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
     """The per-row numbers through which the parameters enter a DEMAND row, each (R,):
     dθ_m/dt = a·θ_m + b_air·T_air + b_e·T_out + gain_rate and
@@ -346,17 +328,35 @@ def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
     return a_dem, b_air, b_e, g_dem_rate * gain, c_m, c_air, c_e, g_dem_heat * gain
 
 
-def demand_scalars(packed: PackedNights, params: torch.Tensor,
-                   night_index: torch.Tensor | None, ach_vent: float, ach_infl: float
-                   ) -> torch.Tensor:
-    """(R, 9) what a DEMAND row's residuals depend on, as :func:`build_rows` computes it:
-    the 8 numbers of :func:`_demand_scalars` and the furniture's capacity C_fur [J/K]
-    (its heat is C_fur·dT_fur/dt). Rows may be problems (``night_index`` None) where no
-    night has a gain of its own. Without the emitter lag (its emitter splits C_m)."""
+def row_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None,
+                ach_vent: float, ach_infl: float, kinds: tuple[bool, ...]
+                ) -> dict[bool, torch.Tensor]:
+    """What a row's residuals depend on, as :func:`build_rows` computes it, for the row types
+    ``kinds`` (True: DEMAND, False: AIR) from one network.
+
+    DEMAND rows, (R, 9): the 8 numbers of :func:`_demand_scalars` and the furniture's capacity
+    C_fur [J/K] (its heat is C_fur·dT_fur/dt). AIR rows, (R, 12): the rate a [1/s]; the
+    initial state z0 = α·θ_m,0 + β·T_out,0 + z_gain as α, β [-] and z_gain [K]; the forcing
+    weights b [1/s], c [-] and coef = a·k_Φ + d [K/J] of T_out, dT_out/dt and the heat
+    input; the gain's rate [K/s]; k_Φ [K/W]; the emitter's release [W] and time constant [s];
+    C_fur [J/K]. Rows may be problems (``night_index`` None) where no night has a gain of its
+    own. Without the emitter lag (its emitter splits C_m).
+    """
     net = network(params, ach_vent, ach_infl)
-    gain, _, _, fur = _nuisance(packed, params, night_index)
-    _, _, g_dem_rate, g_dem_heat = _gain_split(net)
-    return torch.stack([*_demand_scalars(net, gain, g_dem_rate, g_dem_heat), fur], dim=1)
+    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
+    g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
+    out = {}
+    if True in kinds:
+        out[True] = torch.stack([*_demand_scalars(net, gain, g_dem_rate, g_dem_heat), c_fur],
+                                dim=1)
+    if False in kinds:
+        a_air, b, c, d, k_phi = _air_coefficients(net)
+        unit = torch.eye(2, dtype=params.dtype)[:, :, None]
+        alpha, beta = air_temperature(unit[0], unit[1], 0.0, net)
+        out[False] = torch.stack([a_air, alpha, beta, g_air_level * gain, b, c,
+                                  a_air * k_phi + d, g_air_rate * gain, k_phi, em_w, em_tau_s,
+                                  c_fur], dim=1)
+    return out
 
 
 def _emitter_release(c_e: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor,

@@ -2,11 +2,11 @@
 differences where it does not apply (:func:`row_terms`).
 
 A row's residuals depend on its parameters only through a few numbers per row
-(:func:`~impctl.fit.ode.node.demand_scalars`, :func:`~impctl.fit.ode.node.air_scalars`: the
-rate a, the initial state, the weights of each forcing and of each output term). The night ODE
-is linear, so its states are z = z0·P + Σ_f w_f·Z_f, where P and the responses Z_f to each
-forcing f depend on a alone, and ∂z/∂a has a closed form (:mod:`..ode.solver`). Each Jacobian
-column is then a sum of a few such responses weighted by the derivatives of the numbers.
+(:func:`~impctl.fit.ode.node.row_scalars`: the rate a, the initial state, the weights of each
+forcing and of each output term). The night ODE is linear, so its states are
+z = z0·P + Σ_f w_f·Z_f, where P and the responses Z_f to each forcing f depend on a alone, and
+∂z/∂a has a closed form (:mod:`..ode.solver`). Each Jacobian column is then a sum of a few such
+responses weighted by the derivatives of the numbers.
 
 Forward differences build and integrate every row once per parameter (8–12 copies of an
 (R, K) problem). Here the rows are built and integrated once, the responses to all forcings come
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..ode.node import ROW_DEMAND, RowModel, air_scalars, build_rows, demand_scalars
+from ..ode.node import ROW_DEMAND, RowModel, build_rows, row_scalars
 from ..ode.parameters import DTYPE, EMC_COLUMN, to_physical
 from ..ode.solver import chain_rate_derivative, chain_responses
 from .problem import Context, Rows, residuals
@@ -48,6 +48,7 @@ class Evaluated:
     model: RowModel | None = None      # … and the built rows and their states
     z: torch.Tensor | None = None
     fd: tuple | None = None            # forward differences: every term, already
+    numbers: _Numbers | None = None    # the row numbers at u, shared by the point's row types
 
     def take(self, sel: torch.Tensor) -> Evaluated:
         """The rows ``sel`` (indices; problems keep their numbers)."""
@@ -55,7 +56,21 @@ class Evaluated:
             return Evaluated(self.rows.at(sel), self.t_m0[sel], self.r0[sel],
                              fd=tuple(x[sel] for x in self.fd))
         return Evaluated(self.rows.at(sel), self.t_m0[sel], self.r0[sel], self.demand,
-                         self.model.take(sel), self.z[sel])
+                         self.model.take(sel), self.z[sel], numbers=self.numbers)
+
+
+class _Numbers:
+    """Per problem, the row numbers of every row type at one point u and their Jacobian in u
+    (:func:`_numbers`), computed once for all the point's rows: the numbers' small tensors
+    cost a fixed few hundred operations per call, a third of a small batch's iteration."""
+
+    def __init__(self, kinds: tuple[bool, ...]):
+        self.kinds, self.value = kinds, None
+
+    def get(self, ctx: Context, u: torch.Tensor, box: torch.Tensor, demand: bool):
+        if self.value is None:
+            self.value = _numbers(ctx, u, box, None, self.kinds)
+        return self.value[demand]
 
 
 def evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor
@@ -65,9 +80,10 @@ def evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor
     demand = rows.row_type == ROW_DEMAND
     if bool(demand.all()) or not bool(demand.any()):
         kind = bool(demand[0]) if len(demand) else None
-        return [(None, _evaluate_one(ctx, rows, u, t_m0, kind))]
+        return [(None, _evaluate_one(ctx, rows, u, t_m0, kind, _Numbers((kind,))))]
     idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
-    return [(i, _evaluate_one(ctx, rows.at(i, phi=j == 1), u, t_m0[i], j == 0))
+    numbers = _Numbers((True, False))
+    return [(i, _evaluate_one(ctx, rows.at(i, phi=j == 1), u, t_m0[i], j == 0, numbers))
             for j, i in enumerate(idx)]
 
 
@@ -136,7 +152,7 @@ def analytic_row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Te
 
 
 def _evaluate_one(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
-                  demand: bool | None) -> Evaluated:
+                  demand: bool | None, numbers: _Numbers | None = None) -> Evaluated:
     if demand is None or ctx.solver != "exact" or (ctx.packed.emitter_lag
                                                    and u.shape[1] > EMC_COLUMN):
         fd = _forward_differences(ctx, rows, u, t_m0)
@@ -147,7 +163,8 @@ def _evaluate_one(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
     z = model.ode.integrate(model.z0)
     # the arithmetic of problem.residuals, bit for bit
     r0 = torch.where(model.mask, model.predict(z) - model.measured, 0.0) * rows.scale[:, None]
-    return Evaluated(rows, t_m0, r0, demand, model, z)
+    return Evaluated(rows, t_m0, r0, demand, model, z,
+                     numbers=numbers if numbers is not None else _Numbers((demand,)))
 
 
 def _forward_differences(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor
@@ -183,29 +200,14 @@ def _analytic(ctx: Context, ev: Evaluated, u: torch.Tensor) -> tuple | None:
     """:func:`terms` of analytically evaluated rows; None where a rate leaves
     :func:`~..ode.solver.chain_responses`'s range."""
     packed, rows, model, z, r0, demand = ctx.packed, ev.rows, ev.model, ev.z, ev.r0, ev.demand
-    n = u.shape[1]
     night = rows.night
     ode = model.ode
     forcing = _demand_forcings if demand else _air_forcings
-    # The row numbers at u and at u ± h·e_j: their Jacobian (·, m, n) in u by central
-    # differences (small tensors: 2n + 1 sets of m numbers, not of (R, K) rows), accurate to
-    # ≈ 1e-10. They depend on the problem's parameters alone unless a night has a gain of
-    # its own: then per row.
-    per_row = packed.gain_w is not None
-    n_set = len(night) if per_row else len(u)
-    eye = torch.eye(n, dtype=DTYPE) * H_NUMBERS
-    u_all = torch.cat([u] + [u + eye[j] for j in range(n)] + [u - eye[j] for j in range(n)])
-    p_all = to_physical(u_all, rows.box.repeat(2 * n + 1, 1, 1))
-    if per_row:
-        p_all = p_all[rows.problem.repeat(2 * n + 1)
-                      + torch.arange(2 * n + 1).repeat_interleave(len(night)) * len(u)]
-    numbers = demand_scalars if demand else air_scalars
-    sc = numbers(packed, p_all, night.repeat(2 * n + 1) if per_row else None, ctx.ach_vent,
-                 ctx.ach_infl).view(2 * n + 1, n_set, -1)
-    d_sc = ((sc[1:n + 1] - sc[n + 1:]) / (2 * H_NUMBERS)).permute(1, 2, 0)
-    sc = sc[0]
-    if not per_row:
-        d_sc, sc = d_sc[rows.problem], sc[rows.problem]
+    if packed.gain_w is None and ev.numbers is not None:   # per problem, shared
+        sc, d_sc = ev.numbers.get(ctx, u, rows.box, demand)
+        sc, d_sc = sc[rows.problem], d_sc[rows.problem]
+    else:                                                  # a night's own gain: per row
+        sc, d_sc = _numbers(ctx, u, rows.box, rows, (demand,))[demand]
     u0, u1 = forcing(packed, night, ode.h_s, sc, rows.phi_in_w)
     resp = chain_responses(ode.a_per_s, ode.h_s, u0, u1)
     if resp is None:
@@ -232,6 +234,29 @@ def _analytic(ctx: Context, ev: Evaluated, u: torch.Tensor) -> tuple | None:
     jt_rm = torch.bmm(d_t, gram[:, :m, m:])                             # (R, n, 2): Jm, r
     return ((r0 ** 2).sum(1), jtj, jt_rm[..., 1], jt_rm[..., 0], gram[:, m, m],
             gram[:, m, m + 1], r0)
+
+
+def _numbers(ctx: Context, u: torch.Tensor, box: torch.Tensor, rows: Rows | None,
+             kinds: tuple[bool, ...]) -> dict:
+    """Row type → (the row numbers (·, m), their Jacobian in u (·, m, n)) at u, per problem
+    (``rows`` None: where no night has a gain of its own) or per row of ``rows``; the
+    Jacobian by central differences on these small tensors (2n + 1 sets of m numbers, not of
+    (R, K) rows), accurate to ≈ 1e-10."""
+    n = u.shape[1]
+    eye = torch.eye(n, dtype=DTYPE) * H_NUMBERS
+    u_all = torch.cat([u] + [u + eye[j] for j in range(n)] + [u - eye[j] for j in range(n)])
+    p_all = to_physical(u_all, box.repeat(2 * n + 1, 1, 1))
+    night = None
+    if rows is not None:
+        p_all = p_all[rows.problem.repeat(2 * n + 1)
+                      + torch.arange(2 * n + 1).repeat_interleave(len(rows.night)) * len(u)]
+        night = rows.night.repeat(2 * n + 1)
+    out = {}
+    for kind, sc in row_scalars(ctx.packed, p_all, night, ctx.ach_vent, ctx.ach_infl,
+                                kinds).items():
+        sc = sc.view(2 * n + 1, len(sc) // (2 * n + 1), -1)
+        out[kind] = sc[0], ((sc[1:n + 1] - sc[n + 1:]) / (2 * H_NUMBERS)).permute(1, 2, 0)
+    return out
 
 
 def _compare(cols: torch.Tensor, model, scale: torch.Tensor) -> None:
