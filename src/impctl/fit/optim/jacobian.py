@@ -61,8 +61,9 @@ class Evaluated:
 
 class _Numbers:
     """Per problem, the row numbers of every row type at one point u and their Jacobian in u
-    (:func:`_numbers`), computed once for all the point's rows: the numbers' small tensors
-    cost a fixed few hundred operations per call, a third of a small batch's iteration."""
+    (:func:`_numbers`), computed once for all the point's rows (callers pass that point's u):
+    the numbers' small tensors cost a fixed few hundred operations per call, a large share of
+    a small batch's iteration."""
 
     def __init__(self, kinds: tuple[bool, ...]):
         self.kinds, self.value = kinds, None
