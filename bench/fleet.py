@@ -242,7 +242,7 @@ def profile(data: Path, n: int) -> None:
     from impctl.fit import _problems, _statement, _weights, selection
     from impctl.fit.nights import data as fit_data
     from impctl.fit.ode import solver
-    from impctl.fit.optim import batch, lm, problem
+    from impctl.fit.optim import batch, jacobian, lm, problem
     from impctl.fleet import worker
     from impctl.fleet.inputs import discover
 
@@ -274,9 +274,12 @@ def profile(data: Path, n: int) -> None:
     timed(worker, "_classify", "classifiers")
     timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
-    timed(lm, "_normal_equations", "  in LM: residuals + forward-difference Jacobian")
+    timed(lm, "_normal_equations", "  in LM: residuals + Jacobian")
+    timed(lm, "_trial", "  in LM: residuals + Jacobian")   # the iterations' trial points
     timed(lm, "penalty", "    of which the ridge and the population priors (also in the intervals)")
     timed(problem, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
+    timed(jacobian, "build_rows", "    of which building the rows (5R1C coefficients, inputs)")
+    timed(jacobian, "_analytic", "    of which the analytic Jacobian (responses, Gram products)")
     timed(solver.NightODE, "integrate", "    of which integrating (exact discretisation)")
     timed(_statement, "laplace", "Laplace + sandwich intervals, class-check inflation")
     timed(selection, "laplace", "Laplace + sandwich intervals, class-check inflation")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, fields
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +66,8 @@ class Conductances:
     ``floor_area_m2`` [m²].
     """
 
+    # H_tr,1…3 are cached on first use: the fit's row coefficients read each of them dozens
+    # of times per network (frozen, so they cannot go stale)
     h_ve: Any
     h_tr_is: Any
     h_tr_w: Any
@@ -76,17 +79,17 @@ class Conductances:
     a_t_m2: Any
     floor_area_m2: Any
 
-    @property
+    @cached_property
     def h_tr_1(self) -> Any:
         """H_tr,1 = 1/(1/H_ve + 1/H_tr,is) (C.6) [W/K], written to stay finite at H_ve = 0."""
         return self.h_ve * self.h_tr_is / (self.h_ve + self.h_tr_is)
 
-    @property
+    @cached_property
     def h_tr_2(self) -> Any:
         """H_tr,2 = H_tr,1 + H_tr,w (C.7) [W/K]."""
         return self.h_tr_1 + self.h_tr_w
 
-    @property
+    @cached_property
     def h_tr_3(self) -> Any:
         """H_tr,3 = 1/(1/H_tr,2 + 1/H_tr,ms) (C.8) [W/K]."""
         return self.h_tr_2 * self.h_tr_ms / (self.h_tr_2 + self.h_tr_ms)

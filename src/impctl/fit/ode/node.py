@@ -1,13 +1,15 @@
 """The night-time 5R1C dynamics as a torch module (the paper's eq. 5 and 6), batched over nights.
 
 One *row* is one night under one parameter set; each row keeps its night's own sample times
-(nights padded to the longest one). A whole fit — every start, every night, both modes, the
-finite-difference copies of the Jacobian — is integrated by one ``torchdiffeq.odeint`` call with
-``rk4``: the dynamics are linear, so every sample interval of every row is integrated at once in
-its own normalised time (its response to the state it starts from and to its own inputs), and the
-intervals are chained by the exact linear recurrence (:class:`NightODE`). The Python cost is a
-few solver steps per call instead of one step per sample (21 s → about 2 s for the demo's
-export), and each interval sees only its own inputs by construction (the "left-closed lookup per
+(nights padded to the longest one). A whole fit — every start, every night, both modes — is
+integrated in one batched call: by the exact discretisation (the default, :mod:`.solver`), whose
+responses also give the optimiser its analytic Jacobian (:mod:`..optim.jacobian`), or by one
+``torchdiffeq.odeint`` call with ``rk4`` (then the Jacobian's finite-difference copies ride in
+the same call). The dynamics are linear, so every sample interval of every row is integrated at
+once (its response to the state it starts from and to its own inputs), and the intervals are
+chained by the exact linear recurrence (:class:`NightODE`). The Python cost is a few tensor
+operations per call instead of one step per sample (21 s → about 2 s for the demo's export),
+and each interval sees only its own inputs by construction (the "left-closed lookup per
 step" of identifiability.md §7). float64 throughout, direct backprop through the solver when
 gradients are wanted (no adjoint).
 
@@ -70,23 +72,37 @@ class RowModel:
     lag_rate: torch.Tensor | None = None   # (R, K) τ_e/h_k [-]: 0 where there is no lag
     lag_extra: torch.Tensor | None = None  # (R, K) C_e·dT_air/dt [W] on the interval
 
-    def predict(self) -> torch.Tensor:
+    def take(self, sel: torch.Tensor) -> RowModel:
+        """The rows ``sel`` (indices)."""
+        ode = self.ode
+        return RowModel(NightODE(ode.grid_s[sel], ode.a_per_s[sel], ode.u0[sel], ode.u1[sel],
+                                 ode.method),
+                        *(None if x is None else x[sel] for x in (
+                            self.z0, self.out_c, self.out_v, self.measured, self.mask,
+                            self.mean_next, self.lag_next, self.lag_rate, self.lag_extra)))
+
+    def predict(self, z: torch.Tensor | None = None) -> torch.Tensor:
         """Model output at the nodes, (R, K) (interval means where ``mean_next`` says so;
-        plus τ_e·ΔP/h on DEMAND rows with the emitter lag)."""
-        y = self.out_c[:, None] * self.ode.integrate(self.z0) + self.out_v
-        out = y if self.mean_next is None else 0.5 * (y + torch.gather(y, 1, self.mean_next))
-        if self.lag_rate is not None:
-            out = out + self.lag_rate * (torch.gather(y, 1, self.lag_next) - y)
+        plus τ_e·ΔP/h on DEMAND rows with the emitter lag); ``z`` the states at the nodes when
+        they are integrated already."""
+        if z is None:
+            z = self.ode.integrate(self.z0)
+        out = self.observe(self.out_c[:, None] * z + self.out_v)
         if self.lag_extra is not None:
             out = out + self.lag_extra
         return out
 
+    def observe(self, y: torch.Tensor) -> torch.Tensor:
+        """The compared values of node values ``y`` (R, K), or of F columns at once (R, F, K):
+        the linear part of :meth:`predict` (the analytic Jacobian maps its columns with it)."""
+        def at(index):
+            return torch.gather(y, -1, index if y.dim() == 2 else index[:, None].expand_as(y))
 
-def _unit(net, which: int):
-    """Coefficient of input ``which`` (T_air, T_e, dT_e/dt, Φ) in eq. 5/6: affine → unit input."""
-    args = [0.0, 0.0, 0.0, 0.0]
-    args[which] = 1.0
-    return air_derivative(*args, net)
+        out = y if self.mean_next is None else 0.5 * (y + at(self.mean_next))
+        if self.lag_rate is not None:
+            lag = self.lag_rate if y.dim() == 2 else self.lag_rate[:, None]
+            out = out + lag * (at(self.lag_next) - y)
+        return out
 
 
 def _gain_split(net) -> tuple:
@@ -183,23 +199,17 @@ def build_rows(
             dm if dem.dim() == 2 or air.dim() == 2 else demand, dem, air)
 
     # AIR rows: eq. 5/6 in the shifted state z = T_air − k_Φ·Φ_HC.
-    a_air = _unit(net, 0)
-    b, c, d = _unit(net, 1), _unit(net, 2), _unit(net, 3)
-    k_phi = air_temperature(0.0, 0.0, 1.0, net)
-    u0_air = u1_air = z0_air = None
+    a_air = b = c = d = k_phi = u0_air = u1_air = z0_air = None
     if any_air:
+        a_air, b, c, d, k_phi = _air_coefficients(net)
         u0_air = b[:, None] * te + c[:, None] * te_s + (a_air * k_phi + d)[:, None] * phi_in_w
         u1_air = b[:, None] * te_s
         z0_air = air_temperature(t_m0_c, te[:, 0], 0.0, net)
-    gain = torch.zeros_like(a_air)
+    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
     q_fur = torch.zeros_like(te)
     if params.shape[-1] > FUR_COLUMN:
         # heat the air/furniture capacity takes from the air node [W]
-        q_fur = (params[:, FUR_COLUMN] * params[:, 0])[:, None] * packed.t_fur_slope[night_index]
-    if params.shape[-1] > len(PARAM_NAMES):
-        gain = params[:, len(PARAM_NAMES)]
-        if packed.gain_w is not None:   # measured nights: each its own gain
-            gain = gain + packed.gain_w[night_index]
+        q_fur = c_fur[:, None] * packed.t_fur_slope[night_index]
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
     g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
     if params.shape[-1] > len(PARAM_NAMES) and any_air:
@@ -208,8 +218,6 @@ def build_rows(
         # Extra heat to the air node, x(t) = the emitter's release on constrained nights
         # (− the furniture's uptake), linear between the nodes: it enters like Φ_HC (z stays
         # continuous).
-        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
-        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
         cons = packed.constrained[night_index][:, None]
         x = torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
@@ -225,19 +233,13 @@ def build_rows(
         phi_w = phi_w + x
 
     # DEMAND rows: θ_m driven by measured T_air, T_out; surface node balance without Φ_st.
-    s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
-    a_dem = (net.h_tr_ms * (net.h_tr_ms / s - 1.0) - net.h_tr_em) / net.c_m_j_per_k
-    b_air = net.h_tr_ms * net.h_tr_is / s / net.c_m_j_per_k
-    b_e = (net.h_tr_ms * net.h_tr_w / s + net.h_tr_em) / net.c_m_j_per_k
-    c_air = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
-    c_e = -net.h_ve - net.h_tr_is * net.h_tr_w / s
-    c_m = -net.h_tr_is * net.h_tr_ms / s
+    a_dem, b_air, b_e, gain_rate, c_m, c_air, c_e, gain_heat = _demand_scalars(
+        net, gain, g_dem_rate, g_dem_heat)
     u0_dem = u1_dem = out_dem = None
     if any_dem:
-        u0_dem = b_air[:, None] * ta + b_e[:, None] * te + (g_dem_rate * gain)[:, None]
+        u0_dem = b_air[:, None] * ta + b_e[:, None] * te + gain_rate[:, None]
         u1_dem = b_air[:, None] * ta_s + b_e[:, None] * te_s
-        out_dem = (c_air[:, None] * ta + c_e[:, None] * te - (g_dem_heat * gain)[:, None]
-                   + q_fur)
+        out_dem = c_air[:, None] * ta + c_e[:, None] * te - gain_heat[:, None] + q_fur
 
     mean_next = None
     if not any_air:  # DEMAND rows only (lm builds each row type on its own rows)
@@ -278,6 +280,83 @@ def build_rows(
         lag_rate=lag_rate,
         lag_extra=lag_extra,
     )
+
+
+def _air_coefficients(net) -> tuple:
+    """AIR rows' dz/dt = a·z + b·T_out + c·dT_out/dt + d·Φ_HC (eq. 5/6) and the air node's
+    instantaneous share of the heat input k_Φ = ∂T_air/∂Φ_HC [K/W], each (R,).
+
+    Eq. 5/6 are affine, so a coefficient is the derivative at a unit input; the four unit
+    inputs go through one call broadcast to (4, R): per element the same arithmetic as four
+    calls, in a quarter of the small-tensor operations (an optimiser evaluation's fixed cost).
+    """
+    unit = torch.eye(4, dtype=net.h_ve.dtype)[:, :, None]
+    a, b, c, d = air_derivative(unit[0], unit[1], unit[2], unit[3], net)
+    return a, b, c, d, air_temperature(0.0, 0.0, 1.0, net)
+
+
+def _nuisance(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None
+              ) -> tuple:
+    """Per row (R,): the night's gain [W] (the campaign's, plus a measured night's own unless
+    ``night_index`` is None), the emitter's release [W] and its time constant [s], the
+    air/furniture capacity C_fur [J/K]; zeros (and τ 60 s) without the nuisance terms."""
+    zero = torch.zeros_like(params[:, 0])
+    gain, em_w, em_tau_s, c_fur = zero, zero, torch.full_like(zero, 60.0), zero
+    if params.shape[-1] > FUR_COLUMN:
+        c_fur = params[:, FUR_COLUMN] * params[:, 0]
+    if params.shape[-1] > len(PARAM_NAMES):
+        gain = params[:, len(PARAM_NAMES)]
+        if packed.gain_w is not None and night_index is not None:
+            gain = gain + packed.gain_w[night_index]   # measured nights: each its own gain
+        em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
+        em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
+    return gain, em_w, em_tau_s, c_fur
+
+
+def _demand_scalars(net, gain, g_dem_rate, g_dem_heat) -> tuple:
+    """The per-row numbers through which the parameters enter a DEMAND row, each (R,):
+    dθ_m/dt = a·θ_m + b_air·T_air + b_e·T_out + gain_rate and
+    Φ_HC = c_m·θ_m + c_air·T_air + c_e·T_out − gain_heat + q_fur
+    (a, b in 1/s, c in W/K, the gain terms in K/s and W)."""
+    s = net.h_tr_is + net.h_tr_w + net.h_tr_ms
+    a_dem = (net.h_tr_ms * (net.h_tr_ms / s - 1.0) - net.h_tr_em) / net.c_m_j_per_k
+    b_air = net.h_tr_ms * net.h_tr_is / s / net.c_m_j_per_k
+    b_e = (net.h_tr_ms * net.h_tr_w / s + net.h_tr_em) / net.c_m_j_per_k
+    c_air = net.h_tr_is + net.h_ve - net.h_tr_is ** 2 / s
+    c_e = -net.h_ve - net.h_tr_is * net.h_tr_w / s
+    c_m = -net.h_tr_is * net.h_tr_ms / s
+    return a_dem, b_air, b_e, g_dem_rate * gain, c_m, c_air, c_e, g_dem_heat * gain
+
+
+def row_scalars(packed: PackedNights, params: torch.Tensor, night_index: torch.Tensor | None,
+                ach_vent: float, ach_infl: float, kinds: tuple[bool, ...]
+                ) -> dict[bool, torch.Tensor]:
+    """What a row's residuals depend on, as :func:`build_rows` computes it, for the row types
+    ``kinds`` (True: DEMAND, False: AIR) from one network.
+
+    DEMAND rows, (R, 9): the 8 numbers of :func:`_demand_scalars` and the furniture's capacity
+    C_fur [J/K] (its heat is C_fur·dT_fur/dt). AIR rows, (R, 12): the rate a [1/s]; the
+    initial state z0 = α·θ_m,0 + β·T_out,0 + z_gain as α, β [-] and z_gain [K]; the forcing
+    weights b [1/s], c [-] and coef = a·k_Φ + d [K/J] of T_out, dT_out/dt and the heat
+    input; the gain's rate [K/s]; k_Φ [K/W]; the emitter's release [W] and time constant [s];
+    C_fur [J/K]. Rows may be problems (``night_index`` None) where no night has a gain of its
+    own. Without the emitter lag (its emitter splits C_m).
+    """
+    net = network(params, ach_vent, ach_infl)
+    gain, em_w, em_tau_s, c_fur = _nuisance(packed, params, night_index)
+    g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
+    out = {}
+    if True in kinds:
+        out[True] = torch.stack([*_demand_scalars(net, gain, g_dem_rate, g_dem_heat), c_fur],
+                                dim=1)
+    if False in kinds:
+        a_air, b, c, d, k_phi = _air_coefficients(net)
+        unit = torch.eye(2, dtype=params.dtype)[:, :, None]
+        alpha, beta = air_temperature(unit[0], unit[1], 0.0, net)
+        out[False] = torch.stack([a_air, alpha, beta, g_air_level * gain, b, c,
+                                  a_air * k_phi + d, g_air_rate * gain, k_phi, em_w, em_tau_s,
+                                  c_fur], dim=1)
+    return out
 
 
 def _emitter_release(c_e: torch.Tensor, tau_s: torch.Tensor, grid: torch.Tensor,

@@ -60,14 +60,11 @@ class NightODE(torch.nn.Module):
         super().__init__()
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}")
-        self.method = method
-        # one grid for all rows (K,) or one per row (R, K)
-        self.grid_s = grid_s if grid_s.dim() == 2 else grid_s[None]
-        self.a_per_s = a_per_s
-        self.u0 = u0
-        self.u1 = u1
-        self.h_s = torch.diff(self.grid_s, dim=1)
-        self.n_sub = 1
+        grid_s = grid_s if grid_s.dim() == 2 else grid_s[None]   # (K,) for all rows, or (R, K)
+        # plain attributes, not through nn.Module.__setattr__: its Parameter checks cost more
+        # than the rest of a fleet batch's row building (one ODE per optimiser evaluation)
+        self.__dict__.update(method=method, grid_s=grid_s, a_per_s=a_per_s, u0=u0, u1=u1,
+                             h_s=torch.diff(grid_s, dim=1), n_sub=1)
 
     def forward(self, t: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         grid = self.grid_s.expand(len(z), -1).contiguous()
@@ -159,3 +156,51 @@ def chain(z0: torch.Tensor, phi: torch.Tensor | None, gamma: torch.Tensor,
         z = torch.addcmul(gamma[:, k], phi[:, k], z)
         out.append(z)
     return torch.stack(out, dim=1)
+
+
+def chain_responses(a_per_s: torch.Tensor, h_s: torch.Tensor, u0: torch.Tensor,
+                    u1: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """Responses of :func:`exact_chain` to F forcings at once, for the analytic Jacobian.
+
+    ``a_per_s`` (R,) [1/s], ``h_s`` (R, K−1) [s], ``u0`` [K/s] and ``u1`` [K/s²] (R, F, K−1).
+    Returns (P, Z, Γ): P (R, K) the response to z0 = 1 without forcing (exp(A·t)), Z (R, F, K)
+    the response to each forcing from z0 = 0, Γ (R, F, K−1) the forcings' interval terms —
+    one exp and one expm1 for all F. None where :func:`exact_chain` would leave its main
+    branch (a rate below 1e-9/s, or P below e^−600): the caller then differentiates by
+    forward differences.
+    """
+    if bool((a_per_s.abs() < _SLOW_RATE).any()):
+        return None
+    x = a_per_s[:, None] * h_s
+    log_p = torch.cumsum(x, dim=1)
+    if log_p.numel() and float(log_p.min()) <= -600.0:
+        return None
+    p = torch.exp(log_p)
+    inv_a = (1.0 / a_per_s)[:, None, None]
+    gamma = inv_a * (torch.expm1(x)[:, None] * torch.addcmul(u0, inv_a, u1)
+                     - h_s[:, None] * u1)
+    z = p[:, None] * torch.cumsum(gamma / p[:, None], dim=2)
+    ones = torch.ones_like(a_per_s)[:, None]
+    return (torch.cat([ones, p], dim=1),
+            torch.cat([torch.zeros_like(z[..., :1]), z], dim=2), gamma)
+
+
+def chain_rate_derivative(z: torch.Tensor, a_per_s: torch.Tensor, h_s: torch.Tensor,
+                          u0: torch.Tensor, u1: torch.Tensor, gamma: torch.Tensor,
+                          p: torch.Tensor) -> torch.Tensor:
+    """∂z/∂A (R, K) [K·s] of the exact chain's states ``z`` (R, K) at fixed z0 and forcing.
+
+    z_k+1 = P_k·(z0 + Σ_j≤k Γ_j/P_j) with P_k = exp(A·T_k), T_k the time of node k+1, so
+    ∂z_k+1/∂A = T_k·z_k+1 + P_k·Σ_j≤k (∂Γ_j/∂A − T_j·Γ_j)/P_j, and from
+    Γ = (e^x − 1)·(u0 + u1/A)/A − h·u1/A (x = A·h):
+    ∂Γ/∂A = (h·e^x·(u0 + u1/A) − (e^x − 1)·u1/A² − Γ)/A. ``gamma`` (R, K−1) the total
+    forcing's Γ, ``p`` (R, K) from :func:`chain_responses`; ``u0``, ``u1`` (R, K−1) the
+    total forcing.
+    """
+    a = a_per_s[:, None]
+    x = a * h_s
+    t = torch.cumsum(h_s, dim=1)
+    pk = p[:, 1:]
+    d_gamma = (h_s * torch.exp(x) * (u0 + u1 / a) - torch.expm1(x) * u1 / (a * a) - gamma) / a
+    rest = t * z[:, 1:] + pk * torch.cumsum((d_gamma - t * gamma) / pk, dim=1)
+    return torch.cat([torch.zeros_like(z[:, :1]), rest], dim=1)

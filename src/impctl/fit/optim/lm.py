@@ -7,9 +7,10 @@ all of them are integrated together in one ``odeint`` call per iteration.
 
 Two optimisers on the same residuals:
 
-* :func:`levenberg_marquardt` (the default): the Jacobian comes from forward differences whose
-  perturbed copies ride in the same batched ``odeint`` call, so one iteration costs one
-  integration. The per-row θ_m,0 are eliminated by a Schur complement (a block-arrow system),
+* :func:`levenberg_marquardt` (the default): the Jacobian is analytic — the night ODE is linear,
+  so each column is a sum of a few responses of the one integration (:mod:`.jacobian`; forward
+  differences whose copies ride in the same batched call where that form does not apply). The
+  per-row θ_m,0 are eliminated by a Schur complement (a block-arrow system),
   so problems with any number of nights share one vectorised 7×7 solve.
 * :func:`adam`: the paper's way — Adam on the loss with gradients by direct backpropagation
   through the solver (no adjoint). Kept for comparison; it needs hundreds of iterations where
@@ -27,15 +28,13 @@ from dataclasses import dataclass, field, replace
 
 import torch
 
-from ..ode.node import ROW_DEMAND
 from ..ode.parameters import DTYPE, PARAM_NAMES
 from ..prior import penalty as prior_penalty
+from .jacobian import assemble, evaluate, loss_rows
 from .priors import MergedPrior
 from .problem import Context, Rows, residuals, sum_rows
 
 N_PARAMS = 7
-_H_U = 1e-6     # forward-difference step in u
-_H_M = 1e-3     # … and in θ_m,0 [K] (the residuals are affine in it, so any step is exact)
 _MAX_STEP_U = 2.0
 _U_LIMIT = 8.0
 
@@ -134,51 +133,12 @@ def _gain_prior(prior: tuple[float, float], u: torch.Tensor, box: torch.Tensor, 
 
 
 def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> _Normal:
-    demand = rows.row_type == ROW_DEMAND
-    if bool(demand.all()) or not bool(demand.any()):
-        terms = _row_terms(ctx, rows, u, t_m0)
-    else:
-        # Each row type on its own (build_rows skips the other type's arithmetic), split
-        # once here rather than in every one of the Jacobian's copies.
-        idx = [demand.nonzero()[:, 0], (~demand).nonzero()[:, 0]]
-        parts = [_row_terms(ctx, rows.at(i, phi=j == 1), u, t_m0[i])
-                 for j, i in enumerate(idx)]
-        order = torch.argsort(torch.cat(idx))
-        terms = tuple(torch.cat(pair)[order] for pair in zip(*parts, strict=True))
-    loss_rows, jtj, g_rows, c, d, gm, r0 = terms
+    sq, jtj, g_rows, c, d, gm, r0 = assemble(ctx, evaluate(ctx, rows, u, t_m0), u)
     p_loss, p_h, p_g = penalty(ctx, u, rows.box)
-    loss = sum_rows(loss_rows, rows) + p_loss
+    loss = sum_rows(sq, rows) + p_loss
     h = sum_rows(jtj, rows) + p_h
     g = sum_rows(g_rows, rows) + p_g
     return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
-
-
-def _row_terms(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor):
-    """Per row: Σr², Jθᵀ Jθ, Jθᵀ r, Jθᵀ Jm, Jmᵀ Jm, Jmᵀ r (forward differences, one call)."""
-    n_rows = len(t_m0)
-    N_PARAMS = u.shape[1]  # noqa: N806 (7, or 10 with the nuisance terms)
-    eye = torch.eye(N_PARAMS, dtype=DTYPE) * _H_U
-    u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
-    # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
-    # column: its copy is left out for those rows (the simple and per-night problems).
-    live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
-    every = slice(None)
-    sel = ([every] + [every if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
-                      for j in range(N_PARAMS)] + [every])
-    m_all = torch.cat([t_m0[s] for s in sel[:-1]] + [t_m0 + _H_M])
-    r_all = residuals(ctx, rows.copies(sel), u_all, m_all)
-    r0 = r_all[:n_rows]
-    ends = torch.tensor([n_rows if s is every else len(s) for s in sel]).cumsum(0).tolist()
-    # (R, 7, K): each row's Jacobian transposed, contiguous for the batched products below
-    jt = torch.zeros(n_rows, N_PARAMS, r0.shape[1], dtype=DTYPE)
-    for j in range(N_PARAMS):
-        s, part = sel[j + 1], r_all[ends[j]:ends[j + 1]]
-        jt[s, j] = (part - r0[s]) / _H_U
-    j_m = (r_all[ends[-2]:] - r0) / _H_M                                 # (R, K)
-    both = torch.stack([r0, j_m], dim=2)                                 # (R, K, 2)
-    jt_rm = torch.bmm(jt, both)                                          # (R, 7, 2)
-    return ((r0 ** 2).sum(1), torch.bmm(jt, jt.transpose(1, 2)), jt_rm[..., 0], jt_rm[..., 1],
-            (j_m ** 2).sum(1), (j_m * r0).sum(1), r0)
 
 
 def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
@@ -191,26 +151,39 @@ def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Ten
                  rows.phi_in_w[rk], rows.scale[rk], rows.box[pk], len(pk)), pk, rk)
 
 
-def _evaluate(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
-              active: torch.Tensor, current: _Normal) -> _Normal:
-    """Normal equations at (u, t_m0) for the ``active`` problems; the others keep ``current``
-    (their step is never taken). Converged problems cost nothing any more: in a merged fleet
-    batch most problems are done long before the slowest one."""
-    if bool(active.all()):
-        return _normal_equations(ctx, rows, u, t_m0)
+def _trial(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
+           active: torch.Tensor, current: _Normal) -> tuple[_Normal, torch.Tensor]:
+    """The trial point (u, t_m0) of the ``active`` problems: its loss, and for the problems
+    whose loss it lowers (``ok`` (P,), the steps taken) its normal equations; every other
+    problem keeps ``current``. The Jacobian of a rejected step (a third of a fleet batch's)
+    is never built, and converged problems cost nothing any more: in a merged fleet batch most
+    problems are done long before the slowest one."""
     out = _Normal(*(x.clone() for x in (current.loss, current.h, current.g, current.c,
                                          current.d, current.gm, current.g_rows, current.r,
                                          current.jtj)))
+    ok = torch.zeros_like(active)
     if not bool(active.any()):
-        return out
+        return out, ok
     sub, pk, rk = _take(rows, active)
     if hasattr(ctx.prior, "take"):   # a merged batch's per-problem priors follow the renumbering
         ctx = replace(ctx, prior=ctx.prior.take(pk))
-    new = _normal_equations(ctx, sub, u[pk], t_m0[rk])
-    out.loss[pk], out.h[pk], out.g[pk] = new.loss, new.h, new.g
-    out.c[rk], out.d[rk], out.gm[rk] = new.c, new.d, new.gm
-    out.g_rows[rk], out.r[rk], out.jtj[rk] = new.g_rows, new.r, new.jtj
-    return out
+    parts = evaluate(ctx, sub, u[pk], t_m0[rk])
+    p_loss, p_h, p_g = penalty(ctx, u[pk], sub.box)
+    loss = sum_rows(loss_rows(parts), sub) + p_loss
+    out.loss[pk] = loss
+    taken = torch.isfinite(loss) & (loss < current.loss[pk])
+    ok[pk] = taken
+    if not bool(taken.any()):
+        return out, ok
+    sel = taken[sub.problem]
+    _, jtj, g_rows, c, d, gm, r0 = assemble(ctx, parts, u[pk], sel)
+    problem = sub.problem[sel]
+    pt, rt = pk[taken], rk[sel]
+    out.h[pt] = (torch.zeros_like(p_h).index_add_(0, problem, jtj) + p_h)[taken]
+    out.g[pt] = (torch.zeros_like(p_g).index_add_(0, problem, g_rows) + p_g)[taken]
+    out.c[rt], out.d[rt], out.gm[rt] = c, d, gm
+    out.g_rows[rt], out.r[rt], out.jtj[rt] = g_rows, r0, jtj
+    return out, ok
 
 
 def schur(ne: _Normal, rows: Rows, lam: torch.Tensor | None = None):
@@ -311,27 +284,16 @@ def levenberg_marquardt(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.T
             step = (u + step).clamp(-_U_LIMIT, _U_LIMIT) - u
             step_m = -(ne.gm + (ne.c * step[rows.problem]).sum(1)) / d
             pred = _predicted_decrease(ne, rows, step, step_m)
-            trial = _evaluate(ctx, rows, u + step, t_m0 + step_m, ~done & ~stopped, ne)
+            trial, ok = _trial(ctx, rows, u + step, t_m0 + step_m, ~done & ~stopped, ne)
             actual = ne.loss - trial.loss
-            ok = torch.isfinite(trial.loss) & (actual > 0) & ~done & ~stopped
             # Converged: an accepted step gained < atol, or a nearly undamped Gauss–Newton step
             # predicts < atol (then a "rejection" is only rounding), or nothing helps any more.
             done = done | (~stopped & ((ok & (actual < atol)) | ((pred < atol) & (lam < 1.0))
                                        | (lam > 1e8)))
-            row_ok = ok[rows.problem]
             u = torch.where(ok[:, None], u + step, u)
-            t_m0 = torch.where(row_ok, t_m0 + step_m, t_m0)
-            ne = _Normal(
-                torch.where(ok, trial.loss, ne.loss),
-                torch.where(ok[:, None, None], trial.h, ne.h),
-                torch.where(ok[:, None], trial.g, ne.g),
-                torch.where(row_ok[:, None], trial.c, ne.c),
-                torch.where(row_ok, trial.d, ne.d),
-                torch.where(row_ok, trial.gm, ne.gm),
-                torch.where(row_ok[:, None], trial.g_rows, ne.g_rows),
-                torch.where(row_ok[:, None], trial.r, ne.r),
-                torch.where(row_ok[:, None, None], trial.jtj, ne.jtj),
-            )
+            t_m0 = torch.where(ok[rows.problem], t_m0 + step_m, t_m0)
+            # the trial holds the new terms where the step is taken and the old ones elsewhere
+            ne = replace(trial, loss=torch.where(ok, trial.loss, ne.loss))
             # Nielsen's damping update from the gain ratio actual/predicted decrease.
             rho = (actual / pred.clamp_min(1e-300)).clamp(0.0, 1.0)
             shrink = torch.clamp(1.0 - (2.0 * rho - 1.0) ** 3, min=1.0 / 3.0)
