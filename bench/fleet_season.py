@@ -63,28 +63,24 @@ def make_input(n: int, owner_nights: int, seed: int, data: Path) -> Path:
 
 
 def run(data: Path, workers: int, work: Path) -> float:
-    """Fit the fleet on ``workers`` local worker processes; print its figures; households/s."""
-    from impctl.fleet import fit_fleet
+    """Fit the fleet on ``workers`` local worker processes (``bench/fleet.py``'s run, which
+    prints the throughput and CPU figures); print the season's and memory figures;
+    households/s."""
+    from fleet import run_fleet  # bench/fleet.py
 
-    out = work / f"FLEET-{workers}w"
-    load = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    result = fit_fleet(data, out, workers=workers, model_dir=None, progress=False,
-                       echo=lambda s: None)
-    wall = time.perf_counter() - t0
+    from impctl.fleet.run import DEFAULT_BATCH
+
+    wall, out = run_fleet(data, workers, DEFAULT_BATCH, work)
     fleet = pd.read_parquet(out)
-    cpu = float(fleet["cpu_s_per_household"].median())
-    season = int(fleet["season_hlc_w_per_k"].notna().sum())
-    owner = float(fleet["season_owner_nights"].median())
+    rate = len(fleet) / wall
     rss = fleet.groupby("worker")["worker_rss_mb"].max()
-    rate = result.fitted / wall
-    print(f"{workers} worker(s): {result.fitted} households {result.counts} in {wall:.1f} s "
-          f"wall (cluster start and preload included) → {rate:.2f} households/s = "
-          f"{3600 * rate:,.0f} households/hour; {cpu:.3f} CPU-s per household in the batches "
-          f"(median); season model fitted for {season} (median {owner:.0f} owner nights used); "
-          f"resident memory per worker after its batches, largest [MB]: "
-          f"{', '.join(f'{v:.0f}' for v in rss)}; load average {load:.1f} before, "
-          f"{os.getloadavg()[0]:.1f} after", flush=True)
+    print(f"  {workers} worker(s): {3600 * rate:,.0f} households/hour (cluster start and "
+          f"preload included); {fleet['cpu_s_per_household'].median():.3f} CPU-s per household "
+          f"in the batches (median); season model fitted for "
+          f"{int(fleet['season_hlc_w_per_k'].notna().sum())} (median "
+          f"{fleet['season_owner_nights'].median():.0f} owner nights used); resident memory per "
+          f"worker after its batches, largest [MB]: {', '.join(f'{v:.0f}' for v in rss)}",
+          flush=True)
     return rate
 
 

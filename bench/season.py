@@ -168,12 +168,17 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
                  # the IMP fit alone: households without a valid constrained night
                  "unidentified": sum(r.get("identified") is False for r in ok)}
     h = np.array([r["household"] for r in ok], int)
-    for k, name in QUANTITIES.items():
+    scales = [(k, name, truth[k]) for k, name in QUANTITIES.items()]
+    if "meter_gain" in truth:   # HLC on the heat meter's own scale (module docstring)
+        scales.append(("hlc_w_per_k", "HLC_meter",
+                       truth["hlc_w_per_k"] * (1.0 + truth["meter_gain"])))
+    for k, name, truth_k in scales:
         est = np.array([r[k] if r[k] is not None else np.nan for r in ok], float)
         given = np.isfinite(est)
-        out[f"{name}_missing"] = int((~given).sum())
+        if name in QUANTITIES.values():
+            out[f"{name}_missing"] = int((~given).sum())
         est, hk = est[given], h[given]
-        true = truth[k][hk]
+        true = truth_k[hk]
         err = 100 * np.abs(est / true - 1)
         lo = np.array([r[f"{k}_low"] for r in ok], float)[given]
         hi = np.array([r[f"{k}_high"] for r in ok], float)[given]
@@ -182,19 +187,6 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
         out[name] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
                      "p90_pct": float(np.percentile(err, 90)), "p90_ci": _boot_ci(err, 90, rng),
                      "coverage": float(cover.mean()), "half_width_pct": float(np.median(half))}
-    if "meter_gain" in truth:   # HLC on the heat meter's own scale (module docstring)
-        est = np.array([r["hlc_w_per_k"] if r["hlc_w_per_k"] is not None else np.nan
-                        for r in ok], float)
-        given = np.isfinite(est)
-        metered = truth["hlc_w_per_k"][h[given]] * (1.0 + truth["meter_gain"][h[given]])
-        err = 100 * np.abs(est[given] / metered - 1)
-        lo = np.array([r["hlc_w_per_k_low"] for r in ok], float)[given]
-        hi = np.array([r["hlc_w_per_k_high"] for r in ok], float)[given]
-        out["HLC_meter"] = {"median_pct": float(np.median(err)),
-                            "median_ci": _boot_ci(err, 50, rng),
-                            "p90_pct": float(np.percentile(err, 90)),
-                            "p90_ci": _boot_ci(err, 90, rng),
-                            "coverage": float(((lo <= metered) & (metered <= hi)).mean())}
     sig = np.array([r["signature_hlc_w_per_k"] for r in ok])
     good = np.isfinite(sig)
     if not good.any():   # no owner night: the IMP fit alone
