@@ -114,14 +114,15 @@ def subset(data: Path, n: int, out: Path) -> Path:
     return target
 
 
-def run_fleet(data: Path, workers: int | None, batch: int, work: Path) -> tuple[float, Path]:
+def run_fleet(data: Path, workers: int | None, batch: int, work: Path,
+              previous: Path | None = None) -> tuple[float, Path]:
     from impctl.fleet import fit_fleet
 
     out = work / f"FLEET-{workers or 'default'}-{time.time_ns()}.parquet"
     before = os.times()
     t0 = time.perf_counter()
     run = fit_fleet(data, out, workers=workers, batch_size=batch, progress=True,
-                    echo=lambda s: print(s, file=sys.stderr))
+                    previous=previous, echo=lambda s: print(s, file=sys.stderr))
     wall = time.perf_counter() - t0
     after = os.times()
     fleet = pd.read_parquet(out)

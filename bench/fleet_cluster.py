@@ -13,11 +13,16 @@ address (:func:`impctl.fleet.fit_fleet` with ``scheduler=``, as ``impctl fleet f
 
 * wall time of the fit, from the call to the last FLEET part (the plugin that loads torch in
   each worker included; the cluster's own start is not), households/s and households/hour;
+* the steady rate: households/s between the first and the last finished batch (from the FLEET
+  parts' modification times) — the throughput once every worker runs, which a fleet of tens of
+  thousands sees; the start it leaves out is printed beside it;
 * CPU-s per household in the workers' batches (the FLEET ``cpu_s_per_household`` column);
 * peak resident memory of each worker process [MB]: the kernel's high-water mark (``VmHWM``
   of ``/proc/PID/status``), read just before the cluster stops.
 
-Then the throughput ratio of the largest worker count against one. Input: the realistic-plant
+Then the throughput ratio of each worker count against the first one given; a count given more
+than once (``--workers 1,2,1,2``, interleaved so that the machine's drift falls on both) counts
+with the median of its runs. Input: the realistic-plant
 fleet of ``bench/fleet.py`` (8 nights of 5-minute rows per household; generated once and kept
 in ``--data``). Without ``--model-dir`` the fits search the whole prior ranges (no classifiers,
 as ``bench/fleet.py``). The machine's other load skews the ratio: keep it quiet while this runs
@@ -39,6 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -103,15 +109,30 @@ def _peak_rss_mb() -> float:
     return float("nan")
 
 
-def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path) -> dict:
+def _steady_rate(out: Path, started: float) -> tuple[float, float]:
+    """(households/s between the first and the last finished batch, seconds from the call to
+    the first batch): the throughput once every worker runs, without the start (the plugin
+    loading torch in each worker, the first batches' imports), which a longer run spreads
+    thinner. From the FLEET parts' modification times (each is renamed into place when its
+    batch is done)."""
+    parts = sorted(out.glob("part-*.parquet"), key=lambda p: p.stat().st_mtime)
+    if len(parts) < 2:
+        return float("nan"), float("nan")
+    first, last = parts[0].stat().st_mtime, parts[-1].stat().st_mtime
+    after = sum(pd.read_parquet(p, columns=["household"]).shape[0] for p in parts[1:])
+    return after / max(last - first, 1e-9), first - started
+
+
+def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path,
+        turn: int = 0) -> dict:
     from distributed import Client
 
     from impctl.fleet import fit_fleet
 
-    out = work / f"FLEET-{workers}w.parquet"
-    with cluster(workers, work / f"logs-{workers}w") as address:
+    out = work / f"FLEET-{turn}-{workers}w.parquet"
+    with cluster(workers, work / f"logs-{turn}-{workers}w") as address:
         load = os.getloadavg()[0]
-        t0 = time.perf_counter()
+        t0, t0_wall = time.perf_counter(), time.time()
         result = fit_fleet(data, out, scheduler=address, model_dir=model_dir,
                            batch_size=batch, progress=False, echo=lambda s: None)
         wall = time.perf_counter() - t0
@@ -121,7 +142,8 @@ def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path
     fleet = pd.read_parquet(out)
     rate = result.fitted / wall
     return {"workers": result.workers, "households": result.fitted, "counts": result.counts,
-            "wall_s": wall, "rate": rate, "cpu_s": fleet["cpu_s_per_household"].mean(),
+            "wall_s": wall, "rate": rate, "steady": _steady_rate(out, t0_wall),
+            "cpu_s": fleet["cpu_s_per_household"].mean(),
             "peaks": {pids[w]: peaks[w] for w in peaks}, "load_before": load,
             "load_after": os.getloadavg()[0]}
 
@@ -148,23 +170,36 @@ def main() -> None:
           f"input {data} ({args.households} households, 8 nights of 5-minute rows each)")
     results = []
     with tempfile.TemporaryDirectory(prefix="fleet-cluster-") as tmp:
-        for w in counts:
-            r = run(data, w, args.batch_size, args.model_dir, Path(tmp))
+        for turn, w in enumerate(counts):
+            r = run(data, w, args.batch_size, args.model_dir, Path(tmp), turn)
             results.append(r)
             peaks = ", ".join(f"{mb:.0f}" for mb in r["peaks"].values())
             print(f"{r['workers']} worker(s): {r['households']} households {r['counts']} in "
                   f"{r['wall_s']:.1f} s wall → {r['rate']:.2f} households/s = "
-                  f"{r['rate'] * 3600:,.0f} households/hour; {r['cpu_s']:.3f} CPU-s per "
+                  f"{r['rate'] * 3600:,.0f} households/hour (first batch after "
+                  f"{r['steady'][1]:.1f} s, then {r['steady'][0]:.2f} households/s); "
+                  f"{r['cpu_s']:.3f} CPU-s per "
                   f"household in the batches; peak RSS per worker [MB]: {peaks}; load average "
                   f"{r['load_before']:.1f} before, {r['load_after']:.1f} after")
-    if len(results) > 1:
-        base = results[0]
-        for r in results[1:]:
-            print(f"throughput {r['workers']} against {base['workers']} worker(s): "
-                  f"{r['rate'] / base['rate']:.2f}×")
-        best = max(results, key=lambda r: r["rate"])
-        print(f"10,000 households at {best['rate']:.2f} households/s: "
-              f"{10_000 / best['rate'] / 60:.1f} min")
+    # a count given more than once (1,2,1,2: interleaved, so that a drift of the machine
+    # falls on both) is summarised by the median of its runs
+    def median(key, w):
+        return float(np.median([r[key] if key == "rate" else r[key][0]
+                                for r in results if r["workers"] == w]))
+
+    rate = {w: median("rate", w) for w in dict.fromkeys(r["workers"] for r in results)}
+    if len(rate) > 1:
+        base, *others = rate
+        for w in others:
+            runs = sum(r["workers"] == w for r in results)
+            print(f"throughput {w} against {base} worker(s): {rate[w] / rate[base]:.2f}× "
+                  f"from the call to the last batch, "
+                  f"{median('steady', w) / median('steady', base):.2f}× between the first "
+                  f"and the last batch (median rates of {runs} and "
+                  f"{sum(r['workers'] == base for r in results)} runs)")
+    best = max(rate, key=rate.get)
+    print(f"10,000 households at {rate[best]:.2f} households/s: "
+          f"{10_000 / rate[best] / 60:.1f} min")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ per household in the workers' batches (the IMP fit and the season model), each w
 resident memory after its batches, and what 10,000 such households would take.
 
 Run:  .venv/bin/python bench/fleet_season.py [--households 96] [--owner-nights 28]
-          [--workers 1,2] [--seed 31] [--data DIR]
+          [--workers 1,2] [--seed 31] [--data DIR] [--next-morning]
 
 Input: ``--households`` houses of the realistic plant simulated over a winter by the season
 simulator of ``bench/season.py`` (the IMP campaign every other night from the first, the owner's
@@ -13,6 +13,13 @@ CSV per household (``write_nights``: the fleet's folder input, the format of ``i
 generated once and kept in ``--data``. The fleet runs on the default local cluster with
 ``--workers`` worker processes, no classifiers (the whole prior ranges, as ``bench/fleet.py``);
 the machine's other load skews the figures, so keep it quiet.
+
+``--next-morning``: an aggregator's daily run. The same season cut after N and after N + 1
+owner nights (one simulation); the fleet is fitted on the first cut, then on the second with
+the first run's FLEET as ``--previous`` (each household's IMP nights unchanged: its IMP fit
+carried over, its season search warm-started) — the figures of that second run, and the
+season model's values against a full fit of the same second cut (median and largest relative
+difference).
 """
 
 from __future__ import annotations
@@ -29,8 +36,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import pandas as pd  # noqa: E402
 
 
-def make_input(n: int, owner_nights: int, seed: int, data: Path) -> Path:
-    """One NIGHTS CSV per household under ``data`` (reused when complete)."""
+def make_input(n: int, owner_nights: int, seed: int, data: Path, simulated: int | None = None
+               ) -> Path:
+    """One NIGHTS CSV per household under ``data`` (reused when complete); the season
+    simulated long enough for ``simulated`` owner nights (default ``owner_nights``), so that
+    two cuts can come from one simulation."""
     import math
     from dataclasses import replace
 
@@ -42,14 +52,16 @@ def make_input(n: int, owner_nights: int, seed: int, data: Path) -> Path:
     from impctl.population.imp_run.season_nights import household_nights
     from impctl.population.realism import sample_params
 
-    target = data / f"season-{n}-{owner_nights}-{seed}"
+    simulated = simulated or owner_nights
+    target = data / (f"season-{n}-{owner_nights}-{seed}" if simulated == owner_nights
+                     else f"season-{n}-{owner_nights}-of-{simulated}-{seed}")
     if target.is_dir() and len(list(target.glob("*.csv"))) == n:
         return target
     target.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     houses, params = sample_households(n, seed=seed), sample_params(n, seed)
     # enough nights for N plain owner nights after the campaign's alternate nights
-    nights = max(40, 2 * owner_nights + 24)
+    nights = max(40, 2 * simulated + 24)
     season = simulate_season(houses, params, SeasonConfig(nights=nights), seed=seed)
     for h in range(n):
         end = cutoff(season, h, owner_nights)
@@ -62,15 +74,16 @@ def make_input(n: int, owner_nights: int, seed: int, data: Path) -> Path:
     return target
 
 
-def run(data: Path, workers: int, work: Path) -> float:
+def run(data: Path, workers: int, work: Path, previous: Path | None = None
+        ) -> tuple[float, Path]:
     """Fit the fleet on ``workers`` local worker processes (``bench/fleet.py``'s run, which
     prints the throughput and CPU figures); print the season's and memory figures;
-    households/s."""
+    (households/s, FLEET)."""
     from fleet import run_fleet  # bench/fleet.py
 
     from impctl.fleet.run import DEFAULT_BATCH
 
-    wall, out = run_fleet(data, workers, DEFAULT_BATCH, work)
+    wall, out = run_fleet(data, workers, DEFAULT_BATCH, work, previous)
     fleet = pd.read_parquet(out)
     rate = len(fleet) / wall
     rss = fleet.groupby("worker")["worker_rss_mb"].max()
@@ -81,7 +94,40 @@ def run(data: Path, workers: int, work: Path) -> float:
           f"{fleet['season_owner_nights'].median():.0f} owner nights used); resident memory per "
           f"worker after its batches, largest [MB]: {', '.join(f'{v:.0f}' for v in rss)}",
           flush=True)
-    return rate
+    if previous is not None:
+        print(f"  IMP fit carried over for {int(fleet['imp_fit_reused'].sum())}, season "
+              f"search warm-started for {int(fleet['season_warm_start'].fillna(False).sum())} "
+              f"of {len(fleet)}", flush=True)
+    return rate, out
+
+
+def next_morning(args) -> None:
+    """``--next-morning`` (module docstring)."""
+    import numpy as np
+
+    n, k = args.households, args.owner_nights
+    before = make_input(n, k, args.seed, args.data, simulated=k + 1)
+    after = make_input(n, k + 1, args.seed, args.data, simulated=k + 1)
+    w = max(int(x) for x in args.workers.split(","))
+    with tempfile.TemporaryDirectory(prefix="impctl-fleet-season-") as tmp:
+        print(f"yesterday ({k} owner nights), a full run:")
+        _, first = run(before, w, Path(tmp))
+        print(f"today ({k + 1} owner nights), the full run for comparison:")
+        full_rate, full = run(after, w, Path(tmp))
+        print("today, --previous yesterday's FLEET:")
+        rate, warm = run(after, w, Path(tmp), previous=first)
+        a = pd.read_parquet(full).set_index("household")
+        b = pd.read_parquet(warm).set_index("household").loc[a.index]
+        for q in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
+            rel = (b[f"season_{q}"] / a[f"season_{q}"] - 1).abs().dropna()
+            print(f"  season {q}: the morning run against the full run: median "
+                  f"{100 * rel.median():.3f} %, largest {100 * rel.max():.2f} % "
+                  f"({int((rel > 0.01).sum())} of {len(rel)} differ by more than 1 %)")
+        same = all(np.allclose(a[c].astype(float), b[c].astype(float), equal_nan=True)
+                   for c in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"))
+        print(f"  the IMP fit's HLC, τ, C_m the same as the full run's: {same}")
+    print(f"10,000 such households every morning at {rate:.2f} households/s ({w} workers): "
+          f"{10_000 / rate / 60:.1f} min (a full run: {10_000 / full_rate / 60:.1f} min)")
 
 
 def main() -> None:
@@ -91,14 +137,19 @@ def main() -> None:
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--seed", type=int, default=31)
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
+    ap.add_argument("--next-morning", action="store_true",
+                    help="the daily run with --previous (module docstring)")
     args = ap.parse_args()
     print(f"command: python bench/fleet_season.py {' '.join(sys.argv[1:])}")
     print(f"machine: {os.uname().machine}, {os.cpu_count()} cores")
+    if args.next_morning:
+        next_morning(args)
+        return
     data = make_input(args.households, args.owner_nights, args.seed, args.data)
     rates = {}
     with tempfile.TemporaryDirectory(prefix="impctl-fleet-season-") as tmp:
         for w in [int(x) for x in args.workers.split(",")]:
-            rates[w] = run(data, w, Path(tmp))
+            rates[w] = run(data, w, Path(tmp))[0]
     best = max(rates, key=lambda w: rates[w])
     print(f"10,000 such households at {rates[best]:.2f} households/s ({best} workers): "
           f"{10_000 / rates[best] / 60:.1f} min")

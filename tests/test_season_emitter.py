@@ -146,3 +146,18 @@ def test_impctl_fits_season_job_passes_the_declared_emitter_to_its_child(winter_
     block, _ = _SeasonJob(nights, "radiators").result()
     assert block["emitter"]["source"] == "declared" and block["emitter"]["kind"] == "radiators"
     assert block["emitter"]["water_reads"] == "underfloor"
+
+
+def test_a_warm_start_from_a_screed_on_a_radiator_house_runs_the_full_search():
+    nights = _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3, 5, 6])
+    cold, _ = fit_nights(nights)
+    assert cold.emitter == "radiators" and not cold.warm_start
+    same, _ = fit_nights(nights, start=cold.theta)   # the fit it starts from read radiators
+    assert same.warm_start and same.emitter == "radiators"
+    screed = (cold.theta[0], cold.theta[1], 4.0 * 3600, *cold.theta[3:])
+    assert screed[2] > 1.5 * 3600 and screed[2] <= TAU_E_MAX_UNDERFLOOR_S
+    moved, _ = fit_nights(nights, start=screed)
+    # the water reads radiators where the start's fit read a screed: not a morning's step
+    assert not moved.warm_start and moved.emitter == "radiators"
+    assert moved.theta == cold.theta
+    assert moved.values["hlc_w_per_k"] == cold.values["hlc_w_per_k"]

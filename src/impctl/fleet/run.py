@@ -42,7 +42,8 @@ DEFAULT_BATCH = 16
 
 @dataclass
 class FleetRun:
-    """What a run did: households found / skipped (resume) / fitted per status, wall time [s]."""
+    """What a run did: households found / skipped (resume) / fitted per status, wall time [s],
+    households whose IMP fit was carried over from ``previous``."""
 
     found: int = 0
     skipped: int = 0
@@ -50,6 +51,7 @@ class FleetRun:
                                                              "error": 0})
     wall_s: float = 0.0
     workers: int = 0
+    reused: int = 0   # households whose IMP fit came from ``previous``
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -201,6 +203,16 @@ def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
         status = f" ({old.status(out).split(' (')[0]})" if old is not None else ""
         raise InputError(f"exists{status}: pass --resume to continue it, or remove it first",
                          out)
+    import pyarrow.parquet as pq
+
+    from .table import SCHEMA
+
+    part = next(out.glob("part-*.parquet"), None)
+    if part is not None and pq.read_schema(part).names != SCHEMA.names:
+        # parts of two layouts in one dataset: a reader takes one layout and drops or
+        # empties the other's columns
+        raise InputError("was written by another impctl version (its columns differ): give a "
+                         "new --out", out)
 
 
 def fit_fleet(
@@ -213,6 +225,7 @@ def fit_fleet(
     tz: str = "Europe/Ljubljana",
     options: FitOptions | None = None,
     resume: bool = False,
+    previous: str | Path | None = None,
     batch_size: int = DEFAULT_BATCH,
     progress: bool = True,
     echo: Callable[[str], None] = print,
@@ -224,15 +237,17 @@ def fit_fleet(
     its defaults; a night gain declared for every household among them). ``client``: an
     existing ``distributed.Client`` to run on (left open), instead of ``scheduler`` or a local
     cluster. ``out/_manifest.json`` says how many households are expected and how many have a
-    row (:mod:`.manifest`), after every batch.
+    row (:mod:`.manifest`), after every batch. ``previous``: the last run's FLEET dataset — a
+    household whose IMP nights are unchanged keeps its IMP fit from there and its season search
+    starts where that run's ended (:mod:`.previous`).
 
     Raises
     ------
     InputError
         Unreadable INPUT, ``out`` overlapping it, ``out`` already there without ``resume`` (or
         not a FLEET dataset, or fitted from another input or with other options), unusable
-        ``model_dir``, a malformed or unreachable scheduler. Households with bad data are
-        rows, not errors.
+        ``model_dir``, a malformed or unreachable scheduler, a ``previous`` that is not a
+        FLEET dataset (or is ``out``). Households with bad data are rows, not errors.
     KeyboardInterrupt
         Ctrl-C: the batches written stay, the manifest says "partial" (a line says how to
         resume).
@@ -242,6 +257,9 @@ def fit_fleet(
     options = options if options is not None else FitOptions()
     if scheduler:
         check_scheduler(scheduler)
+    if previous is not None and Path(previous).resolve() == out.resolve():
+        raise InputError("is --out itself: give the last run's FLEET dataset and a new --out",
+                         previous, "--previous")
     check_places(input_path, out)
     _check_out(out, input_path, resume)
     if batch_size < 1:
@@ -252,11 +270,19 @@ def fit_fleet(
     todo = [s for s in sources if s.household not in done]
     run.skipped = len(sources) - len(todo)
     resolved, note = resolve_models(model_dir)
-    manifest = _start_manifest(out, input_path, sources, done,
-                               {**options.as_dict(), "tz": tz, "model_dir": resolved}, resume)
+    decided = {**options.as_dict(), "tz": tz, "model_dir": resolved}
+    manifest = _start_manifest(out, input_path, sources, done, decided, resume)
     if note:
         run.notes.append(note)
         echo(f"note: {note}")
+    last: dict[str, dict] = {}
+    if previous is not None:
+        from .previous import previous_rows
+        from .table import version
+
+        last, said = previous_rows(previous, decided, version())
+        run.notes.append(said)
+        echo(f"note: {said}")
     if run.skipped:
         echo(f"resume: {run.skipped} of {len(sources)} households already in {out}")
     if not todo:
@@ -277,7 +303,9 @@ def fit_fleet(
         # A small fleet is cut finer, so that every worker gets about two batches.
         size = max(1, min(batch_size, -(-len(todo) // (2 * max(1, run.workers)))))
         batches = _chunks(todo, size)
-        futures = [client.submit(fit_batch, b, settings, pure=False,
+        futures = [client.submit(fit_batch, b, settings,
+                                 {s.household: last[s.household] for s in b
+                                  if s.household in last} or None, pure=False,
                                  key=f"impctl-fleet-{run_id}-{i}", priority=-i)
                    for i, b in enumerate(batches)]
         index = {f.key: i for i, f in enumerate(futures)}
@@ -323,6 +351,7 @@ def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
             write_manifest(out, manifest)
             for row in rows:
                 run.counts[row["status"]] = run.counts.get(row["status"], 0) + 1
+                run.reused += bool(row.get("imp_fit_reused"))
             future.release()
             bar.set_postfix(ok=run.counts["ok"], insufficient=run.counts["insufficient"],
                             failed=run.counts["error"], refresh=False)

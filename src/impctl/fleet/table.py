@@ -24,7 +24,12 @@ switch-off terms ``night_gain_w, emitter_tau_h, furniture_j_per_m2k`` each with 
 ``season_hlc_w_per_k, season_tau_h, season_c_m_j_per_k`` each with ``_low``, ``_high`` (the
 season model of the owner and IMP nights together, :mod:`impctl.season`; empty without owner
 nights), ``season_owner_nights``, ``season_signature_hlc_w_per_k`` (its baseline),
-``season_note`` (why it did not run);
+``season_note`` (why it did not run); ``season_tau_mm_s, season_w, season_tau_e_s,
+season_f_sun, season_tau_r_s`` (its nonlinear parameters, where a later run's search starts) and
+``season_warm_start`` (this run's search started there);
+``imp_nights_digest`` (a digest of the household's IMP nights) and ``imp_fit_reused`` (the IMP
+fit's columns were carried over from ``--previous``: the same IMP nights, options and impctl
+version);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and
@@ -75,6 +80,13 @@ for _col in SEASON_COLUMNS:
                 (f"{_col}_high", pa.float64())]
 _FIELDS += [("season_owner_nights", pa.int32()),
             ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string())]
+#: The season model's nonlinear parameters (:data:`impctl.season.projection.columns.THETA`):
+#: where the next run's search starts (``--previous``).
+THETA_COLUMNS = ("season_tau_mm_s", "season_w", "season_tau_e_s", "season_f_sun",
+                 "season_tau_r_s")
+_FIELDS += [(c, pa.float64()) for c in THETA_COLUMNS]
+_FIELDS += [("season_warm_start", pa.bool_()), ("imp_nights_digest", pa.string()),
+            ("imp_fit_reused", pa.bool_())]
 _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
             ("eps_pct", pa.float64()), ("batch_size", pa.int32()),
@@ -84,6 +96,12 @@ _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("fitted_at", pa.timestamp("s", tz="UTC"))]
 SCHEMA = pa.schema(_FIELDS)
 COLUMNS = tuple(SCHEMA.names)
+#: What a run measures of itself (its batch, its worker, when) and of the season model, which
+#: every run fits again: the columns a row does not carry over from ``--previous``.
+_OWN = {"household", "batch_size", "wall_s_per_household", "cpu_s_per_household", "worker",
+        "worker_rss_mb", "impctl_version", "fitted_at", "imp_fit_reused"}
+#: The IMP fit's columns, the same for the same IMP nights (:mod:`.previous`).
+CARRIED_COLUMNS = tuple(c for c in COLUMNS if c not in _OWN and not c.startswith("season_"))
 
 
 def empty_row(household: str) -> dict:
@@ -93,11 +111,13 @@ def empty_row(household: str) -> dict:
     return row
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+def version() -> str:
+    """impctl's version as the FLEET rows record it."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
 
     try:
-        return version("impctl")
+        return installed("impctl")
     except PackageNotFoundError:
         return "unknown"
 
@@ -107,7 +127,7 @@ def to_table(rows: list[dict]) -> pa.Table:
     import datetime as dt
 
     now = dt.datetime.now(dt.UTC).replace(microsecond=0)
-    version = _version()
+    written_by = version()
     cols = {name: [] for name in COLUMNS}
     for row in rows:
         for name in COLUMNS:
@@ -115,7 +135,7 @@ def to_table(rows: list[dict]) -> pa.Table:
             if isinstance(v, float) and v != v:  # NaN → null
                 v = None
             cols[name].append(v)
-        cols["impctl_version"][-1] = cols["impctl_version"][-1] or version
+        cols["impctl_version"][-1] = cols["impctl_version"][-1] or written_by
         cols["fitted_at"][-1] = cols["fitted_at"][-1] or now
     return pa.table({n: pa.array(cols[n], type=SCHEMA.field(n).type) for n in COLUMNS},
                     schema=SCHEMA)

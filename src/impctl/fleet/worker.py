@@ -109,9 +109,15 @@ _NEEDS = {"constrained": "no usable constrained night (it carries τ)",
           "normal": "no usable normal night with heat power (it carries HLC and C_m)"}
 
 
-def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
-    """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household."""
+def fit_batch(sources: list[Source], settings: Settings,
+              previous: dict[str, dict] | None = None) -> list[dict]:
+    """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household.
+    ``previous``: the last run's rows of households of this batch (:mod:`.previous`) — where a
+    household's IMP nights are unchanged, its IMP columns are carried over and its season
+    search starts where that run's ended."""
     from ..fit.household import choose_nights
+    from ..imp.night import split_owner
+    from .previous import carry_over, imp_digest, theta_start
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
@@ -128,6 +134,13 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
             row.update(status="error", reason=getattr(nights, "reason", "unreadable input"),
                        error=str(nights))
             continue
+        digest = imp_digest(split_owner(nights)[0])
+        last = (previous or {}).get(household)
+        if last is not None and last.get("imp_nights_digest") == digest:
+            carry_over(row, last)
+            _season(row, nights, theta_start(last))
+            continue
+        row.update(imp_nights_digest=digest, imp_fit_reused=False)
         _season(row, nights)
         chosen = choose_nights(nights, settings.options.max_nights)
         row.update(nights_used=len(chosen.chosen),
@@ -162,16 +175,20 @@ def fit_batch(sources: list[Source], settings: Settings) -> list[dict]:
     return [rows[s.household] for s in sources]
 
 
-def _season(row: dict, nights: list) -> None:
-    """The season model's columns of a household with owner nights (empty without)."""
+def _season(row: dict, nights: list, start: tuple | None = None) -> None:
+    """The season model's columns of a household with owner nights (empty without); its search
+    only from ``start`` (θ of the last run's fit) when given."""
     import math
 
     from ..season.fit import fit_nights
+    from .table import THETA_COLUMNS
 
-    fit, note = fit_nights(nights)
+    fit, note = fit_nights(nights, start=start)
     row["season_note"] = note
     if fit is None:
         return
+    row["season_warm_start"] = fit.warm_start
+    row.update(zip(THETA_COLUMNS, fit.theta, strict=True))
     for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
         row[f"season_{k}"] = fit.values[k]
         row[f"season_{k}_low"], row[f"season_{k}_high"] = fit.low[k], fit.high[k]

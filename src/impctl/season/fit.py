@@ -83,6 +83,8 @@ class SeasonFit:
         heating water (:mod:`.emitter`); None when neither tells it
     water_excess_k : the water's excess over the room at the reference load [K] (NaN: unknown)
     emitter_declared : True when the emitter was declared (known), not read from the water
+    warm_start : the search started only from an earlier fit's θ (``start``); False when it
+        ran in full, also when a start was given and the full search had to decide
     """
 
     values: dict[str, float]
@@ -101,6 +103,7 @@ class SeasonFit:
     emitter: str | None = None
     water_excess_k: float = float("nan")
     emitter_declared: bool = False
+    warm_start: bool = False
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -210,11 +213,12 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
         first = tau_e_max_s("radiators" if water_recorded(rec) else None)
+        screed_start = False
         if emitter is not None:
             first = tau_e_max_s(emitter)
         elif start is not None and water_recorded(rec) and start[2] > first:
             # an earlier fit of this house read a screed: one search under its bound
-            first = tau_e_max_s("underfloor")
+            first, screed_start = tau_e_max_s("underfloor"), True
         bounds = bounds_for(first)
         theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
         b = beta_dict(pr)
@@ -222,6 +226,13 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
                   else float("nan"))
         kind = emitter if emitter is not None else emitter_kind(excess)
+        if screed_start and tau_e_max_s(kind) != first:
+            # The water, scaled by this fit's HLC, now reads radiators where the fit it
+            # started from read a screed. A fit without a start reads the water at the
+            # radiators' HLC and may read a screed again: searching on under the radiators'
+            # bound from here kept a cost ten times the full search's (a research household
+            # of bench/fleet_season.py --next-morning: HLC −34 %). The full search decides.
+            return fit_season(rec, calibrated, None, max_nfev, emitter)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
             theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds)
@@ -251,7 +262,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
-                     emitter_declared=emitter is not None)
+                     emitter_declared=emitter is not None, warm_start=start is not None)
 
 
 def signature(rec: SeasonRecord) -> float:

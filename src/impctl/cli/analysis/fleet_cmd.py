@@ -45,6 +45,11 @@ def fleet() -> None:
 @click.option("--resume", is_flag=True,
               help="Continue an interrupted run: skip households already in --out (same "
                    "INPUT and options).")
+@click.option("--previous", type=click.Path(path_type=Path), default=None,
+              help="The last run's FLEET.parquet: a household whose IMP nights are unchanged "
+                   "(same options and impctl version) keeps its IMP fit from there, and its "
+                   "season model starts where that run's ended — a morning's run costs a "
+                   "fraction of a full one.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               default=None, help="Also write the fleet report (HTML + PNG) into this folder.")
 @click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True,
@@ -63,7 +68,7 @@ def fleet() -> None:
 @instrument_options
 def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: str | None,
               workers: int | None, tz: str, timestamps: str, max_nights: int, resume: bool,
-              report_dir: Path | None, batch_size: int, quiet: bool,
+              previous: Path | None, report_dir: Path | None, batch_size: int, quiet: bool,
               night_gain_w: float | None, night_gain_sd_w: float | None,
               t_air_offset_sd_k: float | None, t_out_offset_sd_k: float | None,
               meter_error: float | None) -> None:
@@ -87,13 +92,15 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                          night_gain_sd_w=night_gain_sd_w, t_air_offset_sd_k=t_air_offset_sd_k,
                          t_out_offset_sd_k=t_out_offset_sd_k, meter_error=meter_error)
     run = fit_fleet(input_path, out, model_dir=model_dir, scheduler=scheduler, workers=workers,
-                    tz=tz, options=options, resume=resume, batch_size=batch_size,
+                    tz=tz, options=options, resume=resume, previous=previous,
+                    batch_size=batch_size,
                     progress=not quiet, echo=click.echo)
     rate = run.fitted / run.wall_s if run.wall_s > 0 else 0.0
     c = run.counts
+    reused = f", {run.reused} with their IMP fit from --previous" if previous else ""
     click.echo(f"{run.found} households: {run.fitted} fitted now ({c['ok']} ok, "
-               f"{c['insufficient']} insufficient, {c['error']} error), {run.skipped} already "
-               f"in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
+               f"{c['insufficient']} insufficient, {c['error']} error{reused}), {run.skipped} "
+               f"already in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
                f"{run.workers} workers")
     if report_dir is not None:
         from ...fleet.report import write_fleet_report

@@ -66,11 +66,14 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
     curve_s = time.perf_counter() - began - fit_s
     click.echo("\n".join(format_season(fit) + format_convergence(curve)))
     click.echo(f"fitted in {fit_s:.2f} s"
-               + (f" (the search started from {warm_path})" if start is not None else "")
+               + (f" (the search started from {warm_path})" if fit.warm_start else
+                  f" (a full search: the water read another emitter than {warm_path}'s)"
+                  if start is not None else "")
                + (f", against owner nights in {curve_s:.2f} s" if curve else ""))
     if json_path is not None:
         block = fit.as_dict()
-        block["search"] = {"warm_start": start is not None, "time_s": round(fit_s, 3),
+        block["search"] = {"warm_start": fit.warm_start, "start_given": start is not None,
+                           "time_s": round(fit_s, 3),
                            "convergence_time_s": round(curve_s, 3)}
         _write_json(json_path, {"season": block})
         click.echo(f"JSON written to {json_path}")

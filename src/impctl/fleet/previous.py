@@ -1,0 +1,90 @@
+"""The last run's FLEET as a start: a household's IMP fit carried over, its season search warm.
+
+An aggregator fits its fleet every morning, and between two mornings most households gained an
+owner night and no IMP night: their IMP fit — most of a row's cost, with the classes — would
+come out the same. Given the last run's FLEET dataset (``impctl fleet fit --previous``), a
+household whose IMP nights are the same (:func:`imp_digest`), fitted with the same options,
+classifiers and impctl version, keeps that run's IMP columns (``imp_fit_reused``), and its
+season model starts its search only where that run's ended (``season_warm_start``), as the
+daemon's morning refit does (:func:`impctl.season.fit.fit_nights`). A household with a new or
+changed IMP night, or one the last run did not fit, is fitted afresh, the full search included.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .manifest import read_manifest
+from .table import CARRIED_COLUMNS, THETA_COLUMNS
+
+#: Statuses whose IMP columns are carried over: what the same nights give again. An
+#: ``error`` row is fitted afresh (a lost worker or an unreadable file may have been passing).
+CARRIED_STATUSES = ("ok", "insufficient")
+
+
+def imp_digest(nights) -> str:
+    """A digest of the IMP nights (:class:`~impctl.imp.night.NightSamples`, every field and
+    every sample): equal digests, the same input to the IMP fit."""
+    h = hashlib.blake2b(digest_size=16)
+    for n in nights:
+        for f in dataclasses.fields(n):
+            v = getattr(n, f.name)
+            h.update(f.name.encode())
+            if isinstance(v, np.ndarray):
+                a = np.ascontiguousarray(v)
+                h.update(str(a.dtype).encode() + str(a.shape).encode())
+                h.update(a.tobytes())
+            else:
+                h.update(repr(v).encode())
+    return h.hexdigest()
+
+
+def previous_rows(path: str | Path, options: dict, version: str) -> tuple[dict[str, dict], str]:
+    """The rows of the FLEET dataset ``path`` a run with ``options`` (the manifest's: fit
+    options, time zone, classifiers) and impctl ``version`` can start from, by household, and a
+    line saying how many. InputError when ``path`` is not a FLEET dataset."""
+    import pyarrow.dataset as ds
+
+    path = Path(path)
+    manifest = read_manifest(path) if path.is_dir() else None
+    if manifest is None or not any(path.glob("part-*.parquet")):
+        raise InputError("is not a FLEET dataset (no manifest or no parts); give the folder "
+                         "an earlier impctl fleet fit wrote", path, "--previous")
+    changed = sorted(k for k in {*options, *manifest.options}
+                     if options.get(k) != manifest.options.get(k))
+    if changed:
+        return {}, (f"--previous was fitted with other options ({', '.join(changed)}): every "
+                    "household is fitted afresh")
+    dataset = ds.dataset(path, format="parquet")
+    if "imp_nights_digest" not in dataset.schema.names:
+        return {}, ("--previous was written by an impctl that did not keep the IMP nights' "
+                    "digest: every household is fitted afresh")
+    rows = dataset.to_table().to_pylist()
+    kept = {r["household"]: r for r in rows
+            if r.get("impctl_version") == version and r.get("imp_nights_digest")
+            and r.get("status") in CARRIED_STATUSES}
+    return kept, (f"--previous: {len(kept)} of {len(rows)} households can keep their IMP fit "
+                  "where their IMP nights are unchanged")
+
+
+def carry_over(row: dict, previous: dict) -> None:
+    """``row`` takes the IMP fit's columns of ``previous`` (its row of the last run)."""
+    for col in CARRIED_COLUMNS:
+        row[col] = previous.get(col)
+    row["imp_fit_reused"] = True
+
+
+def theta_start(previous: dict | None) -> tuple[float, ...] | None:
+    """The season search's start from a previous row (None where it had no season fit)."""
+    if previous is None:
+        return None
+    theta = tuple(previous.get(c) for c in THETA_COLUMNS)
+    if any(v is None or not (math.isfinite(v) and v > 0) for v in theta):
+        return None
+    return theta  # type: ignore[return-value]

@@ -1,0 +1,127 @@
+"""``impctl fleet fit --previous``: the next morning's run of a fleet starts from the last one.
+
+The run's short realistic winter (``winter_season``: two households, the IMP campaign and the
+owner's nights between). Yesterday's run sees every night but the last owner night; today's
+sees them all — household 0 with the same IMP nights (its IMP fit is carried over, its season
+search starts where yesterday's ended), household 1 with one IMP night fewer (fitted afresh).
+Real parts: a local Dask cluster of one worker process, Parquet datasets on disk.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from cli_fixtures import run_impctl
+
+from impctl.errors import InputError
+from impctl.fit.household import FitOptions
+from impctl.fleet import fit_fleet, read_fleet
+from impctl.fleet.table import CARRIED_COLUMNS, THETA_COLUMNS
+from impctl.imp.nights_csv import read_nights, write_nights
+from impctl.population.imp_run.season_nights import household_nights
+from impctl.season.fit import fit_nights
+
+TZ = "Europe/Ljubljana"
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as c:
+        yield c
+
+
+def _last_owner(nights):
+    return max((n for n in nights if n.kind == "owner"), key=lambda n: n.start)
+
+
+@pytest.fixture(scope="module")
+def mornings(tmp_path_factory, winter_season, client):
+    root = tmp_path_factory.mktemp("mornings")
+    yesterday, today = root / "yesterday", root / "today"
+    yesterday.mkdir()
+    today.mkdir()
+    for i in range(2):
+        nights = household_nights(winter_season, i)
+        last = _last_owner(nights)
+        write_nights([n for n in nights if n is not last], yesterday / f"house-{i}.csv")
+        if i == 1:   # an IMP night less: its IMP fit must be done again
+            imp = [n for n in nights if n.kind == "normal"]
+            nights = [n for n in nights if n is not imp[-1]]
+        write_nights(nights, today / f"house-{i}.csv")
+    first = fit_fleet(yesterday, root / "F1.parquet", client=client, progress=False,
+                      echo=lambda _: None)
+    said: list[str] = []
+    second = fit_fleet(today, root / "F2.parquet", client=client, progress=False,
+                       previous=root / "F1.parquet", echo=said.append)
+    return root, first, second, said
+
+
+def _rows(path):
+    return read_fleet(path).set_index("household")
+
+
+def test_an_unchanged_household_keeps_its_imp_fit_and_warm_starts_its_season(mornings):
+    root, first, second, said = mornings
+    f1, f2 = _rows(root / "F1.parquet"), _rows(root / "F2.parquet")
+    assert first.reused == 0 and not f1["imp_fit_reused"].any()
+    assert (f1["status"] == "ok").all() and np.isfinite(f1[list(THETA_COLUMNS)].to_numpy()).all()
+    assert second.reused == 1 and any("2 of 2 households" in s for s in said)
+    a, b = f1.loc["house-0"], f2.loc["house-0"]
+    assert bool(b["imp_fit_reused"]) and bool(b["season_warm_start"])
+    for col in CARRIED_COLUMNS:   # the IMP fit as yesterday's, column by column
+        assert (a[col] == b[col]) or (a[col] != a[col] and b[col] != b[col]), col
+    # the season model saw the new owner night: one more than yesterday, and where a full
+    # search on today's nights ends
+    assert b["season_owner_nights"] == a["season_owner_nights"] + 1
+    cold, _ = fit_nights(read_nights(root / "today" / "house-0.csv", TZ))
+    assert b["season_owner_nights"] == cold.owner_nights
+    for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
+        assert b[f"season_{k}"] == pytest.approx(cold.values[k], rel=0.01)
+
+
+def test_a_household_with_a_changed_imp_night_is_fitted_afresh(mornings):
+    root, *_ = mornings
+    f1, f2 = _rows(root / "F1.parquet"), _rows(root / "F2.parquet")
+    a, b = f1.loc["house-1"], f2.loc["house-1"]
+    assert b["status"] == "ok" and not bool(b["imp_fit_reused"])
+    assert not bool(b["season_warm_start"])
+    assert b["imp_nights_digest"] != a["imp_nights_digest"]
+    assert b["nights_normal"] == a["nights_normal"] - 1
+
+
+def test_a_previous_run_with_other_options_is_not_used(mornings, client):
+    root, *_ = mornings
+    said: list[str] = []
+    run = fit_fleet(root / "today", root / "F3.parquet", client=client, progress=False,
+                    previous=root / "F1.parquet", options=FitOptions(night_gain_w=120.0),
+                    echo=said.append)
+    assert run.reused == 0 and any("other options (night_gain_w)" in s for s in said)
+    assert not _rows(root / "F3.parquet")["imp_fit_reused"].any()
+
+
+def test_a_previous_that_is_not_a_fleet_or_is_out_is_one_line_and_exit_2(mornings, tmp_path):
+    root, *_ = mornings
+    (tmp_path / "junk").mkdir()
+    res = run_impctl("fleet", "fit", str(root / "today"), "--out", str(tmp_path / "F.parquet"),
+                     "--previous", str(tmp_path / "junk"), "--quiet")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert "junk" in res.stderr and "not a FLEET dataset" in res.stderr
+    res = run_impctl("fleet", "fit", str(root / "today"), "--out", str(root / "F1.parquet"),
+                     "--previous", str(root / "F1.parquet"), "--resume", "--quiet")
+    assert res.returncode == 2 and "is --out itself" in res.stderr
+    assert not (tmp_path / "F.parquet").exists()
+
+
+def test_resuming_a_dataset_of_other_columns_is_refused(mornings, tmp_path):
+    root, *_ = mornings
+    out = tmp_path / "OLD.parquet"
+    out.mkdir()
+    old = pq.read_table(next((root / "F1.parquet").glob("part-*.parquet")))
+    pq.write_table(old.drop(["imp_nights_digest"]), out / "part-0000-000000.parquet")
+    with pytest.raises(InputError, match="another impctl version"):
+        fit_fleet(root / "yesterday", out, resume=True, progress=False, echo=lambda _: None)
+    assert len(list(out.iterdir())) == 1   # nothing written
