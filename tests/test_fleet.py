@@ -238,3 +238,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, fleet_dir):
                          "--model-dir", str(tmp_path))
     assert bad_models.returncode == 2 and "no trained models" in bad_models.stderr
     assert not (tmp_path / "F").exists()
+
+
+def test_a_parquet_file_with_empty_string_cells_reads_as_the_csv(tmp_path, nights):
+    """Null cells of a Parquet file's text columns are the CSV's empty cells (pandas writes an
+    unset label as null): the same nights, not a label "None" or a night split at "nan"."""
+    from impctl.fleet.inputs import discover, read_sources
+
+    (tmp_path / "csv").mkdir()
+    (tmp_path / "pq").mkdir()
+    write_nights(nights[0], tmp_path / "csv" / "h.csv")
+    frame = _frame(nights[0])
+    frame["label"] = pd.Series([None] * len(frame), dtype=object)
+    frame.to_parquet(tmp_path / "pq" / "h.parquet")
+    assert pd.read_parquet(tmp_path / "pq" / "h.parquet")["label"].isna().all()
+    csv, pq = (read_sources(discover(tmp_path / d), "Europe/Ljubljana")["h"]
+               for d in ("csv", "pq"))
+    assert not isinstance(pq, Exception), pq
+    assert [(n.night_id, n.kind, n.label) for n in pq] == [
+        (n.night_id, n.kind, n.label) for n in csv]
+    assert all(n.label == "" for n in pq)

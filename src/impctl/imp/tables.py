@@ -194,7 +194,10 @@ def frame_table(
         out[col] = values
     for col in optional:
         if col in cols and col not in out.columns:
-            out[col] = frame[col].reset_index(drop=True).astype(str).str.strip()
+            # a null cell is the CSV's empty one (pandas reads Parquet strings as a string
+            # type whose nulls stay NaN through astype(str): "nan" ≠ "nan" would split nights)
+            text = frame[col].reset_index(drop=True).astype(object)
+            out[col] = text.where(text.notna(), "").astype(str).str.strip().astype(object)
     return out
 
 
