@@ -16,6 +16,7 @@ reading that meter can do better than — the rest of the error is the model's.
     python bench/season.py --households 40 --variant signed
     python bench/season.py --households 100 --imp constrained   # a campaign without normal nights
     python bench/season.py --households 100 --constrained-hours 3   # shorter constrained nights
+    python bench/season.py --households 200 --declared-emitter   # the installer declares it
     python bench/season.py --calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 \
         --nights 90   # the intervals' scale and floor
     python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
@@ -65,6 +66,8 @@ from benchlib.season_figure import (  # noqa: E402
 
 _SEASON = None
 _HOUSES = None
+#: per household the emitter its installer declares (``--declared-emitter``), else None
+_DECLARED: list | None = None
 _RAW = False
 _P_HOUSE = False
 _IMP = "all"
@@ -115,7 +118,7 @@ def _fit(job: tuple[int, int]) -> dict:
             return {**row, "status": str(exc)}
         row["se"] = {k: math.log(fit.high[k] / fit.values[k]) / Z95 for k in LUMPED}
     else:
-        fit, note = fit_nights(nights)
+        fit, note = fit_nights(nights, emitter=None if _DECLARED is None else _DECLARED[h])
     row["fit_s"] = time.perf_counter() - t0
     if fit is None:
         return {**row, "status": note or "no fit"}
@@ -237,6 +240,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--constrained-hours", type=float, default=None, metavar="H",
                     help="end every constrained night H hours after its switch-off (the rows "
                          "after it left out): does a shorter night still give τ?")
+    ap.add_argument("--declared-emitter", action="store_true",
+                    help="every house's emitter declared, as an installer declares it "
+                         "([fit] emitter): the plant's own kind")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     ap.add_argument("--figure", default=None,
@@ -278,7 +284,7 @@ def _draw(summary: list[dict], run_args: dict, path: str) -> None:
 
 def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     """Simulate, fit, print the table; the JSON and the figure when asked."""
-    global _SEASON, _HOUSES, _RAW, _P_HOUSE, _IMP, _CONSTRAINED_H
+    global _SEASON, _HOUSES, _RAW, _P_HOUSE, _IMP, _CONSTRAINED_H, _DECLARED
     import impctl.season.fit  # noqa: F401  (loaded once, before the workers fork)
     from impctl.population.households import sample_households
     from impctl.population.imp_run.season import SeasonConfig, simulate_season
@@ -291,6 +297,11 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     n = args.households
     houses, params = sample_households(n, seed=args.seed), sample_params(n, args.seed)
     _HOUSES = houses
+    if args.declared_emitter:
+        from impctl.plant.params import RADIATORS
+
+        _DECLARED = ["radiators" if int(k) == RADIATORS else "underfloor"
+                     for k in np.broadcast_to(np.asarray(params.emitter.kind), (n,))]
     if args.variant == "signed":
         params = params.with_section("sensors", meter_positive_only=0)
     elif args.variant == "ideal":     # ISO 13790's 5R1C itself, the gains as on every plant
