@@ -9,6 +9,8 @@ Real parts: a local Dask cluster of one worker process, Parquet datasets on disk
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -48,9 +50,10 @@ def mornings(tmp_path_factory, winter_season, client):
         nights = household_nights(winter_season, i)
         last = _last_owner(nights)
         write_nights([n for n in nights if n is not last], yesterday / f"house-{i}.csv")
-        if i == 1:   # an IMP night less: its IMP fit must be done again
+        if i == 1:   # an IMP night less (its IMP fit done again), the emitter declared
             imp = [n for n in nights if n.kind == "normal"]
-            nights = [n for n in nights if n is not imp[-1]]
+            nights = [dataclasses.replace(n, emitter="underfloor") for n in nights
+                      if n is not imp[-1]]
         write_nights(nights, today / f"house-{i}.csv")
     first = fit_fleet(yesterday, root / "F1.parquet", client=client, progress=False,
                       echo=lambda _: None)
@@ -91,6 +94,9 @@ def test_a_household_with_a_changed_imp_night_is_fitted_afresh(mornings):
     assert not bool(b["season_warm_start"])
     assert b["imp_nights_digest"] != a["imp_nights_digest"]
     assert b["nights_normal"] == a["nights_normal"] - 1
+    # the file declares its emitter (known): the season model's bound is the installer's
+    assert (a["season_emitter"], a["season_emitter_source"]) == ("underfloor", "measured")
+    assert (b["season_emitter"], b["season_emitter_source"]) == ("underfloor", "declared")
 
 
 def test_a_previous_run_with_other_options_is_not_used(mornings, client):

@@ -8,12 +8,16 @@ houses) through the fit; ``impctl fit``'s emitter line and JSON: test_season.py.
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_fixtures import run_impctl
 
+from impctl.errors import InputError
 from impctl.imp.night import NightSamples
+from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
@@ -161,3 +165,49 @@ def test_a_warm_start_from_a_screed_on_a_radiator_house_runs_the_full_search():
     assert not moved.warm_start and moved.emitter == "radiators"
     assert moved.theta == cold.theta
     assert moved.values["hlc_w_per_k"] == cold.values["hlc_w_per_k"]
+
+
+def test_a_file_declares_the_emitter_and_the_season_model_takes_it(tmp_path):
+    nights = [dataclasses.replace(n, emitter="underfloor")
+              for n in _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3])]
+    path = write_nights(nights, tmp_path / "n.csv")
+    back = read_nights(path, TZ)
+    assert {n.emitter for n in back} == {"underfloor"}
+    fit, _ = fit_nights(back)
+    # known before measured: the installer's word, though the water reads radiators
+    assert fit.emitter == "underfloor" and fit.emitter_declared
+    assert fit.emitter_dict()["source"] == "declared"
+    assert fit.emitter_dict()["water_reads"] == "radiators"
+    undeclared, _ = fit_nights(read_nights(write_nights(_nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3]),
+                                                        tmp_path / "m.csv"), TZ))
+    assert undeclared.emitter == "radiators" and not undeclared.emitter_declared
+
+
+@pytest.mark.parametrize(("cells", "problem", "row"),
+                         [(("screed",), "'screed' is not one of radiators, underfloor", 2),
+                          (("radiators", "underfloor"), "'underfloor' after 'radiators'", 3)])
+def test_a_bad_or_second_emitter_in_a_file_is_one_line(tmp_path, cells, problem, row):
+    path = write_nights(_nights(45.0, 1.3, [-6, -3]), tmp_path / "n.csv")
+    frame = pd.read_csv(path)
+    frame["emitter"] = ""
+    for i, c in enumerate(cells):
+        frame.loc[i, "emitter"] = c
+    frame.to_csv(path, index=False)
+    with pytest.raises(InputError) as err:
+        read_nights(path, TZ)
+    assert problem in str(err.value) and f"row {row}" in str(err.value)
+    assert "column 'emitter'" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_command_line_and_the_file_must_agree_on_the_emitter(tmp_path):
+    nights = [dataclasses.replace(n, emitter="radiators")
+              for n in _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3])]
+    path = write_nights(nights, tmp_path / "n.csv")
+    res = run_impctl("season", "--nights", str(path), "--emitter", "underfloor")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    assert "--emitter underfloor, but the file's emitter column says radiators" in res.stderr
+    agreed = run_impctl("season", "--nights", str(path), "--emitter", "radiators", "--json",
+                        str(tmp_path / "s.json"))
+    assert agreed.returncode == 0, agreed.stderr
+    block = json.loads((tmp_path / "s.json").read_text())["season"]
+    assert block["emitter"]["source"] == "declared" and block["emitter"]["kind"] == "radiators"

@@ -169,6 +169,19 @@ def emitter_option(command: Callable) -> Callable:
     return click.option(
         "--emitter", type=click.Choice(EMITTER_KINDS), default=None,
         help="The heating's emitter, declared: radiators (the season model's emitter lag up to "
-             "1.5 h) or underfloor (up to 5 h; a house with both: underfloor). Not given: read "
-             "from the heating water (t_flow_c, t_return_c), else assumed (up to 3 h), said "
-             "so.")(command)
+             "1.5 h) or underfloor (up to 5 h; a house with both: underfloor). Not given: the "
+             "file's emitter column, else read from the heating water (t_flow_c, t_return_c), "
+             "else assumed (up to 3 h), said so.")(command)
+
+
+def agreed_emitter(option: str | None, nights: list, path) -> str | None:
+    """The declared emitter: ``--emitter``, else the file's ``emitter`` column; InputError
+    (one line) when both are given and differ — two declarations, and which is right is not
+    known."""
+    from ..imp.night import declared_emitter
+
+    in_file = declared_emitter(nights)
+    if option is not None and in_file is not None and option != in_file:
+        raise InputError(f"--emitter {option}, but the file's emitter column says {in_file}: "
+                         "give one", path)
+    return option if option is not None else in_file

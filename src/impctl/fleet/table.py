@@ -24,8 +24,11 @@ switch-off terms ``night_gain_w, emitter_tau_h, furniture_j_per_m2k`` each with 
 ``season_hlc_w_per_k, season_tau_h, season_c_m_j_per_k`` each with ``_low``, ``_high`` (the
 season model of the owner and IMP nights together, :mod:`impctl.season`; empty without owner
 nights), ``season_owner_nights``, ``season_signature_hlc_w_per_k`` (its baseline),
-``season_note`` (why it did not run); ``season_tau_mm_s, season_w, season_tau_e_s,
-season_f_sun, season_tau_r_s`` (its nonlinear parameters, where a later run's search starts) and
+``season_note`` (why it did not run); ``season_emitter`` (radiators | underfloor, empty when
+not known) and ``season_emitter_source`` (declared: the household's NIGHTS column
+``emitter`` | measured: the heating water | assumed); ``season_tau_mm_s, season_w,
+season_tau_e_s, season_f_sun, season_tau_r_s`` (its nonlinear parameters, where a later run's
+search starts) and
 ``season_warm_start`` (this run's search started there);
 ``imp_nights_digest`` (a digest of the household's IMP nights) and ``imp_fit_reused`` (the IMP
 fit's columns were carried over from ``--previous``: the same IMP nights, options and impctl
@@ -79,7 +82,8 @@ for _col in SEASON_COLUMNS:
     _FIELDS += [(_col, pa.float64()), (f"{_col}_low", pa.float64()),
                 (f"{_col}_high", pa.float64())]
 _FIELDS += [("season_owner_nights", pa.int32()),
-            ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string())]
+            ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string()),
+            ("season_emitter", pa.string()), ("season_emitter_source", pa.string())]
 #: The season model's nonlinear parameters (:data:`impctl.season.projection.columns.THETA`):
 #: where the next run's search starts (``--previous``).
 THETA_COLUMNS = ("season_tau_mm_s", "season_w", "season_tau_e_s", "season_f_sun",

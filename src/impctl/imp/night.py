@@ -80,6 +80,10 @@ class NightSamples:
         heat pump raised to T_max before a constrained night or held at the setpoint before a
         normal one; ``night_id`` and ``kind`` are the night's, ``start`` is the first row. Read
         by the season model, left out by the IMP fit (:func:`split_owner`). "" otherwise.
+    emitter : str
+        The house's emitter as its installer declares it (NIGHTS column ``emitter``:
+        "radiators" or "underfloor"), the same on every night of a file; "" when not
+        declared (:func:`declared_emitter`).
     """
 
     night_id: str
@@ -106,6 +110,7 @@ class NightSamples:
     defrost_share: np.ndarray | None = None
     label: str = ""
     phase: str = ""
+    emitter: str = ""
 
     @property
     def duration_h(self) -> float:
@@ -130,3 +135,15 @@ def split_owner(nights: list[NightSamples]) -> tuple[list[NightSamples], str | N
     notes = [*([f"{OWNER_NOTE} ({left})"] if left else []),
              *([f"{SHORT_NOTE} ({short})"] if short else [])]
     return imp, ("; ".join(notes) or None)
+
+
+def declared_emitter(nights: list[NightSamples]) -> str | None:
+    """The emitter the nights declare (:attr:`NightSamples.emitter`), None where none does.
+    Raises InputError when two nights declare different ones (one house, one emitter)."""
+    from ..errors import InputError
+
+    kinds = sorted({n.emitter for n in nights if n.emitter})
+    if len(kinds) > 1:
+        raise InputError(f"the nights declare two emitters ({' and '.join(kinds)}): one house, "
+                         "one emitter")
+    return kinds[0] if kinds else None

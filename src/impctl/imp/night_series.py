@@ -5,6 +5,9 @@ pump's curve: the heating water and the hot water, and an owner night's label.
 * ``t_flow_target_c`` — the heat pump's calculated flow target [°C] (2128): the heating
   curve it runs;
 * ``dhw`` — share of the row's time charging hot water (0–1; a single reading 0 or 1);
+* ``emitter`` — the house's emitter as its installer declares it, ``radiators`` or
+  ``underfloor`` (the season model's bound on the emitter's lag: known, before the water's
+  reading), the same on every row that has one (empty: not declared);
 * ``label`` — why an owner night is not the owner's ordinary night, empty when it is; the
   same on every row of the night. A constrained night carries one label only,
   :data:`~impctl.imp.protocol.SHORT_NIGHT` (it reached T_min too soon for the IMP fit: the
@@ -21,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from .protocol import SHORT_NIGHT
+from .protocol import EMITTER_KINDS, SHORT_NIGHT
 
 #: Per-sample columns and their ranges: heating water between freezing and boiling.
 SERIES_COLUMNS: dict[str, tuple[float, float, str]] = {
@@ -31,6 +34,7 @@ SERIES_COLUMNS: dict[str, tuple[float, float, str]] = {
     "dhw": (0.0, 1.0, "(a share of the row's time)"),
 }
 LABEL = "label"
+EMITTER = "emitter"
 
 
 def check_series(table: pd.DataFrame, path, row) -> None:
@@ -78,3 +82,24 @@ def series_fields(table: pd.DataFrame, idx: np.ndarray) -> dict:
     if LABEL in table:
         out[LABEL] = str(table[LABEL].iloc[int(idx[0])])
     return out
+
+
+def check_emitter(table: pd.DataFrame, path, row) -> str:
+    """The emitter the file declares (``emitter`` column), "" where it declares none; refuse
+    (:class:`InputError`, one line) a kind not in :data:`EMITTER_KINDS` or a second kind.
+    ``row(i)`` names the row of index ``i``."""
+    if EMITTER not in table:
+        return ""
+    cells = table[EMITTER].to_numpy(dtype=object)
+    given = np.flatnonzero(cells != "")
+    if not len(given):
+        return ""
+    first = cells[given[0]]
+    if first not in EMITTER_KINDS:
+        raise InputError(f"column '{EMITTER}': {first!r} is not one of "
+                         f"{', '.join(EMITTER_KINDS)}", path, row(int(given[0])))
+    other = given[cells[given] != first]
+    if len(other):
+        raise InputError(f"column '{EMITTER}': {cells[other[0]]!r} after {first!r} (one house, "
+                         "one emitter)", path, row(int(other[0])))
+    return str(first)

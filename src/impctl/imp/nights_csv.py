@@ -20,9 +20,10 @@ Format (one header row, then one row per sample; row numbers in errors are file 
   the room sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while
   the heat pump defrosts, the heat pump's electrical power [W] (:mod:`.night_extras`: a bad
   cell there is missing, not refused).
-* ``t_flow_c``, ``t_return_c``, ``t_flow_target_c``, ``dhw``, ``label`` (optional) — supply,
-  return and target flow water [°C], the share of time charging hot water, an owner night's
-  label (:mod:`.night_series`: a bad value there refuses the file).
+* ``t_flow_c``, ``t_return_c``, ``t_flow_target_c``, ``dhw``, ``label``, ``emitter``
+  (optional) — supply, return and target flow water [°C], the share of time charging hot
+  water, an owner night's label, the emitter as the installer declares it (``radiators`` |
+  ``underfloor``; :mod:`.night_series`: a bad value there refuses the file).
 * ``phase`` (optional, with ``night``) — ``preheat`` on an IMP night's first rows, its pre-heat,
   read as a piece of its own that only the season model takes (:mod:`.night_phase`).
 
@@ -49,7 +50,15 @@ from .held import not_held
 from .night import NightSamples
 from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
 from .night_phase import PHASE, PREHEAT, check_phases, split_preheat
-from .night_series import LABEL, SERIES_COLUMNS, check_labels, check_series, series_fields
+from .night_series import (
+    EMITTER,
+    LABEL,
+    SERIES_COLUMNS,
+    check_emitter,
+    check_labels,
+    check_series,
+    series_fields,
+)
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
 from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
 from .tables import TIMESTAMP_TEXT, frame_table, read_table
@@ -191,7 +200,7 @@ def read_nights(
 _NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating", *SERIES_COLUMNS)
 #: numeric columns whose empty cells are missing values
 _MAY_BE_EMPTY = ("setpoint", *SERIES_COLUMNS)
-_TEXT = ("night", "kind", LABEL, PHASE)
+_TEXT = ("night", "kind", LABEL, PHASE, EMITTER)
 # read as text, then each cell a number or missing (:mod:`.night_extras`), never a refusal
 _OPTIONAL = (*_TEXT, *EXTRA_COLUMNS)
 
@@ -258,6 +267,7 @@ def nights_from_table(
                  path, _row)
     check_phases(table, groups if explicit else None,
                  lambda idx: None if kinds_all is None else kinds_all[idx[0]], path, _row)
+    emitter = check_emitter(table, path, _row)
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
     extras = extra_columns(table)
@@ -288,12 +298,13 @@ def nights_from_table(
         if len(idx):
             start = starts[night_id] if not explicit else stamps.iloc[int(idx[0])]
             night = _samples(night_id, idx, start, table, stamp_ns, off, kinds_all,
-                             setpoint_all, values, extras)
+                             setpoint_all, values, extras, emitter=emitter)
             nights.append(night)
         if len(pre):
             nights.append(_samples(night_id, pre, stamps.iloc[int(pre[0])], table, stamp_ns,
                                    off, kinds_all, setpoint_all, values, extras,
-                                   kind=None if night is None else night.kind))
+                                   kind=None if night is None else night.kind,
+                                   emitter=emitter))
     if not nights:
         what = "no night with two or more samples" if explicit else (
             f"no two samples inside one {window[0]:%H:%M}–{window[1]:%H:%M} window")
@@ -303,7 +314,7 @@ def nights_from_table(
 
 def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame,
              stamp_ns: np.ndarray, off: np.ndarray, kinds_all, setpoint_all, values: dict,
-             extras: dict, kind: str | None = None) -> NightSamples:
+             extras: dict, kind: str | None = None, emitter: str = "") -> NightSamples:
     """The night (or its pre-heat, ``phase`` set) of the rows ``idx``, time 0 at ``start``."""
     pre = PHASE in table and table[PHASE].iloc[int(idx[0])] == PREHEAT
     time_s = (stamp_ns[idx] - pd.Timestamp(start).as_unit("ns").value) / 1e9
@@ -333,6 +344,7 @@ def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame
         q_hc_w=values["q_hc"][idx],
         setpoint_c=setpoint,
         phase=PREHEAT if pre else "",
+        emitter=emitter,
         **more,
         **series_fields(table, idx),
     )
@@ -372,6 +384,8 @@ def write_nights(nights: list[NightSamples], path: str | Path) -> Path:
             frame["label"] = night.label
         if any(n.phase for n in nights):
             frame[PHASE] = night.phase
+        if any(n.emitter for n in nights):
+            frame[EMITTER] = night.emitter
         frames.append(frame)
     path = Path(path)
     pd.concat(frames, ignore_index=True).to_csv(path, index=False, float_format="%.9g")

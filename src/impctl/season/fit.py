@@ -284,13 +284,17 @@ def fit_nights(nights, start: tuple | None = None,
     """(the season fit, None) of a household's nights (NightSamples of every kind), or
     (None, why not) — no owner nights, too few usable ones, or no usable record. ``start``:
     θ of an earlier fit of the same house (:func:`theta_of`), the search's only start;
-    ``emitter``: the declared emitter (:func:`fit_season`)."""
+    ``emitter``: the declared emitter (:func:`fit_season`), else the one the nights declare
+    (NIGHTS column ``emitter``), else none. Raises InputError when the nights declare two."""
+    from ..imp.night import declared_emitter
     from .nights import record_from_nights
 
     owner = [n for n in nights if n.kind == "owner"]
     if not owner:
         return None, None
     nights = list(nights)
+    if emitter is None:   # the file's own declaration (NIGHTS column ``emitter``)
+        emitter = declared_emitter(nights)
     found = detect_change(nights)
     # A change is reported, not acted on: the test's false alarms (about 1 season in 11 on
     # held-out houses) would otherwise throw away weeks of good nights.

@@ -26,6 +26,7 @@ from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_SD_W, NIGHT_GAIN_W
 from .. import cli
 from ..checks import (
     MAX_FILE_MB,
+    agreed_emitter,
     bounded,
     emitter_option,
     file_mb,
@@ -143,7 +144,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
         if refusal is not None:
             raise refusal
         # The season model needs no torch: it runs beside the IMP fit.
-        season_job = _SeasonJob(nights, emitter)
+        season_job = _SeasonJob(nights, agreed_emitter(emitter, nights, nights_path))
         classes = household_classes(chosen.cut, model_dir)
         notes = [*classes.notes, *([chosen.note] if chosen.note else [])]
         click.echo(f"fitting {len(chosen.chosen)} nights "

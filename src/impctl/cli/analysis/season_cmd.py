@@ -16,7 +16,7 @@ import click
 
 from ...errors import InputError
 from .. import cli
-from ..checks import emitter_option, time_zone
+from ..checks import agreed_emitter, emitter_option, time_zone
 from .fit_cmd import _write_json
 
 
@@ -56,6 +56,7 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
     if not any(n.kind == "owner" for n in nights):
         raise InputError("no owner nights (kind=owner): the season model reads the owner's "
                          "own nights", nights_path)
+    emitter = agreed_emitter(emitter, nights, nights_path)
     began = time.perf_counter()
     fit, note = fit_nights(nights, start=start, emitter=emitter)
     if fit is None:
