@@ -183,3 +183,23 @@ def test_state_dir_under_proc_or_a_file_is_one_line(tmp_path, where):
             args, done.stderr)
         assert state in done.stderr or str(tmp_path / "a-file") in done.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("emitter", ["underfloor", None])
+def test_the_export_carries_the_emitter_the_installer_declared(tmp_path, capsys, emitter):
+    """[fit] emitter goes with the nights (the NIGHTS column ``emitter``): a fleet reading the
+    export knows what the installer knows; without it, no column."""
+    from impctl.imp.nights_csv import read_nights
+
+    state = tmp_path / "state"
+    _store(state)
+    mapping = {"state_dir": str(state), "heatpump": {"host": "192.168.1.50"}}
+    if emitter is not None:
+        mapping["fit"] = {"emitter": emitter}
+    config = write_config(tmp_path / "config.toml", mapping)
+    out = tmp_path / "nights.csv"
+    code, _, err = _run(capsys, "export", "--config", str(config), "--out", str(out))
+    assert code == 0, err
+    header = out.read_text().splitlines()[0].split(",")
+    assert ("emitter" in header) == (emitter is not None)
+    assert {n.emitter for n in read_nights(out, "UTC")} == {emitter or ""}

@@ -151,8 +151,11 @@ def check_output_file(out: Path, force: bool = False, protect: Iterable[Path] = 
 
 
 def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | None = None,
-                  valid_only: bool = True, *, force: bool = False, owner: bool = True) -> int:
+                  valid_only: bool = True, *, force: bool = False, owner: bool = True,
+                  emitter: str | None = None) -> int:
     """Write the selected nights to ``out`` as CSV or Parquet, atomically; returns the row count.
+    ``emitter``: the emitter the installer declared ([fit] emitter), written as the NIGHTS
+    column ``emitter`` on every row.
 
     Raises :class:`InputError` (nothing written) for an unsafe ``out`` (see
     :func:`check_output_file`; ``force`` allows overwriting a plain file), an unknown night id,
@@ -180,6 +183,8 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
     # Numbers even when every cell is missing (a column of None would be text in Parquet).
     df[list(NUMBER_COLUMNS)] = df[list(NUMBER_COLUMNS)].astype(float)
     df["defrost"] = df["defrost"].astype("Int8")   # 1/0, empty where not logged
+    if emitter is not None:
+        df["emitter"] = emitter
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     os.close(fd)
     try:

@@ -291,7 +291,8 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
                    include_invalid: bool, no_owner: bool, out_path: Path, force: bool) -> None:
     """Write stored nights in the measured-data format of ``impctl fit``: the IMP nights and
     the owner records (kind owner, labelled where they are not the owner's ordinary night),
-    in time order.
+    in time order; the emitter the configuration declares ([fit] emitter) in an emitter
+    column, so that a fleet reads the installer's word with the nights.
 
     Never writes onto the store or another database, into a directory that does not exist,
     or onto an existing file without --force; unknown night ids or nothing to export give
@@ -300,8 +301,9 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
     from ...store import Store
     from ...store.export import export_nights
 
+    cfg = _load(config_path) if db_path is None or config_path.is_file() else None
     if db_path is None:
-        db_path = _load(config_path).db_path
+        db_path = cfg.db_path
     ids = None
     if night_ids:
         try:
@@ -311,5 +313,6 @@ def export_command(config_path: Path, db_path: Path | None, fmt: str, night_ids:
                              f"got {night_ids!r}", place="--nights") from None
     with Store(db_path, create=False) as store:
         n = export_nights(store, out_path, fmt, ids, valid_only=not (include_invalid or ids),
-                          force=force, owner=not no_owner)
+                          force=force, owner=not no_owner,
+                          emitter=(cfg.fit.emitter or None) if cfg is not None else None)
     click.echo(f"wrote {n} samples to {out_path}")
