@@ -258,3 +258,28 @@ def test_a_parquet_file_with_empty_string_cells_reads_as_the_csv(tmp_path, night
     assert [(n.night_id, n.kind, n.label) for n in pq] == [
         (n.night_id, n.kind, n.label) for n in csv]
     assert all(n.label == "" for n in pq)
+
+
+def test_a_dataset_of_large_row_groups_gets_a_note_on_its_layout(tmp_path, nights):
+    """A worker's filter on ``household`` skips Parquet row groups only whole: row groups far
+    larger than a batch's rows are said, with the layout that reads less."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from impctl.fleet.inputs import discover, layout_note
+
+    one = _frame(nights[0])
+    table = pa.Table.from_pandas(pd.concat(
+        [one.assign(household=f"h{i:02d}") for i in range(20)], ignore_index=True),
+        preserve_index=False)
+    pq.write_table(table, tmp_path / "big.parquet")                  # one row group
+    pq.write_table(table, tmp_path / "small.parquet", row_group_size=len(one))
+    note = layout_note(discover(tmp_path / "big.parquet"), batch_size=1)
+    assert note is not None and f"about {20 * len(one):,} rows" in note
+    assert "sorted by household" in note
+    assert layout_note(discover(tmp_path / "small.parquet"), batch_size=1) is None
+    # a folder of files (one household each) has nothing to say
+    folder = tmp_path / "files"
+    folder.mkdir()
+    write_nights(nights[0], folder / "h.csv")
+    assert layout_note(discover(folder), batch_size=1) is None

@@ -97,6 +97,45 @@ def discover(path: str | Path) -> list[Source]:
     return [Source(f.stem, str(f), f.suffix[1:]) for f in files]
 
 
+#: A dataset's row groups larger than this many batches' rows get a note (:func:`layout_note`).
+_ROW_GROUP_BATCHES = 8
+#: Fragments (files) whose row groups :func:`layout_note` looks at.
+_FRAGMENTS_LOOKED_AT = 20
+
+
+def layout_note(sources: list[Source], batch_size: int) -> str | None:
+    """A line for a dataset INPUT whose Parquet row groups are much larger than a batch's rows,
+    else None. A worker reads its batch by a filter on ``household``; Parquet skips a row group
+    only as a whole (by its statistics), so each batch decodes every row group that holds one of
+    its households — with row groups of a million rows, 10,000 households' batches cost about
+    four times the reading of row groups near a batch's size (``bench/fleet.py`` layouts)."""
+    import statistics
+
+    import pyarrow.dataset as ds
+
+    rows = [s.rows for s in sources if s.kind == "dataset" and s.rows]
+    if not rows:
+        return None
+    dataset = ds.dataset(next(s.path for s in sources if s.kind == "dataset"),
+                         format="parquet", partitioning="hive")
+    groups = []
+    for i, fragment in enumerate(dataset.get_fragments()):
+        if i == _FRAGMENTS_LOOKED_AT:
+            break
+        meta = fragment.metadata
+        groups += [meta.row_group(j).num_rows for j in range(meta.num_row_groups)]
+    if not groups:
+        return None
+    group = statistics.median(groups)
+    batch_rows = batch_size * statistics.median(rows)
+    if group <= _ROW_GROUP_BATCHES * batch_rows:
+        return None
+    return (f"INPUT's Parquet row groups hold about {group:,.0f} rows and a batch of "
+            f"{batch_size} households about {batch_rows:,.0f}: every batch decodes whole row "
+            "groups for its own rows. Written sorted by household in row groups of about "
+            f"{max(batch_rows, 10_000):,.0f} rows, each batch reads little more than its own")
+
+
 def _refuse_fleet_output(path: Path) -> None:
     """A FLEET dataset (or a run's output written into a folder of nights) is no input: its
     parts are results, and read as households they would be phantom ones."""

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..fit.household import FitOptions
-from .inputs import Source, discover
+from .inputs import Source, discover, layout_note
 from .manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
 from .table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
@@ -266,6 +266,10 @@ def fit_fleet(
         raise InputError("must be >= 1", place="batch size")
     sources = discover(input_path)
     run = FleetRun(found=len(sources))
+    layout = layout_note(sources, batch_size)
+    if layout:
+        run.notes.append(layout)
+        echo(f"note: {layout}")
     done = done_households(out) if resume else set()
     todo = [s for s in sources if s.household not in done]
     run.skipped = len(sources) - len(todo)
