@@ -234,8 +234,10 @@ def nights_from_table(
     # The timestamp texts kept for messages would be deep-copied by every column taken below
     # (a season's file: a second per read): they go to the one message that quotes them.
     stamp_text = table.attrs.get(TIMESTAMP_TEXT)
-    table = table.copy(deep=False)
+    # off before the copy as well: pandas deep-copies attrs into every copy (9 ms a season's
+    # file); the table is this module's own (read_table, frame_table)
     table.attrs = {}
+    table = table.copy(deep=False)
     _check_values(table, path, stamp_text)
     explicit = "night" in table
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
