@@ -231,11 +231,10 @@ def nights_from_table(
     window: tuple[dt.time, dt.time] = DEFAULT_WINDOW,
 ) -> list[NightSamples]:
     """Checked table (``timestamp`` tz-aware, numbers float) → nights; see :func:`read_nights`."""
-    # The timestamp texts kept for messages would be deep-copied by every column taken below
-    # (a season's file: a second per read): they go to the one message that quotes them.
+    # The timestamp texts kept for messages go to the one message that quotes them, and off
+    # the table before it is copied: pandas deep-copies attrs into every copy and every column
+    # taken below (a season's file: a second per read). The table is this module's own.
     stamp_text = table.attrs.get(TIMESTAMP_TEXT)
-    # off before the copy as well: pandas deep-copies attrs into every copy (9 ms a season's
-    # file); the table is this module's own (read_table, frame_table)
     table.attrs = {}
     table = table.copy(deep=False)
     _check_values(table, path, stamp_text)
