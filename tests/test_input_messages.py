@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from test_reliability_input import cli, refused
 
 from impctl.errors import InputError
@@ -47,6 +48,25 @@ def test_a_duplicated_timestamp_is_quoted_as_the_file_writes_it(tmp_path):
         f"{path}: row 3: timestamps must strictly increase: the rows are not in time order "
         "(1 step back in time; the first, 2026-01-12 22:05, comes after 2026-01-12 22:10): "
         "sort the rows by timestamp")
+
+
+def test_a_parquet_frame_quotes_its_timestamps_too(tmp_path):
+    """A frame read from Parquet (datetimes or strings): the line quotes the cell it speaks
+    of, as the frame holds it."""
+    from impctl.imp.nights_csv import read_nights_frame
+
+    stamps = pd.to_datetime(["2026-01-12T21:00:00Z", "2026-01-12T21:05:00Z",
+                             "2026-01-12T21:05:00Z", "2026-01-12T21:10:00Z"], utc=True)
+    frame = pd.DataFrame({"timestamp": stamps, "t_air": 21.0, "t_out": 0.0, "q_hc": 0.0})
+    with pytest.raises(InputError) as err:
+        read_nights_frame(frame, tmp_path / "h.parquet", "UTC")
+    assert "(the first, 2026-01-12 21:05:00+00:00, repeats the row before)" in str(err.value)
+    assert "row 4" in str(err.value)
+    frame["timestamp"] = ["2026-01-12T22:10Z", "2026-01-12T22:05Z", "2026-01-12T22:15Z",
+                          "2026-01-12T22:20Z"]
+    with pytest.raises(InputError) as err:
+        read_nights_frame(frame, tmp_path / "h.parquet", "UTC")
+    assert "the first, 2026-01-12T22:05Z, comes after 2026-01-12T22:10Z" in str(err.value)
 
 
 def _sized(path: Path, size_bytes: int, step_s: float = 300.0) -> Path:

@@ -115,12 +115,12 @@ def layout_problem(path: str | Path, required: tuple[str, ...]) -> tuple[str, st
     return None
 
 
-def order_problem(stamps: pd.Series, back: np.ndarray,
-                  text: np.ndarray | None = None) -> tuple[str, int]:
+def order_problem(stamps: pd.Series, back: np.ndarray, text=None) -> tuple[str, int]:
     """What is wrong with timestamps that do not strictly increase (``back`` marks each row
     that does not come after the one before it): duplicates, or rows out of time order; and
     the index of the row the text speaks of. ``text``: the timestamp cells as the file writes
-    them, which the line quotes (else the parsed instants)."""
+    them, indexed by row (an array, or :class:`~.tables.CellText`), which the line quotes (else
+    the parsed instants)."""
     def quoted(i: int) -> str:
         return str(text[i]) if text is not None else stamps.iloc[i].isoformat()
 

@@ -83,7 +83,7 @@ def _row(index: int) -> str:
     return f"row {index + 2}"
 
 
-def _check_values(table: pd.DataFrame, path: Path, stamp_text: np.ndarray | None) -> None:
+def _check_values(table: pd.DataFrame, path: Path, stamp_text) -> None:
     # A file in °F: its rooms are warmer than any room in °C, yet mostly inside t_air's range.
     fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
     if fahrenheit is not None:
