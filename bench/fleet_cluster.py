@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from benchlib.fleet_rates import steady_rate
 
 DASK = str(Path(sys.executable).with_name("dask"))
 #: The worker programs' environment, as the how-to starts them.
@@ -109,20 +110,6 @@ def _peak_rss_mb() -> float:
     return float("nan")
 
 
-def _steady_rate(out: Path, started: float) -> tuple[float, float]:
-    """(households/s between the first and the last finished batch, seconds from the call to
-    the first batch): the throughput once every worker runs, without the start (the plugin
-    loading torch in each worker, the first batches' imports), which a longer run spreads
-    thinner. From the FLEET parts' modification times (each is renamed into place when its
-    batch is done)."""
-    parts = sorted(out.glob("part-*.parquet"), key=lambda p: p.stat().st_mtime)
-    if len(parts) < 2:
-        return float("nan"), float("nan")
-    first, last = parts[0].stat().st_mtime, parts[-1].stat().st_mtime
-    after = sum(pd.read_parquet(p, columns=["household"]).shape[0] for p in parts[1:])
-    return after / max(last - first, 1e-9), first - started
-
-
 def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path,
         turn: int = 0) -> dict:
     from distributed import Client
@@ -142,7 +129,7 @@ def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path
     fleet = pd.read_parquet(out)
     rate = result.fitted / wall
     return {"workers": result.workers, "households": result.fitted, "counts": result.counts,
-            "wall_s": wall, "rate": rate, "steady": _steady_rate(out, t0_wall),
+            "wall_s": wall, "rate": rate, "steady": steady_rate(out, t0_wall),
             "cpu_s": fleet["cpu_s_per_household"].mean(),
             "peaks": {pids[w]: peaks[w] for w in peaks}, "load_before": load,
             "load_after": os.getloadavg()[0]}
