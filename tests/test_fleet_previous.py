@@ -19,7 +19,7 @@ from cli_fixtures import run_impctl
 from impctl.errors import InputError
 from impctl.fit.household import FitOptions
 from impctl.fleet import fit_fleet, read_fleet
-from impctl.fleet.table import CARRIED_COLUMNS, THETA_COLUMNS
+from impctl.fleet.table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season.fit import fit_nights
@@ -75,6 +75,7 @@ def test_an_unchanged_household_keeps_its_imp_fit_and_warm_starts_its_season(mor
     assert second.reused == 1 and any("2 of 2 households" in s for s in said)
     a, b = f1.loc["house-0"], f2.loc["house-0"]
     assert bool(b["imp_fit_reused"]) and bool(b["season_warm_start"])
+    assert not bool(b["nights_unchanged"]) and b["nights_digest"] != a["nights_digest"]
     for col in CARRIED_COLUMNS:   # the IMP fit as yesterday's, column by column
         assert (a[col] == b[col]) or (a[col] != a[col] and b[col] != b[col]), col
     # the season model saw the new owner night: one more than yesterday, and where a full
@@ -97,6 +98,23 @@ def test_a_household_with_a_changed_imp_night_is_fitted_afresh(mornings):
     # the file declares its emitter (known): the season model's bound is the installer's
     assert (a["season_emitter"], a["season_emitter_source"]) == ("underfloor", "measured")
     assert (b["season_emitter"], b["season_emitter_source"]) == ("underfloor", "declared")
+
+
+def test_the_same_nights_again_keep_the_whole_row(mornings, client):
+    """Run on today's nights again from today's FLEET (a gateway that sent no new night, or the
+    same run twice): every row as it was, nothing fitted."""
+    root, *_ = mornings
+    run = fit_fleet(root / "today", root / "F4.parquet", client=client, progress=False,
+                    previous=root / "F2.parquet", echo=lambda _: None)
+    assert run.unchanged == run.reused == 2
+    f2, f4 = _rows(root / "F2.parquet"), _rows(root / "F4.parquet")
+    assert f4["nights_unchanged"].all() and f4["imp_fit_reused"].all()
+    for col in ROW_COLUMNS:
+        for h in f2.index:
+            a, b = f2.loc[h, col], f4.loc[h, col]
+            assert (a == b) or (a != a and b != b), (h, col)
+    assert (f4["nights_digest"] == f2["nights_digest"]).all()
+    assert not f2["nights_unchanged"].any()   # yesterday's run had one night less
 
 
 def test_a_previous_run_with_other_options_is_not_used(mornings, client):

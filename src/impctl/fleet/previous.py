@@ -3,11 +3,13 @@
 An aggregator fits its fleet every morning, and between two mornings most households gained an
 owner night and no IMP night: their IMP fit — most of a row's cost, with the classes — would
 come out the same. Given the last run's FLEET dataset (``impctl fleet fit --previous``), a
-household whose IMP nights are the same (:func:`imp_digest`), fitted with the same options,
+household whose IMP nights are the same (:func:`nights_digest`), fitted with the same options,
 classifiers and impctl version, keeps that run's IMP columns (``imp_fit_reused``), and its
 season model starts its search only where that run's ended (``season_warm_start``), as the
-daemon's morning refit does (:func:`impctl.season.fit.fit_nights`). A household with a new or
-changed IMP night, or one the last run did not fit, is fitted afresh, the full search included.
+daemon's morning refit does (:func:`impctl.season.fit.fit_nights`). A household whose nights
+are all the same (no new night: a gateway that did not report, or the same run again) keeps
+its whole row (``nights_unchanged``). A household with a new or changed IMP night, or one the
+last run did not fit, is fitted afresh, the full search included.
 """
 
 from __future__ import annotations
@@ -21,16 +23,17 @@ import numpy as np
 
 from ..errors import InputError
 from .manifest import read_manifest
-from .table import CARRIED_COLUMNS, THETA_COLUMNS
+from .table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 
 #: Statuses whose IMP columns are carried over: what the same nights give again. An
 #: ``error`` row is fitted afresh (a lost worker or an unreadable file may have been passing).
 CARRIED_STATUSES = ("ok", "insufficient")
 
 
-def imp_digest(nights) -> str:
-    """A digest of the IMP nights (:class:`~impctl.imp.night.NightSamples`, every field and
-    every sample): equal digests, the same input to the IMP fit."""
+def nights_digest(nights) -> str:
+    """A digest of nights (:class:`~impctl.imp.night.NightSamples`, every field and every
+    sample): equal digests, the same input (to the IMP fit for the IMP nights, to the whole row
+    for all of them)."""
     h = hashlib.blake2b(digest_size=16)
     for n in nights:
         for f in dataclasses.fields(n):
@@ -73,11 +76,13 @@ def previous_rows(path: str | Path, options: dict, version: str) -> tuple[dict[s
                   "where their IMP nights are unchanged")
 
 
-def carry_over(row: dict, previous: dict) -> None:
-    """``row`` takes the IMP fit's columns of ``previous`` (its row of the last run)."""
-    for col in CARRIED_COLUMNS:
+def carry_over(row: dict, previous: dict, whole: bool = False) -> None:
+    """``row`` takes the IMP fit's columns of ``previous`` (its row of the last run), or, with
+    ``whole`` (the nights all unchanged), every column but the run's own."""
+    for col in ROW_COLUMNS if whole else CARRIED_COLUMNS:
         row[col] = previous.get(col)
     row["imp_fit_reused"] = True
+    row["nights_unchanged"] = whole
 
 
 def theta_start(previous: dict | None) -> tuple[float, ...] | None:

@@ -43,7 +43,8 @@ DEFAULT_BATCH = 16
 @dataclass
 class FleetRun:
     """What a run did: households found / skipped (resume) / fitted per status, wall time [s],
-    households whose IMP fit was carried over from ``previous``."""
+    households whose IMP fit (or, their nights all unchanged, whole row) was carried over from
+    ``previous``."""
 
     found: int = 0
     skipped: int = 0
@@ -51,7 +52,8 @@ class FleetRun:
                                                              "error": 0})
     wall_s: float = 0.0
     workers: int = 0
-    reused: int = 0   # households whose IMP fit came from ``previous``
+    reused: int = 0      # households whose IMP fit came from ``previous``
+    unchanged: int = 0   # … and whose nights were all the same: the whole row
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -356,6 +358,7 @@ def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
             for row in rows:
                 run.counts[row["status"]] = run.counts.get(row["status"], 0) + 1
                 run.reused += bool(row.get("imp_fit_reused"))
+                run.unchanged += bool(row.get("nights_unchanged"))
             future.release()
             bar.set_postfix(ok=run.counts["ok"], insufficient=run.counts["insufficient"],
                             failed=run.counts["error"], refresh=False)

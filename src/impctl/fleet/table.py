@@ -32,7 +32,8 @@ search starts) and
 ``season_warm_start`` (this run's search started there);
 ``imp_nights_digest`` (a digest of the household's IMP nights) and ``imp_fit_reused`` (the IMP
 fit's columns were carried over from ``--previous``: the same IMP nights, options and impctl
-version);
+version); ``nights_digest`` (a digest of all its nights) and ``nights_unchanged`` (every night
+as in ``--previous``: the whole row carried over, nothing fitted);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and
@@ -90,7 +91,8 @@ THETA_COLUMNS = ("season_tau_mm_s", "season_w", "season_tau_e_s", "season_f_sun"
                  "season_tau_r_s")
 _FIELDS += [(c, pa.float64()) for c in THETA_COLUMNS]
 _FIELDS += [("season_warm_start", pa.bool_()), ("imp_nights_digest", pa.string()),
-            ("imp_fit_reused", pa.bool_())]
+            ("imp_fit_reused", pa.bool_()), ("nights_digest", pa.string()),
+            ("nights_unchanged", pa.bool_())]
 _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("needs_more_nights", pa.bool_()), ("loss", pa.float64()),
             ("eps_pct", pa.float64()), ("batch_size", pa.int32()),
@@ -100,12 +102,15 @@ _FIELDS += [("ach_vent_per_h", pa.float64()), ("ach_infl_per_h", pa.float64()),
             ("fitted_at", pa.timestamp("s", tz="UTC"))]
 SCHEMA = pa.schema(_FIELDS)
 COLUMNS = tuple(SCHEMA.names)
-#: What a run measures of itself (its batch, its worker, when) and of the season model, which
-#: every run fits again: the columns a row does not carry over from ``--previous``.
+#: What a run measures of itself (its batch, its worker, when, what it carried over, the
+#: digest of all the nights it read): never carried over from ``--previous``.
 _OWN = {"household", "batch_size", "wall_s_per_household", "cpu_s_per_household", "worker",
-        "worker_rss_mb", "impctl_version", "fitted_at", "imp_fit_reused"}
+        "worker_rss_mb", "impctl_version", "fitted_at", "imp_fit_reused", "nights_digest",
+        "nights_unchanged"}
+#: The columns the same nights give again: all but the run's own (:mod:`.previous`).
+ROW_COLUMNS = tuple(c for c in COLUMNS if c not in _OWN)
 #: The IMP fit's columns, the same for the same IMP nights (:mod:`.previous`).
-CARRIED_COLUMNS = tuple(c for c in COLUMNS if c not in _OWN and not c.startswith("season_"))
+CARRIED_COLUMNS = tuple(c for c in ROW_COLUMNS if not c.startswith("season_"))
 
 
 def empty_row(household: str) -> dict:

@@ -114,10 +114,10 @@ def fit_batch(sources: list[Source], settings: Settings,
     """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household.
     ``previous``: the last run's rows of households of this batch (:mod:`.previous`) — where a
     household's IMP nights are unchanged, its IMP columns are carried over and its season
-    search starts where that run's ended."""
+    search starts where that run's ended; where all its nights are, its whole row."""
     from ..fit.household import choose_nights
     from ..imp.night import split_owner
-    from .previous import carry_over, imp_digest, theta_start
+    from .previous import carry_over, nights_digest, theta_start
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
@@ -134,13 +134,16 @@ def fit_batch(sources: list[Source], settings: Settings,
             row.update(status="error", reason=getattr(nights, "reason", "unreadable input"),
                        error=str(nights))
             continue
-        digest = imp_digest(split_owner(nights)[0])
+        digest, whole = nights_digest(split_owner(nights)[0]), nights_digest(nights)
+        row["nights_digest"] = whole
         last = (previous or {}).get(household)
         if last is not None and last.get("imp_nights_digest") == digest:
-            carry_over(row, last)
-            _season(row, nights, theta_start(last))
+            unchanged = last.get("nights_digest") == whole
+            carry_over(row, last, whole=unchanged)
+            if not unchanged:
+                _season(row, nights, theta_start(last))
             continue
-        row.update(imp_nights_digest=digest, imp_fit_reused=False)
+        row.update(imp_nights_digest=digest, imp_fit_reused=False, nights_unchanged=False)
         _season(row, nights)
         chosen = choose_nights(nights, settings.options.max_nights)
         row.update(nights_used=len(chosen.chosen),

@@ -97,7 +97,8 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                     progress=not quiet, echo=click.echo)
     rate = run.fitted / run.wall_s if run.wall_s > 0 else 0.0
     c = run.counts
-    reused = f", {run.reused} with their IMP fit from --previous" if previous else ""
+    reused = (f", {run.reused} with their IMP fit from --previous ({run.unchanged} with no new "
+              "night: the whole row)" if previous else "")
     click.echo(f"{run.found} households: {run.fitted} fitted now ({c['ok']} ok, "
                f"{c['insufficient']} insufficient, {c['error']} error{reused}), {run.skipped} "
                f"already in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
