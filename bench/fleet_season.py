@@ -23,7 +23,8 @@ owner nights (one simulation); the fleet is fitted on the first cut, then on the
 the first run's FLEET as ``--previous`` (each household's IMP nights unchanged: its IMP fit
 carried over, its season search warm-started) — the figures of that second run, and the
 season model's values against a full fit of the same second cut (median and largest relative
-difference).
+difference); and once more on the second cut from the morning run's FLEET (no new night: every
+row carried over whole).
 """
 
 from __future__ import annotations
@@ -126,9 +127,10 @@ def run(data: Path, workers: int, work: Path, previous: Path | None = None
           f"worker after its batches, largest [MB]: {', '.join(f'{v:.0f}' for v in rss)}",
           flush=True)
     if previous is not None:
-        print(f"  IMP fit carried over for {int(fleet['imp_fit_reused'].sum())}, season "
-              f"search warm-started for {int(fleet['season_warm_start'].fillna(False).sum())} "
-              f"of {len(fleet)}", flush=True)
+        print(f"  IMP fit carried over for {int(fleet['imp_fit_reused'].sum())} (the whole row, "
+              f"no new night: {int(fleet['nights_unchanged'].sum())}), season search "
+              f"warm-started for {int(fleet['season_warm_start'].fillna(False).sum())} of "
+              f"{len(fleet)}", flush=True)
     return steady, out
 
 
@@ -159,9 +161,12 @@ def next_morning(args) -> None:
         same = all(np.allclose(a[c].astype(float), b[c].astype(float), equal_nan=True)
                    for c in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"))
         print(f"  the IMP fit's HLC, τ, C_m the same as the full run's: {same}")
+        print("today again (no new night), --previous the morning run's FLEET:")
+        again_rate, _ = run(after, w, Path(tmp), previous=warm)
     print(f"10,000 such households every morning at {rate:.2f} households/s ({w} workers, "
           f"the steady rate): {10_000 / rate / 60:.1f} min (a full run: "
-          f"{10_000 / full_rate / 60:.1f} min)")
+          f"{10_000 / full_rate / 60:.1f} min; with no new night: "
+          f"{10_000 / again_rate / 60:.1f} min)")
 
 
 def main() -> None:
