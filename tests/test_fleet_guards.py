@@ -250,7 +250,7 @@ CTRL_C_HOUSES = 4
 
 
 def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models):
-    from impctl.fleet.report import write_fleet_report
+    from impctl.report.fleet import write_fleet_report
 
     src = tmp_path / "in"
     src.mkdir()

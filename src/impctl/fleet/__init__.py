@@ -8,7 +8,6 @@ lazily), so ``import impctl.fleet`` stays light.
 * :func:`fit_batch` (:mod:`.worker`): one batch of households on a worker
 * :func:`read_fleet`, :data:`COLUMNS` (:mod:`.table`): FLEET.parquet
 * :func:`read_manifest`, :func:`completeness` (:mod:`.manifest`): expected and done households
-* :func:`write_fleet_report` (:mod:`.report`): HTML + PNG
 * :func:`fleet_flexibility` (:mod:`.flex_rows`): ``impctl flex`` on FLEET rows
 """
 
@@ -25,7 +24,6 @@ _LAZY = {
     "COLUMNS": "table",
     "read_manifest": "manifest",
     "completeness": "manifest",
-    "write_fleet_report": "report",
     "fleet_flexibility": "flex_rows",
 }
 

@@ -6,7 +6,6 @@ whose ``predictions`` carry the fitted curves). Nothing here imports torch.
 
 from __future__ import annotations
 
-import base64
 import html
 import json
 import os
@@ -21,21 +20,13 @@ from ..store import Store
 from . import figures
 from .fit_json import fit_problem
 from .household import household_html, household_summary, night_comfort
+from .page import img as _img
+from .page import table as _table
 from .summary import demo_summary, format_summary
 
 __all__ = ["demo_summary", "format_summary", "write_report"]
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode()
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
-
-
-def _table(headers: list[str], rows: list[list[str]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
-                   for r in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def _list(x) -> list:

@@ -104,7 +104,7 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                f"already in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
                f"{run.workers} workers")
     if report_dir is not None:
-        from ...fleet.report import write_fleet_report
+        from ...report.fleet import write_fleet_report
 
         page = write_fleet_report(out, report_dir)
         click.echo(f"report written to {page}")

@@ -6,11 +6,13 @@ intervals, the households that need more nights, and the failures grouped by rea
 
 from __future__ import annotations
 
-import base64
 import html
 from pathlib import Path
 
 import numpy as np
+
+from .page import img as _img
+from .page import table as _table
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:1em 0;font-size:14px}td,th{border:1px solid #ccc;
@@ -18,16 +20,6 @@ padding:3px 8px;text-align:left}th{background:#f3f3f3}img{max-width:100%;margin:
 _LIST_MAX = 200
 
 
-def _img(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode()
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.stem)}">'
-
-
-def _table(headers: list[str], rows: list[list]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
-                   for r in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
 def _hist(ax, values, label: str) -> None:
@@ -74,8 +66,8 @@ def _figures(ok, out: Path) -> list[Path]:
 
 def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
     """Write OUT/fleet_report.html and its PNG figures from the FLEET dataset ``fleet``."""
-    from .manifest import completeness
-    from .table import read_fleet
+    from ..fleet.manifest import completeness
+    from ..fleet.table import read_fleet
 
     table = read_fleet(fleet)
     # an interrupted run's distributions are those of the households it reached: said first
