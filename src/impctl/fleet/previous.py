@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import math
 from pathlib import Path
 
 import numpy as np
@@ -86,10 +85,12 @@ def carry_over(row: dict, previous: dict, whole: bool = False) -> None:
 
 
 def theta_start(previous: dict | None) -> tuple[float, ...] | None:
-    """The season search's start from a previous row (None where it had no season fit)."""
+    """The season search's start from a previous row (None where it had no season fit), by
+    the rule a fit JSON's θ is read with (:func:`impctl.season.fit.theta_of`)."""
     if previous is None:
         return None
-    theta = tuple(previous.get(c) for c in THETA_COLUMNS)
-    if any(v is None or not (math.isfinite(v) and v > 0) for v in theta):
-        return None
-    return theta  # type: ignore[return-value]
+    from ..season.fit import theta_of
+    from ..season.projection.columns import THETA
+
+    return theta_of({"season": {"theta": {
+        name: previous.get(col) for name, col in zip(THETA, THETA_COLUMNS, strict=True)}}})

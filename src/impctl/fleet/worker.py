@@ -192,8 +192,8 @@ def _season(row: dict, nights: list, start: tuple | None = None) -> None:
         return
     row["season_warm_start"] = fit.warm_start
     row["season_emitter"] = fit.emitter
-    row["season_emitter_source"] = ("declared" if fit.emitter_declared else
-                                    "measured" if fit.emitter is not None else "assumed")
+    # the fit JSON's source (declared | measured: … | assumed: …), its first word
+    row["season_emitter_source"] = fit.emitter_dict()["source"].split(":")[0]
     row.update(zip(THETA_COLUMNS, fit.theta, strict=True))
     for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
         row[f"season_{k}"] = fit.values[k]

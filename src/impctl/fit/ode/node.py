@@ -226,7 +226,7 @@ def build_rows(
                                                        packed.t_air_in_slope[night_index]), 0.0)
         h = torch.diff(grid, dim=1)
         x_slope = torch.zeros_like(x)
-        x_slope[:, :-1] = torch.where(h > 0, torch.diff(x, dim=1) / h.clamp_min(1e-9), 0.0)
+        x_slope[:, :-1] = interval_slope(x, h)
         coef = (a_air * k_phi + d)[:, None]
         u0_air = u0_air + coef * x
         u1_air = u1_air + coef * x_slope
@@ -280,6 +280,12 @@ def build_rows(
         lag_rate=lag_rate,
         lag_extra=lag_extra,
     )
+
+
+def interval_slope(v: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    """Slope of node values ``v`` (R, …, K) on each interval of lengths ``h`` (R, …, K−1) [s]:
+    zero on padding (zero-length intervals)."""
+    return torch.where(h > 0, torch.diff(v, dim=-1) / h.clamp_min(1e-9), 0.0)
 
 
 def _air_coefficients(net) -> tuple:

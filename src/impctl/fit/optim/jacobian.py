@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..ode.node import ROW_DEMAND, RowModel, build_rows, row_scalars
+from ..ode.node import ROW_DEMAND, RowModel, build_rows, interval_slope, row_scalars
 from ..ode.parameters import DTYPE, EMC_COLUMN, to_physical
 from ..ode.solver import chain_rate_derivative, chain_responses
 from .problem import Context, Rows, residuals
@@ -279,12 +279,6 @@ def _compare(cols: torch.Tensor, model, scale: torch.Tensor) -> None:
     cols.copy_(model.observe(cols) * w)
 
 
-def _slope(v: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
-    """Slope of node values ``v`` (R, …, K) on each interval (R, …, K−1) as build_rows takes
-    it (zero on padding)."""
-    return torch.where(h > 0, torch.diff(v, dim=-1) / h.clamp_min(1e-9), 0.0)
-
-
 def _demand_forcings(packed, night, h, sc, phi_in_w):
     """(u0, u1) (R, 3, K−1) of T_air, T_out and a constant [per unit weight]."""
     ta, te = packed.t_air_in_c[night, :-1], packed.t_out_c[night, :-1]
@@ -323,8 +317,8 @@ def _air_forcings(packed, night, h, sc, phi_in_w):
     # within an interval the heat input is constant and only x has a slope (build_rows)
     u1 = torch.zeros_like(v[..., :-1])
     u1[:, 0] = packed.t_out_slope[night, :-1]
-    u1[:, 2] = _slope(x, h)
-    u1[:, 4:] = _slope(v[:, 4:], h[:, None])
+    u1[:, 2] = interval_slope(x, h)
+    u1[:, 4:] = interval_slope(v[:, 4:], h[:, None])
     return v[..., :-1], u1
 
 
