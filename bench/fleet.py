@@ -2,7 +2,7 @@
 batch vs alone, memory per worker, and where a batch's CPU goes.
 
 Run:  .venv/bin/python bench/fleet.py [--households 1000] [--data DIR] [--throughput 128]
-          [--alone 16] [--batch-size 16] [--plant realistic|iso] [--profile 16]
+          [--alone 16] [--batch-size 64] [--plant realistic|iso] [--profile 16]
           [--skip-full | --full-only]
       .venv/bin/python bench/fleet.py --sample 10 [--ranges true] [--dump F] [--against F]
 
@@ -319,7 +319,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
     ap.add_argument("--throughput", type=int, default=256)
     ap.add_argument("--alone", type=int, default=16)
-    ap.add_argument("--batch-size", type=int, default=16)
+    ap.add_argument("--batch-size", type=int, default=64)
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
     ap.add_argument("--profile", type=int, default=0, metavar="N",
                     help="split one batch of N households' CPU by phase, then stop")

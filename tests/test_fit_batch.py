@@ -224,3 +224,38 @@ def test_merged_calls_hold_their_households_in_batch_order(fleet, monkeypatch):
     fit_households(nights[:2] * 2, ranges[:2] * 2, **PARAMS)
     assert any(len(o) > 1 for o in orders)
     assert all(o == sorted(o) for o in orders)
+
+
+def test_one_household_thread_runs_at_a_time(fleet, monkeypatch):
+    """Between merged calls the households' own work runs one thread at a time: torch
+    releases the GIL in every operation, and many runnable threads turned each release into a
+    handoff between them (half a batch's CPU). The estimator's steps here sleep, which lets
+    any other runnable household in; none may be."""
+    import threading
+    import time
+
+    from impctl.fit import estimator
+
+    inside, most = [0], [0]
+    lock = threading.Lock()
+    real = {"prepare": estimator.prepare, "statement": estimator.statement}
+
+    def crowded(name):
+        def step(*a, **kw):
+            with lock:
+                inside[0] += 1
+                most[0] = max(most[0], inside[0])
+            time.sleep(0.02)
+            try:
+                return real[name](*a, **kw)
+            finally:
+                with lock:
+                    inside[0] -= 1
+        return step
+
+    for name in real:
+        monkeypatch.setattr(estimator, name, crowded(name))
+    nights, ranges = fleet
+    results, _ = fit_households(nights, ranges, **PARAMS)
+    assert all(isinstance(r, NightFit) for r in results)
+    assert most[0] == 1

@@ -37,7 +37,7 @@ from .manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_man
 from .table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
 
-DEFAULT_BATCH = 16
+DEFAULT_BATCH = 64
 
 
 @dataclass

@@ -52,7 +52,7 @@ def fleet() -> None:
                    "fraction of a full one.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path),
               default=None, help="Also write the fleet report (HTML + PNG) into this folder.")
-@click.option("--batch-size", type=click.IntRange(min=1), default=16, show_default=True,
+@click.option("--batch-size", type=click.IntRange(min=1), default=64, show_default=True,
               help="Households fitted together in one batched optimiser call (one Dask "
                    "task); a fleet smaller than two batches per worker is cut finer.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")

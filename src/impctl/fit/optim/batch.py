@@ -9,7 +9,9 @@ same work is a few large tensor operations, so a household costs much less in a 
 (``bench/fleet.py``).
 
 How: each household runs ``NightFit.fit`` in its own thread with the optimiser step replaced by
-:class:`_BatchFit._optimise`, which hands its problem to a :class:`_Rendezvous` and waits. When
+:class:`_BatchFit._optimise`, which hands its problem to a :class:`_Rendezvous` and waits; the
+household threads take turns (one runs, from its start or its last result to its next problem
+or its end), which halves a batch's CPU against letting them all run at once. When
 every household still running is waiting, the rendezvous merges their problems — nights
 concatenated (grids padded to the longest), problem, night and group indices offset — solves
 them together and hands each household its slice back. Problems stay independent in the merged
@@ -69,15 +71,26 @@ class _Rendezvous:
 
     def __init__(self, n_running: int):
         self._cond = threading.Condition()
+        # One household thread runs at a time (it holds the baton from its start or its last
+        # merged result to its next problem or its end). Torch releases the GIL in every
+        # tensor operation; with dozens of runnable threads each release became a handoff
+        # between them: millions of futex calls and a third of a batch's CPU in the kernel.
+        self._baton = threading.Lock()
         self._running = n_running
         self._pending: list[_Problem] = []
         self.merged_calls = 0
 
+    def start(self) -> None:
+        """A household thread begins: wait for the baton."""
+        self._baton.acquire()
+
     def solve(self, problem: _Problem) -> lm.LMResult:
         with self._cond:
             self._pending.append(problem)
+            self._baton.release()
             self._cond.notify_all()
             self._cond.wait_for(lambda: problem.done)
+        self._baton.acquire()
         if problem.error is not None:
             raise problem.error
         assert problem.result is not None
@@ -86,6 +99,7 @@ class _Rendezvous:
     def finished(self) -> None:
         with self._cond:
             self._running -= 1
+            self._baton.release()
             self._cond.notify_all()
 
     def serve(self) -> None:
@@ -269,6 +283,7 @@ def fit_households(
     results: list[NightFit | BaseException] = [RuntimeError("not run")] * len(nights)
 
     def run(i: int) -> None:
+        rendezvous.start()
         est = _BatchFit(**params)
         if probabilities is not None:
             est.prior = with_class_probabilities(est.prior, probabilities[i])
