@@ -57,6 +57,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from impctl.fleet.run import DEFAULT_BATCH
+
 SEED = 20260
 
 
@@ -319,7 +321,8 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
     ap.add_argument("--throughput", type=int, default=256)
     ap.add_argument("--alone", type=int, default=16)
-    ap.add_argument("--batch-size", type=int, default=64)
+    ap.add_argument("--batch-size", type=int, default=DEFAULT_BATCH,
+                    help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
     ap.add_argument("--profile", type=int, default=0, metavar="N",
                     help="split one batch of N households' CPU by phase, then stop")

@@ -2,7 +2,7 @@
 on 1 and 2 worker processes, the ratio, and each worker's peak resident memory.
 
 Run:  .venv/bin/python bench/fleet_cluster.py [--households 448] [--data DIR]
-          [--workers 1,2] [--batch-size 16] [--model-dir DIR]
+          [--workers 1,2] [--batch-size 64] [--model-dir DIR]
 
 For every worker count W, as on a real cluster: ``dask scheduler`` and ``dask worker
 --nworkers W --nthreads 1`` (``MALLOC_ARENA_MAX=2``, Dask's profiler off, as
@@ -47,6 +47,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from benchlib.fleet_rates import steady_rate
+
+from impctl.fleet.run import DEFAULT_BATCH
 
 DASK = str(Path(sys.executable).with_name("dask"))
 #: The worker programs' environment, as the how-to starts them.
@@ -141,7 +143,8 @@ def main() -> None:
                     help="fleet size (the default takes about a minute on one worker)")
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
     ap.add_argument("--workers", default="1,2", help="worker counts to run, comma-separated")
-    ap.add_argument("--batch-size", type=int, default=16)
+    ap.add_argument("--batch-size", type=int, default=DEFAULT_BATCH,
+                    help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--model-dir", type=Path, default=None,
                     help="classifiers [default: none — the whole prior ranges]")
     args = ap.parse_args()

@@ -102,8 +102,8 @@ def as_parquet(folder: Path) -> Path:
     return target
 
 
-def run(data: Path, workers: int, work: Path, previous: Path | None = None
-        ) -> tuple[float, Path]:
+def run(data: Path, workers: int, work: Path, previous: Path | None = None,
+        batch: int | None = None) -> tuple[float, Path]:
     """Fit the fleet on ``workers`` local worker processes (``bench/fleet.py``'s run, which
     prints the throughput and CPU figures); print the season's and memory figures; (the steady
     rate between the first and the last batch [households/s] — what a large fleet sees, the
@@ -113,7 +113,7 @@ def run(data: Path, workers: int, work: Path, previous: Path | None = None
     from impctl.fleet.run import DEFAULT_BATCH
 
     started = time.time()
-    wall, out = run_fleet(data, workers, DEFAULT_BATCH, work, previous)
+    wall, out = run_fleet(data, workers, batch or DEFAULT_BATCH, work, previous)
     fleet = pd.read_parquet(out)
     rate = len(fleet) / wall
     steady, first_s = steady_rate(out, started)
@@ -146,11 +146,11 @@ def next_morning(args) -> None:
     w = max(int(x) for x in args.workers.split(","))
     with tempfile.TemporaryDirectory(prefix="impctl-fleet-season-") as tmp:
         print(f"yesterday ({k} owner nights), a full run:")
-        _, first = run(before, w, Path(tmp))
+        _, first = run(before, w, Path(tmp), batch=args.batch_size)
         print(f"today ({k + 1} owner nights), the full run for comparison:")
-        full_rate, full = run(after, w, Path(tmp))
+        full_rate, full = run(after, w, Path(tmp), batch=args.batch_size)
         print("today, --previous yesterday's FLEET:")
-        rate, warm = run(after, w, Path(tmp), previous=first)
+        rate, warm = run(after, w, Path(tmp), previous=first, batch=args.batch_size)
         a = pd.read_parquet(full).set_index("household")
         b = pd.read_parquet(warm).set_index("household").loc[a.index]
         for q in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
@@ -162,7 +162,8 @@ def next_morning(args) -> None:
                    for c in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"))
         print(f"  the IMP fit's HLC, τ, C_m the same as the full run's: {same}")
         print("today again (no new night), --previous the morning run's FLEET:")
-        again_rate, _ = run(after, w, Path(tmp), previous=warm)
+        again_rate, _ = run(after, w, Path(tmp), previous=warm,
+                              batch=args.batch_size)
     print(f"10,000 such households every morning at {rate:.2f} households/s ({w} workers, "
           f"the steady rate): {10_000 / rate / 60:.1f} min (a full run: "
           f"{10_000 / full_rate / 60:.1f} min; with no new night: "
@@ -178,6 +179,8 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
     ap.add_argument("--input", choices=("csv", "parquet"), default="csv",
                     help="one NIGHTS CSV per household, or one Parquet dataset")
+    ap.add_argument("--batch-size", type=int, default=None,
+                    help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--next-morning", action="store_true",
                     help="the daily run with --previous (module docstring)")
     args = ap.parse_args()
@@ -192,7 +195,7 @@ def main() -> None:
     rates = {}
     with tempfile.TemporaryDirectory(prefix="impctl-fleet-season-") as tmp:
         for w in [int(x) for x in args.workers.split(",")]:
-            rates[w] = run(data, w, Path(tmp))[0]
+            rates[w] = run(data, w, Path(tmp), batch=args.batch_size)[0]
     best = max(rates, key=lambda w: rates[w])
     print(f"10,000 such households at {rates[best]:.2f} households/s ({best} workers, the "
           f"steady rate): "
