@@ -259,3 +259,20 @@ def test_one_household_thread_runs_at_a_time(fleet, monkeypatch):
     results, _ = fit_households(nights, ranges, **PARAMS)
     assert all(isinstance(r, NightFit) for r in results)
     assert most[0] == 1
+
+
+def test_a_household_whose_prior_cannot_be_built_does_not_hold_up_the_batch(fleet):
+    """A household that fails before its fit starts (its class probabilities name no class)
+    gets its exception; the others are fitted and the batch returns."""
+    import threading
+
+    nights, ranges = fleet
+    out = []
+    batch = threading.Thread(target=lambda: out.append(fit_households(
+        nights[:2], ranges[:2], [None, "not a mapping"], **PARAMS)), daemon=True)
+    batch.start()
+    batch.join(timeout=120)
+    assert out, "the batch never returned"
+    results, _ = out[0]
+    assert isinstance(results[0], NightFit)
+    assert isinstance(results[1], BaseException)

@@ -284,17 +284,19 @@ def fit_households(
 
     def run(i: int) -> None:
         rendezvous.start()
-        est = _BatchFit(**params)
-        if probabilities is not None:
-            est.prior = with_class_probabilities(est.prior, probabilities[i])
-        est._rendezvous = rendezvous
-        est._household = i
-        try:
+        est = None
+        try:   # whatever fails, the household leaves the rendezvous (else the batch waits)
+            est = _BatchFit(**params)
+            if probabilities is not None:
+                est.prior = with_class_probabilities(est.prior, probabilities[i])
+            est._rendezvous = rendezvous
+            est._household = i
             results[i] = est.fit(nights[i], ranges[i])
         except BaseException as exc:  # noqa: BLE001 — reported per household
             results[i] = exc
         finally:
-            est._rendezvous = None
+            if est is not None:
+                est._rendezvous = None
             rendezvous.finished()
 
     retain_freed_memory()
