@@ -5,13 +5,15 @@ resident memory after its batches, and what 10,000 such households would take.
 
 Run:  .venv/bin/python bench/fleet_season.py [--households 96] [--owner-nights 28]
           [--workers 1,2] [--seed 31] [--data DIR] [--next-morning] [--input csv|parquet]
+          [--batch-size N] [--model-dir DIR]
 
 Input: ``--households`` houses of the realistic plant simulated over a winter by the season
 simulator of ``bench/season.py`` (the IMP campaign every other night from the first, the owner's
 nights between), each cut when its N-th plain owner night is over and written as one NIGHTS
 CSV per household (``write_nights``: the fleet's folder input, the format of ``impctl export``);
 generated once and kept in ``--data``. The fleet runs on the default local cluster with
-``--workers`` worker processes, no classifiers (the whole prior ranges, as ``bench/fleet.py``);
+``--workers`` worker processes, no classifiers unless ``--model-dir`` (the whole prior ranges, as
+``bench/fleet.py``);
 the machine's other load skews the figures, so keep it quiet.
 
 ``--input parquet``: the same households as one Parquet dataset with a ``household`` column,
@@ -183,7 +185,11 @@ def main() -> None:
                     help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--next-morning", action="store_true",
                     help="the daily run with --previous (module docstring)")
+    ap.add_argument("--model-dir", type=Path, default=None,
+                    help="classifiers [default: none — the whole prior ranges, whatever the "
+                         "user's data directory holds]")
     args = ap.parse_args()
+    os.environ["IMPCTL_MODEL_DIR"] = str(args.model_dir or args.data / "no-models")
     print(f"command: python bench/fleet_season.py {' '.join(sys.argv[1:])}")
     print(f"machine: {os.uname().machine}, {os.cpu_count()} cores")
     if args.next_morning:
