@@ -48,6 +48,11 @@ SUN_RIDGE = 0.05
 GAIN_RW = 5.0
 #: Residual scale [W] (the search is scale-free; this keeps the numbers near 1).
 W_SCALE = 100.0
+#: A warm search (from an earlier fit's θ) stops when a step changes the cost or θ
+#: (transformed) by less than this share; the full search keeps MINPACK's 1e-8. From one start
+#: there is no other start to overtake it: on 192 households a morning's values stayed within
+#: 0.4 % of the 1e-8 ones, at 10 % less CPU per household (decision record 0031).
+WARM_TOL = 1e-6
 
 
 def bounds_for(tau_e_max_s: float) -> tuple[tuple[float, float], ...]:
@@ -252,9 +257,10 @@ def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
                     for tau_h, w in START_GRID]
             starts.append(min(grid, key=lambda u: float(np.sum(_residual(u, d, bounds) ** 2))))
     best = None
+    tol = WARM_TOL if start is not None else 1e-8
     for u0 in starts:
         res = least_squares(_residual, u0, args=(d, bounds), method="lm", max_nfev=max_nfev,
-                            diff_step=1e-4, x_scale=1.0)
+                            diff_step=1e-4, x_scale=1.0, ftol=tol, xtol=tol)
         if best is None or res.cost < best.cost:
             best = res
     theta = from_u(best.x, bounds)
