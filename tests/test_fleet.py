@@ -283,3 +283,29 @@ def test_a_dataset_of_large_row_groups_gets_a_note_on_its_layout(tmp_path, night
     folder.mkdir()
     write_nights(nights[0], folder / "h.csv")
     assert layout_note(discover(folder), batch_size=1) is None
+
+
+def test_a_batch_reads_only_the_row_groups_holding_its_households(tmp_path, nights):
+    """A batch of many households (64 here, the default) skips every row group that holds none
+    of them — by the groups' statistics, which pyarrow does not use for a membership test of
+    that many values — and reads exactly its households' rows."""
+    import pyarrow as pa
+    import pyarrow.dataset as ds
+    import pyarrow.parquet as pq
+
+    from impctl.fleet.inputs import _read_parquet, discover, households_filter
+
+    one = _frame(nights[0])
+    table = pa.Table.from_pandas(pd.concat(
+        [one.assign(household=f"h{i:03d}") for i in range(256)], ignore_index=True),
+        preserve_index=False)
+    path = tmp_path / "fleet.parquet"
+    pq.write_table(table, path, row_group_size=64 * len(one))       # four row groups
+    batch = [s.household for s in discover(path)][64:128]
+    dataset = ds.dataset(path, format="parquet")
+    groups = next(dataset.get_fragments()).split_by_row_group(
+        households_filter(batch, dataset.schema.field("household").type))
+    assert len(groups) == 1
+    frame = _read_parquet(str(path), batch)
+    assert sorted(set(frame["household"])) == sorted(batch)
+    assert len(frame) == 64 * len(one)

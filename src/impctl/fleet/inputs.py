@@ -225,13 +225,24 @@ def _read_parquet(path: str, households: list[str] | None = None):
         dataset = ds.dataset(path, format="parquet", partitioning="hive")
         if households is None:
             return dataset.to_table().to_pandas()
-        col = ds.field(HOUSEHOLD_COLUMN)
-        field_type = dataset.schema.field(HOUSEHOLD_COLUMN).type
-        import pyarrow as pa
-
-        values = pa.array(households).cast(field_type) if not pa.types.is_string(
-            field_type) else pa.array(households)
-        return dataset.to_table(filter=col.isin(values)).to_pandas()
+        flt = households_filter(households, dataset.schema.field(HOUSEHOLD_COLUMN).type)
+        return dataset.to_table(filter=flt).to_pandas()
     except (OSError, ValueError, TypeError) as exc:
         raise InputError(f"not a readable Parquet file ({str(exc).splitlines()[0]})",
                          path) from None
+
+
+def households_filter(households: list[str], field_type):
+    """The dataset filter of a batch's rows: ``household`` among ``households``, and between
+    their least and greatest. pyarrow skips a row group by its statistics for the range, but
+    not for a membership test of more than a few values: a batch of 64 households read every
+    row group of a 10,000-household dataset (0.28–0.40 CPU-s a batch against 0.01)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.dataset as ds
+
+    col = ds.field(HOUSEHOLD_COLUMN)
+    values = (pa.array(households) if pa.types.is_string(field_type)
+              else pa.array(households).cast(field_type))
+    bounds = pc.min_max(values)
+    return (col >= bounds["min"]) & (col <= bounds["max"]) & col.isin(values)
