@@ -309,3 +309,25 @@ def test_a_batch_reads_only_the_row_groups_holding_its_households(tmp_path, nigh
     frame = _read_parquet(str(path), batch)
     assert sorted(set(frame["household"])) == sorted(batch)
     assert len(frame) == 64 * len(one)
+
+
+def test_a_dataset_whose_household_column_is_categorical_reads_its_households(tmp_path,
+                                                                               nights):
+    """pandas writes a categorical column as a Parquet dictionary: its households are read as
+    from a plain text column (the filter compares the dictionary's values)."""
+    from impctl.fleet.inputs import discover, read_sources
+
+    one = _frame(nights[0])
+    frame = pd.concat([one.assign(household=f"h{i:02d}") for i in range(3)], ignore_index=True)
+    frame["household"] = frame["household"].astype("category")
+    frame.to_parquet(tmp_path / "fleet.parquet", index=False)
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    write_nights(nights[0], plain / "h01.csv")
+    sources = discover(tmp_path / "fleet.parquet")
+    assert [s.household for s in sources] == ["h00", "h01", "h02"]
+    got = read_sources([s for s in sources if s.household == "h01"], "Europe/Ljubljana")
+    want = read_sources(discover(plain), "Europe/Ljubljana")["h01"]
+    assert list(got) == ["h01"] and not isinstance(got["h01"], Exception), got
+    assert [(n.night_id, n.kind, len(n.time_s)) for n in got["h01"]] == [
+        (n.night_id, n.kind, len(n.time_s)) for n in want]

@@ -242,6 +242,8 @@ def households_filter(households: list[str], field_type):
     import pyarrow.dataset as ds
 
     col = ds.field(HOUSEHOLD_COLUMN)
+    if pa.types.is_dictionary(field_type):   # a pandas categorical: compare its values
+        col, field_type = col.cast(field_type.value_type), field_type.value_type
     values = (pa.array(households) if pa.types.is_string(field_type)
               else pa.array(households).cast(field_type))
     bounds = pc.min_max(values)
