@@ -132,3 +132,32 @@ def test_home_assistant_shows_since_when_the_house_changed():
     season["change"] = {"changed": False, "since_date": None}
     hlc = fit_payloads((created, [1], {"lumped": {}, "season": season}))["hlc"]
     assert hlc["changed_since"] is None and hlc["change_w_per_k"] is None
+
+
+def test_the_fleet_says_which_households_changed_and_since_when(tmp_path, season):
+    from distributed import Client, LocalCluster
+
+    from impctl.fleet import fit_fleet, read_fleet
+
+    folder = tmp_path / "nights"
+    folder.mkdir()
+    for i in (0, 1):
+        write_nights(household_nights(season, i), folder / f"house-{i}.csv")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address="127.0.0.1:0") as cluster, Client(cluster) as client:
+        run = fit_fleet(folder, tmp_path / "FLEET.parquet", client=client, progress=False,
+                        echo=lambda _: None)
+    assert run.changed == 1
+    rows = read_fleet(tmp_path / "FLEET.parquet").set_index("household")
+    opened, kept = rows.loc["house-0"], rows.loc["house-1"]
+    assert bool(opened["season_changed"]) is True
+    assert isinstance(opened["season_changed_since"], dt.date)   # a date column, not text
+    assert abs(_days(season.nights[STEP_NIGHT][0],
+                     opened["season_changed_since"].isoformat())) <= 2
+    assert (opened["season_change_w_per_k_low"] <= WINDOW_W_K
+            <= opened["season_change_w_per_k_high"])
+    assert abs(opened["season_change_w_per_k"] - WINDOW_W_K) <= 15.0
+    assert opened["season_change_nights_after"] >= 1
+    assert bool(kept["season_changed"]) is False
+    assert kept[["season_changed_since", "season_change_w_per_k",
+                 "season_change_nights_after"]].isna().all()

@@ -54,6 +54,7 @@ class FleetRun:
     workers: int = 0
     reused: int = 0      # households whose IMP fit came from ``previous``
     unchanged: int = 0   # … and whose nights were all the same: the whole row
+    changed: int = 0     # households whose heat loss changed (``season_changed``)
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -359,6 +360,7 @@ def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
                 run.counts[row["status"]] = run.counts.get(row["status"], 0) + 1
                 run.reused += bool(row.get("imp_fit_reused"))
                 run.unchanged += bool(row.get("nights_unchanged"))
+                run.changed += bool(row.get("season_changed"))
             future.release()
             bar.set_postfix(ok=run.counts["ok"], insufficient=run.counts["insufficient"],
                             failed=run.counts["error"], refresh=False)

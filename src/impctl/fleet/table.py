@@ -26,7 +26,12 @@ season model of the owner and IMP nights together, :mod:`impctl.season`; empty w
 nights), ``season_owner_nights``, ``season_signature_hlc_w_per_k`` (its baseline),
 ``season_note`` (why it did not run); ``season_emitter`` (radiators | underfloor, empty when
 not known) and ``season_emitter_source`` (declared: the household's NIGHTS column
-``emitter`` | measured: the heating water | assumed); ``season_tau_mm_s, season_w,
+``emitter`` | measured: the heating water | assumed); ``season_changed`` (the change test
+on the owner nights found a step in the heat loss; empty when it could not run),
+``season_changed_since`` (the evening of the first night after it),
+``season_change_w_per_k`` with ``_low``, ``_high`` (the step and its 95 % interval [W/K]) and
+``season_change_nights_after`` (owner nights since) — empty without a change;
+``season_tau_mm_s, season_w,
 season_tau_e_s, season_f_sun, season_tau_r_s`` (its nonlinear parameters, where a later run's
 search starts) and
 ``season_warm_start`` (this run's search started there);
@@ -84,7 +89,11 @@ for _col in SEASON_COLUMNS:
                 (f"{_col}_high", pa.float64())]
 _FIELDS += [("season_owner_nights", pa.int32()),
             ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string()),
-            ("season_emitter", pa.string()), ("season_emitter_source", pa.string())]
+            ("season_emitter", pa.string()), ("season_emitter_source", pa.string()),
+            ("season_changed", pa.bool_()), ("season_changed_since", pa.date32()),
+            ("season_change_w_per_k", pa.float64()), ("season_change_w_per_k_low", pa.float64()),
+            ("season_change_w_per_k_high", pa.float64()),
+            ("season_change_nights_after", pa.int32())]
 #: The season model's nonlinear parameters (:data:`impctl.season.projection.columns.THETA`):
 #: where the next run's search starts (``--previous``).
 THETA_COLUMNS = ("season_tau_mm_s", "season_w", "season_tau_e_s", "season_f_sun",

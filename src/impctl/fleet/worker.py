@@ -200,6 +200,16 @@ def _season(row: dict, nights: list, start: tuple | None = None) -> None:
         row[f"season_{k}"] = fit.values[k]
         row[f"season_{k}_low"], row[f"season_{k}_high"] = fit.low[k], fit.high[k]
     row["season_owner_nights"] = fit.owner_nights
+    c = fit.change
+    row["season_changed"] = None if c is None else bool(c.changed)
+    if c is not None and c.changed:
+        import datetime as dt
+
+        row["season_changed_since"] = dt.date.fromisoformat(c.since_date)
+        row["season_change_w_per_k"] = c.delta_hlc_w_k
+        row["season_change_w_per_k_low"] = c.low_w_k
+        row["season_change_w_per_k_high"] = c.high_w_k
+        row["season_change_nights_after"] = c.nights_after
     sig = fit.signature_hlc_w_per_k
     row["season_signature_hlc_w_per_k"] = sig if math.isfinite(sig) else None
 

@@ -103,6 +103,9 @@ def fleet_fit(input_path: Path, out: Path, model_dir: Path | None, scheduler: st
                f"{c['insufficient']} insufficient, {c['error']} error{reused}), {run.skipped} "
                f"already in {out}; {run.wall_s:.1f} s wall, {rate:.2f} households/s on "
                f"{run.workers} workers")
+    if run.changed:
+        click.echo(f"{run.changed} households' heat loss changed during their season (FLEET "
+                   "columns season_changed_since, season_change_w_per_k)")
     if report_dir is not None:
         from ...report.fleet import write_fleet_report
 
