@@ -167,6 +167,25 @@ def test_a_warm_start_from_a_screed_on_a_radiator_house_runs_the_full_search():
     assert moved.values["hlc_w_per_k"] == cold.values["hlc_w_per_k"]
 
 
+def test_a_refit_of_a_house_whose_water_could_not_tell_searches_once_under_its_bound(
+        searches):
+    """The water on two nights only (fewer than the emitter test needs): recorded, but it
+    cannot tell the emitter, so the lag's bound is the unknown emitter's. A morning's refit
+    from such a fit searches once under that bound — not under the screed's and then in
+    full (three searches where one does)."""
+    nights = _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3, 5, 6])
+    nights = [n if i < 2 else dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+              for i, n in enumerate(nights)]
+    cold, _ = fit_nights(nights)
+    assert cold.emitter is None and searches == [1.5 * 3600, TAU_E_MAX_UNKNOWN_S]
+    searches.clear()
+    start = (cold.theta[0], cold.theta[1], 2.5 * 3600, *cold.theta[3:])
+    warm, _ = fit_nights(nights, start=start)
+    assert searches == [TAU_E_MAX_UNKNOWN_S]
+    assert warm.warm_start and warm.emitter is None
+    assert warm.values["hlc_w_per_k"] == pytest.approx(cold.values["hlc_w_per_k"], rel=0.01)
+
+
 def test_a_file_declares_the_emitter_and_the_season_model_takes_it(tmp_path):
     nights = [dataclasses.replace(n, emitter="underfloor")
               for n in _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3])]

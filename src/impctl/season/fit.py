@@ -213,12 +213,16 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
         first = tau_e_max_s("radiators" if water_recorded(rec) else None)
-        screed_start = False
+        start_bound = False
         if emitter is not None:
             first = tau_e_max_s(emitter)
         elif start is not None and water_recorded(rec) and start[2] > first:
-            # an earlier fit of this house read a screed: one search under its bound
-            first, screed_start = tau_e_max_s("underfloor"), True
+            # An earlier fit of this house read a screed, or could not tell: one search under
+            # the narrowest bound that holds its lag. Under the screed's alone, a house whose
+            # water could not tell searched there and then in full: three searches a morning.
+            first = min((b for b in (tau_e_max_s(None), tau_e_max_s("underfloor"))
+                         if b >= start[2] * (1.0 - 1e-9)), default=tau_e_max_s("underfloor"))
+            start_bound = True
         bounds = bounds_for(first)
         theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
         b = beta_dict(pr)
@@ -226,7 +230,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
                   else float("nan"))
         kind = emitter if emitter is not None else emitter_kind(excess)
-        if screed_start and tau_e_max_s(kind) != first:
+        if start_bound and tau_e_max_s(kind) != first:
             # The water, scaled by this fit's HLC, now reads radiators where the fit it
             # started from read a screed. A fit without a start reads the water at the
             # radiators' HLC and may read a screed again: searching on under the radiators'
