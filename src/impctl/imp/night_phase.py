@@ -57,10 +57,11 @@ def check_phases(table: pd.DataFrame, groups, kind_of, path, row) -> None:
                              f"{night_id!r} is an owner night)", path, row(int(idx[0])))
 
 
-def split_preheat(table: pd.DataFrame, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def split_preheat(phase: np.ndarray | None, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the pre-heat rows, the window's rows) of a night's rows ``idx`` (checked by
-    :func:`check_phases`: the pre-heat rows come first)."""
-    if PHASE not in table:
+    :func:`check_phases`: the pre-heat rows come first); ``phase``: the file's ``phase``
+    column (None without one)."""
+    if phase is None:
         return idx[:0], idx
-    n_pre = int(np.sum(table[PHASE].to_numpy(dtype=object)[idx] == PREHEAT))
+    n_pre = int(np.sum(phase[idx] == PREHEAT))
     return idx[:n_pre], idx[n_pre:]

@@ -74,13 +74,21 @@ def check_labels(table: pd.DataFrame, groups, kind_of, path, row) -> None:
                              f"{kind or 'of no kind'})", path, row(int(idx[0])))
 
 
-def series_fields(table: pd.DataFrame, idx: np.ndarray) -> dict:
-    """The :class:`~impctl.imp.night.NightSamples` fields of the rows ``idx``: each column of
-    :data:`SERIES_COLUMNS` the file has (NaN where empty) and the ``label``."""
-    out: dict = {col: table[col].to_numpy(dtype=float)[idx]
-                 for col in SERIES_COLUMNS if col in table}
+def series_arrays(table: pd.DataFrame) -> dict:
+    """The columns of :data:`SERIES_COLUMNS` the file has, as float arrays (NaN where empty),
+    and the ``label`` column as text — once per file, for :func:`series_fields`."""
+    out: dict = {col: table[col].to_numpy(dtype=float) for col in SERIES_COLUMNS if col in table}
     if LABEL in table:
-        out[LABEL] = str(table[LABEL].iloc[int(idx[0])])
+        out[LABEL] = table[LABEL].to_numpy(dtype=object)
+    return out
+
+
+def series_fields(arrays: dict, idx: np.ndarray) -> dict:
+    """The :class:`~impctl.imp.night.NightSamples` fields of the rows ``idx`` from
+    :func:`series_arrays`: each series column's rows and the ``label``."""
+    out = {col: a[idx] for col, a in arrays.items() if col != LABEL}
+    if LABEL in arrays:
+        out[LABEL] = str(arrays[LABEL][int(idx[0])])
     return out
 
 

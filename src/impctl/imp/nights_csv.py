@@ -57,6 +57,7 @@ from .night_series import (
     check_emitter,
     check_labels,
     check_series,
+    series_arrays,
     series_fields,
 )
 from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
@@ -271,6 +272,11 @@ def nights_from_table(
     emitter = check_emitter(table, path, _row)
     setpoint_all = (table["setpoint"].to_numpy(dtype=float) if "setpoint" in table else None)
     values = {c: table[c].to_numpy(dtype=float) for c in ("t_air", "t_out", "q_hc")}
+    # every column a night reads, as arrays once (per night from the table: the whole column
+    # converted once per night — a season of nights read a file many times over)
+    phase = table[PHASE].to_numpy(dtype=object) if PHASE in table else None
+    series = series_arrays(table)
+    heating_given = "heating" in table
     extras = extra_columns(table)
     if "p_el_w" in extras:  # the heat pump's electricity: q_hc must be well above it
         why = electrical_problem(values["q_hc"], extras["p_el_w"])
@@ -280,7 +286,7 @@ def nights_from_table(
     for night_id, idx in groups:
         if night_id == "":
             continue
-        pre, idx = split_preheat(table, idx)
+        pre, idx = split_preheat(phase, idx)
         if len(idx) == 1 or len(pre) + len(idx) < 2:
             if explicit:
                 raise InputError(f"night {night_id!r} has only one sample", path,
@@ -298,13 +304,13 @@ def nights_from_table(
         night = None
         if len(idx):
             start = starts[night_id] if not explicit else stamps.iloc[int(idx[0])]
-            night = _samples(night_id, idx, start, table, stamp_ns, off, kinds_all,
-                             setpoint_all, values, extras, emitter=emitter)
+            night = _samples(night_id, idx, start, phase, series, heating_given, stamp_ns,
+                             off, kinds_all, setpoint_all, values, extras, emitter=emitter)
             nights.append(night)
         if len(pre):
-            nights.append(_samples(night_id, pre, stamps.iloc[int(pre[0])], table, stamp_ns,
-                                   off, kinds_all, setpoint_all, values, extras,
-                                   kind=None if night is None else night.kind,
+            nights.append(_samples(night_id, pre, stamps.iloc[int(pre[0])], phase, series,
+                                   heating_given, stamp_ns, off, kinds_all, setpoint_all,
+                                   values, extras, kind=None if night is None else night.kind,
                                    emitter=emitter))
     if not nights:
         what = "no night with two or more samples" if explicit else (
@@ -313,11 +319,13 @@ def nights_from_table(
     return sorted(nights, key=lambda n: n.start)
 
 
-def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame,
-             stamp_ns: np.ndarray, off: np.ndarray, kinds_all, setpoint_all, values: dict,
-             extras: dict, kind: str | None = None, emitter: str = "") -> NightSamples:
-    """The night (or its pre-heat, ``phase`` set) of the rows ``idx``, time 0 at ``start``."""
-    pre = PHASE in table and table[PHASE].iloc[int(idx[0])] == PREHEAT
+def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, phase: np.ndarray | None,
+             series: dict, heating_given: bool, stamp_ns: np.ndarray, off: np.ndarray,
+             kinds_all, setpoint_all, values: dict, extras: dict, kind: str | None = None,
+             emitter: str = "") -> NightSamples:
+    """The night (or its pre-heat, ``phase`` set) of the rows ``idx``, time 0 at ``start``;
+    ``phase``, ``series``, ``values``, ``extras``: the file's columns as arrays."""
+    pre = phase is not None and phase[int(idx[0])] == PREHEAT
     time_s = (stamp_ns[idx] - pd.Timestamp(start).as_unit("ns").value) / 1e9
     more: dict = {}
     if kinds_all is not None:
@@ -326,7 +334,7 @@ def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame
         kind = _infer_kind(time_s, off[idx])
         if not pre:
             more["not_held"] = not_held(kind, time_s, values["t_air"][idx], off[idx],
-                                        "heating" in table, values["q_hc"][idx])
+                                        heating_given, values["q_hc"][idx])
     setpoint = np.nan
     if setpoint_all is not None and np.isfinite(setpoint_all[idx]).any():
         setpoint = float(np.nanmedian(setpoint_all[idx]))
@@ -347,7 +355,7 @@ def _samples(night_id, idx: np.ndarray, start: pd.Timestamp, table: pd.DataFrame
         phase=PREHEAT if pre else "",
         emitter=emitter,
         **more,
-        **series_fields(table, idx),
+        **series_fields(series, idx),
     )
 
 
