@@ -179,16 +179,15 @@ def _hourly(nights: Sequence[NightSamples]) -> tuple[float, np.ndarray]:
 def _memory(hourly: np.ndarray, tau_h: float) -> np.ndarray:
     """Exponential mean of ``hourly`` with time constant ``tau_h`` [h] at the end of each
     hour, over the hours recorded (a gap carries no weight)."""
+    from scipy.signal import lfilter
+
     a = math.exp(-1.0 / tau_h)
-    s = w = 0.0
-    out = np.empty(len(hourly))
-    for i, x in enumerate(hourly):
-        s, w = a * s, a * w
-        if x == x:  # recorded
-            s += (1 - a) * x
-            w += 1 - a
-        out[i] = s / w if w > 0 else math.nan
-    return out
+    recorded = np.isfinite(hourly)
+    # the recorded hours' weighted sum and their weight, both decaying by a per hour
+    s = lfilter([1.0 - a], [1.0, -a], np.where(recorded, hourly, 0.0))
+    w = lfilter([1.0 - a], [1.0, -a], recorded.astype(float))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(w > 0, s / np.where(w > 0, w, 1.0), math.nan)
 
 
 def night_rows(nights: Sequence[NightSamples]) -> NightRows:

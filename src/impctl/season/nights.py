@@ -62,9 +62,16 @@ def record_from_nights(nights: Sequence[NightSamples],
     t0 = float(np.floor(min(t[0] for t in t_abs) / BLOCK_S) * BLOCK_S)
     t1 = max(t[-1] for t in t_abs)
     n_steps = int((t1 - t0) // step_s) + 1
-    sums = {k: np.zeros(n_steps) for k in ("t_air", "t_out", "q_hc", "defrost", "dhw", "n",
-                                           "n_def", "n_dhw", "p_house", "n_p", "water",
-                                           "n_w")}
+    # each sum's steps and values over all nights, binned once at the end (a bin count of the
+    # whole grid per night and field cost a season's record most of its time)
+    parts: dict[str, tuple[list, list]] = {k: ([], []) for k in (
+        "t_air", "t_out", "q_hc", "n", "defrost", "n_def", "dhw", "n_dhw", "water", "n_w",
+        "p_house", "n_p")}
+
+    def add(name: str, steps: np.ndarray, values: np.ndarray | None = None) -> None:
+        parts[name][0].append(steps)
+        parts[name][1].append(np.ones(len(steps)) if values is None else values)
+
     kind = np.full(n_steps, "", dtype=object)
     night_id = np.full(n_steps, "", dtype=object)
     dropped = np.zeros(n_steps, bool)
@@ -76,32 +83,33 @@ def record_from_nights(nights: Sequence[NightSamples],
         ok = np.isfinite(n.t_air_c) & np.isfinite(n.t_out_c) & np.isfinite(n.q_hc_w)
         kk = k[ok]
         for name, x in (("t_air", n.t_air_c), ("t_out", n.t_out_c), ("q_hc", n.q_hc_w)):
-            sums[name] += np.bincount(kk, np.asarray(x, float)[ok], n_steps)
-        sums["n"] += np.bincount(kk, minlength=n_steps)
+            add(name, kk, np.asarray(x, float)[ok])
+        add("n", kk)
         for name, x in (("defrost", n.defrost_share), ("dhw", n.dhw)):
             if x is not None:
                 good = ok & np.isfinite(x)
-                sums[name] += np.bincount(k[good], np.asarray(x, float)[good], n_steps)
-                sums["n_" + ("def" if name == "defrost" else "dhw")] += np.bincount(
-                    k[good], minlength=n_steps)
+                add(name, k[good], np.asarray(x, float)[good])
+                add("n_" + ("def" if name == "defrost" else "dhw"), k[good])
         if n.t_flow_c is not None and n.t_return_c is not None:
             water = (np.asarray(n.t_flow_c, float) + np.asarray(n.t_return_c, float)) / 2.0
             good = ok & np.isfinite(water)
-            sums["water"] += np.bincount(k[good], water[good], n_steps)
-            sums["n_w"] += np.bincount(k[good], minlength=n_steps)
+            add("water", k[good], water[good])
+            add("n_w", k[good])
         if np.isfinite(n.p_house_w) and n.p_house_series_w is not None:
             # the rows' own readings: when in the day the household's heat falls
             p = np.asarray(n.p_house_series_w, float)
             good = ok & np.isfinite(p)
-            sums["p_house"] += np.bincount(k[good], p[good], n_steps)
-            sums["n_p"] += np.bincount(k[good], minlength=n_steps)
+            add("p_house", k[good], p[good])
+            add("n_p", k[good])
         elif np.isfinite(n.p_house_w):
-            sums["p_house"] += np.bincount(kk, np.full(len(kk), n.p_house_w), n_steps)
-            sums["n_p"] += np.bincount(kk, minlength=n_steps)
+            add("p_house", kk, np.full(len(kk), n.p_house_w))
+            add("n_p", kk)
         span = np.unique(k)
         kind[span] = n.kind
         night_id[span] = n.night_id
         dropped[span] = any(n.label.startswith(d) for d in DROP_LABELS)
+    sums = {name: (np.bincount(np.concatenate(st), np.concatenate(vs), n_steps) if st
+                   else np.zeros(n_steps)) for name, (st, vs) in parts.items()}
     with np.errstate(invalid="ignore", divide="ignore"):
         cnt = np.where(sums["n"] > 0, sums["n"], np.nan)
         t_air, t_out, q_hc = (sums[k] / cnt for k in ("t_air", "t_out", "q_hc"))
