@@ -46,7 +46,7 @@ import torch
 
 from ...model.continuous import air_derivative, air_temperature
 from ...model.house import H_MS
-from .packing import PackedNights
+from .packing import PackedNights, rows_at
 from .parameters import EMC_COLUMN, FUR_COLUMN, PARAM_NAMES, network
 from .solver import (
     NightODE,  # the integrator (re-exported: tests and readers find it here)
@@ -136,16 +136,16 @@ def _gain_split(net) -> tuple:
 def _mixed_mask(packed: PackedNights, night_index: torch.Tensor, dm: torch.Tensor, k: int
                 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """Compared nodes and interval-mean partners of rows of both types, (R, K) each."""
-    mask = packed.mask[night_index]
+    mask = rows_at(packed.mask, night_index)
     mean_next = None
     if packed.timestamps == "instant":
         # A power sample is the mean until the next sample: compare the model's interval mean
         # (trapezoid), and drop the last sample, whose interval lies outside the night.
-        nxt = packed.next_node[night_index]
+        nxt = rows_at(packed.next_node, night_index)
         mean_next = torch.where(dm, nxt, torch.arange(k).expand_as(nxt))
-        mask = mask & ~(dm & packed.last[night_index])
+        mask = mask & ~(dm & rows_at(packed.last, night_index))
     if packed.power_ok is not None:
-        mask = mask & ~(dm & ~packed.power_ok[night_index])
+        mask = mask & ~(dm & ~rows_at(packed.power_ok, night_index))
     return mask, mean_next
 
 
@@ -183,11 +183,11 @@ def build_rows(
         # the emitter's share of C_m is not at the mass node (as the plant splits it)
         cap_e = params[:, EMC_COLUMN] * net.c_m_j_per_k
         net = dataclasses.replace(net, c_m_j_per_k=net.c_m_j_per_k - cap_e)
-    te = packed.t_out_c[night_index]
-    te_s = packed.t_out_slope[night_index]
-    ta = packed.t_air_in_c[night_index]
-    ta_s = packed.t_air_in_slope[night_index]
-    grid = packed.grid_s[night_index]
+    te = rows_at(packed.t_out_c, night_index)
+    te_s = rows_at(packed.t_out_slope, night_index)
+    ta = rows_at(packed.t_air_in_c, night_index)
+    ta_s = rows_at(packed.t_air_in_slope, night_index)
+    grid = rows_at(packed.grid_s, night_index)
     demand = (row_type == ROW_DEMAND)
     dm = demand[:, None]
     # Rows of one type skip the other type's arithmetic (most of a fit's rows are DEMAND rows,
@@ -209,7 +209,7 @@ def build_rows(
     q_fur = torch.zeros_like(te)
     if params.shape[-1] > FUR_COLUMN:
         # heat the air/furniture capacity takes from the air node [W]
-        q_fur = c_fur[:, None] * packed.t_fur_slope[night_index]
+        q_fur = c_fur[:, None] * rows_at(packed.t_fur_slope, night_index)
     # the constant gain enters at the air, surface and mass nodes as ISO 13790 splits it
     g_air_rate, g_air_level, g_dem_rate, g_dem_heat = _gain_split(net)
     if params.shape[-1] > len(PARAM_NAMES) and any_air:
@@ -218,12 +218,12 @@ def build_rows(
         # Extra heat to the air node, x(t) = the emitter's release on constrained nights
         # (− the furniture's uptake), linear between the nodes: it enters like Φ_HC (z stays
         # continuous).
-        cons = packed.constrained[night_index][:, None]
+        cons = rows_at(packed.constrained, night_index)[:, None]
         x = torch.where(cons, em_w[:, None] * torch.exp(
             -(grid - grid[:, :1]) / em_tau_s[:, None]), 0.0) - q_fur
         if cap_e is not None:
-            x = x + torch.where(cons, _emitter_release(cap_e, em_tau_s, grid,
-                                                       packed.t_air_in_slope[night_index]), 0.0)
+            slope = rows_at(packed.t_air_in_slope, night_index)
+            x = x + torch.where(cons, _emitter_release(cap_e, em_tau_s, grid, slope), 0.0)
         h = torch.diff(grid, dim=1)
         x_slope = torch.zeros_like(x)
         x_slope[:, :-1] = interval_slope(x, h)
@@ -243,11 +243,11 @@ def build_rows(
 
     mean_next = None
     if not any_air:  # DEMAND rows only (lm builds each row type on its own rows)
-        mask = packed.demand_mask()[night_index]
+        mask = rows_at(packed.demand_mask(), night_index)
         if packed.timestamps == "instant":
-            mean_next = packed.next_node[night_index]
+            mean_next = rows_at(packed.next_node, night_index)
     elif not any_dem:  # AIR rows compare T_air at each sample's node: no interval mean
-        mask = packed.mask[night_index]
+        mask = rows_at(packed.mask, night_index)
     else:
         mask, mean_next = _mixed_mask(packed, night_index, dm, grid.shape[1])
     lag_next = lag_rate = lag_extra = None
@@ -259,7 +259,7 @@ def build_rows(
         # condition (tests/test_node.py). Over a sample interval the mean of τ_e·dP/dt is
         # τ_e·(P_k+1 − P_k)/h_k. τ_e is the emitter time constant of the release after
         # switch-off (one constant for both kinds of night); switched off with that term.
-        lag_next = packed.next_node[night_index]
+        lag_next = rows_at(packed.next_node, night_index)
         h = torch.gather(grid, 1, lag_next) - grid
         tau_s = torch.where(demand, params[:, len(PARAM_NAMES) + 2] * 3600.0, 0.0)
         lag_rate = torch.where(h > 0, tau_s[:, None] / h.clamp_min(1e-9), 0.0)
@@ -272,8 +272,8 @@ def build_rows(
         z0=pick(t_m0_c, z0_air),
         out_c=pick(c_m, torch.ones_like(c_m)),
         out_v=pick(out_dem, k_phi[:, None] * phi_w if any_air else None),
-        measured=pick(packed.q_w[night_index] if any_dem else None,
-                      packed.t_air_c[night_index] if any_air else None),
+        measured=pick(rows_at(packed.q_w, night_index) if any_dem else None,
+                      rows_at(packed.t_air_c, night_index) if any_air else None),
         mask=mask,
         mean_next=mean_next,
         lag_next=lag_next,
@@ -313,7 +313,7 @@ def _nuisance(packed: PackedNights, params: torch.Tensor, night_index: torch.Ten
     if params.shape[-1] > len(PARAM_NAMES):
         gain = params[:, len(PARAM_NAMES)]
         if packed.gain_w is not None and night_index is not None:
-            gain = gain + packed.gain_w[night_index]   # measured nights: each its own gain
+            gain = gain + rows_at(packed.gain_w, night_index)   # measured nights: each its own gain
         em_w, em_tau_s = (params[:, len(PARAM_NAMES) + j] for j in (1, 2))
         em_tau_s = (em_tau_s * 3600.0).clamp_min(60.0)  # a term switched off has τ = 0
     return gain, em_w, em_tau_s, c_fur

@@ -17,6 +17,13 @@ from .parameters import DTYPE, FURNITURE_TAU_S
 TIMESTAMPS = ("instant", "interval")
 
 
+def rows_at(x: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """``x[index]`` for a 1-D integer index of ``x``'s first dimension, by ``index_select``:
+    the same values, two to three times faster than advanced indexing on a CPU (the fit
+    gathers each night's arrays for its rows many times per iteration)."""
+    return x.index_select(0, index)
+
+
 @dataclass
 class PackedNights:
     """Nights side by side (tensors float64; N nights, K nodes = the longest night's samples).

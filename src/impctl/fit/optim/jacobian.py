@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import torch
 
 from ..ode.node import ROW_DEMAND, RowModel, build_rows, interval_slope, row_scalars
+from ..ode.packing import rows_at
 from ..ode.parameters import DTYPE, EMC_COLUMN, to_physical
 from ..ode.solver import chain_rate_derivative, chain_responses
 from .problem import Context, Rows, residuals
@@ -158,7 +159,7 @@ def _evaluate_one(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor,
                                                    and u.shape[1] > EMC_COLUMN):
         fd = _forward_differences(ctx, rows, u, t_m0)
         return Evaluated(rows, t_m0, fd[6], fd=fd)
-    params = to_physical(u, rows.box)[rows.problem]
+    params = rows_at(to_physical(u, rows.box), rows.problem)
     model = build_rows(ctx.packed, params, t_m0, rows.night, rows.row_type, rows.phi_w,
                        rows.phi_in_w, ctx.ach_vent, ctx.ach_infl, ctx.solver)
     z = model.ode.integrate(model.z0)
@@ -177,7 +178,7 @@ def _forward_differences(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.
     u_all = torch.cat([u] + [u + eye[j] for j in range(N_PARAMS)] + [u])
     # A parameter whose box is a point (a nuisance term switched off) has a zero Jacobian
     # column: its copy is left out for those rows (the simple and per-night problems).
-    live = (rows.box[:, :, 1] > rows.box[:, :, 0])[rows.problem]          # (R, 7)
+    live = rows_at(rows.box[:, :, 1] > rows.box[:, :, 0], rows.problem)          # (R, 7)
     every = slice(None)
     sel = ([every] + [every if bool(live[:, j].all()) else live[:, j].nonzero()[:, 0]
                       for j in range(N_PARAMS)] + [every])
@@ -206,7 +207,7 @@ def _analytic(ctx: Context, ev: Evaluated, u: torch.Tensor) -> tuple | None:
     forcing = _demand_forcings if demand else _air_forcings
     if packed.gain_w is None and ev.numbers is not None:   # per problem, shared
         sc, d_sc = ev.numbers.get(ctx, u, rows.box, demand)
-        sc, d_sc = sc[rows.problem], d_sc[rows.problem]
+        sc, d_sc = rows_at(sc, rows.problem), rows_at(d_sc, rows.problem)
     else:                                                  # a night's own gain: per row
         sc, d_sc = _numbers(ctx, u, rows.box, rows, (demand,))[demand]
     u0, u1 = forcing(packed, night, ode.h_s, sc, rows.phi_in_w)
@@ -281,10 +282,10 @@ def _compare(cols: torch.Tensor, model, scale: torch.Tensor) -> None:
 
 def _demand_forcings(packed, night, h, sc, phi_in_w):
     """(u0, u1) (R, 3, K−1) of T_air, T_out and a constant [per unit weight]."""
-    ta, te = packed.t_air_in_c[night, :-1], packed.t_out_c[night, :-1]
+    ta, te = rows_at(packed.t_air_in_c, night)[:, :-1], rows_at(packed.t_out_c, night)[:, :-1]
     u0 = torch.stack([ta, te, torch.ones_like(ta)], dim=1)
-    u1 = torch.stack([packed.t_air_in_slope[night, :-1], packed.t_out_slope[night, :-1],
-                      torch.zeros_like(ta)], dim=1)
+    u1 = torch.stack([rows_at(packed.t_air_in_slope, night)[:, :-1],
+                      rows_at(packed.t_out_slope, night)[:, :-1], torch.zeros_like(ta)], dim=1)
     return u0, u1
 
 
@@ -294,29 +295,29 @@ def _demand_columns(cols, sc, z, dz_da, p, z_f, packed, night, model, t_m0):
     torch.mul(dz_da, c_m, out=cols[:, 0])
     torch.mul(z_f, c_m[:, :, None], out=cols[:, 1:4])
     cols[:, 4] = z
-    cols[:, 5] = packed.t_air_in_c[night]
-    cols[:, 6] = packed.t_out_c[night]
+    cols[:, 5] = rows_at(packed.t_air_in_c, night)
+    cols[:, 6] = rows_at(packed.t_out_c, night)
     cols[:, 7] = -1.0
-    cols[:, 8] = packed.t_fur_slope[night]
+    cols[:, 8] = rows_at(packed.t_fur_slope, night)
     torch.mul(p, c_m, out=cols[:, 9])
 
 
 def _air_forcings(packed, night, h, sc, phi_in_w):
     """(u0, u1) (R, 7, K−1) of T_out, dT_out/dt, the heat input (with the release x), a
     constant, the release's shape E, its ∂E/∂τ and the furniture's dT_fur/dt."""
-    grid = packed.grid_s[night]
+    grid = rows_at(packed.grid_s, night)
     t = grid - grid[:, :1]
     em_w, tau, c_fur = sc[:, 9:10], sc[:, 10:11], sc[:, 11:12]
-    cons = packed.constrained[night][:, None]
+    cons = rows_at(packed.constrained, night)[:, None]
     e = torch.where(cons, torch.exp(-t / tau), 0.0)
-    fur = packed.t_fur_slope[night]
+    fur = rows_at(packed.t_fur_slope, night)
     x = em_w * e - c_fur * fur
-    te = packed.t_out_c[night]
-    v = torch.stack([te, packed.t_out_slope[night], phi_in_w + x, torch.ones_like(te), e,
+    te = rows_at(packed.t_out_c, night)
+    v = torch.stack([te, rows_at(packed.t_out_slope, night), phi_in_w + x, torch.ones_like(te), e,
                      e * t / (tau * tau), fur], dim=1)
     # within an interval the heat input is constant and only x has a slope (build_rows)
     u1 = torch.zeros_like(v[..., :-1])
-    u1[:, 0] = packed.t_out_slope[night, :-1]
+    u1[:, 0] = rows_at(packed.t_out_slope, night)[:, :-1]
     u1[:, 2] = interval_slope(x, h)
     u1[:, 4:] = interval_slope(v[:, 4:], h[:, None])
     return v[..., :-1], u1
@@ -325,17 +326,17 @@ def _air_forcings(packed, night, h, sc, phi_in_w):
 def _air_columns(cols, sc, z, dz_da, p, z_f, packed, night, model, t_m0):
     """AIR rows: T_air = z + k_Φ·(Φ_HC + x), x = emitter_w·E(τ) − C_fur·dT_fur/dt."""
     coef, k_phi, em_w, tau = sc[:, 6:7], sc[:, 8:9], sc[:, 9:10], sc[:, 10:11]
-    grid = packed.grid_s[night]
+    grid = rows_at(packed.grid_s, night)
     t = grid - grid[:, :1]
-    e = torch.where(packed.constrained[night][:, None], torch.exp(-t / tau), 0.0)
+    e = torch.where(rows_at(packed.constrained, night)[:, None], torch.exp(-t / tau), 0.0)
     cols[:, 0] = dz_da
     torch.mul(p, t_m0[:, None], out=cols[:, 1])
-    torch.mul(p, packed.t_out_c[night, :1], out=cols[:, 2])
+    torch.mul(p, rows_at(packed.t_out_c, night)[:, :1], out=cols[:, 2])
     cols[:, 3] = p
     cols[:, 4:8] = z_f[:, :4]
     # k_Φ's column: the whole heat input at the nodes (model.out_v = k_Φ·(Φ_HC + x))
     torch.div(model.out_v, k_phi, out=cols[:, 8])
     cols[:, 9] = coef * z_f[:, 4] + k_phi * e
     cols[:, 10] = em_w * (coef * z_f[:, 5] + k_phi * e * t / (tau * tau))
-    cols[:, 11] = -(coef * z_f[:, 6] + k_phi * packed.t_fur_slope[night])
+    cols[:, 11] = -(coef * z_f[:, 6] + k_phi * rows_at(packed.t_fur_slope, night))
     torch.mul(p, sc[:, 1:2], out=cols[:, 12])

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import torch
 
 from ..ode.node import ROW_DEMAND, build_rows
-from ..ode.packing import PackedNights
+from ..ode.packing import PackedNights, rows_at
 from ..ode.parameters import to_physical
 
 
@@ -89,7 +89,7 @@ class Context:
 
 def raw_residuals(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Tensor) -> torch.Tensor:
     """(model − measured) at the nodes, zero off the sample mask, (R, K), in data units."""
-    params = to_physical(u, rows.box)[rows.problem]
+    params = rows_at(to_physical(u, rows.box), rows.problem)
     demand = rows.row_type == ROW_DEMAND
     if bool(demand.all()) or not bool(demand.any()):
         return _raw(ctx, rows, params, t_m0, slice(None))
