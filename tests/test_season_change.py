@@ -159,5 +159,10 @@ def test_the_fleet_says_which_households_changed_and_since_when(tmp_path, season
     assert abs(opened["season_change_w_per_k"] - WINDOW_W_K) <= 15.0
     assert opened["season_change_nights_after"] >= 1
     assert bool(kept["season_changed"]) is False
+    from impctl.report.fleet import write_fleet_report
+
+    page = write_fleet_report(tmp_path / "FLEET.parquet", tmp_path / "report").read_text()
+    assert "Households whose heat loss changed (1)" in page
+    assert f"<td>house-0</td><td>{opened['season_changed_since']}</td>" in page
     assert kept[["season_changed_since", "season_change_w_per_k",
                  "season_change_nights_after"]].isna().all()

@@ -99,6 +99,15 @@ def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
         more_rows.append([r["household"], r["status"], r["nights_constrained"],
                           r["nights_normal"], what])
 
+    changed = (table[table["season_changed"].fillna(False).astype(bool)]
+               if "season_changed" in table else table.iloc[:0])
+    changed_rows = [[r["household"], str(r["season_changed_since"]),
+                     f"{r['season_change_w_per_k']:+.0f} (95 % "
+                     f"{r['season_change_w_per_k_low']:+.0f} – "
+                     f"{r['season_change_w_per_k_high']:+.0f})",
+                     int(r["season_change_nights_after"])]
+                    for _, r in changed.head(_LIST_MAX).iterrows()]
+
     def q(col, scale=1.0):
         v = ok[col].to_numpy(float) / scale
         v = v[np.isfinite(v)]
@@ -123,6 +132,13 @@ def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
         _table(["household", "status", "constrained nights", "normal nights", "what is missing"],
                more_rows)
         + (f"<p>… and {len(more) - _LIST_MAX} more.</p>" if len(more) > _LIST_MAX else ""),
+        f"<h2>Households whose heat loss changed ({len(changed)})</h2>",
+        "<p>The change test on each household's owner nights found a step in its heat loss — "
+        "a window left open for days, insulation added. The season values still read the "
+        "nights before it.</p>",
+        _table(["household", "since", "change [W/K]", "owner nights since"], changed_rows)
+        + (f"<p>… and {len(changed) - _LIST_MAX} more.</p>" if len(changed) > _LIST_MAX
+           else ""),
         f"<h2>Failures by reason ({len(failed)})</h2>",
         _table(["status", "reason", "households", "examples", "first message"], reasons),
         "</body></html>",
