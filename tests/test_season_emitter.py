@@ -180,10 +180,30 @@ def test_a_refit_of_a_house_whose_water_could_not_tell_searches_once_under_its_b
     assert cold.emitter is None and searches == [1.5 * 3600, TAU_E_MAX_UNKNOWN_S]
     searches.clear()
     start = (cold.theta[0], cold.theta[1], 2.5 * 3600, *cold.theta[3:])
-    warm, _ = fit_nights(nights, start=start)
+    warm, _ = fit_nights(nights, start=start, start_bound_s=TAU_E_MAX_UNKNOWN_S)
     assert searches == [TAU_E_MAX_UNKNOWN_S]
     assert warm.warm_start and warm.emitter is None
     assert warm.values["hlc_w_per_k"] == pytest.approx(cold.values["hlc_w_per_k"], rel=0.01)
+    # θ alone cannot tell such a fit from a screed's: the screed's bound, then the full search
+    searches.clear()
+    alone, _ = fit_nights(nights, start=start)
+    assert searches == [TAU_E_MAX_UNDERFLOOR_S, 1.5 * 3600, TAU_E_MAX_UNKNOWN_S]
+    assert not alone.warm_start
+
+
+def test_a_warm_start_says_the_bound_its_fit_ended_under(tmp_path):
+    """``impctl season --warm-start`` reads the earlier result's emitter bound with its θ
+    (the daemon's morning refit runs it so); the fleet's ``--previous`` row its emitter."""
+    from impctl.cli.analysis.season_cmd import _warm_start
+
+    nights = _nights(45.0, 1.3, [-6, -3, -1, 0, 2, 3, 5, 6])
+    nights = [n if i < 2 else dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+              for i, n in enumerate(nights)]
+    fit, _ = fit_nights(nights)
+    path = tmp_path / "season.json"
+    path.write_text(json.dumps({"season": fit.as_dict()}))
+    theta, bound = _warm_start(path)
+    assert theta == pytest.approx(fit.theta) and bound == TAU_E_MAX_UNKNOWN_S
 
 
 def test_a_file_declares_the_emitter_and_the_season_model_takes_it(tmp_path):

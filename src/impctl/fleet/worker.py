@@ -142,7 +142,7 @@ def fit_batch(sources: list[Source], settings: Settings,
             unchanged = last.get("nights_digest") == whole
             carry_over(row, last, whole=unchanged)
             if not unchanged:
-                _season(row, nights, theta_start(last))
+                _season(row, nights, theta_start(last), last.get("season_emitter"))
             continue
         row.update(imp_nights_digest=digest, imp_fit_reused=False, nights_unchanged=False)
         _season(row, nights)
@@ -179,15 +179,19 @@ def fit_batch(sources: list[Source], settings: Settings,
     return [rows[s.household] for s in sources]
 
 
-def _season(row: dict, nights: list, start: tuple | None = None) -> None:
+def _season(row: dict, nights: list, start: tuple | None = None,
+            start_emitter: str | None = None) -> None:
     """The season model's columns of a household with owner nights (empty without); its search
-    only from ``start`` (θ of the last run's fit) when given."""
+    only from ``start`` (θ of the last run's fit, whose emitter was ``start_emitter``) when
+    given."""
     import math
 
+    from ..season.emitter import tau_e_max_s
     from ..season.fit import fit_nights
     from .table import THETA_COLUMNS
 
-    fit, note = fit_nights(nights, start=start)
+    fit, note = fit_nights(nights, start=start, start_bound_s=None if start is None
+                           else tau_e_max_s(start_emitter))
     row["season_note"] = note
     if fit is None:
         return

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from .emitter import tau_e_max_s
 from .fit import SeasonFit, fit_season
 from .projection.solve import LUMPED
 
@@ -47,11 +48,11 @@ def convergence(nights, full: SeasonFit | None = None) -> list[dict]:
         end = owner[n - 1].start + _span(owner[n - 1])
         cut = [x for x in nights if x.start < end]
         try:
-            fit = fit_season(record_from_nights(cut),
-                             start=full.theta if full is not None and full.theta else None,
-                             max_nfev=CUT_MAX_NFEV,
+            start = full.theta if full is not None and full.theta else None
+            fit = fit_season(record_from_nights(cut), start=start, max_nfev=CUT_MAX_NFEV,
                              emitter=full.emitter if full is not None and full.emitter_declared
-                             else None)
+                             else None,
+                             start_bound_s=tau_e_max_s(full.emitter) if start else None)
         except (ValueError, np.linalg.LinAlgError):
             continue
         out.append(_row(n, fit))

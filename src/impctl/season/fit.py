@@ -188,13 +188,15 @@ def imp_kinds(rec: SeasonRecord, used: np.ndarray) -> set[str]:
 
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
                start: tuple | None = None, max_nfev: int = 60,
-               emitter: str | None = None) -> SeasonFit:
+               emitter: str | None = None, start_bound_s: float | None = None) -> SeasonFit:
     """Fit the season model to ``rec`` (module docstring); ``calibrated=False`` gives the raw
     intervals (the bench calibrates on them); ``max_nfev`` caps each search's evaluations of
     the residual; ``start`` warm-starts the search at a known θ
     (:attr:`SeasonFit.theta` of a fit of the same house); ``emitter`` ("radiators" or
     "underfloor"): the emitter as the installer declares it, known — its bound on the lag
-    whatever the water reads (:mod:`.emitter`). Raises ValueError when fewer than
+    whatever the water reads (:mod:`.emitter`); ``start_bound_s``: the bound on the emitter's
+    lag [s] the fit ``start`` comes from ended under (its emitter's :func:`tau_e_max_s`; None:
+    read from the start's lag). Raises ValueError when fewer than
     :data:`MIN_OWNER_NIGHTS` owner nights have usable rows."""
     if emitter not in (None, *EMITTER_KINDS):
         raise ValueError(f"emitter {emitter!r}: give one of {', '.join(EMITTER_KINDS)}")
@@ -216,12 +218,13 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         start_bound = False
         if emitter is not None:
             first = tau_e_max_s(emitter)
-        elif start is not None and water_recorded(rec) and start[2] > first:
-            # An earlier fit of this house read a screed, or could not tell: one search under
-            # the narrowest bound that holds its lag. Under the screed's alone, a house whose
-            # water could not tell searched there and then in full: three searches a morning.
-            first = min((b for b in (tau_e_max_s(None), tau_e_max_s("underfloor"))
-                         if b >= start[2] * (1.0 - 1e-9)), default=tau_e_max_s("underfloor"))
+        elif start is not None and water_recorded(rec) and (
+                start_bound_s if start_bound_s is not None else start[2]) > first:
+            # The fit it starts from ended under a wider bound than the radiators' — a screed,
+            # or no emitter where the water could not tell: one search under that bound (the
+            # screed's when only the start's lag says so). A house whose water could not tell,
+            # searched under the screed's, searched again in full: three searches a morning.
+            first = start_bound_s if start_bound_s is not None else tau_e_max_s("underfloor")
             start_bound = True
         bounds = bounds_for(first)
         theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
@@ -283,11 +286,12 @@ def signature(rec: SeasonRecord) -> float:
     return float(np.linalg.lstsq(A, np.asarray(y), rcond=None)[0][0])
 
 
-def fit_nights(nights, start: tuple | None = None,
-               emitter: str | None = None) -> tuple[SeasonFit | None, str | None]:
+def fit_nights(nights, start: tuple | None = None, emitter: str | None = None,
+               start_bound_s: float | None = None) -> tuple[SeasonFit | None, str | None]:
     """(the season fit, None) of a household's nights (NightSamples of every kind), or
     (None, why not) — no owner nights, too few usable ones, or no usable record. ``start``:
-    θ of an earlier fit of the same house (:func:`theta_of`), the search's only start;
+    θ of an earlier fit of the same house (:func:`theta_of`), the search's only start, and
+    ``start_bound_s`` the bound on the emitter's lag that fit ended under (:func:`fit_season`);
     ``emitter``: the declared emitter (:func:`fit_season`), else the one the nights declare
     (NIGHTS column ``emitter``), else none. Raises InputError when the nights declare two."""
     from ..imp.night import declared_emitter
@@ -303,7 +307,8 @@ def fit_nights(nights, start: tuple | None = None,
     # A change is reported, not acted on: the test's false alarms (about 1 season in 11 on
     # held-out houses) would otherwise throw away weeks of good nights.
     try:
-        fit = fit_season(record_from_nights(nights), start=start, emitter=emitter)
+        fit = fit_season(record_from_nights(nights), start=start, emitter=emitter,
+                         start_bound_s=start_bound_s)
     except (ValueError, np.linalg.LinAlgError) as exc:
         return None, f"season model not fitted: {exc}"
     fit.change = found

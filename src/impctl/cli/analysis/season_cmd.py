@@ -46,7 +46,7 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
     from ...store.export import refuse_database
 
     refuse_database(json_path, "--json")
-    start = _warm_start(warm_path) if warm_path is not None else None
+    start, start_bound_s = _warm_start(warm_path) if warm_path is not None else (None, None)
     from ...fit.household import read_household
     from ...season.convergence import convergence as against_nights
     from ...season.convergence import format_convergence
@@ -58,7 +58,7 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
                          "own nights", nights_path)
     emitter = agreed_emitter(emitter, nights, nights_path)
     began = time.perf_counter()
-    fit, note = fit_nights(nights, start=start, emitter=emitter)
+    fit, note = fit_nights(nights, start=start, emitter=emitter, start_bound_s=start_bound_s)
     if fit is None:
         raise InputError(note or "the season model was not fitted", nights_path)
     fit_s = time.perf_counter() - began
@@ -80,8 +80,9 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
         click.echo(f"JSON written to {json_path}")
 
 
-def _warm_start(path: Path) -> tuple[float, ...] | None:
-    """θ of an earlier result (refused in one line when it has none; None, a full search,
+def _warm_start(path: Path) -> tuple[tuple[float, ...] | None, float | None]:
+    """θ of an earlier result and the bound on the emitter's lag it ended under [s] (None
+    where it does not say; refused in one line when it has no θ; (None, None), a full search,
     when it is an earlier version of the model's)."""
     from ...season.fit import theta_of
 
@@ -94,11 +95,13 @@ def _warm_start(path: Path) -> tuple[float, ...] | None:
         # a result from before an update of the model: a start it cannot use, not bad input
         click.echo(f"{path}: its season model is an earlier version's (season.theta "
                    f"without {', '.join(_missing_theta(result))}): a full search")
-        return None
+        return None, None
     if theta is None:
         raise InputError("no season model to start from (season.theta missing or not "
                          "positive numbers)", path, "--warm-start")
-    return theta
+    bound_h = ((result.get("season") or {}).get("emitter") or {}).get("tau_e_max_h")
+    bound_ok = isinstance(bound_h, int | float) and math.isfinite(bound_h) and bound_h > 0
+    return theta, float(bound_h) * 3600.0 if bound_ok else None
 
 
 def _missing_theta(result: dict) -> list[str]:
