@@ -80,6 +80,13 @@ def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
     return nuisance, plain
 
 
+#: Starts in the whole prior box where the classes narrow it: that fit only has to say whether
+#: the data contradict the classes (the likelihood-ratio test). 300 held-out households, paired
+#: against one start per class start (4): the same medians within their CIs, the same
+#: coverage and rejections, 10 % less CPU in a classifier fleet (decision record 0012).
+PRIOR_STARTS = 2
+
+
 def layout(n: int, with_prior: bool, nuisance_box, class_box, prior_box, *, n_starts: int,
            seed: int, per_night: bool) -> dict:
     """Problems: joint starts in the class box with the nuisance terms ("class"), the same
@@ -97,7 +104,7 @@ def layout(n: int, with_prior: bool, nuisance_box, class_box, prior_box, *, n_st
     if with_nuisance:
         kinds += [("simple", j, -1) for j in range(s)]
     if with_prior:
-        kinds += [("prior", j, -1) for j in range(s)]
+        kinds += [("prior", j, -1) for j in range(min(s, PRIOR_STARTS))]
     if per_night:
         # the paper's per-night mode is a comparison, not the result: two starts suffice
         kinds += [("night", j, i) for j in range(min(s, 2)) for i in range(n)]
