@@ -186,8 +186,7 @@ def _memory(hourly: np.ndarray, tau_h: float) -> np.ndarray:
     # the recorded hours' weighted sum and their weight, both decaying by a per hour
     s = lfilter([1.0 - a], [1.0, -a], np.where(recorded, hourly, 0.0))
     w = lfilter([1.0 - a], [1.0, -a], recorded.astype(float))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(w > 0, s / np.where(w > 0, w, 1.0), math.nan)
+    return np.where(w > 0, s / np.where(w > 0, w, 1.0), math.nan)
 
 
 def night_rows(nights: Sequence[NightSamples]) -> NightRows:
