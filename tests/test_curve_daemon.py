@@ -188,9 +188,11 @@ def test_a_controller_that_does_not_follow_its_points_gets_them_back(tmp_path):
             wait_until(lambda: "did not follow the curve points" in d.output(), 30,
                        "the check to fail", proc=d.proc)
             wait_until(lambda: _points(sim.port) == owner, 10, "the owner's points back")
+            # The refusal is said after the points are written back: wait for it, not race it.
+            wait_until(lambda: "does not follow its curve points" in d.output(), 10,
+                       "the refusal", proc=d.proc)
             assert not _curve_journal(db)
             assert json.loads((state / "curve-intent.json").read_text())["apply"] is False
-            assert "does not follow its curve points" in d.output()
         finally:
             stop_process(d.proc)
 
