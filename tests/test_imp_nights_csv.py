@@ -77,6 +77,30 @@ def test_write_then_read_gives_the_same_nights_and_features(tmp_path):
                                                     nan_ok=True)
 
 
+def test_a_parquet_frame_reads_its_text_cells_as_the_csv_does(tmp_path):
+    """Night ids as numbers, padded kinds and labels, null labels (pandas' string type keeps
+    them NaN): the Parquet frame gives the nights the CSV gives."""
+    from impctl.imp.nights_csv import read_nights_frame
+
+    stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)
+    frame = pd.DataFrame({
+        "timestamp": stamps, "t_air": 22.0 - 0.05 * np.arange(12), "t_out": 1.0,
+        "q_hc": 0.0, "heating": 0,
+        "night": [7] * 6 + [8] * 6,
+        "kind": ["owner "] * 6 + [" owner"] * 6,
+        "label": pd.array([None] * 6 + [" dhw"] * 6, dtype="str"),
+    })
+    frame.to_parquet(tmp_path / "n.parquet")
+    csv = tmp_path / "n.csv"
+    frame.assign(timestamp=[t.isoformat() for t in stamps]).to_csv(csv, index=False)
+    read = pd.read_parquet(tmp_path / "n.parquet")
+    assert read["label"].isna().sum() == 6
+    got, want = read_nights_frame(read, tmp_path / "n.parquet", TZ), read_nights(csv, TZ)
+    assert [(n.night_id, n.kind, n.label) for n in got] == [
+        (n.night_id, n.kind, n.label) for n in want] == [("7", "owner", ""),
+                                                         ("8", "owner", "dhw")]
+
+
 GOOD = ("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22.0,1.0,2000\n"
         "2026-01-12T22:10,22.0,1.0,2100\n")
 

@@ -209,11 +209,27 @@ def frame_table(
         out[col] = values
     for col in optional:
         if col in cols and col not in out.columns:
-            # a null cell is the CSV's empty one (pandas reads Parquet strings as a string
-            # type whose nulls stay NaN through astype(str): "nan" ≠ "nan" would split nights)
-            text = frame[col].reset_index(drop=True).astype(object)
-            out[col] = text.where(text.notna(), "").astype(str).str.strip().astype(object)
+            out[col] = pd.Series(_text_cells(frame[col]), dtype=object)
     return out
+
+
+def _text_cells(column: pd.Series) -> np.ndarray:
+    """A column's cells as stripped text (object array), a null cell the CSV's empty one.
+
+    pandas reads Parquet strings as a string type whose nulls stay NaN through ``astype(str)``
+    ("nan" ≠ "nan" would split nights). Each distinct value is converted once: a season's
+    file holds ~12,000 rows of a few dozen night ids, three kinds and three labels, and
+    converting cell by cell (back to pandas' string type and out again) was a third of reading
+    a household of a fleet."""
+    if column.dtype == object:  # e.g. 5 and 5.0 in one column: one value to factorize
+        text = column.reset_index(drop=True)
+        return text.where(text.notna(), "").astype(str).str.strip().to_numpy(dtype=object)
+    codes, uniques = pd.factorize(column, use_na_sentinel=True)
+    # the sentinel −1 takes the last entry: the empty cell
+    text = np.empty(len(uniques) + 1, dtype=object)
+    text[:-1] = [str(u).strip() for u in uniques]
+    text[-1] = ""
+    return text[codes]
 
 
 def _refuse_ragged_rows(path: Path, n_columns: int) -> None:
