@@ -246,12 +246,85 @@ def _gain_gram(tau_mm: float, d: Design) -> GainGram:
     return GainGram(tau_mm, rho, ss, sg.reshape(m, m), gg.reshape(m, m), filtered)
 
 
+def gain_diag(tau_mm: float, d: Design) -> tuple[Array, Array]:
+    """The diagonals of SGᵀ and GGᵀ at ``tau_mm`` [s] (each shape with its own low-pass: the
+    gains' columns' scales), without the products between shapes; the full Gram's when it is
+    remembered."""
+    full = d.remembered(("gram", tau_mm))
+    if full is not None:
+        return np.diagonal(full.sg), np.diagonal(full.gg)
+    return d.cached(("gram diag", tau_mm), lambda: _gain_diag(tau_mm, d))
+
+
+@dataclass
+class _Lowpassed:
+    """The shapes' low-pass at one τ_mm without their products (what :func:`_cross` needs)."""
+
+    rho: float
+    runs: list[_Filtered]
+
+
+def _lowpassed(tau_mm: float, d: Design) -> GainGram | _Lowpassed:
+    """The full Gram at ``tau_mm`` when it is remembered, else the low-pass alone."""
+    full = d.remembered(("gram", tau_mm))
+    if full is not None:
+        return full
+    return d.cached(("lowpassed", tau_mm), lambda: _make_lowpassed(tau_mm, d))
+
+
+def _make_lowpassed(tau_mm: float, d: Design) -> _Lowpassed:
+    block_s = d.rec.per_block * d.rec.step_s
+    rho = math.exp(-block_s / tau_mm)
+    f = tau_mm / block_s * (1.0 - rho)
+    runs = []
+    for run in d.once("gram_layout", lambda: _layout(d)):
+        nl = len(run.local)
+        gw, tail = np.zeros((nl, 1)), np.zeros(nl)
+        if nl:   # as _gain_gram
+            x = run.s_win
+            z0 = np.where(run.start == 0, x[:, 0], 0.0)
+            z = lfilter([1.0 - rho], [1.0, -rho], x, axis=1, zi=(rho * z0)[:, None])[0]
+            prev = np.concatenate([z0[:, None], z[:, :-1]], axis=1)
+            g_win = x + (prev - x) * f
+            tail = g_win[np.arange(nl), run.end - run.start]
+            gw = g_win * run.used_win
+        runs.append(_Filtered(gw, tail, held_lowpass(run.s_dense, tau_mm, block_s,
+                                                     [(0, run.n)])))
+    return _Lowpassed(rho, runs)
+
+
+def _gain_diag(tau_mm: float, d: Design) -> tuple[Array, Array]:
+    low = _lowpassed(tau_mm, d)
+    m = d.gains_b.shape[0]
+    sg, gg = np.zeros(m), np.zeros(m)
+    for run, fl in zip(d.once("gram_layout", lambda: _layout(d)), low.runs, strict=True):
+        if len(run.local):   # the windows, then each one's tail after it
+            tails_w = _after(run.mask, low.rho * low.rho)[run.end]
+            gw = fl.g_win_used
+            np.add.at(gg, run.local, np.einsum("kw,kw->k", gw, gw) + fl.tail ** 2 * tails_w)
+            np.add.at(sg, run.local, np.einsum("kw,kw->k", run.s_win_used, gw))
+        if len(run.dense):
+            g = fl.g_dense
+            np.add.at(gg, run.dense, np.einsum("dn,dn->d", g * run.mask, g))
+            np.add.at(sg, run.dense, np.einsum("dn,dn->d", run.s_dense * run.mask, g))
+    return sg, gg
+
+
+def gain_sum_sq(theta: tuple[float, ...], d: Design) -> Array:
+    """Each gains' column's sum of squares over the usable blocks at ``theta`` (in the order
+    of :func:`~.columns.gain_family`): the diagonal of its block of XᵀX."""
+    ss = np.diagonal(d.once("gram_ss", lambda: _outer_used(d)))
+    sg, gg = gain_diag(theta[0], d)
+    a, b = gain_coefficients(theta, d)
+    return a * a * ss + 2.0 * a * b * sg + b * b * gg
+
+
 def _outer_used(d: Design) -> Array:
     s = d.gains_b[:, d.blocks]
     return s @ s.T
 
 
-def _cross(gram: GainGram, d: Design, rows: Array) -> Array:
+def _cross(gram: GainGram | _Lowpassed, d: Design, rows: Array) -> Array:
     """rows·Gᵀ: products of series over the usable blocks with every shape's low-pass."""
     m = d.gains_b.shape[0]
     out = np.zeros((len(rows), m))
@@ -294,6 +367,17 @@ class Normal:
         nq = len(self.q)
         return coef[:nq] @ self.q + _gains_fitted(self.theta, d, coef[nq:])
 
+    def fitted_many(self, coefs: Array, d: Design) -> Array:
+        """X·coef for each row of ``coefs`` (k × columns, in the order ``perm``): (k, blocks)."""
+        nq = len(self.q)
+        a, b = gain_coefficients(self.theta, d)
+        shapes_t, used_t = _shapes_t(d)
+        cg = coefs[:, nq:]
+        gains = (used_t @ (a * cg).T).T + held_lowpass(
+            (shapes_t @ (b * cg).T).T, self.theta[0], d.rec.per_block * d.rec.step_s,
+            d.block_runs)[:, d.blocks]
+        return coefs[:, :nq] @ self.q + gains
+
 
 def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Array]:
     """(y, X·coef) at ``theta`` over the usable blocks, without X (``coef`` in X's order)."""
@@ -318,14 +402,21 @@ def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
         d.block_runs)[0, d.blocks]
 
 
-def x_products(theta: tuple[float, ...], d: Design, rows: Array) -> Array:
+def x_products(theta: tuple[float, ...], d: Design, rows: Array,
+               known: dict | None = None) -> Array:
     """rows·X at ``theta`` (rows × X's columns, in X's order) for series ``rows`` over the
-    usable blocks, without X."""
-    gram = gain_gram(theta[0], d)
+    usable blocks, without X. ``known``: the same rows' products with the shapes and their
+    low-pass from earlier calls at other θ (filled in here): a step of θ that keeps τ_mm
+    changes only the coefficients of the gains' columns."""
+    known = {} if known is None else known
+    if "shapes" not in known:
+        known["shapes"] = _shape_products(d, rows)
+    if ("lowpass", theta[0]) not in known:
+        known["lowpass", theta[0]] = _cross(_lowpassed(theta[0], d), d, rows)
     gcols, _ = gain_family(d)
     a, b = gain_coefficients(theta, d)
     out = np.empty((len(rows), len(column_names(d))))
-    out[:, gcols] = a * _shape_products(d, rows) + b * _cross(gram, d, rows)
+    out[:, gcols] = a * known["shapes"] + b * known["lowpass", theta[0]]
     for _key, q, cols in dense_groups(theta, d):
         keep = cols >= 0
         out[:, cols[keep]] = rows @ q[keep].T

@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
-from .columns import BETA, Design, column_names, columns, lumped
-from .gram import fitted, normal_equations, x_products
+from .columns import BETA, Design, column_names, columns, gain_family, lumped
+from .gram import fitted, gain_sum_sq, normal_equations, x_products
+from .jacobian import projected_jacobian
 
 Array = NDArray[np.float64]
 
@@ -46,6 +47,8 @@ SUN_RIDGE = 0.05
 #: Weight of the slow gain's day-to-day steps, per block [-]: its random-walk prior. Set on
 #: simulated seasons the bench does not use (0.2–20 tried; 1–5 best, HLC's P90 32 → 24 %).
 GAIN_RW = 5.0
+#: Relative step of the search's forward differences in the transformed θ [-].
+SEARCH_FD_STEP = 1e-4
 #: Residual scale [W] (the search is scale-free; this keeps the numbers near 1).
 W_SCALE = 100.0
 #: The full search stops when a step changes the cost or θ (transformed) by less than this
@@ -180,12 +183,19 @@ def _solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback) -> Array:
     """Least squares from the scaled normal equations ``xtx_s``, ``xty_s`` with the ridge
     rows' ``rtr`` (the columns are scaled and the ridge rows keep them well posed; four times
     faster than an SVD); ``fallback()`` (an SVD) if they are singular."""
+    return _factor_solve(xtx_s, rtr, xty_s, fallback)[0]
+
+
+def _factor_solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback):
+    """:func:`_solve`'s solution and the Cholesky factor it came from (None from the
+    fallback)."""
     ata = xtx_s + rtr
     ata[np.diag_indices_from(ata)] += 1e-10 * np.trace(ata) / len(ata)
     try:
-        return cho_solve(cho_factor(ata, check_finite=False), xty_s, check_finite=False)
+        factor = cho_factor(ata, check_finite=False)
     except np.linalg.LinAlgError:
-        return fallback()
+        return fallback(), None
+    return cho_solve(factor, xty_s, check_finite=False), factor
 
 
 def projected_residual(theta, d: Design) -> Array:
@@ -195,14 +205,19 @@ def projected_residual(theta, d: Design) -> Array:
     if solved is None:
         pr = project(theta, d)
         return np.concatenate([pr.residual_w, pr.penalty])
-    ne, coef, scale, v, unit = solved
+    ne, coef, scale, v, unit, _ = solved
     return np.concatenate([ne.y - ne.fitted(coef / scale, d), unit @ (v * coef)])
 
 
 def _solve_parts(theta, d: Design):
-    """(normal equations, coef, scale, ridge weights, ridge rows' unit) of the ridge least
-    squares at ``theta`` in the order of the normal equations' columns (``perm``), or None when
-    they are singular."""
+    """(normal equations, coef, scale, ridge weights, ridge rows' unit, Cholesky factor) of
+    the ridge least squares at ``theta`` in the order of the normal equations' columns
+    (``perm``), or None when they are singular; remembered for the next few calls (the
+    search asks for the residual, then for the Jacobian at the same θ)."""
+    return d.cached(("solved", *theta), lambda: _solve_new(theta, d))
+
+
+def _solve_new(theta, d: Design):
     ne = normal_equations(theta, d)
     n = len(ne.y)
     unit, unit_sq = d.once("ridge_perm", lambda: _permuted_ridge(d, n, ne.perm))
@@ -211,9 +226,9 @@ def _solve_parts(theta, d: Design):
     scale[ne.perm] = scale_p
     v = _ridge_weight(scale, d)[ne.perm]
     failed = []
-    coef = _solve(ne.xtx / np.outer(scale_p, scale_p), unit_sq * np.outer(v, v),
-                  ne.xty / scale_p, lambda: failed.append(True))
-    return None if failed else (ne, coef, scale_p, v, unit)
+    coef, factor = _factor_solve(ne.xtx / np.outer(scale_p, scale_p), unit_sq * np.outer(v, v),
+                                 ne.xty / scale_p, lambda: failed.append(True))
+    return None if failed else (ne, coef, scale_p, v, unit, factor)
 
 
 def projection(theta, d: Design) -> Projection:
@@ -221,7 +236,7 @@ def projection(theta, d: Design) -> Projection:
     solved = _solve_parts(theta, d)
     if solved is None:
         return project(theta, d)
-    ne, coef, scale, v, unit = solved
+    ne, coef, scale, v, unit, _ = solved
     beta = np.empty_like(coef)
     beta[ne.perm] = coef / scale
     rows = np.empty_like(unit)
@@ -243,6 +258,36 @@ def _residual(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
     return projected_residual(from_u(u, bounds), d) / W_SCALE
 
 
+def _ridge_scale(theta, d: Design, perm: NDArray[np.int64], scale_p: Array) -> Array:
+    """Each column's ridge weight times its scale at ``theta`` (order ``perm``): the ridge
+    rows' weight on β. Only the gains' columns' scales move it (:func:`_ridge_weight`);
+    the others are kept at ``scale_p``."""
+    scale = np.empty_like(scale_p)
+    scale[perm] = scale_p
+    gcols, _ = gain_family(d)
+    scale[gcols] = _scale(gain_sum_sq(theta, d), int(d.blocks.sum()))
+    return (_ridge_weight(scale, d) * scale)[perm]
+
+
+def _jacobian(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
+    """The search's Jacobian (:mod:`.jacobian`): forward differences of the regressors in
+    the steps MINPACK's own differences took (1e-4 relative, away from zero), the solve
+    differentiated; forward differences of the residual where the solve is singular."""
+    steps = SEARCH_FD_STEP * np.where(u >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(u))
+    solved = _solve_parts(from_u(u, bounds), d)
+    if solved is not None:
+        ne, _, scale, _, _, _ = solved
+        return projected_jacobian(u, steps, solved, lambda x: from_u(x, bounds), d,
+                                  lambda theta: _ridge_scale(theta, d, ne.perm, scale)) / W_SCALE
+    r0 = _residual(u, d, bounds)
+    out = np.empty((len(r0), len(u)))
+    for k, h in enumerate(steps):
+        uk = u.copy()
+        uk[k] += h
+        out[:, k] = (_residual(uk, d, bounds) - r0) / h
+    return out
+
+
 def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
            bounds=THETA_BOUNDS) -> tuple[tuple, Projection, object]:
     """Best θ, its projection and the optimiser's result (least squares over θ); from the
@@ -262,8 +307,8 @@ def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
     best = None
     tol = WARM_TOL if start is not None else FULL_TOL
     for u0 in starts:
-        res = least_squares(_residual, u0, args=(d, bounds), method="lm", max_nfev=max_nfev,
-                            diff_step=1e-4, x_scale=1.0, ftol=tol, xtol=tol)
+        res = least_squares(_residual, u0, jac=_jacobian, args=(d, bounds), method="lm",
+                            max_nfev=max_nfev, x_scale=1.0, ftol=tol, xtol=tol)
         if best is None or res.cost < best.cost:
             best = res
     theta = from_u(best.x, bounds)
