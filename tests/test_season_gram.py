@@ -1,6 +1,6 @@
 """The season search's normal equations from the regressors' structure against X itself.
 
-The search never forms X (:mod:`impctl.season.projection.gram`); these tests form it
+The search never forms X (:mod:`impctl.season.projection.normal`); these tests form it
 (:func:`impctl.season.projection.columns.columns`) and check that the products, the fitted
 values, the
 projected residual and the fit's result are those of the straightforward computation — on the
@@ -20,7 +20,7 @@ from scipy.optimize import least_squares
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.projection.columns import Design, columns, lumped
-from impctl.season.projection.gram import fitted, normal_equations
+from impctl.season.projection.normal import fitted, normal_equations
 from impctl.season.projection.solve import (
     SEARCH_FD_STEP,
     W_SCALE,

@@ -1,12 +1,10 @@
-"""The season model's normal equations XᵀX, Xᵀy from the structure of its regressors.
+"""The gains' Gram products SSᵀ, SGᵀ, GGᵀ from the structure of their shapes.
 
-:func:`~.columns.columns` builds X (blocks × regressors, about 2,800 × 160 for two months)
-and the search's linear solve would form XᵀX from it at every θ: most of the fit's time. Most
-of X is the gains' family: each shape (night, day, a day's sun, a knot of the slow gain, the
-household electricity) s_j gives the column α_j·s_j + β_j·g_j, g_j its held low-pass
-(:func:`~.columns.held_lowpass`, τ_mm) and α, β numbers of θ. So that block of XᵀX is
-α αᵀ∘SSᵀ + α βᵀ∘SGᵀ + β αᵀ∘GSᵀ + β βᵀ∘GGᵀ, where SSᵀ never changes and SGᵀ, GGᵀ change with
-τ_mm alone — four of a finite-difference Jacobian's five steps reuse them.
+Most of the season model's X is the gains' family: each shape (night, day, a day's sun, a knot
+of the slow gain, the household electricity) s_j gives the column α_j·s_j + β_j·g_j, g_j its
+held low-pass (:func:`~.columns.held_lowpass`, τ_mm) and α, β numbers of θ. So that block of
+XᵀX is α αᵀ∘SSᵀ + α βᵀ∘SGᵀ + β αᵀ∘GSᵀ + β βᵀ∘GGᵀ, where SSᵀ never changes and SGᵀ, GGᵀ
+change with τ_mm alone (:mod:`.normal` assembles XᵀX from them).
 
 SGᵀ and GGᵀ are not formed from dense rows either. A day's sun and a knot are zero outside a
 day or two (their *window*); the low-pass of such a shape is zero before its window and, after
@@ -15,7 +13,9 @@ heat store, where the filter runs. A product of two such rows over the usable bl
 the product over the windows plus sums of geometric tails, which reverse first-order filters
 give at every block at once: O(m·window + m²) for m shapes instead of O(m²·blocks). Shapes
 without a short window (the night and day levels, the household electricity) are kept as
-dense rows. Exact, not an approximation: the tests compare it with the dense products.
+dense rows. Exact, not an approximation: the tests compare it with the dense products. The
+same windows and tails give any series' products with the shapes' low-pass
+(:func:`cross_products`) and the diagonals alone (:func:`gain_diag`: the columns' scales).
 """
 
 from __future__ import annotations
@@ -26,16 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
-from scipy.sparse import csr_matrix
 
-from .columns import (
-    Design,
-    column_names,
-    dense_groups,
-    gain_coefficients,
-    gain_family,
-    held_lowpass,
-)
+from .columns import Design, gain_coefficients, held_lowpass
 
 Array = NDArray[np.float64]
 
@@ -184,28 +176,15 @@ def gain_gram(tau_mm: float, d: Design) -> GainGram:
 
 
 def _gain_gram(tau_mm: float, d: Design) -> GainGram:
-    block_s = d.rec.per_block * d.rec.step_s
-    rho = math.exp(-block_s / tau_mm)
-    f = tau_mm / block_s * (1.0 - rho)
+    low = d.cached(("lowpassed", tau_mm), lambda: _makelowpassed(tau_mm, d))
+    rho = low.rho
     m = d.gains_b.shape[0]
     ss = d.once("gram_ss", lambda: _outer_used(d))
     sg, gg = np.zeros(m * m), np.zeros(m * m)
-    filtered = []
-    for run in d.once("gram_layout", lambda: _layout(d)):
+    for run, fl in zip(d.once("gram_layout", lambda: _layout(d)), low.runs, strict=True):
         nl, nd = len(run.local), len(run.dense)
         powers = rho ** np.arange(run.n + 1)
-        # the windows: the filter starts from the stretch's first value (as held_lowpass) or
-        # from rest when the window opens later (the shape was 0 until then)
-        x = run.s_win
-        z0 = np.where(run.start == 0, x[:, 0], 0.0)
-        z = lfilter([1.0 - rho], [1.0, -rho], x, axis=1, zi=(rho * z0)[:, None])[0]
-        prev = np.concatenate([z0[:, None], z[:, :-1]], axis=1)
-        g_win = x + (prev - x) * f
-        e = run.end
-        tail = g_win[np.arange(nl), e - run.start]
-        gw = g_win * run.used_win
-        g_dense = held_lowpass(run.s_dense, tau_mm, block_s, [(0, run.n)])
-        filtered.append(_Filtered(gw, tail, g_dense))
+        gw, tail, g_dense, e = fl.g_win_used, fl.tail, fl.g_dense, run.end
         # over the windows' overlaps
         gw0 = np.r_[gw.ravel(), 0.0]
         g_i = np.take(gw0, run.pair_at)
@@ -243,7 +222,7 @@ def _gain_gram(tau_mm: float, d: Design) -> GainGram:
             blk_sg[nl:, nl:] = (run.s_dense * run.mask) @ g_dense.T
         gg[run.order] += blk_gg.ravel()
         sg[run.order] += blk_sg.ravel()
-    return GainGram(tau_mm, rho, ss, sg.reshape(m, m), gg.reshape(m, m), filtered)
+    return GainGram(tau_mm, rho, ss, sg.reshape(m, m), gg.reshape(m, m), low.runs)
 
 
 def gain_diag(tau_mm: float, d: Design) -> tuple[Array, Array]:
@@ -264,15 +243,15 @@ class _Lowpassed:
     runs: list[_Filtered]
 
 
-def _lowpassed(tau_mm: float, d: Design) -> GainGram | _Lowpassed:
+def lowpassed(tau_mm: float, d: Design) -> GainGram | _Lowpassed:
     """The full Gram at ``tau_mm`` when it is remembered, else the low-pass alone."""
     full = d.remembered(("gram", tau_mm))
     if full is not None:
         return full
-    return d.cached(("lowpassed", tau_mm), lambda: _make_lowpassed(tau_mm, d))
+    return d.cached(("lowpassed", tau_mm), lambda: _makelowpassed(tau_mm, d))
 
 
-def _make_lowpassed(tau_mm: float, d: Design) -> _Lowpassed:
+def _makelowpassed(tau_mm: float, d: Design) -> _Lowpassed:
     block_s = d.rec.per_block * d.rec.step_s
     rho = math.exp(-block_s / tau_mm)
     f = tau_mm / block_s * (1.0 - rho)
@@ -280,7 +259,9 @@ def _make_lowpassed(tau_mm: float, d: Design) -> _Lowpassed:
     for run in d.once("gram_layout", lambda: _layout(d)):
         nl = len(run.local)
         gw, tail = np.zeros((nl, 1)), np.zeros(nl)
-        if nl:   # as _gain_gram
+        if nl:
+            # the windows: the filter starts from the stretch's first value (as
+            # held_lowpass) or from rest when the window opens later (the shape was 0 before)
             x = run.s_win
             z0 = np.where(run.start == 0, x[:, 0], 0.0)
             z = lfilter([1.0 - rho], [1.0, -rho], x, axis=1, zi=(rho * z0)[:, None])[0]
@@ -294,7 +275,7 @@ def _make_lowpassed(tau_mm: float, d: Design) -> _Lowpassed:
 
 
 def _gain_diag(tau_mm: float, d: Design) -> tuple[Array, Array]:
-    low = _lowpassed(tau_mm, d)
+    low = lowpassed(tau_mm, d)
     m = d.gains_b.shape[0]
     sg, gg = np.zeros(m), np.zeros(m)
     for run, fl in zip(d.once("gram_layout", lambda: _layout(d)), low.runs, strict=True):
@@ -324,7 +305,7 @@ def _outer_used(d: Design) -> Array:
     return s @ s.T
 
 
-def _cross(gram: GainGram | _Lowpassed, d: Design, rows: Array) -> Array:
+def cross_products(gram: GainGram | _Lowpassed, d: Design, rows: Array) -> Array:
     """rows·Gᵀ: products of series over the usable blocks with every shape's low-pass."""
     m = d.gains_b.shape[0]
     out = np.zeros((len(rows), m))
@@ -337,130 +318,3 @@ def _cross(gram: GainGram | _Lowpassed, d: Design, rows: Array) -> Array:
         if len(run.dense):
             out[:, run.dense] += r @ fl.g_dense.T
     return out
-
-
-def _shapes_t(d: Design) -> tuple[csr_matrix, csr_matrix]:
-    """The shapes, sparse, time × shape: at every block and at the usable ones."""
-    return d.once("shapes_sparse", lambda: (csr_matrix(d.gains_b.T),
-                                             csr_matrix(d.gains_b[:, d.blocks].T)))
-
-
-def _shape_products(d: Design, rows: Array) -> Array:
-    """rows·Sᵀ: products of series over the usable blocks with every shape."""
-    return (_shapes_t(d)[1].T @ rows.T).T
-
-
-@dataclass
-class Normal:
-    """The normal equations at one θ, X's columns in the order ``perm`` (the regressors
-    outside the gains' family first, then the gains')."""
-
-    xtx: Array
-    xty: Array
-    y: Array
-    perm: NDArray[np.int64]
-    theta: tuple[float, ...]
-    q: Array            # (nq, blocks) the regressors outside the gains' family
-
-    def fitted(self, coef: Array, d: Design) -> Array:
-        """X·coef over the usable blocks (``coef`` in the order ``perm``)."""
-        nq = len(self.q)
-        return coef[:nq] @ self.q + _gains_fitted(self.theta, d, coef[nq:])
-
-    def fitted_many(self, coefs: Array, d: Design) -> Array:
-        """X·coef for each row of ``coefs`` (k × columns, in the order ``perm``): (k, blocks)."""
-        nq = len(self.q)
-        a, b = gain_coefficients(self.theta, d)
-        shapes_t, used_t = _shapes_t(d)
-        cg = coefs[:, nq:]
-        gains = (used_t @ (a * cg).T).T + held_lowpass(
-            (shapes_t @ (b * cg).T).T, self.theta[0], d.rec.per_block * d.rec.step_s,
-            d.block_runs)[:, d.blocks]
-        return coefs[:, :nq] @ self.q + gains
-
-
-def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Array]:
-    """(y, X·coef) at ``theta`` over the usable blocks, without X (``coef`` in X's order)."""
-    gcols, _ = gain_family(d)
-    out = _gains_fitted(theta, d, coef[gcols])
-    y = None
-    for _key, rows, cols in dense_groups(theta, d):
-        for row, col in zip(rows, cols, strict=True):
-            if col >= 0:
-                out += coef[col] * row
-            else:
-                y = row
-    return y, out
-
-
-def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
-    """The gains' family's columns times their coefficients ``cg``."""
-    a, b = gain_coefficients(theta, d)
-    shapes_t, used_t = _shapes_t(d)
-    return used_t @ (a * cg) + held_lowpass(
-        (shapes_t @ (b * cg))[None, :], theta[0], d.rec.per_block * d.rec.step_s,
-        d.block_runs)[0, d.blocks]
-
-
-def x_products(theta: tuple[float, ...], d: Design, rows: Array,
-               known: dict | None = None) -> Array:
-    """rows·X at ``theta`` (rows × X's columns, in X's order) for series ``rows`` over the
-    usable blocks, without X. ``known``: the same rows' products with the shapes and their
-    low-pass from earlier calls at other θ (filled in here): a step of θ that keeps τ_mm
-    changes only the coefficients of the gains' columns."""
-    known = {} if known is None else known
-    if "shapes" not in known:
-        known["shapes"] = _shape_products(d, rows)
-    if ("lowpass", theta[0]) not in known:
-        known["lowpass", theta[0]] = _cross(_lowpassed(theta[0], d), d, rows)
-    gcols, _ = gain_family(d)
-    a, b = gain_coefficients(theta, d)
-    out = np.empty((len(rows), len(column_names(d))))
-    out[:, gcols] = a * known["shapes"] + b * known["lowpass", theta[0]]
-    for _key, q, cols in dense_groups(theta, d):
-        keep = cols >= 0
-        out[:, cols[keep]] = rows @ q[keep].T
-    return out
-
-
-def _products(d: Design, groups: list, keys: list[tuple], make) -> Array:
-    """The groups' products (:func:`_cross`), those not remembered under ``keys`` made in one
-    call of ``make`` on their rows."""
-    new = [i for i, k in enumerate(keys) if d.remembered(k) is None]
-    if new:
-        made = make(np.concatenate([groups[i][1] for i in new]))
-        at = 0
-        for i in new:
-            n = len(groups[i][1])
-            d.cached(keys[i], lambda at=at, n=n: made[at:at + n])
-            at += n
-    return np.concatenate([d.remembered(k) for k in keys])
-
-
-def normal_equations(theta: tuple[float, ...], d: Design) -> Normal:
-    """XᵀX and Xᵀy of :func:`~.columns.columns` at ``theta``, from the parts (module
-    docstring), X's columns in the order :attr:`Normal.perm`."""
-    tau_mm = theta[0]
-    gram = gain_gram(tau_mm, d)
-    groups = dense_groups(theta, d)
-    # products with the shapes and their low-pass: only of the groups this θ changed (a step
-    # of the Jacobian moves one coordinate), in one pass each
-    rs = _products(d, groups, [("S " + key[0], *key[1:]) for key, _, _ in groups],
-                   lambda rows: _shape_products(d, rows))
-    rg = _products(d, groups, [("G " + key[0], tau_mm, *key[1:]) for key, _, _ in groups],
-                   lambda rows: _cross(gram, d, rows))
-    cols = np.concatenate([c for _, _, c in groups])
-    qy = np.concatenate([rows for _, rows, _ in groups])
-    iy = int(np.flatnonzero(cols < 0)[0])
-    keep = cols >= 0
-    q, y = qy[keep], qy[iy]
-    gcols, _ = gain_family(d)
-    a, b = gain_coefficients(theta, d)
-    # (a step of τ_e or τ_r keeps it)
-    gains = d.cached(("gains gram", tau_mm, theta[1], theta[3]), lambda: (
-        np.outer(a, a) * gram.ss + np.outer(a, b) * gram.sg + np.outer(b, a) * gram.sg.T
-        + np.outer(b, b) * gram.gg))
-    cross = rs[keep] * a[None, :] + rg[keep] * b[None, :]                   # Qᵀ·gains
-    xtx = np.block([[q @ q.T, cross], [cross.T, gains]])
-    xty = np.r_[q @ y, rs[iy] * a + rg[iy] * b]
-    return Normal(xtx, xty, y, np.r_[cols[keep], gcols], tuple(theta), q)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .gram import fitted, x_products
+from .normal import fitted, x_products
 
 Array = NDArray[np.float64]
 

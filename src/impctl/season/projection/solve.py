@@ -3,9 +3,10 @@
 For each θ (:data:`~.columns.THETA`) the linear parameters β come from a ridge least-squares
 solve (the daily sun amplitudes are shrunk towards their mean: a cloudy week leaves few blocks to
 tell them apart); the search over θ — five numbers in transformed coordinates — is a bounded
-trust-region least squares on the projected residual, started from a small grid. No torch.
+trust-region least squares on the projected residual, started from a small grid, with the
+projection's own Jacobian (:mod:`.jacobian`). No torch.
 
-The search solves from the normal equations' parts (:mod:`.gram`) and never forms X;
+The search solves from the normal equations' parts (:mod:`.normal`) and never forms X;
 :func:`project` forms it — the straightforward computation the tests hold the search to.
 """
 
@@ -20,8 +21,9 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from .columns import BETA, Design, column_names, columns, gain_family, lumped
-from .gram import fitted, gain_sum_sq, normal_equations, x_products
+from .gram import gain_sum_sq
 from .jacobian import projected_jacobian
+from .normal import fitted, normal_equations, x_products
 
 Array = NDArray[np.float64]
 
@@ -200,7 +202,7 @@ def _factor_solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback):
 
 def projected_residual(theta, d: Design) -> Array:
     """The block residuals and the ridge rows' of :func:`project` at ``theta`` [W], from the
-    normal equations' parts (:mod:`.gram`: X is never formed)."""
+    normal equations' parts (:mod:`.normal`: X is never formed)."""
     solved = _solve_parts(theta, d)
     if solved is None:
         pr = project(theta, d)
@@ -334,7 +336,7 @@ def covariance(u: Array, pr: Projection, d: Design, bounds=THETA_BOUNDS) -> Arra
     block residuals (the ridge rows included), the meat from each local day's summed scores —
     residuals of one day share its weather, its sun and its owner, so they are not independent.
     The Jacobian J = [∂r/∂u, −X] enters as JᵀJ and per-day sums of J·r only: from the normal
-    equations' parts (:mod:`.gram`), X never formed."""
+    equations' parts (:mod:`.normal`), X never formed."""
     theta = from_u(u, bounds)
     r0 = _fixed_residual(u, pr.beta, d, bounds)
     ju = np.empty((len(r0), len(u)))
