@@ -198,11 +198,16 @@ def night_rows(nights: Sequence[NightSamples]) -> NightRows:
         return _no_rows()
     t0, hourly = _hourly(nights)
     memories = [_memory(hourly, tau) for tau in MEMORY_H]
-    for n in owner:
-        start = pd.Timestamp(n.start)
-        day = (start - pd.Timedelta(hours=12)).normalize()
-        midnight = day + pd.Timedelta(days=1)
-        h = ((start - midnight).total_seconds() + np.asarray(n.time_s, float)) / 3600.0
+    # the nights' local days and midnights at once (per night, the timestamps' arithmetic was
+    # most of the rows' cost)
+    starts = pd.DatetimeIndex([pd.Timestamp(n.start) for n in owner])
+    days = (starts - pd.Timedelta(hours=12)).normalize()
+    midnights = days + pd.Timedelta(days=1)
+    into = (starts - midnights).total_seconds().to_numpy()
+    midnight_s = [m.timestamp() for m in midnights]
+    dates = [str(d.date()) for d in days]
+    for n, into_s, midnight_at, date in zip(owner, into, midnight_s, dates, strict=True):
+        h = (into_s + np.asarray(n.time_s, float)) / 3600.0
         ok = np.isfinite(n.t_air_c) & np.isfinite(n.t_out_c) & np.isfinite(n.q_hc_w)
         win = ok & (h >= WINDOW_H[0]) & (h < WINDOW_H[1])
         if win.sum() < MIN_ROWS_SHARE * per_window:
@@ -224,7 +229,7 @@ def night_rows(nights: Sequence[NightSamples]) -> NightRows:
             continue
         fall = float(np.mean(ta[first]) - np.mean(ta[last]))
         # the hour ending at the window's start
-        at = int((midnight.timestamp() + WINDOW_H[0] * 3600 - t0) // 3600.0) - 1
+        at = int((midnight_at + WINDOW_H[0] * 3600 - t0) // 3600.0) - 1
         if not 0 <= at < len(hourly):
             continue
         mem = [float(m[at]) - dt for m in memories]
@@ -232,7 +237,7 @@ def night_rows(nights: Sequence[NightSamples]) -> NightRows:
             continue
         defrost = (float(np.nanmean(np.asarray(n.defrost_share, float)[win]))
                    if n.defrost_share is not None else 0.0)
-        rows.append((str(day.date()), float(np.mean(q[win])), dt, fall, defrost, mem,
+        rows.append((date, float(np.mean(q[win])), dt, fall, defrost, mem,
                      float(n.p_house_w)))
     rows.sort(key=lambda r: r[0])
     if rows:
