@@ -9,7 +9,7 @@ evaluation) and their Cholesky solve. Differentiating the solve instead (Golub a
 
     ∂r/∂θ_k = m_k − X̃ (X̃ᵀX̃ + εI)⁻¹ (X̃ᵀm_k + ∂X̃ᵀr),   m_k = ∂(ỹ − X̃β̂)/∂θ_k at fixed β̂,
 
-which needs only the regressors at the moved θ times β̂ (:func:`~.gram.fitted`: the filtered
+which needs only the regressors at the moved θ times β̂ (:func:`~.normal.fitted`: the filtered
 series, no products), ∂X̃ᵀr from the products of the one residual with the moved regressors
 (a step that keeps τ_mm changes only the gains' coefficients), and, for all five at once, one
 product with X, one solve with the factor already made and one product of X with the
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import cho_solve
 
 from .normal import fitted, x_products
 
@@ -42,9 +43,9 @@ def projected_jacobian(u: Array, steps: Array, solved, theta_of, d, ridge_scale)
     column's weight in the ridge rows times its scale (the weight on β) at θ."""
     ne, coef, scale, v, unit, factor = solved
     theta = theta_of(u)
+    beta_p = coef / scale                            # in the solve's order
     beta = np.empty_like(coef)
-    beta[ne.perm] = coef / scale
-    beta_p = coef / scale
+    beta[ne.perm] = beta_p                           # in X's
     y0, f0 = fitted(theta, d, beta)
     r0, vs0 = y0 - f0, ridge_scale(theta)
     known: dict = {}   # r0's products with the shapes and their low-pass, by τ_mm
@@ -68,8 +69,6 @@ def projected_jacobian(u: Array, steps: Array, solved, theta_of, d, ridge_scale)
     # ĉ = A⁻¹ (X̃ᵀ[moved; moved ridge] + ∂X̃ᵀ r̃) in the solve's scaled columns (order
     # ``ne.perm``), X̃ = [X/scale; −ridge rows]: the column is [moved − X ĉ/scale;
     # moved ridge + rows ĉ]
-    from scipy.linalg import cho_solve
-
     rows = unit * v
     xt = (x_products(theta, d, moved)[:, ne.perm] + turned) / scale - moved_ridge @ rows
     c = cho_solve(factor, xt.T, check_finite=False).T          # (k, p) scaled
