@@ -176,7 +176,7 @@ def gain_gram(tau_mm: float, d: Design) -> GainGram:
 
 
 def _gain_gram(tau_mm: float, d: Design) -> GainGram:
-    low = d.cached(("lowpassed", tau_mm), lambda: _makelowpassed(tau_mm, d))
+    low = d.cached(("lowpassed", tau_mm), lambda: _make_lowpassed(tau_mm, d))
     rho = low.rho
     m = d.gains_b.shape[0]
     ss = d.once("gram_ss", lambda: _outer_used(d))
@@ -237,7 +237,8 @@ def gain_diag(tau_mm: float, d: Design) -> tuple[Array, Array]:
 
 @dataclass
 class _Lowpassed:
-    """The shapes' low-pass at one τ_mm without their products (what :func:`_cross` needs)."""
+    """The shapes' low-pass at one τ_mm without their products (:func:`cross_products`
+    needs no more)."""
 
     rho: float
     runs: list[_Filtered]
@@ -248,10 +249,10 @@ def lowpassed(tau_mm: float, d: Design) -> GainGram | _Lowpassed:
     full = d.remembered(("gram", tau_mm))
     if full is not None:
         return full
-    return d.cached(("lowpassed", tau_mm), lambda: _makelowpassed(tau_mm, d))
+    return d.cached(("lowpassed", tau_mm), lambda: _make_lowpassed(tau_mm, d))
 
 
-def _makelowpassed(tau_mm: float, d: Design) -> _Lowpassed:
+def _make_lowpassed(tau_mm: float, d: Design) -> _Lowpassed:
     block_s = d.rec.per_block * d.rec.step_s
     rho = math.exp(-block_s / tau_mm)
     f = tau_mm / block_s * (1.0 - rho)

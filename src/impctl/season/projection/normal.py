@@ -114,8 +114,8 @@ def x_products(theta: tuple[float, ...], d: Design, rows: Array,
 
 
 def _products(d: Design, groups: list, keys: list[tuple], make) -> Array:
-    """The groups' products (:func:`_cross`), those not remembered under ``keys`` made in one
-    call of ``make`` on their rows."""
+    """The groups' products (:func:`~.gram.cross_products`), those not remembered under
+    ``keys`` made in one call of ``make`` on their rows."""
     new = [i for i, k in enumerate(keys) if d.remembered(k) is None]
     if new:
         made = make(np.concatenate([groups[i][1] for i in new]))
