@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import cho_factor, cho_solve
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, leastsq
 
 from .columns import BETA, Design, column_names, columns, gain_family, lumped
 from .gram import gain_sum_sq
@@ -290,6 +290,24 @@ def _jacobian(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
     return out
 
 
+def _levenberg_marquardt(u0: Array, d: Design, bounds, max_nfev: int,
+                         tol: float) -> OptimizeResult:
+    """MINPACK's Levenberg–Marquardt (``lmder``) from ``u0``: what ``least_squares(...,
+    method="lm", x_scale=1.0)`` runs, through ``leastsq``, which does not compute the Jacobian
+    once more at the end (a tenth of a warm search) — its check of the shapes at the start
+    costs a residual, and its Jacobian is the one the first iteration then takes."""
+    x, _, info, _, status = leastsq(
+        _residual, u0, args=(d, bounds), Dfun=_remembered_jacobian, full_output=True,
+        ftol=tol, xtol=tol, gtol=1e-8, maxfev=max_nfev, diag=np.ones(len(u0)))
+    return OptimizeResult(x=x, cost=0.5 * float(info["fvec"] @ info["fvec"]),
+                          nfev=int(info["nfev"]), njev=int(info["njev"]), status=int(status))
+
+
+def _remembered_jacobian(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
+    return d.cached(("jacobian", *u.tolist(), *np.ravel(bounds).tolist()),
+                    lambda: _jacobian(u, d, bounds))
+
+
 def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
            bounds=THETA_BOUNDS) -> tuple[tuple, Projection, object]:
     """Best θ, its projection and the optimiser's result (least squares over θ); from the
@@ -309,8 +327,7 @@ def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
     best = None
     tol = WARM_TOL if start is not None else FULL_TOL
     for u0 in starts:
-        res = least_squares(_residual, u0, jac=_jacobian, args=(d, bounds), method="lm",
-                            max_nfev=max_nfev, x_scale=1.0, ftol=tol, xtol=tol)
+        res = _levenberg_marquardt(u0, d, bounds, max_nfev, tol)
         if best is None or res.cost < best.cost:
             best = res
     theta = from_u(best.x, bounds)
