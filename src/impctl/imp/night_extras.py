@@ -98,7 +98,8 @@ def defrost_fields(extras: dict[str, np.ndarray], idx: np.ndarray, time_s: np.nd
         return {}
     on = flag[idx] >= 0.5
     step = np.diff(np.asarray(time_s, float))
-    span_h = np.append(step, np.median(step)) / 3600.0
+    # the last row's interval (the median one) counts only where that row defrosts
+    span_h = np.append(step, np.median(step) if on[-1] else 0.0) / 3600.0
     signed = bool((on & (np.asarray(q_hc_w, float) < -read_below_w)).any())
     hours = float(span_h[on].sum())
     return {"defrost_h": hours, "defrost_unread_h": 0.0 if signed else hours}
