@@ -13,9 +13,10 @@ address (:func:`impctl.fleet.fit_fleet` with ``scheduler=``, as ``impctl fleet f
 
 * wall time of the fit, from the call to the last FLEET part (the plugin that loads torch in
   each worker included; the cluster's own start is not), households/s and households/hour;
-* the steady rate: households/s between the first and the last finished batch (from the FLEET
-  parts' modification times) — the throughput once every worker runs, which a fleet of tens of
-  thousands sees; the start it leaves out is printed beside it;
+* the steady rate: each worker's households after its first finished batch over the time to
+  its last, summed over the workers (from the FLEET parts' modification times and ``worker``
+  column) — the throughput once every worker runs, which a fleet of tens of thousands sees;
+  the start it leaves out is printed beside it;
 * CPU-s per household in the workers' batches (the FLEET ``cpu_s_per_household`` column);
 * peak resident memory of each worker process [MB]: the kernel's high-water mark (``VmHWM``
   of ``/proc/PID/status``), read just before the cluster stops.
@@ -184,8 +185,8 @@ def main() -> None:
             runs = sum(r["workers"] == w for r in results)
             print(f"throughput {w} against {base} worker(s): {rate[w] / rate[base]:.2f}× "
                   f"from the call to the last batch, "
-                  f"{median('steady', w) / median('steady', base):.2f}× between the first "
-                  f"and the last batch (median rates of {runs} and "
+                  f"{median('steady', w) / median('steady', base):.2f}× once every worker "
+                  f"runs (median rates of {runs} and "
                   f"{sum(r['workers'] == base for r in results)} runs)")
     best = max(rate, key=rate.get)
     print(f"10,000 households at {rate[best]:.2f} households/s: "

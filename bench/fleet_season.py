@@ -108,8 +108,8 @@ def run(data: Path, workers: int, work: Path, previous: Path | None = None,
         batch: int | None = None) -> tuple[float, Path]:
     """Fit the fleet on ``workers`` local worker processes (``bench/fleet.py``'s run, which
     prints the throughput and CPU figures); print the season's and memory figures; (the steady
-    rate between the first and the last batch [households/s] — what a large fleet sees, the
-    start spread thin — and the FLEET)."""
+    rate once every worker runs [households/s] — what a large fleet sees, the start spread
+    thin: ``benchlib.fleet_rates.steady_rate`` — and the FLEET)."""
     from fleet import run_fleet  # bench/fleet.py
 
     from impctl.fleet.run import DEFAULT_BATCH
