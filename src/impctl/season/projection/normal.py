@@ -60,13 +60,7 @@ class Normal:
     def fitted_many(self, coefs: Array, d: Design) -> Array:
         """X·coef for each row of ``coefs`` (k × columns, in the order ``perm``): (k, blocks)."""
         nq = len(self.q)
-        a, b = gain_coefficients(self.theta, d)
-        shapes_t, used_t = _shapes_t(d)
-        cg = coefs[:, nq:]
-        gains = (used_t @ (a * cg).T).T + held_lowpass(
-            (shapes_t @ (b * cg).T).T, self.theta[0], d.rec.per_block * d.rec.step_s,
-            d.block_runs)[:, d.blocks]
-        return coefs[:, :nq] @ self.q + gains
+        return coefs[:, :nq] @ self.q + _gains_fitted(self.theta, d, coefs[:, nq:])
 
 
 def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Array]:
@@ -84,12 +78,15 @@ def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Arr
 
 
 def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
-    """The gains' family's columns times their coefficients ``cg``."""
+    """The gains' family's columns times their coefficients ``cg`` ((shapes,) → (blocks,), or
+    (k, shapes) → (k, blocks))."""
     a, b = gain_coefficients(theta, d)
     shapes_t, used_t = _shapes_t(d)
-    return used_t @ (a * cg) + held_lowpass(
-        (shapes_t @ (b * cg))[None, :], theta[0], d.rec.per_block * d.rec.step_s,
-        d.block_runs)[0, d.blocks]
+    many = np.atleast_2d(cg)
+    out = (used_t @ (a * many).T).T + held_lowpass(
+        (shapes_t @ (b * many).T).T, theta[0], d.rec.per_block * d.rec.step_s,
+        d.block_runs)[:, d.blocks]
+    return out if cg.ndim == 2 else out[0]
 
 
 def x_products(theta: tuple[float, ...], d: Design, rows: Array,

@@ -109,9 +109,10 @@ def project(theta, d: Design) -> Projection:
     scale = _scale(np.einsum("ij,ij->j", X, X), len(X))
     rows = _ridge_rows(scale, d, len(y))
     Xs = X / scale
-    coef = _solve(Xs.T @ Xs, rows.T @ rows, Xs.T @ y,
-                  lambda: np.linalg.lstsq(np.concatenate([Xs, rows]),
-                                          np.r_[y, np.zeros(len(rows))], rcond=None)[0])
+    coef, _ = _factor_solve(Xs.T @ Xs, rows.T @ rows, Xs.T @ y,
+                            lambda: np.linalg.lstsq(np.concatenate([Xs, rows]),
+                                                    np.r_[y, np.zeros(len(rows))],
+                                                    rcond=None)[0])
     beta = coef / scale
     return Projection(beta, names, y - X @ beta, X, y, rows @ coef, rows * scale)
 
@@ -181,16 +182,11 @@ def _ridge_rows(scale: Array, d: Design, n: int) -> Array:
     return _ridge_unit(d, n) * _ridge_weight(scale, d)
 
 
-def _solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback) -> Array:
-    """Least squares from the scaled normal equations ``xtx_s``, ``xty_s`` with the ridge
-    rows' ``rtr`` (the columns are scaled and the ridge rows keep them well posed; four times
-    faster than an SVD); ``fallback()`` (an SVD) if they are singular."""
-    return _factor_solve(xtx_s, rtr, xty_s, fallback)[0]
-
-
 def _factor_solve(xtx_s: Array, rtr: Array, xty_s: Array, fallback):
-    """:func:`_solve`'s solution and the Cholesky factor it came from (None from the
-    fallback)."""
+    """(least squares from the scaled normal equations ``xtx_s``, ``xty_s`` with the ridge
+    rows' ``rtr``, its Cholesky factor): the columns are scaled and the ridge rows keep them
+    well posed, four times faster than an SVD; (``fallback()`` (an SVD), None) if they are
+    singular."""
     ata = xtx_s + rtr
     ata[np.diag_indices_from(ata)] += 1e-10 * np.trace(ata) / len(ata)
     try:
