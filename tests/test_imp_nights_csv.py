@@ -101,6 +101,32 @@ def test_a_parquet_frame_reads_its_text_cells_as_the_csv_does(tmp_path):
                                                          ("8", "owner", "dhw")]
 
 
+def test_a_parquet_frame_reads_its_optional_numbers_as_the_csv_does(tmp_path):
+    """The optional numeric columns stored as numbers (defrost as integers, the household
+    electricity and the rooms as floats, with a null, an infinity and a value out of range):
+    the Parquet frame's nights carry what the CSV's carry, bit for bit."""
+    from impctl.fleet.previous import night_digest
+    from impctl.imp.nights_csv import read_nights_frame
+
+    stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)
+    frame = pd.DataFrame({
+        "timestamp": stamps, "t_air": 22.0 - 0.05 * np.arange(12), "t_out": 1.0,
+        "q_hc": [0.0] * 6 + [2000.0] * 6, "night": ["a"] * 6 + ["b"] * 6, "kind": "owner",
+        "defrost": [0, 0, 1, 0, 0, 0] * 2,
+        "p_house_w": [np.nan, np.inf, 4e4] + [310.0 + 0.1 * i for i in range(9)],
+        "t_rooms_c": np.linspace(21.3, 20.1, 12),
+    })
+    frame.to_parquet(tmp_path / "n.parquet")
+    csv = tmp_path / "n.csv"
+    frame.assign(timestamp=[t.isoformat() for t in stamps]).to_csv(csv, index=False)
+    read = pd.read_parquet(tmp_path / "n.parquet")
+    assert read["defrost"].dtype == np.int64 and read["p_house_w"].dtype == np.float64
+    got, want = read_nights_frame(read, tmp_path / "n.parquet", TZ), read_nights(csv, TZ)
+    assert got[1].p_house_w == pytest.approx(310.55) and got[0].defrost_h > 0
+    assert got[0].t_air_offset_k == pytest.approx(0.85, abs=0.01)
+    assert [night_digest(n) for n in got] == [night_digest(n) for n in want]
+
+
 GOOD = ("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22.0,1.0,2000\n"
         "2026-01-12T22:10,22.0,1.0,2100\n")
 

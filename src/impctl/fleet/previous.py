@@ -29,21 +29,29 @@ from .table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 CARRIED_STATUSES = ("ok", "insufficient")
 
 
-def nights_digest(nights) -> str:
-    """A digest of nights (:class:`~impctl.imp.night.NightSamples`, every field and every
-    sample): equal digests, the same input (to the IMP fit for the IMP nights, to the whole row
-    for all of them)."""
+def night_digest(night) -> bytes:
+    """A digest of one night (:class:`~impctl.imp.night.NightSamples`: every field and every
+    sample)."""
     h = hashlib.blake2b(digest_size=16)
-    for n in nights:
-        for f in dataclasses.fields(n):
-            v = getattr(n, f.name)
-            h.update(f.name.encode())
-            if isinstance(v, np.ndarray):
-                a = np.ascontiguousarray(v)
-                h.update(str(a.dtype).encode() + str(a.shape).encode())
-                h.update(a.tobytes())
-            else:
-                h.update(repr(v).encode())
+    for f in dataclasses.fields(night):
+        v = getattr(night, f.name)
+        h.update(f.name.encode())
+        if isinstance(v, np.ndarray):
+            a = np.ascontiguousarray(v)
+            h.update(str(a.dtype).encode() + str(a.shape).encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(v).encode())
+    return h.digest()
+
+
+def nights_digest(digests) -> str:
+    """A digest of nights from their :func:`night_digest` (in order): equal digests, the same
+    input (to the IMP fit for the IMP nights, to the whole row for all of them). Each night is
+    digested once for both."""
+    h = hashlib.blake2b(digest_size=16)
+    for d in digests:
+        h.update(d)
     return h.hexdigest()
 
 

@@ -220,7 +220,7 @@ def read_nights_frame(
     """
     table = frame_table(frame.reset_index(drop=True), source, required=REQUIRED_COLUMNS,
                         numeric=_NUMERIC, optional=_OPTIONAL, may_be_empty=_MAY_BE_EMPTY,
-                        tz=tz)
+                        lenient=EXTRA_COLUMNS, tz=tz)
     return nights_from_table(table, Path(source), tz, window=window)
 
 

@@ -21,11 +21,12 @@ baseline the season model has to beat. Units in every name.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from ..imp.protocol import EMITTER_KINDS
 from .change import Change, detect_change
@@ -186,6 +187,14 @@ def imp_kinds(rec: SeasonRecord, used: np.ndarray) -> set[str]:
     return set(np.unique(rec.kind[: len(used) * k][steps])) & {"constrained", "normal"}
 
 
+@functools.cache
+def _thread_pools() -> ThreadpoolController:
+    """This process's thread pools, found once: finding them scans the loaded libraries (about
+    1 ms a call, more in a fleet worker, where a morning refit costs ~70 ms). numpy's and
+    scipy's BLAS, the only ones a season fit calls, are loaded before the first call."""
+    return ThreadpoolController()
+
+
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
                start: tuple | None = None, max_nfev: int = 60,
                emitter: str | None = None, start_bound_s: float | None = None) -> SeasonFit:
@@ -210,7 +219,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                          f"{MIN_OWNER_NIGHTS}")
     # Small matrices (thousands × hundreds): BLAS threads only contend — three times slower
     # with two threads on a 2-core gateway, more beside torch's.
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _thread_pools().limit(limits=1, user_api="blas"):
         # The emitter from the water (:mod:`.emitter`), scaled by this fit's HLC (the energy
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
