@@ -305,3 +305,31 @@ def test_a_warm_search_stops_sooner_and_lands_where_the_strict_stop_does(winter_
     assert loose < calls[0]
     for k in KEYS:
         assert warm.values[k] == pytest.approx(strict.values[k], rel=5e-3)
+
+
+def test_a_warm_search_steps_shorter_and_lands_where_the_full_search_does(winter_season,
+                                                                          monkeypatch):
+    """From an earlier fit's θ, near the new optimum, the search's first step is bounded by
+    |u| instead of MINPACK's 100 |u|: fewer evaluations of the residuals than the long first
+    step, and the HLC, τ and C_m of the full search from the grid to 0.5 %."""
+    from impctl.season.projection import solve
+
+    nights = household_nights(winter_season, 1)
+    owner = [i for i, n in enumerate(nights) if n.kind == "owner"]
+    earlier, _ = fit_nights(nights[:owner[-2]])
+    calls = [0]
+    real = solve.projected_residual
+
+    def counted(*a, **kw):
+        calls[0] += 1
+        return real(*a, **kw)
+
+    monkeypatch.setattr(solve, "projected_residual", counted)
+    short, _ = fit_nights(nights, start=earlier.theta)
+    few, calls[0] = calls[0], 0
+    monkeypatch.setattr(solve, "WARM_STEP", solve.FULL_STEP)
+    fit_nights(nights, start=earlier.theta)
+    assert few < calls[0]
+    full, _ = fit_nights(nights)
+    for k in KEYS:
+        assert short.values[k] == pytest.approx(full.values[k], rel=5e-3)

@@ -38,7 +38,15 @@ from .emitter import (
     water_recorded,
 )
 from .projection.columns import THETA, lumped
-from .projection.solve import LUMPED, beta_dict, bounds_for, covariance, lumped_log_se, search
+from .projection.solve import (
+    FULL_STEP,
+    LUMPED,
+    beta_dict,
+    bounds_for,
+    covariance,
+    lumped_log_se,
+    search,
+)
 from .record import SeasonRecord
 
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
@@ -251,7 +259,9 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             return fit_season(rec, calibrated, None, max_nfev, emitter)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
-            theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds)
+            # from the first search's θ, but under another bound: maybe far (MINPACK's step)
+            theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds,
+                                    step=FULL_STEP)
             b = beta_dict(pr)
             values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
         se = lumped_log_se(res.x, pr, covariance(res.x, pr, d, bounds), bounds)
