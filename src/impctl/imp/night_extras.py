@@ -94,9 +94,14 @@ def defrost_fields(extras: dict[str, np.ndarray], idx: np.ndarray, time_s: np.nd
     its negative rows, and a row that is a mean over a defrost and some heating may still be
     positive."""
     flag = extras.get("defrost")
-    if flag is None or not _present(flag[idx]) or len(idx) < 2:
+    if flag is None or len(idx) < 2:
         return {}
-    on = flag[idx] >= 0.5
+    rows = flag[idx]
+    if not _present(rows):
+        return {}
+    on = rows >= 0.5
+    if not on.any():   # most nights: nothing to add up
+        return {"defrost_h": 0.0, "defrost_unread_h": 0.0}
     step = np.diff(np.asarray(time_s, float))
     # the last row's interval (the median one) counts only where that row defrosts
     span_h = np.append(step, np.median(step) if on[-1] else 0.0) / 3600.0
