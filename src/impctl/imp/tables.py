@@ -185,7 +185,8 @@ def frame_table(
             raise InputError(f"missing column '{col}' (columns: {','.join(cols)})", source)
     if frame.empty:
         raise InputError("no data rows", source)
-    out = pd.DataFrame(index=range(len(frame)))
+    # the columns gathered first and made a frame once (one column at a time: a copy each)
+    out: dict = {}
     stamps = frame["timestamp"].reset_index(drop=True)
     if pd.api.types.is_datetime64_any_dtype(stamps):
         idx = pd.DatetimeIndex(stamps)
@@ -196,13 +197,15 @@ def frame_table(
                                              source, tz))
     else:
         out["timestamp"] = parse_timestamps(stamps.astype(object), source, tz)
-    out.attrs[TIMESTAMP_TEXT] = CellText(stamps)
     may_be_empty = set(may_be_empty)
     for col in numeric:
         if col not in cols:
             continue
-        values = pd.to_numeric(frame[col].reset_index(drop=True), errors="coerce")
-        values = values.to_numpy(dtype=float, na_value=np.nan)
+        column = frame[col]
+        if not (pd.api.types.is_numeric_dtype(column)
+                and not pd.api.types.is_bool_dtype(column)):   # numbers stay as they are
+            column = pd.to_numeric(column.reset_index(drop=True), errors="coerce")
+        values = column.to_numpy(dtype=float, na_value=np.nan)
         bad = ~np.isfinite(values)
         if col in may_be_empty:
             bad &= ~np.isnan(values)
@@ -212,7 +215,7 @@ def frame_table(
         out[col] = values
     lenient = set(lenient)
     for col in optional:
-        if col in cols and col not in out.columns:
+        if col in cols and col not in out:
             column = frame[col]
             if (col in lenient and pd.api.types.is_numeric_dtype(column)
                     and not pd.api.types.is_bool_dtype(column)):
@@ -220,8 +223,10 @@ def frame_table(
                 # way through text cost a season's household 2 ms of its 13 ms read
                 out[col] = column.to_numpy(dtype=float, na_value=np.nan)
                 continue
-            out[col] = pd.Series(_text_cells(column), dtype=object)
-    return out
+            out[col] = pd.Series(_text_cells(column), dtype=object, copy=False)
+    table = pd.DataFrame(out, index=range(len(frame)))
+    table.attrs[TIMESTAMP_TEXT] = CellText(stamps)
+    return table
 
 
 def _text_cells(column: pd.Series) -> np.ndarray:
