@@ -116,6 +116,39 @@ def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_
     assert calls == [1.5 * 3600, TAU_E_MAX_UNDERFLOOR_S]
 
 
+def test_a_screed_start_whose_water_reads_radiators_is_read_as_the_full_search_reads_it(
+        winter_season, searches, monkeypatch):
+    """From a screed fit's θ the water, scaled by the warm search's HLC, may read radiators
+    where the full search's reading, at its radiators-bound HLC, reads a screed (a house near
+    the threshold). A warm search under the radiators' bound reads it that way: where it reads
+    a screed the warm fit stands, no full search; where it reads radiators the full search
+    decides."""
+    import impctl.season.fit as season_fit
+
+    nights = household_nights(winter_season, 0)
+    full, _ = fit_nights(nights)
+    real = season_fit.water_excess_k
+    readings: list[float] = []
+
+    def first_reads_radiators(rec, hlc_w_per_k):
+        readings.append(hlc_w_per_k)
+        return RADIATOR_EXCESS_K + 1.0 if len(readings) == 1 else real(rec, hlc_w_per_k)
+
+    monkeypatch.setattr(season_fit, "water_excess_k", first_reads_radiators)
+    searches.clear()
+    refit, _ = fit_nights(nights, start=full.theta)
+    assert searches == [TAU_E_MAX_UNDERFLOOR_S, 1.5 * 3600]      # no full search
+    assert refit.emitter == "underfloor" and refit.warm_start
+    assert refit.water_excess_k == real(record_from_nights(nights), readings[1])
+    assert refit.values["hlc_w_per_k"] == pytest.approx(full.values["hlc_w_per_k"], rel=1e-3)
+    monkeypatch.setattr(season_fit, "water_excess_k",
+                        lambda rec, hlc_w_per_k: RADIATOR_EXCESS_K + 1.0)
+    searches.clear()
+    again, _ = fit_nights(nights, start=full.theta)
+    assert searches == [TAU_E_MAX_UNDERFLOOR_S, 1.5 * 3600, 1.5 * 3600]   # then the full one
+    assert again.emitter == "radiators" and not again.warm_start
+
+
 def test_a_declared_emitter_is_known_searched_once_and_a_disagreeing_water_is_said(
         winter_season, searches):
     """The installer's word comes before the water: one search under the declared emitter's

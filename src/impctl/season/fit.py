@@ -252,11 +252,25 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         kind = emitter if emitter is not None else emitter_kind(excess)
         if start_bound and tau_e_max_s(kind) != first:
             # The water, scaled by this fit's HLC, now reads radiators where the fit it
-            # started from read a screed. A fit without a start reads the water at the
-            # radiators' HLC and may read a screed again: searching on under the radiators'
-            # bound from here kept a cost ten times the full search's (a research household
-            # of bench/fleet_season.py --next-morning: HLC −34 %). The full search decides.
-            return fit_season(rec, calibrated, None, max_nfev, emitter)
+            # started from read a screed. A fit without a start reads the water at the HLC of
+            # its search under the radiators' bound, and may read a screed again: so does
+            # this one, from a warm search under that bound. Where the water then reads what
+            # the start was fitted under, this fit stands (a house near the radiators'
+            # excess flipped every morning, and each flip cost a full search: 12 % of a
+            # morning's fits); else the full search decides — searching on under the
+            # radiators' bound from here kept a cost ten times the full search's (a research
+            # household of bench/fleet_season.py --next-morning: HLC −34 %).
+            # (a water that cannot tell — too few nights read — goes to the full search)
+            r_excess = float("nan")
+            if math.isfinite(excess):
+                r_theta, r_pr, _ = search(d, max_nfev=max_nfev, start=start,
+                                          bounds=bounds_for(tau_e_max_s("radiators")))
+                r_b = beta_dict(r_pr)
+                r_excess = water_excess_k(rec, lumped(r_theta, r_b["k_ao_w_per_k"],
+                                                      r_b["k_am_w_per_k"])["hlc_w_per_k"])
+            if not math.isfinite(r_excess) or tau_e_max_s(emitter_kind(r_excess)) != first:
+                return fit_season(rec, calibrated, None, max_nfev, emitter)
+            excess, kind = r_excess, emitter_kind(r_excess)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
             # from the first search's θ, but under another bound: maybe far (MINPACK's step)
