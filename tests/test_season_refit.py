@@ -279,16 +279,14 @@ def test_impctl_season_takes_a_declared_emitter_and_refuses_an_unknown_one(tmp_p
     assert res.returncode == 2 and "--emitter" in res.stderr and not bad.exists()
 
 
-def test_a_warm_search_stops_sooner_and_lands_where_the_strict_stop_does(winter_season,
-                                                                         monkeypatch):
-    """From an earlier fit's θ the search stops at a looser tolerance than the full search
-    (one start: no other start to overtake it): fewer evaluations of the residuals, the same
-    HLC, τ and C_m to 0.5 %."""
+def _earlier_and_counted(winter_season, monkeypatch, before_last: int):
+    """(household 1's nights, a fit of them up to its ``before_last``-th last owner night, a
+    counter of the season residual's evaluations from here on — [n])."""
     from impctl.season.projection import solve
 
     nights = household_nights(winter_season, 1)
     owner = [i for i, n in enumerate(nights) if n.kind == "owner"]
-    earlier, _ = fit_nights(nights[:owner[-3]])
+    earlier, _ = fit_nights(nights[:owner[-before_last]])
     calls = [0]
     real = solve.projected_residual
 
@@ -297,6 +295,17 @@ def test_a_warm_search_stops_sooner_and_lands_where_the_strict_stop_does(winter_
         return real(*a, **kw)
 
     monkeypatch.setattr(solve, "projected_residual", counted)
+    return nights, earlier, calls
+
+
+def test_a_warm_search_stops_sooner_and_lands_where_the_strict_stop_does(winter_season,
+                                                                         monkeypatch):
+    """From an earlier fit's θ the search stops at a looser tolerance than the full search
+    (one start: no other start to overtake it): fewer evaluations of the residuals, the same
+    HLC, τ and C_m to 0.5 %."""
+    from impctl.season.projection import solve
+
+    nights, earlier, calls = _earlier_and_counted(winter_season, monkeypatch, 3)
     warm, _ = fit_nights(nights, start=earlier.theta)
     loose, calls[0] = calls[0], 0
     monkeypatch.setattr(solve, "WARM_TOL", 1e-8)
@@ -314,17 +323,7 @@ def test_a_warm_search_steps_shorter_and_lands_where_the_full_search_does(winter
     step, and the HLC, τ and C_m of the full search from the grid to 0.5 %."""
     from impctl.season.projection import solve
 
-    nights = household_nights(winter_season, 1)
-    owner = [i for i, n in enumerate(nights) if n.kind == "owner"]
-    earlier, _ = fit_nights(nights[:owner[-2]])
-    calls = [0]
-    real = solve.projected_residual
-
-    def counted(*a, **kw):
-        calls[0] += 1
-        return real(*a, **kw)
-
-    monkeypatch.setattr(solve, "projected_residual", counted)
+    nights, earlier, calls = _earlier_and_counted(winter_season, monkeypatch, 2)
     short, _ = fit_nights(nights, start=earlier.theta)
     few, calls[0] = calls[0], 0
     monkeypatch.setattr(solve, "WARM_STEP", solve.FULL_STEP)
