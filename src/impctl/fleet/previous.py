@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +46,7 @@ def night_digest(night) -> bytes:
     return h.digest()
 
 
-def nights_digest(digests) -> str:
+def nights_digest(digests: Iterable[bytes]) -> str:
     """A digest of nights from their :func:`night_digest` (in order): equal digests, the same
     input (to the IMP fit for the IMP nights, to the whole row for all of them). Each night is
     digested once for both."""
