@@ -187,6 +187,11 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
         hi = np.array([r[f"{k}_high"] for r in ok], float)[given]
         cover = (lo <= true) & (true <= hi)
         half = 100 * (hi - lo) / 2 / est
+        if not len(err):   # not given for any household (e.g. τ and C_m without a normal night)
+            nan = math.nan
+            out[name] = {"median_pct": nan, "median_ci": (nan, nan), "p90_pct": nan,
+                         "p90_ci": (nan, nan), "coverage": nan, "half_width_pct": nan}
+            continue
         out[name] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
                      "p90_pct": float(np.percentile(err, 90)), "p90_ci": _boot_ci(err, 90, rng),
                      "coverage": float(cover.mean()), "half_width_pct": float(np.median(half))}
@@ -347,6 +352,10 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
         label = sm["owner_nights"] or "0 (IMP)"
         for name in QUANTITIES.values():
             q = sm[name]
+            if not math.isfinite(q["median_pct"]):
+                print(f"{label:>12} {name:>4} {'—':>6}   not given ({sm[name + '_missing']} "
+                      "without)")
+                continue
             print(f"{label:>12} {name:>4} {q['median_pct']:6.1f} "
                   f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
                   f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}"
