@@ -149,3 +149,22 @@ def test_resuming_a_dataset_of_other_columns_is_refused(mornings, tmp_path):
     with pytest.raises(InputError, match="another impctl version"):
         fit_fleet(root / "yesterday", out, resume=True, progress=False, echo=lambda _: None)
     assert len(list(out.iterdir())) == 1   # nothing written
+
+
+def test_one_pass_gives_each_digest_as_its_nights_alone_give_it(winter_season):
+    """The IMP nights' and all nights' digests from one pass over the nights are the digests of
+    each set alone (a FLEET written before the one pass stays usable as ``--previous``), and a
+    changed sample changes them."""
+    from impctl.fleet.previous import nights_digest, nights_digests
+    from impctl.imp.night import split_owner
+
+    nights = household_nights(winter_season, 0)
+    imp = {id(n) for n in split_owner(nights)[0]}
+    assert 0 < len(imp) < len(nights)
+    some, every = nights_digests(nights, lambda n: id(n) in imp)
+    assert some == nights_digest([n for n in nights if id(n) in imp])
+    assert every == nights_digest(nights) != some
+    owner = next(n for n in nights if n.kind == "owner")
+    moved = [dataclasses.replace(n, q_hc_w=n.q_hc_w + 1e-9) if n is owner else n for n in nights]
+    again = nights_digests(moved, lambda n: id(n) in imp)
+    assert again[0] == some and again[1] != every

@@ -105,7 +105,7 @@ def test_a_parquet_frame_reads_its_optional_numbers_as_the_csv_does(tmp_path):
     """The optional numeric columns stored as numbers (defrost as integers, the household
     electricity and the rooms as floats, with a null, an infinity and a value out of range):
     the Parquet frame's nights carry what the CSV's carry, bit for bit."""
-    from impctl.fleet.previous import night_digest
+    from impctl.fleet.previous import nights_digest
     from impctl.imp.nights_csv import read_nights_frame
 
     stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)
@@ -124,7 +124,7 @@ def test_a_parquet_frame_reads_its_optional_numbers_as_the_csv_does(tmp_path):
     got, want = read_nights_frame(read, tmp_path / "n.parquet", TZ), read_nights(csv, TZ)
     assert got[1].p_house_w == pytest.approx(310.55) and got[0].defrost_h > 0
     assert got[0].t_air_offset_k == pytest.approx(0.85, abs=0.01)
-    assert [night_digest(n) for n in got] == [night_digest(n) for n in want]
+    assert [nights_digest([n]) for n in got] == [nights_digest([n]) for n in want]
 
 
 GOOD = ("timestamp,t_air,t_out,q_hc\n2026-01-12T22:00,22.0,1.0,2000\n"

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -30,30 +30,39 @@ from .table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 CARRIED_STATUSES = ("ok", "insufficient")
 
 
-def night_digest(night) -> bytes:
-    """A digest of one night (:class:`~impctl.imp.night.NightSamples`: every field and every
-    sample)."""
-    h = hashlib.blake2b(digest_size=16)
+def _night_bytes(night) -> list[bytes]:
+    """What a digest reads of one night (:class:`~impctl.imp.night.NightSamples`): every field
+    and every sample."""
+    out = []
     for f in dataclasses.fields(night):
         v = getattr(night, f.name)
-        h.update(f.name.encode())
+        out.append(f.name.encode())
         if isinstance(v, np.ndarray):
             a = np.ascontiguousarray(v)
-            h.update(str(a.dtype).encode() + str(a.shape).encode())
-            h.update(a.tobytes())
+            out.append(str(a.dtype).encode() + str(a.shape).encode())
+            out.append(a.tobytes())
         else:
-            h.update(repr(v).encode())
-    return h.digest()
+            out.append(repr(v).encode())
+    return out
 
 
-def nights_digest(digests: Iterable[bytes]) -> str:
-    """A digest of nights from their :func:`night_digest` (in order): equal digests, the same
-    input (to the IMP fit for the IMP nights, to the whole row for all of them). Each night is
-    digested once for both."""
-    h = hashlib.blake2b(digest_size=16)
-    for d in digests:
-        h.update(d)
-    return h.hexdigest()
+def nights_digest(nights: Iterable) -> str:
+    """A digest of nights: equal digests, the same input (to the IMP fit for the IMP nights,
+    to the whole row for all of them)."""
+    return nights_digests(nights, lambda _: False)[1]
+
+
+def nights_digests(nights: Iterable, part: Callable[[object], bool]) -> tuple[str, str]:
+    """(:func:`nights_digest` of the nights ``part`` picks, of all of them), each night read
+    once for both."""
+    some, every = hashlib.blake2b(digest_size=16), hashlib.blake2b(digest_size=16)
+    for n in nights:
+        picked = part(n)
+        for chunk in _night_bytes(n):
+            every.update(chunk)
+            if picked:
+                some.update(chunk)
+    return some.hexdigest(), every.hexdigest()
 
 
 def previous_rows(path: str | Path, options: dict, version: str) -> tuple[dict[str, dict], str]:

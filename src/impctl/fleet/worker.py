@@ -118,7 +118,7 @@ def fit_batch(sources: list[Source], settings: Settings,
     search starts where that run's ended; where all its nights are, its whole row."""
     from ..fit.household import choose_nights
     from ..imp.night import split_owner
-    from .previous import carry_over, night_digest, nights_digest, theta_start
+    from .previous import carry_over, nights_digests, theta_start
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
@@ -135,10 +135,8 @@ def fit_batch(sources: list[Source], settings: Settings,
             row.update(status="error", reason=getattr(nights, "reason", "unreadable input"),
                        error=str(nights))
             continue
-        each = [night_digest(n) for n in nights]
         imp = {id(n) for n in split_owner(nights)[0]}
-        digest = nights_digest(d for n, d in zip(nights, each, strict=True) if id(n) in imp)
-        whole = nights_digest(each)
+        digest, whole = nights_digests(nights, lambda n, imp=imp: id(n) in imp)
         row["nights_digest"] = whole
         last = (previous or {}).get(household)
         if last is not None and last.get("imp_nights_digest") == digest:
