@@ -84,7 +84,7 @@ def _row(index: int) -> str:
     return f"row {index + 2}"
 
 
-def _check_values(table: pd.DataFrame, path: Path, stamp_text) -> None:
+def _check_values(table: pd.DataFrame, path: Path, stamp_text, stamp_ns: np.ndarray) -> None:
     # A file in °F: its rooms are warmer than any room in °C, yet mostly inside t_air's range.
     fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
     if fahrenheit is not None:
@@ -119,7 +119,6 @@ def _check_values(table: pd.DataFrame, path: Path, stamp_text) -> None:
         empty = (table["night"] == "").to_numpy()
         if empty.any():
             raise InputError("column 'night': empty cell", path, _row(int(np.argmax(empty))))
-    stamp_ns = pd.DatetimeIndex(table["timestamp"]).as_unit("ns").asi8
     back = np.r_[False, stamp_ns[1:] <= stamp_ns[:-1]]
     if "night" in table:  # labelled nights may overlap (e.g. simulated); each must increase
         ids = table["night"].to_numpy(dtype=object)
@@ -240,11 +239,11 @@ def nights_from_table(
     stamp_text = table.attrs.get(TIMESTAMP_TEXT)
     table.attrs = {}
     table = table.copy(deep=False)
-    _check_values(table, path, stamp_text)
-    explicit = "night" in table
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
-    stamps = table["timestamp"]
-    stamp_ns = pd.DatetimeIndex(stamps).as_unit("ns").asi8
+    stamps = pd.DatetimeIndex(table["timestamp"])
+    stamp_ns = stamps.as_unit("ns").asi8
+    _check_values(table, path, stamp_text, stamp_ns)
+    explicit = "night" in table
     starts: dict = {}  # without ``night``: each window's start (else a night's first row)
     if explicit:
         ids = table["night"].to_numpy(dtype=object)
@@ -261,7 +260,7 @@ def nights_from_table(
         groups = [(ids[a], np.arange(a, b)) for a, b in zip(bounds[:-1], bounds[1:],
                                                               strict=True)]
     else:
-        win_ids, starts = _window_ids(stamps, tz, window)
+        win_ids, starts = _window_ids(table["timestamp"], tz, window)
         groups = [(n, np.asarray(r)) for n, r in
                   table.groupby(win_ids, sort=False).groups.items()]
 
@@ -311,7 +310,7 @@ def nights_from_table(
     # household has ~60 pieces); without a night column a night starts at its window's start.
     firsts = [int(a[0]) for _, pre, idx in pieces
               for a in ((idx,) if explicit else ()) + (pre,) if len(a)]
-    boxed = iter(pd.DatetimeIndex(stamps)[firsts])
+    boxed = iter(stamps[firsts])
     nights: list[NightSamples] = []
     for night_id, pre, idx in pieces:
         # The pre-heat: the night's id and kind, a piece of its own (the IMP fit's night

@@ -202,8 +202,7 @@ def frame_table(
         if col not in cols:
             continue
         column = frame[col]
-        if not (pd.api.types.is_numeric_dtype(column)
-                and not pd.api.types.is_bool_dtype(column)):   # numbers stay as they are
+        if not _numbers(column):   # numbers stay as they are
             column = pd.to_numeric(column.reset_index(drop=True), errors="coerce")
         values = column.to_numpy(dtype=float, na_value=np.nan)
         bad = ~np.isfinite(values)
@@ -217,8 +216,7 @@ def frame_table(
     for col in optional:
         if col in cols and col not in out:
             column = frame[col]
-            if (col in lenient and pd.api.types.is_numeric_dtype(column)
-                    and not pd.api.types.is_bool_dtype(column)):
+            if col in lenient and _numbers(column):
                 # what their text read back as (the text of each as a float64, exact); the
                 # way through text cost a season's household 2 ms of its 13 ms read
                 out[col] = column.to_numpy(dtype=float, na_value=np.nan)
@@ -227,6 +225,11 @@ def frame_table(
     table = pd.DataFrame(out, index=range(len(frame)))
     table.attrs[TIMESTAMP_TEXT] = CellText(stamps)
     return table
+
+
+def _numbers(column: pd.Series) -> bool:
+    """Whether a column is stored as numbers (not booleans, whose text is True/False)."""
+    return pd.api.types.is_numeric_dtype(column) and not pd.api.types.is_bool_dtype(column)
 
 
 def _text_cells(column: pd.Series) -> np.ndarray:

@@ -203,6 +203,12 @@ def _thread_pools() -> ThreadpoolController:
     return ThreadpoolController()
 
 
+def _lumped(theta: tuple, pr) -> tuple[dict, dict]:
+    """(β by name, HLC, τ and C_m) of a search's θ and projection."""
+    b = beta_dict(pr)
+    return b, lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
+
+
 def fit_season(rec: SeasonRecord, calibrated: bool = True,
                start: tuple | None = None, max_nfev: int = 60,
                emitter: str | None = None, start_bound_s: float | None = None) -> SeasonFit:
@@ -245,8 +251,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             start_bound = True
         bounds = bounds_for(first)
         theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
-        b = beta_dict(pr)
-        values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
+        b, values = _lumped(theta, pr)
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
                   else float("nan"))
         kind = emitter if emitter is not None else emitter_kind(excess)
@@ -265,9 +270,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             if math.isfinite(excess):
                 r_theta, r_pr, _ = search(d, max_nfev=max_nfev, start=start,
                                           bounds=bounds_for(tau_e_max_s("radiators")))
-                r_b = beta_dict(r_pr)
-                r_excess = water_excess_k(rec, lumped(r_theta, r_b["k_ao_w_per_k"],
-                                                      r_b["k_am_w_per_k"])["hlc_w_per_k"])
+                r_excess = water_excess_k(rec, _lumped(r_theta, r_pr)[1]["hlc_w_per_k"])
             if not math.isfinite(r_excess) or tau_e_max_s(emitter_kind(r_excess)) != first:
                 return fit_season(rec, calibrated, None, max_nfev, emitter)
             excess, kind = r_excess, emitter_kind(r_excess)
@@ -276,8 +279,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
             # from the first search's θ, but under another bound: maybe far (MINPACK's step)
             theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds,
                                     step=FULL_STEP)
-            b = beta_dict(pr)
-            values = lumped(theta, b["k_ao_w_per_k"], b["k_am_w_per_k"])
+            b, values = _lumped(theta, pr)
         se = lumped_log_se(res.x, pr, covariance(res.x, pr, d, bounds), bounds)
     low, high = {}, {}
     for k in LUMPED:
