@@ -1,7 +1,8 @@
 """Does impctl's heating curve save electricity on realistic houses, and keep them warm?
 
 Run:  .venv/bin/python bench/curve.py [--households 200] [--learn-days 21] [--winter-days 75]
-          [--dt 60] [--margin-k 1.0] [--model-dir DIR] [--cache DIR] [--refit]
+          [--dt 60] [--margin-k 1.0] [--model-dir DIR] [--cache DIR] [--refit] [--oracle]
+          [--plant SECTION.FIELD=VALUE ...]
 
 Per household of the validation population (``bench/fit.py``: seed 20260, the realistic plant
 with its realism drawn by ``impctl.population.realism.sample_params``):
@@ -40,6 +41,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +59,7 @@ from benchlib.fit_protocol import VAL_SEED, gateway_campaign, simulate_schedule,
 from impctl.curve import analyse  # noqa: E402
 from impctl.curve.need import FLOW_LIMITS_C  # noqa: E402
 from impctl.curve.rows import rows_from_table  # noqa: E402
+from impctl.errors import InputError  # noqa: E402
 from impctl.plant import PlantCore  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
@@ -84,15 +87,17 @@ def fit_json(nights, model_dir) -> dict | None:
     return fit_to_dict(est, classes.classes, classes.notes)
 
 
-def campaign_fits(houses, n: int, model_dir, cache: Path, refit: bool) -> list[dict | None]:
-    """Every household's fit JSON (cached)."""
-    path = cache / f"fits-{n}.json"
+def campaign_fits(houses, n: int, model_dir, cache: Path, refit: bool, params=None,
+                  tag: str = "") -> list[dict | None]:
+    """Every household's fit JSON (cached; ``params``: the plant's realism, None: drawn)."""
+    path = cache / f"fits-{n}{tag}.json"
     if path.exists() and not refit:
         return json.loads(path.read_text())
     from impctl.population.imp_run.synth import sample_nights
 
     sched = val_schedule(n)
-    sim, sp, _ = simulate_schedule(houses, sched, "realistic", stop_at_t_min=True)
+    realism = None if params is None else (tag, params, True)
+    sim, sp, _ = simulate_schedule(houses, sched, "realistic", realism, stop_at_t_min=True)
     gate = gateway_campaign(sp, sched)
     fits = []
     t0 = time.perf_counter()
@@ -111,6 +116,17 @@ def campaign_fits(houses, n: int, model_dir, cache: Path, refit: bool) -> list[d
     cache.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(fits))
     return fits
+
+
+def with_options(params, options: list[str], n: int):
+    """``params`` with each ``SECTION.FIELD=VALUE`` of ``options`` set for every household (the
+    plant's own range check applies)."""
+    for option in options:
+        key, _, value = option.partition("=")
+        section, _, name = key.partition(".")
+        part = getattr(params, section)
+        params = replace(params, **{section: replace(part, **{name: np.full(n, float(value))})})
+    return params
 
 
 def boot_median(x: np.ndarray, rng: np.random.Generator) -> tuple[float, float, float]:
@@ -139,18 +155,28 @@ def main() -> None:
                          "lowers the installer's: what perfect knowledge would save")
     ap.add_argument("--verbose", action="store_true",
                     help="one line per household whose curve impctl changed")
+    ap.add_argument("--plant", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                    help="set one realism option of every household, within the plant's range "
+                         "(e.g. heat_pump.curve_gain=1.3: every installer's curve at 1.3 x the "
+                         "house's matched curve); repeatable; default: the drawn realism")
     args = ap.parse_args()
     n = args.households
     command = "python bench/curve.py " + " ".join(sys.argv[1:])
     houses = sample_households(n, seed=VAL_SEED)
     params = sample_params(n, VAL_SEED)
+    try:
+        params = with_options(params, args.plant, n)
+    except (AttributeError, TypeError, ValueError, InputError) as exc:
+        ap.error(f"--plant: {exc}")
     t_start = time.perf_counter()
-    fits = campaign_fits(houses, n, args.model_dir, args.cache, args.refit)
-    print(f"fits: {sum(f is not None for f in fits)}/{n} "
-          f"({time.perf_counter() - t_start:.0f} s)", flush=True)
     learn = simulate(houses, params, args.learn_days, LEARN_SEED, "2026-11-20 00:00",
                      dt_s=args.dt, row_step_s=300.0)
     print(f"owner's nights simulated ({time.perf_counter() - t_start:.0f} s)", flush=True)
+    tag = "".join(f"-{o}" for o in sorted(args.plant))
+    fits = campaign_fits(houses, n, args.model_dir, args.cache, args.refit,
+                         params if args.plant else None, tag)
+    print(f"fits: {sum(f is not None for f in fits)}/{n} "
+          f"({time.perf_counter() - t_start:.0f} s)", flush=True)
     fa, fb = np.full(n, np.nan), np.full(n, np.nan)
     central0, rec0, run0, timing = (np.full(n, np.nan) for _ in range(4))
     reasons: dict[str, int] = {}
