@@ -57,7 +57,7 @@ from benchlib.curve_sim import (  # noqa: E402
 from benchlib.fit_protocol import VAL_SEED, gateway_campaign, simulate_schedule, val_schedule  # noqa: E402,I001
 
 from impctl.curve import analyse  # noqa: E402
-from impctl.curve.need import FLOW_LIMITS_C  # noqa: E402
+from impctl.curve.need import FLOW_LIMITS_C, writable  # noqa: E402
 from impctl.curve.rows import rows_from_table  # noqa: E402
 from impctl.errors import InputError  # noqa: E402
 from impctl.plant import PlantCore  # noqa: E402
@@ -180,6 +180,7 @@ def main() -> None:
     fa, fb = np.full(n, np.nan), np.full(n, np.nan)
     central0, rec0, run0, timing = (np.full(n, np.nan) for _ in range(4))
     reasons: dict[str, int] = {}
+    advice = 0
     for j in range(n):
         t0 = time.perf_counter()
         try:
@@ -194,10 +195,13 @@ def main() -> None:
         rec0[j] = float(res.recommended.at(0.0))
         run0[j] = float(res.running.line.at(0.0)) if res.running else np.nan
         line = res.recommended
-        if res.lowers and max(line.flow_a_c, line.flow_b_c) <= FLOW_LIMITS_C[1]:
+        if res.lowers and writable(line, res.running.line if res.running else None):
             fa[j], fb[j] = line.flow_a_c, line.flow_b_c
-    print(f"analysed ({time.perf_counter() - t_start:.0f} s); refused: {reasons or 'none'}",
-          flush=True)
+        elif res.lowers:
+            advice += 1
+    print(f"analysed ({time.perf_counter() - t_start:.0f} s); refused: {reasons or 'none'}; "
+          f"lower, but advice only (a point above {FLOW_LIMITS_C[1]:g} °C and the running "
+          f"curve's): {advice}", flush=True)
     changed = np.isfinite(fa)
     core = PlantCore(houses, params, seed=0)
     truth0 = true_flow_c(core, learn.night_gain_w, 0.0)
@@ -223,7 +227,7 @@ def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray
     """Each house's own curve from its truth (the need on the grid as both the central and the
     bound, no margin, the same straight-line rule over the assumed winter), where it is at
     least 0.5 K below the installer's at 0 °C; NaN elsewhere."""
-    from impctl.curve.need import GRID_T_OUT_C, NeedCurve, recommend
+    from impctl.curve.need import GRID_T_OUT_C, POINTS_T_OUT_C, Line, NeedCurve, recommend
     from impctl.curve.savings import ASSUMED_DAYS
     from impctl.weather import winter_weather
 
@@ -231,13 +235,14 @@ def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray
     idx = np.clip(np.rint((climate - GRID_T_OUT_C[0]) / 0.5), 0, len(GRID_T_OUT_C) - 1)
     fa, fb = np.full(core.n, np.nan), np.full(core.n, np.nan)
     need = np.array([true_flow_c(core, night_gain_w, float(t)) for t in GRID_T_OUT_C])
+    cold, mild = (installer_flow_c(core, t) for t in POINTS_T_OUT_C)
     for j in range(core.n):
         q = np.maximum(core.hlc[j] * (SETPOINT_C - climate) - night_gain_w[j], 0.0)
         weights = np.bincount(idx.astype(int), weights=q, minlength=len(GRID_T_OUT_C))
         curve = NeedCurve(GRID_T_OUT_C, need[:, j], need[:, j], q)
-        line, _ = recommend(curve, 0.0, weights, SETPOINT_C, float(np.quantile(climate, 0.01)),
+        line = recommend(curve, 0.0, weights, SETPOINT_C, float(np.quantile(climate, 0.01)),
                             0.0)
-        if line.at(0.0) <= inst0[j] - 0.5 and max(line.flow_a_c, line.flow_b_c) <= 55.0:
+        if line.at(0.0) <= inst0[j] - 0.5 and writable(line, Line(cold[j], mild[j])):
             fa[j], fb[j] = line.flow_a_c, line.flow_b_c
     return fa, fb
 
@@ -317,7 +322,8 @@ def report(args, command, params, base, ours, changed, central0, rec0, run0, tru
                   f"Δel {d_el[j]:+6.2f} %, Δcold {d_cold[j]:+5.2f} pp (sensor "
                   f"{d_seen[j]:+5.2f}); room sensor offset "
                   f"{float(np.ravel(params.sensors.t_air_offset_k)[j]):+.2f} K; at 0 °C need "
-                  f"{truth0[j]:.1f}, installer {inst0[j]:.1f}, impctl {rec0[j]:.1f} °C")
+                  f"{truth0[j]:.1f}, installer {inst0[j]:.1f}, impctl {rec0[j]:.1f} °C; "
+                  f"coldest night {base.coldest_night_c[j]:.1f} → {ours.coldest_night_c[j]:.1f} °C")
     t = timing[np.isfinite(timing)]
     print(f"\nimpctl curve analysis per household: median {np.median(t):.2f} s, max "
           f"{np.max(t):.2f} s")

@@ -118,7 +118,7 @@ def test_the_recommended_line_is_the_lowest_above_the_need(seed):
     upper = central + rng.uniform(0.2, 1.0) + 0.05 * np.abs(t - 2.0)
     curve = NeedCurve(t, central, upper, np.maximum(3000.0 - 150.0 * t, 0.0))
     weights = np.exp(-0.5 * ((t + 1.0) / 4.0) ** 2)
-    line, _ = recommend(curve, 1.0, weights, 21.0, cold_c=-10.0, anchor_c=2.0)
+    line = recommend(curve, 1.0, weights, 21.0, cold_c=-10.0, anchor_c=2.0)
     need = required_flow_c(curve, 1.0, 21.0, -10.0, 2.0)
     held = np.isfinite(need)
     assert np.all(line.at(t)[held] >= need[held] - 1e-6)

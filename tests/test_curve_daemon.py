@@ -252,3 +252,54 @@ def test_curve_restore_gives_the_points_back_when_no_daemon_runs(tmp_path):
         assert res.returncode == 0, res.stderr
         assert "your heating curve is back" in res.stdout
         assert _points(sim.port) == owner and not _curve_journal(db)
+
+
+def test_a_new_fit_asking_past_the_bounds_gives_the_owner_their_curve_back(tmp_path):
+    """Never a clamp: a point clamped to 55 °C would read back as somebody else's change, and
+    the owner's points would be taken for their own and never come back."""
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        owner = _points(sim.port)
+        assert owner[0] < 550
+        new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == (round(new[0] * 10), round(new[1] * 10)),
+                       30, "the curve set", proc=d.proc)
+            _kept_curve(state, (56.0, new[1]))  # the next fit: above 55 °C and the owner's
+            wait_until(lambda: "the new fit's curve cannot be set" in d.output(), 30,
+                       "the refusal", proc=d.proc)
+            assert _points(sim.port) == owner and not _curve_journal(db)
+            assert "the owner changed" not in d.output()
+        finally:
+            stop_process(d.proc)
+
+
+def test_a_cold_point_the_owner_runs_above_55_c_is_lowered_within_it(tmp_path):
+    """A radiator house's curve often runs above 55 °C at −15 °C: impctl may set a point up
+    to the owner's own there (a value the controller already runs), and gives theirs back."""
+    with sim_process(tmp_path, EPOCH, SPEED) as sim:
+        modbus_write(sim.port, 2309, 620)  # the owner's curve: 62 °C at −15 °C outside
+        owner = _points(sim.port)
+        assert owner[0] == 620
+        new = (58.0, (owner[1] - 20) / 10.0)
+        state = tmp_path / "state"
+        _kept_curve(state, new)
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: _points(sim.port) == (580, round(new[1] * 10)), 30,
+                       "the curve set", proc=d.proc)
+            assert {e.register: e.raw_value for e in _curve_journal(db)} == {
+                "loop1_curve_cold": 620, "loop1_curve_mild": owner[1]}
+            d.proc.send_signal(signal.SIGTERM)
+            assert d.proc.wait(30) == 0
+            assert _points(sim.port) == owner and not _curve_journal(db)
+        finally:
+            stop_process(d.proc)

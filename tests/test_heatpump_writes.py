@@ -243,8 +243,9 @@ def test_restore_may_use_a_small_reserve_beyond_the_budget(tmp_path, caplog):
 
 def test_the_curve_points_are_written_only_when_allowed_and_always_restorable(tmp_path):
     """2309/2314 are no register impctl writes by default; while the owner has impctl's
-    curve set (``loop1_curve_c``) they are clamped to 20–55 °C and read back, and the owner's
-    points go back whatever the configuration; the adaptive-curve switch 2320 is never
+    curve set (``loop1_curve_c``) they are clamped to 20–55 °C — up to the owner's own point
+    where that is higher — and read back, and the owner's points go back whatever the
+    configuration; the adaptive-curve switch 2320 is never
     written. The simulated controller runs the points it is given."""
     from dataclasses import replace
 
@@ -268,6 +269,13 @@ def test_the_curve_points_are_written_only_when_allowed_and_always_restorable(tm
             assert sim.plant.core.core.controller.flow_curve_set[0]  # the controller runs them
             with pytest.raises(WriteRefused):
                 await hp.write(2320, 1)
+            # the owner's own point above 55 °C raises that point's ceiling, and only its
+            hp.config = replace(hp.config, writes=replace(
+                POLICY, loop1_curve_c=(20.0, 55.0), loop1_curve_owner_c=(62.0, 30.0)))
+            own = await hp.write(2309, 60.0)
+            assert not own.clamped and own.read_back == 60.0
+            assert (await hp.write(2309, 64.0)).target == 62.0
+            assert (await hp.write(2314, 58.0)).target == 55.0
             hp.config = replace(hp.config, writes=POLICY)  # the owner took the curve back
             back = await hp.restore(2309, owner)
             assert back.written and back.read_back == owner

@@ -11,7 +11,7 @@ from ..errors import InputError
 from .blocks import heated, hourly, steady_blocks
 from .cop import fit_cop
 from .emitter import EmitterUnknown, fit_emitter
-from .need import NeedUnknown, heat_need, need_curve, recommend
+from .need import FLOW_LIMITS_C, NeedUnknown, heat_need, need_curve, recommend, writable
 from .result import CurveResult
 from .running import running_curve
 from .savings import season_savings, winter_climate
@@ -76,11 +76,15 @@ def analyse(rows: pd.DataFrame, fit: dict | None = None, *, setpoint_c: float | 
     climate = winter_climate(rows)
     curve = need_curve(need, emitter, sp, rng)
     anchor = need.anchor_t_out_c if need.anchor_t_out_c is not None else 0.0
-    recommended, limits = recommend(curve, margin_k, climate.weights(need, sp), sp,
-                                    climate.cold_c(), anchor)
-    notes += limits
+    recommended = recommend(curve, margin_k, climate.weights(need, sp), sp, climate.cold_c(),
+                            anchor)
     slope = (recommended.flow_b_c - recommended.flow_a_c) / 30.0
     running = running_curve(rows, sp, slope)
+    if not writable(recommended, running.line if running is not None else None):
+        hi = FLOW_LIMITS_C[1]
+        notes.append(f"this house needs a curve above the {hi:g} °C impctl writes, and above "
+                     f"the curve the heat pump runs ({recommended.flow_a_c:.0f} °C at −15 °C "
+                     "outside): advice only, impctl does not set it")
     if running is None:
         notes.append("no flow target (t_flow_c, t_flow_target_c) recorded on enough heated "
                      "hours: the curve the heat pump runs is unknown, so is the saving")

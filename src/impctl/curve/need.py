@@ -34,7 +34,8 @@ comfort watch raises the curve if a cold snap proves it short); where it is mild
 above the bound and the central need plus the margin. Within that, with points not below
 :data:`FLOW_LIMITS_C`'s lower limit, it is the line lowest on average over the winter's
 heating (its hours weighted by the heat they need): a linear programme in two unknowns. A
-line whose point lies above the upper limit is advice only: impctl does not write it.
+line with a point above the upper limit and above the running curve's own point there is
+advice only: impctl does not write it (:func:`writable`).
 """
 
 from __future__ import annotations
@@ -276,10 +277,10 @@ def required_flow_c(curve: NeedCurve, margin_k: float, setpoint_c: float, cold_c
 
 
 def recommend(curve: NeedCurve, margin_k: float, weights: np.ndarray, setpoint_c: float,
-              cold_c: float = -15.0, anchor_c: float = 0.0) -> tuple[Line, list[str]]:
+              cold_c: float = -15.0, anchor_c: float = 0.0) -> Line:
     """The lowest line at or above :func:`required_flow_c` on the grid, weighted by
     ``weights`` (heat per grid temperature), points at least :data:`FLOW_LIMITS_C`'s lower
-    limit; and a note when a point lies above its upper limit (advice only then).
+    limit (whether impctl may set it: :func:`writable`).
 
     A linear programme in two unknowns (the flows at the two points): its optimum is a vertex,
     a line through two of the constraints' points (the floor of a curve point is the point
@@ -287,7 +288,7 @@ def recommend(curve: NeedCurve, margin_k: float, weights: np.ndarray, setpoint_c
     """
     need = required_flow_c(curve, margin_k, setpoint_c, cold_c, anchor_c)
     a, b = POINTS_T_OUT_C
-    lo, hi = FLOW_LIMITS_C
+    lo = FLOW_LIMITS_C[0]
     held = np.isfinite(need)
     t_pts = np.concatenate([curve.t_out_c[held], [a, b]])
     f_pts = np.concatenate([need[held], [lo, lo]])
@@ -305,10 +306,15 @@ def recommend(curve: NeedCurve, margin_k: float, weights: np.ndarray, setpoint_c
     w = np.asarray(weights, dtype=float) + 1e-6 * max(float(np.sum(weights)), 1.0)
     cost = fa * np.sum(w * (1 - s)) + fb * np.sum(w * s)
     best = int(np.argmin(np.where(feasible, cost, np.inf)))
-    fa_best, fb_best = float(fa[best]), float(fb[best])
-    notes: list[str] = []
-    if max(fa_best, fb_best) > hi:
-        notes.append(f"this house needs a curve above the {hi:g} °C impctl writes "
-                     f"({fa_best:.0f} °C at −15 °C outside): advice only, impctl does not set "
-                     "it")
-    return Line(fa_best, fb_best), notes
+    return Line(float(fa[best]), float(fb[best]))
+
+
+def writable(line: Line, running: Line | None) -> bool:
+    """Whether impctl may set ``line``'s points: each within :data:`FLOW_LIMITS_C`, or up to
+    the running curve's own point where that is higher (a value the controller already runs;
+    the daemon checks against the controller's own points 2309/2314)."""
+    lo, hi = FLOW_LIMITS_C
+    points = (line.flow_a_c, line.flow_b_c)
+    own = ((running.flow_a_c, running.flow_b_c) if running is not None
+           else (-math.inf, -math.inf))
+    return all(lo <= p <= max(hi, o) for p, o in zip(points, own, strict=True))

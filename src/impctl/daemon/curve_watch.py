@@ -8,15 +8,17 @@ no night runs, the daemon:
 1. **sets** the kept curve (:mod:`.curve_state`) when it lowers the running one: only on an
    extended controller (a compact one has no curve register) whose adaptive curve (2320) is
    off (the controller would change the points itself); the owner's points 2309/2314 are
-   journaled first, then written through the safe path (whitelist, 20–55 °C, compare, budget,
-   read-back);
+   journaled first, then written through the safe path (whitelist, compare, budget,
+   read-back) — each point within 20–55 °C or up to the owner's own point where that is
+   higher (``[heatpump.writes] loop1_curve_c`` where the installer set limits), checked before
+   the write: a curve outside them is refused, never clamped;
 2. **checks** at the next look that the controller follows: its own flow target (2128) must
    have moved as the line moved at the outdoor temperature now (the new line less the
    owner's), within :data:`FOLLOW_TOL_K`; if it has not, the owner's points come back and the
    curve stays advice (the points' meaning is the controller document's, not measured);
 3. **watches comfort**: a room more than ``[curve] short_k`` below its setpoint for over
    ``short_h`` raises both points by ``raise_k`` (said in the log and the store's events); a
-   curve raised back to the owner's is the owner's again;
+   curve raised back to the owner's, or past the bounds, is the owner's again;
 4. keeps the owner's word: points the owner changed are kept (their journal entries closed)
    and impctl stops setting the curve until asked again.
 
@@ -38,7 +40,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..heatpump import HeatPumpError
-from ..heatpump.config import CURVE_FLOW_BOUNDS_C
+from ..heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
+from ..heatpump.writes import write_rules
 from ..kronoterm.registers import Generation
 from ..store import JournalEntry
 from .curve_state import line_flow_c, load_curve
@@ -155,9 +158,6 @@ class CurveWatch:
                 await self._give_back("the kept curve no longer lowers the running one")
             return
         points = tuple(float(v) for v in curve["recommended"]["flow_c"])
-        lo, hi = CURVE_FLOW_BOUNDS_C
-        if not all(lo <= p <= hi for p in points):
-            return self._refuse(f"its points lie outside {lo:g}–{hi:g} °C")
         if client.generation is not Generation.EXTENDED:
             return self._refuse("a compact controller (TT3000) has no heating-curve "
                                 "registers: set the curve in its menu")
@@ -168,11 +168,15 @@ class CurveWatch:
         before = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
         if any(before[ma].raw is None for ma in CURVE_REGISTERS):
             return self._refuse("the curve points cannot be read")
+        # the points before impctl ever wrote: journaled (kept across restarts), else now
+        pending = {e.address + 1: e.raw_value for e in curve_entries(d.store)}
+        owner = tuple(pending.get(ma, int(before[ma].raw)) / 10.0 for ma in CURVE_REGISTERS)
+        why = self._outside(points, owner)
+        if why is not None:
+            return self._refuse(why)
         for ma, name in CURVE_REGISTERS.items():
             d.store.journal_record(None, name, ma - 1, int(before[ma].raw))
-        owner = tuple(e.raw_value / 10.0 for e in sorted(curve_entries(d.store),
-                                                         key=lambda e: e.address))
-        self.owner = owner  # the points before impctl ever wrote (kept across restarts)
+        self.owner = owner
         self._keep(True)
         await self._write(points)
         self._verify = before[2128].value
@@ -181,12 +185,38 @@ class CurveWatch:
                 f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
         self._say("info", text)
 
+    def _policy(self, owner: tuple[float, float]):
+        """The write policy the points go through: the configured ``[heatpump.writes]
+        loop1_curve_c`` where the installer set limits, else :data:`CURVE_FLOW_BOUNDS_C` with
+        each point's top raised to the owner's own point where that is higher (a value this
+        controller already runs: a radiator house's curve at −15 °C often does)."""
+        writes = self.daemon.client.config.writes
+        configured = self.daemon.cfg.heatpump.writes.loop1_curve_c
+        own = None if configured or max(owner) > CURVE_OWNER_MAX_C else owner
+        return replace(writes, loop1_curve_c=configured or CURVE_FLOW_BOUNDS_C,
+                       loop1_curve_owner_c=own)
+
+    def _bounds(self, owner: tuple[float, float]) -> tuple[tuple[float, float], ...]:
+        """(lowest, highest) each point may be set to [°C] (:meth:`_policy`)."""
+        rules = write_rules(self._policy(owner))
+        return tuple(rules[ma] for ma in CURVE_REGISTERS)
+
+    def _outside(self, points: tuple[float, ...], owner: tuple[float, float]) -> str | None:
+        """Why ``points`` may not be written (one phrase), or None."""
+        bounds = self._bounds(owner)
+        if all(lo <= p <= hi for p, (lo, hi) in zip(points, bounds, strict=True)):
+            return None
+        allowed = " and ".join(f"{lo:g}–{hi:g} °C" for lo, hi in bounds)
+        return (f"its points {points[0]:.1f} / {points[1]:.1f} °C lie outside {allowed} "
+                f"(the owner's own points: {owner[0]:.1f} / {owner[1]:.1f} °C)")
+
     async def _write(self, points: tuple[float, float]) -> None:
+        """Write both points; the caller has checked them against :meth:`_bounds`, so the safe
+        path's clamp never changes them (a clamped point would read back as the owner's
+        change and the owner's points would never come back)."""
         client = self.daemon.client
-        writes = client.config.writes
-        if writes.loop1_curve_c is None:  # whitelisted while the owner asks for the curve
-            client.config = replace(client.config,
-                                    writes=replace(writes, loop1_curve_c=CURVE_FLOW_BOUNDS_C))
+        # whitelisted while the owner asks for the curve, up to these bounds
+        client.config = replace(client.config, writes=self._policy(self.owner))
         for ma, value in zip(CURVE_REGISTERS, points, strict=True):
             await client.write(ma, value)
 
@@ -242,6 +272,9 @@ class CurveWatch:
             return await self._give_back("the kept curve no longer lowers the running one")
         new = tuple(float(v) + self.raised_k for v in curve["recommended"]["flow_c"])
         if max(abs(a - b) for a, b in zip(new, self.held, strict=True)) >= MOVE_K:
+            why = self._outside(new, self.owner)
+            if why is not None:
+                return await self._give_back(f"the new fit's curve cannot be set: {why}")
             await self._write(new)
             self.held = new
             self._say("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C "
@@ -280,9 +313,11 @@ class CurveWatch:
         raised = tuple(p + cfg.raise_k for p in self.held)
         why = (f"the room stayed more than {cfg.short_k:g} K below its setpoint {sp:.1f} °C "
                f"for over {cfg.short_h:g} h ({t_air:.1f} °C now)")
-        if self.owner is not None and all(r >= o for r, o in zip(raised, self.owner,
-                                                                 strict=True)):
+        if all(r >= o for r, o in zip(raised, self.owner, strict=True)):
             return await self._give_back(why + "; raised back to the owner's curve")
+        if self._outside(raised, self.owner) is not None:
+            return await self._give_back(why + "; a higher curve than impctl may set: the "
+                                               "owner's curve back")
         await self._write(raised)
         self.held, self.raised_k = raised, self.raised_k + cfg.raise_k
         text = f"{why}: heating curve raised by {cfg.raise_k:g} K to " \

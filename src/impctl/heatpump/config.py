@@ -95,6 +95,9 @@ class WritePolicy:
     loop1_curve_c : (min, max) clamp for the curve points 2309/2314 [°C], within
         :data:`CURVE_FLOW_BOUNDS_C`; ``None`` = not writable (a restore of the owner's points
         is always allowed).
+    loop1_curve_owner_c : the owner's own points 2309/2314 [°C], or ``None``: each point's
+        clamp reaches up to its own where that lies above ``loop1_curve_c``'s top (a value the
+        controller already runs). Set by the daemon from its journal, not configured.
     daily_budget : writes per register per day (UTC day of the client's clock); build the
         budget with ``WriteBudget(path, policy.daily_budget)``.
     verify_attempts : read-backs after a write before it counts as failed.
@@ -107,6 +110,7 @@ class WritePolicy:
     loop2_setpoint_c: tuple[float, float] | None = None
     correction_k: tuple[int, int] | None = None
     loop1_curve_c: tuple[float, float] | None = None
+    loop1_curve_owner_c: tuple[float, float] | None = None
     daily_budget: int = 12
     verify_attempts: int = 3
     verify_delay_s: float = 0.5
@@ -148,6 +152,9 @@ ROOM_SETPOINT_BOUNDS_C = (10.0, 30.0)
 #: room, above 55 °C an air-source heat pump runs near its limit (and radiators sized for it
 #: are no house impctl lowers a curve in).
 CURVE_FLOW_BOUNDS_C = (20.0, 55.0)
+#: Highest owner's curve point impctl takes as a ceiling [°C] (``loop1_curve_owner_c``): above
+#: 80 °C no heat pump delivers flow, so such a reading is a fault, not a setting.
+CURVE_OWNER_MAX_C = 80.0
 #: Endurance of the controller's non-volatile memory [writes per register over its life]:
 #: assumed — Kronoterm publishes no figure, so the conservative class of the makers that do
 #: (Weishaupt 100,000; iDM 300,000; reference kronoterm-modbus.md §4.1).
@@ -198,6 +205,10 @@ def _write_problems(c: Any) -> list[Problem]:
             <= hi_c:
         out.append(("loop1_curve_c", f"limits must satisfy {lo_c:g} <= min <= max <= "
                                      f"{hi_c:g} °C"))
+    own = c.loop1_curve_owner_c
+    if own is not None and not all(v <= CURVE_OWNER_MAX_C for v in own):
+        out.append(("loop1_curve_owner_c", f"the owner's points must not lie above "
+                                           f"{CURVE_OWNER_MAX_C:g} °C"))
     for key, low in (("daily_budget", 0), ("restore_reserve", 0), ("verify_attempts", 1)):
         if getattr(c, key) < low:
             out.append((key, f"must be >= {low}"))
@@ -280,6 +291,10 @@ def _default(f: Any) -> Any:
     return None
 
 
+#: Fields the daemon sets at run time; a configuration that names them is refused.
+_NOT_CONFIGURED = frozenset({"loop1_curve_owner_c"})
+
+
 def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
            problems: list[InputError], required: tuple[str, ...] = ()) -> Any:
     """Build ``cls`` from a TOML table, appending every problem found to ``problems``;
@@ -297,6 +312,9 @@ def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
     for key, value in data.items():
         if key not in spec:
             bad(key, "unknown key")
+            continue
+        if key in _NOT_CONFIGURED:
+            bad(key, "set by the daemon, not configured")
             continue
         problem = _type_problem(key, value)
         if problem:

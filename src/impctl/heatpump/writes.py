@@ -84,8 +84,10 @@ def write_rules(policy: WritePolicy) -> Mapping[int, Rule]:
     if policy.correction_k is not None:
         rules[2014] = (float(policy.correction_k[0]), float(policy.correction_k[1]))
     if policy.loop1_curve_c is not None:
-        rules.update(dict.fromkeys(CURVE_POINTS, (float(policy.loop1_curve_c[0]),
-                                                  float(policy.loop1_curve_c[1]))))
+        lo, hi = (float(v) for v in policy.loop1_curve_c)
+        own = policy.loop1_curve_owner_c or (hi, hi)
+        rules.update({ma: (lo, max(hi, float(o))) for ma, o in zip(CURVE_POINTS, own,
+                                                                   strict=True)})
     if FORBIDDEN_WRITES & set(rules):  # guards against a future edit of this table
         raise RuntimeError("a forbidden register slipped into the write whitelist")
     return rules
