@@ -50,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from benchlib.curve_sim import (  # noqa: E402
     SETPOINT_C,
     T_MIN_C,
+    Watch,
     installer_flow_c,
     simulate,
     true_flow_c,
@@ -57,7 +58,7 @@ from benchlib.curve_sim import (  # noqa: E402
 from benchlib.fit_protocol import VAL_SEED, gateway_campaign, simulate_schedule, val_schedule  # noqa: E402,I001
 
 from impctl.curve import analyse  # noqa: E402
-from impctl.curve.need import FLOW_LIMITS_C, writable  # noqa: E402
+from impctl.curve.need import FLOW_LIMITS_C, POINTS_T_OUT_C, writable  # noqa: E402
 from impctl.curve.rows import rows_from_table  # noqa: E402
 from impctl.errors import InputError  # noqa: E402
 from impctl.plant import PlantCore  # noqa: E402
@@ -155,6 +156,9 @@ def main() -> None:
                          "lowers the installer's: what perfect knowledge would save")
     ap.add_argument("--verbose", action="store_true",
                     help="one line per household whose curve impctl changed")
+    ap.add_argument("--no-watch", action="store_true",
+                    help="impctl's curves without the daemon's comfort watch (which raises a "
+                         "curve 1 K when the room stays 0.5 K short for an hour)")
     ap.add_argument("--plant", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                     help="set one realism option of every household, within the plant's range "
                          "(e.g. heat_pump.curve_gain=1.3: every installer's curve at 1.3 x the "
@@ -208,15 +212,17 @@ def main() -> None:
     inst0 = installer_flow_c(core, 0.0)
     base = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
                     dt_s=args.dt)
+    owner = tuple(installer_flow_c(core, t) for t in POINTS_T_OUT_C)
+    watch = None if args.no_watch else Watch(owner)
     ours = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
-                    dt_s=args.dt, curve=(fa, fb))
+                    dt_s=args.dt, curve=(fa, fb), watch=watch)
     print(f"winters simulated ({time.perf_counter() - t_start:.0f} s)\n", flush=True)
     report(args, command, params, base, ours, changed, central0, rec0, run0, truth0, inst0,
            timing)
     if args.oracle:
         ofa, ofb = oracle_curves(core, learn.night_gain_w, inst0)
         known = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
-                         dt_s=args.dt, curve=(ofa, ofb))
+                         dt_s=args.dt, curve=(ofa, ofb), watch=watch)
         print("\n=== the true house's own curve (perfect knowledge, no margin) ===")
         report(args, command, params, base, known, np.isfinite(ofa), central0, rec0, run0,
                truth0, inst0, timing)
@@ -293,6 +299,11 @@ def report(args, command, params, base, ours, changed, central0, rec0, run0, tru
           f"{(base.coldest_night_c < T_MIN_C).sum()}, impctl "
           f"{(ours.coldest_night_c < T_MIN_C).sum()} households "
           f"(changed by impctl: {((ours.coldest_night_c < T_MIN_C) & changed).sum()})")
+    if ours.raises is not None:
+        r = ours.raises[changed]
+        print(f"comfort watch: raised {int((r > 0).sum())} of {int(changed.sum())} changed "
+              f"curves ({int(r.sum())} raises of 1 K; {int((r >= 3).sum())} three times or "
+              "more)")
     print(f"space-heating COP: installer median {np.median(cop_b):.2f}, impctl "
           f"{np.median(cop_o):.2f}; mean room: installer {np.median(base.mean_t_air_c):.2f} °C, "
           f"impctl {np.median(ours.mean_t_air_c):.2f} °C")

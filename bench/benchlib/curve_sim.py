@@ -50,6 +50,8 @@ class Stretch:
     night_gain_w: np.ndarray
     #: hours the room sensor (what the owner and the heat pump see) read below sp − 0.5 K
     cold_sensed_h: np.ndarray = None  # type: ignore[assignment]
+    #: the comfort watch's raises per house (:class:`Watch`)
+    raises: np.ndarray = None  # type: ignore[assignment]
     rows: list[list[pd.DataFrame]] = field(default_factory=list)
 
     def house_rows(self, j: int) -> pd.DataFrame:
@@ -64,14 +66,30 @@ def weather(n: int, days: float, seed: int, start: str) -> np.ndarray:
     return np.column_stack(cols)
 
 
+@dataclass
+class Watch:
+    """The daemon's comfort watch over a two-point curve (``[curve]`` short_k, short_h,
+    raise_k; :mod:`impctl.daemon.curve_watch`): a room sensed more than ``short_k`` below the
+    setpoint for ``short_h`` raises both points by ``raise_k``, checked every hour of the
+    simulation (the daemon looks every sampling interval); a curve raised to the owner's
+    points (``owner``: flows at −15 and +15 °C [°C]), or past the write bounds, is the
+    owner's again (the house's built-in curve)."""
+
+    owner: tuple[np.ndarray, np.ndarray]
+    short_k: float = 0.5
+    short_h: float = 1.0
+    raise_k: float = 1.0
+
+
 def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:00", *,
              dt_s: float = 60.0, curve: tuple[np.ndarray, np.ndarray] | None = None,
-             row_step_s: float | None = None) -> Stretch:
+             row_step_s: float | None = None, watch: Watch | None = None) -> Stretch:
     """Simulate ``days`` days from ``start`` (local) on the realistic plant, day by day.
 
     ``curve``: flows at −15 and +15 °C per house [°C] (NaN: the house keeps its built-in
     curve); ``row_step_s``: also keep each house's recorded rows at this step (owner nights,
-    :func:`impctl.curve.synth.rows_from_run`).
+    :func:`impctl.curve.synth.rows_from_run`); ``watch``: the comfort watch over ``curve``
+    (the day then runs an hour at a time; :attr:`Stretch.raises` counts its raises).
     """
     n = houses.n_houses
     t_hour = weather(n, days, seed, start)
@@ -79,7 +97,9 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
     core = PlantCore(houses, params, seed=seed)
     core.start_steady(SETPOINT_C, t_hour[0])
     if curve is not None:
+        curve = (np.array(curve[0], float), np.array(curve[1], float))
         core.set_flow_curve(curve[0], curve[1], SETPOINT_C)
+    short_s, raises = np.zeros(n), np.zeros(n, int)
     per_gain = int(round(GAIN_STEP_S / dt_s))
     g_index = begin + pd.to_timedelta(np.arange(int(days * 86400 / GAIN_STEP_S)) * GAIN_STEP_S,
                                       unit="s")
@@ -104,8 +124,19 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
                                  for j in range(n)])
         gi = np.repeat(g_int[d * steps // per_gain:(d + 1) * steps // per_gain], per_gain, axis=0)
         gs = np.repeat(g_sol[d * steps // per_gain:(d + 1) * steps // per_gain], per_gain, axis=0)
-        run = simulate_plant(houses, params, t_out, dt_s, setpoint_c=sp, internal_gains_w=gi,
-                             solar_gains_w=gs, outputs=keep, core=core)
+        chunk = int(round(3600.0 / dt_s)) if watch is not None and curve is not None else steps
+        parts = []
+        for c0 in range(0, steps, chunk):
+            c = slice(c0, c0 + chunk)
+            part = simulate_plant(houses, params, t_out[c], dt_s, setpoint_c=sp[c],
+                                  internal_gains_w=gi[c], solar_gains_w=gs[c],
+                                  outputs=keep,
+                                  core=core)
+            parts.append(part)
+            if chunk < steps:
+                _look(watch, core, curve, part["t_air_sensed_c"], dt_s, short_s, raises)
+        run = parts[0] if len(parts) == 1 else {
+            k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in keep}
         index = begin + pd.to_timedelta(t_end, unit="s")
         local_h = index.hour.to_numpy()
         night = (local_h >= 22) | (local_h < 6)
@@ -132,7 +163,33 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
                                                  dt_s=dt_s))
     out.hours = days * 24.0
     out.night_gain_w = night_gain / max(night_n, 1)
+    out.raises = raises
     return out
+
+
+def _look(watch: Watch, core: PlantCore, curve: tuple[np.ndarray, np.ndarray],
+          sensed: np.ndarray, dt_s: float, short_s: np.ndarray, raises: np.ndarray) -> None:
+    """The watch after an hour (:class:`Watch`): updates ``curve`` and the plant in place."""
+    from impctl.heatpump.config import CURVE_FLOW_BOUNDS_C
+
+    fa, fb = curve
+    fire = np.zeros(len(fa), bool)
+    for row in np.asarray(sensed) < SETPOINT_C - watch.short_k:
+        short_s[:] = np.where(row, short_s + dt_s, 0.0)
+        now = row & (short_s >= watch.short_h * 3600.0) & np.isfinite(fa)
+        short_s[now] = 0.0
+        fire |= now
+    if not fire.any():
+        return
+    raises += fire
+    fa[fire] += watch.raise_k
+    fb[fire] += watch.raise_k
+    oa, ob = watch.owner
+    hi = CURVE_FLOW_BOUNDS_C[1]
+    back = fire & (((fa >= oa) & (fb >= ob)) | (fa > np.maximum(hi, oa))
+                   | (fb > np.maximum(hi, ob)))
+    fa[back], fb[back] = np.nan, np.nan
+    core.set_flow_curve(fa, fb, SETPOINT_C)
 
 
 def true_flow_c(core: PlantCore, night_gain_w: np.ndarray, t_out_c: float,
