@@ -267,7 +267,8 @@ def report(args, command, params, base, ours, changed, central0, rec0, run0, tru
     control = np.broadcast_to(np.asarray(params.heat_pump.control), (n,))
     groups = {"all": np.ones(n, bool), "radiators": kind == 0, "underfloor": kind == 1,
               "weather curve": control == 0, "room thermostat": control == 1,
-              "curve changed": changed}
+              "curve changed": changed, "changed, curve": changed & (control == 0),
+              "changed, thermo": changed & (control == 1)}
     print(f"command: {command}")
     print(f"{n} households, {args.winter_days}-day winter at {args.dt:g} s, margin "
           f"{args.margin_k:g} K; impctl changed the curve of {changed.sum()} "

@@ -154,7 +154,11 @@ class HeatPump(_Ranged):
         on its design point; with 0.025 and a 0.5 defrost draw the default unit came out at
         2.8 × the design load at +7 °C and could not modulate at any temperature.
     curve_gain : float, default 1.1
-        Heating curve / exactly matched curve [-] (installers set curves high) [own choice].
+        Heating curve / exactly matched curve [-] (installers set curves high) [own choice,
+        consistent with the field: EN 12831 calculations over-estimated the measured heat
+        loss of 59 % of 56 UK homes, by 35 % on mean absolute difference (Build Test
+        Solutions, Veritherm, Elmhurst Energy 2024); a curve set for f × the true heat loss
+        runs at f^(1/n) × the matched curve's excess: 1.11–1.26 for f = 1.15–1.35, n = 1.3].
         Range 0.9–1.3.
     room_influence_k_per_k : float, default 2
         Water-temperature shift per K of room error [K/K] [own choice]. Range 0–5.
