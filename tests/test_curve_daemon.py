@@ -303,3 +303,36 @@ def test_a_cold_point_the_owner_runs_above_55_c_is_lowered_within_it(tmp_path):
             assert _points(sim.port) == owner and not _curve_journal(db)
         finally:
             stop_process(d.proc)
+
+
+def test_a_curve_raised_back_to_the_owners_is_not_set_again(tmp_path):
+    """A curve the comfort watch had to raise all the way back proved too low for this house:
+    the owner's points stay, and impctl sets no curve until asked again (it would otherwise
+    set the same curve at the next look and leave the room short once more)."""
+    with sim_process(tmp_path, EPOCH, 3600.0, house=default_house()) as sim:
+        modbus_write(sim.port, 2309, 400)  # the owner's own curve: 40 °C at −15 °C outside,
+        modbus_write(sim.port, 2314, 300)  # 30 °C at +15 °C (barely enough for this house)
+        owner = _points(sim.port)
+        state = tmp_path / "state"
+        _kept_curve(state, (37.0, 27.0))
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            state, sim.port, sim.clock, curve={"apply": True, "raise_k": 2.0, "short_k": 0.2,
+                                               "short_h": 0.25}))
+        db = state / "impctl.db"
+        d = start_daemon(config, db, tmp_path / "daemon.log")
+        try:
+            wait_until(lambda: "raised back to the owner's curve" in d.output(), 60,
+                       "the curve raised back to the owner's", proc=d.proc)
+            wait_until(lambda: _points(sim.port) == owner and not _curve_journal(db), 10,
+                       "the owner's points back")
+            looks = d.output().count("heating curve set to")
+            wait_until(lambda: "sets no curve until asked again" in d.output(), 10,
+                       "the stop said", proc=d.proc)
+            assert json.loads((state / "curve-intent.json").read_text())["apply"] is False
+            sim_time = sim.clock.now()
+            wait_until(lambda: (sim.clock.now() - sim_time).total_seconds() > 3 * 3600, 30,
+                       "three simulated hours")
+            assert _points(sim.port) == owner and not _curve_journal(db)
+            assert d.output().count("heating curve set to") == looks
+        finally:
+            stop_process(d.proc)

@@ -18,7 +18,8 @@ no night runs, the daemon:
    curve stays advice (the points' meaning is the controller document's, not measured);
 3. **watches comfort**: a room more than ``[curve] short_k`` below its setpoint for over
    ``short_h`` raises both points by ``raise_k`` (said in the log and the store's events); a
-   curve raised back to the owner's, or past the bounds, is the owner's again;
+   curve raised back to the owner's, or past the bounds, is the owner's again, and impctl sets
+   no curve until asked again (it proved too low for this house);
 4. keeps the owner's word: points the owner changed are kept (their journal entries closed)
    and impctl stops setting the curve until asked again.
 
@@ -313,11 +314,20 @@ class CurveWatch:
         raised = tuple(p + cfg.raise_k for p in self.held)
         why = (f"the room stayed more than {cfg.short_k:g} K below its setpoint {sp:.1f} °C "
                f"for over {cfg.short_h:g} h ({t_air:.1f} °C now)")
+        back = None
         if all(r >= o for r, o in zip(raised, self.owner, strict=True)):
-            return await self._give_back(why + "; raised back to the owner's curve")
-        if self._outside(raised, self.owner) is not None:
-            return await self._give_back(why + "; a higher curve than impctl may set: the "
-                                               "owner's curve back")
+            back = "raised back to the owner's curve"
+        elif self._outside(raised, self.owner) is not None:
+            back = "a higher curve than impctl may set: the owner's curve back"
+        if back is not None:
+            # impctl's curve proved too low for this house: setting it again at the next look
+            # would leave the room short once more. Kept first, as when the controller does
+            # not follow: a restart between the two restores and does not set it again.
+            set_intent(d.cfg.state_dir, False, "the room stayed short under impctl's curve")
+            await self._give_back(f"{why}; {back}")
+            self._refuse("the room stayed short under impctl's curve even raised back; "
+                         "impctl sets no curve until asked again (impctl curve --apply)")
+            return
         await self._write(raised)
         self.held, self.raised_k = raised, self.raised_k + cfg.raise_k
         text = f"{why}: heating curve raised by {cfg.raise_k:g} K to " \
