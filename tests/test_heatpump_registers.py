@@ -225,3 +225,8 @@ def test_config_from_mapping():
         config_from_mapping({"hots": "x"}, "impctl.toml")
     with pytest.raises(InputError, match="-4…4"):
         config_from_mapping({"writes": {"correction_k": [-5, 0]}})
+    # the owner's curve points are the daemon's to read, never a setting
+    with pytest.raises(InputError, match=r"\[heatpump.writes\] key 'loop1_curve_owner_c': "
+                                         "set by the daemon, not configured"):
+        config_from_mapping({"host": "x", "writes": {"loop1_curve_owner_c": [60.0, 30.0]}},
+                            "impctl.toml")

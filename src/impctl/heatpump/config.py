@@ -149,8 +149,8 @@ class HeatPumpConfig:
 #: ranges lie within 16–26 °C); a write outside them is a typo, not an experiment.
 ROOM_SETPOINT_BOUNDS_C = (10.0, 30.0)
 #: Flow temperatures a heating-curve point may be set to [°C]: below 20 °C no emitter heats a
-#: room, above 55 °C an air-source heat pump runs near its limit (and radiators sized for it
-#: are no house impctl lowers a curve in).
+#: room, above 55 °C an air-source heat pump runs near its limit — higher only up to the
+#: owner's own point there (``WritePolicy.loop1_curve_owner_c``), a value it already runs.
 CURVE_FLOW_BOUNDS_C = (20.0, 55.0)
 #: Highest owner's curve point impctl takes as a ceiling [°C] (``loop1_curve_owner_c``): above
 #: 80 °C no heat pump delivers flow, so such a reading is a fault, not a setting.
