@@ -70,10 +70,12 @@ def weather(n: int, days: float, seed: int, start: str) -> np.ndarray:
 class Watch:
     """The daemon's comfort watch over a two-point curve (``[curve]`` short_k, short_h,
     raise_k; :mod:`impctl.daemon.curve_watch`): a room sensed more than ``short_k`` below the
-    setpoint for ``short_h`` raises both points by ``raise_k``, checked every hour of the
-    simulation (the daemon looks every sampling interval); a curve raised to the owner's
+    setpoint for ``short_h`` raises both points by ``raise_k`` — the sensed room read at every
+    step, a raise made at the end of the simulated hour it falls in (the daemon raises at
+    once, so this watch is a little slower); a curve raised to the owner's
     points (``owner``: flows at −15 and +15 °C [°C]), or past the write bounds, is the
-    owner's again (the house's built-in curve)."""
+    owner's again (the house's built-in curve) for the rest of the winter, as the daemon
+    keeps it until asked again."""
 
     owner: tuple[np.ndarray, np.ndarray]
     short_k: float = 0.5
@@ -130,8 +132,7 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
             c = slice(c0, c0 + chunk)
             part = simulate_plant(houses, params, t_out[c], dt_s, setpoint_c=sp[c],
                                   internal_gains_w=gi[c], solar_gains_w=gs[c],
-                                  outputs=keep,
-                                  core=core)
+                                  outputs=keep, core=core)
             parts.append(part)
             if chunk < steps:
                 _look(watch, core, curve, part["t_air_sensed_c"], dt_s, short_s, raises)
