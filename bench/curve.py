@@ -183,6 +183,7 @@ def main() -> None:
           f"({time.perf_counter() - t_start:.0f} s)", flush=True)
     fa, fb = np.full(n, np.nan), np.full(n, np.nan)
     central0, rec0, run0, timing = (np.full(n, np.nan) for _ in range(4))
+    said = np.full((n, 3), np.nan)  # impctl's saving in % of the running curve's: value, 95 %
     reasons: dict[str, int] = {}
     advice = 0
     for j in range(n):
@@ -198,6 +199,10 @@ def main() -> None:
         central0[j] = float(np.interp(0.0, nc.t_out_c, nc.central_c))
         rec0[j] = float(res.recommended.at(0.0))
         run0[j] = float(res.running.line.at(0.0)) if res.running else np.nan
+        if res.savings is not None and res.savings.running_kwh > 0:
+            sv = res.savings
+            said[j] = 100.0 * np.array([sv.saving_kwh, sv.saving_low_kwh, sv.saving_high_kwh]) \
+                / sv.running_kwh
         line = res.recommended
         if res.lowers and writable(line, res.running.line if res.running else None):
             fa[j], fb[j] = line.flow_a_c, line.flow_b_c
@@ -219,6 +224,7 @@ def main() -> None:
     print(f"winters simulated ({time.perf_counter() - t_start:.0f} s)\n", flush=True)
     report(args, command, params, base, ours, changed, central0, rec0, run0, truth0, inst0,
            timing)
+    said_and_done(params, base, ours, changed, said)
     if args.oracle:
         ofa, ofb = oracle_curves(core, learn.night_gain_w, inst0)
         known = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
@@ -226,6 +232,24 @@ def main() -> None:
         print("\n=== the true house's own curve (perfect knowledge, no margin) ===")
         report(args, command, params, base, known, np.isfinite(ofa), central0, rec0, run0,
                truth0, inst0, timing)
+
+
+def said_and_done(params, base, ours, changed: np.ndarray, said: np.ndarray) -> None:
+    """What ``impctl curve`` said lowering would save (% of the running curve's electricity,
+    its 95 % interval) against what the winter saved, on the households it changed."""
+    done = 100.0 * (1.0 - ours.electricity_kwh / base.electricity_kwh)
+    control = np.broadcast_to(np.asarray(params.heat_pump.control), (len(changed),))
+    print("\nthe saving impctl said (its 95 % interval) against the winter's, changed households:")
+    for name, m in (("weather curve", changed & (control == 0)),
+                    ("room thermostat", changed & (control == 1))):
+        m = m & np.isfinite(said[:, 0])
+        if not m.any():
+            continue
+        inside = (said[m, 1] <= done[m]) & (done[m] <= said[m, 2])
+        below = done[m] < said[m, 1]
+        print(f"  {name:16s} {m.sum():3d}: said median {np.median(said[m, 0]):+5.1f} %, saved "
+              f"{np.median(done[m]):+5.1f} %; the winter's inside the said interval in "
+              f"{100 * inside.mean():.0f} %, below it in {100 * below.mean():.0f} %")
 
 
 def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray

@@ -164,3 +164,23 @@ def test_the_plant_runs_a_two_point_flow_curve():
     core2 = PlantCore(house, params, seed=0, n=1)
     core2.set_flow_curve(np.nan, np.nan, 21.0)
     assert not np.isfinite(core2.controller.flow_target_c).any()
+
+
+def test_a_room_kept_too_warm_counts_in_the_saving(high):
+    """The installer's curve warms the room above the setpoint (no room influence): the
+    lower curve saves that heat as well as the COP's, and says how warm the room runs."""
+    from impctl.curve.savings import season_savings
+
+    rows, _ = high
+    res = analyse(rows, None, setpoint_c=21.0)
+    s = res.savings
+    assert s.room_excess_k > 0.5 and 0.0 <= s.room_excess_new_k < s.room_excess_k
+    cop_only = season_savings(res.need, res.cop, res.running.line, res.recommended,
+                              res.climate, 21.0, np.random.default_rng(0))
+    assert cop_only.room_excess_k == 0.0
+    assert s.saving_kwh > 1.2 * cop_only.saving_kwh
+    assert s.running_kwh > cop_only.running_kwh  # the warm room's heat is in the running's
+    assert f"Your rooms run {s.room_excess_k:.1f} K above 21.0 °C" in res.advice()
+    block = res.to_dict()["savings"]["room_above_setpoint_k"]
+    assert block == {"running": round(s.room_excess_k, 2),
+                     "recommended": round(s.room_excess_new_k, 2)}

@@ -96,24 +96,31 @@ def analyse(rows: pd.DataFrame, fit: dict | None = None, *, setpoint_c: float | 
     if cop.assumed:
         notes.append(f"the heat pump's electricity (p_el_w) is not recorded: its efficiency is "
                      f"ASSUMED ({cop.eta:.2f} of the ideal), so is the saving in kWh")
-    savings = (season_savings(need, cop, running.line, recommended, climate, sp, rng)
+    cold, total, excess = _room_hours(rows, sp)
+    at = need.anchor_t_out_c if need.anchor_t_out_c is not None else 0.0
+    savings = (season_savings(need, cop, running.line, recommended, climate, sp, rng,
+                              room_excess_k=excess,
+                              need_at_anchor_c=float(np.interp(at, curve.t_out_c,
+                                                               curve.central_c)))
                if running is not None else None)
     if climate.source == "assumed":
         notes.append("the saving is over an ASSUMED winter (the file spans less than a "
                      "season of outdoor temperatures)")
-    cold, total = _cold_hours(rows, sp)
     return CurveResult(sp, sp_source, float(margin_k), emitter, need, curve, recommended,
                        running, cop, climate, savings, notes, cold, total)
 
 
-def _cold_hours(rows: pd.DataFrame, setpoint_c: float) -> tuple[int, int]:
-    """Heated hours at the owner's setpoint, and those with the room ≥ :data:`COLD_K` below."""
+def _room_hours(rows: pd.DataFrame, setpoint_c: float) -> tuple[int, int, float]:
+    """Of the heated hours at the owner's setpoint: those with the room ≥ :data:`COLD_K`
+    below it, all of them, and the room's mean above the setpoint over them [K] (0 without
+    any)."""
     on = heated(rows)
     sp = rows["setpoint"].to_numpy(dtype=float)
     own = on & ((rows["kind"] == "owner").to_numpy()
                 | (np.isfinite(sp) & (np.abs(sp - setpoint_c) <= 0.25)))
     hours = hourly(rows, "t_air", own)
     if hours.empty:
-        return 0, 0
-    cold = hours["value"].to_numpy(dtype=float) < setpoint_c - COLD_K
-    return int(cold.sum()), int(len(hours))
+        return 0, 0, 0.0
+    room = hours["value"].to_numpy(dtype=float)
+    cold = room < setpoint_c - COLD_K
+    return int(cold.sum()), int(len(hours)), float(np.mean(room) - setpoint_c)

@@ -18,6 +18,8 @@ from .savings import Climate, Savings
 SCHEMA = "impctl-curve/1"
 #: A running curve within this of the recommended one at 0 °C is "about right" [K].
 ABOUT_RIGHT_K = 0.5
+#: A mean room this far above the setpoint is said in the advice [K].
+WARM_ROOM_K = 0.3
 
 
 @dataclass(frozen=True)
@@ -82,6 +84,10 @@ class CurveResult:
                               f"{_kwh(max(s.saving_low_kwh, 0.0))} and "
                               f"{_kwh(s.saving_high_kwh)}; {s.percent:.0f} % of the heating's)")
             parts[-1] += "."
+            if s is not None and s.room_excess_k >= WARM_ROOM_K:
+                parts.append(f"Your rooms run {s.room_excess_k:.1f} K above "
+                             f"{self.setpoint_c:.1f} °C on average: part of the saving is the "
+                             "heat that warmth costs.")
         elif hot is not None and hot <= -ABOUT_RIGHT_K:
             parts.append(f"Your heating runs its water {-hot:.0f} K cooler than impctl would "
                          f"set it at 0 °C outside ({setting}, {self.margin_k:g} K warmer than "

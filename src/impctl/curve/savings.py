@@ -3,8 +3,15 @@
 Hour by hour over a winter's outdoor temperatures: the heat the house needs (:mod:`.need`,
 central) divided by the COP (:mod:`.cop`) at the flow of the curve it runs, and at the flow
 of the recommended curve; the saving is the difference, with an interval from draws of the
-heat loss, the other heat and η. The heat itself is taken as unchanged: a room that no longer
-overheats under a curve set too high saves more, which this does not count.
+heat loss, the other heat and η.
+
+**A room kept too warm.** A curve set too high on a heat pump that follows it (no room
+thermostat to stop it) warms the rooms above the setpoint, and the house loses that heat too.
+The rows tell by how much: the mean room above the owner's setpoint over the recorded heated
+hours (``room_excess_k``, measured). The heat at the running curve holds that room; at the
+recommended one, the excess shrinks in proportion to how much closer the curve comes to the
+central need at the nights' own outdoor temperature (a curve at the need holds the setpoint).
+A room held at its setpoint by a thermostat shows no excess, and no heat is counted saved.
 
 **The winter.** The house's own recorded outdoor temperatures where they span a season
 (:data:`RECORDED_MIN_DAYS` days of hours), else :data:`ASSUMED_DAYS` days of the built-in
@@ -92,6 +99,10 @@ class Savings:
     saving_low_kwh: float
     saving_high_kwh: float
     heat_kwh: float
+    #: the room above the setpoint at the running curve (measured) and at the recommended
+    #: one (estimated) [K]
+    room_excess_k: float = 0.0
+    room_excess_new_k: float = 0.0
 
     @property
     def percent(self) -> float:
@@ -106,27 +117,43 @@ class Savings:
                                "low": round(self.saving_low_kwh, 0),
                                "high": round(self.saving_high_kwh, 0)},
                 "saving_percent": round(self.percent, 1),
-                "heat_kwh": round(self.heat_kwh, 0)}
+                "heat_kwh": round(self.heat_kwh, 0),
+                "room_above_setpoint_k": {"running": round(self.room_excess_k, 2),
+                                          "recommended": round(self.room_excess_new_k, 2)}}
 
 
 def season_savings(need: HeatNeed, cop: CopModel, running: Line, recommended: Line,
                    climate: Climate, setpoint_c: float,
-                   rng: np.random.Generator, draws: int = DRAWS) -> Savings:
-    """The winter's electricity and saving (module docstring)."""
+                   rng: np.random.Generator, draws: int = DRAWS, *,
+                   room_excess_k: float = 0.0, need_at_anchor_c: float | None = None
+                   ) -> Savings:
+    """The winter's electricity and saving (module docstring).
+
+    ``room_excess_k``: the recorded room's mean above the setpoint on heated hours [K];
+    ``need_at_anchor_c``: the central need's flow at the nights' outdoor temperature [°C]
+    (without it no excess is counted)."""
     t = climate.t_out_c
     f_run, f_new = running.at(t), recommended.at(t)
+    ex_run, ex_new = 0.0, 0.0
+    if need_at_anchor_c is not None and room_excess_k > 0.0:
+        at = need.anchor_t_out_c if need.anchor_t_out_c is not None else 0.0
+        gap_run = float(running.at(at)) - need_at_anchor_c
+        if gap_run > 0.0:
+            ex_run = float(room_excess_k)
+            gap_new = float(recommended.at(at)) - need_at_anchor_c
+            ex_new = ex_run * float(np.clip(gap_new / gap_run, 0.0, 1.0))
 
-    def electricity(q: np.ndarray, eta: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        run = np.sum(q / carnot_cop(f_run, t, eta), axis=-1) / 1000.0
-        new = np.sum(q / carnot_cop(f_new, t, eta), axis=-1) / 1000.0
+    def electricity(hlc, gain, eta) -> tuple[np.ndarray, np.ndarray]:
+        q_run = np.maximum(hlc * (setpoint_c + ex_run - t) - gain, 0.0)
+        q_new = np.maximum(hlc * (setpoint_c + ex_new - t) - gain, 0.0)
+        run = np.sum(q_run / carnot_cop(f_run, t, eta), axis=-1) / 1000.0
+        new = np.sum(q_new / carnot_cop(f_new, t, eta), axis=-1) / 1000.0
         return run, new
 
-    q = need.q_w(setpoint_c, t)
-    run, new = electricity(q, cop.eta)
+    run, new = electricity(need.hlc_w_per_k, need.gain_w, cop.eta)
     hlc, gain = need.draws(rng, draws)
     eta = cop.draws(rng, draws)
-    qd = np.maximum(hlc[:, None] * (setpoint_c - t[None, :]) - gain[:, None], 0.0)
-    run_d, new_d = electricity(qd, eta[:, None])
+    run_d, new_d = electricity(hlc[:, None], gain[:, None], eta[:, None])
     lo, hi = np.quantile(run_d - new_d, [0.025, 0.975])
     return Savings(float(run), float(new), float(run - new), float(lo), float(hi),
-                   float(np.sum(q) / 1000.0))
+                   float(np.sum(need.q_w(setpoint_c, t)) / 1000.0), ex_run, ex_new)
