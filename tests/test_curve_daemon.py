@@ -51,6 +51,17 @@ def _curve_journal(db: Path) -> list:
     return [e for e in store_query(db, lambda s: s.journal_pending()) if e.register in KEEP]
 
 
+def _start_with_curve(tmp_path: Path, sim, points: tuple[float, float], **curve):
+    """A kept curve of ``points`` [°C], the owner asking for it (``curve``: more of
+    ``[curve]``), and the daemon started: (daemon, state dir, config, store)."""
+    state = tmp_path / "state"
+    _kept_curve(state, points)
+    config = write_config(tmp_path / "config.toml", daemon_mapping(
+        state, sim.port, sim.clock, curve={"apply": True, **curve}))
+    db = state / "impctl.db"
+    return start_daemon(config, db, tmp_path / "daemon.log"), state, config, db
+
+
 def test_the_daemon_sets_the_curve_the_owner_asked_for_and_gives_it_back(tmp_path):
     with sim_process(tmp_path, EPOCH, SPEED) as sim:
         owner = _points(sim.port)
@@ -113,13 +124,9 @@ def test_the_watch_raises_a_curve_that_leaves_the_room_short(tmp_path):
     tests use it) and the watch's thresholds at their configurable least (0.2 K for 0.25 h)
     get there within hours of simulated time, not the heavy house's day and a half."""
     with sim_process(tmp_path, EPOCH, 3600.0, house=default_house()) as sim:
-        state = tmp_path / "state"
-        _kept_curve(state, (26.0, 21.0))  # far too low for this house at 0 °C
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True, "raise_k": 2.0, "short_k": 0.2,
-                                               "short_h": 0.25}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        # far too low for this house at 0 °C
+        d, _, _, db = _start_with_curve(tmp_path, sim, (26.0, 21.0), raise_k=2.0, short_k=0.2,
+                                        short_h=0.25)
         try:
             wait_until(lambda: _points(sim.port) == (260, 210), 30, "the curve set",
                        proc=d.proc)
@@ -178,12 +185,7 @@ def test_a_controller_that_does_not_follow_its_points_gets_them_back(tmp_path):
     owner's points are back, the curve stays advice, and impctl does not try again."""
     with sim_process(tmp_path, EPOCH, SPEED, plant="iso") as sim:
         owner = _points(sim.port)
-        state = tmp_path / "state"
-        _kept_curve(state, (36.0, 24.0))
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        d, state, _, db = _start_with_curve(tmp_path, sim, (36.0, 24.0))
         try:
             wait_until(lambda: "did not follow the curve points" in d.output(), 30,
                        "the check to fail", proc=d.proc)
@@ -234,12 +236,7 @@ def test_curve_restore_gives_the_points_back_when_no_daemon_runs(tmp_path):
     with sim_process(tmp_path, EPOCH, SPEED) as sim:
         owner = _points(sim.port)
         new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
-        state = tmp_path / "state"
-        _kept_curve(state, new)
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        d, state, config, db = _start_with_curve(tmp_path, sim, new)
         try:
             wait_until(lambda: _points(sim.port) == (round(new[0] * 10), round(new[1] * 10)),
                        30, "the curve set", proc=d.proc)
@@ -261,12 +258,7 @@ def test_a_new_fit_asking_past_the_bounds_gives_the_owner_their_curve_back(tmp_p
         owner = _points(sim.port)
         assert owner[0] < 550
         new = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
-        state = tmp_path / "state"
-        _kept_curve(state, new)
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        d, state, config, db = _start_with_curve(tmp_path, sim, new)
         try:
             wait_until(lambda: _points(sim.port) == (round(new[0] * 10), round(new[1] * 10)),
                        30, "the curve set", proc=d.proc)
@@ -287,12 +279,7 @@ def test_a_cold_point_the_owner_runs_above_55_c_is_lowered_within_it(tmp_path):
         owner = _points(sim.port)
         assert owner[0] == 620
         new = (58.0, (owner[1] - 20) / 10.0)
-        state = tmp_path / "state"
-        _kept_curve(state, new)
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        d, state, config, db = _start_with_curve(tmp_path, sim, new)
         try:
             wait_until(lambda: _points(sim.port) == (580, round(new[1] * 10)), 30,
                        "the curve set", proc=d.proc)
@@ -313,13 +300,8 @@ def test_a_curve_raised_back_to_the_owners_is_not_set_again(tmp_path):
         modbus_write(sim.port, 2309, 400)  # the owner's own curve: 40 °C at −15 °C outside,
         modbus_write(sim.port, 2314, 300)  # 30 °C at +15 °C (barely enough for this house)
         owner = _points(sim.port)
-        state = tmp_path / "state"
-        _kept_curve(state, (37.0, 27.0))
-        config = write_config(tmp_path / "config.toml", daemon_mapping(
-            state, sim.port, sim.clock, curve={"apply": True, "raise_k": 2.0, "short_k": 0.2,
-                                               "short_h": 0.25}))
-        db = state / "impctl.db"
-        d = start_daemon(config, db, tmp_path / "daemon.log")
+        d, state, config, db = _start_with_curve(tmp_path, sim, (37.0, 27.0), raise_k=2.0,
+                                                 short_k=0.2, short_h=0.25)
         try:
             wait_until(lambda: "raised back to the owner's curve" in d.output(), 60,
                        "the curve raised back to the owner's", proc=d.proc)
