@@ -87,8 +87,8 @@ def _tables(cls: type, table: str, out: dict[str, list], parents: dict[str, tupl
     hints = typing.get_type_hints(cls)
     rows = out.setdefault(table, [])
     for f in fields(cls):
-        if f.name == "source":
-            continue
+        if f.name == "source" or f.metadata.get("configured") is False:
+            continue  # not a configuration key (set at run time)
         inner = _dataclasses_in(hints[f.name])
         if inner and f.name == "link":
             if table == "heatpump":      # the heat pump's own link: its keys sit in [heatpump]

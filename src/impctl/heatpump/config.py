@@ -110,7 +110,9 @@ class WritePolicy:
     loop2_setpoint_c: tuple[float, float] | None = None
     correction_k: tuple[int, int] | None = None
     loop1_curve_c: tuple[float, float] | None = None
-    loop1_curve_owner_c: tuple[float, float] | None = None
+    # set by the daemon at run time, never read from a configuration
+    loop1_curve_owner_c: tuple[float, float] | None = field(default=None,
+                                                            metadata={"configured": False})
     daily_budget: int = 12
     verify_attempts: int = 3
     verify_delay_s: float = 0.5
@@ -291,10 +293,6 @@ def _default(f: Any) -> Any:
     return None
 
 
-#: Fields the daemon sets at run time; a configuration that names them is refused.
-_NOT_CONFIGURED = frozenset({"loop1_curve_owner_c"})
-
-
 def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
            problems: list[InputError], required: tuple[str, ...] = ()) -> Any:
     """Build ``cls`` from a TOML table, appending every problem found to ``problems``;
@@ -313,7 +311,7 @@ def _build(cls: type, data: Any, source: str | Path | None, prefix: str,
         if key not in spec:
             bad(key, "unknown key")
             continue
-        if key in _NOT_CONFIGURED:
+        if spec[key].metadata.get("configured") is False:
             bad(key, "set by the daemon, not configured")
             continue
         problem = _type_problem(key, value)
