@@ -184,3 +184,12 @@ def test_a_room_kept_too_warm_counts_in_the_saving(high):
     block = res.to_dict()["savings"]["room_above_setpoint_k"]
     assert block == {"running": round(s.room_excess_k, 2),
                      "recommended": round(s.room_excess_new_k, 2)}
+
+
+def test_a_constant_flow_temperature_is_told_from_a_curve(high):
+    rows, _ = high
+    assert not analyse(rows, None, setpoint_c=21.0).running.constant
+    res = analyse(rows.assign(t_flow_target_c=45.0), None, setpoint_c=21.0)
+    assert res.running.slope_read and res.running.constant
+    assert res.to_dict()["running"]["constant"] is True
+    assert "45 °C whatever the weather outside" in res.advice()

@@ -71,6 +71,11 @@ class CurveResult:
                     "with the heating curve set in your heat pump.")
         hot = self.hotter_at_0_k
         parts = []
+        if self.running.constant:
+            parts.append(f"Your heat pump holds its water at about "
+                         f"{self.running.line.at(0.0):.0f} °C whatever the weather outside: a "
+                         "constant flow temperature, not a heating curve. Set it to follow the "
+                         "weather (its heating curve) to use what follows.")
         if self.lowers:
             s = self.savings
             parts.append(f"Your heating runs its water {hot:.0f} K hotter than this house "

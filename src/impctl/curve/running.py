@@ -28,6 +28,8 @@ MIN_HOURS = 6
 MIN_RANGE_K = 3.0
 #: Setpoints within this of the owner's count as the owner's [K].
 SAME_SETPOINT_K = 0.25
+#: A read line rising less than this from +15 to −15 °C is a constant flow, not a curve [K].
+FLAT_K = 3.0
 
 
 @dataclass(frozen=True)
@@ -43,12 +45,18 @@ class RunningCurve:
     t_out_range_c: tuple[float, float]
     slope_read: bool
 
+    @property
+    def constant(self) -> bool:
+        """The heat pump holds one flow temperature whatever the weather (its slope read, and
+        less than :data:`FLAT_K` over the curve's two points)."""
+        return self.slope_read and self.line.flow_a_c - self.line.flow_b_c < FLAT_K
+
     def to_dict(self) -> dict:
         """The JSON block ``running``."""
         out = self.line.to_dict()
         out.update({"source": self.source, "hours": self.hours,
                     "t_out_range_c": [round(v, 1) for v in self.t_out_range_c],
-                    "slope_read": self.slope_read})
+                    "slope_read": self.slope_read, "constant": self.constant})
         return out
 
 
