@@ -1,8 +1,8 @@
 """Does impctl's heating curve save electricity on realistic houses, and keep them warm?
 
 Run:  .venv/bin/python bench/curve.py [--households 200] [--learn-days 21] [--winter-days 75]
-          [--dt 60] [--margin-k 1.0] [--model-dir DIR] [--cache DIR] [--refit] [--oracle]
-          [--plant SECTION.FIELD=VALUE ...]
+          [--dt 60] [--margin-k 1.0] [--model-dir DIR] [--cache DIR] [--refit]
+          [--plant SECTION.FIELD=VALUE ...] [--constant-flow] [--no-watch] [--oracle]
 
 Per household of the validation population (``bench/fit.py``: seed 20260, the realistic plant
 with its realism drawn by ``impctl.population.realism.sample_params``):
@@ -12,7 +12,8 @@ with its realism drawn by ``impctl.population.realism.sample_params``):
    classifiers of ``--model-dir``): its fit JSON — :func:`fit_json`, the one place the fit is
    called;
 2. **the owner's nights**: ``--learn-days`` days of the owner's winter (setpoint 21 °C day and
-   night, the installer's curve: the plant's own, ``curve_gain``), recorded as a gateway
+   night, the installer's curve: the plant's own, ``curve_gain``; with ``--constant-flow`` one
+   flow temperature whatever the weather), recorded as a gateway
    records them (5-minute rows: room and outdoor sensors, the heat meter, flow, return, the
    curve's flow target, the electricity);
 3. **impctl curve** on those rows and the fit JSON (``--margin-k``): the recommended curve.
@@ -156,6 +157,10 @@ def main() -> None:
                          "lowers the installer's: what perfect knowledge would save")
     ap.add_argument("--verbose", action="store_true",
                     help="one line per household whose curve impctl changed")
+    ap.add_argument("--constant-flow", action="store_true",
+                    help="every installer holds one flow temperature whatever the weather (the "
+                         "built-in curve's flow at the house's design outdoor temperature) "
+                         "instead of a heating curve")
     ap.add_argument("--no-watch", action="store_true",
                     help="impctl's curves without the daemon's comfort watch (which raises a "
                          "curve 1 K when the room stays 0.5 K short for an hour)")
@@ -173,8 +178,14 @@ def main() -> None:
     except (AttributeError, TypeError, ValueError, InputError) as exc:
         ap.error(f"--plant: {exc}")
     t_start = time.perf_counter()
+    core = PlantCore(houses, params, seed=0)
+    installer = None  # the plant's own curve
+    if args.constant_flow:
+        design = np.broadcast_to(np.asarray(params.emitter.design_t_out_c, float), (n,))
+        const = installer_flow_c(core, design)
+        installer = (const, const.copy())
     learn = simulate(houses, params, args.learn_days, LEARN_SEED, "2026-11-20 00:00",
-                     dt_s=args.dt, row_step_s=300.0)
+                     dt_s=args.dt, row_step_s=300.0, curve=installer)
     print(f"owner's nights simulated ({time.perf_counter() - t_start:.0f} s)", flush=True)
     tag = "".join(f"-{o}" for o in sorted(args.plant))
     fits = campaign_fits(houses, n, args.model_dir, args.cache, args.refit,
@@ -212,23 +223,29 @@ def main() -> None:
           f"lower, but advice only (a point above {FLOW_LIMITS_C[1]:g} °C and the running "
           f"curve's): {advice}", flush=True)
     changed = np.isfinite(fa)
-    core = PlantCore(houses, params, seed=0)
     truth0 = true_flow_c(core, learn.night_gain_w, 0.0)
-    inst0 = installer_flow_c(core, 0.0)
+    owner = installer or tuple(installer_flow_c(core, t) for t in POINTS_T_OUT_C)
+    inst0 = installer[0] if installer else installer_flow_c(core, 0.0)
+
+    def run_winter(curve_a, curve_b):
+        """The winter with these curves where finite, the installer's elsewhere."""
+        mask = np.isfinite(curve_a)
+        if installer:
+            curve_a, curve_b = np.where(mask, curve_a, owner[0]), np.where(mask, curve_b, owner[1])
+        watch = None if args.no_watch else Watch(owner, mask.copy(), installer is None)
+        return simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
+                        dt_s=args.dt, curve=(curve_a, curve_b), watch=watch)
+
     base = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
-                    dt_s=args.dt)
-    owner = tuple(installer_flow_c(core, t) for t in POINTS_T_OUT_C)
-    watch = None if args.no_watch else Watch(owner)
-    ours = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
-                    dt_s=args.dt, curve=(fa, fb), watch=watch)
+                    dt_s=args.dt, curve=installer)
+    ours = run_winter(fa, fb)
     print(f"winters simulated ({time.perf_counter() - t_start:.0f} s)\n", flush=True)
     report(args, command, params, base, ours, changed, central0, rec0, run0, truth0, inst0,
            timing)
     said_and_done(params, base, ours, changed, said)
     if args.oracle:
-        ofa, ofb = oracle_curves(core, learn.night_gain_w, inst0)
-        known = simulate(houses, params, args.winter_days, WINTER_SEED, "2027-01-05 00:00",
-                         dt_s=args.dt, curve=(ofa, ofb), watch=watch)
+        ofa, ofb = oracle_curves(core, learn.night_gain_w, inst0, owner)
+        known = run_winter(ofa, ofb)
         print("\n=== the true house's own curve (perfect knowledge, no margin) ===")
         report(args, command, params, base, known, np.isfinite(ofa), central0, rec0, run0,
                truth0, inst0, timing)
@@ -252,12 +269,12 @@ def said_and_done(params, base, ours, changed: np.ndarray, said: np.ndarray) -> 
               f"{100 * inside.mean():.0f} %, below it in {100 * below.mean():.0f} %")
 
 
-def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray,
+                  owner: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Each house's own curve from its truth (the need on the grid as both the central and the
     bound, no margin, the same straight-line rule over the assumed winter), where it is at
     least 0.5 K below the installer's at 0 °C; NaN elsewhere."""
-    from impctl.curve.need import GRID_T_OUT_C, POINTS_T_OUT_C, Line, NeedCurve, recommend
+    from impctl.curve.need import GRID_T_OUT_C, Line, NeedCurve, recommend
     from impctl.curve.savings import ASSUMED_DAYS
     from impctl.weather import winter_weather
 
@@ -265,7 +282,7 @@ def oracle_curves(core: PlantCore, night_gain_w: np.ndarray, inst0: np.ndarray
     idx = np.clip(np.rint((climate - GRID_T_OUT_C[0]) / 0.5), 0, len(GRID_T_OUT_C) - 1)
     fa, fb = np.full(core.n, np.nan), np.full(core.n, np.nan)
     need = np.array([true_flow_c(core, night_gain_w, float(t)) for t in GRID_T_OUT_C])
-    cold, mild = (installer_flow_c(core, t) for t in POINTS_T_OUT_C)
+    cold, mild = owner
     for j in range(core.n):
         q = np.maximum(core.hlc[j] * (SETPOINT_C - climate) - night_gain_w[j], 0.0)
         weights = np.bincount(idx.astype(int), weights=q, minlength=len(GRID_T_OUT_C))

@@ -78,6 +78,10 @@ class Watch:
     keeps it until asked again."""
 
     owner: tuple[np.ndarray, np.ndarray]
+    #: the houses running impctl's curve (the others run the installer's and are not watched)
+    houses: np.ndarray
+    #: the owner's curve is the plant's built-in one (given back as NaN), else ``owner``'s line
+    owner_builtin: bool = True
     short_k: float = 0.5
     short_h: float = 1.0
     raise_k: float = 1.0
@@ -177,7 +181,7 @@ def _look(watch: Watch, core: PlantCore, curve: tuple[np.ndarray, np.ndarray],
     fire = np.zeros(len(fa), bool)
     for row in np.asarray(sensed) < SETPOINT_C - watch.short_k:
         short_s[:] = np.where(row, short_s + dt_s, 0.0)
-        now = row & (short_s >= watch.short_h * 3600.0) & np.isfinite(fa)
+        now = row & (short_s >= watch.short_h * 3600.0) & watch.houses
         short_s[now] = 0.0
         fire |= now
     if not fire.any():
@@ -189,7 +193,9 @@ def _look(watch: Watch, core: PlantCore, curve: tuple[np.ndarray, np.ndarray],
     hi = CURVE_FLOW_BOUNDS_C[1]
     back = fire & (((fa >= oa) & (fb >= ob)) | (fa > np.maximum(hi, oa))
                    | (fb > np.maximum(hi, ob)))
-    fa[back], fb[back] = np.nan, np.nan
+    fa[back] = np.nan if watch.owner_builtin else oa[back]
+    fb[back] = np.nan if watch.owner_builtin else ob[back]
+    watch.houses[back] = False
     core.set_flow_curve(fa, fb, SETPOINT_C)
 
 
@@ -203,10 +209,12 @@ def true_flow_c(core: PlantCore, night_gain_w: np.ndarray, t_out_c: float,
     return flow_for_node(node, setpoint_c, core.k_w, core.exponent, core.flow_lag_k_per_w)
 
 
-def installer_flow_c(core: PlantCore, t_out_c: float, setpoint_c: float = SETPOINT_C
+def installer_flow_c(core: PlantCore, t_out_c, setpoint_c: float = SETPOINT_C
                      ) -> np.ndarray:
-    """The installer's curve (the plant's own, curve_gain) as the steady flow at ``t_out_c``."""
+    """The installer's curve (the plant's own, curve_gain) as the steady flow at ``t_out_c``
+    [°C] (one for all houses, or one per house)."""
     node = core.controller.target_water_c(np.full(core.n, setpoint_c),
                                           np.full(core.n, setpoint_c),
-                                          np.full(core.n, float(t_out_c)))
+                                          np.broadcast_to(np.asarray(t_out_c, float),
+                                                          (core.n,)).copy())
     return core.controller.steady_flow_c(node, setpoint_c, core.flow_lag_k_per_w)
