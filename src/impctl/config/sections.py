@@ -145,8 +145,10 @@ class CurveConfig:
         ``--restore`` say the same at run time and win over this key.
     margin_k : kelvin of flow temperature kept above the bound of what the house needs [K].
     raise_k : how much the comfort watch raises both curve points at a time [K].
-    short_k : the room counts as short when it is more than this below its setpoint [K].
-    short_h : the watch raises the curve when the room has been short for over this [h].
+    short_k : the room counts as short when it is on average more than this below its
+        setpoint [K].
+    short_h : over this window [h]: the watch raises the curve when the room's mean over the
+        last ``short_h`` is short.
     """
 
     apply: bool = False

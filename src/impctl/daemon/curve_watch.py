@@ -16,10 +16,12 @@ no night runs, the daemon:
    have moved as the line moved at the outdoor temperature now (the new line less the
    owner's), within :data:`FOLLOW_TOL_K`; if it has not, the owner's points come back and the
    curve stays advice (the points' meaning is the controller document's, not measured);
-3. **watches comfort**: a room more than ``[curve] short_k`` below its setpoint for over
-   ``short_h`` raises both points by ``raise_k`` (said in the log and the store's events); a
-   curve raised back to the owner's, or past the bounds, is the owner's again, and impctl sets
-   no curve until asked again (it proved too low for this house);
+3. **watches comfort**: a room on average more than ``[curve] short_k`` below its setpoint
+   over ``short_h`` (the mean of the looks, so that a room short most of the time but crossing
+   the line every few minutes counts) raises both points by ``raise_k`` (said in the log
+   and the store's events); a curve raised back to the owner's, or past the bounds, is the
+   owner's again, and impctl sets no curve until asked again (it proved too low for this
+   house);
 4. keeps the owner's word: points the owner changed are kept (their journal entries closed)
    and impctl stops setting the curve until asked again.
 
@@ -37,6 +39,7 @@ import logging
 import os
 import sqlite3
 import tempfile
+from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
@@ -106,7 +109,9 @@ class CurveWatch:
         self.held: tuple[float, float] | None = None   # points impctl wrote [°C]
         self.owner: tuple[float, float] | None = None  # the owner's points [°C]
         self._verify: float | None = None                # 2128 before the write [°C]
-        self._short_since: float | None = None          # simulated s the room got short
+        # the room's looks since the watch began this window: (simulated s, K below setpoint)
+        self._looks: deque[tuple[float, float]] = deque()
+        self._since: float | None = None                # simulated s this window began
         self.raised_k = 0.0
         self._refused: str | None = None                # why not now (said once)
         self.task: asyncio.Task | None = None
@@ -237,7 +242,9 @@ class CurveWatch:
         d = self.daemon
         for entry in curve_entries(d.store):
             await restore_entry(d.client, d.store, entry)
-        self.held, self._verify, self._short_since = None, None, None
+        self.held, self._verify = None, None
+        self._looks.clear()
+        self._since = None
         self._keep(False)
         text = f"the owner's heating curve restored ({why})"
         self._say("info", text)
@@ -302,18 +309,25 @@ class CurveWatch:
         if t_air is None or sp is None:
             return
         now = d.clock.now_s()
-        if t_air >= sp - cfg.short_k:
-            self._short_since = None
+        # Judged on the room's mean over the window, not look by look: a room that sits
+        # 0.5 K short on average but crosses the line every few minutes (a thermostat's
+        # cycling, a sensor's noise and rounding) would otherwise never count as short.
+        window = cfg.short_h * 3600.0
+        if self._since is None:
+            self._since = now
+        self._looks.append((now, sp - t_air))
+        while self._looks and self._looks[0][0] < now - window:
+            self._looks.popleft()
+        if now - self._since < window:
             return
-        if self._short_since is None:
-            self._short_since = now
+        short = sum(k for _, k in self._looks) / len(self._looks)
+        if short <= cfg.short_k:
             return
-        if now - self._short_since < cfg.short_h * 3600.0:
-            return
-        self._short_since = None
+        self._looks.clear()
+        self._since = now
         raised = tuple(p + cfg.raise_k for p in self.held)
-        why = (f"the room stayed more than {cfg.short_k:g} K below its setpoint {sp:.1f} °C "
-               f"for over {cfg.short_h:g} h ({t_air:.1f} °C now)")
+        why = (f"the room stayed on average {short:.1f} K below its setpoint {sp:.1f} °C "
+               f"over {cfg.short_h:g} h (more than {cfg.short_k:g} K; {t_air:.1f} °C now)")
         back = None
         if all(r >= o for r, o in zip(raised, self.owner, strict=True)):
             back = "raised back to the owner's curve"
