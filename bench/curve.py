@@ -376,7 +376,8 @@ def report(args, command, params, base, ours, changed, central0, rec0, run0, tru
                   f"{d_seen[j]:+5.2f}); room sensor offset "
                   f"{float(np.ravel(params.sensors.t_air_offset_k)[j]):+.2f} K; at 0 °C need "
                   f"{truth0[j]:.1f}, installer {inst0[j]:.1f}, impctl {rec0[j]:.1f} °C; "
-                  f"coldest night {base.coldest_night_c[j]:.1f} → {ours.coldest_night_c[j]:.1f} °C")
+                  f"coldest night {base.coldest_night_c[j]:.1f} → {ours.coldest_night_c[j]:.1f} °C"
+                  + ("" if ours.raises is None else f"; raised {ours.raises[j]}×"))
     t = timing[np.isfinite(timing)]
     print(f"\nimpctl curve analysis per household: median {np.median(t):.2f} s, max "
           f"{np.max(t):.2f} s")

@@ -69,9 +69,10 @@ def weather(n: int, days: float, seed: int, start: str) -> np.ndarray:
 @dataclass
 class Watch:
     """The daemon's comfort watch over a two-point curve (``[curve]`` short_k, short_h,
-    raise_k; :mod:`impctl.daemon.curve_watch`): a room sensed more than ``short_k`` below the
-    setpoint for ``short_h`` raises both points by ``raise_k`` — the sensed room read at every
-    step, a raise made at the end of the simulated hour it falls in (the daemon raises at
+    raise_k; :mod:`impctl.daemon.curve_watch`): a room sensed on average more than
+    ``short_k`` below the setpoint over a window of ``short_h`` raises both points by
+    ``raise_k`` — the sensed room read at every step, a raise made at the end of the simulated
+    hour it falls in (the daemon raises at
     once, so this watch is a little slower); a curve raised to the owner's
     points (``owner``: flows at −15 and +15 °C [°C]), or past the write bounds, is the
     owner's again (the house's built-in curve) for the rest of the winter, as the daemon
@@ -85,6 +86,11 @@ class Watch:
     short_k: float = 0.5
     short_h: float = 1.0
     raise_k: float = 1.0
+    # the sliding window's state (the last short_h of shortfalls per house)
+    _buf: np.ndarray | None = field(default=None, repr=False)
+    _seen: np.ndarray | None = field(default=None, repr=False)
+    _total: np.ndarray | None = field(default=None, repr=False)
+    _step: int = 0
 
 
 def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:00", *,
@@ -105,7 +111,7 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
     if curve is not None:
         curve = (np.array(curve[0], float), np.array(curve[1], float))
         core.set_flow_curve(curve[0], curve[1], SETPOINT_C)
-    short_s, raises = np.zeros(n), np.zeros(n, int)
+    raises = np.zeros(n, int)
     per_gain = int(round(GAIN_STEP_S / dt_s))
     g_index = begin + pd.to_timedelta(np.arange(int(days * 86400 / GAIN_STEP_S)) * GAIN_STEP_S,
                                       unit="s")
@@ -139,7 +145,7 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
                                   outputs=keep, core=core)
             parts.append(part)
             if chunk < steps:
-                _look(watch, core, curve, part["t_air_sensed_c"], dt_s, short_s, raises)
+                _look(watch, core, curve, part["t_air_sensed_c"], dt_s, raises)
         run = parts[0] if len(parts) == 1 else {
             k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in keep}
         index = begin + pd.to_timedelta(t_end, unit="s")
@@ -173,16 +179,27 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
 
 
 def _look(watch: Watch, core: PlantCore, curve: tuple[np.ndarray, np.ndarray],
-          sensed: np.ndarray, dt_s: float, short_s: np.ndarray, raises: np.ndarray) -> None:
+          sensed: np.ndarray, dt_s: float, raises: np.ndarray) -> None:
     """The watch after an hour (:class:`Watch`): updates ``curve`` and the plant in place."""
     from impctl.heatpump.config import CURVE_FLOW_BOUNDS_C
 
     fa, fb = curve
     fire = np.zeros(len(fa), bool)
-    for row in np.asarray(sensed) < SETPOINT_C - watch.short_k:
-        short_s[:] = np.where(row, short_s + dt_s, 0.0)
-        now = row & (short_s >= watch.short_h * 3600.0) & watch.houses
-        short_s[now] = 0.0
+    # the daemon's rule: the sensed room's mean shortfall over the last short_h, sliding,
+    # once a whole window has been seen since the last raise
+    need = int(round(watch.short_h * 3600.0 / dt_s))
+    if watch._buf is None:
+        watch._buf = np.zeros((need, len(fa)))
+        watch._seen, watch._total = np.zeros(len(fa), int), np.zeros(len(fa))
+    buf, seen, total = watch._buf, watch._seen, watch._total
+    for row in SETPOINT_C - np.asarray(sensed):
+        slot = watch._step % need
+        total += row - buf[slot]
+        buf[slot] = row
+        watch._step += 1
+        seen += 1
+        now = (seen >= need) & (total / need > watch.short_k) & watch.houses
+        seen[now], total[now], buf[:, now] = 0, 0.0, 0.0  # a new window after a raise
         fire |= now
     if not fire.any():
         return
