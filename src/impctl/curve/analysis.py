@@ -97,10 +97,9 @@ def analyse(rows: pd.DataFrame, fit: dict | None = None, *, setpoint_c: float | 
         notes.append(f"the heat pump's electricity (p_el_w) is not recorded: its efficiency is "
                      f"ASSUMED ({cop.eta:.2f} of the ideal), so is the saving in kWh")
     cold, total, excess = _room_hours(rows, sp)
-    at = need.anchor_t_out_c if need.anchor_t_out_c is not None else 0.0
     savings = (season_savings(need, cop, running.line, recommended, climate, sp, rng,
                               room_excess_k=excess,
-                              need_at_anchor_c=float(np.interp(at, curve.t_out_c,
+                              need_at_anchor_c=float(np.interp(anchor, curve.t_out_c,
                                                                curve.central_c)))
                if running is not None else None)
     if climate.source == "assumed":
