@@ -82,7 +82,7 @@ def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
 
 #: Starts in the whole prior box where the classes narrow it: that fit only has to say whether
 #: the data contradict the classes (the likelihood-ratio test). Against as many starts as the
-#: class box (4), paired on 300 held-out households: the same medians within their CIs, the
+#: class box (then 4), paired on 300 held-out households: the same medians within their CIs, the
 #: same coverage and rejections, 10 % less CPU in a classifier fleet (decision record 0012).
 PRIOR_STARTS = 2
 
