@@ -43,7 +43,7 @@ def _fit(nights) -> dict:
     # the test was written: a fit of three nights has optima within 0.2 χ² of each other whose
     # τ half-widths differ up to 2.5-fold, and the starts decide which one a refit ends in
     # (with two, the constrained night's refit ends 0.19 χ² higher, the normal night's 0.14
-    # lower) — the ranking of the nights' information is not what is tested there.
+    # lower) — which of those optima the starts find is not what this test is about.
     fit = NightFit(ach_vent=0.0, ach_infl=0.01, sensor_offsets_k=(0.0, 0.0), meter_error=0.0,
                    night_gain_sd_w=0.0, structure_share=False, model_error=None,
                    prior=None, n_starts=4).fit(nights)
