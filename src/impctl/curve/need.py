@@ -77,6 +77,13 @@ class NeedUnknown(ValueError):
     """The inputs do not give the heat need (the message says what is missing)."""
 
 
+def heat_w(hlc_w_per_k, gain_w, setpoint_c, t_out_c):
+    """The heat a house of heat loss ``hlc_w_per_k`` [W/K] and other heat ``gain_w`` [W]
+    needs to hold ``setpoint_c`` at ``t_out_c`` [°C]: HLC·(T_set − T_out) − G, at least 0 [W]
+    (arrays broadcast: draws × hours)."""
+    return np.maximum(hlc_w_per_k * (setpoint_c - t_out_c) - gain_w, 0.0)
+
+
 @dataclass(frozen=True)
 class HeatNeed:
     """What the heat need rests on.
@@ -114,7 +121,7 @@ class HeatNeed:
 
     def q_w(self, setpoint_c: float, t_out_c: np.ndarray) -> np.ndarray:
         """Central heat need [W] at ``t_out_c`` (≥ 0)."""
-        return np.maximum(self.hlc_w_per_k * (setpoint_c - t_out_c) - self.gain_w, 0.0)
+        return heat_w(self.hlc_w_per_k, self.gain_w, setpoint_c, t_out_c)
 
     def draws(self, rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
         """``n`` draws of (HLC [W/K], G [W]) (module docstring)."""

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from .cop import CopModel, carnot_cop
-from .need import COLD_QUANTILE, GRID_T_OUT_C, HeatNeed, Line
+from .need import COLD_QUANTILE, GRID_T_OUT_C, HeatNeed, Line, heat_w
 
 #: Days of hourly outdoor temperatures that make a recorded season.
 RECORDED_MIN_DAYS = 90
@@ -144,8 +144,8 @@ def season_savings(need: HeatNeed, cop: CopModel, running: Line, recommended: Li
             ex_new = ex_run * float(np.clip(gap_new / gap_run, 0.0, 1.0))
 
     def electricity(hlc, gain, eta) -> tuple[np.ndarray, np.ndarray]:
-        q_run = np.maximum(hlc * (setpoint_c + ex_run - t) - gain, 0.0)
-        q_new = np.maximum(hlc * (setpoint_c + ex_new - t) - gain, 0.0)
+        q_run = heat_w(hlc, gain, setpoint_c + ex_run, t)
+        q_new = heat_w(hlc, gain, setpoint_c + ex_new, t)
         run = np.sum(q_run / carnot_cop(f_run, t, eta), axis=-1) / 1000.0
         new = np.sum(q_new / carnot_cop(f_new, t, eta), axis=-1) / 1000.0
         return run, new
