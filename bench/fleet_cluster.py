@@ -2,14 +2,16 @@
 on 1 and 2 worker processes, the ratio, and each worker's peak resident memory.
 
 Run:  .venv/bin/python bench/fleet_cluster.py [--households 448] [--data DIR]
-          [--workers 1,2] [--batch-size 64] [--model-dir DIR]
+          [--workers 1,2] [--batch-size 64] [--model-dir DIR] [--pin]
 
 For every worker count W, as on a real cluster: ``dask scheduler`` and ``dask worker
 --nworkers W --nthreads 1`` (``MALLOC_ARENA_MAX=2``, Dask's profiler off, as
 docs/how-to/fleet-dask.md starts them)
-are started as separate programs on loopback TCP, the fleet is fitted through the scheduler's
-address (:func:`impctl.fleet.fit_fleet` with ``scheduler=``, as ``impctl fleet fit
---scheduler`` does), and the programs are stopped. Measured per run:
+are started as separate programs on loopback TCP (with ``--pin``: one ``taskset -c I dask
+worker --nworkers 1`` per worker, each kept on a CPU of its own, as the how-to shows), the
+fleet is fitted through the scheduler's address (:func:`impctl.fleet.fit_fleet` with
+``scheduler=``, as ``impctl fleet fit --scheduler`` does), and the programs are stopped.
+Measured per run:
 
 * wall time of the fit, from the call to the last FLEET part (the plugin that loads torch in
   each worker included; the cluster's own start is not), households/s and households/hour;
@@ -63,7 +65,7 @@ def _free_port() -> int:
 
 
 @contextlib.contextmanager
-def cluster(workers: int, logs: Path):
+def cluster(workers: int, logs: Path, pin: bool = False):
     """Scheduler and worker programs, ready (all workers registered); stopped on exit."""
     from distributed import Client
 
@@ -77,11 +79,16 @@ def cluster(workers: int, logs: Path):
             [DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
             stdout=subprocess.DEVNULL, stderr=open(logs / "scheduler.log", "w"),  # noqa: SIM115
             env=env, start_new_session=True))
-        procs.append(subprocess.Popen(
-            [DASK, "worker", address, "--nworkers", str(workers), "--nthreads", "1",
-             "--no-dashboard", "--host", "127.0.0.1"],
-            stdout=subprocess.DEVNULL, stderr=open(logs / "worker.log", "w"),  # noqa: SIM115
-            env=env, start_new_session=True))
+        worker = [DASK, "worker", address, "--nthreads", "1", "--no-dashboard",
+                  "--host", "127.0.0.1"]
+        cpus = sorted(os.sched_getaffinity(0))
+        starts = ([["taskset", "-c", str(cpus[i % len(cpus)]), *worker, "--nworkers", "1"]
+                   for i in range(workers)] if pin else [[*worker, "--nworkers", str(workers)]])
+        for i, argv in enumerate(starts):
+            procs.append(subprocess.Popen(
+                argv, stdout=subprocess.DEVNULL,
+                stderr=open(logs / f"worker-{i}.log", "w"),  # noqa: SIM115
+                env=env, start_new_session=True))
         deadline = time.monotonic() + 180
         while True:
             try:
@@ -114,13 +121,13 @@ def _peak_rss_mb() -> float:
 
 
 def run(data: Path, workers: int, batch: int, model_dir: Path | None, work: Path,
-        turn: int = 0) -> dict:
+        turn: int = 0, pin: bool = False) -> dict:
     from distributed import Client
 
     from impctl.fleet import fit_fleet
 
     out = work / f"FLEET-{turn}-{workers}w.parquet"
-    with cluster(workers, work / f"logs-{turn}-{workers}w") as address:
+    with cluster(workers, work / f"logs-{turn}-{workers}w", pin) as address:
         load = os.getloadavg()[0]
         t0, t0_wall = time.perf_counter(), time.time()
         result = fit_fleet(data, out, scheduler=address, model_dir=model_dir,
@@ -148,6 +155,8 @@ def main() -> None:
                     help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--model-dir", type=Path, default=None,
                     help="classifiers [default: none — the whole prior ranges]")
+    ap.add_argument("--pin", action="store_true",
+                    help="one worker program per CPU under taskset (each on a CPU of its own)")
     args = ap.parse_args()
     if args.model_dir is None:
         os.environ["IMPCTL_MODEL_DIR"] = str(args.data / "no-models")  # → the prior ranges
@@ -162,7 +171,7 @@ def main() -> None:
     results = []
     with tempfile.TemporaryDirectory(prefix="fleet-cluster-") as tmp:
         for turn, w in enumerate(counts):
-            r = run(data, w, args.batch_size, args.model_dir, Path(tmp), turn)
+            r = run(data, w, args.batch_size, args.model_dir, Path(tmp), turn, args.pin)
             results.append(r)
             peaks = ", ".join(f"{mb:.0f}" for mb in r["peaks"].values())
             print(f"{r['workers']} worker(s): {r['households']} households {r['counts']} in "

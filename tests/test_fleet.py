@@ -231,6 +231,34 @@ def test_local_cluster_workers_run_with_two_malloc_arenas_and_no_profiler():
     assert os.getpid() not in pids.values()  # a separate process, not this one
 
 
+def _thread_cpus() -> list[list[int]]:
+    return [sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")]
+
+
+def test_local_cluster_workers_each_keep_to_a_cpu_of_their_own():
+    """With the fleet's plugin, each worker process of the default cluster runs every thread
+    on one CPU, a different one per worker (a batch's threads hand over hundreds of times a
+    second: on one core their caches stay warm); with more workers than CPUs nothing is
+    pinned. Read from the real worker processes."""
+    from impctl.fleet.run import _client
+    from impctl.fleet.worker import PRIOR, Preload, pin_to_cpu
+
+    allowed = sorted(os.sched_getaffinity(0))
+    assert pin_to_cpu(0, len(allowed) + 1) is None   # oversubscribed: left to the kernel
+    assert sorted(os.sched_getaffinity(0)) == allowed
+    n = min(2, len(allowed))
+    client, cluster = _client(None, n)
+    try:
+        client.register_plugin(Preload(PRIOR, len(cluster.workers)))
+        seen = client.run(_thread_cpus)
+    finally:
+        client.close()
+        cluster.close()
+    per_worker = [{tuple(c) for c in threads} for threads in seen.values()]
+    assert all(len(cpus) == 1 and len(next(iter(cpus))) == 1 for cpus in per_worker), seen
+    assert len({next(iter(cpus)) for cpus in per_worker}) == n, seen
+
+
 def test_bad_input_is_one_line_and_exit_2(tmp_path, fleet_dir):
     missing = run_cli("fleet", "fit", str(tmp_path / "nope"), "--out", str(tmp_path / "F"))
     assert missing.returncode == 2 and "no such file" in missing.stderr

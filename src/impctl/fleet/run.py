@@ -297,12 +297,14 @@ def fit_fleet(
         run.wall_s = time.perf_counter() - started
         return run
     settings = Settings(model_dir=resolved, tz=tz, options=options)
-    own = client is None
+    own, cluster = client is None, None
     if own:
         client, cluster = _client(scheduler, workers)
     futures = []
     try:
-        client.register_plugin(Preload(settings.model_dir))
+        # the workers of our own local cluster each keep to a CPU of their own
+        client.register_plugin(Preload(settings.model_dir, len(cluster.workers)
+                                       if cluster is not None else 0))
         run.workers = len(client.scheduler_info().get("workers", {}))
         run_id = new_run_id()
         manifest.runs.append(run_id)
