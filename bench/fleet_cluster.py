@@ -81,8 +81,8 @@ def cluster(workers: int, logs: Path, pin: bool = False):
             env=env, start_new_session=True))
         worker = [DASK, "worker", address, "--nthreads", "1", "--no-dashboard",
                   "--host", "127.0.0.1"]
-        cpus = sorted(os.sched_getaffinity(0))
-        starts = ([["taskset", "-c", str(cpus[i % len(cpus)]), *worker, "--nworkers", "1"]
+        cpus = sorted(os.sched_getaffinity(0))   # --pin: at most one worker per CPU (main)
+        starts = ([["taskset", "-c", str(cpus[i]), *worker, "--nworkers", "1"]
                    for i in range(workers)] if pin else [[*worker, "--nworkers", str(workers)]])
         for i, argv in enumerate(starts):
             procs.append(subprocess.Popen(
@@ -158,6 +158,9 @@ def main() -> None:
     ap.add_argument("--pin", action="store_true",
                     help="one worker program per CPU under taskset (each on a CPU of its own)")
     args = ap.parse_args()
+    if args.pin and max(int(w) for w in args.workers.split(",")) > len(os.sched_getaffinity(0)):
+        # two workers on one CPU is not what --pin measures (impctl pins nothing then either)
+        ap.error(f"--pin: at most {len(os.sched_getaffinity(0))} workers here (one per CPU)")
     if args.model_dir is None:
         os.environ["IMPCTL_MODEL_DIR"] = str(args.data / "no-models")  # → the prior ranges
     sys.path.insert(0, str(Path(__file__).parent))
