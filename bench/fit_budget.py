@@ -81,53 +81,18 @@ sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
 import fit  # noqa: E402  (bench/fit.py's protocol)
 from benchlib.fit_tables import rel, stats  # noqa: E402
+from benchlib.realism_groups import GROUPS, ablate  # noqa: E402
 from fit import VAL_SEED, run_step  # noqa: E402
 
 from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H  # noqa: E402
-from impctl.plant.params import CONTROL_IDEAL, RADIATORS, PlantParams  # noqa: E402
+from impctl.plant.params import PlantParams  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 
-#: Groups of realism and what each is when on (module docstring); order = table order.
-GROUPS = {
-    "meter_gain": "heat-meter gain error ±5 %",
-    "offsets": "sensor offsets T_air ±1 K, T_out ±2 K",
-    "gains": "internal + solar gains",
-    "noise": "room and outdoor sensor noise",
-    "sensors": "T_air quantisation and lag; meter noise, positive-only meter",
-    "air": "air + furniture capacity",
-    "emitter": "emitter capacity (radiators, screed, buffer)",
-    "control": "heat-pump control, cycling, modulation limits",
-    "defrost": "heat-pump defrosts",
-}
 #: What the nights cannot see (the floor row).
 UNSEEN = ("meter_gain", "offsets", "gains")
 DEFAULT_ROWS = (["none"] + [f"only:{g}" for g in GROUPS if g != "defrost"] + ["unseen", "all"]
                 + [f"but:{g}" for g in GROUPS])
-
-
-def ablate(full: PlantParams, off: set[str]) -> tuple[PlantParams, bool]:
-    """(realism options, gains on) with the groups in ``off`` at their ideal limit."""
-    p = full
-    if "meter_gain" in off:
-        p = p.with_section("sensors", meter_gain_error=0.0)
-    if "offsets" in off:
-        p = p.with_section("sensors", t_air_offset_k=0.0, t_out_offset_k=0.0)
-    if "noise" in off:
-        p = p.with_section("sensors", t_air_noise_k=0.0, t_out_noise_k=0.0)
-    if "sensors" in off:
-        p = p.with_section("sensors", t_air_quantum_k=0.0, t_air_lag_s=0.0, meter_noise=0.0,
-                           meter_positive_only=0)
-    if "air" in off:
-        p = p.with_section("capacities", air_j_per_m3k=0.0, furniture_j_per_m2k=0.0)
-    if "emitter" in off:
-        p = p.with_section("emitter", kind=RADIATORS, radiator_j_per_k_per_w=0.0,
-                           buffer_l_per_kw=0.0)
-    if "control" in off:
-        p = p.with_section("heat_pump", control=CONTROL_IDEAL)
-    if "defrost" in off:
-        p = p.with_section("heat_pump", defrost=0)
-    return p, "gains" not in off
 
 
 def groups_on(row: str) -> set[str]:
@@ -156,7 +121,8 @@ def fit_args(realism, night_gain_w: float | None = None,
                            model_dir=None, realism=realism, night_gain_w=night_gain_w,
                            night_gain_sd_w=night_gain_sd_w, stop_at_t_min=stop_at_t_min,
                            band_k=DEFAULT_BAND_K, valid_h=MIN_NIGHT_H, anticipate=True,
-                           prior="default", prior_weight=1.0)
+                           prior="default", prior_weight=1.0,
+                           sensor_offsets_k=None, meter_error=None)
 
 
 @contextmanager

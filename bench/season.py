@@ -17,6 +17,8 @@ reading that meter can do better than — the rest of the error is the model's.
     python bench/season.py --households 100 --imp constrained   # a campaign without normal nights
     python bench/season.py --households 100 --constrained-hours 3   # shorter constrained nights
     python bench/season.py --households 200 --declared-emitter   # the installer declares it
+    python bench/season.py --households 200 --owner-nights 28 --nights 90 --ideal drift
+        # the error budget: one group of realism at its ideal limit, the rest as drawn
     python bench/season.py --calibrate --households 150 --seed 31 --owner-nights 7,14,28,56 \
         --nights 90   # the intervals' scale and floor
     python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
@@ -52,6 +54,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one BLAS thread per worker: 2 c
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from benchlib.realism_groups import GAIN_PARTS, GROUPS, ablate  # noqa: E402
 from benchlib.season_figure import (  # noqa: E402
     SavedError,
     check_target,
@@ -72,6 +75,8 @@ _RAW = False
 _P_HOUSE = False
 _IMP = "all"
 _CONSTRAINED_H = None
+#: Groups ``--ideal`` takes: the IMP budget's, the gains split into their walk and the sun.
+IDEAL_GROUPS = [g for g in GROUPS if g != "gains"] + list(GAIN_PARTS)
 QUANTITIES = {"hlc_w_per_k": "HLC", "tau_h": "tau", "c_m_j_per_k": "C_m"}
 
 
@@ -226,6 +231,15 @@ def _owner_nights(text: str) -> list[int]:
     return ns
 
 
+def _ideal_groups(text: str) -> list[str]:
+    out = [g for g in text.split(",") if g]
+    bad = [g for g in out if g not in IDEAL_GROUPS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"{bad[0]!r} is not a group of realism: use "
+                                         + ", ".join(IDEAL_GROUPS))
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=200)
@@ -248,6 +262,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--declared-emitter", action="store_true",
                     help="every house's emitter declared, as an installer declares it "
                          "([fit] emitter): the plant's own kind")
+    ap.add_argument("--ideal", type=_ideal_groups, default=[], metavar="G[,G…]",
+                    help="these groups of realism at their ideal limit (the error budget; "
+                         f"{', '.join(IDEAL_GROUPS)}): benchlib/realism_groups.py")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None, help="write the rows and the summary here")
     ap.add_argument("--figure", default=None,
@@ -313,6 +330,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
         from impctl.plant.params import PlantParams
 
         params = PlantParams.ideal().with_section("gains", **vars(params.gains))
+    if args.ideal:
+        params, _ = ablate(params, set(args.ideal))
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
     _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed)
@@ -332,7 +351,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
                 print(f"  {i}/{len(jobs)} fits, {time.perf_counter() - t0:.0f} s",
                       file=sys.stderr, flush=True)
     command = f"$ python bench/season.py {' '.join(argv if argv is not None else sys.argv[1:])}"
-    saved_args = {**vars(args), "owner_nights": ",".join(str(k) for k in ns)}
+    saved_args = {**vars(args), "owner_nights": ",".join(str(k) for k in ns),
+                  "ideal": ",".join(args.ideal)}
     if args.calibrate:
         from benchlib.season_calibration import arrays, calibrate
 
@@ -344,8 +364,9 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
         return
     summaries = [summarize(rows, truth, k) for k in ns]
     print(command)
-    print(f"{n} households ({args.variant} plant, seed {args.seed}), season simulated in "
-          f"{sim_s:.0f} s; the fits: {args.workers} processes; IMP nights read: {args.imp}")
+    ideal = f", ideal: {', '.join(args.ideal)}" if args.ideal else ""
+    print(f"{n} households ({args.variant} plant{ideal}, seed {args.seed}), season simulated "
+          f"in {sim_s:.0f} s; the fits: {args.workers} processes; IMP nights read: {args.imp}")
     print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
           f"{'coverage':>8} {'half-width %':>12}")
     for sm in summaries:
