@@ -19,7 +19,7 @@ from impctl.imp.night import NightSamples
 from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import fit_season, record_from_nights
-from impctl.season.fit import fit_nights, signature
+from impctl.season.fit import fit_nights, format_season, signature
 
 TZ = "Europe/Ljubljana"
 
@@ -93,6 +93,35 @@ def test_the_season_fit_finds_the_house_and_its_interval_holds_it(season):
             assert fit.low[k] < fit.values[k] < fit.high[k]
             assert abs(fit.values[k] / float(true) - 1) < 0.35, (h, k, fit.values[k], true)
         assert abs(fit.values["hlc_w_per_k"] / float(truth["hlc_w_per_k"]) - 1) < 0.15
+
+
+def test_a_meter_that_reads_the_defrosts_draw_is_not_given_a_draw_of_its_own(season):
+    """A positive-only meter reads nothing while the heat pump defrosts: the draw per unit of
+    defrost time is fitted. A signed meter reads it (its defrost rows go negative), so the fit
+    must not add a draw on top: fitted, it trades with the HLC on the cold nights."""
+    nights = household_nights(season, 0)
+    rec = record_from_nights(nights)
+    assert rec.meter_reads_defrosts() is False
+    positive = fit_season(rec)
+    assert positive.beta["defrost_w"] > 100.0
+    assert positive.as_dict()["defrost_draw"]["draw_w"] == round(positive.beta["defrost_w"], 1)
+    assert any(line.startswith("  defrosts: the meter reads none") for line in
+               format_season(positive))
+
+    def signed(n: NightSamples) -> NightSamples:
+        if n.defrost_share is None:
+            return n
+        on = np.asarray(n.defrost_share) >= 0.5
+        return dataclasses.replace(n, q_hc_w=np.where(on, -1500.0, n.q_hc_w))
+
+    rec_signed = record_from_nights([signed(n) for n in nights])
+    assert rec_signed.meter_reads_defrosts() is True
+    fit = fit_season(rec_signed)
+    assert fit.beta["defrost_w"] == 0.0
+    assert fit.as_dict()["defrost_draw"] == {"source": "measured: the heat meter reads it"}
+    assert np.isfinite(fit.values["hlc_w_per_k"])
+    no_defrost = dataclasses.replace(rec, defrost=np.zeros(rec.n))
+    assert no_defrost.meter_reads_defrosts() is None
 
 
 def test_too_few_owner_nights_are_said_not_fitted(season):

@@ -94,6 +94,9 @@ class SeasonFit:
     emitter_declared : True when the emitter was declared (known), not read from the water
     warm_start : the search started only from an earlier fit's θ (``start``); False when it
         ran in full, also when a start was given and the full search had to decide
+    defrost_read : whether the heat meter read the heat the defrosts drew from the water
+        (:meth:`~.record.SeasonRecord.meter_reads_defrosts`: True, measured; False, the draw
+        estimated as ``beta["defrost_w"]``; None, no defrost recorded)
     """
 
     values: dict[str, float]
@@ -113,6 +116,7 @@ class SeasonFit:
     water_excess_k: float = float("nan")
     emitter_declared: bool = False
     warm_start: bool = False
+    defrost_read: bool | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -129,6 +133,10 @@ class SeasonFit:
             "baseline_signature_hlc_w_per_k": (None if not math.isfinite(
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
             "emitter": self.emitter_dict(),
+            **({} if self.defrost_read is None else {"defrost_draw": (
+                {"source": "measured: the heat meter reads it"} if self.defrost_read else
+                {"source": "estimated: the heat meter reads no heat drawn while defrosting",
+                 "draw_w": _num(round(self.beta.get("defrost_w", math.nan), 1))})}),
             "interval": "95 %: day-clustered sandwich, scaled, with a model-error floor, both "
                         "estimated on simulated seasons",
             # the search's own coordinates: a later fit of the same house starts from them
@@ -304,7 +312,8 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
-                     emitter_declared=emitter is not None, warm_start=start is not None)
+                     emitter_declared=emitter is not None, warm_start=start is not None,
+                     defrost_read=rec.meter_reads_defrosts())
 
 
 def signature(rec: SeasonRecord) -> float:
@@ -386,6 +395,9 @@ def format_season(fit: SeasonFit) -> list[str]:
         lines.append(f"  changed since {c.since_date}: heat loss {c.delta_hlc_w_k:+.0f} W/K "
                      f"(95 % {c.low_w_k:+.0f} – {c.high_w_k:+.0f}), {c.nights_after} owner "
                      "nights after it; the estimate above still reads the nights before it")
+    if fit.defrost_read is False:
+        lines.append(f"  defrosts: the meter reads none of the heat they draw; estimated at "
+                     f"{fit.beta.get('defrost_w', math.nan):.0f} W while defrosting")
     if fit.left_out_h:
         lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"
                                                for k, h in sorted(fit.left_out_h.items())))

@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..imp.protocol import Q_ON_W
+
 Array = NDArray[np.float64]
 
 #: Grid step of the record [s] (the gateway's owner rows).
@@ -91,6 +93,18 @@ class SeasonRecord:
     def per_block(self) -> int:
         """Grid steps per likelihood block."""
         return int(round(BLOCK_S / self.step_s))
+
+    def meter_reads_defrosts(self) -> bool | None:
+        """Whether the heat meter reads the heat a defrost draws from the water: True when a
+        step with a defrost reads below −:data:`~impctl.imp.protocol.Q_ON_W` (a signed meter
+        shows itself so), False when the record has defrosts and none of them does (a
+        positive-only meter, or one whose defrosts hide in steps of heating), None without a
+        defrost."""
+        on = self.defrost > 0
+        if not on.any():
+            return None
+        with np.errstate(invalid="ignore"):
+            return bool((self.q_hc_w[on] < -Q_ON_W).any())
 
     def segments(self) -> NDArray[np.int64]:
         """Segment number of each step: a new segment after a gap (a step with T_air, T_out or
