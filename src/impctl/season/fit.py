@@ -96,7 +96,7 @@ class SeasonFit:
         ran in full, also when a start was given and the full search had to decide
     defrost_read : whether the heat meter read the heat the defrosts drew from the water
         (:meth:`~.record.SeasonRecord.meter_reads_defrosts`: True, measured; False, the draw
-        estimated as ``beta["defrost_w"]``; None, no defrost recorded)
+        estimated, ``beta["defrost_w"]``; None, no defrost recorded)
     """
 
     values: dict[str, float]
@@ -133,10 +133,9 @@ class SeasonFit:
             "baseline_signature_hlc_w_per_k": (None if not math.isfinite(
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
             "emitter": self.emitter_dict(),
-            **({} if self.defrost_read is None else {"defrost_draw": (
-                {"source": "measured: the heat meter reads it"} if self.defrost_read else
-                {"source": "estimated: the heat meter reads no heat drawn while defrosting",
-                 "draw_w": _num(round(self.beta.get("defrost_w", math.nan), 1))})}),
+            **({} if self.defrost_read is None else {"defrost_draw": {
+                "source": "measured: the heat meter reads it" if self.defrost_read else
+                "estimated: the heat meter reads no heat drawn while defrosting"}}),
             "interval": "95 %: day-clustered sandwich, scaled, with a model-error floor, both "
                         "estimated on simulated seasons",
             # the search's own coordinates: a later fit of the same house starts from them
@@ -396,8 +395,8 @@ def format_season(fit: SeasonFit) -> list[str]:
                      f"(95 % {c.low_w_k:+.0f} – {c.high_w_k:+.0f}), {c.nights_after} owner "
                      "nights after it; the estimate above still reads the nights before it")
     if fit.defrost_read is False:
-        lines.append(f"  defrosts: the meter reads none of the heat they draw; estimated at "
-                     f"{fit.beta.get('defrost_w', math.nan):.0f} W while defrosting")
+        lines.append("  defrosts: the meter reads none of the heat they draw from the water; "
+                     "the draw is estimated")
     if fit.left_out_h:
         lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"
                                                for k, h in sorted(fit.left_out_h.items())))
