@@ -122,6 +122,12 @@ def test_a_meter_that_reads_the_defrosts_draw_is_not_given_a_draw_of_its_own(sea
     assert np.isfinite(fit.values["hlc_w_per_k"])
     no_defrost = dataclasses.replace(rec, defrost=np.zeros(rec.n))
     assert no_defrost.meter_reads_defrosts() is None
+    # one odd negative reading in a defrost step does not make the meter signed
+    on = np.flatnonzero(rec.defrost > 0)
+    assert len(on) >= 20
+    glitch = dataclasses.replace(rec, q_hc_w=np.where(np.arange(rec.n) == on[0], -500.0,
+                                                      rec.q_hc_w))
+    assert glitch.meter_reads_defrosts() is False
 
 
 def test_too_few_owner_nights_are_said_not_fitted(season):

@@ -35,6 +35,9 @@ DHW_AFTER_S = 3600.0
 #: interpolated across it (an IMP night's pre-heat, a restart) [s]; a longer one starts a new
 #: stretch with a heat store of its own.
 MAX_BRIDGE_S = 4 * 3600.0
+#: Share of the defrost steps that must read negative heat for the meter to count as signed
+#: [-] (:meth:`SeasonRecord.meter_reads_defrosts`).
+SIGNED_SHARE = 0.1
 #: Local hours of the night level of internal gains [h] (people asleep).
 NIGHT_HOURS = (22.0, 7.0)
 #: Local hours of daylight for the solar gains [h] (a winter day) [assumption].
@@ -95,16 +98,19 @@ class SeasonRecord:
         return int(round(BLOCK_S / self.step_s))
 
     def meter_reads_defrosts(self) -> bool | None:
-        """Whether the heat meter reads the heat a defrost draws from the water: True when a
-        step with a defrost reads below −:data:`~impctl.imp.protocol.Q_ON_W` (a signed meter
-        shows itself so), False when the record has defrosts and none of them does (a
-        positive-only meter, or one whose defrosts hide in steps of heating), None without a
+        """Whether the heat meter reads the heat a defrost draws from the water: True when
+        steps with a defrost read below −:data:`~impctl.imp.protocol.Q_ON_W` — at least two of
+        them and :data:`SIGNED_SHARE` of all (a signed meter shows itself so: 41–88 % of its
+        defrost steps on the realistic plant; one odd reading does not make a meter signed) —,
+        False when the record has defrosts and too few such steps (a positive-only meter, or
+        one whose defrosts hide in steps of heating: the draw is then fitted), None without a
         defrost."""
         on = self.defrost > 0
         if not on.any():
             return None
         with np.errstate(invalid="ignore"):
-            return bool((self.q_hc_w[on] < -Q_ON_W).any())
+            negative = int((self.q_hc_w[on] < -Q_ON_W).sum())
+        return negative >= 2 and negative >= SIGNED_SHARE * int(on.sum())
 
     def segments(self) -> NDArray[np.int64]:
         """Segment number of each step: a new segment after a gap (a step with T_air, T_out or
