@@ -312,7 +312,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
                      emitter_declared=emitter is not None, warm_start=start is not None,
-                     defrost_read=rec.meter_reads_defrosts())
+                     defrost_read=d.defrost_read)
 
 
 def signature(rec: SeasonRecord) -> float:

@@ -126,6 +126,7 @@ class Design:
     dt_b: Array         # (nu,) block mean of T_air − T_out at the usable blocks [K]
     ta_b: Array         # (nu,) block mean of T_air [°C]
     defrost: Array      # the defrost share the draw D multiplies (zeros: the meter reads it)
+    defrost_read: bool | None  # the meter reads the draw (SeasonRecord.meter_reads_defrosts)
     # the filtered series of the last few θ: a finite-difference step moves one coordinate of
     # θ, so most of its filters are the base point's (a third of the search's work)
     filtered: dict = field(default_factory=dict, repr=False, compare=False)
@@ -186,10 +187,11 @@ class Design:
             p = mean(rec.p_house_w)
             if blocks.any() and np.isfinite(p[blocks]).mean() >= P_HOUSE_MIN_SHARE:
                 shapes[-1] = np.where(np.isfinite(p), p, np.nanmean(p[blocks]))
+        read = rec.meter_reads_defrosts()
         return cls(rec, seg, _runs(seg), aligned, _runs(sb), ta, to, blocks,
                    np.ascontiguousarray(shapes), n_days, len(knots),
                    mean(ta - to)[blocks], mean(ta)[blocks],
-                   np.zeros(rec.n) if rec.meter_reads_defrosts() else np.nan_to_num(rec.defrost))
+                   np.zeros(rec.n) if read else np.nan_to_num(rec.defrost), read)
 
     def block_day(self) -> NDArray[np.int64]:
         """Local day of each usable block (the clusters of the interval)."""
