@@ -334,7 +334,10 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
         params, _ = ablate(params, set(args.ideal))
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
-    _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights), seed=args.seed)
+    # the season's own sensors (the flow and return pair) go with the plant's
+    water = {"water_offset_k": 0.0, "flow_wander": 0.0} if "sensors" in args.ideal else {}
+    _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights, **water),
+                              seed=args.seed)
     sim_s = time.perf_counter() - t0
     truth = {"hlc_w_per_k": np.asarray(houses.hlc_w_per_k, float),
              "tau_h": np.asarray(houses.tau_h, float),

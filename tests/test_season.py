@@ -19,6 +19,7 @@ from impctl.imp.night import NightSamples
 from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import fit_season, record_from_nights
+from impctl.season.defrost import read_draw
 from impctl.season.fit import fit_nights, format_season, signature
 
 TZ = "Europe/Ljubljana"
@@ -99,14 +100,16 @@ def test_a_meter_that_reads_the_defrosts_draw_is_not_given_a_draw_of_its_own(sea
     """A positive-only meter reads nothing while the heat pump defrosts: the draw per unit of
     defrost time is fitted. A signed meter reads it (its defrost rows go negative), so the fit
     must not add a draw on top: fitted, it trades with the HLC on the cold nights."""
-    nights = household_nights(season, 0)
+    # without the flow and return temperatures nothing else reads the draw
+    nights = [dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+              for n in household_nights(season, 0)]
     rec = record_from_nights(nights)
     assert rec.meter_reads_defrosts() is False
     positive = fit_season(rec)
     assert positive.beta["defrost_w"] > 100.0
     assert positive.as_dict()["defrost_draw"]["source"].startswith("estimated")
-    assert any(line.startswith("  defrosts: the meter reads none") for line in
-               format_season(positive))
+    assert any(line.startswith("  defrosts: the heat they draw from the water is estimated")
+               for line in format_season(positive))
 
     def signed(n: NightSamples) -> NightSamples:
         if n.defrost_share is None:
@@ -128,6 +131,45 @@ def test_a_meter_that_reads_the_defrosts_draw_is_not_given_a_draw_of_its_own(sea
     glitch = dataclasses.replace(rec, q_hc_w=np.where(np.arange(rec.n) == on[0], -500.0,
                                                       rec.q_hc_w))
     assert glitch.meter_reads_defrosts() is False
+
+
+def test_a_positive_only_meter_s_defrosts_are_read_from_the_flow_return_spread(season):
+    """The heat pump's flow and return sensors see the defrost's draw the meter does not read:
+    the defrost steps get ṁc·(spread − offset), ṁc from the meter's heating around them. On
+    the plant (sensor offsets of their own, a flow that wanders from day to day) that is the
+    heat the heat pump put in, draws included, on the meter's scale; no draw is fitted on top."""
+    h = 0
+    nights = household_nights(season, h)
+    rec = record_from_nights(nights)
+    assert rec.defrost_from_spread and rec.meter_reads_defrosts() is True
+    # the same rows with the heat pump's true heat on the meter's scale, nothing rebuilt
+    gain = 1.0 + float(np.asarray(season.params.sensors.meter_gain_error)[h])
+    true_q = {n.start: gain * season.q_true_w[np.searchsorted(season.index, n.start)
+                                              + (n.time_s // season.sample_s).astype(int), h]
+              for n in nights}
+    truth = record_from_nights([dataclasses.replace(n, q_hc_w=true_q[n.start], t_flow_c=None,
+                                                    t_return_c=None) for n in nights])
+    on = rec.defrost > 0
+    assert on.sum() >= 20
+    plain = record_from_nights([dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+                                for n in nights])
+    drawn = truth.q_hc_w[on].sum()
+    assert drawn < plain.q_hc_w[on].sum() - 200.0 * on.sum()  # the meter misses the draws
+    assert abs(rec.q_hc_w[on].sum() - drawn) < 0.15 * abs(plain.q_hc_w[on].sum() - drawn)
+    fit = fit_season(rec)
+    assert fit.beta["defrost_w"] == 0.0
+    assert fit.as_dict()["defrost_draw"]["source"].startswith(
+        "measured: read from the flow–return spread")
+    assert any(line.startswith("  defrosts: the heat they draw from the water is measured")
+               for line in format_season(fit))
+    # a defrost step without its spread is missing, not the meter's reading without the draw
+    first = np.flatnonzero(on)[0]
+    spread = rec.t_spread_k.copy()
+    spread[first] = np.nan
+    again = read_draw(dataclasses.replace(plain, t_spread_k=spread,
+                                          t_water_c=rec.t_water_c))
+    assert again.defrost_from_spread and np.isnan(again.q_hc_w[first])
+    assert np.isfinite(again.q_hc_w[np.flatnonzero(on)[1:]]).all()
 
 
 def test_too_few_owner_nights_are_said_not_fitted(season):

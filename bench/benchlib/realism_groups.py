@@ -19,7 +19,8 @@ GROUPS = {
     "offsets": "sensor offsets T_air ±1 K, T_out ±2 K",
     "gains": "internal + solar gains",
     "noise": "room and outdoor sensor noise",
-    "sensors": "T_air quantisation and lag; meter noise, positive-only meter",
+    "sensors": "T_air quantisation and lag; meter noise, positive-only meter (the season: "
+               "flow and return sensor offsets, the flow's wander)",
     "air": "air + furniture capacity",
     "emitter": "emitter capacity (radiators, screed, buffer)",
     "control": "heat-pump control, cycling, modulation limits",

@@ -94,9 +94,11 @@ class SeasonFit:
     emitter_declared : True when the emitter was declared (known), not read from the water
     warm_start : the search started only from an earlier fit's θ (``start``); False when it
         ran in full, also when a start was given and the full search had to decide
-    defrost_read : whether the heat meter read the heat the defrosts drew from the water
+    defrost_read : whether the record holds the heat the defrosts drew from the water
         (:meth:`~.record.SeasonRecord.meter_reads_defrosts`: True, measured; False, the draw
         estimated, ``beta["defrost_w"]``; None, no defrost recorded)
+    defrost_from_spread : that heat was read from the flow–return spread, the meter reading
+        positive heat only (:mod:`.defrost`)
     """
 
     values: dict[str, float]
@@ -117,6 +119,19 @@ class SeasonFit:
     emitter_declared: bool = False
     warm_start: bool = False
     defrost_read: bool | None = None
+    defrost_from_spread: bool = False
+
+    def defrost_source(self) -> str:
+        """Where the heat the defrosts drew from the water comes from (known, measured,
+        estimated); "" without a defrost."""
+        if self.defrost_read is None:
+            return ""
+        if not self.defrost_read:
+            return "estimated: the heat meter reads no heat drawn while defrosting"
+        if self.defrost_from_spread:
+            return ("measured: read from the flow–return spread, scaled by the meter's "
+                    "heating around each defrost (the meter reads positive heat only)")
+        return "measured: the heat meter reads it"
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -134,8 +149,7 @@ class SeasonFit:
                 self.signature_hlc_w_per_k) else self.signature_hlc_w_per_k),
             "emitter": self.emitter_dict(),
             **({} if self.defrost_read is None else {"defrost_draw": {
-                "source": "measured: the heat meter reads it" if self.defrost_read else
-                "estimated: the heat meter reads no heat drawn while defrosting"}}),
+                "source": self.defrost_source()}}),
             "interval": "95 %: day-clustered sandwich, scaled, with a model-error floor, both "
                         "estimated on simulated seasons",
             # the search's own coordinates: a later fit of the same house starts from them
@@ -312,7 +326,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
                      emitter_declared=emitter is not None, warm_start=start is not None,
-                     defrost_read=d.defrost_read)
+                     defrost_read=d.defrost_read, defrost_from_spread=rec.defrost_from_spread)
 
 
 def signature(rec: SeasonRecord) -> float:
@@ -394,9 +408,8 @@ def format_season(fit: SeasonFit) -> list[str]:
         lines.append(f"  changed since {c.since_date}: heat loss {c.delta_hlc_w_k:+.0f} W/K "
                      f"(95 % {c.low_w_k:+.0f} – {c.high_w_k:+.0f}), {c.nights_after} owner "
                      "nights after it; the estimate above still reads the nights before it")
-    if fit.defrost_read is False:
-        lines.append("  defrosts: the meter reads none of the heat they draw from the water; "
-                     "the draw is estimated")
+    if fit.defrost_read is not None and not (fit.defrost_read and not fit.defrost_from_spread):
+        lines.append(f"  defrosts: the heat they draw from the water is {fit.defrost_source()}")
     if fit.left_out_h:
         lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"
                                                for k, h in sorted(fit.left_out_h.items())))

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ..imp.night import NightSamples
+from .defrost import read_draw
 from .record import BLOCK_S, STEP_S, SeasonRecord, exclude_after
 
 #: After a hot-water charge the emitter refills: steps left out [s].
@@ -75,10 +76,13 @@ def record_from_nights(nights: Sequence[NightSamples],
 
     t_air_r, t_out_r, q_r = rows("t_air_c"), rows("t_out_c"), rows("q_hc_w")
     ok = np.isfinite(t_air_r) & np.isfinite(t_out_r) & np.isfinite(q_r)
-    water_r = np.concatenate([
-        (np.asarray(n.t_flow_c, float) + np.asarray(n.t_return_c, float)) / 2.0
-        if n.t_flow_c is not None and n.t_return_c is not None
-        else np.full(len(n.time_s), np.nan) for n in ns])
+    def water(n: NightSamples, sign: float) -> np.ndarray:
+        if n.t_flow_c is None or n.t_return_c is None:
+            return np.full(len(n.time_s), np.nan)
+        return np.asarray(n.t_flow_c, float) + sign * np.asarray(n.t_return_c, float)
+
+    water_r = np.concatenate([water(n, 1.0) for n in ns]) / 2.0
+    spread_r = np.concatenate([water(n, -1.0) for n in ns])
     # the household electricity: the rows' own readings (when in the day its heat falls),
     # else the night's one value on every row
     p_r = np.concatenate([
@@ -94,6 +98,7 @@ def record_from_nights(nights: Sequence[NightSamples],
             "q_hc": binned(q_r, ok), "n": binned(None, ok)}
     for name, count, x in (("defrost", "n_def", rows("defrost_share")),
                            ("dhw", "n_dhw", rows("dhw")), ("water", "n_w", water_r),
+                           ("spread", "n_s", spread_r),
                            ("p_house", "n_p", p_r)):
         good = ok & np.isfinite(x)
         sums[name], sums[count] = binned(x, good), binned(None, good)
@@ -114,8 +119,9 @@ def record_from_nights(nights: Sequence[NightSamples],
         defrost = np.where(sums["n_def"] > 0, sums["defrost"] / sums["n_def"], 0.0)
         dhw = np.where(sums["n_dhw"] > 0, sums["dhw"] / sums["n_dhw"], 0.0)
         p_house = np.where(sums["n_p"] > 0, sums["p_house"] / sums["n_p"], np.nan)
-        water = (np.where(sums["n_w"] > 0, sums["water"] / sums["n_w"], np.nan)
-                 if sums["n_w"].any() else np.zeros(0))
+        water, spread = ((np.where(sums[c] > 0, sums[x] / sums[c], np.nan)
+                          if sums[c].any() else np.zeros(0))
+                         for x, c in (("water", "n_w"), ("spread", "n_s")))
     t_air[dropped] = t_out[dropped] = q_hc[dropped] = np.nan
     excluded = np.full(n_steps, "", dtype=object)
     excluded[exclude_after(dhw > DHW_SHARE, int(DHW_AFTER_S // step_s))] = "hot water"
@@ -129,11 +135,11 @@ def record_from_nights(nights: Sequence[NightSamples],
     hour = (of_day // 3600 + (of_day % 3600 // 60) / 60.0) + step_s / 7200.0
     day = local_s // 86400 - local_s[0] // 86400
     if len(water):
-        water[dropped] = np.nan
+        water[dropped] = spread[dropped] = np.nan
     rec = SeasonRecord(t0, step_s, hour, day, t_air, t_out, q_hc, defrost,
-                       kind.astype(str), night_id, excluded, p_house, water)
+                       kind.astype(str), night_id, excluded, p_house, water, spread)
     _settle(rec, int(SETTLE_S // step_s))
-    return rec
+    return read_draw(rec)
 
 
 def _settle(rec: SeasonRecord, steps: int) -> None:

@@ -71,6 +71,10 @@ class SeasonRecord:
     p_house_w : household electricity, step mean [W] (NaN when not measured)
     t_water_c : the heating water's mean temperature, (flow + return)/2, step mean [°C]
         (NaN where the heat pump did not report both; empty when no row did)
+    t_spread_k : the flow–return spread, flow − return, step mean [K] (NaN and empty as
+        ``t_water_c``)
+    defrost_from_spread : the defrost steps' heat was read from the spread, the meter reading
+        positive heat only (:mod:`.defrost`)
     """
 
     t0_s: float
@@ -86,6 +90,8 @@ class SeasonRecord:
     excluded: NDArray[np.object_]
     p_house_w: Array = field(default_factory=lambda: np.zeros(0))
     t_water_c: Array = field(default_factory=lambda: np.zeros(0))
+    t_spread_k: Array = field(default_factory=lambda: np.zeros(0))
+    defrost_from_spread: bool = False
 
     @property
     def n(self) -> int:
@@ -104,10 +110,13 @@ class SeasonRecord:
         defrost steps on the realistic plant; one odd reading does not make a meter signed) —,
         False when the record has defrosts and too few such steps (a positive-only meter, or
         one whose defrosts hide in steps of heating: the draw is then fitted), None without a
-        defrost."""
+        defrost. True as well once the defrost steps' heat was read from the flow–return
+        spread (:mod:`.defrost`)."""
         on = self.defrost > 0
         if not on.any():
             return None
+        if self.defrost_from_spread:
+            return True
         with np.errstate(invalid="ignore"):
             negative = int((self.q_hc_w[on] < -Q_ON_W).sum())
         return negative >= 2 and negative >= SIGNED_SHARE * int(on.sum())

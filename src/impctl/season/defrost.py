@@ -1,0 +1,77 @@
+"""The heat a defrost draws from the heating water, read from the flow–return spread.
+
+A defrost runs the heat pump backwards: it takes heat out of the heating water to melt the ice
+on its outdoor coil. A heat meter that integrates positive heat only reads nothing then, and
+the season model would have to fit the draw — a draw that trades with the HLC, because the heat
+pump defrosts most on cold days. The heat pump's own flow and return sensors still see it: the
+water leaves colder than it came back. The heat is Q = ṁc·(spread − offset) (the heat
+meter's own formula), and :func:`read_draw` puts it on the record's defrost steps:
+
+* the offset of the sensor pair [K] is the median spread of the steps with no heat read
+  (|Q| < :data:`~impctl.imp.protocol.Q_ON_W`), no defrost and no hot water: water that runs
+  through the heat pump unheated has no spread;
+* ṁc [W/K] is read from the steps of heating within :data:`LOCAL_S` of each defrost, the sum
+  of their heat over the sum of their spread less the offset — on the meter's own scale, its
+  gain error included, and following a circulation pump whose flow changes from day to day;
+  the season's own ratio where fewer than :data:`MIN_LOCAL` such steps are near;
+* each defrost step's heat is ṁc·(spread − offset): the step's signed mean, its heating and
+  its draw together.
+
+Nothing is rebuilt where the meter reads the draws itself
+(:meth:`~.record.SeasonRecord.meter_reads_defrosts`), where the record has no spread, or where
+too few steps tell the offset or ṁc (:data:`MIN_STEPS`): the draw is then fitted, an estimate.
+A defrost step without a spread reading is then left missing, not kept as a reading without its
+draw. Units: W, K, s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..imp.protocol import Q_ON_W
+from .record import SeasonRecord
+
+#: Steps of heating around a defrost ṁc is read from: this far either side [s].
+LOCAL_S = 3 * 3600.0
+#: Fewest steps of heating near a defrost for a local ṁc; else the season's.
+MIN_LOCAL = 3
+#: Fewest steps without heat (the offset) and with heating (ṁc) in the whole record.
+MIN_STEPS = 12
+#: A step counts as heating from this heat [W] and this spread above the offset [K]: a small
+#: spread divides into noise.
+HEAT_MIN_W = 3 * Q_ON_W
+MIN_SPREAD_K = 0.5
+
+
+def read_draw(rec: SeasonRecord) -> SeasonRecord:
+    """``rec`` with its defrost steps' heat read from the flow–return spread (module
+    docstring) where its meter reads positive heat only; ``rec`` itself, unchanged, where the
+    meter reads the draw, nothing defrosted, or the spread does not tell it."""
+    if rec.meter_reads_defrosts() is not False or len(rec.t_spread_k) != rec.n:
+        return rec
+    q, spread = rec.q_hc_w, rec.t_spread_k
+    on = rec.defrost > 0
+    # hot-water steps are excluded already; their spread is the tank's circuit
+    plain = ~on & (rec.excluded != "hot water") & np.isfinite(q) & np.isfinite(spread)
+    idle = plain & (np.abs(q) < Q_ON_W)
+    if idle.sum() < MIN_STEPS:
+        return rec
+    offset = float(np.median(spread[idle]))
+    x = spread - offset
+    heat = plain & (q >= HEAT_MIN_W) & (x >= MIN_SPREAD_K)
+    if heat.sum() < MIN_STEPS:
+        return rec
+    # sums of the heating steps' heat and spread within LOCAL_S of every step
+    reach = int(LOCAL_S // rec.step_s)
+    cum = [np.r_[0.0, np.cumsum(np.where(heat, v, 0.0))] for v in (q, x, np.ones(rec.n))]
+    idx = np.flatnonzero(on)
+    lo, hi = np.maximum(idx - reach, 0), np.minimum(idx + reach + 1, rec.n)
+    q_near, x_near, n_near = (c[hi] - c[lo] for c in cum)
+    season = float(q[heat].sum() / x[heat].sum())
+    mdot_c = np.where(n_near >= MIN_LOCAL, q_near / np.where(x_near > 0, x_near, 1.0), season)
+    out = q.copy()
+    # without a spread reading the step's heat is unknown: missing (NaN), never the meter's 0
+    out[idx] = mdot_c * x[idx]
+    return replace(rec, q_hc_w=out, defrost_from_spread=True)
