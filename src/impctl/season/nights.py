@@ -12,7 +12,9 @@ why, is said per step:
 * the first half hour of each stretch without gaps (the model's filters start there).
 
 An owner's changed setpoint, a night with the heating off and an IMP night's own steps stay in:
-the model is driven by the measured room temperature, whatever moved it. Units: °C, W, s.
+the model is driven by the measured room temperature, whatever moved it. Where the meter reads
+positive heat only, the defrost steps' heat is read from the flow–return spread
+(:mod:`.defrost`). Units: °C, W, s.
 """
 
 from __future__ import annotations
