@@ -335,7 +335,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     t0 = time.perf_counter()
     print(f"simulating {n} households × {args.nights} nights …", file=sys.stderr, flush=True)
     # the season's own sensors (the flow and return pair) go with the plant's
-    water = {"water_offset_k": 0.0, "flow_wander": 0.0} if "sensors" in args.ideal else {}
+    water = ({"water_offset_k": 0.0, "flow_wander": 0.0, "water_lag_s": 0.0}
+             if "sensors" in args.ideal else {})
     _SEASON = simulate_season(houses, params, SeasonConfig(nights=args.nights, **water),
                               seed=args.seed)
     sim_s = time.perf_counter() - t0

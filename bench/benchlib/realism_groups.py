@@ -20,7 +20,7 @@ GROUPS = {
     "gains": "internal + solar gains",
     "noise": "room and outdoor sensor noise",
     "sensors": "T_air quantisation and lag; meter noise, positive-only meter (the season: "
-               "flow and return sensor offsets, the flow's wander)",
+               "flow and return sensors' offsets and lag, the flow's wander)",
     "air": "air + furniture capacity",
     "emitter": "emitter capacity (radiators, screed, buffer)",
     "control": "heat-pump control, cycling, modulation limits",

@@ -101,6 +101,9 @@ class SeasonConfig:
     #: the circulation's flow from day to day: SD of its log, an AR(1) over days (variable-
     #: speed circulators, valves) [-] [own choice]
     flow_wander: float = 0.1
+    #: the flow and return sensors' time constant [s] [own choice: in a pocket or clamped on
+    #: the pipe, 0.5–3 min]
+    water_lag_s: float = 120.0
     climate: WinterClimate = field(default_factory=lambda: WinterClimate(mean_c=0.0))
 
     def slots(self) -> list[str]:
@@ -305,6 +308,9 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
     want = frozenset({"t_air_sensed_c", "t_out_sensed_c", "heat_meter_w", "t_air_c",
                       "t_mass_c", "defrost", "heat_pump_w", "t_supply_c", "t_return_c"})
     sensed_air = core.sensed_air
+    # the flow and return sensors' own lag (first order, exact per plant step)
+    a_water = 1.0 - np.exp(-STEP_S / cfg.water_lag_s) if cfg.water_lag_s > 0 else 1.0
+    sensed_water: list[np.ndarray] = []
     for i in range(n_steps):
         if i in changes:
             core.network = step_network(core.network, np.where(changes[i], step_w, 0.0))
@@ -365,8 +371,13 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
             if q == 0:
                 rec["setpoint_c"][r] = np.where(enabled, sp_c, np.nan)
             rec["q_hc_w"][r] += out["heat_meter_w"] / stride
-            rec["t_flow_c"][r] += out["t_supply_c"] / stride
-            rec["t_return_c"][r] += out["t_return_c"] / stride
+            if not sensed_water:
+                sensed_water = [out["t_supply_c"].copy(), out["t_return_c"].copy()]
+            for sensed, true in zip(sensed_water, (out["t_supply_c"], out["t_return_c"]),
+                                    strict=True):
+                sensed += a_water * (true - sensed)
+            rec["t_flow_c"][r] += sensed_water[0] / stride
+            rec["t_return_c"][r] += sensed_water[1] / stride
             rec["q_true_w"][r] += out["heat_pump_w"] / stride
             rec["gains_w"][r] += (g_int[i] + g_sol[i]) / stride
             rec["p_house_w"][r] += g_int[i] * meter / stride
