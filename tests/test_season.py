@@ -215,6 +215,10 @@ def test_impctl_fit_reports_the_season_beside_the_imp_fit(tmp_path, season):
     assert season_json["emitter"]["kind"] == "underfloor" == expected.emitter
     assert season_json["emitter"]["source"].startswith("measured")
     assert "emitter: underfloor (measured" in res.stdout
+    # the defrosts' draw, read from the same columns where the meter reads positive heat only
+    assert season_json["defrost_draw"]["source"].startswith(
+        "measured: read from the flow–return spread")
+    assert "defrosts: the heat they draw from the water is measured" in res.stdout
 
 
 def test_the_convergence_curve_is_the_fit_of_the_first_nights(season):
