@@ -98,6 +98,9 @@ def test_a_household_with_a_changed_imp_night_is_fitted_afresh(mornings):
     # the file declares its emitter (known): the season model's bound is the installer's
     assert (a["season_emitter"], a["season_emitter_source"]) == ("underfloor", "measured")
     assert (b["season_emitter"], b["season_emitter_source"]) == ("underfloor", "declared")
+    # the positive-only meter's defrosts, read from the files' flow and return temperatures
+    assert a["season_defrost_draw_source"] == b["season_defrost_draw_source"] \
+        == "flow-return spread"
 
 
 def test_the_same_nights_again_keep_the_whole_row(mornings, client):

@@ -26,7 +26,9 @@ season model of the owner and IMP nights together, :mod:`impctl.season`; empty w
 nights), ``season_owner_nights``, ``season_signature_hlc_w_per_k`` (its baseline),
 ``season_note`` (why it did not run); ``season_emitter`` (radiators | underfloor, empty when
 not known) and ``season_emitter_source`` (declared: the household's NIGHTS column
-``emitter`` | measured: the heating water | assumed); ``season_changed`` (the change test
+``emitter`` | measured: the heating water | assumed); ``season_defrost_draw_source`` (where
+the heat the defrosts drew from the water comes from: heat meter | flow-return spread, both
+measured | estimated; empty without a defrost); ``season_changed`` (the change test
 on the owner nights found a step in the heat loss; empty when it could not run),
 ``season_changed_since`` (the evening of the first night after it),
 ``season_change_w_per_k`` with ``_low``, ``_high`` (the step and its 95 % interval [W/K]) and
@@ -90,6 +92,7 @@ for _col in SEASON_COLUMNS:
 _FIELDS += [("season_owner_nights", pa.int32()),
             ("season_signature_hlc_w_per_k", pa.float64()), ("season_note", pa.string()),
             ("season_emitter", pa.string()), ("season_emitter_source", pa.string()),
+            ("season_defrost_draw_source", pa.string()),
             ("season_changed", pa.bool_()), ("season_changed_since", pa.date32()),
             ("season_change_w_per_k", pa.float64()), ("season_change_w_per_k_low", pa.float64()),
             ("season_change_w_per_k_high", pa.float64()),
