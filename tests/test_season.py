@@ -20,8 +20,9 @@ from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import fit_season, record_from_nights
 from impctl.season.defrost import AFTER_S, read_draw
-from impctl.season.fit import fit_nights, format_season, signature
+from impctl.season.fit import fit_nights, signature
 from impctl.season.record import exclude_after
+from impctl.season.result import format_season
 
 TZ = "Europe/Ljubljana"
 
@@ -268,7 +269,7 @@ def test_home_assistant_shows_the_season_value_with_its_owner_nights():
 
 
 def test_a_value_the_model_cannot_give_is_missing_not_a_number():
-    from impctl.season.fit import SeasonFit, format_season
+    from impctl.season.result import SeasonFit
 
     nan = float("nan")
     fit = SeasonFit({"hlc_w_per_k": 120.0, "tau_h": nan, "c_m_j_per_k": 3.6e7},

@@ -28,6 +28,7 @@ from impctl.season.emitter import (
     water_excess_k,
 )
 from impctl.season.fit import fit_nights
+from impctl.season.result import format_season
 
 TZ = "Europe/Ljubljana"
 HLC_W_PER_K, GAINS_W = 150.0, 250.0
@@ -164,12 +165,12 @@ def test_a_declared_emitter_is_known_searched_once_and_a_disagreeing_water_is_sa
     assert known.emitter == "underfloor" and known.theta[2] > TAU_E_MAX_UNKNOWN_S
     block = known.as_dict()["emitter"]
     assert block["source"] == "declared" and "water_reads" not in block
-    assert "declared" in "\n".join(season_fit.format_season(known))
+    assert "declared" in "\n".join(format_season(known))
     calls.clear()
     wrong, _ = fit_nights(nights, emitter="radiators")
     assert calls == [1.5 * 3600] and wrong.theta[2] <= 1.5 * 3600 + 1e-6
     assert wrong.as_dict()["emitter"]["water_reads"] == "underfloor"
-    assert "the heating water reads underfloor" in "\n".join(season_fit.format_season(wrong))
+    assert "the heating water reads underfloor" in "\n".join(format_season(wrong))
     with pytest.raises(ValueError, match="emitter 'screed'"):
         season_fit.fit_season(record_from_nights(nights), emitter="screed")
 

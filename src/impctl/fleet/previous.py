@@ -104,11 +104,11 @@ def carry_over(row: dict, previous: dict, whole: bool = False) -> None:
 
 def theta_start(previous: dict | None) -> tuple[float, ...] | None:
     """The season search's start from a previous row (None where it had no season fit), by
-    the rule a fit JSON's θ is read with (:func:`impctl.season.fit.theta_of`)."""
+    the rule a fit JSON's θ is read with (:func:`impctl.season.result.theta_of`)."""
     if previous is None:
         return None
-    from ..season.fit import theta_of
     from ..season.projection.columns import THETA
+    from ..season.result import theta_of
 
     return theta_of({"season": {"theta": {
         name: previous.get(col) for name, col in zip(THETA, THETA_COLUMNS, strict=True)}}})

@@ -10,9 +10,10 @@ least-squares likelihood over all of them (:mod:`.projection.solve`), with inter
 >>> fit = fit_season(record_from_nights(nights))          # doctest: +SKIP
 """
 
-from .fit import MIN_OWNER_NIGHTS, SeasonFit, fit_season, signature
+from .fit import MIN_OWNER_NIGHTS, fit_season, signature
 from .nights import record_from_nights
 from .record import SeasonRecord
+from .result import SeasonFit
 
 __all__ = ["MIN_OWNER_NIGHTS", "SeasonFit", "SeasonRecord", "fit_season", "record_from_nights",
            "signature"]

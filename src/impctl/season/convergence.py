@@ -14,8 +14,9 @@ import math
 import numpy as np
 
 from .emitter import tau_e_max_s
-from .fit import SeasonFit, fit_season
+from .fit import fit_season
 from .projection.solve import LUMPED
+from .result import SeasonFit
 
 #: The owner-night counts the curve is given at [-].
 STEPS = (7, 14, 28, 56)

@@ -78,13 +78,15 @@ def record_from_nights(nights: Sequence[NightSamples],
 
     t_air_r, t_out_r, q_r = rows("t_air_c"), rows("t_out_c"), rows("q_hc_w")
     ok = np.isfinite(t_air_r) & np.isfinite(t_out_r) & np.isfinite(q_r)
-    def water(n: NightSamples, sign: float) -> np.ndarray:
+
+    def flow_and_return(n: NightSamples, sign: float) -> np.ndarray:
+        # flow + sign·return, NaN where the heat pump did not report both
         if n.t_flow_c is None or n.t_return_c is None:
             return np.full(len(n.time_s), np.nan)
         return np.asarray(n.t_flow_c, float) + sign * np.asarray(n.t_return_c, float)
 
-    water_r = np.concatenate([water(n, 1.0) for n in ns]) / 2.0
-    spread_r = np.concatenate([water(n, -1.0) for n in ns])
+    water_r = np.concatenate([flow_and_return(n, 1.0) for n in ns]) / 2.0
+    spread_r = np.concatenate([flow_and_return(n, -1.0) for n in ns])
     # the household electricity: the rows' own readings (when in the day its heat falls),
     # else the night's one value on every row
     p_r = np.concatenate([

@@ -223,7 +223,8 @@ def _season(nights: list, emitter: str | None) -> tuple[dict | None, str | None,
     """(the season fit's JSON block with its convergence, or None; a note or None; the text
     lines printed for it); ``emitter``: declared (``--emitter``), or None."""
     from ...season.convergence import convergence, format_convergence
-    from ...season.fit import fit_nights, format_season
+    from ...season.fit import fit_nights
+    from ...season.result import format_season
 
     season, note = fit_nights(nights, emitter=emitter)
     if season is None:

@@ -50,7 +50,8 @@ def season(nights_path: Path, warm_path: Path | None, json_path: Path | None,
     from ...fit.household import read_household
     from ...season.convergence import convergence as against_nights
     from ...season.convergence import format_convergence
-    from ...season.fit import fit_nights, format_season
+    from ...season.fit import fit_nights
+    from ...season.result import format_season
 
     nights = read_household(nights_path, tz)
     if not any(n.kind == "owner" for n in nights):
@@ -84,7 +85,7 @@ def _warm_start(path: Path) -> tuple[tuple[float, ...] | None, float | None]:
     """θ of an earlier result and the bound on the emitter's lag it ended under [s] (None
     where it does not say; refused in one line when it has no θ; (None, None), a full search,
     when it is an earlier version of the model's)."""
-    from ...season.fit import theta_of
+    from ...season.result import theta_of
 
     try:
         result = json.loads(path.read_text())
