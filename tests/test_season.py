@@ -174,6 +174,13 @@ def test_a_positive_only_meter_s_defrosts_are_read_from_the_flow_return_spread(s
                                           t_water_c=rec.t_water_c))
     assert again.defrost_from_spread and np.isnan(again.q_hc_w[first])
     assert np.isfinite(again.q_hc_w[on & (np.arange(rec.n) != first)]).all()
+    # a spread that does not follow the meter's heat (a sensor off its pipe) is not read: the
+    # draw stays an estimate
+    rng = np.random.default_rng(0)
+    loose = rng.uniform(0.0, 6.0, plain.n)
+    unread = read_draw(dataclasses.replace(plain, t_spread_k=loose, t_water_c=rec.t_water_c))
+    assert not unread.defrost_from_spread and unread.meter_reads_defrosts() is False
+    assert np.array_equal(unread.q_hc_w, plain.q_hc_w, equal_nan=True)
 
 
 def test_too_few_owner_nights_are_said_not_fitted(season):
