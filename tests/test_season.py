@@ -109,7 +109,9 @@ def test_a_meter_that_reads_the_defrosts_draw_is_not_given_a_draw_of_its_own(sea
     assert rec.meter_reads_defrosts() is False
     positive = fit_season(rec)
     assert positive.beta["defrost_w"] > 100.0
-    assert positive.as_dict()["defrost_draw"]["source"].startswith("estimated")
+    assert positive.as_dict()["defrost_draw"]["source"] == (
+        "estimated: the heat meter reads no heat drawn while defrosting; no flow and return "
+        "temperatures recorded")
     assert any(line.startswith("  defrosts: the heat they draw from the water is estimated")
                for line in format_season(positive))
 
@@ -180,6 +182,8 @@ def test_a_positive_only_meter_s_defrosts_are_read_from_the_flow_return_spread(s
     loose = rng.uniform(0.0, 6.0, plain.n)
     unread = read_draw(dataclasses.replace(plain, t_spread_k=loose, t_water_c=rec.t_water_c))
     assert not unread.defrost_from_spread and unread.meter_reads_defrosts() is False
+    assert unread.spread_unread.startswith("the flow–return spread does not follow the meter's")
+    assert fit_season(unread).defrost_source().endswith(unread.spread_unread)
     assert np.array_equal(unread.q_hc_w, plain.q_hc_w, equal_nan=True)
 
 

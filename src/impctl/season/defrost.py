@@ -59,22 +59,30 @@ MIN_AGREEMENT = 0.3
 
 def read_draw(rec: SeasonRecord) -> SeasonRecord:
     """``rec`` with its defrost steps' heat read from the flow–return spread (module
-    docstring) where its meter reads positive heat only; ``rec`` itself, unchanged, where the
-    meter reads the draw, nothing defrosted, or the spread does not tell it."""
-    if rec.meter_reads_defrosts() is not False or len(rec.t_spread_k) != rec.n:
+    docstring) where its meter reads positive heat only; ``rec`` itself where the meter reads
+    the draw or nothing defrosted; ``rec`` with only :attr:`~.record.SeasonRecord.spread_unread`
+    set where the spread does not tell it."""
+    if rec.meter_reads_defrosts() is not False:
         return rec
+    if len(rec.t_spread_k) != rec.n:
+        return replace(rec, spread_unread="no flow and return temperatures recorded")
+    few = "too few steps with and without heat to read the flow–return spread from"
     q, spread = rec.q_hc_w, rec.t_spread_k
     on = exclude_after(rec.defrost > 0, int(AFTER_S // rec.step_s))
     # hot-water steps are excluded already; their spread is the tank's circuit
     plain = ~on & (rec.excluded != "hot water") & np.isfinite(q) & np.isfinite(spread)
     idle = plain & (np.abs(q) < Q_ON_W)
     if idle.sum() < MIN_STEPS:
-        return rec
+        return replace(rec, spread_unread=few)
     offset = float(np.median(spread[idle]))
     x = spread - offset
     heat = plain & (q >= HEAT_MIN_W) & (x >= MIN_SPREAD_K)
-    if heat.sum() < MIN_STEPS or not np.corrcoef(q[heat], x[heat])[0, 1] >= MIN_AGREEMENT:
-        return rec
+    if heat.sum() < MIN_STEPS:
+        return replace(rec, spread_unread=few)
+    r = float(np.corrcoef(q[heat], x[heat])[0, 1])
+    if not r >= MIN_AGREEMENT:
+        return replace(rec, spread_unread=f"the flow–return spread does not follow the meter's "
+                                          f"heat (correlation {r:.2f} < {MIN_AGREEMENT})")
     # sums of the heating steps' heat and spread within LOCAL_S of every step
     reach = int(LOCAL_S // rec.step_s)
     cum = [np.r_[0.0, np.cumsum(np.where(heat, v, 0.0))] for v in (q, x, np.ones(rec.n))]

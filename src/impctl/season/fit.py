@@ -194,7 +194,8 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
                      emitter_declared=emitter is not None, warm_start=start is not None,
-                     defrost_read=d.defrost_read, defrost_from_spread=rec.defrost_from_spread)
+                     defrost_read=d.defrost_read, defrost_from_spread=rec.defrost_from_spread,
+                     spread_unread=rec.spread_unread)
 
 
 def signature(rec: SeasonRecord) -> float:

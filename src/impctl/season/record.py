@@ -75,6 +75,7 @@ class SeasonRecord:
         ``t_water_c``)
     defrost_from_spread : the defrost steps' heat was read from the spread, the meter reading
         positive heat only (:mod:`.defrost`)
+    spread_unread : why the spread was not read where the draw stays estimated ("" else)
     """
 
     t0_s: float
@@ -92,6 +93,7 @@ class SeasonRecord:
     t_water_c: Array = field(default_factory=lambda: np.zeros(0))
     t_spread_k: Array = field(default_factory=lambda: np.zeros(0))
     defrost_from_spread: bool = False
+    spread_unread: str = ""
 
     @property
     def n(self) -> int:

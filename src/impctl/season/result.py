@@ -46,6 +46,7 @@ class SeasonFit:
         estimated, ``beta["defrost_w"]``; None, no defrost recorded)
     defrost_from_spread : that heat was read from the flow–return spread, the meter reading
         positive heat only (:mod:`.defrost`)
+    spread_unread : why the spread did not give it where it is estimated ("" else)
     """
 
     values: dict[str, float]
@@ -67,6 +68,7 @@ class SeasonFit:
     warm_start: bool = False
     defrost_read: bool | None = None
     defrost_from_spread: bool = False
+    spread_unread: str = ""
 
     def defrost_source(self) -> str:
         """Where the heat the defrosts drew from the water comes from (known, measured,
@@ -74,7 +76,8 @@ class SeasonFit:
         if self.defrost_read is None:
             return ""
         if not self.defrost_read:
-            return "estimated: the heat meter reads no heat drawn while defrosting"
+            return ("estimated: the heat meter reads no heat drawn while defrosting"
+                    + (f"; {self.spread_unread}" if self.spread_unread else ""))
         if self.defrost_from_spread:
             return ("measured: read from the flow–return spread, scaled by the meter's "
                     "heating around each defrost (the meter reads positive heat only)")
