@@ -229,9 +229,7 @@ def _season(row: dict, nights: list, start: tuple | None = None,
     row["season_emitter"] = fit.emitter
     # the fit JSON's source (declared | measured: … | assumed: …), its first word
     row["season_emitter_source"] = fit.emitter_dict()["source"].split(":")[0]
-    row["season_defrost_draw_source"] = (
-        None if fit.defrost_read is None else "estimated" if not fit.defrost_read
-        else "flow-return spread" if fit.defrost_from_spread else "heat meter")
+    row["season_defrost_draw_source"] = fit.defrost_by()
     row.update(zip(THETA_COLUMNS, fit.theta, strict=True))
     for k in ("hlc_w_per_k", "tau_h", "c_m_j_per_k"):
         row[f"season_{k}"] = fit.values[k]

@@ -70,18 +70,25 @@ class SeasonFit:
     defrost_from_spread: bool = False
     spread_unread: str = ""
 
-    def defrost_source(self) -> str:
-        """Where the heat the defrosts drew from the water comes from (known, measured,
-        estimated); "" without a defrost."""
+    def defrost_by(self) -> str | None:
+        """What gave the heat the defrosts drew from the water: "heat meter" or
+        "flow-return spread" (measured), "estimated" (fitted); None without a defrost."""
         if self.defrost_read is None:
-            return ""
+            return None
         if not self.defrost_read:
+            return "estimated"
+        return "flow-return spread" if self.defrost_from_spread else "heat meter"
+
+    def defrost_source(self) -> str:
+        """:meth:`defrost_by` in words, measured or estimated first; "" without a defrost."""
+        by = self.defrost_by()
+        if by == "estimated":
             return ("estimated: the heat meter reads no heat drawn while defrosting"
                     + (f"; {self.spread_unread}" if self.spread_unread else ""))
-        if self.defrost_from_spread:
+        if by == "flow-return spread":
             return ("measured: read from the flow–return spread, scaled by the meter's "
                     "heating around each defrost (the meter reads positive heat only)")
-        return "measured: the heat meter reads it"
+        return "measured: the heat meter reads it" if by else ""
 
     def as_dict(self) -> dict:
         """JSON-ready, units in the names."""
@@ -184,7 +191,7 @@ def format_season(fit: SeasonFit) -> list[str]:
         lines.append(f"  changed since {c.since_date}: heat loss {c.delta_hlc_w_k:+.0f} W/K "
                      f"(95 % {c.low_w_k:+.0f} – {c.high_w_k:+.0f}), {c.nights_after} owner "
                      "nights after it; the estimate above still reads the nights before it")
-    if fit.defrost_read is False or fit.defrost_from_spread:
+    if fit.defrost_by() in ("estimated", "flow-return spread"):  # a signed meter: nothing
         lines.append(f"  defrosts: the heat they draw from the water is {fit.defrost_source()}")
     if fit.left_out_h:
         lines.append("  left out: " + ", ".join(f"{k} {h:.0f} h"

@@ -17,8 +17,9 @@ positive-only meter did not read (D·defrost share):
 
     LP_τr(LP_τe(Φ_meter − D·defrost)) = LP_τr(Φ_room).
 
-A meter that reads the draw — a signed one, whose defrost steps go negative
-(:meth:`~..record.SeasonRecord.meter_reads_defrosts`) — has it in Φ_meter already: there D is
+A record that holds the draw — a signed meter's, whose defrost steps go negative, or one whose
+defrost steps were read from the flow–return spread (:mod:`..defrost`;
+:meth:`~..record.SeasonRecord.meter_reads_defrosts`) — has it in Φ_meter already: there D is
 0, not fitted. Free, D trades with the HLC, because the heat pump defrosts most on the cold
 nights (with a signed meter, HLC P90 11.1 → 9.6 % on 200 households of seed 4444, 11.4 → 8.5 %
 on seed 31: decision record 0040).
@@ -126,7 +127,7 @@ class Design:
     dt_b: Array         # (nu,) block mean of T_air − T_out at the usable blocks [K]
     ta_b: Array         # (nu,) block mean of T_air [°C]
     defrost: Array      # the defrost share the draw D multiplies (zeros: the meter reads it)
-    defrost_read: bool | None  # the meter reads the draw (SeasonRecord.meter_reads_defrosts)
+    defrost_read: bool | None  # the record holds the draw (SeasonRecord.meter_reads_defrosts)
     # the filtered series of the last few θ: a finite-difference step moves one coordinate of
     # θ, so most of its filters are the base point's (a third of the search's work)
     filtered: dict = field(default_factory=dict, repr=False, compare=False)
