@@ -230,8 +230,8 @@ def fit_nights(nights, start: tuple | None = None, emitter: str | None = None,
     if emitter is None:   # the file's own declaration (NIGHTS column ``emitter``)
         emitter = declared_emitter(nights)
     found = detect_change(nights)
-    # A change is reported, not acted on: the test's false alarms (about 1 season in 11 on
-    # held-out houses) would otherwise throw away weeks of good nights.
+    # A change is reported, not acted on: the test's false alarms (up to one season in 20)
+    # would otherwise throw away weeks of good nights.
     try:
         fit = fit_season(record_from_nights(nights), start=start, emitter=emitter,
                          start_bound_s=start_bound_s)
