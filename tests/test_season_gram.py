@@ -205,7 +205,8 @@ def test_the_shapes_block_means_are_the_means_of_the_steps(designs):
 def test_the_sandwich_is_that_of_the_jacobian_with_x(designs):
     """The covariance from the normal equations' parts against the sandwich written out with
     J = [∂r/∂u, −X] and each day's summed scores."""
-    from impctl.season.projection.solve import FD_STEP, covariance, projection
+    from impctl.season.projection.solve import projection
+    from impctl.season.projection.uncertainty import FD_STEP, covariance
 
     for name in ("house 0", "house 1, a week not recorded"):
         d = designs[name]

@@ -15,7 +15,7 @@ import numpy as np
 
 from .emitter import tau_e_max_s
 from .fit import fit_season
-from .projection.solve import LUMPED
+from .projection.uncertainty import LUMPED
 from .result import SeasonFit
 
 #: The owner-night counts the curve is given at [-].

@@ -36,15 +36,8 @@ from .emitter import (
     water_recorded,
 )
 from .projection.columns import lumped
-from .projection.solve import (
-    FULL_STEP,
-    LUMPED,
-    beta_dict,
-    bounds_for,
-    covariance,
-    lumped_log_se,
-    search,
-)
+from .projection.solve import FULL_STEP, beta_dict, bounds_for, search
+from .projection.uncertainty import LUMPED, covariance, lumped_log_se
 from .record import SeasonRecord
 from .result import SeasonFit
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from .change import Change
 from .emitter import REFERENCE_DT_K, emitter_kind, tau_e_max_s
 from .projection.columns import THETA
-from .projection.solve import LUMPED
+from .projection.uncertainty import LUMPED
 
 
 @dataclass
@@ -20,7 +20,7 @@ class SeasonFit:
 
     Attributes
     ----------
-    values : HLC [W/K], τ [h], C_m [J/K] (keys of :data:`~.projection.solve.LUMPED`)
+    values : HLC [W/K], τ [h], C_m [J/K] (keys of :data:`~.projection.uncertainty.LUMPED`)
     low, high : their 95 % interval bounds, same keys and units
     owner_nights : owner nights (local days) with rows the likelihood used
     imp_nights : IMP nights with rows it used

@@ -4,5 +4,5 @@
 nonlinear parameters θ; :mod:`.gram` gives the gains' Gram products from their shapes'
 structure and :mod:`.normal` the normal equations from them, without forming X;
 :mod:`.jacobian` the projected residual's Jacobian; :mod:`.solve` searches θ with β solved
-inside, and gives the covariance the intervals come from. No torch, no pandas.
+inside; :mod:`.uncertainty` gives the covariance the intervals come from. No torch, no pandas.
 """
