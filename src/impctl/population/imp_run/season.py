@@ -47,6 +47,7 @@ from ...model import HouseParameters
 from ...plant import PlantCore, PlantParams
 from ...plant.building.envelope import Network, Solver
 from ...plant.building.gains import internal_gains_w, solar_gains_w
+from ...plant.instruments.water import water_sensors
 from ...weather import DEFAULT_TZ, WinterClimate, winter_weather
 from .realistic import _GatewayStop
 from .setup import ImpSimConfig
@@ -394,8 +395,9 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
             invalid_c += cons & ~ok
             cons = np.zeros(n, bool)
     samp_index = index[::stride][:n_samp]
-    rec["t_flow_c"], rec["t_return_c"] = _water_sensors(rec["t_flow_c"], rec["t_return_c"],
-                                                        samp_index, cfg, seed)
+    rec["t_flow_c"], rec["t_return_c"] = water_sensors(
+        rec["t_flow_c"], rec["t_return_c"], samp_index, cfg.tz, cfg.water_offset_k,
+        cfg.flow_wander, seed)
     nights = [(str(samp_index[w0 // stride].date()), kinds[j], w0 // stride,
                (w0 + win_len) // stride) for j, w0 in enumerate(win0)]
     return Season(samp_index, cfg.sample_s, rec["t_air_c"], rec["t_out_c"], rec["q_hc_w"],
@@ -403,27 +405,3 @@ def simulate_season(houses: HouseParameters, params: PlantParams,
                   rec["t_air_true_c"], rec["t_mass_c"], nights, valid, stop_sample, labels,
                   t_set, rec["q_true_w"], rec["gains_w"], houses, params, cfg,
                   rec["t_flow_c"], rec["t_return_c"])
-
-
-#: Day-to-day persistence of the circulation's flow (:attr:`SeasonConfig.flow_wander`) [-].
-FLOW_PERSISTENCE = 0.7
-
-
-def _water_sensors(flow_c: np.ndarray, return_c: np.ndarray, index: pd.DatetimeIndex,
-                   cfg: SeasonConfig, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """The flow and return temperatures as the heat pump's sensors read them: each sensor off
-    by its own offset, and the spread of a flow that wanders from day to day (the heat and the
-    mean water temperature are the plant's). Drawn from a generator of their own, so the rest
-    of the season is the same with or without them."""
-    n_rows, n = flow_c.shape
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EA5, 2]))
-    off_f, off_r = (rng.uniform(-cfg.water_offset_k, cfg.water_offset_k, n) for _ in range(2))
-    local = index.tz_convert(cfg.tz).tz_localize(None).normalize()
-    day = ((local - local[0]) // pd.Timedelta(days=1)).to_numpy(dtype=int)
-    x = np.zeros((day[-1] + 1 if n_rows else 0, n))
-    eps = rng.normal(0.0, cfg.flow_wander, x.shape)
-    for d in range(len(x)):
-        x[d] = eps[d] if d == 0 else (FLOW_PERSISTENCE * x[d - 1]
-                                      + np.sqrt(1 - FLOW_PERSISTENCE ** 2) * eps[d])
-    mid, spread = (flow_c + return_c) / 2.0, (flow_c - return_c) * np.exp(-x[day])
-    return mid + spread / 2.0 + off_f, mid - spread / 2.0 + off_r
