@@ -54,7 +54,7 @@ between strategies and targets):
   ``adaptive@8`` runs the plan continued for the houses whose intervals are still wide;
 * **fixed** — the gateway's fixed plan (``CampaignConfig``: 2 + 3, constrained, constrained,
   normal at each normal setpoint in turn); an invalid night is repeated; one fit at the end.
-  Since h18g, as ``daemon.schedule.retry_waits``: after an invalid constrained night the
+  Since h18g, as ``daemon.nights.schedule.retry_waits``: after an invalid constrained night the
   plan's next normal night without a valid night runs first, the constrained retry after it
   (on that date's simulated constrained night);
 * **fixed_next** — the fixed plan before h18g: an invalid night is repeated the next night.
@@ -68,7 +68,7 @@ cooling to 05:00, all valid): ended at T_min = T_set − ΔT or the gateway's an
 switched off after a short pre-heat (h14w's ``stop_at_t_min``), cut there, and invalid with
 < ``night_protocol.MIN_NIGHT_H`` after the 1 h lag (``bench/fit_protocol.short_constrained``).
 An invalid night is repeated (the policy's rule; the fixed plan's); the fixed plan gives up
-after ``campaign.max_invalid_nights`` invalid nights (``daemon.schedule.gave_up``) and is
+after ``campaign.max_invalid_nights`` invalid nights (``daemon.nights.schedule.gave_up``) and is
 fitted on the valid nights it has, if they hold both kinds. Reported per strategy: constrained
 nights run, short, invalid on the band, households with no valid constrained night.
 
@@ -158,7 +158,8 @@ PLANS["normal_after"] = PLANS["plan_warm"] + tuple(
     ("normal", sp) for sp in sorted(NORMAL_SETPOINTS, reverse=True))
 #: policy constants a strategy runs with (set around its decisions only)
 POLICY_RULES = {"min3": {"MIN_FLOOR_NIGHTS": 3}}
-#: the fixed plan stops after this many invalid scheduled nights (``daemon.schedule.gave_up``)
+#: the fixed plan stops after this many invalid scheduled nights
+#: (``daemon.nights.schedule.gave_up``)
 MAX_INVALID = CampaignConfig().max_invalid_nights
 #: the fixed plan as the daemon runs it, and as it ran before h18g (retry the next night)
 FIXED_NAMES = ("fixed", "fixed_next")
@@ -275,7 +276,7 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
             return None
         if (name == "fixed" and c.history and c.history[-1].kind == "constrained"
                 and not c.history[-1].valid):
-            # daemon.schedule.retry_waits: the plan's next normal night first (stable sort)
+            # daemon.nights.schedule.retry_waits: the plan's next normal night first (stable sort)
             todo.sort(key=lambda e: VARIANTS[FIXED[e]][0] != "normal")
         entry = todo[0]
         v = FIXED[entry]
@@ -330,7 +331,7 @@ def step(c: Campaign, j: int, fits: Fits, forecast: float, first_t_out: list,
         if entry is not None:
             c.filled.add(entry)
     elif not name.startswith("full") and sum(not x.valid for x in c.history) >= MAX_INVALID:
-        # both modes give up as the daemon does (daemon.schedule.gave_up); "full" runs on
+        # both modes give up as the daemon does (daemon.nights.schedule.gave_up); "full" runs on
         c.done, c.reason = True, f"gave up: {MAX_INVALID} invalid nights"
     return v
 

@@ -380,7 +380,7 @@ def test_plan_balanced_chooses_among_the_plan_nights_not_yet_run():
 
 def test_daemon_plan_from_the_campaign_config():
     from impctl.config import CampaignConfig, Config
-    from impctl.daemon.adaptive import _plan
+    from impctl.daemon.nights.adaptive import _plan
 
     cfg = Config(campaign=CampaignConfig(constrained_setpoint_c=20.0,
                                          normal_setpoints_c=(21.0, 23.0),

@@ -18,7 +18,7 @@ from reliability_fixtures import loop_wall, run_virtual
 
 from impctl.clock import VirtualClock
 from impctl.config import config_from_mapping
-from impctl.daemon.schedule import accelerated_nights
+from impctl.daemon.nights.schedule import accelerated_nights
 
 TZ = ZoneInfo("Europe/Ljubljana")
 SPEED = 3600.0  # a simulated hour per second of the loop

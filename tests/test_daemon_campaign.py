@@ -34,7 +34,7 @@ from impctl.clock import VirtualClock
 from impctl.config import config_from_mapping
 from impctl.controller import NightRequest
 from impctl.daemon import fitting
-from impctl.daemon.schedule import window_for
+from impctl.daemon.nights.schedule import window_for
 from impctl.daemon.service import Daemon
 from impctl.store import Store
 

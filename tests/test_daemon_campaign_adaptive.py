@@ -21,7 +21,7 @@ from test_daemon_campaign import FINAL, FITS_TIMEOUT_S, TZ, _campaign, unniced_f
 
 from impctl.campaign import FitSummary, parse_candidates
 from impctl.cli.device.status import collect_status, format_status
-from impctl.daemon.schedule import next_act_time
+from impctl.daemon.nights.schedule import next_act_time
 from impctl.store import Store
 
 #: A day of simulated time in 4 s of the virtual-time loop (the nights take no real time, and

@@ -14,9 +14,9 @@ from daemon_fixtures import run_cli
 
 from impctl.campaign import Decision
 from impctl.config import config_from_mapping
-from impctl.daemon import adaptive
-from impctl.daemon.next_night import peek_next_night, why_no_night
-from impctl.daemon.schedule import campaign_plan
+from impctl.daemon.nights import adaptive
+from impctl.daemon.nights.next_night import peek_next_night, why_no_night
+from impctl.daemon.nights.schedule import campaign_plan
 from impctl.errors import InputError
 from impctl.imp.protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
 from impctl.mqtt.discovery import entities

@@ -116,7 +116,7 @@ def test_the_heating_curve_sensors_say_what_to_set_and_what_it_saves():
     """The suggested flow temperature now follows the outdoor temperature along the kept
     curve; the expected saving is the curve result's, its advice an attribute in plain
     words; no curve kept: both unknown, never a number."""
-    from impctl.daemon.curve_state import suggested_flow_c
+    from impctl.daemon.curve.state import suggested_flow_c
     from impctl.mqtt.payloads import curve_payload
 
     cfg = MqttConfig(host="h", client_id="gw9")

@@ -11,7 +11,7 @@ import pytest
 
 from impctl.config import CampaignConfig, Config, ConfigError, NightConfig, config_from_mapping
 from impctl.controller import NightPolicy, NightRequest
-from impctl.daemon.schedule import campaign_plan
+from impctl.daemon.nights.schedule import campaign_plan
 from impctl.daemon.service import policy_from_config
 from impctl.heatpump import WritePolicy
 from impctl.imp import imp_plans

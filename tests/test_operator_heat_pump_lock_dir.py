@@ -41,9 +41,9 @@ from lock_fixtures import (
 )
 from sim_fixtures import clock
 
-from impctl.daemon import hplock
-from impctl.daemon.hplock import HeatPumpLock, lock_path
-from impctl.daemon.lock import DaemonRunning
+from impctl.daemon.locks import heat_pump as hplock
+from impctl.daemon.locks.heat_pump import HeatPumpLock, lock_path
+from impctl.daemon.locks.store import DaemonRunning
 from impctl.errors import InputError
 from impctl.modbus.config import LinkConfig
 

@@ -135,7 +135,7 @@ def test_status_is_calm_while_a_daemon_supervises_the_night(tmp_path):
 
 
 def test_the_lock_is_keyed_by_the_heat_pumps_address(tmp_path):
-    from impctl.daemon.hplock import heat_pump_address, lock_path
+    from impctl.daemon.locks.heat_pump import heat_pump_address, lock_path
 
     tcp = LinkConfig(host="LOCALHOST", port=5020)
     assert heat_pump_address(tcp) == "tcp 127.0.0.1:5020 unit 20"

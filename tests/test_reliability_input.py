@@ -306,7 +306,7 @@ def test_fuzzed_configs_are_refused_cleanly_or_usable(values):
     """Any value at any key: an InputError (exit 2, nothing created) or a configuration the
     daemon can start from — finite numbers, a clock, a policy, a schedule, a budget."""
     from impctl.config import load_config
-    from impctl.daemon.schedule import act_trigger, campaign_plan, next_act_time
+    from impctl.daemon.nights.schedule import act_trigger, campaign_plan, next_act_time
     from impctl.daemon.service import clock_from_config, policy_from_config
     from impctl.heatpump import WriteBudget
     from impctl.modbus import ModbusLink

@@ -16,7 +16,7 @@ import pytest
 
 from impctl.clock import VirtualClock
 from impctl.clock import loop as vtime
-from impctl.daemon.schedule import sleep_until
+from impctl.daemon.nights.schedule import sleep_until
 
 EPOCH = datetime(2026, 1, 12, 12, 0, tzinfo=UTC)
 

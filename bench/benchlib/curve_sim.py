@@ -69,7 +69,7 @@ def weather(n: int, days: float, seed: int, start: str) -> np.ndarray:
 @dataclass
 class Watch:
     """The daemon's comfort watch over a two-point curve (``[curve]`` short_k, short_h,
-    raise_k; :mod:`impctl.daemon.curve_watch`): a room sensed on average more than
+    raise_k; :mod:`impctl.daemon.curve.watch`): a room sensed on average more than
     ``short_k`` below the setpoint over a window of ``short_h`` raises both points by
     ``raise_k`` — the sensed room read at every step, a raise made at the end of the simulated
     hour it falls in (the daemon raises at

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from ..config import Config
 from ..store import Store
-from .adaptive import forecast
-from .curve_state import keep_curve
+from .curve.state import keep_curve
+from .nights.adaptive import forecast
 
 _LOG = logging.getLogger("impctl.daemon")
 _KINDS = ("constrained", "normal")

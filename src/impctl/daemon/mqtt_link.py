@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING
 from ..clock import VirtualClock
 from ..controller import restore_all
 from ..heatpump import HeatPumpError, ModbusLinkError, Snapshot
-from .adaptive import campaign_state
-from .curve_state import curve_path, load_curve, suggested_flow_c
+from .curve.state import curve_path, load_curve, suggested_flow_c
+from .nights.adaptive import campaign_state
+from .nights.schedule import daytime_reason, request_expiry
+from .nights.waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
 from .running import RunningDaemon
-from .schedule import daytime_reason, request_expiry
-from .waiting import SKIP_VALID_H, describe_queued, queue_night, queue_skip, waiting_skips
 
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
@@ -120,8 +120,8 @@ class MqttLink:
         if night == self._next_key and now - self._next_checked < _NEXT_NIGHT_S:
             return self._next_at
         self._next_key = night
-        from .next_night import peek_next_night
-        from .schedule import next_act_time
+        from .nights.next_night import peek_next_night
+        from .nights.schedule import next_act_time
 
         d = self.daemon
         try:
@@ -261,7 +261,7 @@ async def run_commands(daemon: RunningDaemon) -> None:
 
 def _kept(daemon: RunningDaemon) -> frozenset[str]:
     """The registers a restore leaves: the heating curve's while the owner has it set."""
-    from .curve_watch import KEEP
+    from .curve.watch import KEEP
 
     curve = getattr(daemon, "curve", None)
     return KEEP if curve is not None and curve.held is not None else frozenset()

@@ -13,7 +13,7 @@ from ..controller import NightController
 from ..heatpump import HeatPumpClient
 from ..store import Store
 from .house_inputs import HouseInputs
-from .lock import DaemonLock
+from .locks.store import DaemonLock
 
 
 class RunningDaemon(Protocol):

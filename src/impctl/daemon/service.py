@@ -20,24 +20,24 @@ from ..controller import NightController, NightRefused, NightRequest, restore_al
 from ..heatpump import HeatPumpClient, HeatPumpError
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
-from . import adaptive
 from .configured import clock_from_config, open_client, policy_from_config
-from .curve_watch import KEEP as CURVE_KEEP
-from .curve_watch import start_curve_watch
+from .curve.watch import KEEP as CURVE_KEEP
+from .curve.watch import start_curve_watch
 from .fitting import fit_ready, needs_fit, refresh_season, run_fit
-from .hplock import HeatPumpLock
-from .lock import HEARTBEAT_S, DaemonLock
+from .locks.heat_pump import HeatPumpLock
+from .locks.store import HEARTBEAT_S, DaemonLock
 from .mqtt_link import run_commands, skip_tonight, start_mqtt
-from .next_night import adaptive_tonight, next_campaign_night
-from .recording import make_recorder, record_house
-from .restoring import restore_pending, sweep_orphans
-from .schedule import (
+from .nights import adaptive
+from .nights.next_night import adaptive_tonight, next_campaign_night
+from .nights.recording import make_recorder, record_house
+from .nights.schedule import (
     accelerated_nights,
     act_trigger,
     campaign_plan,
     drop_expired_requests,
     every_second,
 )
+from .restoring import restore_pending, sweep_orphans
 from .systemd import Notifier
 
 _LOG = logging.getLogger("impctl.daemon")
@@ -77,7 +77,7 @@ class Daemon:
         self._lock: DaemonLock | None = None  # one process per store (daemon.lock)
         self.mqtt = None  # MqttLink when [mqtt] is configured (issue 17)
         self.house_inputs = None  # HouseInputs when [inputs] is configured
-        self.curve = None  # the heating curve's watch (impctl.daemon.curve_watch)
+        self.curve = None  # the heating curve's watch (impctl.daemon.curve.watch)
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:

@@ -43,7 +43,7 @@ async def run_campaign(opts: DemoOptions, house: HouseParameters, progress: Prog
     """
     from impctl_sim import KronotermSimulator, SimConfig
 
-    from ..daemon.recording import close_for_good
+    from ..daemon.nights.recording import close_for_good
     from ..daemon.service import Daemon
 
     campaign_start = datetime.fromisoformat(opts.start).replace(tzinfo=ZoneInfo(TZ))
@@ -206,7 +206,7 @@ def _campaign_done(store: Store, adaptive: bool) -> tuple[bool, int, str]:
 async def _watch(cfg, clock, sim, progress: Progress, trainer, task) -> None:
     """Until the campaign is done: progress every 3 s of wall time, one line per night that
     ends invalid (why), and the stop of a campaign that cannot finish (:class:`DemoError`)."""
-    from ..daemon.schedule import campaign_plan, gave_up
+    from ..daemon.nights.schedule import campaign_plan, gave_up
 
     last = 0.0
     adaptive = cfg.campaign.adaptive

@@ -45,8 +45,8 @@ def state_dir_problem(state_dir: str | Path) -> str | None:
 def _tonight(cfg, store) -> list[str]:
     """What the next night would do, as lines for people."""
     from ...daemon.configured import clock_from_config
-    from ...daemon.next_night import peek_next_night, why_no_night
-    from ...daemon.schedule import next_act_time
+    from ...daemon.nights.next_night import peek_next_night, why_no_night
+    from ...daemon.nights.schedule import next_act_time
 
     tz = ZoneInfo(cfg.timezone)
     act = next_act_time(cfg, clock_from_config(cfg).now())
@@ -126,7 +126,7 @@ def check_config_command(config_path: Path) -> None:
     """Check a configuration: every problem at once (exit 2), else what the daemon would do
     at the next night. Touches nothing: no heat pump, no store created."""
     from ...config import ConfigError, config_warnings, load_config, read_config_toml
-    from ...daemon.lock import probe
+    from ...daemon.locks.store import probe
     from ...store import Store
 
     problems: list[InputError] = []

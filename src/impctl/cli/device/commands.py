@@ -100,8 +100,8 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
     queued twice: the waiting one stands.
     """
     from ...daemon.configured import clock_from_config
-    from ...daemon.lock import DaemonLock, probe
-    from ...daemon.schedule import request_expiry
+    from ...daemon.locks.store import DaemonLock, probe
+    from ...daemon.nights.schedule import request_expiry
     from ...store import Store
 
     cfg = _load(config_path)
@@ -126,7 +126,7 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
                          f"[{lo:g}, {hi:g}] °C", place="--setpoint")
     clock = clock_from_config(cfg)
-    from ...daemon.schedule import daytime_reason
+    from ...daemon.nights.schedule import daytime_reason
 
     daytime = daytime_reason(cfg, clock.now())
     if when == "now" and daytime and not force:
@@ -136,13 +136,13 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         _setup_logging(cfg.log_level, cfg.timezone)
         with Store(cfg.db_path):  # creates the state directory, or one clear line
             pass
-        from ...daemon.hplock import HeatPumpLock
+        from ...daemon.locks.heat_pump import HeatPumpLock
 
         role = "trigger --foreground"
         with DaemonLock(cfg.state_dir, role=role) as lock, \
                 HeatPumpLock(cfg.heatpump.link, cfg.state_dir, role=role):
             sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
-    from ...daemon.waiting import describe_queued, queue_night
+    from ...daemon.nights.waiting import describe_queued, queue_night
 
     expires = request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
@@ -166,7 +166,7 @@ def _cancel_requests(cfg) -> None:
     if not cfg.db_path.exists():
         click.echo("nothing to cancel (no store yet)")
         return
-    from ...daemon.waiting import cancel_waiting
+    from ...daemon.nights.waiting import cancel_waiting
 
     with Store(cfg.db_path) as store:
         done, skips = cancel_waiting(store)
@@ -183,7 +183,7 @@ def _cancel_requests(cfg) -> None:
 async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     import signal
 
-    from ...daemon.lock import HEARTBEAT_S
+    from ...daemon.locks.store import HEARTBEAT_S
 
     async def heartbeat() -> None:  # `impctl status` shows this process as alive
         while True:
@@ -192,7 +192,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
 
     from ...controller import NightController, NightRefused, NightRequest
     from ...daemon.configured import clock_from_config, open_client, policy_from_config
-    from ...daemon.schedule import next_act_time, window_after_act
+    from ...daemon.nights.schedule import next_act_time, window_after_act
     from ...store import Store
 
     clock = clock_from_config(cfg)

@@ -28,7 +28,7 @@ def _copy_hint(exc: InputError, cfg) -> InputError:
 def collect_status(cfg) -> dict:
     """Daemon liveness, current night with its latest sample, the next night, campaign, last
     fit, link events, write counters."""
-    from ...daemon.lock import probe
+    from ...daemon.locks.store import probe
     from ...heatpump import WriteBudget
     from ...heatpump.health import read_health
     from ...store import Store
@@ -79,7 +79,7 @@ def collect_status(cfg) -> dict:
         out["pending_restore"] = [e.register for e in store.journal_pending()]
         # impctl's heating curve, set on the owner's word and watched by a live daemon: held,
         # not waiting to be restored (without a live daemon it is unsupervised like the rest)
-        from ...daemon.curve_watch import KEEP
+        from ...daemon.curve.watch import KEEP
 
         alive = info.running and not info.stale
         held = [r for r in out["pending_restore"] if r in KEEP] if alive else []
@@ -128,7 +128,7 @@ def _restore_state(pending: list[str], night: dict | None, info) -> dict | None:
 
 def _skips(store) -> list[dict]:
     """The household's waiting skips of the next night (what the night job will honour)."""
-    from ...daemon.waiting import waiting_skips
+    from ...daemon.nights.waiting import waiting_skips
 
     return [{"id": c.id, "source": c.source, "created": c.created}
             for c in waiting_skips(store)]
@@ -151,7 +151,7 @@ def _restore_lines(rs: dict | None) -> list[str]:
 
 def _campaign(store, cfg) -> dict:
     """Mode, nights run / valid, how the intervals shrank fit after fit, the last decision."""
-    from ...daemon.adaptive import absurd, campaign_state, decide_now, fit_history, rel_pct
+    from ...daemon.nights.adaptive import absurd, campaign_state, decide_now, fit_history, rel_pct
 
     st = campaign_state(store, cfg)
     camp = cfg.campaign
@@ -190,8 +190,8 @@ def _finite(x: float) -> float | None:
 def _next_night(store, cfg) -> dict | None:
     """What the daemon would run at its next night (without taking any request)."""
     from ...daemon.configured import clock_from_config
-    from ...daemon.next_night import peek_next_night, why_no_night
-    from ...daemon.schedule import next_act_time, retry_waits
+    from ...daemon.nights.next_night import peek_next_night, why_no_night
+    from ...daemon.nights.schedule import next_act_time, retry_waits
 
     act = next_act_time(cfg, clock_from_config(cfg).now())
     req, request_id = peek_next_night(store, cfg, act)

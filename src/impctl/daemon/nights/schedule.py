@@ -16,9 +16,9 @@ from zoneinfo import ZoneInfo
 
 from apscheduler.triggers.cron import CronTrigger
 
-from ..clock import VirtualClock
-from ..config import Config
-from ..store import Store
+from ...clock import VirtualClock
+from ...config import Config
+from ...store import Store
 
 _LOG = logging.getLogger("impctl.daemon")
 #: Nights that ran (the heat pump was driven, or the process died during it) and are over.

@@ -1,6 +1,6 @@
 """One process drives a heat pump per machine: a lock keyed by the heat pump's address.
 
-The store's ``daemon.lock`` (:mod:`.lock`) keeps two daemons off one state directory; this
+The store's ``daemon.lock`` (:mod:`.store`) keeps two daemons off one state directory; this
 lock keeps two daemons with different state directories off one heat pump. Its file lives in
 a directory every impctl on the machine shares: ``$IMPCTL_LOCK_DIR``, else
 ``/run/lock/impctl`` (``/run/lock`` is the FHS place for locks; a tmpfs, so nothing survives
@@ -36,9 +36,9 @@ import stat
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..errors import InputError
-from ..modbus.config import LinkConfig
-from .lock import DaemonRunning, FlockHolder, flock_within
+from ...errors import InputError
+from ...modbus.config import LinkConfig
+from .store import DaemonRunning, FlockHolder, flock_within
 
 LOCK_DIR_ENV = "IMPCTL_LOCK_DIR"
 DEFAULT_LOCK_DIR = "/run/lock/impctl"

@@ -20,7 +20,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Self
 
-from ..errors import InputError
+from ...errors import InputError
 
 LOCK_NAME = "daemon.lock"
 #: Wall seconds between heartbeats of a healthy daemon.

@@ -1,7 +1,7 @@
 """The last heating-curve result the daemon keeps, read as plain numbers (no pandas here).
 
 After each fit the daemon runs ``impctl curve`` in the fit's subprocess chain
-(:mod:`.fitting`); its ``impctl-curve/1`` JSON is kept as ``<state_dir>/curve.json``. The
+(:mod:`..fitting`); its ``impctl-curve/1`` JSON is kept as ``<state_dir>/curve.json``. The
 daemon reads it to publish the suggested flow temperature and the expected saving, and to
 know which curve to set when the owner asked for it (``[curve] apply``).
 """

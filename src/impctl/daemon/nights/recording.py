@@ -17,12 +17,12 @@ import contextlib
 import logging
 from datetime import UTC, datetime
 
-from ..clock import VirtualClock
-from ..config import Config
-from ..controller.recorder import OwnerRecorder
-from ..heatpump import HeatPumpClient
-from ..store import Store
-from .running import RunningDaemon
+from ...clock import VirtualClock
+from ...config import Config
+from ...controller.recorder import OwnerRecorder
+from ...heatpump import HeatPumpClient
+from ...store import Store
+from ..running import RunningDaemon
 
 _LOG = logging.getLogger("impctl.record")
 #: How often records older than ``record.keep_days`` are deleted [s of the daemon's clock].

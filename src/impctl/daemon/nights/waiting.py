@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from datetime import UTC, datetime, timedelta
 
-from ..store import Command, Store, TriggerRequest
+from ...store import Command, Store, TriggerRequest
 
 #: A skip request older than this is stale (it was for a night that has passed) [h].
 SKIP_VALID_H = 24.0

@@ -26,7 +26,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING
 from zoneinfo import ZoneInfo
 
-from ..campaign import (
+from ...campaign import (
     Candidate,
     Decision,
     FitSummary,
@@ -38,15 +38,15 @@ from ..campaign import (
     parse_outlook,
     plan_order,
 )
-from ..config import Config
-from ..store import Store
+from ...config import Config
+from ...store import Store
 from .schedule import (
     RUN_STATES,
     gave_up,
 )
 
 if TYPE_CHECKING:
-    from ..store import CampaignDecision
+    from ...store import CampaignDecision
 
 _LOG = logging.getLogger("impctl.daemon")
 

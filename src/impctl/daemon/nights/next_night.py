@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from ..campaign import Decision
-from ..config import Config
-from ..controller import NightRequest
-from ..store import Store
+from ...campaign import Decision
+from ...config import Config
+from ...controller import NightRequest
+from ...store import Store
 from .adaptive import decide_now, record
 from .schedule import (
     campaign_plan,

@@ -5,7 +5,7 @@ The owner asks with ``[curve] apply = true`` or ``impctl curve --apply`` (and ta
 with ``impctl curve --restore``; the command's word wins over the configuration). Then, while
 no night runs, the daemon:
 
-1. **sets** the kept curve (:mod:`.curve_state`) when it lowers the running one: only on an
+1. **sets** the kept curve (:mod:`.state`) when it lowers the running one: only on an
    extended controller (a compact one has no curve register) whose adaptive curve (2320) is
    off (the controller would change the points itself); the owner's points 2309/2314 are
    journaled first, then written through the safe path (whitelist, compare, budget,
@@ -43,13 +43,13 @@ from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
-from ..heatpump import HeatPumpError
-from ..heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
-from ..heatpump.writes import write_rules
-from ..kronoterm.registers import Generation
-from ..store import JournalEntry
-from .curve_state import line_flow_c, load_curve
-from .running import RunningDaemon
+from ...heatpump import HeatPumpError
+from ...heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
+from ...heatpump.writes import write_rules
+from ...kronoterm.registers import Generation
+from ...store import JournalEntry
+from ..running import RunningDaemon
+from .state import line_flow_c, load_curve
 
 _LOG = logging.getLogger("impctl.daemon")
 #: The curve points: documented number → journal name.
@@ -237,7 +237,7 @@ class CurveWatch:
             ctl.keep_registers = KEEP if held else frozenset()
 
     async def _give_back(self, why: str) -> None:
-        from ..controller.restore import restore_entry
+        from ...controller.restore import restore_entry
 
         d = self.daemon
         for entry in curve_entries(d.store):
