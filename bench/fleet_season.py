@@ -54,7 +54,7 @@ def make_input(n: int, owner_nights: int, seed: int, data: Path, simulated: int 
 
     from season import cutoff  # bench/season.py: the cut after the N-th plain owner night
 
-    from impctl.imp.nights_csv import write_nights
+    from impctl.imp.files.nights_csv import write_nights
     from impctl.population.households import sample_households
     from impctl.population.imp_run.season import SeasonConfig, simulate_season
     from impctl.population.imp_run.season_nights import household_nights

@@ -14,7 +14,7 @@ from impctl.campaign import FitSummary, parse_candidates, parse_outlook
 from impctl.campaign.design import Z95, Protocol, predict, predict_candidates
 from impctl.fit.estimator import NightFit
 from impctl.fit.result.report import fit_to_dict
-from impctl.imp.nights_csv import write_nights
+from impctl.imp.files.nights_csv import write_nights
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
 

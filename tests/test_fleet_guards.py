@@ -184,13 +184,13 @@ def test_a_household_s_parquet_rows_are_counted_before_they_are_read(tmp_path, n
                                                                     monkeypatch):
     """A Parquet household (its own file, or its rows of a shared dataset) with more rows
     than the limit is refused from the metadata; its rows are never parsed."""
-    import impctl.imp.file_limits
+    import impctl.imp.files.limits
     from impctl.fleet.inputs import discover, read_sources
 
     write_nights(nights[0], tmp_path / "a.csv")
     frame = pd.read_csv(tmp_path / "a.csv")
     limit = len(frame) - 1
-    monkeypatch.setattr(impctl.imp.file_limits, "MAX_ROWS", limit)
+    monkeypatch.setattr(impctl.imp.files.limits, "MAX_ROWS", limit)
     d = tmp_path / "files"
     d.mkdir()
     bad = frame.copy()

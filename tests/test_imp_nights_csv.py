@@ -80,7 +80,7 @@ def test_write_then_read_gives_the_same_nights_and_features(tmp_path):
 def test_a_parquet_frame_reads_its_text_cells_as_the_csv_does(tmp_path):
     """Night ids as numbers, padded kinds and labels, null labels (pandas' string type keeps
     them NaN): the Parquet frame gives the nights the CSV gives."""
-    from impctl.imp.nights_csv import read_nights_frame
+    from impctl.imp.files.nights_csv import read_nights_frame
 
     stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)
     frame = pd.DataFrame({
@@ -106,7 +106,7 @@ def test_a_parquet_frame_reads_its_optional_numbers_as_the_csv_does(tmp_path):
     electricity and the rooms as floats, with a null, an infinity and a value out of range):
     the Parquet frame's nights carry what the CSV's carry, bit for bit."""
     from impctl.fleet.previous import nights_digest
-    from impctl.imp.nights_csv import read_nights_frame
+    from impctl.imp.files.nights_csv import read_nights_frame
 
     stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)
     frame = pd.DataFrame({

@@ -53,7 +53,7 @@ def test_a_duplicated_timestamp_is_quoted_as_the_file_writes_it(tmp_path):
 def test_a_parquet_frame_quotes_its_timestamps_too(tmp_path):
     """A frame read from Parquet (datetimes or strings): the line quotes the cell it speaks
     of, as the frame holds it."""
-    from impctl.imp.nights_csv import read_nights_frame
+    from impctl.imp.files.nights_csv import read_nights_frame
 
     stamps = pd.to_datetime(["2026-01-12T21:00:00Z", "2026-01-12T21:05:00Z",
                              "2026-01-12T21:05:00Z", "2026-01-12T21:10:00Z"], utc=True)

@@ -85,8 +85,8 @@ def test_a_night_too_short_for_the_fit_and_right_otherwise_is_the_season_models(
     """Reached T_min after 100 min: too short for the IMP fit, not valid — yet its cooling is
     exported, labelled, read as a constrained night and left out of the IMP fit; a short night
     with a sensor missing too is not exported at all."""
+    from impctl.imp.files.nights_csv import read_nights
     from impctl.imp.night import SHORT_NOTE, split_owner
-    from impctl.imp.nights_csv import read_nights
     from impctl.imp.protocol import SHORT_NIGHT
     from impctl.store.export import export_nights
 

@@ -15,8 +15,8 @@ import pytest
 from cli_fixtures import run_impctl
 
 from impctl.fit.household import choose_nights
+from impctl.imp.files.nights_csv import read_nights
 from impctl.imp.night import OWNER_NOTE
-from impctl.imp.nights_csv import read_nights
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import synth_nights
 

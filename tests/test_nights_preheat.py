@@ -13,8 +13,8 @@ import pytest
 from test_nights_owner import HOUSE, TZ, _file, _imp_frame, _owner_frame, run_cli
 
 from impctl.fit.household import choose_nights
+from impctl.imp.files.nights_csv import read_nights, write_nights
 from impctl.imp.night import split_owner
-from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.synth import synth_nights
 from impctl.season import record_from_nights
 

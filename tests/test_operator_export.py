@@ -189,7 +189,7 @@ def test_state_dir_under_proc_or_a_file_is_one_line(tmp_path, where):
 def test_the_export_carries_the_emitter_the_installer_declared(tmp_path, capsys, emitter):
     """[fit] emitter goes with the nights (the NIGHTS column ``emitter``): a fleet reading the
     export knows what the installer knows; without it, no column."""
-    from impctl.imp.nights_csv import read_nights
+    from impctl.imp.files.nights_csv import read_nights
 
     state = tmp_path / "state"
     _store(state)

@@ -24,8 +24,8 @@ from impctl.cli.device.status import collect_status, format_status
 from impctl.clock import VirtualClock
 from impctl.controller.record_labels import record_day
 from impctl.heatpump import WriteBudget
+from impctl.imp.files.nights_csv import read_nights
 from impctl.imp.night import SHORT_NOTE, split_owner
-from impctl.imp.nights_csv import read_nights
 from impctl.imp.protocol import SHORT_NIGHT
 from impctl.season import record_from_nights
 from impctl.store.export import export_nights

@@ -124,7 +124,7 @@ def test_export_writes_owner_records_in_time_order_with_their_labels(tmp_path):
     import pandas as pd
     from cli_fixtures import run_impctl
 
-    from impctl.imp.nights_csv import read_nights
+    from impctl.imp.files.nights_csv import read_nights
 
     db = tmp_path / "impctl.db"
     night_start = T0 + timedelta(hours=10)  # 22:00 local, between the two records' rows

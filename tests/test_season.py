@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 from test_nights_owner import run_cli
 
+from impctl.imp.files.nights_csv import read_nights, write_nights
 from impctl.imp.night import NightSamples
-from impctl.imp.nights_csv import read_nights, write_nights
 from impctl.population.imp_run.season_nights import household_nights
 from impctl.season import fit_season, record_from_nights
 from impctl.season.defrost import AFTER_S, read_draw

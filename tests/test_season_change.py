@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from test_nights_owner import run_cli
 
-from impctl.imp.nights_csv import write_nights
+from impctl.imp.files.nights_csv import write_nights
 from impctl.mqtt.payloads import fit_payloads
 from impctl.plant import PlantCore
 from impctl.population.households import sample_households

@@ -23,7 +23,7 @@ def speed(args) -> None:
     import tempfile
     from pathlib import Path
 
-    from impctl.imp.nights_csv import write_nights
+    from impctl.imp.files.nights_csv import write_nights
 
     houses = sample_households(4, seed=VAL_SEED)
     sched = imp_schedule(4, seed=VAL_SEED)
@@ -114,7 +114,7 @@ def season_speed(args) -> None:
     from season import cutoff  # bench/season.py: the cut after the N-th owner night
     from threadpoolctl import threadpool_limits
 
-    from impctl.imp.nights_csv import write_nights
+    from impctl.imp.files.nights_csv import write_nights
     from impctl.population.imp_run.season import SeasonConfig, simulate_season
     from impctl.population.imp_run.season_nights import household_nights
     from impctl.population.realism import sample_params

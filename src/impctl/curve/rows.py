@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from ..imp.file_limits import refuse_large_file
-from ..imp.nights_csv import PLAUSIBLE, REQUIRED_COLUMNS
+from ..imp.files.limits import refuse_large_file
+from ..imp.files.nights_csv import PLAUSIBLE, REQUIRED_COLUMNS
 from ..imp.plausibility import fahrenheit_problem, to_celsius
 from ..imp.tables import read_table
 
@@ -63,7 +63,7 @@ def read_rows(path: str | Path, tz: str) -> pd.DataFrame:
         table = read_table(path, required=REQUIRED_COLUMNS, numeric=("t_air", "t_out", "q_hc"),
                            optional=(*CURVE_COLUMNS, *TEXT_COLUMNS), tz=tz)
     except InputError:
-        from ..imp.csv_hints import layout_problem
+        from ..imp.files.hints import layout_problem
 
         cause = layout_problem(path, REQUIRED_COLUMNS)  # ';' separators, decimal commas
         if cause is None:

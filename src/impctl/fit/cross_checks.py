@@ -1,5 +1,5 @@
 """What the optional NIGHTS columns let a fit check about its instruments
-(:mod:`impctl.imp.night_extras`): the room sensors' and the reference outdoor temperature's
+(:mod:`impctl.imp.files.extras`): the room sensors' and the reference outdoor temperature's
 offsets, and the held nights' defrosts whose heat reading did not go negative."""
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ fit the same nights in the same search box with the same prior, so a fleet row's
 ``impctl fit``'s on the same file with the same options.
 
 1. :func:`read_household` — the size guard before anything is read (:func:`guard_household`,
-   :mod:`impctl.imp.file_limits`), the NIGHTS file read, then
+   :mod:`impctl.imp.files.limits`), the NIGHTS file read, then
    :func:`check_household` — the unit plausibility (:func:`impctl.imp.plausibility.check_units`:
    q_hc in kW, a ratio of power to temperature difference no dwelling has);
 2. :func:`choose_nights` — the nights cut at gaps (:mod:`impctl.imp.gaps`), the usable ones,
@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..imp.file_limits import refuse_large_file
+from ..imp.files.limits import refuse_large_file
 from ..imp.protocol import MIN_NIGHT_H, Q_ON_W
 
 #: Nights fitted by default / accepted by ``--max-nights``: the fit's memory and time grow
@@ -98,9 +98,9 @@ def _refused(reason: str, error: InputError) -> Refusal:
 
 def guard_household(source: str | Path, rows: int | None = None) -> None:
     """Refuse, before anything is read, a household too large to read: a file above
-    :data:`impctl.imp.file_limits.MAX_FILE_MB` (a NIGHTS.csv), or ``rows`` (counted in a Parquet
-    file's or dataset's metadata) above :data:`impctl.imp.file_limits.MAX_ROWS`."""
-    from ..imp.file_limits import refuse_many_rows
+    :data:`impctl.imp.files.limits.MAX_FILE_MB` (a NIGHTS.csv), or ``rows`` (counted in a Parquet
+    file's or dataset's metadata) above :data:`impctl.imp.files.limits.MAX_ROWS`."""
+    from ..imp.files.limits import refuse_many_rows
 
     try:
         if rows is None:
@@ -125,7 +125,7 @@ def read_household(path: str | Path, tz: str, *,
     Refusal
         Too large, unreadable, or implausible units — one line naming the file.
     """
-    from ..imp.nights_csv import read_nights, read_nights_frame
+    from ..imp.files.nights_csv import read_nights, read_nights_frame
 
     try:
         if read_frame is None:
@@ -244,7 +244,7 @@ def household_classes(nights: Sequence, model_dir: str | Path | None = None, *,
     from ..classifiers.saved import classify_nights, classify_with
 
     # the classifiers see the IMP nights only, not an auto-cut night on which the setpoint was
-    # not held (neither kind: :mod:`impctl.imp.held`)
+    # not held (neither kind: :mod:`impctl.imp.files.held`)
     nights = [n for n in nights if not getattr(n, "not_held", False)]
     try:
         results = (classify_with(list(nights), *loaded) if loaded is not None

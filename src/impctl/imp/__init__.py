@@ -19,7 +19,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "features": ["NIGHT_FEATURE_NAMES", "NIGHT_FEATURES", "Q_ON_W", "features_from_arrays",
                  "night_features"],
     "night": ["NightKind", "NightSamples"],
-    "nights_csv": ["read_nights", "write_nights"],
+    "files.nights_csv": ["read_nights", "write_nights"],
     "plan": ["DEFAULT_BAND_K", "DEFAULT_CONSTRAINED_SETPOINT_C", "DEFAULT_PREHEAT_H",
              "DEFAULT_SETPOINTS_C", "DEFAULT_WINDOW", "EMISSION_LAG_H", "NIGHT_KINDS",
              "NightPlan", "imp_plans"],

@@ -60,7 +60,8 @@ class NightSamples:
         from the water was not read, the heat put back afterwards was [h]; NaN when not logged.
     not_held : str
         Why an auto-labelled night is neither a held nor a constrained night (heat pulses,
-        drift: :mod:`impctl.imp.held`); "" for an IMP night. The fit skips it with this reason.
+        drift: :mod:`impctl.imp.files.held`); "" for an IMP night. The fit skips it with
+        this reason.
     t_flow_c, t_return_c, t_flow_target_c : ndarray or None
         Supply and return water and the heat pump's calculated flow target (its heating
         curve) per sample [°C], NaN where a cell is empty; None when the file has no such

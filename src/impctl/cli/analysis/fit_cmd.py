@@ -130,7 +130,7 @@ def fit(nights_path: Path, model_dir: Path | None, json_path: Path | None,
     # with them, the worker fits them) and scipy.special (the fit's, and the season model's)
     import scipy.special  # noqa: F401
 
-    from ...imp import nights_csv  # noqa: F401
+    from ...imp.files import nights_csv  # noqa: F401
 
     # torch (the fit) loads in a worker while this process reads the file: a bad file is
     # refused here without waiting for it, and this process never loads it (.fit_worker)

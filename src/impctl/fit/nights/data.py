@@ -63,7 +63,7 @@ def prepare_nights(
     """
     kept, offsets, skipped = [], [], []
     for night in nights:
-        if night.not_held:   # an auto-cut night that is neither kind (impctl.imp.held)
+        if night.not_held:   # an auto-cut night that is neither kind (impctl.imp.files.held)
             skipped.append((night.night_id, night.not_held))
             continue
         t = np.asarray(night.time_s, float)

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...imp.features import Q_ON_W
+from ...imp.files.extras import defrost_fields
 from ...imp.night import NightSamples
-from ...imp.night_extras import defrost_fields
 from ...imp.plan import (
     DEFAULT_BAND_K,
     DEFAULT_CONSTRAINED_SETPOINT_C,

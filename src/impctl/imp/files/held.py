@@ -1,7 +1,7 @@
 """Is an auto-cut night an IMP night at all? The held-setpoint test of unlabelled nights.
 
 A NIGHTS file without ``kind`` is cut into 22:00–05:00 windows and each labelled by its first
-hour (:func:`impctl.imp.nights_csv.read_nights`). A window may be neither kind: heat pulses
+hour (:func:`impctl.imp.files.nights_csv.read_nights`). A window may be neither kind: heat pulses
 (a pseudo-random binary sequence, a manual test), the heating switched off in the middle of a
 held night, or a heater too small to hold the setpoint — the room drifts while heat flows. Such
 a night is not used: :func:`not_held` gives the reason, the fit lists it among the skipped

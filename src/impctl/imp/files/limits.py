@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
+from ...errors import InputError
 
 #: Largest NIGHTS.csv read [MB] (~600,000 rows, 5.7 years of 5-minute data): 576,000 rows
 #: (24 MB) took 47 s and 531 MB peak RSS with 30 nights fitted (bench/fit_large.py); a gateway

@@ -13,7 +13,7 @@ pump's curve: the heating water and the hot water, and an owner night's label.
   :data:`~impctl.imp.protocol.SHORT_NIGHT` (it reached T_min too soon for the IMP fit: the
   season model reads it, the IMP fit does not); a normal night none.
 
-Unlike the columns of :mod:`.night_extras` these are checked: a cell that is not a number or
+Unlike the columns of :mod:`.extras` these are checked: a cell that is not a number or
 lies outside its range refuses the file with one line naming the row (an empty cell is
 missing). They describe the samples themselves, and a wrong one would be taken as measured.
 """
@@ -23,8 +23,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from .protocol import EMITTER_KINDS, SHORT_NIGHT
+from ...errors import InputError
+from ..protocol import EMITTER_KINDS, SHORT_NIGHT
 
 #: Per-sample columns and their ranges: heating water between freezing and boiling.
 SERIES_COLUMNS: dict[str, tuple[float, float, str]] = {

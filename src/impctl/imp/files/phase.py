@@ -3,7 +3,7 @@
 ``impctl export`` writes an IMP night's pre-heat — the heat pump raised to T_max before a
 constrained night's switch-off, or held at the setpoint before a normal night — as the night's
 first rows, marked ``phase`` = ``preheat``; every other row has an empty ``phase``. The reader
-(:func:`~impctl.imp.nights_csv.read_nights`) gives the pre-heat as a
+(:func:`~impctl.imp.files.nights_csv.read_nights`) gives the pre-heat as a
 :class:`~impctl.imp.night.NightSamples` of its own: the night's id and kind, ``phase``
 ``preheat``, time 0 at its first row. The season model reads it (the house between the owner's
 last row and the night is no gap); the IMP fit, the classifiers and the campaign do not
@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
+from ...errors import InputError
 
 PHASE = "phase"
 #: The value of ``phase`` on an IMP night's pre-heat rows (empty on every other row).

@@ -18,14 +18,14 @@ Format (one header row, then one row per sample; row numbers in errors are file 
 * ``p_house_w``, ``occupants``, ``t_rooms_c``, ``t_out_ref_c``, ``night_gain_w``, ``defrost``,
   ``p_el_w`` (optional) — household electricity besides the heat pump [W], sleepers, mean of
   the room sensors and a reference outdoor temperature [°C], a declared night gain [W], 1 while
-  the heat pump defrosts, the heat pump's electrical power [W] (:mod:`.night_extras`: a bad
+  the heat pump defrosts, the heat pump's electrical power [W] (:mod:`.extras`: a bad
   cell there is missing, not refused).
 * ``t_flow_c``, ``t_return_c``, ``t_flow_target_c``, ``dhw``, ``label``, ``emitter``
   (optional) — supply, return and target flow water [°C], the share of time charging hot
   water, an owner night's label, the emitter as the installer declares it (``radiators`` |
-  ``underfloor``; :mod:`.night_series`: a bad value there refuses the file).
+  ``underfloor``; :mod:`.series`: a bad value there refuses the file).
 * ``phase`` (optional, with ``night``) — ``preheat`` on an IMP night's first rows, its pre-heat,
-  read as a piece of its own that only the season model takes (:mod:`.night_phase`).
+  read as a piece of its own that only the season model takes (:mod:`.phase`).
 
 Without ``night`` the samples are cut into the local windows 22:00–05:00 (end inclusive); samples
 outside every window are ignored, and windows with fewer than two samples are dropped. Without
@@ -44,13 +44,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from .features import Q_ON_W
+from ...errors import InputError
+from ..features import Q_ON_W
+from ..night import NightSamples
+from ..plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
+from ..plausibility import electrical_problem, fahrenheit_problem, to_celsius
+from ..tables import TIMESTAMP_TEXT, frame_table, read_table
+from .extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
 from .held import not_held
-from .night import NightSamples
-from .night_extras import EXTRA_COLUMNS, defrost_fields, extra_columns, night_extras
-from .night_phase import PHASE, PREHEAT, check_phases, split_preheat
-from .night_series import (
+from .phase import PHASE, PREHEAT, check_phases, split_preheat
+from .series import (
     EMITTER,
     LABEL,
     SERIES_COLUMNS,
@@ -60,9 +63,6 @@ from .night_series import (
     series_arrays,
     series_fields,
 )
-from .plan import DEFAULT_WINDOW, NIGHT_KINDS, NightPlan
-from .plausibility import electrical_problem, fahrenheit_problem, to_celsius
-from .tables import TIMESTAMP_TEXT, frame_table, read_table
 
 REQUIRED_COLUMNS = ("timestamp", "t_air", "t_out", "q_hc")
 #: Plausible value ranges; outside them the file is refused (wrong units or a sensor fault).
@@ -124,7 +124,7 @@ def _check_values(table: pd.DataFrame, path: Path, stamp_text, stamp_ns: np.ndar
         ids = table["night"].to_numpy(dtype=object)
         back[1:] &= ids[1:] == ids[:-1]
     if back.any():
-        from .csv_hints import order_problem  # only on the failure path
+        from .hints import order_problem  # only on the failure path
 
         text, i = order_problem(table["timestamp"], back, stamp_text)
         raise InputError(text, path, _row(i))
@@ -190,7 +190,7 @@ def read_nights(
         table = read_table(path, required=REQUIRED_COLUMNS, numeric=_NUMERIC, optional=_OPTIONAL,
                            may_be_empty=_MAY_BE_EMPTY, tz=tz)
     except InputError:
-        from .csv_hints import layout_problem
+        from .hints import layout_problem
 
         cause = layout_problem(path, REQUIRED_COLUMNS)  # ';' separators, decimal commas
         if cause is None:
@@ -203,7 +203,7 @@ _NUMERIC = ("t_air", "t_out", "q_hc", "setpoint", "heating", *SERIES_COLUMNS)
 #: numeric columns whose empty cells are missing values
 _MAY_BE_EMPTY = ("setpoint", *SERIES_COLUMNS)
 _TEXT = ("night", "kind", LABEL, PHASE, EMITTER)
-# read as text, then each cell a number or missing (:mod:`.night_extras`), never a refusal
+# read as text, then each cell a number or missing (:mod:`.extras`), never a refusal
 _OPTIONAL = (*_TEXT, *EXTRA_COLUMNS)
 
 
