@@ -22,7 +22,7 @@ from reliability_fixtures import daemon_rig, run_virtual
 
 from impctl.cli.device.status import collect_status, format_status
 from impctl.clock import VirtualClock
-from impctl.controller.record_labels import record_day
+from impctl.controller.recording.labels import record_day
 from impctl.heatpump import WriteBudget
 from impctl.imp.files.nights_csv import read_nights
 from impctl.imp.night import SHORT_NOTE, split_owner

@@ -9,7 +9,7 @@ from zoneinfo import ZoneInfo
 
 import pytest
 
-from impctl.controller.record_labels import (
+from impctl.controller.recording.labels import (
     Span,
     judge,
     night_part,
@@ -17,7 +17,7 @@ from impctl.controller.record_labels import (
     record_day,
     record_window,
 )
-from impctl.controller.record_rows import RowBuilder, row_start
+from impctl.controller.recording.rows import RowBuilder, row_start
 from impctl.heatpump import Snapshot
 from impctl.kronoterm.decode import Reading
 from impctl.kronoterm.registers import Generation

@@ -18,8 +18,9 @@ class Night:
     next start). ``valid`` is None until assessed; ``reasons`` lists why a night is not valid
     (or notes on a valid one).
 
-    An owner record (the house recorded read-only, :mod:`impctl.controller.recorder`) spans
-    ``window_start`` (local noon) to ``window_end`` (the next local noon); ``state`` is
+    An owner record (the house recorded read-only,
+    :mod:`impctl.controller.recording.recorder`) spans ``window_start`` (local noon) to
+    ``window_end`` (the next local noon); ``state`` is
     "recording" until it is closed ("done"), ``reasons`` are its labels ("data missing: …"),
     ``valid`` is True without a label, and ``setpoint_c`` is the owner's loop-1 setpoint at
     night (None when it was never read).

@@ -5,7 +5,7 @@ The house is recorded whenever the heat pump answers and no IMP night runs — n
 not its restore, not the restore of owner's values still pending. Each snapshot is taken under
 the heat-pump lock (the one a night, a restore and the MQTT idle read hold), and a night that
 begins ends the current row. Nothing here writes to the heat pump: the recorder only reads
-(:class:`~impctl.controller.recorder.OwnerRecorder`).
+(:class:`~impctl.controller.recording.recorder.OwnerRecorder`).
 
 Whether it records, and why not, is noted in the daemon's lock file for ``impctl status``.
 """
@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 
 from ...clock import VirtualClock
 from ...config import Config
-from ...controller.recorder import OwnerRecorder
+from ...controller.recording.recorder import OwnerRecorder
 from ...heatpump import HeatPumpClient
 from ...store import Store
 from ..running import RunningDaemon

@@ -1,13 +1,13 @@
 """The owner recorder: the house recorded read-only between IMP nights, for the season model.
 
 A snapshot every snapshot interval (the heat meter of a cycling heat pump is read often and
-averaged), reduced to rows of ``interval_s`` (:mod:`.record_rows`); one owner record per local
-day from noon to noon, labelled when it is closed (:mod:`.record_labels`). This module only
+averaged), reduced to rows of ``interval_s`` (:mod:`.rows`); one owner record per local
+day from noon to noon, labelled when it is closed (:mod:`.labels`). This module only
 reads: it calls :meth:`HeatPumpClient.snapshot` and never a write. The caller decides when it
 may poll (no IMP night, pre-heat or restore running; the heat-pump lock held) and ends the
 current row when a night begins (:meth:`OwnerRecorder.end_row`).
 
-Time follows the night's rules (:mod:`.timing`): rows are stamped on the wall clock, never
+Time follows the night's rules (:mod:`..timing`): rows are stamped on the wall clock, never
 stored out of order (a row not after the newest stored one is dropped), no wait is longer than
 one snapshot interval, and a wall-clock step beyond the tolerance ends the current row and is
 noted on the open record ("clock stepped: …").
@@ -26,14 +26,14 @@ from collections.abc import Callable
 from datetime import UTC, date, datetime, timedelta
 from zoneinfo import ZoneInfo
 
-from ..clock import VirtualClock
-from ..errors import sqlite_problem
-from ..heatpump import HeatPumpClient, HeatPumpError, Snapshot
-from ..store import Store
-from ..store.house_inputs import HouseInputRow
-from .record_labels import Span, judge, night_part, night_setpoint, record_day, record_window
-from .record_rows import RowBuilder, row_start
-from .timing import REACHED_S, NightTime, describe_step
+from ...clock import VirtualClock
+from ...errors import sqlite_problem
+from ...heatpump import HeatPumpClient, HeatPumpError, Snapshot
+from ...store import Store
+from ...store.house_inputs import HouseInputRow
+from ..timing import REACHED_S, NightTime, describe_step
+from .labels import Span, judge, night_part, night_setpoint, record_day, record_window
+from .rows import RowBuilder, row_start
 
 _LOG = logging.getLogger("impctl.record")
 

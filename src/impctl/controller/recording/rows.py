@@ -13,10 +13,10 @@ import math
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 
-from ..heatpump import Snapshot
-from ..store import Sample
-from ..store.house_inputs import HouseInputRow
-from .poll import _error_bits
+from ...heatpump import Snapshot
+from ...store import Sample
+from ...store.house_inputs import HouseInputRow
+from ..poll import _error_bits
 
 #: Snapshot field → sample column, for the columns that are a row's mean.
 MEAN_FIELDS = {"t_air_c": "t_air_c", "t_out_c": "t_out_c", "q_hc_w": "q_hc_w",

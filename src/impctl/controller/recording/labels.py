@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from datetime import UTC, date, datetime, timedelta
 from zoneinfo import ZoneInfo
 
-from ..store import Sample
+from ...store import Sample
 
 #: Share of a night's time charging hot water above which the night is labelled: past it the
 #: space heating is mostly pauses, and its heat says more of the tank than of the house.
