@@ -19,7 +19,7 @@ from test_reliability_input import cli
 from impctl.errors import InputError
 from impctl.imp import read_nights
 from impctl.mqtt.commands import BadCommand, parse_command
-from impctl.mqtt.discovery import Limits
+from impctl.mqtt.homeassistant.discovery import Limits
 from impctl.mqtt.inputs import parse_payload
 from impctl.numtext import parse_float, parse_int
 

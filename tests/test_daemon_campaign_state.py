@@ -19,8 +19,8 @@ from impctl.daemon.nights.next_night import peek_next_night, why_no_night
 from impctl.daemon.nights.schedule import campaign_plan
 from impctl.errors import InputError
 from impctl.imp.protocol import DEFAULT_CONSTRAINED_SETPOINT_C, DEFAULT_SETPOINTS_C
-from impctl.mqtt.discovery import entities
-from impctl.mqtt.payloads import LiveState
+from impctl.mqtt.homeassistant.discovery import entities
+from impctl.mqtt.homeassistant.payloads import LiveState
 from impctl.store import SCHEMA_VERSION, Sample, Store
 
 T0 = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
@@ -196,7 +196,7 @@ def test_mqtt_state_and_discovery_carry_the_campaign():
         payload["campaign_reason"]) > 255
     json.dumps(payload)  # JSON-ready
     from impctl.mqtt.config import MqttConfig
-    from impctl.mqtt.discovery import Limits
+    from impctl.mqtt.homeassistant.discovery import Limits
 
     ents = {key: conf for _, key, conf in entities(
         MqttConfig(host="h", client_id="gw"), Limits(16.0, 25.0, 1.5, 21.0))}

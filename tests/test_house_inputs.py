@@ -23,9 +23,9 @@ from impctl.heatpump import Snapshot
 from impctl.kronoterm.decode import Reading
 from impctl.kronoterm.registers import Generation
 from impctl.mqtt.config import MqttConfig
-from impctl.mqtt.discovery import DeviceIdentity, Limits, discovery_messages
+from impctl.mqtt.homeassistant.discovery import DeviceIdentity, Limits, discovery_messages
+from impctl.mqtt.homeassistant.payloads import LiveState, fit_payloads
 from impctl.mqtt.inputs import InputsConfig, parse_payload
-from impctl.mqtt.payloads import LiveState, fit_payloads
 from impctl.store import Sample, Store
 from impctl.store.export import COLUMNS, nights_rows
 from impctl.store.house_inputs import outdoor_offset

@@ -277,7 +277,12 @@ def test_another_client_with_the_same_id_is_named_not_an_outage(tmp_path):
 
 
 def test_command_entities_are_the_ones_withdrawn():
-    from impctl.mqtt.discovery import COMMAND_ENTITIES, Limits, entities, withdrawn_topics
+    from impctl.mqtt.homeassistant.discovery import (
+        COMMAND_ENTITIES,
+        Limits,
+        entities,
+        withdrawn_topics,
+    )
 
     limits = Limits(16.0, 24.0, 1.5, 19.0)
     on = {(c, k) for c, k, _ in entities(MqttConfig(host="h", client_id="x", commands=True),

@@ -10,8 +10,8 @@ from mqtt_fixtures import check_discovery, render
 
 from impctl.mqtt.commands import BadCommand, parse_command
 from impctl.mqtt.config import MqttConfig
-from impctl.mqtt.discovery import DeviceIdentity, Limits, discovery_messages
-from impctl.mqtt.payloads import LiveState, fit_payloads
+from impctl.mqtt.homeassistant.discovery import DeviceIdentity, Limits, discovery_messages
+from impctl.mqtt.homeassistant.payloads import LiveState, fit_payloads
 
 LIMITS = Limits(setpoint_min_c=16.0, setpoint_max_c=23.0, comfort_band_k=1.5,
                 default_setpoint_c=21.0)
@@ -117,7 +117,7 @@ def test_the_heating_curve_sensors_say_what_to_set_and_what_it_saves():
     curve; the expected saving is the curve result's, its advice an attribute in plain
     words; no curve kept: both unknown, never a number."""
     from impctl.daemon.curve.state import suggested_flow_c
-    from impctl.mqtt.payloads import curve_payload
+    from impctl.mqtt.homeassistant.payloads import curve_payload
 
     cfg = MqttConfig(host="h", client_id="gw9")
     by_key = {t.split("/")[3]: json.loads(p)

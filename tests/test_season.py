@@ -267,7 +267,7 @@ def test_a_fleet_row_carries_the_season_model(tmp_path, season, monkeypatch):
 def test_home_assistant_shows_the_season_value_with_its_owner_nights():
     from datetime import UTC, datetime
 
-    from impctl.mqtt.payloads import fit_payloads
+    from impctl.mqtt.homeassistant.payloads import fit_payloads
 
     result = {"lumped": {"hlc": {"value": 150.0, "low": 100.0, "high": 200.0,
                                  "determined": True}},

@@ -17,7 +17,7 @@ import pytest
 from test_nights_owner import run_cli
 
 from impctl.imp.files.nights_csv import write_nights
-from impctl.mqtt.payloads import fit_payloads
+from impctl.mqtt.homeassistant.payloads import fit_payloads
 from impctl.plant import PlantCore
 from impctl.population.households import sample_households
 from impctl.population.imp_run.season import SeasonConfig, simulate_season, step_network

@@ -27,8 +27,8 @@ from .running import RunningDaemon
 if TYPE_CHECKING:
     from ..mqtt.bridge import MqttBridge
     from ..mqtt.commands import Command
-    from ..mqtt.discovery import DeviceIdentity
-    from ..mqtt.payloads import LiveState
+    from ..mqtt.homeassistant.discovery import DeviceIdentity
+    from ..mqtt.homeassistant.payloads import LiveState
 
 _LOG = logging.getLogger("impctl.daemon")
 _RUNNING = ("preparing", "active", "restoring")
@@ -56,7 +56,7 @@ class MqttLink:
 
     # -- StateSource -------------------------------------------------------------------------
     def identity(self) -> DeviceIdentity:
-        from ..mqtt.discovery import DeviceIdentity
+        from ..mqtt.homeassistant.discovery import DeviceIdentity
 
         d = self.daemon
         try:
@@ -67,7 +67,7 @@ class MqttLink:
                               sw_version=_VERSION)
 
     def live(self) -> LiveState:
-        from ..mqtt.payloads import LiveState
+        from ..mqtt.homeassistant.payloads import LiveState
 
         d, store = self.daemon, self.daemon.store
         state = LiveState()
@@ -214,7 +214,7 @@ def start_mqtt(daemon: RunningDaemon) -> MqttLink | None:
     if cfg.mqtt is None:
         return None
     from ..mqtt.bridge import MqttBridge
-    from ..mqtt.discovery import Limits
+    from ..mqtt.homeassistant.discovery import Limits
 
     lo, hi = cfg.heatpump.writes.loop1_setpoint_c
     link = MqttLink(daemon)

@@ -25,7 +25,7 @@ from ..errors import InputError
 from .commands import COMMANDS, BadCommand, Command, parse_command
 from .config import MqttConfig
 from .counted import CountedWarnings
-from .discovery import (
+from .homeassistant.discovery import (
     OFFLINE,
     ONLINE,
     DeviceIdentity,
@@ -33,7 +33,7 @@ from .discovery import (
     discovery_messages,
     withdrawn_topics,
 )
-from .payloads import LiveState, curve_payload, fit_payloads
+from .homeassistant.payloads import LiveState, curve_payload, fit_payloads
 from .takeover import TakeoverWatch
 from .tls import SocketErrors, connect_hint
 from .tls import context as tls_context

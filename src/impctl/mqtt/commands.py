@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 
 from ..numtext import non_ascii_problem
-from .discovery import Limits
+from .homeassistant.discovery import Limits
 
 #: The commands under ``<base>/cmd/``.
 COMMANDS = ("abort", "skip_tonight", "trigger", "night_kind", "night_setpoint")

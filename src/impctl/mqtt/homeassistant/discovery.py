@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 
-from .config import MqttConfig
+from ..config import MqttConfig
 
 #: Payloads of the availability topic.
 ONLINE, OFFLINE = "online", "offline"
