@@ -133,13 +133,13 @@ from benchlib.fit_tables import (
 from benchlib.fit_variants import compare, virtual_imp_check
 
 from impctl.fit import baselines
-from impctl.fit.estimator import NightFit
-from impctl.fit.instruments import (
+from impctl.fit.checks.instruments import (
     ASSUMED_METER_ERROR,
     ASSUMED_SENSOR_OFFSETS_K,
     METER_ERROR_LIMITS,
     SENSOR_OFFSET_LIMITS_K,
 )
+from impctl.fit.estimator import NightFit
 from impctl.fit.nights.data import prepare_nights, search_bounds
 from impctl.imp.protocol import DEFAULT_BAND_K, MIN_NIGHT_H
 from impctl.model import HouseParameters

@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from impctl.fit.cross_checks import cross_checks
+from impctl.fit.checks.cross_checks import cross_checks
+from impctl.fit.checks.undetermined import mark_undetermined, nuisance_at_bound, table_iv
 from impctl.fit.gain import resolve
 from impctl.fit.nights.data import prepare_nights
 from impctl.fit.result.table import format_table
-from impctl.fit.undetermined import mark_undetermined, nuisance_at_bound, table_iv
 from impctl.imp import read_nights
 from impctl.imp.gain import NIGHT_GAIN_SD_W, NIGHT_GAIN_W, measured_gain_w, measured_sd_w
 

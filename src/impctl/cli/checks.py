@@ -136,8 +136,8 @@ def time_zone(ctx: click.Context | None, param: click.Parameter | None, value: s
 def instrument_options(command: Callable) -> Callable:
     """``--t-air-offset-sd-k``, ``--t-out-offset-sd-k`` and ``--meter-error`` of ``impctl fit``
     and ``impctl fleet fit``: what the installer knows of the instruments
-    (:mod:`impctl.fit.instruments`; not given: assumed, and said so)."""
-    from ..fit.instruments import (
+    (:mod:`impctl.fit.checks.instruments`; not given: assumed, and said so)."""
+    from ..fit.checks.instruments import (
         ASSUMED_METER_ERROR,
         ASSUMED_SENSOR_OFFSETS_K,
         METER_ERROR_LIMITS,

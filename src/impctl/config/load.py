@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..fit.instruments import METER_ERROR_LIMITS, SENSOR_OFFSET_LIMITS_K
+from ..fit.checks.instruments import METER_ERROR_LIMITS, SENSOR_OFFSET_LIMITS_K
 from ..heatpump import config_from_mapping as heatpump_from_mapping
 from ..imp.gain import NIGHT_GAIN_LIMITS_W
 from ..imp.protocol import EMITTER_KINDS

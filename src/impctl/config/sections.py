@@ -101,7 +101,7 @@ class FitConfig:
     # SD of the declared gain [W]; None: 0 (known exactly)
     night_gain_sd_w: float | None = None
     # SD of the indoor / outdoor sensor's offset [K] and the heat meter's maximum error (a
-    # fraction: 0.02 class 2, 0.05 class 3), declared; None: assumed (impctl.fit.instruments)
+    # fraction: 0.02 class 2, 0.05 class 3), declared; None: assumed (impctl.fit.checks.instruments)
     t_air_offset_sd_k: float | None = None
     t_out_offset_sd_k: float | None = None
     meter_error: float | None = None

@@ -20,8 +20,8 @@ ranges, the classification is reported as contradicted and the prior-range fit i
 Here is the estimator and its procedure in a few steps; the steps live by concern:
 :mod:`._problems` (the nights prepared, the problems laid out: :mod:`.layout`), :mod:`._weights`
 (the noise weights and the refits they ask for), :mod:`._statement` (the problem reported, by
-the likelihood-ratio tests of :mod:`.selection`, and every fitted attribute, with
-:mod:`.intervals` and :mod:`.validation`).
+the likelihood-ratio tests of :mod:`.checks.selection`, and every fitted attribute, with
+:mod:`.intervals` and :mod:`.checks.validation`).
 """
 
 from __future__ import annotations

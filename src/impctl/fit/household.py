@@ -60,7 +60,7 @@ class FitOptions:
     night_gain_w: float | None = None
     night_gain_sd_w: float | None = None
     #: declared SD of the indoor / outdoor sensor's offset [K] and the heat meter's error
-    #: (a fraction); None: assumed (:mod:`impctl.fit.instruments`)
+    #: (a fraction); None: assumed (:mod:`impctl.fit.checks.instruments`)
     t_air_offset_sd_k: float | None = None
     t_out_offset_sd_k: float | None = None
     meter_error: float | None = None

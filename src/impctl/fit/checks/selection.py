@@ -1,6 +1,6 @@
 """Which of a fit's problems is reported, by likelihood-ratio tests (torch).
 
-The problems of one fit (:mod:`.layout`) include the joint fit with and without the nuisance
+The problems of one fit (:mod:`..layout`) include the joint fit with and without the nuisance
 terms, and in the class box and the whole prior box. First the data decide whether they need the
 nuisance terms (:func:`nuisance_check`), then whether they contradict the class ranges
 (:func:`class_check`); :func:`structure_share` widens the intervals by how far the nuisance terms
@@ -15,12 +15,12 @@ import numpy as np
 import torch
 from scipy.special import chdtri
 
-from .gain import GainSource
-from .intervals.uncertainty import LUMPED_NAMES, Z95, laplace
-from .layout import best_of, terms_of
-from .nights.data import Estimate
-from .ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, lumped, to_physical
-from .optim import lm
+from ..gain import GainSource
+from ..intervals.uncertainty import LUMPED_NAMES, Z95, laplace
+from ..layout import best_of, terms_of
+from ..nights.data import Estimate
+from ..ode.parameters import NUISANCE_BOUNDS, PARAM_NAMES, lumped, to_physical
+from ..optim import lm
 
 #: Likelihood-ratio threshold for "the data contradict the class ranges", applied to the loss
 #: drop from the class box to the prior box in units of the autocorrelation-inflated σ: χ² with

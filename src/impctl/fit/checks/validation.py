@@ -4,7 +4,7 @@
   normal nights, T_air RMSE on constrained ones) and the measured vs fitted series per night
   (for plots);
 * :func:`per_night_fits` — the paper's per-night-then-average mode, from the per-night problems
-  of the same optimiser call (:mod:`.layout`): a comparison, not the result.
+  of the same optimiser call (:mod:`..layout`): a comparison, not the result.
 """
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from collections.abc import Sequence
 
 import torch
 
-from ..imp.night import NightSamples
-from .intervals.uncertainty import LUMPED_NAMES
-from .nights.data import validation_table
-from .ode.node import ROW_AIR, ROW_DEMAND, build_rows
-from .ode.packing import PackedNights
-from .ode.parameters import PARAM_NAMES, lumped, to_physical
-from .optim import lm
+from ...imp.night import NightSamples
+from ..intervals.uncertainty import LUMPED_NAMES
+from ..nights.data import validation_table
+from ..ode.node import ROW_AIR, ROW_DEMAND, build_rows
+from ..ode.packing import PackedNights
+from ..ode.parameters import PARAM_NAMES, lumped, to_physical
+from ..optim import lm
 
 
 def per_night_fits(result: lm.LMResult, lay: dict, packed: PackedNights, ach_vent: float,

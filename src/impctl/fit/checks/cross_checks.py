@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ..imp.night import NightSamples
+from ...imp.night import NightSamples
 
 #: A mean offset of T_out from its reference larger than this [K] on most nights is flagged.
 T_OUT_OFFSET_FLAG_K = 1.5

@@ -12,7 +12,7 @@ the data leave to their range.
 
 from __future__ import annotations
 
-from .nights.data import Estimate
+from ..nights.data import Estimate
 
 #: A term within this share of its box's width from a bound sits at the bound.
 AT_BOUND_SHARE = 0.01
