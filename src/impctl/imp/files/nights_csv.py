@@ -60,6 +60,8 @@ from .series import (
     check_emitter,
     check_labels,
     check_series,
+    out_of_range,
+    range_text,
     series_arrays,
     series_fields,
 )
@@ -89,18 +91,15 @@ def _check_values(table: pd.DataFrame, path: Path, stamp_text, stamp_ns: np.ndar
     fahrenheit = fahrenheit_problem(table["t_air"].to_numpy(dtype=float))
     if fahrenheit is not None:
         raise InputError(fahrenheit, path, "column 't_air'")
-    for col, (lo, hi, unit) in PLAUSIBLE.items():
-        if col not in table:
-            continue
-        values = table[col].to_numpy(dtype=float)
-        bad = np.isfinite(values) & ((values < lo) | (values > hi))
-        if bad.any():
-            i = int(np.argmax(bad))
-            text = f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}"
-            if unit == "°C" and values[i] > hi and lo <= to_celsius(values[i]) <= hi:
-                text += (f" — looks like °F ({to_celsius(values[i]):.1f} °C): convert with "
-                         "(°F − 32) / 1.8")
-            raise InputError(text, path, _row(i))
+    found = out_of_range(table, PLAUSIBLE)
+    if found is not None:
+        col, i, value = found
+        lo, hi, unit = PLAUSIBLE[col]
+        text = range_text(col, value, PLAUSIBLE)
+        if unit == "°C" and value > hi and lo <= to_celsius(value) <= hi:
+            text += (f" — looks like °F ({to_celsius(value):.1f} °C): convert with "
+                     "(°F − 32) / 1.8")
+        raise InputError(text, path, _row(i))
     if "heating" in table:
         heating = table["heating"].to_numpy(dtype=float)
         bad = (heating != 0) & (heating != 1)

@@ -37,18 +37,33 @@ LABEL = "label"
 EMITTER = "emitter"
 
 
-def check_series(table: pd.DataFrame, path, row) -> None:
-    """Refuse (:class:`InputError`, one line) a value of :data:`SERIES_COLUMNS` outside its
-    range; ``row(i)`` names the row of index ``i``."""
-    for col, (lo, hi, unit) in SERIES_COLUMNS.items():
+def out_of_range(table: pd.DataFrame, ranges: dict) -> tuple[str, int, float] | None:
+    """The first (column, row index, value) of ``table`` outside its (lo, hi, unit) in
+    ``ranges`` (columns the table lacks and missing values pass), else None."""
+    for col, (lo, hi, _unit) in ranges.items():
         if col not in table:
             continue
         values = table[col].to_numpy(dtype=float)
         bad = np.isfinite(values) & ((values < lo) | (values > hi))
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(f"column '{col}': {values[i]:g} is outside {lo:g}…{hi:g} {unit}",
-                             path, row(i))
+            return col, i, float(values[i])
+    return None
+
+
+def range_text(col: str, value: float, ranges: dict) -> str:
+    """The one line that says ``value`` of ``col`` is outside its range in ``ranges``."""
+    lo, hi, unit = ranges[col]
+    return f"column '{col}': {value:g} is outside {lo:g}…{hi:g} {unit}"
+
+
+def check_series(table: pd.DataFrame, path, row) -> None:
+    """Refuse (:class:`InputError`, one line) a value of :data:`SERIES_COLUMNS` outside its
+    range; ``row(i)`` names the row of index ``i``."""
+    found = out_of_range(table, SERIES_COLUMNS)
+    if found is not None:
+        col, i, value = found
+        raise InputError(range_text(col, value, SERIES_COLUMNS), path, row(i))
 
 
 def check_labels(table: pd.DataFrame, groups, kind_of, path, row) -> None:
