@@ -171,3 +171,37 @@ def test_one_pass_gives_each_digest_as_its_nights_alone_give_it(winter_season):
     moved = [dataclasses.replace(n, q_hc_w=n.q_hc_w + 1e-9) if n is owner else n for n in nights]
     again = nights_digests(moved, lambda n: id(n) in imp)
     assert again[0] == some and again[1] != every
+
+
+def test_rows_of_other_code_are_not_carried_over(mornings, tmp_path):
+    """Between two releases the code can change under the same version number (a checkout, an
+    editable install): the FLEET rows' version carries a digest of the code, and a row of
+    other code is fitted afresh."""
+    import shutil
+    from pathlib import Path
+
+    import impctl
+    from impctl.fleet.previous import previous_rows
+    from impctl.fleet.table import source_digest, version
+
+    package = Path(impctl.__file__).resolve().parent
+    copy = tmp_path / "impctl"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    assert version().endswith("+src." + source_digest(copy))
+    module = copy / "season" / "fit.py"
+    module.write_text(module.read_text() + "\n# a change\n")
+    assert source_digest(copy) != source_digest(package)
+
+    root, *_ = mornings
+    decided = _manifest_options(root / "F1.parquet")
+    kept, _ = previous_rows(root / "F1.parquet", decided, version())
+    assert set(kept) == {"house-0", "house-1"}
+    other = version().rsplit("+src.", 1)[0] + "+src." + source_digest(copy)
+    kept, said = previous_rows(root / "F1.parquet", decided, other)
+    assert kept == {} and "0 of 2 households" in said
+
+
+def _manifest_options(path):
+    from impctl.fleet.manifest import read_manifest
+
+    return read_manifest(path).options

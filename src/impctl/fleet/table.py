@@ -39,17 +39,20 @@ search starts) and
 ``season_warm_start`` (this run's search started there);
 ``imp_nights_digest`` (a digest of the household's IMP nights) and ``imp_fit_reused`` (the IMP
 fit's columns were carried over from ``--previous``: the same IMP nights, options and impctl
-version); ``nights_digest`` (a digest of all its nights) and ``nights_unchanged`` (every night
-as in ``--previous``: the whole row carried over, nothing fitted);
+version, its code included); ``nights_digest`` (a digest of all its nights) and
+``nights_unchanged`` (every night as in ``--previous``: the whole row carried over, nothing
+fitted);
 ``needs_more_nights`` (HLC, C_m or τ not determined by the nights), ``loss``, ``eps_pct``
 (in-sample heat-demand error); ``batch_size, wall_s_per_household, cpu_s_per_household``
 (the worker process's CPU time), ``worker`` (host:pid) and
-``worker_rss_mb`` (its resident memory after the batch [MB]); ``impctl_version,
-fitted_at`` (UTC) — so that a fleet can be re-fitted when the model improves.
+``worker_rss_mb`` (its resident memory after the batch [MB]); ``impctl_version`` (the
+release and a digest of its code, ``0.1.0+src.1f2e3d4c``) and ``fitted_at`` (UTC) — so that a
+fleet can be re-fitted when the model improves.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import uuid
 from pathlib import Path
@@ -132,15 +135,36 @@ def empty_row(household: str) -> dict:
     return row
 
 
+@functools.cache
 def version() -> str:
-    """impctl's version as the FLEET rows record it."""
+    """impctl's version as the FLEET rows record it: the installed version and, as a local
+    label, a digest of the package's own files (``0.1.0+src.1f2e3d4c``).
+
+    ``--previous`` keeps a row only where this matches, so code changed between two releases
+    (a checkout, an editable install) never hands a row its older code computed to a run of
+    the newer one."""
     from importlib.metadata import PackageNotFoundError
     from importlib.metadata import version as installed
 
     try:
-        return installed("impctl")
+        release = installed("impctl")
     except PackageNotFoundError:
-        return "unknown"
+        release = "unknown"
+    return f"{release}+src.{source_digest(Path(__file__).resolve().parents[1])}"
+
+
+def source_digest(root: Path) -> str:
+    """8 hex digits over a package folder's modules and data files (path and bytes, in path
+    order)."""
+    import hashlib
+
+    digest = hashlib.blake2b(digest_size=4)
+    files = sorted(p for p in root.rglob("*")
+                   if p.suffix in (".py", ".json", ".toml") and "__pycache__" not in p.parts)
+    for p in files:
+        digest.update(p.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(p.read_bytes())
+    return digest.hexdigest()
 
 
 def to_table(rows: list[dict]) -> pa.Table:
