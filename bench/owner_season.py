@@ -37,7 +37,7 @@ from impctl.clock import VirtualClock  # noqa: E402
 from impctl.clock import loop as vtime  # noqa: E402
 from impctl.config import config_from_mapping  # noqa: E402
 from impctl.daemon.service import Daemon  # noqa: E402
-from impctl.store.house_inputs import HouseInputRow  # noqa: E402
+from impctl.store.recording.house_inputs import HouseInputRow  # noqa: E402
 
 EPOCH = datetime(2025, 10, 1, 12, 0, tzinfo=UTC)
 SPEED = 3000.0

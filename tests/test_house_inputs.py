@@ -28,7 +28,7 @@ from impctl.mqtt.homeassistant.payloads import LiveState, fit_payloads
 from impctl.mqtt.inputs import InputsConfig, parse_payload
 from impctl.store import Sample, Store
 from impctl.store.export import COLUMNS, nights_rows
-from impctl.store.house_inputs import outdoor_offset
+from impctl.store.recording.house_inputs import outdoor_offset
 
 T0 = datetime(2026, 1, 12, 21, 0, tzinfo=UTC)
 POWER, LIVING, BEDROOM = "ha/sensor/house_power/state", "ha/sensor/living/state", \

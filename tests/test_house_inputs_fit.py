@@ -15,7 +15,7 @@ from daemon_fixtures import write_config
 from impctl.model import default_house
 from impctl.population.imp_run.synth import synth_nights
 from impctl.store import Sample, Store
-from impctl.store.house_inputs import HouseInputRow
+from impctl.store.recording.house_inputs import HouseInputRow
 
 
 def _export_and_fit(tmp_path, add_rows):

@@ -9,7 +9,7 @@ from datetime import UTC, datetime, timedelta
 import pytest
 
 from impctl.store import SCHEMA_VERSION, Sample, Store
-from impctl.store.house_inputs import HouseInputRow
+from impctl.store.recording.house_inputs import HouseInputRow
 from impctl.store.schema import MIGRATIONS
 
 T0 = datetime(2026, 1, 12, 11, 0, tzinfo=UTC)  # noon in Ljubljana

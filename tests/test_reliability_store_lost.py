@@ -131,7 +131,7 @@ def test_the_copy_follows_the_journal_and_only_lost_entries_are_taken_back(tmp_p
     already closed in the store) is not taken back — it would restore over the owner's later
     choice; an empty store (truncated to 0 bytes) takes the copy's entries back, pending."""
     from impctl.store import Store
-    from impctl.store.owner_file import read_owner_values, write_owner_values
+    from impctl.store.restore.owner_file import read_owner_values, write_owner_values
 
     state = tmp_path / "state"
     with Store(state / "impctl.db") as store:

@@ -9,7 +9,7 @@ is back (a full disk, a read-only file system), the heat pump is restored and ve
 the same, one line says so, and the entry stays pending in the store until a later start or
 ``impctl restore`` can close it (this process remembers it, so it does not restore it twice).
 The journal can also come from the owner-values file instead of the store
-(:class:`impctl.store.owner_file.OwnerValuesJournal`), when the store is unusable.
+(:class:`impctl.store.restore.owner_file.OwnerValuesJournal`), when the store is unusable.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from ..clock import VirtualClock
 from ..errors import sqlite_problem
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
 from ..store import JournalEntry, Store
-from ..store.owner_file import OwnerValuesJournal
+from ..store.restore.owner_file import OwnerValuesJournal
 
 _LOG = logging.getLogger(__name__)
 #: Per journal (store): entries restored and verified by this process whose record failed

@@ -19,7 +19,7 @@ from ..clock import VirtualClock
 from ..heatpump import Snapshot
 from ..mqtt.inputs import InputsConfig, parse_payload
 from ..store import Store
-from ..store.house_inputs import HouseInputRow
+from ..store.recording.house_inputs import HouseInputRow
 
 _LOG = logging.getLogger("impctl.inputs")
 #: How often the outdoor-sensor offset is re-evaluated [s, daemon's clock].

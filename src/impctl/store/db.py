@@ -14,11 +14,11 @@ from pathlib import Path
 from ..errors import InputError
 from ._times import _dt, _iso, _now
 from .campaign_tables import CampaignTables
-from .house_inputs import HouseInputTables
-from .journal import JournalTables
-from .owner_file import OWNER_FILE
-from .owner_records import OwnerRecordTables
+from .recording.house_inputs import HouseInputTables
+from .recording.owner_records import OwnerRecordTables
 from .records import IMP_KINDS, SAMPLE_COLUMNS, Command, Night, Sample, TriggerRequest
+from .restore.journal import JournalTables
+from .restore.owner_file import OWNER_FILE
 from .schema import migrate
 
 

@@ -33,7 +33,7 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
     """
     from ...controller.restore import unrecorded
     from ...store import Store
-    from ...store.owner_file import OWNER_FILE
+    from ...store.restore.owner_file import OWNER_FILE
 
     cfg = _load(config_path)
     _setup_logging(cfg.log_level, cfg.timezone)
@@ -79,7 +79,7 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
 def _restore_from_copy(cfg, copy: Path, problem: str, timeout_s: float) -> None:
     """Restore from the owner-values file when the store is unusable; else one line saying
     what to set by hand (exit 1)."""
-    from ...store.owner_file import OwnerValuesJournal
+    from ...store.restore.owner_file import OwnerValuesJournal
 
     try:
         journal = OwnerValuesJournal(copy)

@@ -11,7 +11,7 @@ from ...errors import InputError
 
 def _copy_hint(exc: InputError, cfg) -> InputError:
     """The store's error, plus what its copy outside it says is still to restore."""
-    from ...store.owner_file import OWNER_FILE, read_owner_values
+    from ...store.restore.owner_file import OWNER_FILE, read_owner_values
 
     copy = Path(cfg.state_dir) / OWNER_FILE
     try:

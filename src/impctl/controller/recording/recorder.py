@@ -30,7 +30,7 @@ from ...clock import VirtualClock
 from ...errors import sqlite_problem
 from ...heatpump import HeatPumpClient, HeatPumpError, Snapshot
 from ...store import Store
-from ...store.house_inputs import HouseInputRow
+from ...store.recording.house_inputs import HouseInputRow
 from ..timing import REACHED_S, NightTime, describe_step
 from .labels import Span, judge, night_part, night_setpoint, record_day, record_window
 from .rows import RowBuilder, row_start

@@ -15,7 +15,7 @@ from datetime import UTC, datetime, timedelta
 
 from ...heatpump import Snapshot
 from ...store import Sample
-from ...store.house_inputs import HouseInputRow
+from ...store.recording.house_inputs import HouseInputRow
 from ..poll import _error_bits
 
 #: Snapshot field → sample column, for the columns that are a row's mean.

@@ -13,15 +13,15 @@ import sqlite3
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import InputError
-from ._times import _dt, _iso, _now
+from ...errors import InputError
+from .._times import _dt, _iso, _now
+from ..records import JournalEntry
 from .owner_file import (
     clear_owner_values,
     read_owner_values,
     remove_owner_values,
     write_owner_values,
 )
-from .records import JournalEntry
 
 
 class JournalTables:

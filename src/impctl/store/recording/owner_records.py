@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
-from ._times import _dt, _iso
+from .._times import _dt, _iso
+from ..records import Night, Sample
 from .house_inputs import HouseInputRow
-from .records import Night, Sample
 
 OWNER = "owner"
 

@@ -26,9 +26,9 @@ from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
 
-from ..errors import InputError
-from ._times import _dt, _iso, _now
-from .records import JournalEntry
+from ...errors import InputError
+from .._times import _dt, _iso, _now
+from ..records import JournalEntry
 
 #: The file's name in the state directory.
 OWNER_FILE = "owner-values.json"

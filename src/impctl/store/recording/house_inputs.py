@@ -13,7 +13,7 @@ import statistics
 from dataclasses import asdict, dataclass
 from datetime import datetime
 
-from ._times import _dt, _iso
+from .._times import _dt, _iso
 
 #: Offset between the heat pump's outdoor sensor and the reference that counts as an error [K].
 T_OUT_OFFSET_LIMIT_K = 1.5
