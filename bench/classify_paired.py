@@ -15,8 +15,8 @@ delivers them, the same draws for A and B. Per seed and parameter, A and B side 
 * whether the parameter is determined;
 * accuracy of the reported classes [%] (the prior's most probable class where not determined);
 * Brier score and top-label ECE (10 bins) of the reported probabilities;
-* the fit's search range (:func:`impctl.classifiers.saved.credible_hull`, the whole prior range
-  where not determined): coverage [%] (the true value inside it) and width (the range's
+* the fit's search range (:func:`impctl.classifiers.files.saved.credible_hull`, the whole
+  prior range where not determined): coverage [%] (the true value inside it) and width (the range's
   high / low, the factor the fit searches over);
 * B − A of accuracy, Brier and coverage with a 95 % bootstrap interval over test households.
 
@@ -41,7 +41,7 @@ from impctl.classifiers.campaign import (
     gateway_campaigns,
     night_cube,
 )
-from impctl.classifiers.saved import credible_hull
+from impctl.classifiers.files.saved import credible_hull
 from impctl.classifiers.training import TrainConfig, train_classifiers
 from impctl.population.dataset import generate_dataset
 from impctl.population.imp_run.setup import ImpSimConfig

@@ -90,7 +90,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("demo-determinism"))
     args = parser.parse_args()
     if args.model_dir is None:
-        from impctl.classifiers.saved import default_model_dir
+        from impctl.classifiers.files.saved import default_model_dir
 
         args.model_dir = default_model_dir()
         if args.plant != "realistic":

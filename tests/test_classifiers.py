@@ -27,7 +27,7 @@ from impctl.classifiers.campaign import (
     campaign_features,
     random_campaigns,
 )
-from impctl.classifiers.saved import credible_hull
+from impctl.classifiers.files.saved import credible_hull
 from impctl.classifiers.training import TrainConfig, household_split
 from impctl.errors import InputError
 from impctl.imp import NIGHT_FEATURE_NAMES, night_features

@@ -11,9 +11,9 @@ import pytest
 
 from impctl.classifiers import RangeClassifier, save_models
 from impctl.classifiers.campaign import CAMPAIGN_FEATURE_NAMES
-from impctl.classifiers.compact import CompactForest, export_arrays, load_compact
+from impctl.classifiers.files.compact import CompactForest, export_arrays, load_compact
+from impctl.classifiers.files.saved import classify_with, load_models
 from impctl.classifiers.result import NOT_DETERMINED
-from impctl.classifiers.saved import classify_with, load_models
 from impctl.classifiers.training import brier_score, expected_calibration_error
 from impctl.population import ImpSimConfig, sample_households, simulate_imp
 from impctl.population.ranges import bin_values

@@ -1,4 +1,4 @@
-"""The range forests as arrays (impctl.classifiers.compact): the same probabilities as
+"""The range forests as arrays (impctl.classifiers.files.compact): the same probabilities as
 scikit-learn, calibrated or not, with missing features; classification without scikit-learn;
 fallback to the pickles when the arrays are missing, damaged or stale."""
 
@@ -14,14 +14,14 @@ import pytest
 
 from impctl.classifiers import RangeClassifier, classify_nights, save_models
 from impctl.classifiers.campaign import CAMPAIGN_FEATURE_NAMES
-from impctl.classifiers.compact import (
+from impctl.classifiers.files.compact import (
     COMPACT_FILE,
     CompactForest,
     export_arrays,
     load_compact,
     save_compact,
 )
-from impctl.classifiers.saved import add_compact, load_models
+from impctl.classifiers.files.saved import add_compact, load_models
 from impctl.population import ImpSimConfig, sample_households, simulate_imp
 
 RANGES = {"floor_area": ((60.0, 100.0), (100.0, 200.0), (200.0, 300.0)),

@@ -39,7 +39,7 @@ def speed(args) -> None:
     print("\n### speed (target: impctl fit ≤ 5 s wall per file, in-process ≤ 1 s per household "
           f"at 5-minute rows, one core); each command run {args.repeat} times, min / median")
     if args.model_dir:
-        from impctl.classifiers.compact import COMPACT_FILE
+        from impctl.classifiers.files.compact import COMPACT_FILE
 
         have = (Path(args.model_dir) / COMPACT_FILE).is_file()
         what = "compact forests" if have else "pickled forests only: retrain for the fast path"

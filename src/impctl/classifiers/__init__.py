@@ -22,7 +22,7 @@ from ..population.ranges import DEFAULT_RANGES
 # Resolved on first use (lazy_loader), so that importing the package stays light.
 __getattr__, __dir__, _LAZY_NAMES = lazy_loader.attach(__name__, submod_attrs={
     "result": ["ClassResult"],
-    "saved": ["classify_nights", "default_model_dir", "load_models", "save_models"],
+    "files.saved": ["classify_nights", "default_model_dir", "load_models", "save_models"],
     "training": ["TrainConfig", "train_classifiers"],
     "report": ["format_report"],
     "estimator": ["RangeClassifier"],

@@ -61,8 +61,8 @@ class ClassResult:
     @property
     def fit_range(self) -> tuple[float, float]:
         """The range the fit searches, in the parameter's unit: the hull of the most probable
-        classes up to :data:`~impctl.classifiers.saved.SEARCH_LEVEL` of probability
-        (:func:`~impctl.classifiers.saved.credible_hull`); the class's
+        classes up to :data:`~impctl.classifiers.files.saved.SEARCH_LEVEL` of probability
+        (:func:`~impctl.classifiers.files.saved.credible_hull`); the class's
         own range when no probabilities were kept."""
         return self.search_range or self.range
 

@@ -52,7 +52,7 @@ def _models_unfit(model_dir: Path, plant: str) -> str | None:
     simulates (their dataset manifest's ``plant``), on the nights the gateway runs there
     (decision record 0005, one protocol)."""
     try:
-        from ..classifiers.saved import load_classifiers
+        from ..classifiers.files.saved import load_classifiers
         from ..population.imp_run.setup import ImpSimConfig
 
         # What `impctl fit` loads: the compact forests (0.1 s), else the pickled ones
@@ -122,7 +122,7 @@ def run_demo(opts: DemoOptions, echo: Callable[[str], None] = print) -> dict:
     plant = plant_summary(opts, realism)
     progress = Progress(echo)
     progress.line(f"plant: {plant['kind']} ({plant['description']})")
-    from ..classifiers.saved import default_model_dir
+    from ..classifiers.files.saved import default_model_dir
 
     model_dir = Path(opts.model_dir) if opts.model_dir else default_model_dir()
     if not opts.model_dir and opts.plant != "realistic":

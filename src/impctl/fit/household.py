@@ -241,7 +241,7 @@ def household_classes(nights: Sequence, model_dir: str | Path | None = None, *,
     """Classify the (gap-cut) ``nights`` with the classifiers of ``model_dir`` — or with
     ``loaded`` (models, metadata) a fleet worker keeps — and the search ranges; without usable
     classifiers (or no night at a setpoint they know), the whole prior ranges, said so."""
-    from ..classifiers.saved import classify_nights, classify_with
+    from ..classifiers.files.saved import classify_nights, classify_with
 
     # the classifiers see the IMP nights only, not an auto-cut night on which the setpoint was
     # not held (neither kind: :mod:`impctl.imp.files.held`)

@@ -94,7 +94,7 @@ class PopulationPrior:
     @staticmethod
     def of_labels(probabilities: dict[str, dict[str, float]], **kw) -> PopulationPrior:
         """:meth:`of_classes` from the classifiers' ``{name: {"lo-hi": p}}``
-        (:attr:`impctl.classifiers.saved.ClassResult.probabilities`)."""
+        (:attr:`impctl.classifiers.files.saved.ClassResult.probabilities`)."""
         return PopulationPrior.of_classes(
             {name: [(tuple(float(v) for v in label.split("-")), p) for label, p in rows.items()]
              for name, rows in probabilities.items()}, **kw)

@@ -68,7 +68,7 @@ def resolve_models(model_dir: str | Path | None) -> tuple[str, str | None]:
     An explicitly given directory that holds no usable classifiers is bad input; the default
     directory without them means "search the prior ranges", as ``impctl fit`` does.
     """
-    from ..classifiers.saved import default_model_dir, load_classifiers
+    from ..classifiers.files.saved import default_model_dir, load_classifiers
 
     # what the workers (and impctl fit) load: the compact forests, else the pickled ones
     if model_dir is not None:

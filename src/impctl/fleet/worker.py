@@ -53,7 +53,7 @@ def models(model_dir: str) -> tuple[dict, dict]:
     """The classifiers of ``model_dir``, loaded once per process (thread-safe)."""
     with _LOCK:
         if model_dir not in _MODELS:
-            from ..classifiers.saved import load_classifiers
+            from ..classifiers.files.saved import load_classifiers
 
             _MODELS[model_dir] = load_classifiers(model_dir)
             _LOADS["models"] += 1

@@ -42,7 +42,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     and manifest) and OUT/report.txt, OUT/report.json (accuracies vs baselines and the paper's
     Table III), then prints the report.
     """
-    from ...classifiers.saved import default_model_dir
+    from ...classifiers.files.saved import default_model_dir
     from ...population.imp_run.setup import ImpSimConfig, usable_nights
     from ...weather import read_weather
 
@@ -62,8 +62,8 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
     if out.exists() and not out.is_dir():
         raise InputError("--out must be a directory", out)
     # scikit-learn and the population's modules only now: a bad input is refused in a moment
+    from ...classifiers.files.saved import save_models
     from ...classifiers.report import format_report
-    from ...classifiers.saved import save_models
     from ...classifiers.training import TrainConfig, train_classifiers
     from ...population.dataset import generate_dataset
 
@@ -102,7 +102,7 @@ def train(households: int, seed: int, weather_path: Path | None, out: Path | Non
               help="Time zone of naive timestamps and of the 22:00–05:00 windows.")
 def classify(nights_path: Path, model_dir: Path | None, as_json: bool, tz: str) -> None:
     """Put a house into floor-area, heat-capacity and wall-U ranges from its IMP nights."""
-    from ...classifiers.saved import classify_nights
+    from ...classifiers.files.saved import classify_nights
     from ...imp import read_nights
     from ...imp.gaps import cut_at_gaps
     from ...imp.night import split_owner

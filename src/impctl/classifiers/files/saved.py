@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from ..imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
-from ..population.dataset import package_versions
-from ..population.ranges import labels_of, range_label
-from .campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
+from ...errors import InputError
+from ...imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
+from ...population.dataset import package_versions
+from ...population.ranges import labels_of, range_label
+from ..campaign import CAMPAIGN_FEATURE_NAMES, campaign_features
+from ..result import ClassResult
 from .compact import COMPACT_FILE, load_compact, save_compact
-from .result import ClassResult
 
 #: 2: cross-validated calibration, the training prior and the determination verdict in the
 #: models (older model directories are refused and retrained).
@@ -98,8 +98,8 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
         "report": report or {},
         "dataset": dataset_manifest or {},
     }
-    # The forests as plain arrays too, checked against scikit-learn (impctl.classifiers.compact):
-    # classifying from them needs neither scikit-learn nor unpickling.
+    # The forests as plain arrays too, checked against scikit-learn (.compact): classifying
+    # from them needs neither scikit-learn nor unpickling.
     if save_compact(models, directory) is not None:
         meta["compact"] = COMPACT_FILE
     tmp = directory / (METADATA_FILE + ".tmp")
@@ -175,7 +175,7 @@ def load_models(model_dir: str | Path | None = None) -> tuple[dict, dict]:
                          f"{sklearn.__version__}; {RETRAIN} again", meta_path)
     import joblib
 
-    from .estimator import RangeClassifier
+    from ..estimator import RangeClassifier
 
     models = {}
     for name, info in meta.get("parameters", {}).items():
