@@ -56,9 +56,9 @@ def make_input(n: int, owner_nights: int, seed: int, data: Path, simulated: int 
 
     from impctl.imp.files.nights_csv import write_nights
     from impctl.population.households import sample_households
-    from impctl.population.imp_run.season import SeasonConfig, simulate_season
-    from impctl.population.imp_run.season_nights import household_nights
     from impctl.population.realism import sample_params
+    from impctl.population.season_run.nights import household_nights
+    from impctl.population.season_run.season import SeasonConfig, simulate_season
 
     simulated = simulated or owner_nights
     target = data / (f"season-{n}-{owner_nights}-{seed}" if simulated == owner_nights

@@ -1,6 +1,6 @@
 """The season model against the energy signature, on simulated winters of realistic households.
 
-Each household runs a season on the realistic plant (impctl.population.imp_run.season: the IMP
+Each household runs a season on the realistic plant (impctl.population.season_run.season: the IMP
 campaign every other night, the owner's own nights between, cold and mild spells, night
 setback, hot water, defrosts, owner changes). For every N in ``--owner-nights`` the household's
 record is cut when its N-th plain owner night is over, exported as the gateway would
@@ -93,7 +93,7 @@ def cutoff(s, h: int, n_owner: int) -> int | None:
 
 
 def _fit(job: tuple[int, int]) -> dict:
-    from impctl.population.imp_run.season_nights import household_nights
+    from impctl.population.season_run.nights import household_nights
     from impctl.season.fit import LUMPED, Z95, fit_nights, fit_season
     from impctl.season.nights import record_from_nights
 
@@ -309,8 +309,8 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     global _SEASON, _HOUSES, _RAW, _P_HOUSE, _IMP, _CONSTRAINED_H, _DECLARED
     import impctl.season.fit  # noqa: F401  (loaded once, before the workers fork)
     from impctl.population.households import sample_households
-    from impctl.population.imp_run.season import SeasonConfig, simulate_season
     from impctl.population.realism import sample_params
+    from impctl.population.season_run.season import SeasonConfig, simulate_season
 
     if 0 in args.owner_nights:
         import benchlib.season_imp  # noqa: F401

@@ -68,8 +68,8 @@ def winter_season(tmp_path_factory):
         path = root / "winter-season.pickle"
         if not path.exists():
             from impctl.population.households import sample_households
-            from impctl.population.imp_run.season import SeasonConfig, simulate_season
             from impctl.population.realism import sample_params
+            from impctl.population.season_run.season import SeasonConfig, simulate_season
 
             houses = sample_households(WINTER_HOUSEHOLDS, seed=WINTER_SEED)
             params = sample_params(WINTER_HOUSEHOLDS, WINTER_SEED)

@@ -21,7 +21,7 @@ from impctl.fit.household import FitOptions
 from impctl.fleet import fit_fleet, read_fleet
 from impctl.fleet.table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 from impctl.imp.files.nights_csv import read_nights, write_nights
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season.fit import fit_nights
 
 TZ = "Europe/Ljubljana"

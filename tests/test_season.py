@@ -17,7 +17,7 @@ from test_nights_owner import run_cli
 
 from impctl.imp.files.nights_csv import read_nights, write_nights
 from impctl.imp.night import NightSamples
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season import fit_season, record_from_nights
 from impctl.season.defrost import AFTER_S, read_draw
 from impctl.season.fit import fit_nights, signature
@@ -336,8 +336,8 @@ def test_the_search_finds_a_house_without_a_slow_emitter():
     truth on these houses, HLC by 13 %)."""
     from impctl.plant.params import PlantParams
     from impctl.population.households import sample_households
-    from impctl.population.imp_run.season import SeasonConfig, simulate_season
     from impctl.population.realism import sample_params
+    from impctl.population.season_run.season import SeasonConfig, simulate_season
 
     houses, params = sample_households(4, seed=4242), sample_params(4, 4242)
     ideal = PlantParams.ideal().with_section("gains", **vars(params.gains))

@@ -20,9 +20,9 @@ from impctl.imp.files.nights_csv import write_nights
 from impctl.mqtt.homeassistant.payloads import fit_payloads
 from impctl.plant import PlantCore
 from impctl.population.households import sample_households
-from impctl.population.imp_run.season import SeasonConfig, simulate_season, step_network
-from impctl.population.imp_run.season_nights import household_nights
 from impctl.population.realism import sample_params
+from impctl.population.season_run.nights import household_nights
+from impctl.population.season_run.season import SeasonConfig, simulate_season, step_network
 from impctl.season import change
 
 STEP_NIGHT, WINDOW_W_K = 22, 50.0

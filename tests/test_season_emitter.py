@@ -18,7 +18,7 @@ from cli_fixtures import run_impctl
 from impctl.errors import InputError
 from impctl.imp.files.nights_csv import read_nights, write_nights
 from impctl.imp.night import NightSamples
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
     RADIATOR_EXCESS_K,

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.projection.columns import Design, columns, lumped
 from impctl.season.projection.normal import fitted, normal_equations

@@ -22,7 +22,7 @@ from test_nights_owner import run_cli
 from impctl.config import load_config
 from impctl.daemon.fitting import refresh_season
 from impctl.imp.files.nights_csv import read_nights, write_nights
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season.fit import fit_nights
 from impctl.store import Store
 from impctl.store.records import Sample

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from impctl.population.imp_run.season_nights import household_nights
+from impctl.population.season_run.nights import household_nights
 from impctl.season.fit import fit_nights
 from impctl.season.record import resolution_k, unstep
 

@@ -115,9 +115,9 @@ def season_speed(args) -> None:
     from threadpoolctl import threadpool_limits
 
     from impctl.imp.files.nights_csv import write_nights
-    from impctl.population.imp_run.season import SeasonConfig, simulate_season
-    from impctl.population.imp_run.season_nights import household_nights
     from impctl.population.realism import sample_params
+    from impctl.population.season_run.nights import household_nights
+    from impctl.population.season_run.season import SeasonConfig, simulate_season
     from impctl.season.convergence import convergence
     from impctl.season.fit import fit_nights
 

@@ -15,6 +15,8 @@ only numpy (pandas comes with the first household, night or dataset asked for).
 * :func:`generate_dataset`, :class:`Dataset` (:mod:`.dataset`)
 * :func:`synth_nights` (:mod:`.imp_run.synth`): fine-step simulated nights for the fit's tests
   and benches
+* :mod:`.season_run`: a heating season on the realistic plant, the IMP campaign with the
+  owner's own nights around it (the season model's tests and benches)
 * :data:`DEFAULT_RANGES` (:mod:`.ranges`): the parameter ranges (the paper's Table III) the
   population is drawn over and the classifiers put a house into
 """

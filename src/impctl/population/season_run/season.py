@@ -49,9 +49,9 @@ from ...plant.building.envelope import Network, Solver
 from ...plant.building.gains import internal_gains_w, solar_gains_w
 from ...plant.instruments.water import water_sensors
 from ...weather import DEFAULT_TZ, WinterClimate, winter_weather
-from .realistic import _GatewayStop
-from .setup import ImpSimConfig
-from .synth import house_meter, night_plan
+from ..imp_run.realistic import _GatewayStop
+from ..imp_run.setup import ImpSimConfig
+from ..imp_run.synth import house_meter, night_plan
 
 #: Plant step [s].
 STEP_S = 60.0
