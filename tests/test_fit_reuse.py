@@ -60,7 +60,10 @@ def test_intervals_from_reused_terms_equal_a_fresh_evaluation(realistic_nights):
     fresh = laplace(ctx, sub, u, t_m0, fit._group_n, has_power=has_power)
     reused = laplace(ctx, sub, u, t_m0, fit._group_n, has_power=has_power, terms=terms)
     assert reused["autocorrelation"] == pytest.approx(fresh["autocorrelation"], rel=1e-9)
-    torch.testing.assert_close(reused["cov_u"], fresh["cov_u"], rtol=1e-6, atol=0)
+    # entries that cancel to ~1e-14 of the matrix's scale carry only rounding, whose last bits
+    # differ from CPU to CPU: relative to each entry where it is large, to the scale elsewhere
+    scale = float(fresh["cov_u"].abs().max())
+    torch.testing.assert_close(reused["cov_u"], fresh["cov_u"], rtol=1e-6, atol=1e-9 * scale)
     for key in ("hlc", "c_m", "tau"):
         a, b = fresh["lumped"][key], reused["lumped"][key]
         assert (b.low, b.high) == pytest.approx((a.low, a.high), rel=1e-7)

@@ -26,12 +26,15 @@ Inside, by concern:
   adequacy);
 * :mod:`.result` — the result (no torch): :mod:`.result.report` (the JSON),
   :mod:`.result.table` (its printed form), :mod:`.result.plot` (the figure);
-* here: :mod:`.estimator` (the estimator and its procedure, whose steps are
-  :mod:`._problems` — the nights prepared, the problems laid out —, :mod:`._weights` — the
-  noise weights and their refits — and :mod:`._statement` — the problem reported and every
-  fitted attribute), :mod:`.layout` (the problems one fit solves in one optimiser call:
-  starts, boxes, groups, rows), :mod:`.selection` (which problem is reported: the
-  likelihood-ratio tests), :mod:`.validation` (in-sample checks, per-night fits),
+* :mod:`.steps` — the estimator's steps: :mod:`.steps.problems` (the nights prepared, the
+  problems laid out), :mod:`.steps.weights` (the noise weights and their refits),
+  :mod:`.steps.statement` (the problem reported and every fitted attribute);
+* :mod:`.checks` — :mod:`.checks.selection` (which problem is reported: the likelihood-ratio
+  tests), :mod:`.checks.validation` (in-sample checks, per-night fits) and the rest a fit
+  checks of itself;
+* here: :mod:`.estimator` (the estimator and its procedure), :mod:`.layout` (the problems
+  one fit solves in one optimiser call: starts, boxes, groups, rows), :mod:`.household` (one
+  household's nights as the commands take them), :mod:`.prior`, :mod:`.gain`,
   :mod:`.baselines` (the methods the fit is compared with).
 """
 

@@ -18,10 +18,10 @@ ranges — and a likelihood-ratio test decides: if the data fit clearly better o
 ranges, the classification is reported as contradicted and the prior-range fit is used.
 
 Here is the estimator and its procedure in a few steps; the steps live by concern:
-:mod:`._problems` (the nights prepared, the problems laid out: :mod:`.layout`), :mod:`._weights`
-(the noise weights and the refits they ask for), :mod:`._statement` (the problem reported, by
-the likelihood-ratio tests of :mod:`.checks.selection`, and every fitted attribute, with
-:mod:`.intervals` and :mod:`.checks.validation`).
+:mod:`.steps.problems` (the nights prepared, the problems laid out: :mod:`.layout`),
+:mod:`.steps.weights` (the noise weights and the refits they ask for), :mod:`.steps.statement`
+(the problem reported, by the likelihood-ratio tests of :mod:`.checks.selection`, and every
+fitted attribute, with :mod:`.intervals` and :mod:`.checks.validation`).
 """
 
 from __future__ import annotations
@@ -35,17 +35,17 @@ from ..imp.features import Q_ON_W
 from ..imp.night import NightSamples
 from ..imp.plan import EMISSION_LAG_H
 from ..imp.protocol import MIN_NIGHT_H
-from ._problems import prepare
-from ._statement import choose, statement
-from ._weights import NOISE_PASSES, NOISE_RTOL, Weights, settle
 from .intervals import model_error
 from .layout import stop_units
 from .ode.solver import METHODS
 from .optim import lm
 from .prior import PopulationPrior
+from .steps.problems import prepare
+from .steps.statement import choose, statement
+from .steps.weights import NOISE_PASSES, NOISE_RTOL, Weights, settle
 
-# NOISE_PASSES and NOISE_RTOL live with the noise weights (:mod:`._weights`); named here too, as
-# the ``noise`` option's documentation names them
+# NOISE_PASSES and NOISE_RTOL live with the noise weights (:mod:`.steps.weights`); named here
+# too, as the ``noise`` option's documentation names them
 __all__ = ["NOISE_MODELS", "NOISE_PASSES", "NOISE_RTOL", "NORMAL_MODELS", "NightFit"]
 
 NORMAL_MODELS = ("demand", "series", "mean")

@@ -1,7 +1,7 @@
 """Which night gain a fit uses, and what it says of it: declared, measured, estimated, assumed.
 
 :func:`resolve` reads the fit's options and its nights once, before the problems are laid out
-(:mod:`._problems`): a declared gain (``NightFit(night_gain_w=…)``) is known and used as
+(:mod:`.steps.problems`): a declared gain (``NightFit(night_gain_w=…)``) is known and used as
 declared; else the nights' ``p_house_w``/``occupants`` measure it, night by night; else the
 fit's gain term estimates it where that term is switched on and kept by the likelihood-ratio
 test (:func:`.selection.gain_statement`); else the assumption of :mod:`impctl.imp.gain`.

@@ -7,7 +7,7 @@ and the rows the optimiser evaluates for them, weighted by the residual σ of ea
 
 * :func:`nuisance_boxes` — the bounds of the nuisance terms, switched on and off;
 * :func:`layout` — the problems, their groups and boxes; :func:`best_of` — the best of a group;
-* :func:`stop_units` — which groups stop together (:func:`.optim.lm.levenberg_marquardt`);
+* :func:`stop_units` — which groups stop together (:func:`..optim.lm.levenberg_marquardt`);
 * :func:`night_rows` — each night's row type, heat input and residual group;
 * :func:`problem_rows` — the optimiser's rows; :func:`air_input` — Φ_HC of the AIR rows;
 * :func:`initial_mass` — the mass temperature each row starts from (the start's parameters);
@@ -37,7 +37,7 @@ _FIRST_NIGHT_GROUP = 3
 
 
 def stop_units(groups: torch.Tensor) -> torch.Tensor:
-    """Per group label, its stopping unit (:func:`.lm.levenberg_marquardt`): the joint fit
+    """Per group label, its stopping unit (:func:`..optim.lm.levenberg_marquardt`): the joint fit
     (groups 0–2) and the per-night fits (3 + i) stop on their own, so that the joint answer
     does not depend on whether — or how long — the per-night comparison runs."""
     return (torch.arange(int(groups.max()) + 1) >= _FIRST_NIGHT_GROUP).long()
@@ -65,7 +65,7 @@ def nuisance_boxes(night_gain: bool, emitter_state: bool, furniture_state: bool,
     """Bounds of the nuisance terms (:data:`~.ode.parameters.NUISANCE_NAMES`) with the terms
     switched on as asked, and with all of them off (``plain``); (0, 0) is off. A night gain
     that is not fitted is pinned to ``night_gain_w`` [W] in both; ``estimate_gain``: the gain
-    is free in both (under its Gaussian prior, :attr:`.optim.lm.Context.gain_prior`), so the
+    is free in both (under its Gaussian prior, :attr:`..optim.lm.Context.gain_prior`), so the
     likelihood-ratio test is about the other terms alone."""
     nuisance = {n: (NUISANCE_BOUNDS[n] if on else (0.0, 0.0)) for n, on in zip(
         NUISANCE_NAMES, (night_gain, emitter_state, emitter_state, furniture_state,

@@ -153,7 +153,8 @@ def fit_batch(sources: list[Source], settings: Settings,
     preload(settings.model_dir)
     _LOADS["batches"] += 1
     # No FLEET column reads the paper's per-night fits, and the joint fit does not depend on
-    # them (they stop on their own: fit.layout.stop_units): skipping them saves ~10 % of a batch.
+    # them (they stop on their own: fit.layout.stop_units): skipping them saves ~10 % of
+    # a batch.
     params = {**settings.options.estimator_params(), "per_night": False}
     rows: dict[str, dict] = {}
     todo: list[tuple] = []

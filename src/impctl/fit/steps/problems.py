@@ -2,9 +2,9 @@
 
 The given nights are cut at gaps, checked, coarsened and packed side by side; the class and the
 prior search boxes, the optimiser's context and the layout of every start follow
-(:mod:`.layout`). Nothing here changes while the fit runs — except the prior the context carries,
-which the noise weights temper for their refits (:mod:`._weights`) — so the weights and the
-statement (:mod:`._statement`) take a :class:`Problems` and never rebuild any of it.
+(:mod:`..layout`). Nothing here changes while the fit runs — except the prior the context carries,
+which the noise weights temper for their refits (:mod:`.weights`) — so the weights and the
+statement (:mod:`.statement`) take a :class:`Problems` and never rebuild any of it.
 """
 
 from __future__ import annotations
@@ -14,18 +14,18 @@ from dataclasses import dataclass
 
 import torch
 
-from ..errors import InputError
-from ..imp.gaps import Gap, cut_at_gaps
-from ..imp.night import NightSamples
-from ._params import FitParams
-from .gain import GainSource, resolve
-from .layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
-from .nights.data import compared_power, prepare_nights, search_bounds
-from .nights.resample import coarsen
-from .ode.packing import PackedNights, pack_nights
-from .ode.parameters import bounds_tensor
-from .optim import lm
-from .prior import PopulationPrior
+from ...errors import InputError
+from ...imp.gaps import Gap, cut_at_gaps
+from ...imp.night import NightSamples
+from ..gain import GainSource, resolve
+from ..layout import initial_mass, layout, night_rows, nuisance_boxes, problem_rows
+from ..nights.data import compared_power, prepare_nights, search_bounds
+from ..nights.resample import coarsen
+from ..ode.packing import PackedNights, pack_nights
+from ..ode.parameters import bounds_tensor
+from ..optim import lm
+from ..prior import PopulationPrior
+from .params import FitParams
 
 
 @dataclass(frozen=True)
@@ -45,9 +45,9 @@ class Problems:
     row_type_n: torch.Tensor          # per packed night: row type, Φ_HC of AIR rows [W]
     phi_n: torch.Tensor
     phi_in_n: torch.Tensor
-    group_n: torch.Tensor             # and residual group (:func:`.layout.night_rows`)
+    group_n: torch.Tensor             # and residual group (:func:`..layout.night_rows`)
     n_nuisance: int                   # nuisance terms switched on (the LR test's dof)
-    lay: dict                         # :func:`.layout.layout`
+    lay: dict                         # :func:`..layout.layout`
     gain: GainSource | None = None    # the gain pinned when no gain term is fitted
 
     @property
@@ -62,7 +62,7 @@ class Problems:
                             self.group_n, only, sigma_n)
 
     def initial_mass(self, ach_vent: float, ach_infl: float) -> torch.Tensor:
-        """θ_m,0 [°C] per row at each problem's start (:func:`.layout.initial_mass`)."""
+        """θ_m,0 [°C] per row at each problem's start (:func:`..layout.initial_mass`)."""
         lay = self.lay
         return initial_mass(self.packed, lay["u0"][lay["row_problem"]], lay["row_night"],
                             lay["box"][lay["row_problem"]], self.row_type_n, self.phi_n,

@@ -1,5 +1,5 @@
 """What the steps of a fit read of their :class:`~impctl.fit.NightFit`: its constructor
-parameters, as a typing protocol, so that :mod:`._problems` and :mod:`._statement` need not
+parameters, as a typing protocol, so that :mod:`.problems` and :mod:`.statement` need not
 import the estimator that imports them (the parameters' meaning and units: NightFit's
 docstring)."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from .prior import PopulationPrior
+from ..prior import PopulationPrior
 
 
 class FitParams(Protocol):

@@ -1,7 +1,7 @@
 """The noise weights of one :class:`~impctl.fit.NightFit`: the σ each residual is divided by.
 
 The first optimisation weighs the rows by a data-only guess of the noise per residual group
-(:func:`.nights.data.noise_levels`). Its residuals then give the σ the intervals are scaled
+(:func:`..nights.data.noise_levels`). Its residuals then give the σ the intervals are scaled
 with, and the joint problems are refitted with it: per night (``noise="night"``, iteratively
 reweighted least squares, whose fixed point is the maximum-likelihood fit with an unknown
 variance per night) or per group when it is far from the guess (``noise="kind"``, eq. 5 rows
@@ -20,11 +20,11 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from ._problems import Problems
-from .intervals.uncertainty import inflation
-from .layout import best_of, night_sigma, residual_sigma
-from .nights.data import noise_levels
-from .optim import lm
+from ..intervals.uncertainty import inflation
+from ..layout import best_of, night_sigma, residual_sigma
+from ..nights.data import noise_levels
+from ..optim import lm
+from .problems import Problems
 
 #: Most refits of the joint problems while the per-night σ settle (``noise="night"``), and
 #: the largest relative change of any night's σ at which they count as settled.
@@ -34,7 +34,7 @@ NOISE_RTOL = 0.1
 _GROUPS = ("constrained_t_air_k", "normal_t_air_k", "normal_power_w")
 
 #: An optimiser call (rows, u0, θ_m,0, groups) → result: the estimator's own, so that the
-#: fleet's batched estimator (:mod:`.optim.batch`) merges the refits too.
+#: fleet's batched estimator (:mod:`..optim.batch`) merges the refits too.
 Optimise = Callable[[lm.Rows, torch.Tensor, torch.Tensor, torch.Tensor], lm.LMResult]
 
 
@@ -102,7 +102,7 @@ def _fitted_sigma(problems: Problems, weights: Weights, rows: lm.Rows, result: l
 def _reweight_nights(problems: Problems, weights: Weights, result: lm.LMResult,
                      optimise: Optimise) -> Weights:
     """Refit the joint problems with each night weighted by its own RMS residual
-    (:func:`.layout.night_sigma`) until no night's σ moves by more than :data:`NOISE_RTOL`
+    (:func:`..layout.night_sigma`) until no night's σ moves by more than :data:`NOISE_RTOL`
     (at most :data:`NOISE_PASSES` refits)."""
     for _ in range(NOISE_PASSES):
         new = night_sigma(problems.ctx, weights.rows(problems), result,

@@ -1,6 +1,6 @@
 """What one :class:`~impctl.fit.NightFit` reports: the problem chosen and every fitted attribute.
 
-:func:`choose` picks the problem by the likelihood-ratio tests (:mod:`.checks.selection`): first
+:func:`choose` picks the problem by the likelihood-ratio tests (:mod:`..checks.selection`): first
 whether the data need the nuisance terms, then whether they contradict the class box.
 :func:`statement` builds from it every attribute a fitted NightFit reports — the Laplace
 intervals with their type-B, structural, prior and model-error shares, the nuisance terms,
@@ -16,27 +16,27 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from ._params import FitParams
-from ._problems import Problems
-from ._weights import Weights
-from .checks.cross_checks import cross_checks
-from .checks.instruments import instruments
-from .checks.selection import (
+from ..checks.cross_checks import cross_checks
+from ..checks.instruments import instruments
+from ..checks.selection import (
     assumed_gain,
     class_check,
     gain_statement,
     nuisance_check,
     structure_share,
 )
-from .checks.undetermined import mark_undetermined, nuisance_at_bound, table_iv
-from .checks.validation import in_sample_validation, per_night_fits
-from .intervals import model_error
-from .intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
-from .layout import best_of, terms_of
-from .nights.quality import adequacy, t_air_resolution_k, used_nights_quality
-from .ode.parameters import PARAM_NAMES, to_physical
-from .optim import lm
-from .prior import prior_statement
+from ..checks.undetermined import mark_undetermined, nuisance_at_bound, table_iv
+from ..checks.validation import in_sample_validation, per_night_fits
+from ..intervals import model_error
+from ..intervals.uncertainty import laplace, nuisance_intervals, offset_allowance
+from ..layout import best_of, terms_of
+from ..nights.quality import adequacy, t_air_resolution_k, used_nights_quality
+from ..ode.parameters import PARAM_NAMES, to_physical
+from ..optim import lm
+from ..prior import prior_statement
+from .params import FitParams
+from .problems import Problems
+from .weights import Weights
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def choose(problems: Problems, rows: lm.Rows, result: lm.LMResult) -> Choice:
 def statement(options: FitParams, problems: Problems, weights: Weights, result: lm.LMResult,
               choice: Choice, cal: dict | None) -> dict[str, object]:
     """Every attribute a fitted NightFit reports (name → value), for the problem ``choice``;
-    ``cal``: the model-error calibration (:func:`.intervals.model_error.load_calibration`)."""
+    ``cal``: the model-error calibration (:func:`..intervals.model_error.load_calibration`)."""
     o, p, c = options, problems, choice
     packed, box = p.packed, c.sub.box[0]
     out: dict[str, object] = {
