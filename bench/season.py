@@ -4,13 +4,14 @@ Each household runs a season on the realistic plant (impctl.population.season_ru
 campaign every other night, the owner's own nights between, cold and mild spells, night
 setback, hot water, defrosts, owner changes). For every N in ``--owner-nights`` the household's
 record is cut when its N-th plain owner night is over, exported as the gateway would
-(season_nights.household_nights: owner records noon to noon, IMP nights, the pre-heats not
-recorded) and fitted by ``impctl.season`` — the same path as ``impctl fit``. Beside it, the
-energy signature of the same owner nights (00:00–05:00 means). Errors against the true house;
-medians and P90 with 95 % bootstrap intervals; coverage and median half-width of the 95 %
-intervals; the fit's wall time. The row ``HLCm`` is the HLC against the heat meter's own scale
-(the true HLC × (1 + the house's meter gain error), class 2/3 meters ±5 %): what no method
-reading that meter can do better than — the rest of the error is the model's.
+(population.season_run.nights.household_nights: owner records noon to noon, IMP nights, the
+pre-heats not recorded) and fitted by ``impctl.season`` — the same path as ``impctl fit``.
+Beside it, the energy signature of the same owner nights (00:00–05:00 means). Errors against
+the true house; medians and P90 with 95 % bootstrap intervals; coverage and median
+half-width of the 95 % intervals; the fit's wall time. The row ``HLCm`` is the HLC against the
+heat meter's own scale (the true HLC × (1 + the house's meter gain error), class 2/3 meters
+±5 %): what no method reading that meter can do better than — the rest of the error is the
+model's.
 
     python bench/season.py --households 200 --owner-nights 14,28
     python bench/season.py --households 40 --variant signed
@@ -23,6 +24,7 @@ reading that meter can do better than — the rest of the error is the model's.
         --nights 90   # the intervals' scale and floor
     python bench/season.py --households 10 --owner-nights 0,7,14 --figure curve.png
     python bench/season.py --from-json saved.json --figure curve.png   # redraw, no fits
+    python bench/season.py --pool a.json,b.json   # saved runs of several seeds as one
 
 ``--owner-nights`` may hold 0: the household's IMP nights alone (the whole campaign, no owner
 record) fitted on ``impctl fit``'s path with the true class ranges (benchlib/season_imp.py),
@@ -31,6 +33,10 @@ the same households as the other counts. ``--figure`` draws the error against th
 without refitting; a run without its own 0-night point draws bench/fit.py's figure of record
 there, marked as other households. A saved JSON the figure cannot use is refused in one line
 naming the file and the key, exit status 2, nothing written.
+
+``--pool A.json,B.json`` prints the table of saved ``--json`` runs (other seeds, the same
+settings) pooled as one population: the medians, P90, their bootstrap intervals and the
+coverage over all their households; each run saves its households' true values for it.
 
 ``--calibrate`` fits households of another seed with the raw intervals and prints, per
 quantity, the sandwich scale and model-error floor (benchlib/season_calibration.py: at least
@@ -271,6 +277,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="draw the error against the owner nights into this PNG")
     ap.add_argument("--from-json", default=None, metavar="SAVED",
                     help="draw --figure from a saved --json run, without fitting")
+    ap.add_argument("--pool", default=None, metavar="RUNS",
+                    help="the table of saved --json runs (comma-separated) pooled as one "
+                         "population; no fits")
     ap.add_argument("--calibrate", action="store_true",
                     help="raw intervals: print the scale and floor of the intervals")
     ap.add_argument("--calibrate-from", default=None, metavar="RUNS",
@@ -281,6 +290,12 @@ def main(argv: list[str] | None = None) -> None:
         from benchlib.season_calibration import from_saved
 
         from_saved(args.calibrate_from.split(","))
+        return
+    if args.pool is not None:
+        try:
+            _pool(args.pool.split(","))
+        except SavedError as exc:
+            _refuse(exc)
         return
     if args.from_json is not None and args.figure is None:
         ap.error("--from-json draws a figure: give --figure FILE.png")
@@ -371,6 +386,18 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
     ideal = f", ideal: {', '.join(args.ideal)}" if args.ideal else ""
     print(f"{n} households ({args.variant} plant{ideal}, seed {args.seed}), season simulated "
           f"in {sim_s:.0f} s; the fits: {args.workers} processes; IMP nights read: {args.imp}")
+    _print_table(summaries)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"rows": rows, "summary": summaries, "args": saved_args,
+                       "truth": {k: np.asarray(v).tolist() for k, v in truth.items()}},
+                      fh, indent=1)
+    if args.figure:
+        _draw(summaries, saved_args, args.figure)
+
+
+def _print_table(summaries: list[dict]) -> None:
+    """The run's table: per owner-night count and quantity, the |error| and the intervals."""
     print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
           f"{'coverage':>8} {'half-width %':>12}")
     for sm in summaries:
@@ -383,7 +410,7 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
                 continue
             print(f"{label:>12} {name:>4} {q['median_pct']:6.1f} "
                   f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
-                  f"{100 * q['coverage']:7.0f}% {q['half_width_pct']:12.1f}"
+                  f"{100 * q['coverage']:7.1f}% {q['half_width_pct']:12.1f}"
                   + (f"  ({sm[name + '_missing']} without)" if sm[name + "_missing"] else ""))
         mq = sm.get("HLC_meter")
         if mq is not None:
@@ -399,11 +426,39 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
               f"{sm['fit_s_median']:.1f} s"
               + (f"; {sm['unidentified']} without a valid constrained night (their normal "
                  "nights fitted, τ and C_m from the class ranges)" if sm["unidentified"] else ""))
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"rows": rows, "summary": summaries, "args": saved_args}, fh, indent=1)
-    if args.figure:
-        _draw(summaries, saved_args, args.figure)
+
+
+def _pool(paths: list[str]) -> None:
+    """Saved ``--json`` runs of the same settings (other seeds) as one population: their rows
+    and true values concatenated, the households numbered on, and the table printed."""
+    rows: list[dict] = []
+    truth: dict[str, list] = {}
+    counts: set[tuple] = set()
+    seeds = []
+    for path in paths:
+        saved = load_saved(path)
+        if "truth" not in saved:
+            raise SavedError(path, "truth", "was saved without the true values (run it again "
+                             "with this bench)")
+        n = len(saved["truth"]["hlc_w_per_k"])
+        offset = len(truth.get("hlc_w_per_k", []))
+        for r in saved["rows"]:
+            rows.append({**r, "household": r["household"] + offset})
+        for k, v in saved["truth"].items():
+            truth.setdefault(k, []).extend(v[:n])
+        a = saved["args"]
+        counts.add((a["owner_nights"], a["variant"], a["imp"], a["nights"]))
+        seeds.append(str(a["seed"]))
+    if len(counts) > 1:
+        raise SavedError(paths[-1], "args", "other settings than the first run's (owner "
+                         "nights, variant, IMP nights or nights): pool runs of one setting")
+    ns = sorted({r["owner_nights"] for r in rows})
+    arrays = {k: np.asarray(v, float) for k, v in truth.items()}
+    print(f"$ python bench/season.py --pool {','.join(paths)}")
+    owner, variant, imp, nights = counts.pop()
+    print(f"{len(arrays['hlc_w_per_k'])} households pooled from {len(paths)} runs ({variant} "
+          f"plant, seeds {', '.join(seeds)}, {nights} nights, IMP nights read: {imp})")
+    _print_table([summarize(rows, arrays, k) for k in ns])
 
 
 if __name__ == "__main__":

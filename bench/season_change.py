@@ -6,7 +6,7 @@ water, defrosts, owner changes, the gains wandering). Half of them get a step in
 noon before a night drawn in [``--first``, nights − ``--last``): half of those −14 W/K (loft
 insulation added) and half ``--window-w-k`` (a window left open; default +20 W/K, a tilted
 window's ≈ 60 m³/h at 0.34 Wh/(m³K)); the other half nothing. Each household's export
-(season_nights.household_nights, as the gateway writes it) is read by
+(population.season_run.nights.household_nights, as the gateway writes it) is read by
 ``impctl.season.change`` night after night as the gateway would run it: the first night it says
 "changed" is the alarm.
 

@@ -119,3 +119,53 @@ def test_a_run_fits_the_imp_nights_alone_at_0_owner_nights(tmp_path: Path) -> No
     assert all(math.isfinite(zero[q]["median_pct"]) for q in ("HLC", "tau", "C_m"))
     assert "bench/fit.py's figure of record" not in done.stdout
     _is_png(out)
+
+
+def _run_with_truth(seed: int, errors_pct: list[float], covered: bool) -> dict:
+    """A saved run whose households' HLC is off by ``errors_pct`` (τ and C_m exact), each
+    interval around the truth or beside it, with the true values it was scored against."""
+    true_hlc = [100.0 + 10 * i for i in range(len(errors_pct))]
+    rows = []
+    for h, (t, e) in enumerate(zip(true_hlc, errors_pct, strict=True)):
+        est = t * (1 + e / 100)
+        lo, hi = (0.5 * t, 2 * t) if covered else (1.5 * t, 2 * t)
+        rows.append({"household": h, "owner_nights": 28, "status": "ok", "fit_s": 0.5,
+                     "hlc_w_per_k": est, "hlc_w_per_k_low": lo, "hlc_w_per_k_high": hi,
+                     "tau_h": 40.0, "tau_h_low": 30.0, "tau_h_high": 50.0,
+                     "c_m_j_per_k": 2e7, "c_m_j_per_k_low": 1e7, "c_m_j_per_k_high": 3e7,
+                     "signature_hlc_w_per_k": 1.5 * t})
+    saved = _saved((28,))
+    saved["args"]["seed"] = seed
+    saved["args"].update(imp="all")
+    saved["rows"] = rows
+    n = len(rows)
+    saved["truth"] = {"hlc_w_per_k": true_hlc, "tau_h": [40.0] * n, "c_m_j_per_k": [2e7] * n,
+                      "meter_gain": [0.0] * n}
+    return saved
+
+
+def test_saved_runs_of_other_seeds_pool_into_one_table(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(_run_with_truth(1, [10.0, 20.0], covered=True)))
+    b.write_text(json.dumps(_run_with_truth(2, [30.0, 40.0], covered=False)))
+    done = _run("--pool", f"{a},{b}")
+    assert done.returncode == 0, done.stderr
+    assert "4 households pooled from 2 runs (realistic plant, seeds 1, 2" in done.stdout
+    (hlc,) = [line.split() for line in done.stdout.splitlines()
+              if line.split()[:2] == ["28", "HLC"]]
+    # the median of all four errors, and the coverage of all four intervals
+    assert float(hlc[2]) == pytest.approx(25.0) and hlc[-2] == "50.0%"
+    (sig,) = [line.split() for line in done.stdout.splitlines() if line.split()[1:2] == ["sig"]]
+    assert float(sig[2]) == pytest.approx(50.0)
+
+    b.write_text(json.dumps(_drop(json.loads(b.read_text()), "truth")))
+    done = _run("--pool", f"{a},{b}")
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"bench/season.py: {b}: truth: was saved without the true values (run it again with "
+        "this bench)"]
+    other = _run_with_truth(3, [5.0], covered=True)
+    other["args"]["variant"] = "p_house"
+    b.write_text(json.dumps(other))
+    done = _run("--pool", f"{a},{b}")
+    assert done.returncode == 2 and "other settings than the first run's" in done.stderr

@@ -24,7 +24,7 @@ a season in one pass at 60 s, closed loop where the gateway decides:
 Every 300 s the gateway's log is kept for whole days — the room sensor's T_air, the outdoor
 sensor's T_out, the heat meter's interval mean, the setpoint and the hot-water and defrost flags,
 the household electricity a meter would read — so a fit may take the window it needs
-(:func:`season_nights`). Units: °C, W, s.
+(:func:`.nights.household_nights`). Units: °C, W, s.
 """
 
 from __future__ import annotations
