@@ -416,7 +416,7 @@ def _print_table(summaries: list[dict]) -> None:
         if mq is not None:
             print(f"{label:>12} {'HLCm':>4} {mq['median_pct']:6.1f} "
                   f"{_fmt(mq['median_ci']):>15} {mq['p90_pct']:6.1f} {_fmt(mq['p90_ci']):>15} "
-                  f"{100 * mq['coverage']:7.0f}%   (HLC on the heat meter's scale)")
+                  f"{100 * mq['coverage']:7.1f}%   (HLC on the heat meter's scale)")
         sg = sm["signature"]
         if sg is not None:
             print(f"{label:>12} {'sig':>4} {sg['median_pct']:6.1f} "
