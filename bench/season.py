@@ -134,6 +134,7 @@ def _fit(job: tuple[int, int]) -> dict:
     if fit is None:
         return {**row, "status": note or "no fit"}
     row.update(status="ok", imp_nights=fit.imp_nights, emitter=fit.emitter,
+               owner_nights_used=fit.owner_nights,
                signature_hlc_w_per_k=fit.signature_hlc_w_per_k,
                **{f"{k}": fit.values[k] for k in LUMPED},
                **{f"{k}_low": fit.low[k] for k in LUMPED},
