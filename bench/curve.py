@@ -59,8 +59,8 @@ from benchlib.curve_sim import (  # noqa: E402
 from benchlib.fit_protocol import VAL_SEED, gateway_campaign, simulate_schedule, val_schedule  # noqa: E402,I001
 
 from impctl.curve import analyse  # noqa: E402
+from impctl.curve.data.rows import rows_from_table  # noqa: E402
 from impctl.curve.need import FLOW_LIMITS_C, POINTS_T_OUT_C, writable  # noqa: E402
-from impctl.curve.rows import rows_from_table  # noqa: E402
 from impctl.errors import InputError  # noqa: E402
 from impctl.plant import PlantCore  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402

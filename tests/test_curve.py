@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 
 from impctl.curve import analyse
+from impctl.curve.data.rows import rows_from_table
+from impctl.curve.data.synth import owner_rows
 from impctl.curve.emitter import EmitterUnknown, fit_emitter
 from impctl.curve.need import GRID_T_OUT_C, NeedCurve, recommend, required_flow_c
-from impctl.curve.rows import rows_from_table
 from impctl.curve.savings import ASSUMED_DAYS, winter_climate
-from impctl.curve.synth import owner_rows
 from impctl.imp.tables import parse_timestamps
 from impctl.model import default_house
 from impctl.plant import HeatPump, PlantCore, PlantParams, simulate_plant

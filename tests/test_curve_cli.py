@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from cli_fixtures import run_impctl
 
-from impctl.curve.synth import owner_rows
+from impctl.curve.data.synth import owner_rows
 from impctl.model import default_house
 from impctl.plant import HeatPump, PlantParams
 

@@ -129,7 +129,7 @@ def test_a_phase_that_cannot_be_right_is_refused_in_one_line(tmp_path, imp_night
 
 
 def test_the_heating_curve_does_not_read_a_preheat(tmp_path, imp_nights):
-    from impctl.curve.rows import read_rows
+    from impctl.curve.data.rows import read_rows
 
     normal = next(i for i, n in enumerate(imp_nights) if n.kind == "normal")
     path = tmp_path / "pre.csv"

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from impctl.curve.synth import SYNTH_OUTPUTS, rows_from_run
+from impctl.curve.data.synth import SYNTH_OUTPUTS, rows_from_run
 from impctl.imp.protocol import DEFAULT_BAND_K
 from impctl.plant import PlantCore, simulate_plant
 from impctl.plant.building.gains import internal_gains_w, solar_gains_w
@@ -100,7 +100,7 @@ def simulate(houses, params, days: int, seed: int, start: str = "2026-12-01 00:0
 
     ``curve``: flows at −15 and +15 °C per house [°C] (NaN: the house keeps its built-in
     curve); ``row_step_s``: also keep each house's recorded rows at this step (owner nights,
-    :func:`impctl.curve.synth.rows_from_run`); ``watch``: the comfort watch over ``curve``
+    :func:`impctl.curve.data.synth.rows_from_run`); ``watch``: the comfort watch over ``curve``
     (the day then runs an hour at a time; :attr:`Stretch.raises` counts its raises).
     """
     n = houses.n_houses

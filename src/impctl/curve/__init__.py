@@ -3,9 +3,10 @@
 In pipeline order after :mod:`impctl.fit`, beside :mod:`impctl.flex`; rooms named after the
 physics they hold:
 
-* :mod:`.rows` — the NIGHTS rows with the flow, return and target temperatures, hot water,
-  defrost and electricity a gateway records on held and owner nights;
-* :mod:`.blocks` — steady blocks of those rows (the night, the two halves of the day);
+* :mod:`.data` — what it is worked out from: :mod:`.data.rows`, the NIGHTS rows with the
+  flow, return and target temperatures, hot water, defrost and electricity a gateway records
+  on held and owner nights; :mod:`.data.blocks`, steady blocks of those rows (the night, the
+  two halves of the day); :mod:`.data.synth`, such rows simulated for tests and benches;
 * :mod:`.emitter` — the emitter measured: Q = K·ΔT_wⁿ with intervals;
 * :mod:`.need` — the heat need (the fit's HLC, the heat the blocks show) and the flow
   temperature it takes, at its upper bound plus a stated margin; the recommended line;
@@ -17,7 +18,7 @@ physics they hold:
 """
 
 from .analysis import DEFAULT_MARGIN_K, analyse
+from .data.rows import read_rows
 from .result import SCHEMA, CurveResult
-from .rows import read_rows
 
 __all__ = ["DEFAULT_MARGIN_K", "SCHEMA", "CurveResult", "analyse", "read_rows"]

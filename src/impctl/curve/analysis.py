@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 
 from ..errors import InputError
-from .blocks import heated, hourly, steady_blocks
 from .cop import fit_cop
+from .data.blocks import heated, hourly, steady_blocks
 from .emitter import EmitterUnknown, fit_emitter
 from .need import FLOW_LIMITS_C, NeedUnknown, heat_need, need_curve, recommend, writable
 from .result import CurveResult
@@ -39,7 +39,7 @@ def analyse(rows: pd.DataFrame, fit: dict | None = None, *, setpoint_c: float | 
 
     Parameters
     ----------
-    rows : :func:`impctl.curve.rows.read_rows`'s table.
+    rows : :func:`impctl.curve.data.rows.read_rows`'s table.
     fit : an ``impctl fit --json`` result (its ``lumped.hlc`` and ``fit.night_gain``), or None.
     setpoint_c : the owner's room setpoint [°C]; None: from the owner's rows, else assumed.
     margin_k : kelvin added above the bound [K].

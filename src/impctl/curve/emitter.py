@@ -97,7 +97,7 @@ class EmitterFit:
 
 
 def fit_emitter(blocks: pd.DataFrame) -> EmitterFit:
-    """Fit Q = K·ΔT_wⁿ to ``blocks`` (:func:`impctl.curve.blocks.steady_blocks`).
+    """Fit Q = K·ΔT_wⁿ to ``blocks`` (:func:`impctl.curve.data.blocks.steady_blocks`).
 
     Raises
     ------

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from ..imp.features import Q_ON_W
-from .blocks import heated, hourly
+from .data.blocks import heated, hourly
 from .need import Line
 
 #: Fewest hours the running curve is read from.

@@ -83,8 +83,8 @@ def owner_rows(house, params, days: float, *, seed: int = 0, setpoint_c: float =
     weather of ``seed``, the owner's setpoint day and night, internal gains ``night_gain_w``
     22:00–07:00 and ``day_gain_w`` else [W], no sun, no hot water): its recorded rows
     (timestamps as ISO 8601 text, as a CSV holds them) and the plant core (its truth)."""
-    from ..plant import PlantCore, simulate_plant
-    from ..weather import winter_weather
+    from ...plant import PlantCore, simulate_plant
+    from ...weather import winter_weather
 
     weather = winter_weather(start, days=days + 1, step_s=3600, seed=seed, tz=tz)
     n_steps = int(round(days * 86400 / dt_s))

@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import InputError
-from ..imp.files.limits import refuse_large_file
-from ..imp.files.nights_csv import PLAUSIBLE, REQUIRED_COLUMNS
-from ..imp.plausibility import fahrenheit_problem, to_celsius
-from ..imp.tables import read_table
+from ...errors import InputError
+from ...imp.files.limits import refuse_large_file
+from ...imp.files.nights_csv import PLAUSIBLE, REQUIRED_COLUMNS
+from ...imp.plausibility import fahrenheit_problem, to_celsius
+from ...imp.tables import read_table
 
 #: The optional numeric columns and their plausible ranges (outside: missing).
 CURVE_COLUMNS: dict[str, tuple[float, float]] = {
@@ -63,7 +63,7 @@ def read_rows(path: str | Path, tz: str) -> pd.DataFrame:
         table = read_table(path, required=REQUIRED_COLUMNS, numeric=("t_air", "t_out", "q_hc"),
                            optional=(*CURVE_COLUMNS, *TEXT_COLUMNS), tz=tz)
     except InputError:
-        from ..imp.files.hints import layout_problem
+        from ...imp.files.hints import layout_problem
 
         cause = layout_problem(path, REQUIRED_COLUMNS)  # ';' separators, decimal commas
         if cause is None:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..imp.features import Q_ON_W
+from ...imp.features import Q_ON_W
 from .rows import HEATED_KINDS
 
 #: Block length [h], aligned on the local clock at 22:00 (22–06, 06–14, 14–22).
