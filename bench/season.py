@@ -8,7 +8,8 @@ record is cut when its N-th plain owner night is over, exported as the gateway w
 pre-heats not recorded) and fitted by ``impctl.season`` — the same path as ``impctl fit``.
 Beside it, the energy signature of the same owner nights (00:00–05:00 means). Errors against
 the true house; medians and P90 with 95 % bootstrap intervals; coverage and median
-half-width of the 95 % intervals; the fit's wall time. The row ``HLCm`` is the HLC against the
+half-width of the 95 % intervals, and that half-width as a multiple of the median error with
+its bootstrap interval (the households resampled); the fit's wall time. The row ``HLCm`` is the HLC against the
 heat meter's own scale (the true HLC × (1 + the house's meter gain error), class 2/3 meters
 ±5 %): what no method reading that meter can do better than — the rest of the error is the
 model's.
@@ -172,8 +173,18 @@ def _boot_ci(x: np.ndarray, q: float, rng: np.random.Generator, n: int = 2000) -
     return float(np.percentile(qs, 2.5)), float(np.percentile(qs, 97.5))
 
 
+def _ratio_ci(half: np.ndarray, err: np.ndarray, rng: np.random.Generator,
+              n: int = 2000) -> tuple:
+    """95 % bootstrap interval of median(half-width) / median(|error|), the households
+    resampled with both their numbers (the two medians share them)."""
+    idx = rng.integers(0, len(err), (n, len(err)))
+    r = np.median(half[idx], axis=1) / np.maximum(np.median(err[idx], axis=1), 1e-12)
+    return float(np.percentile(r, 2.5)), float(np.percentile(r, 97.5))
+
+
 def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> dict:
-    """Per quantity: median and P90 of |error| [%] with bootstrap CIs, coverage, half-width."""
+    """Per quantity: median and P90 of |error| [%] with bootstrap CIs, coverage, half-width
+    and its ratio to the median error (with its bootstrap CI)."""
     rng = np.random.default_rng(0)
     ok = [r for r in rows if r["owner_nights"] == n_owner and r["status"] == "ok"]
     out: dict = {"owner_nights": n_owner, "households": sum(r["owner_nights"] == n_owner
@@ -202,11 +213,14 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
         if not len(err):   # not given for any household (e.g. τ and C_m without a normal night)
             nan = math.nan
             out[name] = {"median_pct": nan, "median_ci": (nan, nan), "p90_pct": nan,
-                         "p90_ci": (nan, nan), "coverage": nan, "half_width_pct": nan}
+                         "p90_ci": (nan, nan), "coverage": nan, "half_width_pct": nan,
+                         "width_ratio": nan, "width_ratio_ci": (nan, nan)}
             continue
         out[name] = {"median_pct": float(np.median(err)), "median_ci": _boot_ci(err, 50, rng),
                      "p90_pct": float(np.percentile(err, 90)), "p90_ci": _boot_ci(err, 90, rng),
-                     "coverage": float(cover.mean()), "half_width_pct": float(np.median(half))}
+                     "coverage": float(cover.mean()), "half_width_pct": float(np.median(half)),
+                     "width_ratio": float(np.median(half) / max(np.median(err), 1e-12)),
+                     "width_ratio_ci": _ratio_ci(half, err, rng)}
     sig = np.array([r["signature_hlc_w_per_k"] for r in ok])
     good = np.isfinite(sig)
     if not good.any():   # no owner night: the IMP fit alone
@@ -220,6 +234,10 @@ def summarize(rows: list[dict], truth: dict[str, np.ndarray], n_owner: int) -> d
 
 def _fmt(ci: tuple) -> str:
     return f"[{ci[0]:.1f}, {ci[1]:.1f}]"
+
+
+def _fmt2(ci: tuple) -> str:
+    return f"[{ci[0]:.2f}, {ci[1]:.2f}]"
 
 
 def _refuse(exc: SavedError) -> None:
@@ -400,7 +418,7 @@ def run(args: argparse.Namespace, argv: list[str] | None) -> None:
 def _print_table(summaries: list[dict]) -> None:
     """The run's table: per owner-night count and quantity, the |error| and the intervals."""
     print(f"{'owner nights':>12} {'qty':>4} {'median % [95 % CI]':>22} {'P90 % [95 % CI]':>22} "
-          f"{'coverage':>8} {'half-width %':>12}")
+          f"{'coverage':>8} {'half-width %':>12} {'× median [95 % CI]':>20}")
     for sm in summaries:
         label = sm["owner_nights"] or "0 (IMP)"
         for name in QUANTITIES.values():
@@ -411,7 +429,8 @@ def _print_table(summaries: list[dict]) -> None:
                 continue
             print(f"{label:>12} {name:>4} {q['median_pct']:6.1f} "
                   f"{_fmt(q['median_ci']):>15} {q['p90_pct']:6.1f} {_fmt(q['p90_ci']):>15} "
-                  f"{100 * q['coverage']:7.1f}% {q['half_width_pct']:12.1f}"
+                  f"{100 * q['coverage']:7.1f}% {q['half_width_pct']:12.1f} "
+                  f"{q['width_ratio']:6.2f} {_fmt2(q['width_ratio_ci']):>13}"
                   + (f"  ({sm[name + '_missing']} without)" if sm[name + "_missing"] else ""))
         mq = sm.get("HLC_meter")
         if mq is not None:

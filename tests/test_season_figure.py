@@ -154,7 +154,15 @@ def test_saved_runs_of_other_seeds_pool_into_one_table(tmp_path: Path) -> None:
     (hlc,) = [line.split() for line in done.stdout.splitlines()
               if line.split()[:2] == ["28", "HLC"]]
     # the median of all four errors, and the coverage of all four intervals
-    assert float(hlc[2]) == pytest.approx(25.0) and hlc[-2] == "50.0%"
+    cov = hlc.index("50.0%")
+    assert float(hlc[2]) == pytest.approx(25.0)
+    # half-widths 75/1.1, 75/1.2, 25/1.3, 25/1.4 % of the estimate: median 40.9 %, 1.64 × the
+    # median error, and the ratio's bootstrap interval around it
+    half, ratio = float(hlc[cov + 1]), float(hlc[cov + 2])
+    assert half == pytest.approx((75 / 1.2 + 25 / 1.3) / 2, abs=0.05)
+    assert ratio == pytest.approx(half / 25.0, abs=0.01)
+    low, high = float(hlc[cov + 3].strip("[,")), float(hlc[cov + 4].strip("]"))
+    assert low <= ratio <= high and low < high
     (sig,) = [line.split() for line in done.stdout.splitlines() if line.split()[1:2] == ["sig"]]
     assert float(sig[2]) == pytest.approx(50.0)
 
