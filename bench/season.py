@@ -9,10 +9,10 @@ pre-heats not recorded) and fitted by ``impctl.season`` — the same path as ``i
 Beside it, the energy signature of the same owner nights (00:00–05:00 means). Errors against
 the true house; medians and P90 with 95 % bootstrap intervals; coverage and median
 half-width of the 95 % intervals, and that half-width as a multiple of the median error with
-its bootstrap interval (the households resampled); the fit's wall time. The row ``HLCm`` is the HLC against the
-heat meter's own scale (the true HLC × (1 + the house's meter gain error), class 2/3 meters
-±5 %): what no method reading that meter can do better than — the rest of the error is the
-model's.
+its bootstrap interval (the households resampled); the fit's wall time. The row ``HLCm`` is
+the HLC against the heat meter's own scale (the true HLC × (1 + the house's meter gain
+error), class 2/3 meters ±5 %): what no method reading that meter can do better than — the
+rest of the error is the model's.
 
     python bench/season.py --households 200 --owner-nights 14,28
     python bench/season.py --households 40 --variant signed
