@@ -158,3 +158,46 @@ def test_the_cli_prints_the_cause_in_one_line(tmp_path):
     result = run_impctl("fit", "--nights", str(path))
     assert _one_line(result, f"impctl: {path}: row 1: ").startswith(
         "separator ';' and decimal commas detected")
+
+
+@pytest.mark.parametrize("odd", [None, "1_000", "0x10", "five"])
+def test_numbers_read_as_to_numeric_reads_them_in_every_spelling(odd):
+    """The fast read of number cells gives what ``pd.to_numeric`` gives, bit for bit — empty
+    cells and text NaN, signs, exponents, leading zeros and the last digit's rounding — and a
+    cell it cannot read sends the column through ``to_numeric`` itself."""
+    import numpy as np
+    import pandas as pd
+
+    from impctl.imp.tables import text_floats
+
+    cells = ["21.5", "+5", "5.", ".5", "1e3", "-2.5E-1", "00012", "-0", "", "nan", "inf",
+             "0.1", "0.30000000000000004", "1.000000000000000000001", "123456789.123456789",
+             "-40.0625", "1e400"]
+    if odd is not None:
+        cells.append(odd)
+    text = pd.Series(cells, dtype=str)
+    got = text_floats(text)
+    want = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(
+        dtype=float, na_value=np.nan)
+    assert got.dtype == np.float64 and got.tobytes() == want.tobytes()
+    assert got[cells.index("0.1")] == 0.1 and np.isnan(got[cells.index("")])
+
+
+def test_a_row_cut_short_is_named_and_an_empty_last_cell_is_not_one(tmp_path):
+    """A row with fewer cells than the header (a logger that lost power mid-line) is refused
+    with its own row number, also after a blank line; a row whose last cell is empty has all
+    its cells and is refused for the empty number instead."""
+    lines = [",".join(HEADER)] + [",".join(r) for r in ROWS]
+    cut = tmp_path / "cut.csv"
+    cut.write_text("\n".join(lines[:3] + ["", "2026-01-12T22:10:00+01:00,21.1,4.4"]
+                             + lines[4:]) + "\n")
+    assert _problem(cut) == "row 5: 3 cells where the header has 4"
+    # the same with Windows line ends, and with a quoted cell (read by the csv module)
+    cut.write_bytes(cut.read_bytes().replace(b"\n", b"\r\n"))
+    assert _problem(cut) == "row 5: 3 cells where the header has 4"
+    cut.write_text(cut.read_text().replace("\r\n", "\n").replace(",21.3,", ',"21.3",'))
+    assert _problem(cut) == "row 5: 3 cells where the header has 4"
+    empty = tmp_path / "empty.csv"
+    empty.write_text("\n".join(lines[:3] + ["2026-01-12T22:10:00+01:00,21.1,4.4,"]
+                               + lines[4:]) + "\n")
+    assert _problem(empty) == "row 4: column 'q_hc': empty cell"

@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..tables import text_floats
+
 #: The optional columns and their plausible ranges (outside: missing).
 EXTRA_COLUMNS: dict[str, tuple[float, float]] = {
     "p_house_w": (0.0, 30_000.0),
@@ -45,7 +47,10 @@ def extra_columns(table: pd.DataFrame) -> dict[str, np.ndarray]:
     for col, (lo, hi) in EXTRA_COLUMNS.items():
         if col not in table:
             continue
-        values = np.array(pd.to_numeric(table[col], errors="coerce"), dtype=float)
+        column = table[col]
+        # a copy: the implausible cells are set to NaN below
+        values = np.array(column.to_numpy(dtype=float, na_value=np.nan)
+                          if pd.api.types.is_numeric_dtype(column) else text_floats(column))
         values[~np.isfinite(values) | (values < lo) | (values > hi)] = np.nan
         out[col] = values
     return out
