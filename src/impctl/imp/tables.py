@@ -170,9 +170,9 @@ def text_floats(text: pd.Series) -> np.ndarray:
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    cells = pa.array(text.to_numpy(dtype=object, na_value=""), type=pa.string())
+    cells = pa.array(text)   # pandas' own arrow strings: no copy
     try:
-        cast = pc.cast(pc.if_else(pc.equal(cells, ""), pa.scalar(None, pa.string()), cells),
+        cast = pc.cast(pc.if_else(pc.equal(cells, ""), pa.scalar(None, cells.type), cells),
                        pa.float64())
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         return pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(
