@@ -73,12 +73,12 @@ from season_change_alternatives import (  # noqa: E402  (bench/: the alternative
     variant_sequence,
 )
 
+from impctl import change  # noqa: E402
 from impctl.plant.params import RADIATORS, UNDERFLOOR  # noqa: E402
 from impctl.population.households import sample_households  # noqa: E402
 from impctl.population.realism import sample_params  # noqa: E402
 from impctl.population.season_run.nights import household_nights  # noqa: E402
 from impctl.population.season_run.season import SeasonConfig, simulate_season  # noqa: E402
-from impctl.season import change  # noqa: E402
 
 _SEASON = None
 #: The bench's held-out households' seed, the calibration's (never the same), and the other

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from impctl.season import change
+from impctl import change
 
 #: CUSUM: reference nights, the step it is tuned to [W/K], its threshold (set like the GLR's,
 #: for ≤ 1 in 20 false alarms on the calibration seasons).

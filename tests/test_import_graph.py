@@ -17,7 +17,8 @@ import impctl
 
 SRC = Path(impctl.__file__).parent
 #: The fitting pipeline: each stage may import earlier ones, never a later one.
-PIPELINE = ("model", "plant", "imp", "population", "classifiers", "season", "fit", "fleet")
+PIPELINE = ("model", "plant", "imp", "population", "classifiers", "change", "season", "fit",
+            "fleet")
 #: The device side, transport first.
 DEVICE = ("modbus", "kronoterm", "heatpump", "controller", "config", "daemon", "cli")
 

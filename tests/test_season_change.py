@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from test_nights_owner import run_cli
 
+from impctl import change
 from impctl.imp.files.nights_csv import write_nights
 from impctl.mqtt.homeassistant.payloads import fit_payloads
 from impctl.plant import PlantCore
@@ -23,7 +24,6 @@ from impctl.population.households import sample_households
 from impctl.population.realism import sample_params
 from impctl.population.season_run.nights import household_nights
 from impctl.population.season_run.season import SeasonConfig, simulate_season, step_network
-from impctl.season import change
 
 STEP_NIGHT, WINDOW_W_K = 22, 50.0
 

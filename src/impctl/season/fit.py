@@ -27,8 +27,8 @@ import math
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from ..change import detect_change
 from ..imp.protocol import EMITTER_KINDS
-from .change import detect_change
 from .emitter import (
     emitter_kind,
     tau_e_max_s,

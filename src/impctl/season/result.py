@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .change import Change
+from ..change import Change
 from .emitter import REFERENCE_DT_K, emitter_kind, tau_e_max_s
 from .projection.columns import THETA
 from .projection.uncertainty import LUMPED
