@@ -244,10 +244,12 @@ def profile(data: Path, n: int) -> None:
 
     import torch
 
-    from impctl.fit import _problems, _statement, _weights, selection
-    from impctl.fit.nights import data as fit_data
+    from impctl.fit.checks import selection
     from impctl.fit.ode import solver
     from impctl.fit.optim import batch, jacobian, lm, problem
+    from impctl.fit.steps import problems as _problems
+    from impctl.fit.steps import statement as _statement
+    from impctl.fit.steps import weights as _weights
     from impctl.fleet import worker
     from impctl.fleet.inputs import discover
 
@@ -277,7 +279,7 @@ def profile(data: Path, n: int) -> None:
 
     timed(worker, "read_sources", "read the households' rows (pyarrow/pandas → nights)")
     timed(worker, "_classify", "classifiers")
-    timed(fit_data, "prepare_nights", "prepare/cut nights (worker check + fit)")
+    timed(_problems, "prepare_nights", "prepare/cut nights (worker check + fit)")
     timed(batch, "_solve_group", lm_call)
     timed(lm, "_normal_equations", "  in LM: residuals + Jacobian")
     timed(lm, "_trial", "  in LM: residuals + Jacobian")   # the iterations' trial points
