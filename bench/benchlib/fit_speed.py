@@ -3,8 +3,12 @@ in-process fit per household); --season-speed: the season model's (:func:`season
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -20,15 +24,13 @@ def speed(args) -> None:
     in-process fit per household at 5-minute rows (one core)."""
     import os
     import subprocess
-    import tempfile
-    from pathlib import Path
 
     from impctl.imp.files.nights_csv import write_nights
 
     houses = sample_households(4, seed=VAL_SEED)
     sched = imp_schedule(4, seed=VAL_SEED)
     sim, sp = run_schedule(houses, sched)
-    tmp = Path(tempfile.mkdtemp(prefix="impctl-bench-fit-"))
+    tmp = _scratch("impctl-bench-fit-")
     files = []
     if args.demo_csv:
         files.append(("demo export (" + Path(args.demo_csv).name + ")", Path(args.demo_csv)))
@@ -95,6 +97,13 @@ def speed(args) -> None:
 SEASON_SEED, SEASON_NIGHTS, SEASON_OWNER_NIGHTS = 31, 70, 56
 
 
+def _scratch(prefix: str) -> Path:
+    """A scratch directory removed when the bench ends (the nights it writes are megabytes)."""
+    path = Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, path, True)
+    return path
+
+
 def season_speed(args) -> None:
     """The season model's speed (``--season-speed H``): H households of a simulated winter
     (``bench/season.py``'s export, seed 31, 70 nights), each fitted on its IMP nights and its
@@ -108,8 +117,6 @@ def season_speed(args) -> None:
     import json
     import os
     import subprocess
-    import tempfile
-    from pathlib import Path
 
     from season import cutoff  # bench/season.py: the cut after the N-th owner night
     from threadpoolctl import threadpool_limits
@@ -165,7 +172,7 @@ def season_speed(args) -> None:
                                          for c in cols) + " |")
     if first is None:
         return
-    tmp = Path(tempfile.mkdtemp(prefix="impctl-bench-season-"))
+    tmp = _scratch("impctl-bench-season-")
     csv, csv_more = (write_nights(first[0], tmp / "nights.csv"),
                      write_nights(first[1], tmp / "nights-more.csv"))
     impctl = str(Path(sys.executable).parent / "impctl")
