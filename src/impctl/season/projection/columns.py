@@ -88,9 +88,18 @@ def lowpass(x: Array, tau_s: float, step_s: float, runs: list[tuple[int, int]],
     # the filter's state at rest at a unit input (scipy.signal.lfilter_zi's, in closed form)
     rest = np.array([1.0 - num[0], *(-np.asarray(den[2:]))])
     out = np.full(x.shape, np.nan)
+    # Runs of one length in one call (the IMP nights are cut alike): each row is the same
+    # recursion as alone, and scipy's per-call cost is most of a short run's.
+    by_length: dict[int, list[int]] = {}
     for lo, hi in runs:
-        seg = x[..., lo:hi]
-        out[..., lo:hi] = lfilter(num, den, seg, axis=-1, zi=seg[..., :1] * rest)[0]
+        by_length.setdefault(hi - lo, []).append(lo)
+    for n, starts in by_length.items():
+        if len(starts) == 1:
+            sel: slice | Array = slice(starts[0], starts[0] + n)
+        else:
+            sel = np.asarray(starts)[:, None] + np.arange(n)
+        seg = x[..., sel]
+        out[..., sel] = lfilter(num, den, seg, axis=-1, zi=seg[..., :1] * rest)[0]
     return out
 
 

@@ -66,7 +66,7 @@ class Normal:
 def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Array]:
     """(y, X·coef) at ``theta`` over the usable blocks, without X (``coef`` in X's order)."""
     gcols, _ = gain_family(d)
-    out = _gains_fitted(theta, d, coef[gcols])
+    out = _gains_fitted(theta, d, coef[gcols]).copy()
     y = None
     for _key, rows, cols in dense_groups(theta, d):
         for row, col in zip(rows, cols, strict=True):
@@ -79,7 +79,21 @@ def fitted(theta: tuple[float, ...], d: Design, coef: Array) -> tuple[Array, Arr
 
 def _gains_fitted(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
     """The gains' family's columns times their coefficients ``cg`` ((shapes,) → (blocks,), or
-    (k, shapes) → (k, blocks))."""
+    (k, shapes) → (k, blocks)); one row remembered, read-only: the search's residual and its
+    Jacobian's base point ask for the same, and so do the Jacobian's steps of the emitter's
+    and the room's lags, which leave the gains' columns as they are."""
+    if cg.ndim == 1:
+        return d.cached(("gains fitted", theta[0], theta[1], theta[3], cg.tobytes()),
+                        lambda: _readonly(_gains_fitted_new(theta, d, cg)))
+    return _gains_fitted_new(theta, d, cg)
+
+
+def _readonly(x: Array) -> Array:
+    x.flags.writeable = False
+    return x
+
+
+def _gains_fitted_new(theta: tuple[float, ...], d: Design, cg: Array) -> Array:
     a, b = gain_coefficients(theta, d)
     shapes_t, used_t = _shapes_t(d)
     many = np.atleast_2d(cg)

@@ -91,7 +91,7 @@ def from_u(u: Array, bounds=THETA_BOUNDS) -> tuple[float, ...]:
     """Unconstrained coordinates → physical θ."""
     out = []
     for (lo, hi), x in zip(bounds, u, strict=True):
-        f = 1.0 / (1.0 + math.exp(-float(np.clip(x, -30, 30))))
+        f = 1.0 / (1.0 + math.exp(-min(max(float(x), -30.0), 30.0)))
         out.append(math.exp(math.log(lo) + f * (math.log(hi) - math.log(lo))) if lo > 1
                    else lo + f * (hi - lo))
     return tuple(out)  # type: ignore[return-value]
