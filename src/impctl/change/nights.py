@@ -31,8 +31,6 @@ from ..imp.night import NightSamples
 
 #: The night window: local hours after midnight [h].
 WINDOW_H = (0.0, 5.0)
-#: The evening before it, for ``memory_k``: local hours before midnight [h].
-EVENING_H = 6.0
 #: Time constants of the house's memory of the days before [h] (module docstring).
 MEMORY_H = (12.0, 48.0, 168.0)
 #: A night is used with at least this share of its window's 5-min rows recorded [-].
