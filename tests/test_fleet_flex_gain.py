@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from impctl.fleet.table import empty_row, to_table
+from impctl.fleet.results.table import empty_row, to_table
 from impctl.flex.switch_off import ASSUMED_COLUMN, from_columns, switch_off_from_fit, to_columns
 
 

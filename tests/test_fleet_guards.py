@@ -297,8 +297,8 @@ def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models
 def test_a_part_written_before_the_manifest_counts(tmp_path):
     """A run stopped between a part's rename and the manifest's rewrite: readers count the
     part file's rows, not the manifest's stale number."""
-    from impctl.fleet.manifest import Manifest, completeness, read_manifest, write_manifest
-    from impctl.fleet.table import empty_row, write_part
+    from impctl.fleet.results.manifest import Manifest, completeness, read_manifest, write_manifest
+    from impctl.fleet.results.table import empty_row, write_part
 
     out = tmp_path / "F"
     write_manifest(out, Manifest(input="in", options={}, households=4, done=0))
@@ -308,7 +308,7 @@ def test_a_part_written_before_the_manifest_counts(tmp_path):
 
 
 def test_resume_with_other_options_is_refused(tmp_path, nights):
-    from impctl.fleet.manifest import Manifest, write_manifest
+    from impctl.fleet.results.manifest import Manifest, write_manifest
 
     src = tmp_path / "in"
     src.mkdir()
@@ -326,8 +326,8 @@ def test_resume_with_other_options_is_refused(tmp_path, nights):
 
 
 def test_a_dataset_without_manifest_is_not_called_complete(tmp_path):
-    from impctl.fleet.manifest import completeness
-    from impctl.fleet.table import empty_row, write_part
+    from impctl.fleet.results.manifest import completeness
+    from impctl.fleet.results.table import empty_row, write_part
 
     write_part(tmp_path / "F", "abcd1234", 0, [empty_row("h0")])
     line = completeness(tmp_path / "F")
@@ -339,7 +339,7 @@ def test_fleet_output_is_never_read_as_households(tmp_path, nights):
     households: refused with one line saying what to move."""
     from impctl.errors import InputError
     from impctl.fleet.inputs import discover
-    from impctl.fleet.table import empty_row, write_part
+    from impctl.fleet.results.table import empty_row, write_part
 
     d = tmp_path / "in"
     d.mkdir()

@@ -19,7 +19,7 @@ from cli_fixtures import run_impctl
 from impctl.errors import InputError
 from impctl.fit.household import FitOptions
 from impctl.fleet import fit_fleet, read_fleet
-from impctl.fleet.table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
+from impctl.fleet.results.table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 from impctl.imp.files.nights_csv import read_nights, write_nights
 from impctl.population.season_run.nights import household_nights
 from impctl.season.fit import fit_nights
@@ -158,7 +158,7 @@ def test_one_pass_gives_each_digest_as_its_nights_alone_give_it(winter_season):
     """The IMP nights' and all nights' digests from one pass over the nights are the digests of
     each set alone (a FLEET written before the one pass stays usable as ``--previous``), and a
     changed sample changes them."""
-    from impctl.fleet.previous import nights_digest, nights_digests
+    from impctl.fleet.results.previous import nights_digest, nights_digests
     from impctl.imp.night import split_owner
 
     nights = household_nights(winter_season, 0)
@@ -181,8 +181,8 @@ def test_rows_of_other_code_are_not_carried_over(mornings, tmp_path):
     from pathlib import Path
 
     import impctl
-    from impctl.fleet.previous import previous_rows
-    from impctl.fleet.table import source_digest, version
+    from impctl.fleet.results.previous import previous_rows
+    from impctl.fleet.results.table import source_digest, version
 
     package = Path(impctl.__file__).resolve().parent
     copy = tmp_path / "impctl"
@@ -202,6 +202,6 @@ def test_rows_of_other_code_are_not_carried_over(mornings, tmp_path):
 
 
 def _manifest_options(path):
-    from impctl.fleet.manifest import read_manifest
+    from impctl.fleet.results.manifest import read_manifest
 
     return read_manifest(path).options

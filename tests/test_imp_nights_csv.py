@@ -105,7 +105,7 @@ def test_a_parquet_frame_reads_its_optional_numbers_as_the_csv_does(tmp_path):
     """The optional numeric columns stored as numbers (defrost as integers, the household
     electricity and the rooms as floats, with a null, an infinity and a value out of range):
     the Parquet frame's nights carry what the CSV's carry, bit for bit."""
-    from impctl.fleet.previous import nights_digest
+    from impctl.fleet.results.previous import nights_digest
     from impctl.imp.files.nights_csv import read_nights_frame
 
     stamps = pd.date_range("2026-01-12 22:00", periods=12, freq="10min", tz=TZ)

@@ -7,7 +7,7 @@
   promise a bound the code does not check); the meaning of each key is its comment in
   ``deploy/config.example.toml``.
 * ``<!-- generated: fleet-columns -->`` becomes the FLEET dataset's columns and types from
-  :data:`impctl.fleet.table.SCHEMA`.
+  :data:`impctl.fleet.results.table.SCHEMA`.
 * The CLI page is rendered by mkdocs-click; the click group gets its subcommands here first.
 """
 
@@ -302,7 +302,7 @@ def configuration_md() -> str:
 
 def fleet_columns_md() -> str:
     """The FLEET dataset's columns with their Arrow types, in file order."""
-    from impctl.fleet.table import SCHEMA
+    from impctl.fleet.results.table import SCHEMA
 
     lines = ["| column | type |", "|---|---|"]
     lines += [f"| `{f.name}` | {f.type} |" for f in SCHEMA]

@@ -6,9 +6,10 @@ lazily), so ``import impctl.fleet`` stays light.
 * :func:`fit_fleet` (:mod:`.run`): INPUT → FLEET.parquet on a Dask cluster, batch by batch
 * :func:`discover` (:mod:`.inputs`): the households of INPUT
 * :func:`fit_batch` (:mod:`.worker`): one batch of households on a worker
-* :func:`read_fleet`, :data:`COLUMNS` (:mod:`.table`): FLEET.parquet
-* :func:`read_manifest`, :func:`completeness` (:mod:`.manifest`): expected and done households
-* :func:`fleet_flexibility` (:mod:`.flex_rows`): ``impctl flex`` on FLEET rows
+* :func:`read_fleet`, :data:`COLUMNS` (:mod:`.results.table`): FLEET.parquet
+* :func:`read_manifest`, :func:`completeness` (:mod:`.results.manifest`): expected and done
+  households
+* :func:`fleet_flexibility` (:mod:`.results.flex_rows`): ``impctl flex`` on FLEET rows
 """
 
 from __future__ import annotations
@@ -20,11 +21,11 @@ _LAZY = {
     "fit_fleet": "run",
     "discover": "inputs",
     "fit_batch": "worker",
-    "read_fleet": "table",
-    "COLUMNS": "table",
-    "read_manifest": "manifest",
-    "completeness": "manifest",
-    "fleet_flexibility": "flex_rows",
+    "read_fleet": "results.table",
+    "COLUMNS": "results.table",
+    "read_manifest": "results.manifest",
+    "completeness": "results.manifest",
+    "fleet_flexibility": "results.flex_rows",
 }
 
 __all__ = [*_LAZY]

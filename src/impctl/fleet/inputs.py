@@ -21,10 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
-from .manifest import MANIFEST_FILE
+from .results.manifest import MANIFEST_FILE
 
 HOUSEHOLD_COLUMN = "household"
-#: The name of a FLEET part file (:func:`.table.write_part`).
+#: The name of a FLEET part file (:func:`.results.table.write_part`).
 _PART = re.compile(r"part-[0-9a-f]{8}-\d{6}\.parquet")
 
 

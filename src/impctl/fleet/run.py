@@ -4,9 +4,9 @@ The client discovers the households (:mod:`.inputs`), drops those already in FLE
 resuming, and submits one Dask task per batch (:func:`.worker.fit_batch`); workers read their
 own households' files, so INPUT and the model directory must be reachable under the same paths
 on every worker (a shared file system on a multi-machine cluster). As batches finish, the client
-writes each one as its own part of FLEET.parquet (:mod:`.table`), updates the manifest
-(:mod:`.manifest`: households expected and done — an interrupted run reads as partial) and the
-progress bar (households done, failed, rate).
+writes each one as its own part of FLEET.parquet (:mod:`.results.table`), updates the
+manifest (:mod:`.results.manifest`: households expected and done — an interrupted run reads as
+partial) and the progress bar (households done, failed, rate).
 
 Before anything starts, the places are checked: ``out`` must lie outside INPUT (and INPUT
 outside ``out``: parts written there would be households of the next run), be new, empty or —
@@ -33,8 +33,8 @@ from pathlib import Path
 from ..errors import InputError
 from ..fit.household import FitOptions
 from .inputs import Source, discover, layout_note
-from .manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
-from .table import done_households, empty_row, new_run_id, write_part
+from .results.manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
+from .results.table import done_households, empty_row, new_run_id, write_part
 from .worker import PRIOR, Preload, Settings, fit_batch
 
 DEFAULT_BATCH = 64
@@ -208,7 +208,7 @@ def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
                          out)
     import pyarrow.parquet as pq
 
-    from .table import SCHEMA
+    from .results.table import SCHEMA
 
     part = next(out.glob("part-*.parquet"), None)
     if part is not None and pq.read_schema(part).names != SCHEMA.names:
@@ -240,9 +240,9 @@ def fit_fleet(
     its defaults; a night gain declared for every household among them). ``client``: an
     existing ``distributed.Client`` to run on (left open), instead of ``scheduler`` or a local
     cluster. ``out/_manifest.json`` says how many households are expected and how many have a
-    row (:mod:`.manifest`), after every batch. ``previous``: the last run's FLEET dataset — a
-    household whose IMP nights are unchanged keeps its IMP fit from there and its season search
-    starts where that run's ended (:mod:`.previous`).
+    row (:mod:`.results.manifest`), after every batch. ``previous``: the last run's FLEET
+    dataset — a household whose IMP nights are unchanged keeps its IMP fit from there and its
+    season search starts where that run's ended (:mod:`.results.previous`).
 
     Raises
     ------
@@ -284,8 +284,8 @@ def fit_fleet(
         echo(f"note: {note}")
     last: dict[str, dict] = {}
     if previous is not None:
-        from .previous import previous_rows
-        from .table import version
+        from .results.previous import previous_rows
+        from .results.table import version
 
         last, said = previous_rows(previous, decided, version())
         run.notes.append(said)

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import InputError
 from ..fit.household import FitOptions
 from .inputs import Source, read_sources
-from .table import empty_row
+from .results.table import empty_row
 
 #: Worker-process cache: model directory → (models, metadata), and how often it was filled.
 _MODELS: dict[str, tuple[dict, dict]] = {}
@@ -141,13 +141,14 @@ _NEEDS = {"constrained": "no usable constrained night (it carries τ)",
 
 def fit_batch(sources: list[Source], settings: Settings,
               previous: dict[str, dict] | None = None) -> list[dict]:
-    """Fit one batch of households; one FLEET row (a dict, :mod:`.table`) per household.
-    ``previous``: the last run's rows of households of this batch (:mod:`.previous`) — where a
-    household's IMP nights are unchanged, its IMP columns are carried over and its season
-    search starts where that run's ended; where all its nights are, its whole row."""
+    """Fit one batch of households; one FLEET row (a dict, :mod:`.results.table`) per
+    household. ``previous``: the last run's rows of households of this batch
+    (:mod:`.results.previous`) — where a household's IMP nights are unchanged, its IMP columns
+    are carried over and its season search starts where that run's ended; where all its nights
+    are, its whole row."""
     from ..fit.household import choose_nights
     from ..imp.night import split_owner
-    from .previous import carry_over, nights_digests, theta_start
+    from .results.previous import carry_over, nights_digests, theta_start
 
     started, cpu = time.perf_counter(), time.process_time()
     preload(settings.model_dir)
@@ -219,7 +220,7 @@ def _season(row: dict, nights: list, start: tuple | None = None,
 
     from ..season.emitter import tau_e_max_s
     from ..season.fit import fit_nights
-    from .table import THETA_COLUMNS
+    from .results.table import THETA_COLUMNS
 
     fit, note = fit_nights(nights, start=start, start_bound_s=None if start is None
                            else tau_e_max_s(start_emitter))
@@ -289,7 +290,7 @@ def _fit_todo(todo: list[tuple], params: dict) -> None:
 
 
 def _fill(row: dict, fit) -> None:
-    from .table import LUMPED_COLUMNS, PARAM_COLUMNS
+    from .results.table import LUMPED_COLUMNS, PARAM_COLUMNS
 
     row.update(status="ok", reason=None, error=None)
     for key, col in LUMPED_COLUMNS.items():

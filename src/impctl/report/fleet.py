@@ -66,8 +66,8 @@ def _figures(ok, out: Path) -> list[Path]:
 
 def write_fleet_report(fleet: str | Path, out: str | Path) -> Path:
     """Write OUT/fleet_report.html and its PNG figures from the FLEET dataset ``fleet``."""
-    from ..fleet.manifest import completeness
-    from ..fleet.table import read_fleet
+    from ..fleet.results.manifest import completeness
+    from ..fleet.results.table import read_fleet
 
     table = read_fleet(fleet)
     # an interrupted run's distributions are those of the households it reached: said first

@@ -157,8 +157,8 @@ def flex(source: Path, households: tuple[str, ...], t_set_c: float, t_out_c: flo
         except InputError as exc:
             raise exc.at(source) from None
     else:
-        from ...fleet.flex_rows import fleet_flexibility
-        from ...fleet.manifest import completeness
+        from ...fleet.results.flex_rows import fleet_flexibility
+        from ...fleet.results.manifest import completeness
 
         results = fleet_flexibility(source, list(households), **conditions)
         partial = completeness(source)

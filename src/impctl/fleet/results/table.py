@@ -59,8 +59,8 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from ..flex.switch_off import ASSUMED_COLUMN
-from ..flex.switch_off import COLUMNS as SWITCH_OFF_COLUMNS
+from ...flex.switch_off import ASSUMED_COLUMN
+from ...flex.switch_off import COLUMNS as SWITCH_OFF_COLUMNS
 
 LUMPED_COLUMNS = {"hlc": "hlc_w_per_k", "c_m": "c_m_j_per_k", "tau": "tau_h"}
 PARAM_COLUMNS = {
@@ -150,7 +150,7 @@ def version() -> str:
         release = installed("impctl")
     except PackageNotFoundError:
         release = "unknown"
-    return f"{release}+src.{source_digest(Path(__file__).resolve().parents[1])}"
+    return f"{release}+src.{source_digest(Path(__file__).resolve().parents[2])}"
 
 
 def source_digest(root: Path) -> str:

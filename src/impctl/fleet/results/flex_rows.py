@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
+from ...errors import InputError
 from .table import PARAM_COLUMNS
 
 
@@ -20,9 +20,9 @@ def fleet_flexibility(path: str | Path, households: list[str] | None = None,
     """
     import pandas as pd
 
-    from ..flex import SwitchOff, flexibility_many, switch_off_from_fit
-    from ..flex.switch_off import ASSUMED_COLUMN, COLUMNS, from_columns
-    from ..model import HouseParameters
+    from ...flex import SwitchOff, flexibility_many, switch_off_from_fit
+    from ...flex.switch_off import ASSUMED_COLUMN, COLUMNS, from_columns
+    from ...model import HouseParameters
 
     try:
         table = pd.read_parquet(path)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 from .manifest import read_manifest
 from .table import CARRIED_COLUMNS, ROW_COLUMNS, THETA_COLUMNS
 
@@ -107,8 +107,8 @@ def theta_start(previous: dict | None) -> tuple[float, ...] | None:
     the rule a fit JSON's θ is read with (:func:`impctl.season.result.theta_of`)."""
     if previous is None:
         return None
-    from ..season.projection.columns import THETA
-    from ..season.result import theta_of
+    from ...season.projection.columns import THETA
+    from ...season.result import theta_of
 
     return theta_of({"season": {"theta": {
         name: previous.get(col) for name, col in zip(THETA, THETA_COLUMNS, strict=True)}}})

@@ -18,7 +18,7 @@ import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ..errors import InputError
+from ...errors import InputError
 
 MANIFEST_FILE = "_manifest.json"
 FORMAT = "impctl-fleet/1"
