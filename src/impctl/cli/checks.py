@@ -19,7 +19,7 @@ from ..imp.files.limits import MAX_FILE_MB, file_mb, refuse_large_file  # noqa: 
 from ..numtext import non_ascii_problem
 
 #: Setpoints a room can be heated to [°C]: a room thermostat's span, as the NIGHTS.csv and
-#: DRIVERS.csv ``setpoint`` column (impctl.imp.files.nights_csv.PLAUSIBLE).
+#: DRIVERS.csv ``setpoint`` column (impctl.imp.files.values.PLAUSIBLE).
 SETPOINT_C = (5.0, 35.0)
 #: Outdoor temperatures an analysis accepts [°C] (any winter night anywhere people heat).
 T_OUT_C = (-50.0, 40.0)
