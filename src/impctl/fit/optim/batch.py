@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import torch
 
@@ -63,14 +63,18 @@ class _Problem:
     household: int = 0
     result: lm.LMResult | None = None
     error: BaseException | None = None
-    done: bool = False
+    done: threading.Event = field(default_factory=threading.Event)
 
 
 class _Rendezvous:
     """Collects the optimiser problems of all running households and solves them together."""
 
     def __init__(self, n_running: int):
-        self._cond = threading.Condition()
+        # The main thread waits here for every running household to hand in a problem; each
+        # household waits on its own problem's event. One condition for both woke every
+        # waiting household at each hand-in to check its own flag: a batch's threads woken
+        # n² times a round.
+        self._server = threading.Condition()
         # One household thread runs at a time (it holds the baton from its start or its last
         # merged result to its next problem or its end). Torch releases the GIL in every
         # tensor operation; with dozens of runnable threads each release became a handoff
@@ -85,11 +89,11 @@ class _Rendezvous:
         self._baton.acquire()
 
     def solve(self, problem: _Problem) -> lm.LMResult:
-        with self._cond:
+        with self._server:
             self._pending.append(problem)
             self._baton.release()
-            self._cond.notify_all()
-            self._cond.wait_for(lambda: problem.done)
+            self._server.notify()
+        problem.done.wait()
         self._baton.acquire()
         if problem.error is not None:
             raise problem.error
@@ -97,16 +101,16 @@ class _Rendezvous:
         return problem.result
 
     def finished(self) -> None:
-        with self._cond:
+        with self._server:
             self._running -= 1
             self._baton.release()
-            self._cond.notify_all()
+            self._server.notify()
 
     def serve(self) -> None:
         """Run merged solves until every household has finished (call from the main thread)."""
         while True:
-            with self._cond:
-                self._cond.wait_for(lambda: len(self._pending) == self._running)
+            with self._server:
+                self._server.wait_for(lambda: len(self._pending) == self._running)
                 if self._running == 0:
                     return
                 batch, self._pending = self._pending, []
@@ -117,10 +121,8 @@ class _Rendezvous:
             for group in _compatible_groups(batch):
                 _solve_group(group)
                 self.merged_calls += 1
-            with self._cond:
-                for p in batch:
-                    p.done = True
-                self._cond.notify_all()
+            for p in batch:
+                p.done.set()
 
 
 def _compatible_groups(problems: list[_Problem]) -> list[list[_Problem]]:
