@@ -5,14 +5,13 @@ Temperatures °C, powers W, time steps s.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .atomic import replacing
 from .errors import InputError
 from .imp.tables import read_table, step_seconds
 from .model import HouseParameters, simulate
@@ -84,14 +83,8 @@ def read_drivers(path: Path, step: float | None, tz: str) -> tuple[pd.DataFrame,
 def write_atomically(df: pd.DataFrame, out: Path) -> None:
     """Write to a temporary file beside ``out`` and rename, so no half file is left behind."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            df.to_csv(fh, index=False, float_format="%.4f")
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with replacing(out, mode=0o600) as tmp, open(tmp, "w", newline="") as fh:
+        df.to_csv(fh, index=False, float_format="%.4f")
 
 
 def run_drivers(

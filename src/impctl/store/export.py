@@ -26,11 +26,10 @@ temperature, °C), ``occupants`` (people at home).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from ..atomic import replacing
 from ..errors import InputError
 from ..imp.protocol import SHORT_NIGHT
 from .db import Store
@@ -185,19 +184,13 @@ def export_nights(store: Store, out: Path, fmt: str, night_ids: Iterable[int] | 
     df["defrost"] = df["defrost"].astype("Int8")   # 1/0, empty where not logged
     if emitter is not None:
         df["emitter"] = emitter
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-    os.close(fd)
-    try:
+    if fmt not in ("csv", "parquet"):
+        raise ValueError(f"unknown format {fmt!r}")
+    with replacing(out, mode=0o600) as tmp:
         if fmt == "csv":
             df.to_csv(tmp, index=False)
-        elif fmt == "parquet":
-            df.to_parquet(tmp, index=False)
         else:
-            raise ValueError(f"unknown format {fmt!r}")
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+            df.to_parquet(tmp, index=False)
     return len(df)
 
 

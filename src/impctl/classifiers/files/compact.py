@@ -206,7 +206,7 @@ def save_compact(models: dict, directory: str | Path) -> Path | None:
     """Write ``forests.npz`` for ``models`` (parameter → fitted RangeClassifier) into
     ``directory`` when every forest exports and reproduces scikit-learn's probabilities on
     probe rows; else remove any old file and return None (readers use the pickles)."""
-    import os
+    from ...atomic import replacing
 
     directory = Path(directory)
     target = directory / COMPACT_FILE
@@ -232,9 +232,8 @@ def save_compact(models: dict, directory: str | Path) -> Path | None:
     except Exception:  # an optional speed-up: never let it fail the training that saves models
         target.unlink(missing_ok=True)
         return None
-    tmp = directory / (COMPACT_FILE + ".tmp.npz")
-    np.savez(tmp, **payload)
-    os.replace(tmp, target)
+    with replacing(target, suffix=".tmp.npz") as tmp:
+        np.savez(tmp, **payload)
     return target
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ...atomic import replacing
 from ...errors import InputError
 from ...imp import NIGHT_FEATURE_NAMES, NightSamples, night_features
 from ...population.dataset import package_versions
@@ -74,9 +75,8 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
     params = {}
     for name, model in models.items():
         target = directory / f"{name}.joblib"
-        tmp = target.with_suffix(".joblib.tmp")
-        joblib.dump(model, tmp, compress=3)
-        os.replace(tmp, target)
+        with replacing(target) as tmp:
+            joblib.dump(model, tmp, compress=3)
         params[name] = {"file": target.name, "ranges": [list(r) for r in model.ranges],
                         "labels": labels_of(tuple(model.ranges)),
                         "calibration": model.calibration if model.calibrated_ else None,
@@ -102,9 +102,8 @@ def save_models(models: dict, directory: str | Path, *, seed: int, n_households:
     # from them needs neither scikit-learn nor unpickling.
     if save_compact(models, directory) is not None:
         meta["compact"] = COMPACT_FILE
-    tmp = directory / (METADATA_FILE + ".tmp")
-    tmp.write_text(json.dumps(meta, indent=2) + "\n")
-    os.replace(tmp, directory / METADATA_FILE)
+    with replacing(directory / METADATA_FILE) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2) + "\n")
     return directory
 
 
@@ -120,9 +119,8 @@ def add_compact(model_dir: str | Path) -> bool:
     if save_compact(models, directory) is None:
         return False
     meta["compact"] = COMPACT_FILE
-    tmp = directory / (METADATA_FILE + ".tmp")
-    tmp.write_text(json.dumps(meta, indent=2) + "\n")
-    os.replace(tmp, directory / METADATA_FILE)
+    with replacing(directory / METADATA_FILE) as tmp:
+        tmp.write_text(json.dumps(meta, indent=2) + "\n")
     return True
 
 

@@ -11,15 +11,14 @@ from __future__ import annotations
 import contextlib
 import json
 import multiprocessing
-import os
 import signal
-import tempfile
 import threading
 import time
 from pathlib import Path
 
 import click
 
+from ...atomic import replacing
 from ...errors import InputError
 from ...fit.household import DEFAULT_MAX_NIGHTS, MAX_NIGHTS_RANGE
 from ...imp.gain import NIGHT_GAIN_LIMITS_W, NIGHT_GAIN_SD_W, NIGHT_GAIN_W
@@ -40,15 +39,9 @@ from .fit_worker import FitRequest, FitWorker, draw_outcome
 def _write_json(path: Path, data: dict) -> None:
     # Write beside the target and rename, so a failed run never leaves half a file.
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2, ensure_ascii=False)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with replacing(path, mode=0o600) as tmp, open(tmp, "w") as fh:
+        json.dump(data, fh, indent=2, ensure_ascii=False)
+        fh.write("\n")
 
 
 @cli.command("fit")

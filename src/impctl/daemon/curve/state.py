@@ -11,9 +11,9 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
-import tempfile
 from pathlib import Path
+
+from ...atomic import replacing
 
 _LOG = logging.getLogger("impctl.daemon")
 #: The file in the state directory.
@@ -29,16 +29,9 @@ def curve_path(state_dir: str | Path) -> Path:
 
 def keep_curve(state_dir: str | Path, source: Path) -> None:
     """Make ``source`` (a fresh ``impctl curve --json``) the kept result, atomically."""
-    target = curve_path(state_dir)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(Path(source).read_bytes())
-        os.chmod(tmp, 0o644)  # the report and the CLI read it as another user (mkstemp: 0600)
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    # the report and the CLI read it as another user
+    with replacing(curve_path(state_dir), mode=0o644) as tmp:
+        tmp.write_bytes(Path(source).read_bytes())
 
 
 def _number(x) -> bool:

@@ -36,13 +36,12 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import os
 import sqlite3
-import tempfile
 from collections import deque
 from dataclasses import replace
 from pathlib import Path
 
+from ...atomic import replacing
 from ...heatpump import HeatPumpError
 from ...heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
 from ...heatpump.writes import write_rules
@@ -77,16 +76,9 @@ def intent(state_dir: str | Path) -> bool | None:
 def set_intent(state_dir: str | Path, apply: bool, why: str) -> Path:
     """Record the owner's word (atomically; read by the daemon at its next look)."""
     target = Path(state_dir) / INTENT_FILE
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump({"apply": apply, "why": why}, fh)
-        # readable by the daemon's own user when root wrote it (mkstemp makes it 0600)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    # readable by the daemon's own user when root wrote it
+    with replacing(target, mode=0o644) as tmp:
+        tmp.write_text(json.dumps({"apply": apply, "why": why}))
     return target
 
 

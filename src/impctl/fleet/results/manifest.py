@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ...atomic import replacing
 from ...errors import InputError
 
 MANIFEST_FILE = "_manifest.json"
@@ -66,17 +66,9 @@ def write_manifest(out: Path, manifest: Manifest) -> Path:
     manifest.started_at = manifest.started_at or manifest.updated_at
     out.mkdir(parents=True, exist_ok=True)
     target = out / MANIFEST_FILE
-    tmp = out / f".{MANIFEST_FILE}.tmp"
-    try:
-        with open(tmp, "w") as fh:
-            json.dump({**asdict(manifest), "complete": manifest.complete}, fh, indent=2)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with replacing(target, fsync=True) as tmp:
+        tmp.write_text(json.dumps({**asdict(manifest), "complete": manifest.complete},
+                                  indent=2) + "\n")
     return target
 
 

@@ -53,12 +53,12 @@ fleet can be re-fitted when the model improves.
 from __future__ import annotations
 
 import functools
-import os
 import uuid
 from pathlib import Path
 
 import pyarrow as pa
 
+from ...atomic import replacing
 from ...flex.switch_off import ASSUMED_COLUMN
 from ...flex.switch_off import COLUMNS as SWITCH_OFF_COLUMNS
 
@@ -197,15 +197,8 @@ def write_part(out: Path, run_id: str, index: int, rows: list[dict]) -> Path:
 
     out.mkdir(parents=True, exist_ok=True)
     target = out / f"part-{run_id}-{index:06d}.parquet"
-    tmp = out / f".{target.name}.tmp"
-    try:
+    with replacing(target, fsync=True) as tmp:  # on disk before it becomes visible
         pq.write_table(to_table(rows), tmp)
-        with open(tmp, "rb") as fh:  # on disk before it becomes visible
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return target
 
 

@@ -21,11 +21,11 @@ import contextlib
 import hashlib
 import json
 import os
-import tempfile
 from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
 
+from ...atomic import replacing
 from ...errors import InputError
 from .._times import _dt, _iso, _now
 from ..records import JournalEntry
@@ -56,18 +56,8 @@ def write_owner_values(path: Path, entries: Sequence[JournalEntry]) -> None:
          "raw_value": e.raw_value, "recorded": _iso(e.recorded)} for e in entries]}
     data = {**content, "sha256": hashlib.sha256(_canonical(content)).hexdigest()}
     text = json.dumps(data, indent=1, sort_keys=True).encode() + b"\n"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o640)
-        with os.fdopen(fd, "wb") as out:
-            out.write(text)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    with replacing(path, mode=0o640, fsync=True) as tmp:
+        tmp.write_bytes(text)
     _fsync_dir(path.parent)
 
 
