@@ -7,6 +7,7 @@ import logging
 from datetime import datetime
 from pathlib import Path
 
+from ..atomic import replacing
 from ..clock import VirtualClock
 from ..kronoterm.decode import Reading, decode
 from ..kronoterm.generation import GenerationReport, detect
@@ -132,10 +133,9 @@ class HeatPumpClient:
         if self.health_path is None:
             return
         self._quirks_written = frozenset(self.link.quirks)
-        tmp = self.health_path.with_suffix(".tmp")
         try:
-            tmp.write_text(json.dumps(self.health(), indent=1))
-            tmp.replace(self.health_path)
+            with replacing(self.health_path) as tmp:
+                tmp.write_text(json.dumps(self.health(), indent=1))
         except OSError as exc:  # status is a convenience: never fail a read over it
             _LOG.debug("cannot write %s: %s", self.health_path, exc)
 
