@@ -96,6 +96,11 @@ class NightController:
         self._time = NightTime(clock, policy.sample_interval_s)
         self._last_stored: datetime | None = None  # the newest sample's time this night
 
+    @property
+    def running(self) -> bool:
+        """A night is in :meth:`run`, from its preparation to the end of its restore."""
+        return self._running
+
     def abort(self, reason: str) -> bool:
         """End the running night now and restore, leaving the process running (the
         household's stop button). Returns False when no night is running."""
@@ -185,11 +190,14 @@ class NightController:
         if [e for e in self.store.journal_pending() if e.register not in self.keep_registers]:
             self.on_status(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
+            # What impctl last left in each register: a value that is neither this nor the
+            # journaled one was set by the owner after the last sample, and stays.
+            held = {name: self._held[ma] for ma, name in _JOURNALED if ma in self._held}
             left = await asyncio.shield(restore_all(
                 self.client, self.store, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
                 retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
-                keep=self.keep_registers))
+                keep=self.keep_registers, held=held))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
         reasons += self._incidents.notes
@@ -275,10 +283,19 @@ class NightController:
             if budget.remaining(ma, day) < 2:
                 raise NightRefused(f"daily write budget of register {ma} nearly used up "
                                    f"({budget.used(ma, day)}/{budget.limit(ma)})")
+        readings = {ma: await self.client.read(ma) for ma, _ in _JOURNALED}
         for ma, name in _JOURNALED:
-            reading = await self.client.read(ma)
+            reading = readings[ma]
             if reading.raw is None:
                 raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
+            # A value the restore would refuse (an undocumented mode code, a sentinel) could
+            # never be put back: the heating would stay as the night left it.
+            why = self.client.unrestorable(ma, int(reading.raw))
+            if reading.value is None or why is not None:
+                raise NightRefused(f"{name} ({ma}) reads raw {int(reading.raw)}, which impctl "
+                                   f"could not put back: {why or reading.reason}")
+        for ma, name in _JOURNALED:
+            reading = readings[ma]
             try:
                 entry = self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
             except OSError as exc:  # the copy outside the store; nothing written yet
@@ -296,6 +313,10 @@ class NightController:
                               log) -> str:
         """Write the night's settings and sample until the end; returns why it ended."""
         policy = self.policy
+        if self._abort_reason is not None:   # asked while the night prepared: no write
+            raise _Abort(self._abort_reason)
+        if self.stop.is_set():
+            raise _Abort("stop requested (signal)")
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
         result = self._hold(await self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:

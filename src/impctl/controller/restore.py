@@ -18,7 +18,7 @@ import asyncio
 import logging
 import sqlite3
 import weakref
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from typing import Any
 
 from ..clock import VirtualClock
@@ -32,6 +32,14 @@ _LOG = logging.getLogger(__name__)
 #: (entry id → why), until the record succeeds, a restore of them is tried again, or a night
 #: journals them anew.
 _UNRECORDED: weakref.WeakKeyDictionary[Any, dict[int, str]] = weakref.WeakKeyDictionary()
+#: Per journal: entries whose register the owner set after impctl's last write (kept, not
+#: restored), so that no later restore of this process writes over them when the store could
+#: not record it.
+_OWNER_KEPT: weakref.WeakKeyDictionary[Any, set[int]] = weakref.WeakKeyDictionary()
+
+
+def _owner_kept(store) -> set[int]:
+    return _OWNER_KEPT.setdefault(store, set())
 
 
 def unrecorded(store: Store) -> dict[int, str]:
@@ -46,15 +54,39 @@ def forget_unrecorded(store: Store, entry_id: int) -> None:
     unrecorded(store).pop(entry_id, None)
 
 
-async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry) -> bool:
+async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry,
+                        held: float | None = None) -> bool:
     """Restore one journal entry; True when the read-back shows the owner's value and the
     journal records it, False when the heat pump is restored but the store could not record
-    it (the entry stays pending, see :func:`unrecorded`)."""
+    it (the entry stays pending, see :func:`unrecorded`). ``held``: the value impctl last left
+    in the register (physical unit), when known: a register that holds neither it nor the
+    journaled value was set by the owner since, and is kept (the entry closed as theirs)."""
     forget_unrecorded(store, entry.id)
+    if held is not None:
+        reading = await client.read(entry.address + 1)
+        if (reading.raw is not None and reading.value is not None
+                and int(reading.raw) != entry.raw_value and abs(reading.value - held) > 1e-6):
+            _owner_set(store, entry, int(reading.raw))
+            return True
     await client.restore_raw(entry.address + 1, entry.raw_value)
     _LOG.info("restored %s (register %d) to raw %d, verified by read-back", entry.register,
               entry.address + 1, entry.raw_value)
     return record_restored(store, entry)
+
+
+def _owner_set(store: Store, entry: JournalEntry, raw: int) -> None:
+    """The owner set ``entry``'s register (to ``raw``) after impctl last wrote it: kept."""
+    _owner_kept(store).add(entry.id)
+    what = (f"{entry.register} (register {entry.address + 1}) set to raw {raw} after "
+            f"impctl's last write: the owner's value kept, raw {entry.raw_value} not restored")
+    _LOG.warning("%s", what)
+    try:
+        store.journal_mark_owner_changed(entry.id, raw)
+    except sqlite3.Error as exc:  # kept all the same: this process never restores it
+        _LOG.error("cannot record that the owner changed %s: %s", entry.register,
+                   sqlite_problem(exc))
+        return
+    _event(store, "warning", what)
 
 
 def record_restored(store: Store, entry: JournalEntry) -> bool:
@@ -80,7 +112,8 @@ def _said_unrecorded(store: Store) -> None:
 
 async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal, *,
                       clock: VirtualClock, timeout_s: float, retry_s: float = 5.0,
-                      keep: Collection[str] = ()) -> list[JournalEntry]:
+                      keep: Collection[str] = (),
+                      held: Mapping[str, float] | None = None) -> list[JournalEntry]:
     """Restore every pending journal entry (but those of the registers in ``keep``: a heating
     curve the owner asked for stays when a night ends), retrying while the link is down.
 
@@ -93,6 +126,8 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
     timeout_s : give up after this many (simulated) seconds; entries stay pending
     retry_s : pause between attempts [wall s]
     keep : register names whose pending entries are left pending
+    held : register name → the value impctl last left there (physical unit; a night's own
+        restore): a register set to anything else since, by the owner, is kept
 
     Returns
     -------
@@ -101,17 +136,19 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
     deadline = clock.monotonic_s() + timeout_s
     reported = False
     skip = unrecorded(store)
+    owners = _owner_kept(store)
+    held = held or {}
     for entry in store.journal_pending():  # restored earlier by this process: record only
         if entry.id in skip:
             record_restored(store, entry)
     while True:
         pending = [e for e in store.journal_pending()
-                   if e.id not in skip and e.register not in keep]
+                   if e.id not in skip and e.id not in owners and e.register not in keep]
         if not pending:
             return _done(store, keep)
         for entry in pending:
             try:
-                await restore_entry(client, store, entry)
+                await restore_entry(client, store, entry, held.get(entry.register))
             except HeatPumpError as exc:
                 if not reported:  # one line per incident, not one per retry
                     if isinstance(exc, ModbusLinkError):
@@ -126,13 +163,13 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
                     break  # the link is down: the other entries cannot get through either
                 # Else try the other entries anyway: heating back on matters most.
         if not [e for e in store.journal_pending()
-                if e.id not in skip and e.register not in keep]:
+                if e.id not in skip and e.id not in owners and e.register not in keep]:
             if reported:
                 _LOG.info("restore completed after the heat pump answered again")
             return _done(store, keep)
         if clock.monotonic_s() >= deadline:
             left = [e for e in store.journal_pending()
-                    if e.id not in skip and e.register not in keep]
+                    if e.id not in skip and e.id not in owners and e.register not in keep]
             _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
                        ", ".join(e.register for e in left))
             return left

@@ -235,6 +235,11 @@ async def run_commands(daemon: RunningDaemon) -> None:
     night job (:func:`skip_tonight`)."""
     store = daemon.store
     for cmd in store.pending_commands("abort"):
+        if (daemon.night_running() and daemon.controller is not None
+                and not daemon.controller.running):
+            # A night is starting (waiting for the heat pump, or about to prepare): the
+            # command stays queued until the night can take it, at a later poll.
+            continue
         if not store.take_command(cmd.id):
             continue
         reason = f"aborted on request ({cmd.source})"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..atomic import replacing
 from ..clock import VirtualClock
+from ..errors import InputError
 from ..kronoterm.decode import Reading, decode
 from ..kronoterm.generation import GenerationReport, detect
 from ..kronoterm.registers import Generation, Register, register
@@ -17,7 +18,7 @@ from ..modbus import LinkConfig, ModbusDeviceError, ModbusLink, to_int16, uint32
 from .budget import WriteBudget
 from .config import ExternalRegister, HeatPumpConfig
 from .errors import HeatPumpError, UnsupportedFeature, WriteRefused
-from .writes import WriteResult, safe_write
+from .writes import WriteResult, check_restore, safe_write
 
 _LOG = logging.getLogger(__name__)
 
@@ -292,6 +293,17 @@ class HeatPumpClient:
         """:meth:`restore` from a journaled raw (signed int16) register value."""
         reg = register(key)
         return await self.restore(reg, raw * reg.scale)
+
+    def unrestorable(self, key: str | int, raw: int) -> str | None:
+        """Why :meth:`restore_raw` would refuse to put ``raw`` back into ``key`` (an
+        undocumented mode code, a sentinel, a register off the whitelist); None when it
+        would not."""
+        reg = register(key)
+        try:
+            check_restore(reg, raw * reg.scale, self.config.writes)
+        except (WriteRefused, InputError) as exc:
+            return str(exc)
+        return None
 
     async def set_loop1_setpoint(self, t_c: float) -> WriteResult:
         """Write the loop-1 desired temperature (2187) [°C], clamped to the configured limits."""

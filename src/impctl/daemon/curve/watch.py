@@ -223,6 +223,15 @@ class CurveWatch:
         self.daemon.store.add_event(level, text)
         _LOG.warning(text)
 
+    def _intent_off(self, why: str) -> None:
+        """Keep the decision to set no curve; a file that cannot be written (a full disk) does
+        not stop the owner's points going back."""
+        try:
+            set_intent(self.daemon.cfg.state_dir, False, why)
+        except OSError as exc:
+            _LOG.error("cannot keep the decision to set no heating curve (%s: %s); the "
+                       "owner's points go back all the same", why, exc)
+
     def _keep(self, held: bool) -> None:
         ctl = self.daemon.controller
         if ctl is not None:
@@ -232,12 +241,16 @@ class CurveWatch:
         from ...controller.restore import restore_entry
 
         d = self.daemon
-        for entry in curve_entries(d.store):
-            await restore_entry(d.client, d.store, entry)
+        held = dict(zip(CURVE_REGISTERS, self.held, strict=True)) if self.held else {}
+        # impctl's curve is let go before the first write: a point a failed write leaves is
+        # the daemon's restorer's and the next look's to give back, never read as the
+        # owner's change of impctl's curve
         self.held, self._verify = None, None
         self._looks.clear()
         self._since = None
         self._keep(False)
+        for entry in curve_entries(d.store):
+            await restore_entry(d.client, d.store, entry, held.get(entry.address + 1))
         text = f"the owner's heating curve restored ({why})"
         self._say("info", text)
 
@@ -258,7 +271,7 @@ class CurveWatch:
                 if abs(moved - expected) > FOLLOW_TOL_K:
                     # The decision is kept first: a restart between the two finds the
                     # journal and restores, and does not set the curve again.
-                    set_intent(d.cfg.state_dir, False, "the controller did not follow")
+                    self._intent_off("the controller did not follow")
                     await self._give_back(
                         f"the controller did not follow the curve points: its flow target "
                         f"moved {moved:+.1f} K where the line moved {expected:+.1f} K at "
@@ -288,7 +301,7 @@ class CurveWatch:
             d.store.journal_mark_owner_changed(entry.id, int(reading.raw or entry.raw_value))
         self.held, self._verify = None, None
         self._keep(False)
-        set_intent(d.cfg.state_dir, False, "the owner changed the curve points")
+        self._intent_off("the owner changed the curve points")
         text = ("the owner changed the heating curve: their points are kept, impctl sets no "
                 "curve until asked again (impctl curve --apply)")
         self._say("warning", text)
@@ -329,7 +342,7 @@ class CurveWatch:
             # impctl's curve proved too low for this house: setting it again at the next look
             # would leave the room short once more. Kept first, as when the controller does
             # not follow: a restart between the two restores and does not set it again.
-            set_intent(d.cfg.state_dir, False, "the room stayed short under impctl's curve")
+            self._intent_off("the room stayed short under impctl's curve")
             await self._give_back(f"{why}; {back}")
             self._refuse("the room stayed short under impctl's curve even raised back; "
                          "impctl sets no curve until asked again (impctl curve --apply)")
