@@ -38,7 +38,9 @@ _UNRECORDED: weakref.WeakKeyDictionary[Any, dict[int, str]] = weakref.WeakKeyDic
 _OWNER_KEPT: weakref.WeakKeyDictionary[Any, set[int]] = weakref.WeakKeyDictionary()
 
 
-def _owner_kept(store) -> set[int]:
+def owner_kept(store) -> set[int]:
+    """Entries of ``store``'s journal whose register the owner set after impctl's last write:
+    this process never restores them (their record may have failed)."""
     return _OWNER_KEPT.setdefault(store, set())
 
 
@@ -76,7 +78,7 @@ async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntr
 
 def _owner_set(store: Store, entry: JournalEntry, raw: int) -> None:
     """The owner set ``entry``'s register (to ``raw``) after impctl last wrote it: kept."""
-    _owner_kept(store).add(entry.id)
+    owner_kept(store).add(entry.id)
     what = (f"{entry.register} (register {entry.address + 1}) set to raw {raw} after "
             f"impctl's last write: the owner's value kept, raw {entry.raw_value} not restored")
     _LOG.warning("%s", what)
@@ -136,7 +138,7 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
     deadline = clock.monotonic_s() + timeout_s
     reported = False
     skip = unrecorded(store)
-    owners = _owner_kept(store)
+    owners = owner_kept(store)
     held = held or {}
     for entry in store.journal_pending():  # restored earlier by this process: record only
         if entry.id in skip:

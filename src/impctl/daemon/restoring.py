@@ -9,7 +9,7 @@ import contextlib
 import logging
 import sqlite3
 
-from ..controller.restore import record_restored, restore_entry, unrecorded
+from ..controller.restore import owner_kept, record_restored, restore_entry, unrecorded
 from ..heatpump import HeatPumpError, ModbusLinkError
 from ..store import Store
 from .running import RunningDaemon
@@ -40,13 +40,19 @@ async def restore_pending(daemon: RunningDaemon) -> None:
     waiting = False
     while True:
         await asyncio.sleep(interval)
+        try:
+            todo = [e for e in daemon._restorable() if e.id not in owner_kept(daemon.store)]
+        except sqlite3.Error as exc:  # a damaged store: look again, never end this loop
+            _LOG.error("cannot read the restore journal: %s", exc)
+            continue
         if (daemon.stop.is_set() or not daemon._connected.is_set()
-                or daemon._heat_pump_lock.locked() or not daemon._restorable()):
+                or daemon._heat_pump_lock.locked() or not todo):
             continue
         async with daemon._heat_pump_lock:
             restored = False
             try:
-                for entry in daemon._restorable():
+                for entry in [e for e in daemon._restorable()
+                              if e.id not in owner_kept(daemon.store)]:
                     if entry.id in unrecorded(daemon.store):
                         # Back on the heat pump and verified; only the record failed
                         # (a full disk): try the record alone, quietly, until it works.
@@ -61,6 +67,9 @@ async def restore_pending(daemon: RunningDaemon) -> None:
                         daemon.store.add_event("warning", f"restore pending: {exc}")
                     daemon._status("RESTORE PENDING: waiting for the heat pump")
                     waiting = True
+                continue
+            except sqlite3.Error as exc:  # a damaged store: look again, never end this loop
+                _LOG.error("cannot read the restore journal: %s", exc)
                 continue
         if restored:
             _LOG.info("owner's settings restored%s", " after the link came back"

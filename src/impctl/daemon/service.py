@@ -124,7 +124,8 @@ class Daemon:
                   self.cfg.state_dir, self.cfg.heatpump.link.describe(), self.clock)
         watchdog = asyncio.create_task(self._watchdog())
         self.mqtt = start_mqtt(self)  # MQTT hook: never awaited by the control loop
-        restorer = asyncio.create_task(restore_pending(self))
+        restorer = asyncio.create_task(restore_pending(self), name="background restore")
+        restorer.add_done_callback(_log_crash)
         try:
             await self._connect()
             if not self.stop.is_set() and self.store.journal_pending():
