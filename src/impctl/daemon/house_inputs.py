@@ -4,9 +4,9 @@ row of them stored with every sample.
 The MQTT bridge hands every message on an input topic to :meth:`HouseInputs.receive` (no I/O);
 the night controller calls :meth:`HouseInputs.record` after it stored a sample, the idle reads
 between nights too (the outdoor-sensor check). Ages are on the daemon's clock (the simulated
-one in a demo). A value older than ``max_age_s`` at the sample, a malformed payload and Home
-Assistant's ``unavailable`` are missing; a malformed payload is logged once per topic until
-the topic sends a good value again.
+one in a demo), on its monotonic scale. A value older than ``max_age_s`` at the sample, a
+malformed payload and Home Assistant's ``unavailable`` are missing; a malformed payload is
+logged once per topic until the topic sends a good value again.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ OFFSET_CHECK_S = 3600.0
 @dataclass(frozen=True)
 class _Latest:
     value: float | None
-    received: datetime
+    received_s: float   # on the clock's monotonic scale: a wall-clock step moves no age
     payload: bytes
 
 
@@ -79,15 +79,17 @@ class HouseInputs:
         elif value is not None and topic in self._problem:
             _LOG.info("input %s (%s) back: %g", name.split(":")[0], topic, value)
             del self._problem[topic]
-        self._latest[topic] = _Latest(value, self.clock.now(), payload)
+        self._latest[topic] = _Latest(value, self.clock.monotonic_s(), payload)
 
     def _fresh(self, topic: str, at: datetime, max_age_s: float) -> tuple[float | None,
                                                                          float | None]:
-        """(value, age s) of ``topic`` at ``at``; (None, None) when missing or stale."""
+        """(value, age s) of ``topic`` now (the sample at ``at`` was just taken); (None, None)
+        when missing or stale. Ages run on the monotonic clock: after a wall-clock step back
+        a value heard hours ago is not fresh again."""
         latest = self._latest.get(topic)
         if latest is None or latest.value is None:
             return None, None
-        age = max(0.0, (at - latest.received).total_seconds())
+        age = max(0.0, self.clock.monotonic_s() - latest.received_s)
         if age > max_age_s:
             return None, None
         return latest.value, age

@@ -22,10 +22,16 @@ from .writes import WriteResult, check_restore, safe_write
 
 _LOG = logging.getLogger(__name__)
 
-#: Reads of one snapshot before it is given up as unattributable (issue 15).
+#: Reads of one snapshot before it is given up as unattributable.
 _SNAPSHOT_TRIES = 3
 _NO_Q_HC = ("compact (TT3000) controller has no heat-power register (2329) and no heat meter "
             "is configured")
+#: A room temperature an external sensor may report [°C] (a sensor's error code, e.g. −60.0
+#: from a raw −600, is missing whatever its ``valid`` allows): the NIGHTS reader's range.
+ROOM_PLAUSIBLE_C = (-40.0, 60.0)
+#: A heat output an external meter may report [W] (negative while a defrost draws heat from
+#: the water): the NIGHTS reader's range.
+HEAT_PLAUSIBLE_W = (-25_000.0, 100_000.0)
 
 
 class HeatPumpClient:
@@ -170,8 +176,10 @@ class HeatPumpClient:
         words = await self.link.read(reg.address, reg.words)
         return decode(reg, words, self.clock.now())
 
-    async def read_external(self, ext: ExternalRegister, name: str, unit: str) -> Reading:
-        """Read a value from an external device (room sensor, heat meter)."""
+    async def read_external(self, ext: ExternalRegister, name: str, unit: str,
+                            plausible: tuple[float, float] = (-1e9, 1e9)) -> Reading:
+        """Read a value from an external device (room sensor, heat meter): missing outside
+        its configured ``valid`` range or the quantity's ``plausible`` one."""
         link = self._link_for(ext)
         source = f"external {ext.describe()}"
         try:
@@ -185,7 +193,7 @@ class HeatPumpClient:
                 raw -= 1 << 32
         value = raw * ext.scale
         stamp = self.clock.now()
-        low, high = ext.valid
+        low, high = max(ext.valid[0], plausible[0]), min(ext.valid[1], plausible[1])
         if not low <= value <= high:
             return Reading(name, None, unit, stamp, True,
                            f"{value:g} {unit} outside the valid range {low:g}…{high:g}", raw,
@@ -243,11 +251,13 @@ class HeatPumpClient:
             self.write_health()  # a newly recognised quirk shows in impctl status
         fields = {f: from_register(register(r)) for f, r in SNAPSHOT_REGISTERS.items()}
         if isinstance(room, ExternalRegister):
-            fields["t_air_c"] = await self.read_external(room, "t_air", "°C")
+            fields["t_air_c"] = await self.read_external(room, "t_air", "°C",
+                                                         ROOM_PLAUSIBLE_C)
         else:
             fields["t_air_c"] = from_register(register("room_" + room))
         if self.config.heat_meter is not None:
-            fields["q_hc_w"] = await self.read_external(self.config.heat_meter, "q_hc", "W")
+            fields["q_hc_w"] = await self.read_external(self.config.heat_meter, "q_hc", "W",
+                                                        HEAT_PLAUSIBLE_W)
         elif gen is Generation.EXTENDED:
             fields["q_hc_w"] = from_register(register("power_thermal"))
         else:

@@ -15,7 +15,9 @@ import pandas as pd
 from ..errors import InputError
 from ..numtext import non_ascii_problem
 
-_OFFSET = re.compile(r"(?:Z|[+-]\d\d:?\d\d)$")
+#: A UTC offset at the end of a timestamp with a time of day: Z, ±hh:mm, ±hhmm or ±hh (ISO 8601
+#: allows the hours alone); a date alone ends in "-dd", which is no offset.
+_OFFSET = re.compile(r"[T ]\d.*(?:Z|[+-]\d\d(?::?\d\d)?)$")
 #: Key of ``DataFrame.attrs`` holding the timestamp cells as the source wrote them (strings,
 #: indexed by row: an array, or :class:`CellText` for a frame read from Parquet).
 TIMESTAMP_TEXT = "timestamp_text"
@@ -62,8 +64,12 @@ def parse_timestamps(raw: pd.Series, path: str | Path, tz: str, column: str = "t
     if has_offset.any():
         row = _first_bad(~has_offset)
         raise InputError(f"{column} mixes UTC offsets and local times", path, f"row {row}")
-    naive = pd.DatetimeIndex(pd.to_datetime(text, format="ISO8601"))
-    local = naive.tz_localize(tz, ambiguous="NaT", nonexistent="NaT")
+    try:
+        naive = pd.DatetimeIndex(pd.to_datetime(text, format="ISO8601"))
+        local = naive.tz_localize(tz, ambiguous="NaT", nonexistent="NaT")
+    except (TypeError, ValueError) as exc:  # an offset the pattern above does not know
+        raise InputError(f"cannot read {column} as local times ({exc}): write each with its "
+                         "UTC offset as +hh:mm, or none of them", path) from None
     bad = local.isna()
     if bad.any():
         row = _first_bad(bad)

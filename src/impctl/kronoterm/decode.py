@@ -108,8 +108,11 @@ def decode(reg: Register, words: Sequence[int], timestamp: datetime) -> Reading:
         if not low <= value <= high:
             return missing(f"{value:.1f} °C outside the {low:g}…{high:g} °C sanity range")
         return Reading(reg.name, round(value, 6), reg.unit, timestamp, raw=raw, source=source)
-    return Reading(reg.name, round(raw * reg.scale, 6), reg.unit, timestamp, raw=raw,
-                   source=source)
+    value = raw * reg.scale
+    if reg.valid is not None and not reg.valid[0] <= value <= reg.valid[1]:
+        return missing(f"{value:g} {reg.unit} outside the plausible {reg.valid[0]:g}…"
+                       f"{reg.valid[1]:g} {reg.unit}")
+    return Reading(reg.name, round(value, 6), reg.unit, timestamp, raw=raw, source=source)
 
 
 def encode(reg: Register, value: float) -> int:

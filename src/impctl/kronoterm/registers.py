@@ -84,6 +84,8 @@ class Register:
         Raw values (signed) that mean "no value", with the reason.
     values : Mapping[int, str] or None
         Documented codes of an enum register.
+    valid : (low, high) or None
+        Plausible physical values of a number register; outside, the reading is missing.
     """
 
     name: str
@@ -96,6 +98,7 @@ class Register:
     description: str
     sentinels: Mapping[int, str] = field(default_factory=dict)
     values: Mapping[int, str] | None = None
+    valid: tuple[float, float] | None = None
 
     @property
     def address(self) -> int:
@@ -131,8 +134,8 @@ def _t(name, ma, access, gens, desc, sentinels=_MISSING):
     return Register(name, ma, Kind.TEMP, 0.1, "°C", access, gens, desc, sentinels)
 
 
-def _n(name, ma, scale, unit, access, gens, desc):
-    return Register(name, ma, Kind.NUMBER, scale, unit, access, gens, desc)
+def _n(name, ma, scale, unit, access, gens, desc, valid=None):
+    return Register(name, ma, Kind.NUMBER, scale, unit, access, gens, desc, valid=valid)
 
 
 def _e(name, ma, access, gens, desc, values=_ONOFF):
@@ -243,7 +246,9 @@ _TABLE: tuple[Register, ...] = (
     _b("source_errors", 2127, E, "source errors"),
     # §2.2/2.7 loop targets, power
     _t("loop1_target", 2128, R, CE, "loop-1 current calculated (flow/curve) target"),
-    _n("power_electrical", 2129, 1.0, "W", R, E, "current electrical power consumption"),
+    # a consumption is never negative: −600 there is the sentinel of the other registers
+    _n("power_electrical", 2129, 1.0, "W", R, E, "current electrical power consumption",
+       valid=(0.0, 30_000.0)),
     _t("t_loop1_water", 2130, R, E, "loop-1 water (flow) temperature"),
     _t("room_loop1", 2160, R, CE, "loop-1 room thermostat temperature", _THERMOSTAT),
     _t("room_loop2", 2161, R, CE, "loop-2 room thermostat temperature", _THERMOSTAT),
