@@ -37,7 +37,8 @@ class NightRequest:
             raise ValueError(f"kind must be constrained or normal, got {self.kind!r}")
         if self.window_start.tzinfo is None or self.window_end.tzinfo is None:
             raise ValueError("window instants must be time zone-aware")
-        if not self.window_end > self.window_start:
+        # instants, not wall-clock times: two times of one zone compare as wall clocks
+        if not self.window_end.timestamp() > self.window_start.timestamp():
             raise ValueError("window_end must follow window_start")
 
     @property

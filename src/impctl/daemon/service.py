@@ -36,6 +36,7 @@ from .nights.schedule import (
     campaign_plan,
     drop_expired_requests,
     every_second,
+    next_act_time,
 )
 from .restoring import restore_pending, sweep_orphans
 from .systemd import Notifier
@@ -313,13 +314,20 @@ class Daemon:
             _LOG.info("next night job at %s (wall clock)", job.next_run_time)
 
     async def _night_job(self, act: datetime | None = None) -> None:
+        if skip_tonight(self):  # a household's skip_tonight, also when a night still runs
+            self._status(self._idle_status() + "; tonight skipped on request")
+            return
         if self._night_task is not None and not self._night_task.done():
             _LOG.warning("night job skipped: a night is still running")
             return
-        if skip_tonight(self):  # a household's skip_tonight (issue 17)
-            self._status(self._idle_status() + "; tonight skipped on request")
-            return
-        act = act or self.clock.now()
+        if act is None:
+            # The preheat time this job was scheduled for, not the moment it fired: fired
+            # late (a resume from suspend, a clock stepped forward at boot) within the
+            # misfire grace, it is still tonight's night, not the next day's.
+            now = self.clock.now()
+            scheduled = next_act_time(self.cfg, now - timedelta(
+                seconds=self.cfg.campaign.misfire_grace_s + 1))
+            act = min(scheduled, now)
         if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
             fit_running = self._fit_task is not None and not self._fit_task.done()
             req = adaptive_tonight(self.store, self.cfg, act, fit_running)

@@ -17,6 +17,7 @@ from .adaptive import decide_now, record
 from .schedule import (
     campaign_plan,
     drop_expired_requests,
+    gap_start,
     gave_up,
     retry_waits,
     window_after_act,
@@ -32,6 +33,8 @@ def peek_next_night(store: Store, cfg: Config, act: datetime
     was an invalid constrained night (:func:`retry_waits`); (None, None) when there is
     nothing to run."""
     start, end = window_after_act(act, cfg)
+    if gap_start(start):   # no such local time tonight: no window (and no request taken)
+        return None, None
     band = cfg.night.comfort_band_k
     for req in store.pending_requests():
         if req.when == "tonight" and (req.expires is None or act < req.expires):
@@ -88,6 +91,8 @@ def adaptive_tonight(store: Store, cfg: Config, act: datetime, fit_running: bool
     decides (stored, logged, shown), unless the last night's fit is still running
     (``fit_running``). None when nothing runs tonight."""
     drop_expired_requests(store, act)
+    if gap_start(window_after_act(act, cfg)[0]):
+        return None
     while True:
         req, request_id = peek_next_night(store, cfg, act)
         if request_id is None:

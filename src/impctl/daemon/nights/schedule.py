@@ -11,7 +11,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Awaitable, Callable
-from datetime import datetime, timedelta
+from datetime import UTC, datetime, timedelta
 from zoneinfo import ZoneInfo
 
 from apscheduler.triggers.cron import CronTrigger
@@ -59,6 +59,13 @@ def act_trigger(cfg: Config) -> CronTrigger:
 def next_act_time(cfg: Config, now: datetime) -> datetime:
     """The next instant (aware) at which a night's preheat starts, after ``now``."""
     return act_trigger(cfg).get_next_fire_time(None, now)
+
+
+def gap_start(start: datetime) -> bool:
+    """Whether the local time ``start`` (aware, in its zone) does not exist: the clocks skip it
+    at the spring DST change (a window "02:00-03:00" would last no time that night)."""
+    back = start.astimezone(UTC).astimezone(start.tzinfo)
+    return back.replace(tzinfo=None) != start.replace(tzinfo=None)
 
 
 def window_after_act(act: datetime, cfg: Config) -> tuple[datetime, datetime]:
