@@ -38,16 +38,28 @@ class Source:
     rows: int | None = None  # a dataset household's rows (counted at discovery)
 
 
-def _is_dataset(path: Path) -> bool:
+def _open_dataset(path: str | Path):
+    """The Parquet dataset at ``path``. Partitioned by household (``household=007/``), the id
+    is read as the text it is: pyarrow would read "007" and "01" as the numbers 7 and 1, and
+    merge "01" with "1"."""
+    import pyarrow as pa
     import pyarrow.dataset as ds
 
+    path = Path(path)
+    by_household = path.is_dir() and any(
+        p.is_dir() and p.name.startswith(f"{HOUSEHOLD_COLUMN}=") for p in path.iterdir())
+    partitioning = (ds.partitioning(pa.schema([(HOUSEHOLD_COLUMN, pa.string())]),
+                                    flavor="hive") if by_household else "hive")
+    return ds.dataset(path, format="parquet", partitioning=partitioning)
+
+
+def _is_dataset(path: Path) -> bool:
     if path.is_file():
         return path.suffix == ".parquet"
     if any(path.glob("*.csv")):
         return False
     try:
-        return HOUSEHOLD_COLUMN in ds.dataset(path, format="parquet",
-                                              partitioning="hive").schema.names
+        return HOUSEHOLD_COLUMN in _open_dataset(path).schema.names
     except (OSError, ValueError):  # pyarrow: not a dataset (or an empty one)
         return False
 
@@ -61,7 +73,6 @@ def discover(path: str | Path) -> list[Source]:
         Missing path, a folder with no NIGHTS file, a dataset without a ``household`` column,
         two files with the same household id.
     """
-    import pyarrow.dataset as ds
 
     path = Path(path)
     if not path.exists():
@@ -70,8 +81,7 @@ def discover(path: str | Path) -> list[Source]:
         _refuse_fleet_output(path)
     if _is_dataset(path):
         try:
-            table = ds.dataset(path, format="parquet", partitioning="hive").to_table(
-                columns=[HOUSEHOLD_COLUMN])
+            table = _open_dataset(path).to_table(columns=[HOUSEHOLD_COLUMN])
         except (OSError, ValueError) as exc:
             raise InputError(f"not a readable Parquet dataset ({exc})", path) from None
         except KeyError:
@@ -111,13 +121,11 @@ def layout_note(sources: list[Source], batch_size: int) -> str | None:
     four times the reading of row groups near a batch's size (``bench/fleet.py`` layouts)."""
     import statistics
 
-    import pyarrow.dataset as ds
 
     rows = [s.rows for s in sources if s.kind == "dataset" and s.rows]
     if not rows:
         return None
-    dataset = ds.dataset(next(s.path for s in sources if s.kind == "dataset"),
-                         format="parquet", partitioning="hive")
+    dataset = _open_dataset(next(s.path for s in sources if s.kind == "dataset"))
     groups = []
     for i, fragment in enumerate(dataset.get_fragments()):
         if i == _FRAGMENTS_LOOKED_AT:
@@ -173,6 +181,8 @@ def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]
                     s.path, tz, read_frame=lambda s=s: _read_parquet(s.path))
         except InputError as exc:
             out[s.household] = exc
+        except Exception as exc:  # noqa: BLE001 — one household's file never fails its batch
+            out[s.household] = _unreadable(s.path, exc)
     for path, members in by_dataset.items():
         households = []
         for s in members:
@@ -200,7 +210,16 @@ def read_sources(sources: list[Source], tz: str) -> dict[str, list | InputError]
                 out[h] = read_household(_in_dataset(path, h), tz, read_frame=lambda p=part: p)
             except InputError as exc:
                 out[h] = exc
+            except Exception as exc:  # noqa: BLE001 — one household never fails its batch
+                out[h] = _unreadable(_in_dataset(path, h), exc)
     return out
+
+
+def _unreadable(where: str, exc: Exception) -> InputError:
+    """An error the NIGHTS reader did not foresee, as one household's refusal naming its
+    file."""
+    return InputError(f"cannot read this household's nights ({type(exc).__name__}: "
+                      f"{str(exc).splitlines()[0] if str(exc) else ''})", where)
 
 
 def _in_dataset(path: str, household: str) -> str:
@@ -219,10 +238,9 @@ def _parquet_rows(path: str) -> int | None:
 
 
 def _read_parquet(path: str, households: list[str] | None = None):
-    import pyarrow.dataset as ds
 
     try:
-        dataset = ds.dataset(path, format="parquet", partitioning="hive")
+        dataset = _open_dataset(path)
         if households is None:
             return dataset.to_table().to_pandas()
         flt = households_filter(households, dataset.schema.field(HOUSEHOLD_COLUMN).type)

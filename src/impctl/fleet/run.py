@@ -34,8 +34,15 @@ from ..errors import InputError
 from ..fit.household import FitOptions
 from .inputs import Source, discover, layout_note
 from .results.manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
-from .results.table import done_households, empty_row, new_run_id, write_part
-from .worker import PRIOR, Preload, Settings, fit_batch
+from .results.table import (
+    WORKER_FAILED,
+    done_households,
+    drop_failed_parts,
+    empty_row,
+    new_run_id,
+    write_part,
+)
+from .worker import PRIOR, Preload, Settings, classifiers_digest, fit_batch
 
 DEFAULT_BATCH = 64
 
@@ -179,9 +186,10 @@ def _start_manifest(out: Path, input_path, sources: list[Source], done: set[str]
             raise InputError(f"was fitted with {what}; resume it with the same input and "
                              "options, or give a new --out", out)
         old.households, old.done = len(found), len(found & done)
+        old.expected = sorted(found)
         return old
     return Manifest(input=source, options=options, households=len(found),
-                    done=len(found & done))
+                    done=len(found & done), expected=sorted(found))
 
 
 def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
@@ -216,6 +224,21 @@ def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
         # empties the other's columns
         raise InputError("was written by another impctl version (its columns differ): give a "
                          "new --out", out)
+    if part is not None:
+        import pyarrow.dataset as ds
+
+        from .results.table import version
+
+        written = set(ds.dataset(sorted(out.glob("part-*.parquet")), format="parquet")
+                      .to_table(columns=["impctl_version"]).column(0).to_pylist())
+        other = sorted(str(v) for v in written - {version()})
+        if other:
+            # rows of two codes in one dataset: resumed, the rest would be another code's fit
+            raise InputError(f"was written by another impctl version ({other[0]}, this is "
+                             f"{version()}): give a new --out", out)
+    if old is None and any(out.glob("part-*.parquet")):
+        raise InputError("holds FLEET parts but no manifest, so the options its rows were "
+                         "fitted with are not known: give a new --out", out)
 
 
 def fit_fleet(
@@ -273,11 +296,18 @@ def fit_fleet(
     if layout:
         run.notes.append(layout)
         echo(f"note: {layout}")
+    if resume:
+        drop_failed_parts(out)   # a lost worker's batch is fitted again
     done = done_households(out) if resume else set()
     todo = [s for s in sources if s.household not in done]
     run.skipped = len(sources) - len(todo)
     resolved, note = resolve_models(model_dir)
-    decided = {**options.as_dict(), "tz": tz, "model_dir": resolved}
+    from .results.table import version
+
+    # what the rows depend on beyond the input: a resumed or a --previous dataset must agree on
+    # all of it — the classifiers trained anew in the same folder, impctl's own code too
+    decided = {**options.as_dict(), "tz": tz, "model_dir": resolved,
+               "classifiers": classifiers_digest(resolved), "impctl_version": version()}
     manifest = _start_manifest(out, input_path, sources, done, decided, resume)
     if note:
         run.notes.append(note)
@@ -285,7 +315,6 @@ def fit_fleet(
     last: dict[str, dict] = {}
     if previous is not None:
         from .results.previous import previous_rows
-        from .results.table import version
 
         last, said = previous_rows(previous, decided, version())
         run.notes.append(said)
@@ -353,10 +382,11 @@ def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
                 rows = []
                 for s in batches[i]:
                     row = empty_row(s.household)
-                    row.update(reason="worker failed", error=f"{type(exc).__name__}: {exc}")
+                    row.update(reason=WORKER_FAILED, error=f"{type(exc).__name__}: {exc}")
                     rows.append(row)
             write_part(out, run_id, i, rows)
-            manifest.done += len(rows)
+            # a lost worker's rows are not done: --resume fits them again
+            manifest.done += sum(r.get("reason") != WORKER_FAILED for r in rows)
             write_manifest(out, manifest)
             for row in rows:
                 run.counts[row["status"]] = run.counts.get(row["status"], 0) + 1

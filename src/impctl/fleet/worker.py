@@ -30,7 +30,7 @@ from .inputs import Source, read_sources
 from .results.table import empty_row
 
 #: Worker-process cache: model directory → (models, metadata), and how often it was filled.
-_MODELS: dict[str, tuple[dict, dict]] = {}
+_MODELS: dict[tuple[str, str | None], tuple[dict, dict]] = {}
 _LOADS = {"models": 0, "batches": 0}
 _LOCK = threading.Lock()
 PRIOR = "prior"
@@ -49,15 +49,36 @@ class Settings:
     options: FitOptions = field(default_factory=FitOptions)
 
 
+def classifiers_digest(model_dir: str) -> str | None:
+    """8 hex digits over the classifiers' metadata file in ``model_dir`` (every training writes
+    it anew, with its time); None for :data:`PRIOR` or where there is none."""
+    if model_dir == PRIOR:
+        return None
+    import hashlib
+    from pathlib import Path
+
+    from ..classifiers.files.saved import METADATA_FILE
+
+    try:
+        data = (Path(model_dir) / METADATA_FILE).read_bytes()
+    except OSError:
+        return None
+    return hashlib.blake2b(data, digest_size=4).hexdigest()
+
+
 def models(model_dir: str) -> tuple[dict, dict]:
-    """The classifiers of ``model_dir``, loaded once per process (thread-safe)."""
+    """The classifiers of ``model_dir``, loaded once per process (thread-safe) and again when
+    they were trained anew there (a worker that outlives a run keeps no stale forests)."""
+    key = (model_dir, classifiers_digest(model_dir))
     with _LOCK:
-        if model_dir not in _MODELS:
+        if key not in _MODELS:
             from ..classifiers.files.saved import load_classifiers
 
-            _MODELS[model_dir] = load_classifiers(model_dir)
+            for old in [k for k in _MODELS if k[0] == model_dir]:
+                del _MODELS[old]
+            _MODELS[key] = load_classifiers(model_dir)
             _LOADS["models"] += 1
-        return _MODELS[model_dir]
+        return _MODELS[key]
 
 
 def preload(model_dir: str) -> None:

@@ -30,7 +30,9 @@ class Manifest:
 
     ``options``: what decides the numbers (:class:`impctl.fit.household.FitOptions`, the time
     zone, the classifiers' directory or "prior"); ``households``: expected (found in
-    ``input``); ``done``: with a row; ``runs``: the run ids of its part files.
+    ``input``); ``done``: with a row; ``runs``: the run ids of its part files; ``expected``:
+    the expected households' ids (a resumed input may have lost some: their rows are not
+    counted as done).
     """
 
     input: str
@@ -41,6 +43,7 @@ class Manifest:
     started_at: str = ""
     updated_at: str = ""
     format: str = FORMAT
+    expected: list[str] = field(default_factory=list)
 
     @property
     def complete(self) -> bool:
@@ -117,5 +120,6 @@ def recount(out: Path, manifest: Manifest) -> Manifest:
     N" equal to the rows a reader finds."""
     from .table import done_households
 
-    manifest.done = len(done_households(out))
+    done = done_households(out)
+    manifest.done = len(done & set(manifest.expected)) if manifest.expected else len(done)
     return manifest

@@ -202,14 +202,36 @@ def write_part(out: Path, run_id: str, index: int, rows: list[dict]) -> Path:
     return target
 
 
+#: The reason of the rows a batch gets when its task failed as a whole (a lost worker): they
+#: say nothing of the household, and a resumed run fits it again.
+WORKER_FAILED = "worker failed"
+
+
 def done_households(out: Path) -> set[str]:
-    """Households that already have a row in the FLEET dataset ``out`` (empty if none)."""
+    """Households that already have a row in the FLEET dataset ``out`` (empty if none), but
+    for the rows of a batch whose worker failed (:data:`WORKER_FAILED`)."""
     import pyarrow.dataset as ds
 
     if not out.exists() or not any(out.glob("part-*.parquet")):
         return set()
-    table = ds.dataset(out, format="parquet").to_table(columns=["household"])
-    return {str(x) for x in table.column("household").to_pylist()}
+    table = ds.dataset(out, format="parquet").to_table(columns=["household", "reason"])
+    return {str(h) for h, why in zip(table.column("household").to_pylist(),
+                                      table.column("reason").to_pylist(), strict=True)
+            if why != WORKER_FAILED}
+
+
+def drop_failed_parts(out: Path) -> int:
+    """Remove the parts of batches whose worker failed (every row :data:`WORKER_FAILED`), so
+    that a resumed run's new rows of those households are their only ones; how many."""
+    import pyarrow.parquet as pq
+
+    dropped = 0
+    for part in sorted(out.glob("part-*.parquet")):
+        reasons = pq.read_table(part, columns=["reason"]).column(0).to_pylist()
+        if reasons and all(r == WORKER_FAILED for r in reasons):
+            part.unlink()
+            dropped += 1
+    return dropped
 
 
 def read_fleet(out: str | Path):

@@ -181,7 +181,13 @@ def nights_from_table(
     table = table.copy(deep=False)
     # Plain arrays, cut per night by index: pandas per night cost a fleet ~15 ms per household.
     stamps = pd.DatetimeIndex(table["timestamp"])
-    stamp_ns = stamps.as_unit("ns").asi8
+    try:
+        stamp_ns = stamps.as_unit("ns").asi8
+    except (OverflowError, pd.errors.OutOfBoundsDatetime):
+        bad = np.asarray((stamps.year < 1678) | (stamps.year > 2261))
+        i = int(np.argmax(bad))
+        raise InputError(f"timestamp {stamps[i].isoformat()} is outside the years 1678–2261 "
+                         "a time in nanoseconds can hold", path, _row(i)) from None
     check_values(table, path, stamp_text, stamp_ns)
     explicit = "night" in table
     starts: dict = {}  # without ``night``: each window's start (else a night's first row)
