@@ -14,30 +14,20 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from cli_fixtures import run_impctl
+from test_fleet import HOUSES, _frame
 
 from impctl.errors import InputError
 from impctl.fit.household import FitOptions
 from impctl.fleet import fit_fleet, read_fleet
 from impctl.imp import write_nights
-from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
 
 TZ = "Europe/Ljubljana"
-HOUSES = HouseParameters(
-    floor_area=np.array([120.0, 170.0]), wall_height=np.array([2.6, 2.7]),
-    walls_area=np.array([160.0, 200.0]), windows_area=np.array([25.0, 30.0]),
-    c_f=np.array([2.2, 1.2]), u_walls=np.array([0.5, 0.9]), u_windows=np.array([1.3, 1.8]),
-    ach_vent=np.zeros(2), ach_infl=np.full(2, 0.01))
-
-
-def quiet(_line: str) -> None:
-    pass
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +35,10 @@ def nights():
     sched = imp_schedule(2, n_constrained=2, n_normal=3, seed=5)
     sim, sp = run_schedule(HOUSES, sched)
     return [sample_nights(sim, sp, sched, i, sample_step_s=900.0, seed=i) for i in range(2)]
+
+
+def quiet(_line: str) -> None:
+    pass
 
 
 @pytest.fixture(scope="module")
@@ -64,16 +58,6 @@ def other_models(tmp_path_factory) -> Path:
     done = run_impctl("train", "--households", "20", "--seed", "9", "--out", str(out))
     assert done.returncode == 0, done.stderr
     return out
-
-
-def _frame(nights) -> pd.DataFrame:
-    rows = []
-    for n in nights:
-        stamps = n.start + pd.to_timedelta(n.time_s, unit="s")
-        rows.append(pd.DataFrame({"timestamp": stamps.tz_convert("UTC"), "t_air": n.t_air_c,
-                                  "t_out": n.t_out_c, "q_hc": n.q_hc_w, "night": n.night_id,
-                                  "kind": n.kind}))
-    return pd.concat(rows, ignore_index=True)
 
 
 def _normal_only(nights, path: Path) -> None:
@@ -121,7 +105,7 @@ def test_hive_partitioned_household_ids_keep_their_text(tmp_path, nights):
     assert sorted(s.household for s in sources) == ["007", "01", "1"], per_household
 
 
-# --- 2. one household's bad timestamp takes its whole batch down ---------------------------
+# --- 2. one household's unreadable file, not its whole batch --------------------------------
 
 
 def test_one_households_out_of_range_timestamp_does_not_fail_its_batchmates(tmp_path, nights,
@@ -150,7 +134,24 @@ def test_one_households_out_of_range_timestamp_does_not_fail_its_batchmates(tmp_
     assert late["status"] == "error" and "a-late.csv" in late["error"], late["error"]
 
 
-# --- 3. classifiers retrained in place: --previous carries over the old classes ----------
+# --- 3. classifiers retrained in place: --previous fits again ---------------------------
+
+
+def _fitted_then_retrained(tmp_path, nights, client, trained_models, other_models):
+    """(input, model dir, h0's row of a first run, the class the classifiers trained anew in
+    that directory give h0): a run with one set of classifiers, then ``impctl train``'s new
+    ones written into the same folder."""
+    src = tmp_path / "in"
+    src.mkdir()
+    write_nights(nights[0], src / "h0.csv")
+    models = shutil.copytree(trained_models.out, tmp_path / "models")
+    fit_fleet(src, tmp_path / "F1", client=client, model_dir=models, progress=False,
+              echo=quiet)
+    before = read_fleet(tmp_path / "F1").set_index("household").loc["h0"]
+    _retrain_in_place(models, other_models)
+    now = _expected_class(src / "h0.csv", models)
+    assert now != before["floor_area_class"]   # the retrained classifiers classify otherwise
+    return src, models, before, now
 
 
 def test_previous_is_not_carried_over_after_the_classifiers_were_retrained(
@@ -159,16 +160,8 @@ def test_previous_is_not_carried_over_after_the_classifiers_were_retrained(
     compares the model directory's *path* only: after ``impctl train`` wrote new classifiers
     into the same directory (the default per-user directory is always the same path), the
     old run's classes and the fit made with them are carried over as this run's."""
-    src = tmp_path / "in"
-    src.mkdir()
-    write_nights(nights[0], src / "h0.csv")
-    models = shutil.copytree(trained_models.out, tmp_path / "models-prev")
-    fit_fleet(src, tmp_path / "F1", client=client, model_dir=models, progress=False,
-              echo=quiet)
-    before = read_fleet(tmp_path / "F1").set_index("household").loc["h0"]
-    _retrain_in_place(models, other_models)
-    now = _expected_class(src / "h0.csv", models)
-    assert now != before["floor_area_class"]   # the retrained classifiers classify otherwise
+    src, models, before, now = _fitted_then_retrained(tmp_path, nights, client,
+                                                      trained_models, other_models)
     fit_fleet(src, tmp_path / "F2", client=client, model_dir=models, previous=tmp_path / "F1",
               progress=False, echo=quiet)
     row = read_fleet(tmp_path / "F2").set_index("household").loc["h0"]
@@ -177,7 +170,7 @@ def test_previous_is_not_carried_over_after_the_classifiers_were_retrained(
         f"{row['floor_area_class']!r} of the old classifiers; these give {now!r}")
 
 
-# --- 4. a worker keeps classifiers by path for its whole life -----------------------------
+# --- 4. a worker's classifiers follow their folder -----------------------------------------
 
 
 def test_a_workers_classifiers_follow_the_directory_they_are_read_from(
@@ -187,15 +180,9 @@ def test_a_workers_classifiers_follow_the_directory_they_are_read_from(
     directory, a full run (no ``--previous``) still classifies with the old forests, while a
     worker that joins later (or ``impctl fit``) reads the new ones — one FLEET, two sets of
     classifiers under one ``model_dir`` in the manifest."""
-    src = tmp_path / "in"
-    src.mkdir()
-    write_nights(nights[0], src / "h0.csv")
-    models = shutil.copytree(trained_models.out, tmp_path / "models-cache")
-    fit_fleet(src, tmp_path / "F1", client=client, model_dir=models, progress=False,
-              echo=quiet)
-    old = read_fleet(tmp_path / "F1").set_index("household").loc["h0", "floor_area_class"]
-    _retrain_in_place(models, other_models)
-    now = _expected_class(src / "h0.csv", models)
+    src, models, before, now = _fitted_then_retrained(tmp_path, nights, client,
+                                                      trained_models, other_models)
+    old = before["floor_area_class"]
     assert now != old
     fit_fleet(src, tmp_path / "F2", client=client, model_dir=models, progress=False,
               echo=quiet)
@@ -203,7 +190,7 @@ def test_a_workers_classifiers_follow_the_directory_they_are_read_from(
     assert got == now, f"classified with the cached old classifiers: {got!r}, now {now!r}"
 
 
-# --- 5. --resume mixes rows of two code versions ------------------------------------------
+# --- 5. --resume and rows of other code -----------------------------------------------------
 
 
 def _two_part_fleet(tmp_path, nights, client, **kw) -> tuple[Path, Path, Path]:
@@ -244,7 +231,7 @@ def test_resume_does_not_mix_rows_of_other_code(tmp_path, nights, client):
     assert versions == [version()], f"one dataset, rows of two codes: {versions}"
 
 
-# --- 6. --resume of a dataset without its manifest checks nothing -------------------------
+# --- 6. --resume of a dataset without its manifest ------------------------------------------
 
 
 def test_resume_without_a_manifest_does_not_adopt_rows_of_other_options(tmp_path, nights,
@@ -263,7 +250,7 @@ def test_resume_without_a_manifest_does_not_adopt_rows_of_other_options(tmp_path
                   echo=quiet)   # default options: max_nights 30
 
 
-# --- 7. "complete" counted from households that are not the input's -----------------------
+# --- 7. "complete" counts the input's households only -----------------------------------------
 
 
 def test_an_interrupted_resume_is_not_called_complete_while_a_household_is_missing(
@@ -297,7 +284,7 @@ def test_an_interrupted_resume_is_not_called_complete_while_a_household_is_missi
     assert (manifest["complete"], completeness(out)) != (True, None), (said, manifest)
 
 
-# --- 8. a batch whose worker failed is "done" for --resume --------------------------------
+# --- 8. a batch whose worker failed is fitted again by --resume -----------------------------
 
 
 def test_resume_refits_a_batch_whose_worker_failed(tmp_path, nights, monkeypatch):
