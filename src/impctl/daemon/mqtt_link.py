@@ -48,6 +48,7 @@ class MqttLink:
         self.daemon = daemon
         self._idle: Snapshot | None = None
         self._idle_ok = False
+        self._idle_tried = None  # when the last idle read was tried, answered or not
         self.bridge: MqttBridge | None = None
         self._next_at: datetime | None = None
         self._next_checked = -1e9
@@ -79,8 +80,11 @@ class MqttLink:
             state.night_state, state.night_kind, state.night_id = (night.state, night.kind,
                                                                    night.id)
             snap, ok = last, last is not None
-        elif last is not None and (snap is None or last.timestamp > snap.timestamp):
-            snap, ok = last, True  # a night's last sample is newer than the idle read
+        elif last is not None and (self._idle_tried is None
+                                   or last.timestamp > self._idle_tried):
+            # a night's last sample, newer than any idle read tried: after a failed one it is
+            # no longer what the heat pump says now (missing, the link not OK)
+            snap, ok = last, True
         if snap is not None:
             state.ts = snap.timestamp
             state.t_air_c = snap.t_air_c.value
@@ -117,15 +121,19 @@ class MqttLink:
         night starts or ends and at most once a minute of wall time otherwise (an adaptive
         campaign's decision reads the fits)."""
         now = time.monotonic()
-        if night == self._next_key and now - self._next_checked < _NEXT_NIGHT_S:
+        d = self.daemon
+        skipped = bool(waiting_skips(d.store))   # a skip pressed: the night after it
+        key = (*night, skipped)
+        if key == self._next_key and now - self._next_checked < _NEXT_NIGHT_S:
             return self._next_at
-        self._next_key = night
+        self._next_key = key
         from .nights.next_night import peek_next_night
         from .nights.schedule import next_act_time
 
-        d = self.daemon
         try:
             act = next_act_time(d.cfg, d.clock.now())
+            if skipped:   # (a fire time at the instant itself counts: one second on)
+                act = next_act_time(d.cfg, act + timedelta(seconds=1))
             req, _ = peek_next_night(d.store, d.cfg, act)
             self._next_at = None if req is None else act
         except Exception as exc:  # noqa: BLE001 - a sensor less, never a failed publish
@@ -141,6 +149,7 @@ class MqttLink:
         if not d._connected.is_set() or d._heat_pump_lock.locked() or d.stop.is_set():
             return
         async with d._heat_pump_lock:
+            self._idle_tried = d.clock.now()
             try:
                 self._idle = await d.client.snapshot()
                 self._idle_ok = True

@@ -59,6 +59,8 @@ def _number(value: object) -> float:
         raise BadCommand(f"expected a number, got {value!r}")
     if isinstance(value, str) and (problem := non_ascii_problem(value)) is not None:
         raise BadCommand(problem)  # float() would take '٢٢' or '２２' as 22
+    if isinstance(value, str) and "_" in value:
+        raise BadCommand(f"expected a number, got {value!r}")  # float() takes '2_2' as 22
     try:
         out = float(value)
     except ValueError:
