@@ -36,7 +36,7 @@ def parse_float(text: str) -> float:
         A character outside ASCII (the message names it, :func:`non_ascii_problem`), a "_"
         (Python's digit grouping, no number people write), or what ``float`` refuses.
     """
-    problem = non_ascii_problem(text) or _underscore_problem(text)
+    problem = non_ascii_problem(text) or underscore_problem(text)
     if problem is not None:
         raise ValueError(problem)
     return float(text)
@@ -44,14 +44,14 @@ def parse_float(text: str) -> float:
 
 def parse_int(text: str) -> int:
     """``int(text)`` (base 10) for ASCII text only; raises ValueError as :func:`parse_float`."""
-    problem = non_ascii_problem(text) or _underscore_problem(text)
+    problem = non_ascii_problem(text) or underscore_problem(text)
     if problem is not None:
         raise ValueError(problem)
     return int(text)
 
 
-def _underscore_problem(text: str) -> str | None:
-    # Python's own literals group digits with "_" ("2_2" is 22); people's text does not: a
-    # typo would become another number
+def underscore_problem(text: str) -> str | None:
+    """Why ``text`` is no number people write when it holds "_" (Python's digit grouping:
+    ``float('2_2')`` is 22, a typo read as another number), else None."""
     return f"{text!r} holds '_': write numbers with the digits 0-9 alone" if "_" in text \
         else None

@@ -140,15 +140,18 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
     skip = unrecorded(store)
     owners = owner_kept(store)
     held = held or {}
+
+    def pending() -> list[JournalEntry]:
+        return [e for e in store.journal_pending()
+                if e.id not in skip and e.id not in owners and e.register not in keep]
     for entry in store.journal_pending():  # restored earlier by this process: record only
         if entry.id in skip:
             record_restored(store, entry)
     while True:
-        pending = [e for e in store.journal_pending()
-                   if e.id not in skip and e.id not in owners and e.register not in keep]
-        if not pending:
+        todo = pending()
+        if not todo:
             return _done(store, keep)
-        for entry in pending:
+        for entry in todo:
             try:
                 await restore_entry(client, store, entry, held.get(entry.register))
             except HeatPumpError as exc:
@@ -164,14 +167,12 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
                 if isinstance(exc, ModbusLinkError):
                     break  # the link is down: the other entries cannot get through either
                 # Else try the other entries anyway: heating back on matters most.
-        if not [e for e in store.journal_pending()
-                if e.id not in skip and e.id not in owners and e.register not in keep]:
+        if not pending():
             if reported:
                 _LOG.info("restore completed after the heat pump answered again")
             return _done(store, keep)
         if clock.monotonic_s() >= deadline:
-            left = [e for e in store.journal_pending()
-                    if e.id not in skip and e.id not in owners and e.register not in keep]
+            left = pending()
             _LOG.error("restore incomplete after %.0f s: %s still pending", timeout_s,
                        ", ".join(e.register for e in left))
             return left

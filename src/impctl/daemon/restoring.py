@@ -29,6 +29,13 @@ def sweep_orphans(store: Store) -> list[int]:
     return ids
 
 
+def _todo(daemon: RunningDaemon) -> list:
+    """The journal entries to put back: pending, but for those the owner set since impctl's
+    last write (:func:`~impctl.controller.restore.owner_kept`)."""
+    kept = owner_kept(daemon.store)
+    return [e for e in daemon._restorable() if e.id not in kept]
+
+
 async def restore_pending(daemon: RunningDaemon) -> None:
     """Put the owner's settings back whenever the journal holds any and no night runs.
 
@@ -41,7 +48,7 @@ async def restore_pending(daemon: RunningDaemon) -> None:
     while True:
         await asyncio.sleep(interval)
         try:
-            todo = [e for e in daemon._restorable() if e.id not in owner_kept(daemon.store)]
+            todo = _todo(daemon)
         except sqlite3.Error as exc:  # a damaged store: look again, never end this loop
             _LOG.error("cannot read the restore journal: %s", exc)
             continue
@@ -51,8 +58,7 @@ async def restore_pending(daemon: RunningDaemon) -> None:
         async with daemon._heat_pump_lock:
             restored = False
             try:
-                for entry in [e for e in daemon._restorable()
-                              if e.id not in owner_kept(daemon.store)]:
+                for entry in _todo(daemon):
                     if entry.id in unrecorded(daemon.store):
                         # Back on the heat pump and verified; only the record failed
                         # (a full disk): try the record alone, quietly, until it works.

@@ -17,7 +17,7 @@ import json
 import math
 from dataclasses import dataclass
 
-from ..numtext import non_ascii_problem
+from ..numtext import non_ascii_problem, underscore_problem
 from .homeassistant.discovery import Limits
 
 #: The commands under ``<base>/cmd/``.
@@ -57,10 +57,10 @@ def setpoint_problem(kind: str, setpoint_c: float, limits: Limits) -> str | None
 def _number(value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise BadCommand(f"expected a number, got {value!r}")
-    if isinstance(value, str) and (problem := non_ascii_problem(value)) is not None:
-        raise BadCommand(problem)  # float() would take '٢٢' or '２２' as 22
-    if isinstance(value, str) and "_" in value:
-        raise BadCommand(f"expected a number, got {value!r}")  # float() takes '2_2' as 22
+    if isinstance(value, str):
+        # float() would take '٢٢', '２２' or '2_2' as 22: the ASCII digits alone
+        if (problem := non_ascii_problem(value) or underscore_problem(value)) is not None:
+            raise BadCommand(problem)
     try:
         out = float(value)
     except ValueError:
