@@ -20,6 +20,8 @@ import pandas as pd
 import pytest
 from cli_fixtures import run_impctl
 
+from impctl.errors import InputError
+from impctl.fleet.results.lock import LOCK_FILE, holding
 from impctl.imp import write_nights
 from impctl.model import HouseParameters
 from impctl.population.imp_run.synth import imp_schedule, run_schedule, sample_nights
@@ -267,6 +269,10 @@ def test_ctrl_c_leaves_a_dataset_marked_partial(tmp_path, nights, pickled_models
     while not list(out.glob("part-*.parquet")):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
+    # the run holds its dataset's lock while it writes (itself, not its workers)
+    with pytest.raises(InputError, match=rf"another fleet run \(process {proc.pid}\)"):
+        with holding(out):
+            pass
     proc.send_signal(signal.SIGINT)  # Ctrl-C
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 130, stdout + stderr
@@ -351,3 +357,47 @@ def test_fleet_output_is_never_read_as_households(tmp_path, nights):
     write_part(tmp_path / "F", "abcd1234", 0, [empty_row("h0")])
     with pytest.raises(InputError, match="part-abcd1234-000000.parquet"):
         discover(tmp_path / "F")
+
+
+#: Holds a dataset's lock as a run does, until killed.
+_HOLDER = """
+import sys, time
+from pathlib import Path
+from impctl.fleet.results.lock import holding
+with holding(Path(sys.argv[1])):
+    print("held", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_one_run_at_a_time_writes_a_dataset(work, tmp_path):
+    """A second run on an ``--out`` another run holds is one line, exit 2, nothing written,
+    whether it would start the dataset or resume it; a killed holder leaves no lock behind."""
+    out = tmp_path / "FLEET.parquet"
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(out)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        for extra in ((), ("--resume",)):
+            res = run_cli("fleet", "fit", "in", "--out", str(out), "--workers", "1", *extra,
+                          cwd=work)
+            assert res.returncode == 2, res.stdout + res.stderr
+            line, = res.stderr.strip().splitlines()
+            assert f"is being written by another fleet run (process {holder.pid})" in line
+            assert str(out) in line
+            assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]
+    finally:
+        holder.kill()
+        holder.wait(timeout=30)
+    with holding(out):  # the kernel let go of the killed holder's lock
+        pass
+
+
+def test_a_refused_run_leaves_no_new_dataset_behind(work, tmp_path):
+    """A check that fails under the lock (here: INPUT without households) removes the ``--out``
+    folder the lock created: a refused run writes nothing."""
+    (tmp_path / "empty").mkdir()
+    out = tmp_path / "NEW.parquet"
+    res = run_cli("fleet", "fit", str(tmp_path / "empty"), "--out", str(out), cwd=work)
+    assert res.returncode == 2 and "no NIGHTS file" in res.stderr, res.stderr
+    assert not out.exists()

@@ -11,7 +11,8 @@ partial) and the progress bar (households done, failed, rate).
 Before anything starts, the places are checked: ``out`` must lie outside INPUT (and INPUT
 outside ``out``: parts written there would be households of the next run), be new, empty or —
 with ``resume`` — a FLEET dataset of the same INPUT and options; the scheduler address must
-read as one. Every refusal is one line and says what to do instead.
+read as one. One run at a time writes an ``out`` (:mod:`.results.lock`). Every refusal is one
+line and says what to do instead.
 
 Cluster: by default a ``distributed.LocalCluster`` of worker *processes* (one thread each —
 torch is pinned to one thread per process) on this machine, started and stopped with the run;
@@ -33,6 +34,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..fit.household import FitOptions
 from .inputs import Source, discover, layout_note
+from .results.lock import LOCK_FILE, holding
 from .results.manifest import MANIFEST_FILE, Manifest, read_manifest, recount, write_manifest
 from .results.table import (
     WORKER_FAILED,
@@ -197,7 +199,7 @@ def _check_out(out: Path, input_path: str | Path, resume: bool) -> None:
     advice given never leads into a refusal: ``--resume`` is suggested only where it works."""
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a FLEET dataset folder", out)
-    if not out.exists() or not any(out.iterdir()):
+    if not out.exists() or not any(p.name != LOCK_FILE for p in out.iterdir()):
         return
     foreign = [p.name for p in out.iterdir() if not (
         p.name == MANIFEST_FILE or p.name.startswith(".")
@@ -287,82 +289,84 @@ def fit_fleet(
         raise InputError("is --out itself: give the last run's FLEET dataset and a new --out",
                          previous, "--previous")
     check_places(input_path, out)
-    _check_out(out, input_path, resume)
-    if batch_size < 1:
-        raise InputError("must be >= 1", place="batch size")
-    sources = discover(input_path)
-    run = FleetRun(found=len(sources))
-    layout = layout_note(sources, batch_size)
-    if layout:
-        run.notes.append(layout)
-        echo(f"note: {layout}")
-    if resume:
-        drop_failed_parts(out)   # a lost worker's batch is fitted again
-    done = done_households(out) if resume else set()
-    todo = [s for s in sources if s.household not in done]
-    run.skipped = len(sources) - len(todo)
-    resolved, note = resolve_models(model_dir)
-    from .results.table import version
+    _check_out(out, input_path, resume)  # before the lock's file goes into a folder
+    with holding(out):
+        _check_out(out, input_path, resume)  # again: another run may have written since
+        if batch_size < 1:
+            raise InputError("must be >= 1", place="batch size")
+        sources = discover(input_path)
+        run = FleetRun(found=len(sources))
+        layout = layout_note(sources, batch_size)
+        if layout:
+            run.notes.append(layout)
+            echo(f"note: {layout}")
+        if resume:
+            drop_failed_parts(out)   # a lost worker's batch is fitted again
+        done = done_households(out) if resume else set()
+        todo = [s for s in sources if s.household not in done]
+        run.skipped = len(sources) - len(todo)
+        resolved, note = resolve_models(model_dir)
+        from .results.table import version
 
-    # what the rows depend on beyond the input: a resumed or a --previous dataset must agree on
-    # all of it — the classifiers trained anew in the same folder, impctl's own code too
-    decided = {**options.as_dict(), "tz": tz, "model_dir": resolved,
-               "classifiers": classifiers_digest(resolved), "impctl_version": version()}
-    manifest = _start_manifest(out, input_path, sources, done, decided, resume)
-    if note:
-        run.notes.append(note)
-        echo(f"note: {note}")
-    last: dict[str, dict] = {}
-    if previous is not None:
-        from .results.previous import previous_rows
+        # what the rows depend on beyond the input: a resumed or a --previous dataset must agree on
+        # all of it — the classifiers trained anew in the same folder, impctl's own code too
+        decided = {**options.as_dict(), "tz": tz, "model_dir": resolved,
+                   "classifiers": classifiers_digest(resolved), "impctl_version": version()}
+        manifest = _start_manifest(out, input_path, sources, done, decided, resume)
+        if note:
+            run.notes.append(note)
+            echo(f"note: {note}")
+        last: dict[str, dict] = {}
+        if previous is not None:
+            from .results.previous import previous_rows
 
-        last, said = previous_rows(previous, decided, version())
-        run.notes.append(said)
-        echo(f"note: {said}")
-    if run.skipped:
-        echo(f"resume: {run.skipped} of {len(sources)} households already in {out}")
-    if not todo:
-        write_manifest(out, manifest)
+            last, said = previous_rows(previous, decided, version())
+            run.notes.append(said)
+            echo(f"note: {said}")
+        if run.skipped:
+            echo(f"resume: {run.skipped} of {len(sources)} households already in {out}")
+        if not todo:
+            write_manifest(out, manifest)
+            run.wall_s = time.perf_counter() - started
+            return run
+        settings = Settings(model_dir=resolved, tz=tz, options=options)
+        own, cluster = client is None, None
+        if own:
+            client, cluster = _client(scheduler, workers)
+        futures = []
+        try:
+            # the workers of our own local cluster each keep to a CPU of their own
+            client.register_plugin(Preload(settings.model_dir, len(cluster.workers)
+                                           if cluster is not None else 0))
+            run.workers = len(client.scheduler_info().get("workers", {}))
+            run_id = new_run_id()
+            manifest.runs.append(run_id)
+            write_manifest(out, manifest)
+            # A small fleet is cut finer, so that every worker gets about two batches.
+            size = max(1, min(batch_size, -(-len(todo) // (2 * max(1, run.workers)))))
+            batches = _chunks(todo, size)
+            futures = [client.submit(fit_batch, b, settings,
+                                     {s.household: last[s.household] for s in b
+                                      if s.household in last} or None, pure=False,
+                                     key=f"impctl-fleet-{run_id}-{i}", priority=-i)
+                       for i, b in enumerate(batches)]
+            index = {f.key: i for i, f in enumerate(futures)}
+            _collect(futures, index, batches, out, run_id, run, progress, manifest)
+        except KeyboardInterrupt:
+            for f in futures:
+                f.cancel()
+            if (out / MANIFEST_FILE).exists():
+                # Ctrl-C may land between a part's rename and the manifest's rewrite.
+                write_manifest(out, recount(out, manifest))
+                echo(f"interrupted: {manifest.status(out)}")
+            raise
+        finally:
+            if own:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
         run.wall_s = time.perf_counter() - started
         return run
-    settings = Settings(model_dir=resolved, tz=tz, options=options)
-    own, cluster = client is None, None
-    if own:
-        client, cluster = _client(scheduler, workers)
-    futures = []
-    try:
-        # the workers of our own local cluster each keep to a CPU of their own
-        client.register_plugin(Preload(settings.model_dir, len(cluster.workers)
-                                       if cluster is not None else 0))
-        run.workers = len(client.scheduler_info().get("workers", {}))
-        run_id = new_run_id()
-        manifest.runs.append(run_id)
-        write_manifest(out, manifest)
-        # A small fleet is cut finer, so that every worker gets about two batches.
-        size = max(1, min(batch_size, -(-len(todo) // (2 * max(1, run.workers)))))
-        batches = _chunks(todo, size)
-        futures = [client.submit(fit_batch, b, settings,
-                                 {s.household: last[s.household] for s in b
-                                  if s.household in last} or None, pure=False,
-                                 key=f"impctl-fleet-{run_id}-{i}", priority=-i)
-                   for i, b in enumerate(batches)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        _collect(futures, index, batches, out, run_id, run, progress, manifest)
-    except KeyboardInterrupt:
-        for f in futures:
-            f.cancel()
-        if (out / MANIFEST_FILE).exists():
-            # Ctrl-C may land between a part's rename and the manifest's rewrite.
-            write_manifest(out, recount(out, manifest))
-            echo(f"interrupted: {manifest.status(out)}")
-        raise
-    finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    run.wall_s = time.perf_counter() - started
-    return run
 
 
 def _collect(futures, index, batches, out: Path, run_id: str, run: FleetRun,
