@@ -21,10 +21,13 @@ from impctl.imp.night import NightSamples
 from impctl.population.season_run.nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
+    DECAY_BAND_K,
     RADIATOR_EXCESS_K,
+    SCREED_DECAY_H,
     TAU_E_MAX_UNDERFLOOR_S,
     TAU_E_MAX_UNKNOWN_S,
     emitter_kind,
+    water_decay_h,
     water_excess_k,
 )
 from impctl.season.fit import fit_nights
@@ -60,6 +63,45 @@ def test_the_water_tells_radiators_from_a_screed_in_cold_and_mild_weather(
     # one load: a mild night's low water and a cold night's high water give one number
     assert ex_mild == pytest.approx(ex_cold, rel=0.15)
     assert emitter_kind(ex_cold) == emitter_kind(ex_mild) == kind
+
+
+def _constrained(decay_h: float, off_h: float = 7.0, day: int = 0) -> NightSamples:
+    """A constrained night: heat off from 22:00 for ``off_h`` hours (then on again), the room
+    cooling, the water's excess over it fading with the e-folding time ``decay_h``."""
+    start = pd.Timestamp("2026-12-10 22:00", tz=TZ) + pd.Timedelta(days=day)
+    t = np.arange(0.0, 7 * 3600, 300.0)
+    air = 21.0 - 2.0 * (1 - np.exp(-t / (30 * 3600.0)))
+    on = t >= off_h * 3600.0
+    water = air + 12.0 * np.exp(-t / (decay_h * 3600.0)) + np.where(on, 15.0, 0.0)
+    q = np.where(on, 3000.0, 0.0)
+    return NightSamples(f"{start.date()} constrained", "constrained", start, t, air, 0.0 * t,
+                        q, t_flow_c=water + 1.0, t_return_c=water - 1.0)
+
+
+@pytest.mark.parametrize(("decay_h", "kind"), [(0.8, "radiators"), (2.0, "radiators"),
+                                               (5.0, "underfloor"), (8.0, "underfloor")])
+def test_where_the_excess_cannot_tell_the_waters_decay_after_a_switch_off_does(decay_h, kind):
+    nights = _nights(45.0, 1.3, [-5, 0, 3, 5]) + [_constrained(decay_h, day=d) for d in (0, 1)]
+    rec = record_from_nights(nights)
+    measured = water_decay_h(rec)
+    assert measured == pytest.approx(decay_h, rel=0.05)
+    assert emitter_kind(12.0, measured) == kind      # inside the band: the decay decides
+    # outside it the excess alone, whatever the decay
+    assert emitter_kind(DECAY_BAND_K[0] - 1.0, 0.8) == "underfloor"
+    assert emitter_kind(DECAY_BAND_K[1] + 1.0, 8.0) == "radiators"
+    assert emitter_kind(12.0) == emitter_kind(12.0, float("nan")) == "underfloor"
+
+
+def test_the_decay_is_not_read_from_a_short_stretch_or_without_the_water():
+    # the heat back within half an hour: too short a stretch to read the water fade
+    short = record_from_nights(_nights(45.0, 1.3, [-5, 0, 3]) + [_constrained(2.0, off_h=0.5)])
+    assert np.isnan(water_decay_h(short))
+    dry = [dataclasses.replace(n, t_flow_c=None, t_return_c=None)
+           for n in _nights(45.0, 1.3, [-5, 0, 3]) + [_constrained(2.0)]]
+    assert np.isnan(water_decay_h(record_from_nights(dry)))
+    # no constrained night: nothing to read it from
+    assert np.isnan(water_decay_h(record_from_nights(_nights(45.0, 1.3, [-5, 0, 3]))))
+    assert SCREED_DECAY_H > 2.0
 
 
 def test_without_the_water_or_enough_nights_the_emitter_is_unknown():
@@ -133,7 +175,7 @@ def test_a_screed_start_whose_water_reads_radiators_is_read_as_the_full_search_r
 
     def first_reads_radiators(rec, hlc_w_per_k):
         readings.append(hlc_w_per_k)
-        return RADIATOR_EXCESS_K + 1.0 if len(readings) == 1 else real(rec, hlc_w_per_k)
+        return DECAY_BAND_K[1] + 1.0 if len(readings) == 1 else real(rec, hlc_w_per_k)
 
     monkeypatch.setattr(season_fit, "water_excess_k", first_reads_radiators)
     searches.clear()
@@ -143,7 +185,7 @@ def test_a_screed_start_whose_water_reads_radiators_is_read_as_the_full_search_r
     assert refit.water_excess_k == real(record_from_nights(nights), readings[1])
     assert refit.values["hlc_w_per_k"] == pytest.approx(full.values["hlc_w_per_k"], rel=1e-3)
     monkeypatch.setattr(season_fit, "water_excess_k",
-                        lambda rec, hlc_w_per_k: RADIATOR_EXCESS_K + 1.0)
+                        lambda rec, hlc_w_per_k: DECAY_BAND_K[1] + 1.0)
     searches.clear()
     again, _ = fit_nights(nights, start=full.theta)
     assert searches == [TAU_E_MAX_UNDERFLOOR_S, 1.5 * 3600, 1.5 * 3600]   # then the full one

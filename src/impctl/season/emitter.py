@@ -16,7 +16,9 @@ above the room (design mean water 28–38 °C), a radiator 20–35 K above it (4
 §2, EN 442). :func:`water_excess_k` reads, on the owner's plain nights, the mean water's excess
 over the room and scales it to one load — the heat the house loses at 20 K indoors–outdoors, by
 the fit's HLC and the emitter law Q ∝ ΔT^n — so that a mild night's low water and a cold
-night's high water give the same number. Units: °C, K, W, s.
+night's high water give the same number. Where the two kinds' excesses overlap, the
+constrained nights decide (:func:`water_decay_h`): once the heat stops, a radiator's excess
+over the room fades within an hour or two, a screed's over many hours. Units: °C, K, W, s, h.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import math
 
 import numpy as np
 
+from ..imp.protocol import Q_ON_W
 from .record import SeasonRecord
 
 #: Load the excess is scaled to: the heat lost at this indoor–outdoor difference [K].
@@ -43,6 +46,17 @@ MIN_LOAD_SHARE = 0.15
 #: at the reference load, radiators at ≥ 40 °C ≥ 14.3 K). On the development households 12 and
 #: 13 K classify alike (real-houses §2; the plant's emitters are sized the same way).
 RADIATOR_EXCESS_K = 13.0
+#: Excesses [K] at which the two kinds overlap (on the development households: radiators'
+#: 5th percentile 12.3 K, their misread ones down to 9.8 K; screeds' 95th 13.2 K): there the
+#: water's decay after a switch-off decides, where a constrained night shows it.
+DECAY_BAND_K = (9.5, 14.5)
+#: The water's e-folding time after a switch-off [h] from which the emitter is a screed: a
+#: radiator's water and steel fade in about half an hour, a screed's in 3–7 h (real-houses §2;
+#: on the development households radiators 0.7–4.5 h, 5th–95th percentile, screeds 4.4–16 h
+#: — the room's own cooling and the pipes slow both).
+SCREED_DECAY_H = 3.5
+#: Excess [K] a decay is read from, and down to; the shortest stretch read [h].
+DECAY_FROM_K, DECAY_TO_K, DECAY_MIN_H = 2.0, 0.5, 1.0
 #: Upper bound of the emitter's lag [s] for radiators, an underfloor screed and an emitter
 #: not known (module docstring).
 TAU_E_MAX_RADIATORS_S = 1.5 * 3600
@@ -69,11 +83,51 @@ def water_excess_k(rec: SeasonRecord, hlc_w_per_k: float) -> float:
     return float(np.median(out)) if len(out) >= MIN_NIGHTS else float("nan")
 
 
-def emitter_kind(excess_k: float) -> str | None:
-    """"radiators", "underfloor", or None when the excess is unknown (NaN)."""
+def water_decay_h(rec: SeasonRecord) -> float:
+    """How fast the water's excess over the room fades once the heat stops [h]: the median
+    over the constrained nights of the e-folding time of (water − room), fitted log-linearly
+    from the switch-off (the first step the meter reads under
+    :data:`~impctl.imp.protocol.Q_ON_W`, from an excess of at least :data:`DECAY_FROM_K`) to
+    the heat's return or the excess under :data:`DECAY_TO_K`, over at least
+    :data:`DECAY_MIN_H`. NaN without the water, a constrained night or such a stretch."""
+    if not water_recorded(rec):
+        return float("nan")
+    per = max(rec.step_s, 1.0)
+    out = []
+    steps = np.flatnonzero(rec.kind == "constrained")
+    for night in dict.fromkeys(rec.night_id[steps].tolist()):
+        at = steps[rec.night_id[steps] == night]
+        ex = rec.t_water_c[at] - rec.t_air_c[at]
+        off = rec.q_hc_w[at] < Q_ON_W
+        first = np.flatnonzero(off & (ex >= DECAY_FROM_K))
+        if not len(first):
+            continue
+        i = j = int(first[0])
+        while j < len(at) and off[j] and np.isfinite(ex[j]) and ex[j] >= DECAY_TO_K:
+            j += 1
+        if (j - i) * per < DECAY_MIN_H * 3600.0:
+            continue
+        slope = np.polyfit((at[i:j] - at[i]) * per / 3600.0, np.log(ex[i:j]), 1)[0]
+        if slope < 0:
+            out.append(-1.0 / slope)
+    return float(np.median(out)) if out else float("nan")
+
+
+def emitter_kind(excess_k: float, decay_h: float = float("nan")) -> str | None:
+    """"radiators", "underfloor", or None when the excess is unknown (NaN). Within
+    :data:`DECAY_BAND_K`, where the two kinds' excesses overlap, the water's decay after a
+    switch-off (:func:`water_decay_h`) decides when it was read: from :data:`SCREED_DECAY_H`
+    a screed."""
     if not math.isfinite(excess_k):
         return None
+    if decay_decides(excess_k, decay_h):
+        return "underfloor" if decay_h >= SCREED_DECAY_H else "radiators"
     return "radiators" if excess_k >= RADIATOR_EXCESS_K else "underfloor"
+
+
+def decay_decides(excess_k: float, decay_h: float) -> bool:
+    """Whether the water's decay, not its excess, tells the emitter (:func:`emitter_kind`)."""
+    return DECAY_BAND_K[0] <= excess_k < DECAY_BAND_K[1] and math.isfinite(decay_h)
 
 
 def tau_e_max_s(kind: str | None) -> float:

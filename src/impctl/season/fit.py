@@ -32,6 +32,7 @@ from ..imp.protocol import EMITTER_KINDS
 from .emitter import (
     emitter_kind,
     tau_e_max_s,
+    water_decay_h,
     water_excess_k,
     water_recorded,
 )
@@ -120,6 +121,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         # signature of a few weeks can be off by half): searched first as radiators where the
         # water is recorded, and again from that θ when it is a screed or not to be read.
         first = tau_e_max_s("radiators" if water_recorded(rec) else None)
+        decay = water_decay_h(rec)
         start_bound = False
         if emitter is not None:
             first = tau_e_max_s(emitter)
@@ -136,7 +138,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
         b, values = _lumped(theta, pr)
         excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
                   else float("nan"))
-        kind = emitter if emitter is not None else emitter_kind(excess)
+        kind = emitter if emitter is not None else emitter_kind(excess, decay)
         if start_bound and tau_e_max_s(kind) != first:
             # The water, scaled by this fit's HLC, now reads radiators where the fit it
             # started from read a screed. A fit without a start reads the water at the HLC of
@@ -153,9 +155,9 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                 r_theta, r_pr, _ = search(d, max_nfev=max_nfev, start=start,
                                           bounds=bounds_for(tau_e_max_s("radiators")))
                 r_excess = water_excess_k(rec, _lumped(r_theta, r_pr)[1]["hlc_w_per_k"])
-            if not math.isfinite(r_excess) or tau_e_max_s(emitter_kind(r_excess)) != first:
+            if not math.isfinite(r_excess) or tau_e_max_s(emitter_kind(r_excess, decay)) != first:
                 return fit_season(rec, calibrated, None, max_nfev, emitter)
-            excess, kind = r_excess, emitter_kind(r_excess)
+            excess, kind = r_excess, emitter_kind(r_excess, decay)
         if tau_e_max_s(kind) != first:
             bounds = bounds_for(tau_e_max_s(kind))
             # from the first search's θ, but under another bound: maybe far (MINPACK's step)
@@ -186,6 +188,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
+                     water_decay_h=decay,
                      emitter_declared=emitter is not None, warm_start=start is not None,
                      defrost_read=d.defrost_read, defrost_from_spread=rec.defrost_from_spread,
                      spread_unread=rec.spread_unread)

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..change import Change
-from .emitter import REFERENCE_DT_K, emitter_kind, tau_e_max_s
+from .emitter import REFERENCE_DT_K, decay_decides, emitter_kind, tau_e_max_s
 from .projection.columns import THETA
 from .projection.uncertainty import LUMPED
 
@@ -38,6 +38,7 @@ class SeasonFit:
     emitter : "radiators" or "underfloor": declared (``emitter_declared``) or read from the
         heating water (:mod:`.emitter`); None when neither tells it
     water_excess_k : the water's excess over the room at the reference load [K] (NaN: unknown)
+    water_decay_h : how fast the water's excess fades after a switch-off [h] (NaN: not read)
     emitter_declared : True when the emitter was declared (known), not read from the water
     warm_start : the search started only from an earlier fit's θ (``start``); False when it
         ran in full, also when a start was given and the full search had to decide
@@ -64,6 +65,7 @@ class SeasonFit:
     missing: dict[str, str] = field(default_factory=dict)
     emitter: str | None = None
     water_excess_k: float = float("nan")
+    water_decay_h: float = float("nan")
     emitter_declared: bool = False
     warm_start: bool = False
     defrost_read: bool | None = None
@@ -122,8 +124,9 @@ class SeasonFit:
         """The emitter the lag's bound was chosen for, and whether declared, measured or
         assumed."""
         if self.emitter_declared:
-            read = emitter_kind(self.water_excess_k)
+            read = emitter_kind(self.water_excess_k, self.water_decay_h)
             return {"kind": self.emitter, "water_excess_k": _num(round(self.water_excess_k, 1)),
+                    "water_decay_h": _num(round(self.water_decay_h, 1)),
                     "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
                     "source": "declared", **({"water_reads": read} if read not in
                                              (None, self.emitter) else {})}
@@ -131,9 +134,13 @@ class SeasonFit:
             return {"kind": None, "tau_e_max_h": tau_e_max_s(None) / 3600.0,
                     "source": "assumed: no heating-water temperatures recorded and none "
                               "declared, a bound between the radiators' and the screed's"}
+        decay = decay_decides(self.water_excess_k, self.water_decay_h)
         return {"kind": self.emitter, "water_excess_k": round(self.water_excess_k, 1),
+                "water_decay_h": _num(round(self.water_decay_h, 1)),
                 "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
-                "source": "measured: the heating water's excess over the room"}
+                "source": "measured: " + ("how fast the heating water cools after a switch-off "
+                                          "(its excess over the room could be either)" if decay
+                                          else "the heating water's excess over the room")}
 
 
 def theta_of(result: dict) -> tuple[float, ...] | None:
@@ -174,15 +181,17 @@ def format_season(fit: SeasonFit) -> list[str]:
                      f"{tau_e_max_s(None) / 3600:.0f} h; no heating-water temperatures recorded "
                      "and none declared)")
     elif fit.emitter_declared:
-        read = emitter_kind(fit.water_excess_k)
+        read = emitter_kind(fit.water_excess_k, fit.water_decay_h)
         lines.append(f"  emitter: {fit.emitter} (declared; its lag up to "
                      f"{tau_e_max_s(fit.emitter) / 3600:.0f} h)"
                      + (f" — the heating water reads {read}: is the declaration right?"
                         if read not in (None, fit.emitter) else ""))
     else:
+        fade = (f", its excess fading in {fit.water_decay_h:.1f} h after a switch-off"
+                if decay_decides(fit.water_excess_k, fit.water_decay_h) else "")
         lines.append(f"  emitter: {fit.emitter} (measured: the water {fit.water_excess_k:.0f} K "
-                     f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors; its lag up to "
-                     f"{tau_e_max_s(fit.emitter) / 3600:.0f} h)")
+                     f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors{fade}; its lag "
+                     f"up to {tau_e_max_s(fit.emitter) / 3600:.0f} h)")
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")
