@@ -52,8 +52,8 @@ RADIATOR_EXCESS_K = 13.0
 DECAY_BAND_K = (9.5, 14.5)
 #: The water's e-folding time after a switch-off [h] from which the emitter is a screed: a
 #: radiator's water and steel fade in about half an hour, a screed's in 3–7 h (real-houses §2;
-#: on the development households radiators 0.7–4.5 h, 5th–95th percentile, screeds 4.4–16 h
-#: — the room's own cooling and the pipes slow both).
+#: on four seeds of 200 realistic households radiators 0.9–4.6 h, 5th–95th percentile,
+#: screeds 4.6–16 h — the room's own cooling and the pipes slow both).
 SCREED_DECAY_H = 3.5
 #: Excess [K] a decay is read from, and down to; the shortest stretch read [h].
 DECAY_FROM_K, DECAY_TO_K, DECAY_MIN_H = 2.0, 0.5, 1.0
