@@ -178,12 +178,12 @@ def format_season(fit: SeasonFit) -> list[str]:
                      f"{fit.high[key] * scale:.2f}")
     if fit.emitter is None:
         lines.append("  emitter: not known (assumed: its lag up to "
-                     f"{tau_e_max_s(None) / 3600:.0f} h; no heating-water temperatures recorded "
+                     f"{tau_e_max_s(None) / 3600:g} h; no heating-water temperatures recorded "
                      "and none declared)")
     elif fit.emitter_declared:
         read = emitter_kind(fit.water_excess_k, fit.water_decay_h)
         lines.append(f"  emitter: {fit.emitter} (declared; its lag up to "
-                     f"{tau_e_max_s(fit.emitter) / 3600:.0f} h)"
+                     f"{tau_e_max_s(fit.emitter) / 3600:g} h)"
                      + (f" — the heating water reads {read}: is the declaration right?"
                         if read not in (None, fit.emitter) else ""))
     else:
@@ -191,7 +191,7 @@ def format_season(fit: SeasonFit) -> list[str]:
                 if decay_decides(fit.water_excess_k, fit.water_decay_h) else "")
         lines.append(f"  emitter: {fit.emitter} (measured: the water {fit.water_excess_k:.0f} K "
                      f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors{fade}; its lag "
-                     f"up to {tau_e_max_s(fit.emitter) / 3600:.0f} h)")
+                     f"up to {tau_e_max_s(fit.emitter) / 3600:g} h)")
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")
