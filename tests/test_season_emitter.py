@@ -22,11 +22,13 @@ from impctl.population.season_run.nights import household_nights
 from impctl.season import record_from_nights
 from impctl.season.emitter import (
     DECAY_BAND_K,
+    LAG_BOUND_S,
     RADIATOR_EXCESS_K,
     SCREED_DECAY_H,
     TAU_E_MAX_UNDERFLOOR_S,
     TAU_E_MAX_UNKNOWN_S,
     emitter_kind,
+    lag_bound_s,
     water_decay_h,
     water_excess_k,
 )
@@ -50,6 +52,13 @@ def _nights(design_water_c: float, exponent: float, t_out_c: list[float]) -> lis
         out.append(NightSamples(f"{start.date()} owner", "owner", start, t, 20.0 + 0 * t,
                                 te + 0 * t, q, t_flow_c=water + 2.5, t_return_c=water - 2.5))
     return out
+
+
+def without_fade(nights: list[NightSamples]) -> list[NightSamples]:
+    """The nights with no water on the constrained ones: the fade after a switch-off is not
+    read, and the emitter's lag is bounded by the emitter the excess reads (its class)."""
+    return [dataclasses.replace(n, t_flow_c=None, t_return_c=None) if n.kind == "constrained"
+            else n for n in nights]
 
 
 @pytest.mark.parametrize(("design_water_c", "exponent", "kind"),
@@ -114,9 +123,30 @@ def test_without_the_water_or_enough_nights_the_emitter_is_unknown():
     assert water_excess_k(record_from_nights(nights), HLC_W_PER_K) > RADIATOR_EXCESS_K
 
 
-def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_season):
+def test_a_screed_house_gets_its_fades_bound_on_the_lag_in_one_search(winter_season, searches):
+    """Where a constrained night shows the water's fade, the lag's bound is a share of it —
+    one search, said in the JSON and the text — and a warm refit keeps that bound."""
     assert (winter_season.params.emitter.kind == 1).all()     # the run's houses: underfloor
     nights = household_nights(winter_season, 0)
+    fit, _ = fit_nights(nights)
+    assert fit.water_decay_h >= SCREED_DECAY_H and fit.emitter == "underfloor"
+    bound = lag_bound_s(fit.water_decay_h)
+    assert searches == [bound] and fit.theta[2] <= bound + 1e-6
+    emitter = fit.as_dict()["emitter"]
+    assert emitter["tau_e_max_h"] == round(bound / 3600, 2)
+    assert emitter["water_decay_h"] == round(fit.water_decay_h, 1)
+    assert f"its lag up to {round(bound / 3600, 2):g} h" in "\n".join(format_season(fit))
+    # the share of a radiator's fast fade is held at half an hour, a slow screed's at 8 h
+    assert lag_bound_s(0.2) == LAG_BOUND_S[0] and lag_bound_s(40.0) == LAG_BOUND_S[1]
+    searches.clear()
+    refit, _ = fit_nights(nights, start=fit.theta)
+    assert searches == [bound] and refit.warm_start
+    assert refit.values["hlc_w_per_k"] == pytest.approx(fit.values["hlc_w_per_k"], rel=1e-3)
+
+
+def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_season):
+    assert (winter_season.params.emitter.kind == 1).all()     # the run's houses: underfloor
+    nights = without_fade(household_nights(winter_season, 0))
     fit, _ = fit_nights(nights)
     emitter = fit.as_dict()["emitter"]
     assert fit.emitter == "underfloor" and emitter["source"].startswith("measured")
@@ -146,7 +176,7 @@ def searches(monkeypatch) -> list[float]:
 
 def test_a_refit_of_a_screed_house_searches_once_under_the_screeds_bound(winter_season,
                                                                          searches):
-    nights = household_nights(winter_season, 0)
+    nights = without_fade(household_nights(winter_season, 0))
     full, _ = fit_nights(nights)
     calls = searches
     calls.clear()
@@ -168,7 +198,7 @@ def test_a_screed_start_whose_water_reads_radiators_is_read_as_the_full_search_r
     decides."""
     import impctl.season.fit as season_fit
 
-    nights = household_nights(winter_season, 0)
+    nights = without_fade(household_nights(winter_season, 0))
     full, _ = fit_nights(nights)
     real = season_fit.water_excess_k
     readings: list[float] = []

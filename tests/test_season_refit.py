@@ -18,6 +18,7 @@ from zoneinfo import ZoneInfo
 
 import pytest
 from test_nights_owner import run_cli
+from test_season_emitter import without_fade
 
 from impctl.config import load_config
 from impctl.daemon.fitting import refresh_season
@@ -279,12 +280,15 @@ def test_impctl_season_takes_a_declared_emitter_and_refuses_an_unknown_one(tmp_p
     assert res.returncode == 2 and "--emitter" in res.stderr and not bad.exists()
 
 
-def _earlier_and_counted(winter_season, monkeypatch, before_last: int):
+def _earlier_and_counted(winter_season, monkeypatch, before_last: int, fade: bool = True):
     """(household 1's nights, a fit of them up to its ``before_last``-th last owner night, a
-    counter of the season residual's evaluations from here on — [n])."""
+    counter of the season residual's evaluations from here on — [n]); ``fade=False``: no water
+    on the constrained nights (the lag bounded by the emitter's class)."""
     from impctl.season.projection import solve
 
     nights = household_nights(winter_season, 1)
+    if not fade:
+        nights = without_fade(nights)
     owner = [i for i, n in enumerate(nights) if n.kind == "owner"]
     earlier, _ = fit_nights(nights[:owner[-before_last]])
     calls = [0]
@@ -305,7 +309,8 @@ def test_a_warm_search_stops_sooner_and_lands_where_the_strict_stop_does(winter_
     HLC, τ and C_m to 0.5 %."""
     from impctl.season.projection import solve
 
-    nights, earlier, calls = _earlier_and_counted(winter_season, monkeypatch, 3)
+    # under the emitter class's bound, where the lag walks to its bound (decision 0031)
+    nights, earlier, calls = _earlier_and_counted(winter_season, monkeypatch, 3, fade=False)
     warm, _ = fit_nights(nights, start=earlier.theta)
     loose, calls[0] = calls[0], 0
     monkeypatch.setattr(solve, "WARM_TOL", 1e-8)

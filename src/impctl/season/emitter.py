@@ -55,6 +55,11 @@ DECAY_BAND_K = (9.5, 14.5)
 #: on four seeds of 200 realistic households radiators 0.9–4.6 h, 5th–95th percentile,
 #: screeds 4.6–16 h — the room's own cooling and the pipes slow both).
 SCREED_DECAY_H = 3.5
+#: Share of the water's fade [-] the emitter's lag may reach, where the fade was read: the
+#: lag takes in the air's and the furniture's lag too, and where it is free it trades with the
+#: mass (measured: decision 0037); and the bounds that share is held within [s].
+DECAY_LAG_SHARE = 0.6
+LAG_BOUND_S = (0.5 * 3600, 8.0 * 3600)
 #: Excess [K] a decay is read from, and down to; the shortest stretch read [h].
 DECAY_FROM_K, DECAY_TO_K, DECAY_MIN_H = 2.0, 0.5, 1.0
 #: Upper bound of the emitter's lag [s] for radiators, an underfloor screed and an emitter
@@ -123,6 +128,12 @@ def emitter_kind(excess_k: float, decay_h: float = float("nan")) -> str | None:
     if decay_decides(excess_k, decay_h):
         return "underfloor" if decay_h >= SCREED_DECAY_H else "radiators"
     return "radiators" if excess_k >= RADIATOR_EXCESS_K else "underfloor"
+
+
+def lag_bound_s(decay_h: float) -> float:
+    """Upper bound of the emitter's lag [s] from the water's fade ``decay_h`` [h]
+    (:data:`DECAY_LAG_SHARE` of it, within :data:`LAG_BOUND_S`)."""
+    return min(max(DECAY_LAG_SHARE * decay_h * 3600.0, LAG_BOUND_S[0]), LAG_BOUND_S[1])
 
 
 def decay_decides(excess_k: float, decay_h: float) -> bool:

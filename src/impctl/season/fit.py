@@ -31,6 +31,7 @@ from ..change import detect_change
 from ..imp.protocol import EMITTER_KINDS
 from .emitter import (
     emitter_kind,
+    lag_bound_s,
     tau_e_max_s,
     water_decay_h,
     water_excess_k,
@@ -117,53 +118,64 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
     # Small matrices (thousands × hundreds): BLAS threads only contend — three times slower
     # with two threads on a 2-core gateway, more beside torch's.
     with _thread_pools().limit(limits=1, user_api="blas"):
-        # The emitter from the water (:mod:`.emitter`), scaled by this fit's HLC (the energy
-        # signature of a few weeks can be off by half): searched first as radiators where the
-        # water is recorded, and again from that θ when it is a screed or not to be read.
-        first = tau_e_max_s("radiators" if water_recorded(rec) else None)
         decay = water_decay_h(rec)
-        start_bound = False
-        if emitter is not None:
-            first = tau_e_max_s(emitter)
-        elif start is not None and water_recorded(rec) and (
-                start_bound_s if start_bound_s is not None else start[2]) > first:
-            # The fit it starts from ended under a wider bound than the radiators' — a screed,
-            # or no emitter where the water could not tell: one search under that bound (the
-            # screed's when only the start's lag says so). A house whose water could not tell,
-            # searched under the screed's, searched again in full: three searches a morning.
-            first = start_bound_s if start_bound_s is not None else tau_e_max_s("underfloor")
-            start_bound = True
-        bounds = bounds_for(first)
-        theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
-        b, values = _lumped(theta, pr)
-        excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
-                  else float("nan"))
-        kind = emitter if emitter is not None else emitter_kind(excess, decay)
-        if start_bound and tau_e_max_s(kind) != first:
-            # The water, scaled by this fit's HLC, now reads radiators where the fit it
-            # started from read a screed. A fit without a start reads the water at the HLC of
-            # its search under the radiators' bound, and may read a screed again: so does
-            # this one, from a warm search under that bound. Where the water then reads what
-            # the start was fitted under, this fit stands (a house near the radiators'
-            # excess flipped every morning, and each flip cost a full search: 12 % of a
-            # morning's fits); else the full search decides — searching on under the
-            # radiators' bound from here kept a cost ten times the full search's (a research
-            # household of bench/fleet_season.py --next-morning: HLC −34 %).
-            # (a water that cannot tell — too few nights read — goes to the full search)
-            r_excess = float("nan")
-            if math.isfinite(excess):
-                r_theta, r_pr, _ = search(d, max_nfev=max_nfev, start=start,
-                                          bounds=bounds_for(tau_e_max_s("radiators")))
-                r_excess = water_excess_k(rec, _lumped(r_theta, r_pr)[1]["hlc_w_per_k"])
-            if not math.isfinite(r_excess) or tau_e_max_s(emitter_kind(r_excess, decay)) != first:
-                return fit_season(rec, calibrated, None, max_nfev, emitter)
-            excess, kind = r_excess, emitter_kind(r_excess, decay)
-        if tau_e_max_s(kind) != first:
-            bounds = bounds_for(tau_e_max_s(kind))
-            # from the first search's θ, but under another bound: maybe far (MINPACK's step)
-            theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds,
-                                    step=FULL_STEP)
+        if emitter is None and math.isfinite(decay):
+            # Measured: the emitter's own fade after a switch-off bounds its lag (the lag
+            # takes in the room's and the furniture's too, and unbounded trades with the
+            # mass): one search, whatever the start.
+            bounds = bounds_for(lag_bound_s(decay))
+            theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
             b, values = _lumped(theta, pr)
+            excess = water_excess_k(rec, values["hlc_w_per_k"])
+            kind = emitter_kind(excess, decay)
+        else:
+            # The emitter from the water (:mod:`.emitter`), scaled by this fit's HLC (the energy
+            # signature of a few weeks can be off by half): searched first as radiators where the
+            # water is recorded, and again from that θ when it is a screed or not to be read.
+            first = tau_e_max_s("radiators" if water_recorded(rec) else None)
+            start_bound = False
+            if emitter is not None:
+                first = tau_e_max_s(emitter)
+            elif start is not None and water_recorded(rec) and (
+                    start_bound_s if start_bound_s is not None else start[2]) > first:
+                # The fit it starts from ended under a wider bound than the radiators' — a screed,
+                # or no emitter where the water could not tell: one search under that bound (the
+                # screed's when only the start's lag says so). A house whose water could not tell,
+                # searched under the screed's, searched again in full: three searches a morning.
+                first = start_bound_s if start_bound_s is not None else tau_e_max_s("underfloor")
+                start_bound = True
+            bounds = bounds_for(first)
+            theta, pr, res = search(d, max_nfev=max_nfev, start=start, bounds=bounds)
+            b, values = _lumped(theta, pr)
+            excess = (water_excess_k(rec, values["hlc_w_per_k"]) if water_recorded(rec)
+                      else float("nan"))
+            kind = emitter if emitter is not None else emitter_kind(excess, decay)
+            if start_bound and tau_e_max_s(kind) != first:
+                # The water, scaled by this fit's HLC, now reads radiators where the fit it
+                # started from read a screed. A fit without a start reads the water at the HLC of
+                # its search under the radiators' bound, and may read a screed again: so does
+                # this one, from a warm search under that bound. Where the water then reads what
+                # the start was fitted under, this fit stands (a house near the radiators'
+                # excess flipped every morning, and each flip cost a full search: 12 % of a
+                # morning's fits); else the full search decides — searching on under the
+                # radiators' bound from here kept a cost ten times the full search's (a research
+                # household of bench/fleet_season.py --next-morning: HLC −34 %).
+                # (a water that cannot tell — too few nights read — goes to the full search)
+                r_excess = float("nan")
+                if math.isfinite(excess):
+                    r_theta, r_pr, _ = search(d, max_nfev=max_nfev, start=start,
+                                              bounds=bounds_for(tau_e_max_s("radiators")))
+                    r_excess = water_excess_k(rec, _lumped(r_theta, r_pr)[1]["hlc_w_per_k"])
+                r_kind = emitter_kind(r_excess, decay)
+                if not math.isfinite(r_excess) or tau_e_max_s(r_kind) != first:
+                    return fit_season(rec, calibrated, None, max_nfev, emitter)
+                excess, kind = r_excess, r_kind
+            if tau_e_max_s(kind) != first:
+                bounds = bounds_for(tau_e_max_s(kind))
+                # from the first search's θ, but under another bound: maybe far (MINPACK's step)
+                theta, pr, res = search(d, max_nfev=max_nfev, start=theta, bounds=bounds,
+                                        step=FULL_STEP)
+                b, values = _lumped(theta, pr)
         se = lumped_log_se(res.x, pr, covariance(res.x, pr, d, bounds), bounds)
     low, high = {}, {}
     for k in LUMPED:
@@ -188,7 +200,7 @@ def fit_season(rec: SeasonRecord, calibrated: bool = True,
                      float(d.blocks.sum()) * rec.per_block * rec.step_s / 3600.0,
                      rec.exclusion_counts(), tuple(float(t) for t in theta), b,
                      sig, missing=missing, emitter=kind, water_excess_k=excess,
-                     water_decay_h=decay,
+                     water_decay_h=decay, lag_bound_s=bounds[2][1],
                      emitter_declared=emitter is not None, warm_start=start is not None,
                      defrost_read=d.defrost_read, defrost_from_spread=rec.defrost_from_spread,
                      spread_unread=rec.spread_unread)

@@ -39,6 +39,7 @@ class SeasonFit:
         heating water (:mod:`.emitter`); None when neither tells it
     water_excess_k : the water's excess over the room at the reference load [K] (NaN: unknown)
     water_decay_h : how fast the water's excess fades after a switch-off [h] (NaN: not read)
+    lag_bound_s : the bound the emitter's lag was searched under [s]
     emitter_declared : True when the emitter was declared (known), not read from the water
     warm_start : the search started only from an earlier fit's θ (``start``); False when it
         ran in full, also when a start was given and the full search had to decide
@@ -66,6 +67,7 @@ class SeasonFit:
     emitter: str | None = None
     water_excess_k: float = float("nan")
     water_decay_h: float = float("nan")
+    lag_bound_s: float = float("nan")
     emitter_declared: bool = False
     warm_start: bool = False
     defrost_read: bool | None = None
@@ -120,6 +122,12 @@ class SeasonFit:
         }
 
 
+    def _bound_h(self) -> float:
+        """The bound the emitter's lag was searched under [h]."""
+        if math.isfinite(self.lag_bound_s):
+            return round(self.lag_bound_s / 3600.0, 2)
+        return tau_e_max_s(self.emitter) / 3600.0
+
     def emitter_dict(self) -> dict:
         """The emitter the lag's bound was chosen for, and whether declared, measured or
         assumed."""
@@ -127,17 +135,17 @@ class SeasonFit:
             read = emitter_kind(self.water_excess_k, self.water_decay_h)
             return {"kind": self.emitter, "water_excess_k": _num(round(self.water_excess_k, 1)),
                     "water_decay_h": _num(round(self.water_decay_h, 1)),
-                    "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
+                    "tau_e_max_h": self._bound_h(),
                     "source": "declared", **({"water_reads": read} if read not in
                                              (None, self.emitter) else {})}
         if self.emitter is None:
-            return {"kind": None, "tau_e_max_h": tau_e_max_s(None) / 3600.0,
+            return {"kind": None, "tau_e_max_h": self._bound_h(),
                     "source": "assumed: no heating-water temperatures recorded and none "
                               "declared, a bound between the radiators' and the screed's"}
         decay = decay_decides(self.water_excess_k, self.water_decay_h)
         return {"kind": self.emitter, "water_excess_k": round(self.water_excess_k, 1),
                 "water_decay_h": _num(round(self.water_decay_h, 1)),
-                "tau_e_max_h": tau_e_max_s(self.emitter) / 3600.0,
+                "tau_e_max_h": self._bound_h(),
                 "source": "measured: " + ("how fast the heating water cools after a switch-off "
                                           "(its excess over the room could be either)" if decay
                                           else "the heating water's excess over the room")}
@@ -178,12 +186,12 @@ def format_season(fit: SeasonFit) -> list[str]:
                      f"{fit.high[key] * scale:.2f}")
     if fit.emitter is None:
         lines.append("  emitter: not known (assumed: its lag up to "
-                     f"{tau_e_max_s(None) / 3600:g} h; no heating-water temperatures recorded "
+                     f"{fit._bound_h():g} h; no heating-water temperatures recorded "
                      "and none declared)")
     elif fit.emitter_declared:
         read = emitter_kind(fit.water_excess_k, fit.water_decay_h)
         lines.append(f"  emitter: {fit.emitter} (declared; its lag up to "
-                     f"{tau_e_max_s(fit.emitter) / 3600:g} h)"
+                     f"{fit._bound_h():g} h)"
                      + (f" — the heating water reads {read}: is the declaration right?"
                         if read not in (None, fit.emitter) else ""))
     else:
@@ -191,7 +199,7 @@ def format_season(fit: SeasonFit) -> list[str]:
                 if decay_decides(fit.water_excess_k, fit.water_decay_h) else "")
         lines.append(f"  emitter: {fit.emitter} (measured: the water {fit.water_excess_k:.0f} K "
                      f"above the room at {REFERENCE_DT_K:.0f} K indoors–outdoors{fade}; its lag "
-                     f"up to {tau_e_max_s(fit.emitter) / 3600:g} h)")
+                     f"up to {fit._bound_h():g} h)")
     if math.isfinite(fit.signature_hlc_w_per_k):
         lines.append(f"  baseline: the energy signature of the same owner nights gives HLC "
                      f"{fit.signature_hlc_w_per_k:.1f} W/K")
