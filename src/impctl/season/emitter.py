@@ -18,7 +18,9 @@ over the room and scales it to one load — the heat the house loses at 20 K ind
 the fit's HLC and the emitter law Q ∝ ΔT^n — so that a mild night's low water and a cold
 night's high water give the same number. Where the two kinds' excesses overlap, the
 constrained nights decide (:func:`water_decay_h`): once the heat stops, a radiator's excess
-over the room fades within an hour or two, a screed's over many hours. Units: °C, K, W, s, h.
+over the room fades within an hour or two, a screed's over many hours. Where that fade was
+read it bounds the lag itself (:func:`lag_bound_s`), this house's measurement in place of its
+kind's bound. Units: °C, K, W, s, h.
 """
 
 from __future__ import annotations
