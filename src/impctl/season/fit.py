@@ -46,7 +46,7 @@ from .result import SeasonFit
 #: Scale of the sandwich standard errors per quantity [-] (estimated, module docstring).
 INTERVAL_SCALE = {"hlc_w_per_k": 2.5, "tau_h": 2.25, "c_m_j_per_k": 2.5}
 #: Model-error floor of each log quantity [-] (estimated, module docstring).
-MODEL_FLOOR = {"hlc_w_per_k": 0.025, "tau_h": 0.051, "c_m_j_per_k": 0.063}
+MODEL_FLOOR = {"hlc_w_per_k": 0.029, "tau_h": 0.051, "c_m_j_per_k": 0.063}
 #: Normal quantile of a two-sided 95 % interval.
 Z95 = 1.959964
 #: Widest 95 % interval given, as the log of its high/value ratio [-] (a factor of 1000 up
