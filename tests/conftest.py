@@ -9,7 +9,7 @@ import json
 import os
 import pickle
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,25 +57,47 @@ def trained_models(tmp_path_factory) -> Trained:
 WINTER_HOUSEHOLDS, WINTER_SEED, WINTER_NIGHTS = 2, 31, 20
 
 
+def built_once(tmp_path_factory, name: str, build: Callable[[], object]) -> object:
+    """``build()``'s result, built by the first worker of the run that asks and pickled in
+    the run's folder; every worker unpickles its own copy (read-only data: a test that changes
+    it works on a copy)."""
+    with _once_per_run(tmp_path_factory, name) as root:
+        path = root / f"{name}.pickle"
+        if not path.exists():
+            part = path.with_suffix(".part")  # a worker killed mid-write leaves no pickle
+            part.write_bytes(pickle.dumps(build()))
+            part.rename(path)
+        return pickle.loads(path.read_bytes())
+
+
+@pytest.fixture(scope="session")
+def build_once(tmp_path_factory) -> Callable[[str, Callable[[], object]], object]:
+    """:func:`built_once` for a module's own data: ``build_once(name, build)``."""
+    return lambda name, build: built_once(tmp_path_factory, name, build)
+
+
 @pytest.fixture(scope="session")
 def winter_season(tmp_path_factory):
     """A short winter of two realistic households (``simulate_season``: 20 nights from 20
     November 2026, the IMP campaign every other night from the first, the owner's nights
     between, hot water, defrosts), simulated once per test run (about 9 CPU-s, the same for
-    one household as for two) and read by the season model's tests. Read-only: each worker
-    unpickles its own copy."""
-    with _once_per_run(tmp_path_factory, "winter-season") as root:
-        path = root / "winter-season.pickle"
-        if not path.exists():
-            from impctl.population.households import sample_households
-            from impctl.population.realism import sample_params
-            from impctl.population.season_run.season import SeasonConfig, simulate_season
+    one household as for two) and read by the season model's tests."""
+    def build():
+        from impctl.population.households import sample_households
+        from impctl.population.realism import sample_params
+        from impctl.population.season_run.season import SeasonConfig, simulate_season
 
-            houses = sample_households(WINTER_HOUSEHOLDS, seed=WINTER_SEED)
-            params = sample_params(WINTER_HOUSEHOLDS, WINTER_SEED)
-            season = simulate_season(houses, params, SeasonConfig(nights=WINTER_NIGHTS),
-                                     seed=WINTER_SEED)
-            part = path.with_suffix(".part")  # a worker killed mid-write leaves no pickle
-            part.write_bytes(pickle.dumps(season))
-            part.rename(path)
-        return pickle.loads(path.read_bytes())
+        houses = sample_households(WINTER_HOUSEHOLDS, seed=WINTER_SEED)
+        params = sample_params(WINTER_HOUSEHOLDS, WINTER_SEED)
+        return simulate_season(houses, params, SeasonConfig(nights=WINTER_NIGHTS),
+                               seed=WINTER_SEED)
+
+    return built_once(tmp_path_factory, "winter-season", build)
+
+
+@pytest.fixture(scope="session")
+def two_fleet_households(tmp_path_factory):
+    """The fleet tests' two households' nights (``fleet_fixtures``), simulated once per run."""
+    from fleet_fixtures import two_households_nights
+
+    return built_once(tmp_path_factory, "two-fleet-households", two_households_nights)

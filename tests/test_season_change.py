@@ -29,12 +29,16 @@ STEP_NIGHT, WINDOW_W_K = 22, 50.0
 
 
 @pytest.fixture(scope="module")
-def season():
+def season(build_once):
     """40 nights: the step found 11 days after it (the test allows 16), the third house with
-    29 nights for its verdict (MIN_NIGHTS 24); each night more costs ~0.5 CPU-s."""
-    houses, params = sample_households(3, seed=31), sample_params(3, 31)
-    return simulate_season(houses, params, SeasonConfig(nights=40), seed=31,
-                           hlc_step_w_k=[WINDOW_W_K, 0.0, 0.0], step_night=STEP_NIGHT)
+    29 nights for its verdict (MIN_NIGHTS 24); each night more costs ~0.5 CPU-s. Simulated
+    once per test run."""
+    def build():
+        houses, params = sample_households(3, seed=31), sample_params(3, 31)
+        return simulate_season(houses, params, SeasonConfig(nights=40), seed=31,
+                               hlc_step_w_k=[WINDOW_W_K, 0.0, 0.0], step_night=STEP_NIGHT)
+
+    return build_once("season-change-window", build)
 
 
 def _days(a: str, b: str) -> int:
