@@ -144,6 +144,38 @@ def test_a_screed_house_gets_its_fades_bound_on_the_lag_in_one_search(winter_sea
     assert refit.values["hlc_w_per_k"] == pytest.approx(fit.values["hlc_w_per_k"], rel=1e-3)
 
 
+def test_under_the_fades_bound_the_search_starts_once_from_the_grids_best_point(
+        winter_season, monkeypatch):
+    """Where the fade bounds the lag, the search runs once, from the start grid's best point
+    in the lag's slow basin (clipped to the bound), not from each basin's: here, as on the
+    bench, the lower-cost of the two starts the two-basin search takes. (How far the results
+    move: decision record 0031.)"""
+    from impctl.season.projection import solve
+    from impctl.season.projection.columns import Design
+
+    rec = record_from_nights(household_nights(winter_season, 0))
+    d, bounds = Design.of(rec), solve.bounds_for(lag_bound_s(water_decay_h(rec)))
+    runs: list[np.ndarray] = []
+    lm = solve._levenberg_marquardt
+
+    def counted(u0, *args, **kw):
+        runs.append(u0.copy())
+        return lm(u0, *args, **kw)
+
+    monkeypatch.setattr(solve, "_levenberg_marquardt", counted)
+    theta, _, res = solve.search(d, bounds=bounds, one_start=True)
+    assert len(runs) == 1
+    solve.search(d, bounds=bounds)
+    assert len(runs) == 3            # the two basins' starts
+    costs = [float(np.sum(solve._residual(u, d, bounds) ** 2)) for u in runs[1:]]
+    assert costs[0] != costs[1]
+    assert np.array_equal(runs[0], runs[1 + int(np.argmin(costs))])
+    # the season fit takes this path where the fade is read
+    runs.clear()
+    fit, _ = fit_nights(household_nights(winter_season, 0))
+    assert len(runs) == 1 and fit.theta == pytest.approx(theta, rel=1e-9)
+
+
 def test_a_screed_house_gets_the_screeds_lag_and_says_it_was_measured(winter_season):
     assert (winter_season.params.emitter.kind == 1).all()     # the run's houses: underfloor
     nights = without_fade(household_nights(winter_season, 0))

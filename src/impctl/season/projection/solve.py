@@ -39,6 +39,8 @@ START_GRID = tuple((t, w) for t in (3.0, 8.0, 24.0, 80.0) for w in (0.7, 0.9, 0.
 #: near 2–3 h where most realistic houses end (a screed, the furniture and the air's capacity
 #: read as lag), and near zero (radiators, ISO 13790's own model, which has no emitter). From
 #: 2 h alone, houses of the second kind stuck with τ_e at hours and τ up to 3× the truth.
+#: Under a bound from the water's fade (0.5–8 h) the near-zero start's grid point never ranked
+#: first (0 of 100 households): the search then starts from the first τ_e alone.
 #: f_sun ≲ 0.1 — from 0.3 the ranking sent some houses into a corner (w at its bound, τ 10×
 #: off) whose cost was 3× the best.
 START_TAU_E_S, START_F_SUN = (7200.0, 300.0), 0.05
@@ -313,19 +315,22 @@ def _remembered_jacobian(u: Array, d: Design, bounds=THETA_BOUNDS) -> Array:
 
 
 def search(d: Design, max_nfev: int = 60, start: tuple | None = None,
-           bounds=THETA_BOUNDS, step: float | None = None) -> tuple[tuple, Projection, object]:
+           bounds=THETA_BOUNDS, step: float | None = None,
+           one_start: bool = False) -> tuple[tuple, Projection, object]:
     """Best θ, its projection and the optimiser's result (least squares over θ); from the
-    grid's best point at each of :data:`START_TAU_E_S`, or from ``start`` alone (a warm start:
-    yesterday's θ, or the full season's for a part of it), which then steps shorter and stops
-    sooner (:data:`WARM_STEP`, :data:`WARM_TOL`); ``step``: the first step's bound instead
-    (:data:`FULL_STEP` for a start that may be far, e.g. under another bound)."""
+    grid's best point at each of :data:`START_TAU_E_S` (``one_start``: at the first alone, the
+    slow basin, clipped to the bound; for a bound on the emitter's lag its fade has set), or from
+    ``start`` alone (a warm start: yesterday's θ, or the full season's for a part of it), which
+    then steps shorter and stops sooner (:data:`WARM_STEP`, :data:`WARM_TOL`); ``step``: the
+    first step's bound instead (:data:`FULL_STEP` for a start that may be far, e.g. under
+    another bound)."""
     if start is not None:
         # a start outside these bounds (another emitter's) is moved onto them
         starts = [to_u(tuple(min(max(v, lo), hi) for v, (lo, hi) in
                              zip(start, bounds, strict=True)), bounds)]
     else:
         starts = []
-        for tau_e in START_TAU_E_S:
+        for tau_e in START_TAU_E_S[:1] if one_start else START_TAU_E_S:
             grid = [to_u((tau_h * 3600, w, tau_e, START_F_SUN, START_TAU_R_S), bounds)
                     for tau_h, w in START_GRID]
             starts.append(min(grid, key=lambda u: float(np.sum(_residual(u, d, bounds) ** 2))))
