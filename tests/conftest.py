@@ -57,27 +57,25 @@ def trained_models(tmp_path_factory) -> Trained:
 WINTER_HOUSEHOLDS, WINTER_SEED, WINTER_NIGHTS = 2, 31, 20
 
 
-def built_once(tmp_path_factory, name: str, build: Callable[[], object]) -> object:
-    """``build()``'s result, built by the first worker of the run that asks and pickled in
-    the run's folder; every worker unpickles its own copy (read-only data: a test that changes
-    it works on a copy)."""
-    with _once_per_run(tmp_path_factory, name) as root:
-        path = root / f"{name}.pickle"
-        if not path.exists():
-            part = path.with_suffix(".part")  # a worker killed mid-write leaves no pickle
-            part.write_bytes(pickle.dumps(build()))
-            part.rename(path)
-        return pickle.loads(path.read_bytes())
-
-
 @pytest.fixture(scope="session")
 def build_once(tmp_path_factory) -> Callable[[str, Callable[[], object]], object]:
-    """:func:`built_once` for a module's own data: ``build_once(name, build)``."""
-    return lambda name, build: built_once(tmp_path_factory, name, build)
+    """``build_once(name, build)``: ``build()``'s result, built by the first worker of the run
+    that asks and pickled in the run's folder; every worker unpickles its own copy (read-only
+    data: a test that changes it works on a copy)."""
+    def built(name: str, build: Callable[[], object]) -> object:
+        with _once_per_run(tmp_path_factory, name) as root:
+            path = root / f"{name}.pickle"
+            if not path.exists():
+                part = path.with_suffix(".part")  # a worker killed mid-write leaves no pickle
+                part.write_bytes(pickle.dumps(build()))
+                part.rename(path)
+            return pickle.loads(path.read_bytes())
+
+    return built
 
 
 @pytest.fixture(scope="session")
-def winter_season(tmp_path_factory):
+def winter_season(build_once):
     """A short winter of two realistic households (``simulate_season``: 20 nights from 20
     November 2026, the IMP campaign every other night from the first, the owner's nights
     between, hot water, defrosts), simulated once per test run (about 9 CPU-s, the same for
@@ -92,12 +90,12 @@ def winter_season(tmp_path_factory):
         return simulate_season(houses, params, SeasonConfig(nights=WINTER_NIGHTS),
                                seed=WINTER_SEED)
 
-    return built_once(tmp_path_factory, "winter-season", build)
+    return build_once("winter-season", build)
 
 
 @pytest.fixture(scope="session")
-def two_fleet_households(tmp_path_factory):
+def two_fleet_households(build_once):
     """The fleet tests' two households' nights (``fleet_fixtures``), simulated once per run."""
     from fleet_fixtures import two_households_nights
 
-    return built_once(tmp_path_factory, "two-fleet-households", two_households_nights)
+    return build_once("two-fleet-households", two_households_nights)

@@ -163,7 +163,7 @@ def test_under_the_fades_bound_the_search_starts_once_from_the_grids_best_point(
         return lm(u0, *args, **kw)
 
     monkeypatch.setattr(solve, "_levenberg_marquardt", counted)
-    theta, _, res = solve.search(d, bounds=bounds, one_start=True)
+    theta, _, _ = solve.search(d, bounds=bounds, one_start=True)
     assert len(runs) == 1
     solve.search(d, bounds=bounds)
     assert len(runs) == 3            # the two basins' starts
