@@ -8,13 +8,40 @@ import fcntl
 import json
 import os
 import pickle
+import shutil
 import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from cli_fixtures import run_impctl
+
+_ROOT = Path(__file__).resolve().parent.parent
+_SOURCES = ("src", "simulator", "tests")
+
+
+def pytest_configure(config) -> None:
+    """Where the environment says not to write bytecode (``PYTHONDONTWRITEBYTECODE``), the run
+    writes it all the same and removes what it wrote when it ends: the suite starts about 250
+    Python processes (xdist workers, daemons, simulators, commands), and each compiled
+    impctl's sources and rewrote the tests' asserts anew — about 25 CPU-s a run. The tree is
+    left as it was found."""
+    if hasattr(config, "workerinput") or not sys.dont_write_bytecode:
+        return
+    before = {p for top in _SOURCES for p in (_ROOT / top).rglob("__pycache__")}
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)   # the workers and every process they start
+    sys.dont_write_bytecode = False
+
+    def remove_written() -> None:
+        sys.dont_write_bytecode = True
+        for top in _SOURCES:
+            for p in (_ROOT / top).rglob("__pycache__"):
+                if p not in before:
+                    shutil.rmtree(p, ignore_errors=True)
+
+    config.add_cleanup(remove_written)
 
 
 @dataclass(frozen=True)

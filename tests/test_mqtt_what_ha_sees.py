@@ -65,7 +65,10 @@ def test_a_setpoint_with_underscores_is_refused(tmp_path):
 def test_a_failed_idle_read_after_a_night_publishes_nothing_as_now(tmp_path):
     """After a night, an idle read that fails: the values are missing and the heat-pump link
     is off — not the night's last sample, hours old, shown as now."""
-    epoch = datetime(2026, 1, 12, 21, 15, tzinfo=TZ)
+    # An hour before the night's start (21:30): at 1800× the daemon's start-up takes 10–15
+    # virtual minutes; from 21:15 a slow start now and then missed the night, and the test
+    # waited a day for the next one.
+    epoch = datetime(2026, 1, 12, 20, 30, tzinfo=TZ)
     with broker(tmp_path / "broker") as b, home_assistant(b.port) as ha, \
             sim_process(tmp_path, epoch, 1800.0, plant="iso") as sim:
         config = write_config(tmp_path / "config.toml", daemon_mapping(
