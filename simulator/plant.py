@@ -19,12 +19,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from impctl.model import HouseParameters
 from impctl.model.annex_c import _Step
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -77,11 +80,22 @@ class WeatherFeed:
     """
 
     def __init__(self, series: pd.Series) -> None:
-        if len(series) < 2:
-            raise ValueError("weather needs at least two samples")
+        import pandas as pd
+
         index = pd.DatetimeIndex(series.index)
-        self._t = (index.as_unit("ns").asi8 / 1e9).astype(float)
-        self._v = series.to_numpy(dtype=float)
+        self._set((index.as_unit("ns").asi8 / 1e9).astype(float), series.to_numpy(dtype=float))
+
+    @classmethod
+    def of_arrays(cls, posix_s: np.ndarray, t_out_c: np.ndarray) -> WeatherFeed:
+        """The feed of outdoor temperatures ``t_out_c`` [°C] at POSIX times ``posix_s`` [s]."""
+        feed = cls.__new__(cls)
+        feed._set(np.asarray(posix_s, dtype=float), np.asarray(t_out_c, dtype=float))
+        return feed
+
+    def _set(self, t: np.ndarray, v: np.ndarray) -> None:
+        if len(v) < 2:
+            raise ValueError("weather needs at least two samples")
+        self._t, self._v = t, v
         self._span = self._t[-1] - self._t[0]
 
     def t_out_c(self, sim_s: float) -> float:

@@ -118,3 +118,28 @@ def test_house_file_plant_tables_and_bad_values(tmp_path, capsys):
     err = capsys.readouterr().err
     assert info.value.code == 2 and len(err.strip().splitlines()) == 1
     assert "bad.toml" in err and "plant.sensors.t_air_lag_s" in err
+
+
+@pytest.mark.parametrize("epoch", ["2026-01-12T21:15:00+01:00", "2026-03-29T03:30:00+02:00",
+                                   "2026-10-25T01:00:00+00:00"])
+def test_the_default_weather_starts_at_midnight_five_days_before_the_clock(epoch):
+    """The simulator's own weather (built without pandas) is the generator's series from the
+    midnight, in the clock's zone, five days before the clock's start, to the bit."""
+    from datetime import datetime
+    from zoneinfo import ZoneInfo
+
+    import numpy as np
+    import pandas as pd
+    from impctl_sim import WeatherFeed
+
+    from impctl.clock import VirtualClock
+    from impctl.weather import winter_weather
+
+    start = datetime.fromisoformat(epoch).astimezone(ZoneInfo("Europe/Ljubljana"))
+    c = VirtualClock(epoch=start, factor=60.0)
+    feed = SimConfig(weather_seed=4).weather_feed(c)
+    series = winter_weather(pd.Timestamp(c.epoch).floor("D") - pd.Timedelta(days=5), days=62,
+                            step_s=900, seed=4)
+    expected = WeatherFeed(series)
+    times = start.timestamp() + np.linspace(-4 * 86400.0, 70 * 86400.0, 97)
+    assert [feed.t_out_c(t) for t in times] == [expected.t_out_c(t) for t in times]

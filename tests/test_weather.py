@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from impctl.errors import InputError
-from impctl.weather import read_weather, winter_weather
+from impctl.weather import read_weather, winter_temperatures, winter_weather
 
 
 def test_generator_is_seeded_and_wintry():
@@ -22,6 +22,24 @@ def test_generator_is_seeded_and_wintry():
     assert a[a.index.hour == 6].mean() < a[a.index.hour == 15].mean() - 1.0
     sub = winter_weather(days=2, step_s=300, seed=3)
     assert (sub.index[1] - sub.index[0]).total_seconds() == 300
+
+
+@pytest.mark.parametrize("zone", ["Europe/Ljubljana", "UTC", "America/New_York",
+                                  "Australia/Lord_Howe"])
+def test_the_arrays_are_the_series_numbers_across_the_clock_changes(zone):
+    """The generator without pandas (the simulator's) gives the series' times and values to the
+    bit, over the spring and autumn clock changes and a half-hour offset (Lord Howe)."""
+    from datetime import datetime
+    from zoneinfo import ZoneInfo
+
+    for start in ("2026-03-20 00:00", "2026-10-20 06:00", "2026-04-01 00:00"):
+        series = winter_weather(start, days=14, step_s=900, seed=5, tz=zone)
+        aware = datetime.fromisoformat(start).replace(tzinfo=ZoneInfo(zone))
+        t, v = winter_temperatures(aware, days=14, step_s=900, seed=5)
+        assert np.array_equal(t, series.index.as_unit("ns").asi8 / 1e9)
+        assert np.array_equal(v, series.to_numpy())
+    with pytest.raises(ValueError, match="aware"):
+        winter_temperatures(datetime(2026, 1, 1))
 
 
 def _epw(path, temps, offset_h=1):

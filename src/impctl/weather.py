@@ -1,7 +1,8 @@
 """Outdoor temperature: a seeded winter generator and EPW/CSV weather files.
 
-All functions return a pandas Series of outdoor dry-bulb temperature [°C] indexed by
-timezone-aware timestamps at a fixed step.
+The functions return a pandas Series of outdoor dry-bulb temperature [°C] indexed by
+timezone-aware timestamps at a fixed step; :func:`winter_temperatures` gives the generator's
+series as arrays, without pandas (the Modbus simulator, which starts often, does not load it).
 
 The built-in generator's climate (documented, not fitted to any station) is a continental
 heating-season climate like the paper's case study (Slovenj Gradec, Slovenia, Dec–Jan):
@@ -16,12 +17,16 @@ heating-season climate like the paper's case study (Slovenj Gradec, Slovenia, De
 from __future__ import annotations
 
 from dataclasses import dataclass
+from datetime import datetime, tzinfo
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from .errors import InputError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 DEFAULT_TZ = "Europe/Ljubljana"
 
@@ -83,29 +88,71 @@ def winter_weather(
     -------
     pandas.Series named ``t_out`` [°C]
     """
+    import pandas as pd
+
     start_ts = pd.Timestamp(start)
     if start_ts.tzinfo is None:
         start_ts = start_ts.tz_localize(tz)
+    n = _samples(days, step_s)
+    index = start_ts + pd.to_timedelta(np.arange(n) * step_s, unit="s")
+    hours_since = (index - start_ts.normalize()).total_seconds().to_numpy() / 3600.0
+    local_hour = (index.hour + index.minute / 60.0 + index.second / 3600.0).to_numpy()
+    return pd.Series(_temperatures(hours_since, local_hour, days, seed, climate), index=index,
+                     name="t_out")
+
+
+def winter_temperatures(start: datetime, days: float = 31, step_s: float = 3600,
+                        seed: int = 0, climate: WinterClimate = WinterClimate()
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`winter_weather`'s series as arrays, without pandas: (POSIX time [s], outdoor
+    temperature [°C]); ``start`` is time zone-aware, and its zone is the weather's. The same
+    numbers as :func:`winter_weather` from that start (whole-second steps)."""
+    if start.tzinfo is None:
+        raise ValueError("start must be time zone-aware")
+    n = _samples(days, step_s)
+    zone = start.tzinfo
+    start_s = start.timestamp()
+    offsets = np.arange(n) * float(step_s)
+    midnight = datetime(start.year, start.month, start.day, tzinfo=zone).timestamp()
+    hours_since = (offsets + (start_s - midnight)) / 3600.0
+    posix_s = start_s + offsets
+    local_s = np.floor(posix_s + _utc_offsets_s(posix_s, zone)) % 86400.0
+    hour, rest = np.divmod(local_s, 3600.0)
+    minute, second = np.divmod(rest, 60.0)
+    local_hour = hour + minute / 60.0 + second / 3600.0
+    return posix_s, _temperatures(hours_since, local_hour, days, seed, climate)
+
+
+def _utc_offsets_s(posix_s: np.ndarray, zone: tzinfo) -> np.ndarray:
+    """The zone's UTC offset [s] at each POSIX time."""
+    return np.array([datetime.fromtimestamp(t, zone).utcoffset().total_seconds()
+                     for t in posix_s.tolist()])
+
+
+def _samples(days: float, step_s: float) -> int:
     n = int(round(days * 86400.0 / step_s)) if step_s > 0 and days > 0 else 0
     if n < 1:
         raise InputError(f"{days:g} days at a {step_s:g} s step hold no sample",
                          place="--days")
-    index = start_ts + pd.to_timedelta(np.arange(n) * step_s, unit="s")
+    return n
+
+
+def _temperatures(hours_since: np.ndarray, local_hour: np.ndarray, days: float, seed: int,
+                  climate: WinterClimate) -> np.ndarray:
+    """The generator's temperatures [°C] at ``hours_since`` the start's local midnight [h],
+    ``local_hour`` the local time of day [h]."""
     rng = np.random.default_rng(seed)
     n_days = int(np.ceil(days)) + 2
     daily = climate.mean_c + _ar1(rng, n_days, climate.daily_sd_k, climate.daily_corr)
     amp = rng.uniform(*climate.amplitude_k, size=n_days)
-    hours_since = (index - start_ts.normalize()).total_seconds().to_numpy() / 3600.0
     # Daily mean and amplitude interpolated between day centres, so no jump at midnight.
     centres = np.arange(n_days) * 24.0 - 12.0
     mean_t = np.interp(hours_since, centres, daily)
     amp_t = np.interp(hours_since, centres, amp)
-    local_hour = (index.hour + index.minute / 60.0 + index.second / 3600.0).to_numpy()
-    n_hours = int(np.ceil(hours_since[-1])) + 2 if n else 2
+    n_hours = int(np.ceil(hours_since[-1])) + 2
     noise_h = _ar1(rng, n_hours, climate.noise_sd_k, climate.noise_corr)
     noise = np.interp(hours_since, np.arange(n_hours), noise_h)
-    values = mean_t + amp_t * _diurnal_shape(local_hour, climate.hour_min, climate.hour_max) + noise
-    return pd.Series(values, index=index, name="t_out")
+    return mean_t + amp_t * _diurnal_shape(local_hour, climate.hour_min, climate.hour_max) + noise
 
 
 def read_weather(path: str | Path, tz: str = DEFAULT_TZ) -> pd.Series:
@@ -120,6 +167,8 @@ def read_weather(path: str | Path, tz: str = DEFAULT_TZ) -> pd.Series:
     InputError
         Unreadable file, missing column, bad number or timestamp.
     """
+    import pandas as pd
+
     path = Path(path)
     if not path.exists():
         raise InputError("file not found", path)
@@ -132,6 +181,8 @@ def read_weather(path: str | Path, tz: str = DEFAULT_TZ) -> pd.Series:
 
 
 def _read_epw(path: Path, tz: str) -> pd.Series:
+    import pandas as pd
+
     try:
         header = path.read_text(errors="replace").splitlines()[0].split(",")
         raw = pd.read_csv(path, skiprows=8, header=None)
