@@ -19,7 +19,13 @@ import pytest
 from cli_fixtures import run_impctl
 
 _ROOT = Path(__file__).resolve().parent.parent
-_SOURCES = ("src", "simulator", "tests")
+
+
+def _bytecode_dirs() -> set[Path]:
+    """Every ``__pycache__`` of the checkout outside its hidden folders (the virtual
+    environment's, compiled when installed, stay)."""
+    return {p for top in _ROOT.iterdir() if top.is_dir() and not top.name.startswith(".")
+            for p in top.rglob("__pycache__")}
 
 
 def pytest_configure(config) -> None:
@@ -30,16 +36,14 @@ def pytest_configure(config) -> None:
     left as it was found."""
     if hasattr(config, "workerinput") or not sys.dont_write_bytecode:
         return
-    before = {p for top in _SOURCES for p in (_ROOT / top).rglob("__pycache__")}
+    before = _bytecode_dirs()
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)   # the workers and every process they start
     sys.dont_write_bytecode = False
 
     def remove_written() -> None:
         sys.dont_write_bytecode = True
-        for top in _SOURCES:
-            for p in (_ROOT / top).rglob("__pycache__"):
-                if p not in before:
-                    shutil.rmtree(p, ignore_errors=True)
+        for p in _bytecode_dirs() - before:
+            shutil.rmtree(p, ignore_errors=True)
 
     config.add_cleanup(remove_written)
 
