@@ -42,6 +42,7 @@ How it stays cheap
 from __future__ import annotations
 
 import asyncio
+import functools
 import math
 import os
 import random
@@ -109,8 +110,15 @@ class Screen:
     worst_undershoot_k: float
 
 
-def screen(vh: VirtualHouse, interval_s: float, latency_s: float = 10.0) -> Screen:
-    """The simulator's plant without Modbus: 4 days at 21 °C, 1 h at T_max, heating off."""
+#: Step of the heating-off trajectory the screen samples [s].
+SCREEN_DT_S = 10.0
+
+
+@functools.cache
+def cooling(vh: VirtualHouse) -> np.ndarray:
+    """T_air every :data:`SCREEN_DT_S` after the heating goes off [°C] — the simulator's plant
+    without Modbus: 4 days at 21 °C, 1 h at T_max, heating off. Kept per house: every screen
+    of a house (each sampling interval, the choice of the houses to run) samples this one."""
     plant = Plant(vh.house, vh.plant_params, setpoint_c=T_SET)
     for _ in range(int(4 * 86400 / 300)):
         plant.step(300.0, vh.t_out_c)
@@ -118,7 +126,7 @@ def screen(vh: VirtualHouse, interval_s: float, latency_s: float = 10.0) -> Scre
     for _ in range(360):
         plant.step(10.0, vh.t_out_c)
     plant.loop_mode = 0
-    dt = 10.0
+    dt = SCREEN_DT_S
     traj = []
     while len(traj) * dt < 7 * 3600:
         plant.step(dt, vh.t_out_c)
@@ -126,6 +134,13 @@ def screen(vh: VirtualHouse, interval_s: float, latency_s: float = 10.0) -> Scre
         if plant.t_air_c < T_MIN - 1.0:
             break
     traj = np.array(traj)
+    traj.flags.writeable = False  # shared by every screen of the house
+    return traj
+
+
+def screen(vh: VirtualHouse, interval_s: float, latency_s: float = 10.0) -> Screen:
+    """How the sampled end rule fares on the house's cooling (:func:`cooling`)."""
+    traj, dt = cooling(vh), SCREEN_DT_S
     below = np.nonzero(traj <= T_MIN)[0]
     if len(below) == 0:
         return Screen(False, math.inf, 0.0, 0.0)

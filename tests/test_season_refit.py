@@ -172,9 +172,9 @@ def test_the_daemon_refits_the_season_when_an_owner_night_closes(tmp_path, owner
         _store_records(store, owner_nights)  # 20 Nov – mid-December 2026
         export_nights(store, tmp_path / "before.csv", "csv")
         fit_id = store.add_fit([], {"hlc": "imp", "season": earlier.as_dict()})
-    # 11:00 on 19 December: this record closes at noon with an hour (labelled), the next one,
-    # a whole day of the owner's, at noon on the 20th
-    epoch = datetime(2026, 12, 19, 11, 0, tzinfo=ZoneInfo(TZ))
+    # 21:30 on 19 December: the record begins half an hour before the night's window
+    # (22:00–05:00) and closes at noon on the 20th, a usable owner night
+    epoch = datetime(2026, 12, 19, 21, 30, tzinfo=ZoneInfo(TZ))
     with sim_process(tmp_path, epoch, 3600.0) as sim:
         config = write_config(tmp_path / "config.toml", daemon_mapping(
             state, sim.port, sim.clock, night={"sample_interval_s": 300},
