@@ -110,6 +110,9 @@ def test_signed_negative_outdoor_temperatures(word, value):
     ("t_supply", 5000, "sanity range"),  # 500 °C is not a temperature either
     ("t_outdoor", 1501, "sanity range"),
     ("loop1_mode", 7, "undocumented value"),
+    ("power_thermal", 32767, "outside the plausible"),
+    ("power_thermal", -32768, "outside the plausible"),
+    ("power_electrical", -600, "outside the plausible"),
 ])
 def test_sentinels_and_implausible_values_are_missing(key, raw, reason):
     reading = decode(register(key), [raw & 0xFFFF], NOW)
@@ -118,6 +121,12 @@ def test_sentinels_and_implausible_values_are_missing(key, raw, reason):
     assert reading.raw == raw
     with pytest.raises(InputError, match=f"register {register(key).ma}"):
         reading.require()
+
+
+def test_a_defrost_and_a_full_load_are_heat_outputs():
+    """2329 goes negative while the unit defrosts (it takes heat from the water)."""
+    assert decode(register("power_thermal"), [(-2500) & 0xFFFF], NOW).value == -2500.0
+    assert decode(register("power_thermal"), [25_000], NOW).value == 25_000.0
 
 
 def test_minus_forty_is_a_real_outdoor_temperature_but_no_thermostat_indoors():

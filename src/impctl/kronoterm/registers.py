@@ -275,7 +275,10 @@ _TABLE: tuple[Register, ...] = (
     _n("pressure_setpoint", 2325, 0.1, "bar", RW, E, "heating-system pressure setpoint"),
     _n("pressure_system", 2326, 0.1, "bar", R, E, "heating-system pressure"),
     _n("load", 2327, 1.0, "%", R, E, "current HP load (compressor modulation)"),
-    _n("power_thermal", 2329, 1.0, "W", R, E, "current heating/cooling (thermal) power"),
+    # the unit's own heat output, negative while it defrosts or cools: within its electrical
+    # power's bound; beyond it (0x7FFF, 0x8000 …) the word is no power
+    _n("power_thermal", 2329, 1.0, "W", R, E, "current heating/cooling (thermal) power",
+       valid=(-30_000.0, 30_000.0)),
     _u32("energy_electrical", 2361, 1.0, "kWh", "lifetime electrical energy, heating + DHW"),
     _u32("energy_thermal", 2363, 0.1, "kWh", "lifetime thermal energy, heating + DHW"),
     _n("cop", 2371, 0.01, "", R, E, "COP (scale disputed: ×0.01 assumed)"),
