@@ -27,7 +27,8 @@ How it stays cheap
    the same emitter and 5R1C step) is run without Modbus: 4 days at the owner's 21 °C, 1 h at
    T_max, then heating off; the sampled end rule is applied at every sampling phase. This gives
    each house's worst predicted undershoot (and proves the houses that never reach T_min
-   safe: with the heating off all window they stay above it).
+   safe: with the heating off all window they stay above it). Each house's cooling is
+   simulated once and sampled at every interval the tests ask for.
 2. *The real thing, in CI:* the 10 houses with the largest predicted undershoot plus 4 random
    ones run the real :class:`~impctl.controller.NightController` against the real simulator
    over Modbus TCP and a real store, on a virtual-time event loop

@@ -134,6 +134,11 @@ def _t(name, ma, access, gens, desc, sentinels=_MISSING):
     return Register(name, ma, Kind.TEMP, 0.1, "°C", access, gens, desc, sentinels)
 
 
+#: Largest power a residential unit's registers give, electrical or thermal [W] (the largest
+#: residential Kronoterm gives 25 kW of heat): beyond it a word is no power.
+POWER_MAX_W = 30_000.0
+
+
 def _n(name, ma, scale, unit, access, gens, desc, valid=None):
     return Register(name, ma, Kind.NUMBER, scale, unit, access, gens, desc, valid=valid)
 
@@ -248,7 +253,7 @@ _TABLE: tuple[Register, ...] = (
     _t("loop1_target", 2128, R, CE, "loop-1 current calculated (flow/curve) target"),
     # a consumption is never negative: −600 there is the sentinel of the other registers
     _n("power_electrical", 2129, 1.0, "W", R, E, "current electrical power consumption",
-       valid=(0.0, 30_000.0)),
+       valid=(0.0, POWER_MAX_W)),
     _t("t_loop1_water", 2130, R, E, "loop-1 water (flow) temperature"),
     _t("room_loop1", 2160, R, CE, "loop-1 room thermostat temperature", _THERMOSTAT),
     _t("room_loop2", 2161, R, CE, "loop-2 room thermostat temperature", _THERMOSTAT),
@@ -275,10 +280,10 @@ _TABLE: tuple[Register, ...] = (
     _n("pressure_setpoint", 2325, 0.1, "bar", RW, E, "heating-system pressure setpoint"),
     _n("pressure_system", 2326, 0.1, "bar", R, E, "heating-system pressure"),
     _n("load", 2327, 1.0, "%", R, E, "current HP load (compressor modulation)"),
-    # the unit's own heat output, negative while it defrosts or cools: within its electrical
-    # power's bound; beyond it (0x7FFF, 0x8000 …) the word is no power
+    # the unit's own heat output, negative while it defrosts or cools; beyond the bound
+    # (0x7FFF, 0x8000 …) the word is no power
     _n("power_thermal", 2329, 1.0, "W", R, E, "current heating/cooling (thermal) power",
-       valid=(-30_000.0, 30_000.0)),
+       valid=(-POWER_MAX_W, POWER_MAX_W)),
     _u32("energy_electrical", 2361, 1.0, "kWh", "lifetime electrical energy, heating + DHW"),
     _u32("energy_thermal", 2363, 0.1, "kWh", "lifetime thermal energy, heating + DHW"),
     _n("cop", 2371, 0.01, "", R, E, "COP (scale disputed: ×0.01 assumed)"),
