@@ -25,6 +25,8 @@ The proxy's faults (``ModbusProxy.mode``)
 ``slow-write``    every FC 06 request is held ``write_delay_s`` wall-clock seconds before it is
                   forwarded — even when its sender has died meanwhile (a slow gateway: the
                   write lands after the master is gone)
+``down-after-write``  the next FC 06 request is forwarded (the write lands), then the mode
+                  becomes ``down``: the link drops before the write's answer and read-back
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ TZ = ZoneInfo("Europe/Ljubljana")
 #: 03:00 local: manual nights are far from the scheduled 22:00 one and from the UTC day's end.
 MORNING = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
 MODES = ("pass", "down", "drop-read", "drop-write", "lose-write", "busy-write", "stall",
-         "garbage", "slow-write")
+         "garbage", "slow-write", "down-after-write")
 #: Which rig (``daemon_rig(name=…)``) the running code belongs to: every task the daemon
 #: creates inherits it, so several rigs can share one event loop and keep their logs apart.
 RIG: contextvars.ContextVar[str | None] = contextvars.ContextVar("RIG", default=None)
@@ -208,6 +210,12 @@ class ModbusProxy:
                 return
             if mode == "drop-read" and fc == 3:
                 state["cut_answer"] = True
+            if mode == "down-after-write" and fc == 6:
+                # the heat pump takes the write, then the gateway's link drops (until set back)
+                await asyncio.sleep(0.02)
+                self.stats.cut[mode] += 1
+                self.set("down")
+                return
 
     async def _downstream(self, server_r, client_w, server_w, state) -> None:
         """Server → client, in chunks as they come (a greeting may precede any answer)."""

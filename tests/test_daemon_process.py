@@ -15,15 +15,19 @@ import contextlib
 import json
 import signal
 import sqlite3
+import subprocess
 from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
+import pytest
 from cli_fixtures import run_impctl
 from daemon_fixtures import (
+    IMPCTL,
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
+    ROOT,
     DaemonProcess,
     SimProcess,
     daemon_mapping,
@@ -91,14 +95,15 @@ ONE_CONSTRAINED = {"enabled": True, "mode": "fixed", "constrained_nights": 1,
                    "normal_setpoints_c": [], "fit_when_complete": False}
 
 
-def test_sigterm_mid_night_restores_before_exit(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_a_stop_signal_mid_night_restores_before_exit(tmp_path, sig):
     with rig(tmp_path, campaign=ONE_CONSTRAINED) as (sim, config, db):
         d = _daemon(config, db, tmp_path / "daemon.log")
         try:
             wait_until(_switched_off_with_samples(sim, db), GUARD_S, "the night to switch off",
                        proc=d.proc)
             assert owner_state(sim.port) == (225, 0)  # T_max held, then loop 1 off
-            d.proc.send_signal(signal.SIGTERM)
+            d.proc.send_signal(sig)
             assert d.proc.wait(30) == 0
         finally:
             stop_process(d.proc)
@@ -110,8 +115,34 @@ def test_sigterm_mid_night_restores_before_exit(tmp_path):
         assert nights[0].reasons[0] == "stop requested (signal)"
         assert store_query(db, lambda s: s.journal_pending()) == []
         log = d.output()
-        assert "received SIGTERM" in log and "impctl daemon stopped" in log
+        assert f"received {sig.name}" in log and "impctl daemon stopped" in log
         assert log.index("restored loop1_mode") < log.index("impctl daemon stopped")
+
+
+def test_a_foreground_night_whose_terminal_goes_away_restores(tmp_path):
+    """The SSH session of ``impctl trigger --foreground`` closes mid-night: SIGHUP, and every
+    line it writes after that fails (its terminal is gone: a broken pipe here). Nothing else
+    would restore a foreground night — no daemon, no ExecStopPost."""
+    with sim_process(tmp_path, MORNING, 600.0) as sim:
+        config = write_config(tmp_path / "config.toml", daemon_mapping(
+            tmp_path / "state", sim.port, sim.clock,
+            night={"window": "02:30-06:00", "preheat_h": 0.25}))
+        fg = subprocess.Popen([*IMPCTL, "trigger", "--kind", "constrained", "--now", "--force",
+                               "--foreground", "--config", str(config)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+        try:
+            wait_until(lambda: owner_state(sim.port)[1] == 0, GUARD_S, "the switch-off",
+                       proc=fg)
+            fg.stdout.close()
+            fg.stderr.close()
+            fg.send_signal(signal.SIGHUP)
+            fg.wait(GUARD_S)
+        finally:
+            stop_process(fg)
+        assert owner_state(sim.port) == OWNER
+        night = store_query(tmp_path / "state" / "impctl.db", lambda s: s.night(1))
+        assert night.state == "aborted" and night.reasons[0] == "stop requested (signal)"
+        assert store_query(tmp_path / "state" / "impctl.db", lambda s: s.journal_pending()) == []
 
 
 def test_sigkill_mid_night_then_restart_sweeps_and_restores(tmp_path):

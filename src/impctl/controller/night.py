@@ -4,6 +4,9 @@ Safety rules this module keeps:
 
 * the owner's loop-1 setpoint and mode are journaled in the store BEFORE the first write;
 * every write goes through the safe client (whitelist, clamp, compare, read-back, budget);
+  until its read-back confirms it, impctl claims no value in that register (the write may
+  have landed before the link dropped), so the restore puts the owner's value back
+  whatever it finds there;
 * whatever ends the night — its window, T_min, an abort, an exception (also an unexpected
   one: a bug, a store that cannot write), cancellation (SIGTERM) — the journal is restored and
   verified by read-back; if the process dies instead, the journal stays pending and the next
@@ -16,7 +19,13 @@ Safety rules this module keeps:
   owner's new value (its journal entry is closed, not restored) and the others are restored;
 * one log line per incident (link lost, readings missing), when it starts, and one when it
   ends; each incident is also noted in the night's reasons;
-* a store that cannot record (a full disk) ends the night; the restore never needs it;
+* a store that cannot record (a full disk) ends the night; the restore never needs it: a
+  store that cannot even be read restores from the copy of the owner's values beside it;
+* the switch-off comes only while the night's journal is still pending and the registers
+  hold what impctl left there (``impctl restore`` may have put the owner's values back
+  since the last sample);
+* a progress line that cannot be shown (a foreground night's terminal went away) never
+  stops the night or its restore;
 * waits last one sample interval at most, a wall-clock step ends the night, the window holds
   on the monotonic clock too (:mod:`.timing`); samples are never stored out of order.
 """
@@ -26,19 +35,19 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from datetime import datetime, timedelta
 
 from ..clock import VirtualClock
 from ..errors import sqlite_problem
-from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
+from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot, WriteResult
 from ..store import Night, Store
 from .assess import record_end
 from .incidents import Incidents
-from .owner import describe_changes, fmt_register, owner_changes
+from .owner import fmt_register, keep_owner_changes, owner_changes, taken_back
 from .plan import NightPolicy, NightRequest, anticipated_end, preheat_short
 from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
-from .restore import forget_unrecorded, restore_all
+from .restore import forget_unrecorded, journal_to_restore, restore_all
 from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger(__name__)
@@ -87,6 +96,7 @@ class NightController:
         self._floor_c: float | None = None
         self._trend: list[tuple[float, float]] = []  # (POSIX s, T_air °C) since switch-off
         self._held: dict[int, float] = {}  # register → the value impctl last put there
+        self._entries: dict[int, int] = {}  # register → this night's journal entry
         self._abort_reason: str | None = None  # a household's stop request (abort())
         self._aborted = asyncio.Event()
         self._running = False
@@ -109,6 +119,14 @@ class NightController:
         self._abort_reason = reason
         self._aborted.set()
         return True
+
+    def _say(self, text: str) -> None:
+        """One line of progress to ``on_status``; a reader that went away (the terminal of a
+        foreground night closed: EIO, a broken pipe) never stops the night or its restore."""
+        try:
+            self.on_status(text)
+        except Exception as exc:  # noqa: BLE001 - the heat pump matters more than the line
+            _LOG.warning("progress line not shown (%s): %s", exc, text)
 
     def _clock_check(self) -> None:
         """End the night (raises ``_Abort``) when the wall clock stepped since the last look."""
@@ -141,7 +159,7 @@ class NightController:
         state, reasons = "done", []
         wrote = False
         self._incidents = Incidents(self.store)
-        self._held = {}
+        self._held, self._entries = {}, {}
         self._abort_reason, self._running = None, True
         self._aborted.clear()
         self._time = NightTime(self.clock, self.policy.sample_interval_s)
@@ -187,14 +205,18 @@ class NightController:
         except Exception as exc:  # noqa: BLE001 - the restore below matters more
             log.error("cannot record the night's state (%s); restoring the heat pump anyway",
                       sqlite_problem(exc), exc_info=not isinstance(exc, sqlite3.Error))
-        if [e for e in self.store.journal_pending() if e.register not in self.keep_registers]:
-            self.on_status(f"night {night_id}: restoring the heat pump")
+        journal = journal_to_restore(self.store, log)
+        if journal is not None and [e for e in journal.journal_pending()
+                                    if e.register not in self.keep_registers]:
+            self._say(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
             # What impctl last left in each register: a value that is neither this nor the
-            # journaled one was set by the owner after the last sample, and stays.
-            held = {name: self._held[ma] for ma, name in _JOURNALED if ma in self._held}
+            # journaled one was set by the owner after the last sample, and stays (from the
+            # store's journal only: the copy cannot record the owner's change).
+            held = ({name: self._held[ma] for ma, name in _JOURNALED if ma in self._held}
+                    if journal is self.store else None)
             left = await asyncio.shield(restore_all(
-                self.client, self.store, clock=self.clock,
+                self.client, journal, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
                 retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
                 keep=self.keep_registers, held=held))
@@ -207,8 +229,8 @@ class NightController:
                  "valid" if night.valid else "not valid", "; ".join(night.reasons),
                  "" if unrecorded is None else f" (not recorded: {unrecorded}; the next start "
                  "marks it interrupted)")
-        self.on_status(f"night {night_id} {night.state} "
-                       f"({'valid' if night.valid else 'not valid'})")
+        self._say(f"night {night_id} {night.state} "
+                  f"({'valid' if night.valid else 'not valid'})")
         return night
 
     async def _snapshot(self, night_id: int | None, log: logging.Logger) -> Snapshot | None:
@@ -272,7 +294,7 @@ class NightController:
                 break
             if self.clock.now() >= give_up:
                 raise NightRefused(problem)
-            self.on_status(f"night {night_id}: waiting ({problem})")
+            self._say(f"night {night_id}: waiting ({problem})")
             await self._sleep_until(self.clock.now() + timedelta(
                 seconds=self.policy.sample_interval_s))
         budget = self.client.budget
@@ -302,6 +324,7 @@ class NightController:
                 raise NightRefused(f"cannot keep the owner's values in "
                                    f"{self.store.owner_file}: {exc.strerror or exc}") from None
             forget_unrecorded(self.store, entry.id)  # this night writes it: restore anew
+            self._entries[ma] = entry.id
             if reading.value is not None:
                 self._held[ma] = reading.value
         log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
@@ -318,13 +341,13 @@ class NightController:
         if self.stop.is_set():
             raise _Abort("stop requested (signal)")
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
-        result = self._hold(await self.client.set_loop1_setpoint(preheat_target))
+        result = await self._write(_SETPOINT, self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:
             log.warning("setpoint %.1f °C clamped to %.1f °C by the configured limits",
                         result.requested, result.target)
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
-            self._hold(await self.client.set_loop1_mode(1))
+            await self._write(_MODE, self.client.set_loop1_mode(1))
         # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
         # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
         # a cold house and must not abort the night.
@@ -350,6 +373,7 @@ class NightController:
                 too_cold = preheat_short(self.last_snapshot, req, policy)
                 if too_cold:  # switching off would only take the room under T_min
                     return too_cold
+                await self._still_ours(log)
                 await self._switch_off(log)
                 switched_off = True
                 self._trend = []
@@ -358,7 +382,7 @@ class NightController:
             reason = self._check(snap, req, switched_off, now)
             if reason is not None:
                 return reason
-            self.on_status(status_line(night_id, req, snap))
+            self._say(status_line(night_id, req, snap))
             next_at = max(next_at + interval, self.clock.now())
             if next_at >= req.window_end or self._time.reached(req.window_end):
                 await self._sleep_until(req.window_end)
@@ -369,8 +393,15 @@ class NightController:
                 return "window ended"
             await self._sleep_until(next_at)
 
-    def _hold(self, result):
-        """Remember what a write left in the register (to tell the owner's changes apart)."""
+    async def _write(self, ma: int, write: Awaitable[WriteResult]) -> WriteResult:
+        """Make ``write`` (a safe-client write of register ``ma``) and remember what it left
+        there, to tell the owner's changes apart. Until its read-back confirms it, what the
+        register holds is not known — the write may have landed before the link dropped, a
+        controller may apply it late, the night may be cancelled in between — so no value is
+        claimed as impctl's: the restore then puts the owner's value back whatever it finds,
+        and never keeps the experiment's value as if the owner had set it."""
+        self._held.pop(ma, None)
+        result = await write
         self._held[result.ma] = result.read_back
         return result
 
@@ -380,25 +411,27 @@ class NightController:
         The changed registers' journal entries are closed, so the restore that follows puts
         back only what the owner did not touch, and never overwrites their new choice.
         """
-        changes = owner_changes(snap, self._held)
-        if not changes:
-            return
-        names = dict(_JOURNALED)
-        for change in changes:
-            for entry in self.store.journal_pending():
-                if entry.register == names.get(change.ma):
-                    self.store.journal_mark_owner_changed(entry.id, change.raw)
-        what = describe_changes(changes)
-        self.store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
-        raise _Abort(f"owner changed the heat pump mid-night: {what}; night ended, the "
-                     "owner's setting kept")
+        self._owner_changed(owner_changes(snap, self._held))
+
+    async def _still_ours(self, log) -> None:
+        """Before the switch-off (:func:`.owner.taken_back`): raises ``_Abort``, nothing
+        written, when the owner's values were put back since the last sample."""
+        why = await taken_back(self.client, self.store, self._entries, self._held, log)
+        if why is not None:
+            raise _Abort(why)
+
+    def _owner_changed(self, changes) -> None:
+        why = keep_owner_changes(self.store, changes)
+        if why is not None:
+            raise _Abort(why)
 
     async def _switch_off(self, log) -> None:
         if self.policy.constrained_action == "loop_off":
-            self._hold(await self.client.set_loop1_mode(0))
+            await self._write(_MODE, self.client.set_loop1_mode(0))
             log.info("heating switched off (loop-1 mode 0)")
         else:
-            self._hold(await self.client.set_loop1_setpoint(self.policy.setpoint_floor_c))
+            await self._write(_SETPOINT,
+                              self.client.set_loop1_setpoint(self.policy.setpoint_floor_c))
             log.info("heating set back to the floor %.1f °C", self.policy.setpoint_floor_c)
 
     def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,

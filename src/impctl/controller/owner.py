@@ -8,12 +8,15 @@ owner's choice too. The night controller ends the night on any of these.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-from ..heatpump import Snapshot
+from ..heatpump import HeatPumpError, Reading, Snapshot
 
 _SETPOINT, _MODE, _SYSTEM_ON = 2187, 2042, 2012
 _NAMES = {_SETPOINT: "loop1 setpoint", _MODE: "loop1 mode"}
+#: The journal's names of the registers a night writes.
+_JOURNAL_NAMES = {_SETPOINT: "loop1_setpoint", _MODE: "loop1_mode"}
 
 
 @dataclass(frozen=True)
@@ -39,15 +42,23 @@ def owner_changes(snap: Snapshot | None, held: dict[int, float]) -> list[OwnerCh
     there), plus the heating system switched off; empty when nothing changed or unknown."""
     if snap is None:
         return []
+    out = register_changes({_SETPOINT: snap.loop1_setpoint_c, _MODE: snap.loop1_mode}, held)
+    if snap.system_on.value == 0:
+        out.append(OwnerChange(_SYSTEM_ON, None, 0.0, 0))
+    return out
+
+
+def register_changes(readings: Mapping[int, Reading], held: dict[int, float]
+                     ) -> list[OwnerChange]:
+    """The registers (number → reading) whose value differs from ``held``; a register
+    without a held value or a reading is not judged."""
     out = []
-    for ma, reading in ((_SETPOINT, snap.loop1_setpoint_c), (_MODE, snap.loop1_mode)):
+    for ma, reading in readings.items():
         value = held.get(ma)
         if value is None or reading.value is None or reading.raw is None:
             continue
         if abs(reading.value - value) > 1e-6:
             out.append(OwnerChange(ma, value, reading.value, int(reading.raw)))
-    if snap.system_on.value == 0:
-        out.append(OwnerChange(_SYSTEM_ON, None, 0.0, 0))
     return out
 
 
@@ -57,3 +68,41 @@ def describe_changes(changes: list[OwnerChange]) -> str:
         "heating system switched off (2012 = 0)" if c.ma == _SYSTEM_ON else
         f"{_NAMES[c.ma]} ({c.ma}) {fmt_register(c.ma, c.held)} → {fmt_register(c.ma, c.value)}"
         for c in changes)
+
+
+def keep_owner_changes(store, changes: list[OwnerChange]) -> str | None:
+    """The owner changed these registers mid-night: their journal entries are closed (the
+    restore puts back only what the owner did not touch, never over their new choice) and an
+    event says so. Returns the night's abort reason; None when nothing changed."""
+    if not changes:
+        return None
+    for change in changes:
+        for entry in store.journal_pending():
+            if entry.register == _JOURNAL_NAMES.get(change.ma):
+                store.journal_mark_owner_changed(entry.id, change.raw)
+    what = describe_changes(changes)
+    store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
+    return f"owner changed the heat pump mid-night: {what}; night ended, the owner's setting kept"
+
+
+async def taken_back(client, store, entries: Mapping[int, int], held: dict[int, float],
+                     log) -> str | None:
+    """Before a switch-off, which comes a sample interval after the last look: the night's
+    journal entries (register → entry id) must still be pending and the registers must still
+    hold what impctl left there (``held``). ``impctl restore`` or the household may have put
+    the owner's values back since; switching off then would leave the heating off with
+    nothing left to restore. Returns why the night ends instead (an owner's change is kept as
+    :func:`keep_owner_changes` keeps it), None to go on; a register that cannot be read now
+    is left to the write's own checks and the next sample's."""
+    pending = {e.id for e in store.journal_pending()}
+    closed = [_JOURNAL_NAMES[ma] for ma in (_SETPOINT, _MODE) if entries.get(ma) not in pending]
+    if closed:
+        return (f"the owner's {' and '.join(closed)} put back from outside (impctl restore) "
+                "before the switch-off; night ended without switching off")
+    readings = {}
+    for ma in (_SETPOINT, _MODE):
+        try:
+            readings[ma] = await client.read(ma)
+        except HeatPumpError as exc:
+            log.info("register %d not read before the switch-off: %s", ma, exc)
+    return keep_owner_changes(store, register_changes(readings, held))

@@ -22,7 +22,7 @@ from collections.abc import Collection, Mapping
 from typing import Any
 
 from ..clock import VirtualClock
-from ..errors import sqlite_problem
+from ..errors import InputError, sqlite_problem
 from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError
 from ..store import JournalEntry, Store
 from ..store.restore.owner_file import OwnerValuesJournal
@@ -89,6 +89,27 @@ def _owner_set(store: Store, entry: JournalEntry, raw: int) -> None:
                    sqlite_problem(exc))
         return
     _event(store, "warning", what)
+
+
+def journal_to_restore(store: Store, log: logging.Logger = _LOG
+                       ) -> Store | OwnerValuesJournal | None:
+    """The journal a night restores from: the store's, or — when the store cannot even be
+    read (an I/O error of the card, a damaged file) — the copy of the owner's values kept
+    beside it; None when neither can be read (one line names the registers to check)."""
+    try:
+        store.journal_pending()
+        return store
+    except sqlite3.Error as exc:
+        problem = sqlite_problem(exc)
+    try:
+        copy = OwnerValuesJournal(store.owner_file)
+    except (OSError, InputError) as exc:
+        log.critical("cannot restore: the store cannot be read (%s) and neither can the copy "
+                     "of the owner's values (%s); check register 2187 (loop1_setpoint) and "
+                     "register 2042 (loop1_mode) on the heat pump", problem, exc)
+        return None
+    log.error("the store cannot be read (%s): restoring from %s", problem, store.owner_file)
+    return copy
 
 
 def record_restored(store: Store, entry: JournalEntry) -> bool:

@@ -82,9 +82,10 @@ class Daemon:
 
     # -- lifecycle -------------------------------------------------------------------------
     async def run(self) -> int:
-        """Run until SIGTERM/SIGINT; returns the exit status."""
+        """Run until SIGTERM, SIGINT or SIGHUP; returns the exit status."""
         loop = asyncio.get_running_loop()
-        for sig in (signal.SIGTERM, signal.SIGINT):
+        # SIGHUP too: its default ends the process at once, the heat pump as the night left it
+        for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
             loop.add_signal_handler(sig, self._request_stop, sig)
         self.store = Store(self.cfg.db_path)
         try:

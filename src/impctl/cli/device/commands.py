@@ -198,7 +198,9 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
     clock = clock_from_config(cfg)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    for sig in (signal.SIGTERM, signal.SIGINT):
+    # SIGHUP: the terminal or SSH session of a foreground night went away; by default it
+    # would end the process at once, the heating as the night left it
+    for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
         loop.add_signal_handler(sig, stop.set)
     with Store(cfg.db_path) as store:
         client = open_client(cfg, clock)
