@@ -90,7 +90,8 @@ def daemon_command(config_path: Path) -> None:
               help="Cancel every request not yet started, and a waiting skip of the next "
                    "night.")
 @click.option("--foreground", is_flag=True,
-              help="Run one night in this process, without a daemon (Ctrl-C restores).")
+              help="Run one night in this process, without a daemon (Ctrl-C, or the "
+                   "terminal closing, restores).")
 def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
                     tonight: bool, now: bool, expires_h: float | None, force: bool,
                     cancel: bool, foreground: bool) -> None:
