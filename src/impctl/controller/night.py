@@ -44,19 +44,15 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot,
 from ..store import Night, Store
 from .assess import record_end
 from .incidents import Incidents
-from .owner import fmt_register, keep_owner_changes, owner_changes, taken_back
-from .plan import NightPolicy, NightRequest, anticipated_end, preheat_short
+from .owner import fmt_register, journal_owner, keep_owner_changes, owner_changes, taken_back
+from .plan import NightPolicy, NightRefused, NightRequest, anticipated_end, preheat_short
 from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
-from .restore import forget_unrecorded, journal_to_restore, restore_all
+from .restore import journal_to_restore, restore_all
 from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
 _JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
-
-
-class NightRefused(Exception):
-    """The night did not start: the heat pump or the weather is not fit for it."""
 
 
 class _Abort(Exception):
@@ -297,36 +293,8 @@ class NightController:
             self._say(f"night {night_id}: waiting ({problem})")
             await self._sleep_until(self.clock.now() + timedelta(
                 seconds=self.policy.sample_interval_s))
-        budget = self.client.budget
-        if budget is None:
-            raise NightRefused("no write budget configured: writes are refused")
-        day = self.clock.now().date()
-        for ma, _ in _JOURNALED:
-            if budget.remaining(ma, day) < 2:
-                raise NightRefused(f"daily write budget of register {ma} nearly used up "
-                                   f"({budget.used(ma, day)}/{budget.limit(ma)})")
-        readings = {ma: await self.client.read(ma) for ma, _ in _JOURNALED}
-        for ma, name in _JOURNALED:
-            reading = readings[ma]
-            if reading.raw is None:
-                raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
-            # A value the restore would refuse (an undocumented mode code, a sentinel) could
-            # never be put back: the heating would stay as the night left it.
-            why = self.client.unrestorable(ma, int(reading.raw))
-            if reading.value is None or why is not None:
-                raise NightRefused(f"{name} ({ma}) reads raw {int(reading.raw)}, which impctl "
-                                   f"could not put back: {why or reading.reason}")
-        for ma, name in _JOURNALED:
-            reading = readings[ma]
-            try:
-                entry = self.store.journal_record(night_id, name, ma - 1, int(reading.raw))
-            except OSError as exc:  # the copy outside the store; nothing written yet
-                raise NightRefused(f"cannot keep the owner's values in "
-                                   f"{self.store.owner_file}: {exc.strerror or exc}") from None
-            forget_unrecorded(self.store, entry.id)  # this night writes it: restore anew
-            self._entries[ma] = entry.id
-            if reading.value is not None:
-                self._held[ma] = reading.value
+        self._entries, self._held = await journal_owner(
+            self.client, self.store, night_id, self.clock.now().date())
         log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
                  fmt_register(_SETPOINT, snap.loop1_setpoint_c.value),
                  fmt_register(_MODE, snap.loop1_mode.value))

@@ -1,6 +1,7 @@
-"""The owner's hand on the heat pump during a night: what changed behind impctl's back.
+"""The owner's values and the owner's hand on the heat pump during a night.
 
-impctl remembers what it last put in the loop-1 setpoint (2187) and mode (2042). At a sample,
+Before a night's first write the owner's loop-1 setpoint (2187) and mode (2042) are journaled
+(:func:`journal_owner`). impctl remembers what it last put there. At a sample,
 a value that differs from it was set by someone else — the owner at the controller, a
 thermostat app, ``impctl restore`` — and a heating system switched off (2012 = 0) is the
 owner's choice too. The night controller ends the night on any of these.
@@ -10,8 +11,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from datetime import date
 
 from ..heatpump import HeatPumpError, Reading, Snapshot
+from .plan import NightRefused
+from .restore import forget_unrecorded
 
 _SETPOINT, _MODE, _SYSTEM_ON = 2187, 2042, 2012
 _NAMES = {_SETPOINT: "loop1 setpoint", _MODE: "loop1 mode"}
@@ -106,3 +110,40 @@ async def taken_back(client, store, entries: Mapping[int, int], held: dict[int, 
         except HeatPumpError as exc:
             log.info("register %d not read before the switch-off: %s", ma, exc)
     return keep_owner_changes(store, register_changes(readings, held))
+
+
+async def journal_owner(client, store, night_id: int, day: date
+                        ) -> tuple[dict[int, int], dict[int, float]]:
+    """Journal the owner's loop-1 setpoint and mode before the night's first write (and, by
+    the store, in the copy beside it): (journal entry id, the owner's value) by register.
+
+    Raises :class:`~.plan.NightRefused`, nothing written, when the daily write budget of
+    ``day`` cannot pay the night and its restore, a register cannot be read, it holds a
+    value the restore could not put back (an undocumented mode code, a sentinel: the heating
+    would stay as the night left it), or the copy cannot be written."""
+    budget = client.budget
+    if budget is None:
+        raise NightRefused("no write budget configured: writes are refused")
+    for ma in (_SETPOINT, _MODE):
+        if budget.remaining(ma, day) < 2:
+            raise NightRefused(f"daily write budget of register {ma} nearly used up "
+                               f"({budget.used(ma, day)}/{budget.limit(ma)})")
+    readings = {ma: await client.read(ma) for ma in (_SETPOINT, _MODE)}
+    for ma, reading in readings.items():
+        name = _JOURNAL_NAMES[ma]
+        if reading.raw is None:
+            raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
+        why = client.unrestorable(ma, int(reading.raw))
+        if reading.value is None or why is not None:
+            raise NightRefused(f"{name} ({ma}) reads raw {int(reading.raw)}, which impctl "
+                               f"could not put back: {why or reading.reason}")
+    entries, values = {}, {}
+    for ma, reading in readings.items():
+        try:
+            entry = store.journal_record(night_id, _JOURNAL_NAMES[ma], ma - 1, int(reading.raw))
+        except OSError as exc:  # the copy outside the store; nothing written yet
+            raise NightRefused(f"cannot keep the owner's values in {store.owner_file}: "
+                               f"{exc.strerror or exc}") from None
+        forget_unrecorded(store, entry.id)  # this night writes it: restore anew
+        entries[ma], values[ma] = entry.id, reading.value
+    return entries, values

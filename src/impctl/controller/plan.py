@@ -8,6 +8,10 @@ from datetime import datetime
 from ..imp import protocol as _protocol
 
 
+class NightRefused(Exception):
+    """The night did not start: the heat pump or the weather is not fit for it."""
+
+
 @dataclass(frozen=True)
 class NightRequest:
     """One IMP night to run.
