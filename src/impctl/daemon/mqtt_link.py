@@ -113,7 +113,8 @@ class MqttLink:
             state.writes = {str(ma): f"{budget.used(ma, day)}/{budget.limit(ma)}"
                             for ma in (2187, 2042)}
         state.skip_tonight = bool(waiting_skips(store))
-        state.restore_pending = [e.register for e in store.journal_pending()]
+        state.restore_pending = [e.register for e in store.journal_pending()
+                                 if e.register not in _kept(d)]
         return state
 
     def _next_night(self, night: tuple) -> datetime | None:

@@ -211,7 +211,14 @@ class CurveWatch:
     async def _write(self, points: tuple[float, float]) -> None:
         """Write both points; the caller has checked them against :meth:`_bounds`, so the safe
         path's clamp never changes them (a clamped point would read back as the owner's
-        change and the owner's points would never come back)."""
+        change and the owner's points would never come back).
+
+        impctl's curve is let go first (``held`` None) and held again by the caller once both
+        points are read back: a write that may have landed unseen (the link dropped before
+        its read-back) leaves a point that is neither impctl's held one nor the owner's, and
+        it must never be read as the owner's change. Let go, the owner's points are the
+        daemon's restorer's to put back, or the next look sets the curve anew."""
+        self.held = None
         client = self.daemon.client
         # whitelisted while the owner asks for the curve, up to these bounds
         client.config = replace(client.config, writes=self._policy(self.owner))
@@ -260,7 +267,14 @@ class CurveWatch:
         client = d.client
         now = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
         seen = tuple(now[ma].value for ma in CURVE_REGISTERS)
-        if any(v is None or abs(v - h) > 0.05 for v, h in zip(seen, self.held, strict=True)):
+        if any(v is None for v in seen):
+            # a point that reads as missing (a sentinel, a word out of range) says nothing of
+            # who set it: judged at the next look, never taken for the owner's change
+            _LOG.info("heating curve: a point reads as missing (%s); next look later",
+                      "; ".join(str(now[ma].reason) for ma in CURVE_REGISTERS
+                                if now[ma].value is None))
+            return None
+        if any(abs(v - h) > 0.05 for v, h in zip(seen, self.held, strict=True)):
             return self._owner_changed(now)
         if self._verify is not None:
             t_out, target = now[2103].value, now[2128].value
@@ -288,7 +302,7 @@ class CurveWatch:
             why = self._outside(new, self.owner)
             if why is not None:
                 return await self._give_back(f"the new fit's curve cannot be set: {why}")
-            await self._write(new)
+            await self._write(new)   # lets go of the held curve until read back
             self.held = new
             self._say("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C "
                               "(a new fit)")
@@ -347,7 +361,7 @@ class CurveWatch:
             self._refuse("the room stayed short under impctl's curve even raised back; "
                          "impctl sets no curve until asked again (impctl curve --apply)")
             return
-        await self._write(raised)
+        await self._write(raised)   # lets go of the held curve until read back
         self.held, self.raised_k = raised, self.raised_k + cfg.raise_k
         text = f"{why}: heating curve raised by {cfg.raise_k:g} K to " \
                f"{raised[0]:.1f} / {raised[1]:.1f} °C"

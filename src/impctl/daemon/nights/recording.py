@@ -63,7 +63,7 @@ def busy(daemon: RunningDaemon) -> str | None:
         return "the heat pump is not connected"
     if daemon.night_running():
         return "an IMP night runs"
-    if daemon.store.journal_pending():
+    if daemon._restorable():  # not the heating curve's while the owner has it set
         return "the owner's settings are being restored"
     return None
 
