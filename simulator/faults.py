@@ -15,8 +15,9 @@ Syntax: comma-separated items, e.g. ``"delay=2.5,greeting,fixed-tid,missing=2103
 ``gateway-exceptions=R``  answer a share R of requests with gateway exception 10 or 11
 ``spikes=R@S``          delay a share R of answers by S wall-clock seconds (past a timeout)
 ``duplicates=R@S``      send a share R of answers twice, the copy up to S seconds later
-``foreign=R``           RTU: before a share R of FC 03 answers, a second master's answer of
-                        the same length (other registers) crosses the line
+``foreign=R[@S]``       RTU: before a share R of FC 03 answers, a second master's answer of
+                        the same length (other registers) crosses the line; the real answer
+                        follows S wall-clock seconds later (default 0)
 ``write-answer-lost=R``  a share R of FC 06 writes execute, but the gateway answers 11
 ``cop-3-decimals``      the controller encodes COP/SCOP (2371/2372) as ×0.001, not ×0.01
 ``tt3000-undocumented`` compact controller answers undocumented registers (2130 low, 2329
@@ -71,6 +72,7 @@ class Faults:
     duplicate_rate: float = 0.0
     duplicate_delay_s: float = 0.0
     foreign_rate: float = 0.0
+    foreign_delay_s: float = 0.0
     tt3000_undocumented: bool = False
     cop_3_decimals: bool = False
     write_answer_lost_rate: float = 0.0
@@ -108,7 +110,8 @@ class Faults:
         if self.duplicate_rate:
             items.append(f"duplicates={self.duplicate_rate:g}@{self.duplicate_delay_s:g}")
         if self.foreign_rate:
-            items.append(f"foreign={self.foreign_rate:g}")
+            items.append(f"foreign={self.foreign_rate:g}" + (
+                f"@{self.foreign_delay_s:g}" if self.foreign_delay_s else ""))
         if self.tt3000_undocumented:
             items.append("tt3000-undocumented")
         if self.cop_3_decimals:
@@ -168,7 +171,11 @@ def parse_faults(text: str, source: str | None = None) -> Faults:
                 else:
                     faults.duplicate_rate, faults.duplicate_delay_s = pair
             elif key == "foreign":
-                faults.foreign_rate = _rate(value)
+                rate, _, seconds = value.partition("@")
+                faults.foreign_rate = _rate(rate)
+                faults.foreign_delay_s = float(seconds) if seconds else 0.0
+                if faults.foreign_delay_s < 0:
+                    raise ValueError("seconds must be >= 0")
             elif key == "tt3000-undocumented":
                 faults.tt3000_undocumented = True
             elif key == "write-answer-lost":

@@ -66,6 +66,10 @@ class GatewayFaults:
         if rtu and request.function_code == 3 and self._hit(faults.foreign_rate):
             self.counts["foreign"] += 1
             handler.server_send(self._foreign(request), addr)
+            if faults.foreign_delay_s:  # the real answer comes late (a busy bus)
+                await asyncio.sleep(faults.foreign_delay_s)
+                if not handler.transport:
+                    return
         handler.server_send(response, addr)
         if self._hit(faults.duplicate_rate):
             self.counts["duplicates"] += 1

@@ -25,6 +25,7 @@ from impctl.heatpump import (
     UnsupportedFeature,
     WritePolicy,
 )
+from impctl.heatpump.config import ExternalRegister
 
 FAULTY = "freeze,spikes=0.1@0.3,duplicates=0.3@0.25,gateway-exceptions=0.1"
 
@@ -103,6 +104,52 @@ def test_second_master_on_rtu_is_detected_and_never_stored():
         finally:
             await sim.stop()
     run(body(), 90)
+
+
+def test_second_master_on_rtu_never_puts_a_number_in_a_single_read_or_the_heat_meter():
+    """The same foreign answers, on the reads made outside a snapshot's blocks: the heat
+    meter's (its own unit on the same line) and one register at a time (the owner's values
+    journaled before a night, the curve's points). Such a read is missing, never another
+    master's number."""
+    async def body():
+        port = free_port()
+        sim = KronotermSimulator(_frozen(heat_meter_id=30))
+        await sim.start(rtu=f"socket://127.0.0.1:{port}")
+        try:
+            link = LinkConfig(transport="rtu", serial_port=f"socket://127.0.0.1:{port}",
+                              timeout_s=0.1, attempts=4, retry_delay_s=0.01, drain_s=0.01,
+                              connect_backoff_s=(0.02, 0.1), settle_s=0.02)
+            meter = ExternalRegister(device_id=30, address=0, datatype="uint32")
+            hp = HeatPumpClient(HeatPumpConfig(link=link, heat_meter=meter), clock=sim.clock)
+            await hp.connect(max_wait_s=5)
+            registers = (2187, 2309, 2103)
+            truth = {ma: (await hp.read(ma)).raw for ma in registers}
+            heat = (await hp.snapshot()).q_hc_w.value
+            assert heat is not None and None not in truth.values()
+            # the real answer 0.08 s after the foreign one: inside the 2 × timeout a settle
+            # waits for, past the 0.02 s it waits at least
+            sim.faults.update(parse_faults("freeze,foreign=0.4@0.08"))
+            wrong = read = 0
+            for _ in range(5):
+                for ma in registers:
+                    try:
+                        reading = await hp.read(ma)
+                    except ModbusLinkError:  # the link gave up: nothing, and nothing wrong
+                        continue
+                    read += reading.raw is not None
+                    wrong += reading.raw is not None and reading.raw != truth[ma]
+                try:
+                    q = (await hp.snapshot()).q_hc_w.value
+                except ModbusLinkError:
+                    continue
+                read += q is not None
+                wrong += q is not None and q != heat
+            assert sim.gateway.counts["foreign"] > 5 and read > 12
+            assert wrong == 0
+            hp.close()
+        finally:
+            await sim.stop()
+    run(body(), 120)
 
 
 def test_gateway_exceptions_are_retried_and_writes_read_back(tmp_path, caplog):
@@ -243,6 +290,10 @@ def test_new_fault_switches_round_trip():
     faults = parse_faults(text)
     assert (faults.spike_rate, faults.spike_s) == (0.05, 1.5) and faults.tt3000_undocumented
     assert parse_faults(faults.describe()) == faults
-    for bad in ("foreign=2", "spikes=0.1", "duplicates=x@1", "gateway-exceptions=-0.1"):
+    late = parse_faults("foreign=0.3@0.15")
+    assert (late.foreign_rate, late.foreign_delay_s) == (0.3, 0.15)
+    assert parse_faults(late.describe()) == late
+    for bad in ("foreign=2", "foreign=0.1@-1", "spikes=0.1", "duplicates=x@1",
+                "gateway-exceptions=-0.1"):
         with pytest.raises(Exception, match="bad fault"):
             parse_faults(bad)

@@ -132,7 +132,24 @@ def test_a_defrost_and_a_full_load_are_heat_outputs():
 def test_minus_forty_is_a_real_outdoor_temperature_but_no_thermostat_indoors():
     assert decode(register("t_outdoor"), [(-400) & 0xFFFF], NOW).value == -40.0
     assert decode(register("room_loop1"), [(-400) & 0xFFFF], NOW).missing
-    assert decode(register("t_outdoor"), [1500], NOW).value == 150.0
+    assert decode(register("t_outdoor"), [600], NOW).value == 60.0
+
+
+@pytest.mark.parametrize(("key", "raw"), [("t_outdoor", 601), ("t_outdoor", 700),
+                                          ("room_loop1", 601), ("room_loop1", 850),
+                                          ("room_loop1", -401), ("room_loop4", 1500)])
+def test_a_room_or_outdoor_temperature_no_night_file_would_take_is_missing(key, raw):
+    """A spike the NIGHTS files refuse (their plausible ranges) is missing at the source, never
+    a stored sample that makes every later fit refuse its file."""
+    reading = decode(register(key), [raw & 0xFFFF], NOW)
+    assert reading.missing and "outside" in reading.reason
+
+
+def test_the_room_and_outdoor_ranges_are_the_night_files_own():
+    from impctl.imp.files.values import PLAUSIBLE
+
+    assert register("room_loop1").valid == PLAUSIBLE["t_air"][:2]
+    assert register("t_outdoor").valid == PLAUSIBLE["t_out"][:2]
 
 
 @given(st.sampled_from(TEMPS), st.integers(0, 0xFFFF))
@@ -151,7 +168,7 @@ def test_outdoor_encode_decode_round_trip(tenths):
     reg = register("t_outdoor")
     word = encode(reg, value)
     reading = decode(reg, [word], NOW)
-    if tenths <= -500:
+    if tenths <= -500 or value > 60.0:
         assert reading.missing
     else:
         assert reading.value == pytest.approx(value)

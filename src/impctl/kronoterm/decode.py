@@ -104,7 +104,7 @@ def decode(reg: Register, words: Sequence[int], timestamp: datetime) -> Reading:
         if raw <= ERROR_RAW_AT_OR_BELOW:
             return missing(f"sensor error code (raw {raw})")
         value = raw * reg.scale
-        low, high = TEMP_VALID_C
+        low, high = reg.valid if reg.valid is not None else TEMP_VALID_C
         if not low <= value <= high:
             return missing(f"{value:.1f} °C outside the {low:g}…{high:g} °C sanity range")
         return Reading(reg.name, round(value, 6), reg.unit, timestamp, raw=raw, source=source)

@@ -130,8 +130,15 @@ _WORKING = {0: "heating", 1: "dhw", 2: "cooling", 3: "pool", 4: "dhw overheating
 R, RW = Access.R, Access.RW
 
 
-def _t(name, ma, access, gens, desc, sentinels=_MISSING):
-    return Register(name, ma, Kind.TEMP, 0.1, "°C", access, gens, desc, sentinels)
+def _t(name, ma, access, gens, desc, sentinels=_MISSING, valid=None):
+    return Register(name, ma, Kind.TEMP, 0.1, "°C", access, gens, desc, sentinels, valid=valid)
+
+
+#: Plausible room (2160–2163) and outdoor (2103) temperatures [°C]: the NIGHTS files' own
+#: ranges (``imp.files.values.PLAUSIBLE``). A word beyond them (a spike, a sensor fault) is
+#: missing, never a sample the night files would then refuse whole.
+ROOM_VALID_C = (-40.0, 60.0)
+OUTDOOR_VALID_C = (-60.0, 60.0)
 
 
 #: Largest power a residential unit's registers give, electrical or thermal [W] (the largest
@@ -230,7 +237,7 @@ _TABLE: tuple[Register, ...] = (
     # §2.4 measured temperatures
     _t("t_return", 2101, R, CE, "return water (or buffer) temperature"),
     _t("t_dhw", 2102, R, CE, "DHW tank temperature"),
-    _t("t_outdoor", 2103, R, CE, "outdoor temperature"),
+    _t("t_outdoor", 2103, R, CE, "outdoor temperature", valid=OUTDOOR_VALID_C),
     _t("t_supply", 2104, R, CE, "supply (flow) water temperature, HP outlet"),
     _t("t_source_in", 2105, R, CE, "source inlet / evaporating"),
     _t("t_source_out", 2106, R, CE, "source outlet / compressor"),
@@ -255,10 +262,14 @@ _TABLE: tuple[Register, ...] = (
     _n("power_electrical", 2129, 1.0, "W", R, E, "current electrical power consumption",
        valid=(0.0, POWER_MAX_W)),
     _t("t_loop1_water", 2130, R, E, "loop-1 water (flow) temperature"),
-    _t("room_loop1", 2160, R, CE, "loop-1 room thermostat temperature", _THERMOSTAT),
-    _t("room_loop2", 2161, R, CE, "loop-2 room thermostat temperature", _THERMOSTAT),
-    _t("room_loop3", 2162, R, CE, "loop-3 room thermostat temperature", _THERMOSTAT),
-    _t("room_loop4", 2163, R, CE, "loop-4 room thermostat temperature", _THERMOSTAT),
+    _t("room_loop1", 2160, R, CE, "loop-1 room thermostat temperature", _THERMOSTAT,
+       valid=ROOM_VALID_C),
+    _t("room_loop2", 2161, R, CE, "loop-2 room thermostat temperature", _THERMOSTAT,
+       valid=ROOM_VALID_C),
+    _t("room_loop3", 2162, R, CE, "loop-3 room thermostat temperature", _THERMOSTAT,
+       valid=ROOM_VALID_C),
+    _t("room_loop4", 2163, R, CE, "loop-4 room thermostat temperature", _THERMOSTAT,
+       valid=ROOM_VALID_C),
     _b("thermostat_failure", 2186, E, "thermostat failure, b0–b3 loops 1–4"),
     _t("loop1_setpoint", 2187, RW, CE, "loop-1 desired temperature (room if KT)"),
     _t("loop2_flow_target", 2188, R, CE, "loop-2 current desired flow temperature"),
