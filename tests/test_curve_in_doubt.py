@@ -119,3 +119,33 @@ def test_a_curve_point_that_reads_as_missing_is_not_the_owners_change(tmp_path):
             assert [e.register for e in rig.store.journal_pending()] == [
                 "loop1_curve_cold", "loop1_curve_mild"]
     run_virtual(body(), 200)
+
+
+def test_impctls_points_landing_after_impctl_restore_closed_the_journal_go_back(tmp_path):
+    """``impctl restore`` in another process, while the watch writes the curve: it finds the
+    owner's points still on the heat pump, marks them restored, and impctl's points land after
+    it — the heat pump holds impctl's curve with nothing journaled. The watch's next look puts
+    the owner's points back and sets no curve until asked again."""
+    from impctl.store import Store
+
+    state = tmp_path / "state"
+    _asked(state)
+
+    async def body():
+        async with daemon_rig(tmp_path, speed=SPEED, heatpump=LINK) as rig:
+            owner = (rig.sim.rw[2309], rig.sim.rw[2314])
+            points = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+            _kept(state, points)
+            await rig.until(lambda: rig.daemon.curve.held == points, 60)
+            assert (rig.sim.rw[2309], rig.sim.rw[2314]) == _raw(points)
+            # what that `impctl restore` left: the journal closed, impctl's points on the pump
+            with Store(rig.daemon.cfg.db_path, create=False) as other:
+                for entry in other.journal_pending():
+                    other.journal_mark_restored(entry.id)
+            await rig.until(lambda: (rig.sim.rw[2309], rig.sim.rw[2314]) == owner, 60)
+            assert rig.daemon.curve.held is None
+            intent = json.loads((state / "curve-intent.json").read_text())
+            assert intent["apply"] is False
+            await rig.sim_minutes(10)
+            assert (rig.sim.rw[2309], rig.sim.rw[2314]) == owner   # not set again
+    run_virtual(body(), 200)

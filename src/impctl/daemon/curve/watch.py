@@ -100,6 +100,7 @@ class CurveWatch:
         self.daemon = daemon
         self.held: tuple[float, float] | None = None   # points impctl wrote [°C]
         self.owner: tuple[float, float] | None = None  # the owner's points [°C]
+        self._owner_raw: dict[int, int] = {}             # … as journaled (raw words)
         self._verify: float | None = None                # 2128 before the write [°C]
         # the room's looks since the watch began this window: (simulated s, K below setpoint)
         self._looks: deque[tuple[float, float]] = deque()
@@ -139,8 +140,26 @@ class CurveWatch:
             curve = load_curve(d.cfg.state_dir)
             if self.held is None:
                 await self._set(curve)
+            elif not curve_entries(d.store):
+                await self._journal_closed()
             else:
                 await self._follow(curve)
+
+    async def _journal_closed(self) -> None:
+        """impctl holds its curve, but the owner's points are no longer journaled: closed from
+        outside (``impctl restore`` in another process) while impctl's points were being
+        written, so they landed after the owner's went back. The owner asked for their
+        settings: their points are put back from what this watch journaled, verified, and no
+        curve is set until asked again."""
+        d = self.daemon
+        self._intent_off("the owner's settings were put back from outside")
+        for ma, raw in self._owner_raw.items():
+            await d.client.restore_raw(ma, raw)
+        self.held, self._verify = None, None
+        self._keep(False)
+        self._say("warning", "the owner's settings were put back from outside (impctl restore) "
+                             "while the heating curve was being set: their points are back, "
+                             "impctl sets no curve until asked again (impctl curve --apply)")
 
     # -- setting -------------------------------------------------------------------------------
     def _refuse(self, why: str) -> None:
@@ -168,13 +187,14 @@ class CurveWatch:
             return self._refuse("the curve points cannot be read")
         # the points before impctl ever wrote: journaled (kept across restarts), else now
         pending = {e.address + 1: e.raw_value for e in curve_entries(d.store)}
-        owner = tuple(pending.get(ma, int(before[ma].raw)) / 10.0 for ma in CURVE_REGISTERS)
+        owner_raw = {ma: pending.get(ma, int(before[ma].raw)) for ma in CURVE_REGISTERS}
+        owner = tuple(owner_raw[ma] / 10.0 for ma in CURVE_REGISTERS)
         why = self._outside(points, owner)
         if why is not None:
             return self._refuse(why)
         for ma, name in CURVE_REGISTERS.items():
             d.store.journal_record(None, name, ma - 1, int(before[ma].raw))
-        self.owner = owner
+        self.owner, self._owner_raw = owner, owner_raw
         self._keep(True)
         await self._write(points)
         self._verify = before[2128].value
