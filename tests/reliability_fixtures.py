@@ -360,10 +360,10 @@ class DaemonRig:
         return self.sim.plant.setpoint_c, self.sim.plant.loop_mode
 
     async def trigger(self, kind: str, setpoint_c: float = 21.0) -> int:
-        """Queue a manual night (as ``impctl trigger --now``); return its night id once it
+        """Queue a manual night (as ``impctl trigger --now --force``); return its night id once it
         exists."""
         before = len(self.store.nights())
-        self.store.add_request(kind, setpoint_c, "now")
+        self.store.add_request(kind, setpoint_c, "now", forced=True)
         # Taken at once, as the daemon's 1 s trigger-poll job would (APScheduler times its
         # jobs on the wall clock, not on the loop's, possibly virtual, time), in the rig's
         # context so that the night's log lines are this rig's.
@@ -409,7 +409,7 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
                      t_out_c: float = 0.0, epoch: datetime = MORNING,
                      heatpump: dict | None = None, night: dict | None = None,
                      sim_faults: str | None = None, name: str = "rig",
-                     record: dict | None = None,
+                     record: dict | None = None, campaign: dict | None = None,
                      daemon_clock: Callable[[VirtualClock], VirtualClock] | None = None
                      ) -> AsyncIterator[DaemonRig]:
     """Simulator → proxy → in-process daemon, one event loop, one accelerated clock (on the
@@ -435,7 +435,8 @@ async def daemon_rig(tmp_path: Path, *, speed: float, house: HouseParameters = H
         mapping = daemon_mapping(
             tmp_path / "state", proxy.port, clock, heatpump=heatpump or {},
             night={"window": "22:00-23:00", "preheat_h": 0.1, "sample_interval_s": 60,
-                   **(night or {})}, **({"record": record} if record else {}))
+                   **(night or {})}, **({"record": record} if record else {}),
+            **({"campaign": campaign} if campaign else {}))
         daemon = Daemon(config_from_mapping(mapping),
                         clock=clock if daemon_clock is None else daemon_clock(clock))
         context = contextvars.copy_context()
@@ -659,7 +660,8 @@ def crash_run(tmp_path: Path, points: int, seed: int, *, speed: float = 7200.0,
                 from impctl.store import Store
 
                 with Store(db) as store:
-                    store.add_request(kind, 21.0 if kind == "constrained" else 22.0, "now")
+                    store.add_request(kind, 21.0 if kind == "constrained" else 22.0, "now",
+                                      forced=True)
                 wait_until(lambda b=nights_before: len(db_facts(db)["nights"]) > b, CRASH_GUARD_S,
                            "the daemon to take the night", interval_s=0.01, proc=daemon.proc)
                 t0 = time.monotonic()

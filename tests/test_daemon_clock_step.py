@@ -58,7 +58,7 @@ def test_a_queued_abort_and_a_trigger_are_taken_within_seconds_after_a_step_back
             queued = loop.now()
             await rig.until(lambda: not rig.store.pending_commands(), 30)
             abort_after = loop.now() - queued
-            rig.store.add_request("normal", 22.0, "now")
+            rig.store.add_request("normal", 22.0, "now", forced=True)
             queued = loop.now()
             await rig.until(lambda: rig.store.nights(), 30)
             night_after = loop.now() - queued

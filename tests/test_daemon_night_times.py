@@ -29,7 +29,7 @@ LATE = datetime(2026, 1, 12, 22, 30, tzinfo=TZ)
 
 
 @contextlib.asynccontextmanager
-async def _daemon(tmp_path, epoch: datetime):
+async def _daemon(tmp_path, epoch: datetime, grace_s: float = 14400):
     """A daemon on the default night window (22:00–05:00, 2 h preheat) with the fixed campaign
     on and ``misfire_grace_s`` 4 h (allowed up to 12 h: "a night whose 22:00 start was missed by
     less still runs")."""
@@ -40,7 +40,7 @@ async def _daemon(tmp_path, epoch: datetime):
         mapping = daemon_mapping(tmp_path / "state", sim.port, clock,
                                  night={"window": "22:00-05:00", "preheat_h": 2.0,
                                         "sample_interval_s": 300},
-                                 campaign={"enabled": True, "misfire_grace_s": 14400})
+                                 campaign={"enabled": True, "misfire_grace_s": grace_s})
         daemon = Daemon(config_from_mapping(mapping, "test"), clock=clock)
         task = asyncio.create_task(daemon.run())
         try:
@@ -75,6 +75,20 @@ def test_a_night_job_fired_late_within_the_grace_runs_tonights_window(tmp_path):
         datetime(2026, 1, 12, 22, 0, tzinfo=TZ), datetime(2026, 1, 13, 5, 0, tzinfo=TZ)), (
         f"night {night.id} created at 12 Jan 22:30 for the window "
         f"{_local(night.window_start)} → {_local(night.window_end)}")
+
+
+def test_a_night_job_fired_too_late_for_a_night_runs_none_and_writes_nothing(tmp_path):
+    """Fired at 04:00 (a resume from suspend) within a 12 h grace: tonight's window has 1 h
+    left, less than a night needs — no night, no write, nothing counted against the campaign."""
+    async def scenario():
+        async with _daemon(tmp_path, datetime(2026, 1, 13, 4, 0, tzinfo=TZ),
+                           grace_s=43200) as (daemon, clock):
+            await daemon._night_job()   # as APScheduler fires it
+            return daemon.store.nights(), daemon.client.budget.used(
+                2187, clock.now().date()), daemon.client.budget.used(2042, clock.now().date())
+
+    nights, setpoint_writes, mode_writes = run_virtual(scenario(), 86400)
+    assert nights == [] and setpoint_writes == mode_writes == 0
 
 
 def test_a_skip_of_the_next_night_holds_after_a_late_night_job(tmp_path):

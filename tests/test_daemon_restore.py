@@ -43,7 +43,7 @@ def test_link_back_after_the_night_gave_up_restoring(tmp_path):
             task = asyncio.create_task(daemon.run())
             try:
                 await wait_for(lambda: daemon.scheduler is not None, 10)
-                daemon.store.add_request("constrained", 21.0, "now")
+                daemon.store.add_request("constrained", 21.0, "now", forced=True)
                 # Taken now, as the 1 s trigger-poll job would (APScheduler times it on the
                 # wall clock, not on the loop's virtual time).
                 await daemon._poll_requests()

@@ -300,7 +300,7 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
                 campaign=ONE_CONSTRAINED) as (sim, config, db):
         # A stored fit (the fit JSON's lumped block, with the flexibility block).
         with Store(db) as store:
-            store.add_fit([1, 2, 3], {"lumped": {
+            fit_id = store.add_fit([1, 2, 3], {"lumped": {
                 "hlc": {"value": 182.4, "low": 170.1, "high": 195.0, "determined": True},
                 "c_m": {"value": 3.1e7, "low": 2.5e7, "high": 3.9e7, "determined": False},
                 "tau": {"value": 49.3, "low": 44.0, "high": 55.2, "determined": True}},
@@ -337,6 +337,16 @@ def test_refused_credentials_and_skip_tonight(tmp_path):
             assert owner_state(sim.port) == OWNER
             assert d.output().count("retained messages are not commands") == 1
             assert "abort requested" not in d.output()
+            # The morning's season refit rewrites the fit in place (same id, same nights):
+            # Home Assistant gets its numbers at the next look, not at the next restart.
+            with Store(db) as store:
+                assert store.refresh_fit_season(fit_id, {
+                    "hlc_w_per_k": {"value": 190.0, "low": 180.0, "high": 200.0},
+                    "owner_nights": 11})
+            wait_until(lambda: ha.latest(f"{BASE}/fit/hlc").json()["value"] == 190.0, 90,
+                       "the season refit's HLC", proc=d.proc)
+            hlc = ha.latest(f"{BASE}/fit/hlc").json()
+            assert (hlc["source"], hlc["owner_nights"]) == ("season model", 11)
         finally:
             assert stop_process(d.proc) == 0
         # A clean stop says offline itself (no last will is sent then).

@@ -90,7 +90,7 @@ def test_state_dir_fills_mid_night_restore_needs_no_space(tmp_path):
             from impctl.store import Store
 
             with Store(db) as store:
-                store.add_request("constrained", 21.0, "now")
+                store.add_request("constrained", 21.0, "now", forced=True)
 
             def heating_off_and_sampled() -> bool:
                 facts = db_facts(db)

@@ -178,7 +178,7 @@ BAD_CONFIG_VALUES: dict[tuple[str, ...], list[str]] = {
     ("campaign", "constrained_nights"): ["-1", "1.5", '"two"'],
     ("campaign", "constrained_setpoint_c"): ["30.0", "10.0", *_NONFINITE],
     ("campaign", "normal_setpoints_c"): ["[30.0]", "[nan]", '["21"]', "21.0"],
-    ("campaign", "misfire_grace_s"): ["-1.0", *_NONFINITE],
+    ("campaign", "misfire_grace_s"): ["-1.0", "0", "0.5", *_NONFINITE],
     ("campaign", "enabled"): ['"yes"', "1"],
     ("campaign", "mode"): ['"smart"', "1"],
     ("campaign", "max_nights"): ["1", "2.5"],

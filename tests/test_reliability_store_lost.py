@@ -60,7 +60,7 @@ def power_cut_mid_night(tmp_path: Path) -> Iterator[tuple[SimProcess, Path, Path
             from impctl.store import Store
 
             with Store(db) as store:
-                store.add_request("constrained", 21.0, "now")
+                store.add_request("constrained", 21.0, "now", forced=True)
             wait_until(lambda: owner_state(sim.port) == (225, 0) and len(
                 db_facts(db)["samples"]) >= 3, GUARD_S, "the heating to be off",
                 proc=daemon.proc)

@@ -76,7 +76,7 @@ def test_a_stop_pressed_as_a_manual_night_starts_ends_that_night(tmp_path):
     async def scenario():
         async with daemon_rig(tmp_path, speed=600.0) as rig:
             await rig.sim_minutes(2)
-            rig.store.add_request("constrained", 21.0, "now")   # "start now" …
+            rig.store.add_request("constrained", 21.0, "now", forced=True)   # "start now" …
             rig.store.add_command("abort", "mqtt")              # … and "stop", same second
             await rig.until(lambda: not rig.store.pending_commands("abort")
                             and not rig.store.pending_requests(), 30)

@@ -225,8 +225,8 @@ def _check(cfg: Config, problems: list[str], limits_known: bool = True) -> None:
         bad("night.t_out_max_c", "must be above night.t_out_min_c")
     if not 0 <= night.emission_lag_h <= 6:
         bad("night.emission_lag_h", "must lie in 0–6 h")
-    if camp.misfire_grace_s < 0:
-        bad("campaign.misfire_grace_s", "must be >= 0 s")
+    if camp.misfire_grace_s < 1:  # the scheduler's grace: a whole, positive number of s
+        bad("campaign.misfire_grace_s", "must be at least 1 s")
     if cfg.clock.epoch:
         try:
             aware = datetime.fromisoformat(cfg.clock.epoch).tzinfo is not None

@@ -308,6 +308,8 @@ class NightController:
             raise _Abort(self._abort_reason)
         if self.stop.is_set():
             raise _Abort("stop requested (signal)")
+        if self._time.reached(req.window_end):   # a late start (a resume from suspend)
+            raise _Abort("the night's window had ended before its first write")
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
         result = await self._write(_SETPOINT, self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:
@@ -337,7 +339,8 @@ class NightController:
             if self._time.reached(deadline):
                 raise _Abort("hard deadline passed")
             if (req.kind == "constrained" and not switched_off
-                    and self._time.reached(req.window_start)):
+                    and self._time.reached(req.window_start)
+                    and not self._time.reached(req.window_end)):
                 too_cold = preheat_short(self.last_snapshot, req, policy)
                 if too_cold:  # switching off would only take the room under T_min
                     return too_cold

@@ -37,6 +37,9 @@ from .nights.schedule import (
     drop_expired_requests,
     every_second,
     next_act_time,
+    night_needs_h,
+    now_window,
+    window_after_act,
 )
 from .restoring import restore_pending, sweep_orphans
 from .systemd import Notifier
@@ -329,6 +332,14 @@ class Daemon:
             scheduled = next_act_time(self.cfg, now - timedelta(
                 seconds=self.cfg.campaign.misfire_grace_s + 1))
             act = min(scheduled, now)
+        left_h = (window_after_act(act, self.cfg)[1] - self.clock.now()).total_seconds() / 3600
+        if left_h < night_needs_h(self.cfg):
+            # fired so late (a resume from suspend within the misfire grace) that tonight's
+            # window cannot hold a night any more: no night, no write, nothing counted
+            _LOG.warning("night job at %s skipped: %.1f h of tonight's window left, less than "
+                         "the %g h a night needs", self.clock.now().isoformat(),
+                         max(left_h, 0.0), night_needs_h(self.cfg))
+            return
         if self.cfg.campaign.adaptive and self.cfg.campaign.enabled:
             fit_running = self._fit_task is not None and not self._fit_task.done()
             req = adaptive_tonight(self.store, self.cfg, act, fit_running)
@@ -344,18 +355,24 @@ class Daemon:
             return
         drop_expired_requests(self.store, self.clock.now())
         for req in self.store.pending_requests():
-            if req.when != "now" or not self.store.take_request(req.id):
+            if req.when != "now":
                 continue
-            s_min, e_min = self.cfg.window_minutes
-            length = timedelta(minutes=(e_min - s_min) % (24 * 60))
-            start = self.clock.now() + timedelta(hours=self.cfg.night.preheat_h)
+            window = now_window(self.cfg, self.clock.now(), bool(req.extra.get("forced")))
+            if isinstance(window, str):
+                if self.store.close_request(req.id, "refused"):
+                    _LOG.warning("manual trigger %d not run: %s", req.id, window)
+                    self.store.add_event("warning", f"request {req.id} not run: {window}")
+                continue
+            if not self.store.take_request(req.id):
+                continue
+            start, end = window
             sp = req.setpoint_c if req.setpoint_c is not None else (
                 self.cfg.campaign.constrained_setpoint_c)
             _LOG.info("manual trigger %d: %s night at %.1f °C now", req.id, req.kind, sp)
             # Its own task, so this 1 s poll returns at once (the commands are polled
             # beside it all night).
             self._night_task = asyncio.create_task(self._run_night(NightRequest(
-                req.kind, sp, start, start + length, self.cfg.night.comfort_band_k,
+                req.kind, sp, start, end, self.cfg.night.comfort_band_k,
                 source="trigger")), name=f"manual night {req.id}")
             self._night_task.add_done_callback(_log_crash)
             return

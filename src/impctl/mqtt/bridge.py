@@ -317,12 +317,14 @@ class MqttBridge:
     async def _publish_fit(self, client: aiomqtt.Client) -> None:
         self._fit_checked = time.monotonic()
         fit = self.source.last_fit()
-        key = None if fit is None else (fit[0], tuple(fit[1]))
+        # What would be sent, not which fit: the morning's season refit rewrites the newest
+        # fit's numbers in place (same id, same nights)
+        payloads = {name: json.dumps(payload) for name, payload in fit_payloads(fit).items()}
+        key = json.dumps(payloads, sort_keys=True)
         if key == self._fit_sent:
             return
-        for name, payload in fit_payloads(fit).items():
-            await client.publish(f"{self.cfg.topic}/fit/{name}", json.dumps(payload),
-                                 qos=1, retain=True)
+        for name, payload in payloads.items():
+            await client.publish(f"{self.cfg.topic}/fit/{name}", payload, qos=1, retain=True)
         self._fit_sent = key
         await self._publish_curve(client)
 

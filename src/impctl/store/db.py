@@ -208,42 +208,50 @@ class Store(CampaignTables, HouseInputTables, JournalTables, OwnerRecordTables):
 
     # -- manual trigger requests -----------------------------------------------------------
     def add_request(self, kind: str, setpoint_c: float | None, when: str, *,
-                    expires: datetime | None = None) -> int:
+                    expires: datetime | None = None, forced: bool = False) -> int:
         """Queue a manual night for the daemon; returns the request id.
 
         ``expires`` (aware, on the daemon's clock): the daemon drops the request unstarted
-        after it; None = never.
+        after it; None = never. ``forced``: a ``now`` night that may run in daytime
+        (``--force``).
         """
         cur = self._db.execute(
-            "INSERT INTO requests (kind, setpoint_c, run_when, created, expires)"
-            " VALUES (?, ?, ?, ?, ?)",
-            (kind, setpoint_c, when, _iso(_now()), _iso(expires)))
+            "INSERT INTO requests (kind, setpoint_c, run_when, created, expires, extra)"
+            " VALUES (?, ?, ?, ?, ?, ?)",
+            (kind, setpoint_c, when, _iso(_now()), _iso(expires),
+             json.dumps({"forced": True} if forced else {})))
         return int(cur.lastrowid)
 
     def queue_request(self, kind: str, setpoint_c: float | None, when: str, *,
-                      expires: datetime | None = None) -> tuple[int, bool]:
+                      expires: datetime | None = None, forced: bool = False) -> tuple[int, bool]:
         """Queue a manual night unless an identical one (kind, setpoint, when) is waiting.
 
         Returns (request id, joined): ``joined`` is True when the waiting request was kept
-        (its expiry moved to the later of the two) instead of a new one being added, so a
-        hundred presses of one button are one request, not a hundred.
+        (its expiry moved to the later of the two; forced if either was) instead of a new one
+        being added, so a hundred presses of one button are one request, not a hundred.
+        ``forced``: a ``now`` night asked for with ``--force`` (it may run in daytime).
         """
         with self._immediate():
             row = self._db.execute(
-                "SELECT id, expires FROM requests WHERE taken IS NULL AND kind = ? AND"
+                "SELECT id, expires, extra FROM requests WHERE taken IS NULL AND kind = ? AND"
                 " run_when = ? AND setpoint_c IS ? ORDER BY id LIMIT 1",
                 (kind, when, setpoint_c)).fetchone()
             if row is None:
                 cur = self._db.execute(
-                    "INSERT INTO requests (kind, setpoint_c, run_when, created, expires)"
-                    " VALUES (?, ?, ?, ?, ?)",
-                    (kind, setpoint_c, when, _iso(_now()), _iso(expires)))
+                    "INSERT INTO requests (kind, setpoint_c, run_when, created, expires, extra)"
+                    " VALUES (?, ?, ?, ?, ?, ?)",
+                    (kind, setpoint_c, when, _iso(_now()), _iso(expires),
+                     json.dumps({"forced": True} if forced else {})))
                 out = (int(cur.lastrowid), False)
             else:
                 old = _dt(row["expires"])
                 if old is not None and (expires is None or expires > old):
                     self._db.execute("UPDATE requests SET expires = ? WHERE id = ?",
                                      (_iso(expires), row["id"]))
+                if forced:
+                    extra = {**json.loads(row["extra"]), "forced": True}
+                    self._db.execute("UPDATE requests SET extra = ? WHERE id = ?",
+                                     (json.dumps(extra), row["id"]))
                 out = (int(row["id"]), True)
         return out
 

@@ -11,7 +11,7 @@ import json
 import logging
 import os
 import sys
-from datetime import datetime, timedelta
+from datetime import datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
@@ -80,12 +80,15 @@ def daemon_command(config_path: Path) -> None:
               help="T_set [°C] (default: the campaign's constrained setpoint).")
 @click.option("--tonight", is_flag=True, help="Run at the next night window (the default).")
 @click.option("--now", is_flag=True,
-              help="Start now (preheat, then a window's length); outside the night window "
-                   "and its preheat only with --force.")
+              help="Start now: the preheat, then the night until the night window ends "
+                   "(at least 3 h of it must be left); outside the window and its preheat "
+                   "only with --force.")
 @click.option("--expires-h", "expires_h", type=float, default=None,
               help="Drop the request unstarted after this many hours of real time [h] "
                    "(default: 1 h for --now; the end of the next night for --tonight).")
-@click.option("--force", is_flag=True, help="Allow a --now night in daytime.")
+@click.option("--force", is_flag=True,
+              help="Allow a --now night in daytime, or with less than 3 h of the window "
+                   "left: the preheat, then a whole window's length.")
 @click.option("--cancel", is_flag=True,
               help="Cancel every request not yet started, and a waiting skip of the next "
                    "night.")
@@ -127,12 +130,17 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         raise InputError(f"setpoint {sp:g} °C (top {top:g} °C) outside the safety limits "
                          f"[{lo:g}, {hi:g}] °C", place="--setpoint")
     clock = clock_from_config(cfg)
-    from ...daemon.nights.schedule import daytime_reason
+    from ...daemon.nights.schedule import daytime_reason, now_window
 
     daytime = daytime_reason(cfg, clock.now())
     if when == "now" and daytime and not force:
         raise InputError(f"{daytime}: a --now night would run in daytime; add --force to run "
                          "it anyway, or use --tonight", place="--now")
+    if when == "now" and not force:
+        window = now_window(cfg, clock.now(), False)
+        if isinstance(window, str):   # too little of the window left: it would end at once
+            raise InputError(f"{window}; add --force to run a whole night from now, or use "
+                             "--tonight", place="--now")
     if foreground:
         _setup_logging(cfg.log_level, cfg.timezone)
         with Store(cfg.db_path):  # creates the state directory, or one clear line
@@ -142,12 +150,13 @@ def trigger_command(config_path: Path, kind: str | None, setpoint: float | None,
         role = "trigger --foreground"
         with DaemonLock(cfg.state_dir, role=role) as lock, \
                 HeatPumpLock(cfg.heatpump.link, cfg.state_dir, role=role):
-            sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock)))
+            sys.exit(asyncio.run(_foreground_night(cfg, kind, sp, when, lock, force)))
     from ...daemon.nights.waiting import describe_queued, queue_night
 
     expires = request_expiry(cfg, clock, when, expires_h)
     with Store(cfg.db_path) as store:
-        rid, joined = queue_night(store, kind, sp, when, expires)
+        rid, joined = queue_night(store, kind, sp, when, expires,
+                                  forced=force and when == "now")
         if joined:  # the waiting request's expiry, maybe later than this one's
             expires = next((r.expires for r in store.pending_requests() if r.id == rid),
                            None) or expires
@@ -181,7 +190,8 @@ def _cancel_requests(cfg) -> None:
         click.echo(f"cancelled skip {c.id} ({c.source}): the next night runs as planned")
 
 
-async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
+async def _foreground_night(cfg, kind: str, sp: float, when: str, lock,
+                            force: bool = False) -> int:
     import signal
 
     from ...daemon.locks.store import HEARTBEAT_S
@@ -193,7 +203,7 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
 
     from ...controller import NightController, NightRefused, NightRequest
     from ...daemon.configured import clock_from_config, open_client, policy_from_config
-    from ...daemon.nights.schedule import next_act_time, window_after_act
+    from ...daemon.nights.schedule import next_act_time, now_window, window_after_act
     from ...store import Store
 
     clock = clock_from_config(cfg)
@@ -208,9 +218,10 @@ async def _foreground_night(cfg, kind: str, sp: float, when: str, lock) -> int:
         await client.connect(max_wait_s=60.0)
         try:
             if when == "now":
-                s_min, e_min = cfg.window_minutes
-                start = clock.now() + timedelta(hours=cfg.night.preheat_h)
-                end = start + timedelta(minutes=(e_min - s_min) % 1440)
+                window = now_window(cfg, clock.now(), force)
+                if isinstance(window, str):
+                    raise InputError(window, place="--now")
+                start, end = window
             else:
                 start, end = window_after_act(next_act_time(cfg, clock.now()), cfg)
             ctl = NightController(client, store, clock, policy_from_config(cfg),

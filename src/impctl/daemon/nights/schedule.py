@@ -18,6 +18,7 @@ from apscheduler.triggers.cron import CronTrigger
 
 from ...clock import VirtualClock
 from ...config import Config
+from ...imp.protocol import MIN_NIGHT_H
 from ...store import Store
 
 _LOG = logging.getLogger("impctl.daemon")
@@ -201,6 +202,38 @@ def daytime_reason(cfg: Config, now: datetime) -> str | None:
         return None
     return (f"it is {local:%H:%M %Z}, outside the night window {cfg.night.window} and its "
             f"{cfg.night.preheat_h:g} h preheat")
+
+
+def now_window(cfg: Config, now: datetime, forced: bool) -> tuple[datetime, datetime] | str:
+    """(window start, window end) of a ``now`` night taken at ``now``, or why it does not
+    run. Forced (``--force``): the preheat from now and a whole window's length after it,
+    whenever that falls. Else only inside the night window: taken in the window or its
+    preheat, it ends when the configured window ends, and a rest shorter than a night needs
+    (:data:`~impctl.imp.protocol.MIN_NIGHT_H`) does not run — a request left waiting behind
+    another night, or pressed late, never runs into the morning."""
+    s_min, e_min = cfg.window_minutes
+    start = now + timedelta(hours=cfg.night.preheat_h)
+    if forced:
+        return start, start + timedelta(minutes=(e_min - s_min) % 1440)
+    why = daytime_reason(cfg, now)
+    if why is not None:
+        return f"{why}; a now night runs in daytime only with --force"
+    local = now.astimezone(ZoneInfo(cfg.timezone))
+    ends = [window_for(local.date() + timedelta(days=d), cfg)[1] for d in (-1, 0, 1)]
+    end = min(e for e in ends if e > now)
+    need_h = night_needs_h(cfg)
+    if (end - start).total_seconds() < need_h * 3600.0:
+        return (f"only {max(0.0, (end - start).total_seconds() / 3600.0):.1f} h of the night "
+                f"window {cfg.night.window} left after the {cfg.night.preheat_h:g} h preheat, "
+                f"less than the {need_h:g} h a night needs")
+    return start, end
+
+
+def night_needs_h(cfg: Config) -> float:
+    """The least of a night window a night is started on [h]: what the fit needs
+    (:data:`~impctl.imp.protocol.MIN_NIGHT_H`), or the whole window where it is shorter."""
+    s_min, e_min = cfg.window_minutes
+    return min(MIN_NIGHT_H, ((e_min - s_min) % 1440) / 60.0)
 
 
 def request_expiry(cfg: Config, clock: VirtualClock, when: str,

@@ -16,9 +16,10 @@ SKIP_VALID_H = 24.0
 
 
 def queue_night(store: Store, kind: str, setpoint_c: float, when: str,
-                expires: datetime) -> tuple[int, bool]:
-    """Queue a manual night, or keep the identical one already waiting: (id, joined)."""
-    return store.queue_request(kind, setpoint_c, when, expires=expires)
+                expires: datetime, forced: bool = False) -> tuple[int, bool]:
+    """Queue a manual night, or keep the identical one already waiting: (id, joined).
+    ``forced``: a ``now`` night that may run in daytime (``--force``)."""
+    return store.queue_request(kind, setpoint_c, when, expires=expires, forced=forced)
 
 
 def describe_queued(rid: int, joined: bool, kind: str, setpoint_c: float, when: str) -> str:
