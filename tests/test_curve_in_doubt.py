@@ -41,6 +41,16 @@ def _raw(points: tuple[float, float]) -> tuple[int, int]:
     return round(points[0] * 10), round(points[1] * 10)
 
 
+async def _curve_set(rig, state: Path) -> tuple[tuple[int, int], tuple[float, float]]:
+    """A kept curve 4 K and 2 K below the owner's points, set and held: (the owner's raw
+    points, impctl's points [°C])."""
+    owner = (rig.sim.rw[2309], rig.sim.rw[2314])
+    points = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
+    _kept(state, points)
+    await rig.until(lambda: rig.daemon.curve.held == points, 60)
+    return owner, points
+
+
 def test_a_curve_point_written_without_a_read_back_is_never_the_owners(tmp_path):
     state = tmp_path / "state"
     _asked(state)
@@ -83,10 +93,7 @@ def test_the_house_is_recorded_while_impctls_curve_is_set(tmp_path):
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED, night={"sample_interval_s": 120},
                               record={"keep_days": 7}) as rig:
-            owner = (rig.sim.rw[2309], rig.sim.rw[2314])
-            points = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
-            _kept(state, points)
-            await rig.until(lambda: rig.daemon.curve.held == points, 60)
+            _, points = await _curve_set(rig, state)
             set_at = rig.clock.now()
             end = set_at + timedelta(hours=3)
             await rig.until(lambda: rig.clock.now() >= end, 3 * 3600 / SPEED + 30)
@@ -104,10 +111,7 @@ def test_a_curve_point_that_reads_as_missing_is_not_the_owners_change(tmp_path):
 
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED, heatpump=LINK) as rig:
-            owner = (rig.sim.rw[2309], rig.sim.rw[2314])
-            points = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
-            _kept(state, points)
-            await rig.until(lambda: rig.daemon.curve.held == points, 60)
+            _, points = await _curve_set(rig, state)
             mark = rig.logs.mark()
             rig.sim.rw[2309] = 0x8000   # a "no value" word: the point reads as missing
             await rig.sim_minutes(10)   # several looks
@@ -133,10 +137,7 @@ def test_impctls_points_landing_after_impctl_restore_closed_the_journal_go_back(
 
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED, heatpump=LINK) as rig:
-            owner = (rig.sim.rw[2309], rig.sim.rw[2314])
-            points = ((owner[0] - 40) / 10.0, (owner[1] - 20) / 10.0)
-            _kept(state, points)
-            await rig.until(lambda: rig.daemon.curve.held == points, 60)
+            owner, points = await _curve_set(rig, state)
             assert (rig.sim.rw[2309], rig.sim.rw[2314]) == _raw(points)
             # what that `impctl restore` left: the journal closed, impctl's points on the pump
             with Store(rig.daemon.cfg.db_path, create=False) as other:

@@ -44,7 +44,14 @@ from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot,
 from ..store import Night, Store
 from .assess import record_end
 from .incidents import Incidents
-from .owner import fmt_register, journal_owner, keep_owner_changes, owner_changes, taken_back
+from .owner import (
+    JOURNAL_NAMES,
+    fmt_register,
+    journal_owner,
+    keep_owner_changes,
+    owner_changes,
+    taken_back,
+)
 from .plan import NightPolicy, NightRefused, NightRequest, anticipated_end, preheat_short
 from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
 from .restore import journal_to_restore, restore_all
@@ -52,7 +59,6 @@ from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
-_JOURNALED = ((_SETPOINT, "loop1_setpoint"), (_MODE, "loop1_mode"))
 
 
 class _Abort(Exception):
@@ -209,7 +215,7 @@ class NightController:
             # What impctl last left in each register: a value that is neither this nor the
             # journaled one was set by the owner after the last sample, and stays (from the
             # store's journal only: the copy cannot record the owner's change).
-            held = ({name: self._held[ma] for ma, name in _JOURNALED if ma in self._held}
+            held = ({name: self._held[ma] for ma, name in JOURNAL_NAMES.items() if ma in self._held}
                     if journal is self.store else None)
             left = await asyncio.shield(restore_all(
                 self.client, journal, clock=self.clock,

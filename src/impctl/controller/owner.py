@@ -19,8 +19,8 @@ from .restore import forget_unrecorded
 
 _SETPOINT, _MODE, _SYSTEM_ON = 2187, 2042, 2012
 _NAMES = {_SETPOINT: "loop1 setpoint", _MODE: "loop1 mode"}
-#: The journal's names of the registers a night writes.
-_JOURNAL_NAMES = {_SETPOINT: "loop1_setpoint", _MODE: "loop1_mode"}
+#: The journal's names of the registers a night writes, by register number.
+JOURNAL_NAMES = {_SETPOINT: "loop1_setpoint", _MODE: "loop1_mode"}
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ def keep_owner_changes(store, changes: list[OwnerChange]) -> str | None:
         return None
     for change in changes:
         for entry in store.journal_pending():
-            if entry.register == _JOURNAL_NAMES.get(change.ma):
+            if entry.register == JOURNAL_NAMES.get(change.ma):
                 store.journal_mark_owner_changed(entry.id, change.raw)
     what = describe_changes(changes)
     store.add_event("warning", f"owner changed the heat pump mid-night: {what}")
@@ -99,7 +99,7 @@ async def taken_back(client, store, entries: Mapping[int, int], held: dict[int, 
     :func:`keep_owner_changes` keeps it), None to go on; a register that cannot be read now
     is left to the write's own checks and the next sample's."""
     pending = {e.id for e in store.journal_pending()}
-    closed = [_JOURNAL_NAMES[ma] for ma in (_SETPOINT, _MODE) if entries.get(ma) not in pending]
+    closed = [JOURNAL_NAMES[ma] for ma in (_SETPOINT, _MODE) if entries.get(ma) not in pending]
     if closed:
         return (f"the owner's {' and '.join(closed)} put back from outside (impctl restore) "
                 "before the switch-off; night ended without switching off")
@@ -130,7 +130,7 @@ async def journal_owner(client, store, night_id: int, day: date
                                f"({budget.used(ma, day)}/{budget.limit(ma)})")
     readings = {ma: await client.read(ma) for ma in (_SETPOINT, _MODE)}
     for ma, reading in readings.items():
-        name = _JOURNAL_NAMES[ma]
+        name = JOURNAL_NAMES[ma]
         if reading.raw is None:
             raise NightRefused(f"cannot read {name} ({ma}) to journal it: {reading.reason}")
         why = client.unrestorable(ma, int(reading.raw))
@@ -140,7 +140,7 @@ async def journal_owner(client, store, night_id: int, day: date
     entries, values = {}, {}
     for ma, reading in readings.items():
         try:
-            entry = store.journal_record(night_id, _JOURNAL_NAMES[ma], ma - 1, int(reading.raw))
+            entry = store.journal_record(night_id, JOURNAL_NAMES[ma], ma - 1, int(reading.raw))
         except OSError as exc:  # the copy outside the store; nothing written yet
             raise NightRefused(f"cannot keep the owner's values in {store.owner_file}: "
                                f"{exc.strerror or exc}") from None
