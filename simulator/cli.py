@@ -38,6 +38,7 @@ SEED = (0, 2**32 - 1)
 UNIT_ID = (1, 247)                 # Modbus unit ids
 DHW_PERIOD_H = (0.5, 168.0)
 NOISE_K = (0.0, 5.0)
+T_OUT_C = (-50.0, 40.0)
 
 
 @click.command(context_settings={"help_option_names": ["-h", "--help"]})
@@ -82,6 +83,9 @@ NOISE_K = (0.0, 5.0)
 @click.option("--weather", type=click.Path(dir_okay=False, path_type=Path),
               help="Weather file (EPW or timestamp,t_out CSV); default: built-in generator.")
 @click.option("--weather-seed", default=0, show_default=True, type=int, callback=bounded(SEED))
+@click.option("--t-out", "t_out", type=float, callback=bounded(T_OUT_C, "°C"),
+              help="Hold the outdoor temperature at this value [°C] instead of a weather "
+                   "file or the generator.")
 @click.option("--setpoint", default=21.0, show_default=True, type=float,
               callback=bounded(SETPOINT_C, "°C"), help="Initial loop-1 setpoint [°C].")
 @click.option("--no-thermostat", is_flag=True, help="No room thermostat: 2160 reads -400.")
@@ -97,11 +101,14 @@ NOISE_K = (0.0, 5.0)
 @click.option("-v", "--verbose", count=True, help="More logging (-vv for pymodbus debug).")
 def cli(house, plant_kind, emitter, control, host, port, allow_remote, rtu, baudrate,
         generation, speed, epoch, wall_epoch, clock_spec, clock_file, faults, faults_file,
-        weather, weather_seed, setpoint, no_thermostat, heat_meter_id, dhw_period_h, defrost,
-        noise, seed, verbose) -> None:
+        weather, weather_seed, t_out, setpoint, no_thermostat, heat_meter_id, dhw_period_h,
+        defrost, noise, seed, verbose) -> None:
     """Simulated Kronoterm heat pump (5R1C house) on a real Modbus server."""
     logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if t_out is not None and weather is not None:
+        raise InputError("give a weather file or a constant outdoor temperature, not both",
+                         place="--t-out")
     if clock_spec:
         clock = VirtualClock.from_spec(clock_spec)
     else:
@@ -114,7 +121,8 @@ def cli(house, plant_kind, emitter, control, host, port, allow_remote, rtu, baud
         house=house_params, plant_kind=plant_kind, realism=realism,
         generation=Generation(generation),
         weather=read_weather(weather) if weather else None,
-        weather_seed=weather_seed, clock=clock, plant=params, setpoint_c=setpoint,
+        weather_seed=weather_seed, t_out_c=t_out, clock=clock, plant=params,
+        setpoint_c=setpoint,
         room_thermostat=not no_thermostat, heat_meter_id=heat_meter_id, noise_sd_k=noise,
         seed=seed, faults=parse_faults(faults),
     )

@@ -7,6 +7,8 @@ from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 from zoneinfo import ZoneInfo
 
+import numpy as np
+
 from impctl.clock import VirtualClock
 from impctl.kronoterm.registers import Generation
 from impctl.model import HouseParameters, default_house
@@ -38,6 +40,8 @@ class SimConfig:
         past its end. Default: the generator of ``impctl.weather`` from midnight five days
         before the clock's epoch, 62 days at 15 min, seed ``weather_seed``.
     weather_seed : int
+    t_out_c : float, optional
+        Outdoor temperature held constant [°C] instead of ``weather`` (tests, steady demos).
     clock : VirtualClock, optional
         Default: real time.
     plant : PlantParams
@@ -79,6 +83,7 @@ class SimConfig:
     generation: Generation = Generation.EXTENDED
     weather: pd.Series | None = None
     weather_seed: int = 0
+    t_out_c: float | None = None
     clock: VirtualClock | None = None
     plant: PlantParams = field(default_factory=PlantParams)
     plant_kind: str = "realistic"
@@ -100,6 +105,9 @@ class SimConfig:
 
     def weather_feed(self, clock: VirtualClock) -> WeatherFeed:
         """The outdoor-temperature source for ``clock``."""
+        if self.t_out_c is not None:
+            # a feed of two equal samples a day apart: it wraps around, so it never changes
+            return WeatherFeed.of_arrays(np.array([0.0, 86400.0]), np.full(2, self.t_out_c))
         if self.weather is not None:
             return WeatherFeed(self.weather)
         # from the midnight (in the clock's zone) five days before the clock's start; pandas

@@ -231,7 +231,7 @@ def sim_process(tmp_path: Path, epoch: datetime, speed: float, *,
     cmd = [*IMPCTL_SIM, "--port", "0", "--speed", repr(speed), "--epoch", epoch.isoformat(),
            "--clock-file", str(clock_file), "--faults-file", str(faults_file),
            "--house", str(house_toml(tmp_path / "house.toml", house)),
-           "--weather", str(weather_csv(tmp_path / "weather.csv", t_out_c)),
+           "--t-out", repr(t_out_c),
            "--setpoint", repr(setpoint_c), "--plant", plant, *args]
     with log.open("w") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, cwd=ROOT)

@@ -170,3 +170,52 @@ def test_cli_serves_and_shares_its_clock(tmp_path):
     finally:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
+
+
+@pytest.mark.parametrize("source", ["--t-out", "--weather"])
+def test_the_outdoor_temperature_held_constant_or_read_from_a_file(tmp_path, source):
+    """``--t-out C`` holds the outdoor sensor at C (no weather file, no pandas in the process);
+    a two-row ``--weather`` CSV of equal values does the same through the file reader."""
+    from daemon_fixtures import weather_csv
+
+    arg = "-7.5" if source == "--t-out" else str(weather_csv(tmp_path / "w.csv", -7.5))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from impctl_sim.cli import main; main(); "
+         "print('pandas' in sys.modules)", "--port", "0", "--speed", "600", "--epoch",
+         EPOCH.isoformat(), "--plant", "iso", source, arg],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        line = proc.stdout.readline()
+        match = re.search(r"serving tcp 127\.0\.0\.1:(\d+) .* clock (\S+)", line)
+        assert match, line + proc.stderr.read() if proc.poll() is not None else line
+        shared = VirtualClock.from_spec(match.group(2))
+
+        async def body():
+            hp = HeatPumpClient(hp_config(int(match.group(1))), clock=shared)
+            await hp.connect(max_wait_s=5.0)
+            first = (await hp.read("t_outdoor")).value
+            await asyncio.sleep(0.5)  # five simulated minutes later
+            second = (await hp.read("t_outdoor")).value
+            hp.close()
+            return first, second
+
+        assert run(body()) == (-7.5, -7.5)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=10)
+    assert proc.returncode == 0
+    assert out.strip().splitlines()[-1] == str(source == "--weather")
+
+
+def test_a_constant_outdoor_temperature_and_a_weather_file_are_not_both_taken(tmp_path, capsys):
+    from daemon_fixtures import weather_csv
+
+    for argv in (["--t-out", "-7.5", "--weather", str(weather_csv(tmp_path / "w.csv"))],
+                 ["--t-out", "45"], ["--t-out", "nan"]):
+        with pytest.raises(SystemExit) as info:
+            sim_main(["--port", "0", *argv])
+        assert info.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("impctl-sim: ") and "--t-out" in err, err
+        assert len(err.strip().splitlines()) == 1
