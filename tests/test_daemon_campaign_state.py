@@ -110,10 +110,11 @@ def test_a_schema_3_store_is_migrated_keeping_its_fits(tmp_path):
                       "ALTER TABLE samples DROP COLUMN t_flow_target_c;"
                       "ALTER TABLE samples DROP COLUMN dhw_share;"
                       "ALTER TABLE samples DROP COLUMN system_on;"
-                      "ALTER TABLE samples DROP COLUMN snapshots; PRAGMA user_version = 3;")
+                      "ALTER TABLE samples DROP COLUMN snapshots;"
+                      "ALTER TABLE journal DROP COLUMN confirmed_raw; PRAGMA user_version = 3;")
     con.close()
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 6
+        assert store.schema_version == SCHEMA_VERSION == 7
         [fit] = store.fits()
         assert (fit.nights, fit.night_count, fit.candidates) == ([1, 2, 5], 3, None)
         assert fit.result["lumped"]["hlc"]["value"] == 180

@@ -50,7 +50,7 @@ def test_migration_6_keeps_every_row_and_admits_owner_records(tmp_path):
     db.close()
 
     with Store(path) as store:
-        assert store.schema_version == SCHEMA_VERSION == 6
+        assert store.schema_version == SCHEMA_VERSION == 7
         assert store.integrity_check() == "ok"
         assert store._db.execute("PRAGMA foreign_key_check").fetchall() == []
         assert store._db.execute("PRAGMA foreign_keys").fetchone()[0] == 1  # on again

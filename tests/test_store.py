@@ -119,6 +119,33 @@ def test_journal_keeps_the_owners_value_until_restored(tmp_path):
         assert fresh.id != first.id and fresh.raw_value == 220
 
 
+def test_what_impctl_holds_is_kept_beside_the_entry_and_its_copy(tmp_path):
+    """What impctl last wrote and read back is kept beside the pending entry, in the store
+    and in owner-values.json alike; given up before a write (the copy follows: a copy that
+    still claimed it would keep a value impctl wrote unseen as the owner's); a new night's
+    journal says what the register holds now."""
+    from impctl.store.restore.owner_file import read_owner_values
+
+    def copied() -> dict[str, int | None]:
+        return {e.register: e.confirmed_raw for e in read_owner_values(store.owner_file)[0]}
+
+    with Store(tmp_path / "db") as store, Store(tmp_path / "db") as other:
+        entry = store.journal_record(None, "loop1_setpoint", 2186, 210, confirmed_raw=210)
+        assert entry.confirmed_raw == 210 and copied() == {"loop1_setpoint": 210}
+        store.journal_confirm(entry.id, None)                 # before a write
+        assert other.journal_confirmed(entry.id) is None and copied() == {"loop1_setpoint": None}
+        store.journal_confirm(entry.id, 225)                  # read back
+        assert other.journal_pending()[0].confirmed_raw == 225
+        assert copied() == {"loop1_setpoint": 225}
+        again = store.journal_record(None, "loop1_setpoint", 2186, 230, confirmed_raw=230)
+        assert (again.id, again.raw_value, again.confirmed_raw) == (entry.id, 210, 230)
+        store.journal_mark_restored(entry.id)
+        store.journal_confirm(entry.id, 240)                  # a closed entry claims nothing
+        assert other.journal_confirmed(entry.id) == 230 and copied() == {}
+        curve = store.journal_record(None, "loop1_curve_cold", 2308, 400)
+        assert curve.confirmed_raw is None and copied() == {"loop1_curve_cold": None}
+
+
 def test_trigger_requests_are_taken_once(tmp_path):
     with Store(tmp_path / "db") as a, Store(tmp_path / "db") as b:
         rid = a.add_request("normal", 23.0, "now")

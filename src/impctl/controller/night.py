@@ -6,11 +6,11 @@ Safety rules this module keeps:
 * every write goes through the safe client (whitelist, clamp, compare, read-back, budget);
   until its read-back confirms it, impctl claims no value in that register (the write may
   have landed before the link dropped), so the restore puts the owner's value back
-  whatever it finds there;
+  whatever it finds there; what it does claim is kept beside the journal too (:mod:`.held`);
 * whatever ends the night — its window, T_min, an abort, an exception (also an unexpected
   one: a bug, a store that cannot write), cancellation (SIGTERM) — the journal is restored and
   verified by read-back; if the process dies instead, the journal stays pending and the next
-  start (orphan sweep) or ``impctl restore`` restores it;
+  start (orphan sweep) or ``impctl restore`` restores it, keeping what the owner set since;
 * the night is never run blind: no good read (link lost) or no indoor temperature for longer
   than ``link_lost_limit_s`` aborts it;
 * the owner comes first: a loop-1 setpoint or mode that differs at a sample from what impctl
@@ -35,17 +35,17 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from datetime import datetime, timedelta
 
 from ..clock import VirtualClock
 from ..errors import sqlite_problem
-from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot, WriteResult
+from ..heatpump import HeatPumpClient, HeatPumpError, ModbusLinkError, Snapshot
 from ..store import Night, Store
 from .assess import record_end
+from .held import Held
 from .incidents import Incidents
 from .owner import (
-    JOURNAL_NAMES,
     fmt_register,
     journal_owner,
     keep_owner_changes,
@@ -97,7 +97,7 @@ class NightController:
         self._incidents = Incidents(store)
         self._floor_c: float | None = None
         self._trend: list[tuple[float, float]] = []  # (POSIX s, T_air °C) since switch-off
-        self._held: dict[int, float] = {}  # register → the value impctl last put there
+        self._held = Held()  # register → the value impctl last wrote there and read back
         self._entries: dict[int, int] = {}  # register → this night's journal entry
         self._abort_reason: str | None = None  # a household's stop request (abort())
         self._aborted = asyncio.Event()
@@ -161,7 +161,7 @@ class NightController:
         state, reasons = "done", []
         wrote = False
         self._incidents = Incidents(self.store)
-        self._held, self._entries = {}, {}
+        self._held, self._entries = Held(), {}
         self._abort_reason, self._running = None, True
         self._aborted.clear()
         self._time = NightTime(self.clock, self.policy.sample_interval_s)
@@ -212,16 +212,13 @@ class NightController:
                                     if e.register not in self.keep_registers]:
             self._say(f"night {night_id}: restoring the heat pump")
             # Shielded: a second cancellation must not interrupt putting the heating back.
-            # What impctl last left in each register: a value that is neither this nor the
-            # journaled one was set by the owner after the last sample, and stays (from the
-            # store's journal only: the copy cannot record the owner's change).
-            held = ({name: self._held[ma] for ma, name in JOURNAL_NAMES.items() if ma in self._held}
-                    if journal is self.store else None)
+            # A value that is neither what impctl last left there nor the journaled one was
+            # set by the owner after the last sample, and stays.
             left = await asyncio.shield(restore_all(
                 self.client, journal, clock=self.clock,
                 timeout_s=self.policy.restore_timeout_s,
                 retry_s=max(0.05, self.clock.wall_seconds(self.policy.sample_interval_s)),
-                keep=self.keep_registers, held=held))
+                keep=self.keep_registers, held=self._held.by_name()))
             if left:
                 reasons.append("restore incomplete: " + ", ".join(e.register for e in left))
         reasons += self._incidents.notes
@@ -299,8 +296,9 @@ class NightController:
             self._say(f"night {night_id}: waiting ({problem})")
             await self._sleep_until(self.clock.now() + timedelta(
                 seconds=self.policy.sample_interval_s))
-        self._entries, self._held = await journal_owner(
+        self._entries, values = await journal_owner(
             self.client, self.store, night_id, self.clock.now().date())
+        self._held = Held(self.store, self._entries, values)
         log.info("journaled owner's state: setpoint %s, loop-1 mode %s",
                  fmt_register(_SETPOINT, snap.loop1_setpoint_c.value),
                  fmt_register(_MODE, snap.loop1_mode.value))
@@ -317,13 +315,14 @@ class NightController:
         if self._time.reached(req.window_end):   # a late start (a resume from suspend)
             raise _Abort("the night's window had ended before its first write")
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
-        result = await self._write(_SETPOINT, self.client.set_loop1_setpoint(preheat_target))
+        result = await self._held.write(
+            _SETPOINT, lambda: self.client.set_loop1_setpoint(preheat_target))
         if result.clamped:
             log.warning("setpoint %.1f °C clamped to %.1f °C by the configured limits",
                         result.requested, result.target)
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
-            await self._write(_MODE, self.client.set_loop1_mode(1))
+            await self._held.write(_MODE, lambda: self.client.set_loop1_mode(1))
         # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
         # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
         # a cold house and must not abort the night.
@@ -370,18 +369,6 @@ class NightController:
                 return "window ended"
             await self._sleep_until(next_at)
 
-    async def _write(self, ma: int, write: Awaitable[WriteResult]) -> WriteResult:
-        """Make ``write`` (a safe-client write of register ``ma``) and remember what it left
-        there, to tell the owner's changes apart. Until its read-back confirms it, what the
-        register holds is not known — the write may have landed before the link dropped, a
-        controller may apply it late, the night may be cancelled in between — so no value is
-        claimed as impctl's: the restore then puts the owner's value back whatever it finds,
-        and never keeps the experiment's value as if the owner had set it."""
-        self._held.pop(ma, None)
-        result = await write
-        self._held[result.ma] = result.read_back
-        return result
-
     def _owner_check(self, snap: Snapshot | None, log) -> None:
         """End the night when the owner changed what impctl holds (raises ``_Abort``).
 
@@ -404,11 +391,11 @@ class NightController:
 
     async def _switch_off(self, log) -> None:
         if self.policy.constrained_action == "loop_off":
-            await self._write(_MODE, self.client.set_loop1_mode(0))
+            await self._held.write(_MODE, lambda: self.client.set_loop1_mode(0))
             log.info("heating switched off (loop-1 mode 0)")
         else:
-            await self._write(_SETPOINT,
-                              self.client.set_loop1_setpoint(self.policy.setpoint_floor_c))
+            await self._held.write(_SETPOINT, lambda: self.client.set_loop1_setpoint(
+                self.policy.setpoint_floor_c))
             log.info("heating set back to the floor %.1f °C", self.policy.setpoint_floor_c)
 
     def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,

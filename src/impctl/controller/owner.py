@@ -139,8 +139,9 @@ async def journal_owner(client, store, night_id: int, day: date
                                f"could not put back: {why or reading.reason}")
     entries, values = {}, {}
     for ma, reading in readings.items():
-        try:
-            entry = store.journal_record(night_id, JOURNAL_NAMES[ma], ma - 1, int(reading.raw))
+        try:  # what it holds now is impctl's to tell the owner's later change by (.held)
+            entry = store.journal_record(night_id, JOURNAL_NAMES[ma], ma - 1, int(reading.raw),
+                                         confirmed_raw=int(reading.raw))
         except OSError as exc:  # the copy outside the store; nothing written yet
             raise NightRefused(f"cannot keep the owner's values in {store.owner_file}: "
                                f"{exc.strerror or exc}") from None

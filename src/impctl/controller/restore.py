@@ -10,6 +10,13 @@ the same, one line says so, and the entry stays pending in the store until a lat
 ``impctl restore`` can close it (this process remembers it, so it does not restore it twice).
 The journal can also come from the owner-values file instead of the store
 (:class:`impctl.store.restore.owner_file.OwnerValuesJournal`), when the store is unusable.
+
+The owner comes first here too: a register that holds neither what impctl last wrote there
+and read back nor the journaled value was set by the owner since, and is kept. What impctl
+last left there is the running night's (``held``) or, without one — a restart after the
+process died, ``impctl restore`` — the one kept beside the journal entry; when neither is
+known (a write not read back, a journal from before it was kept), the owner's value goes
+back whatever the register holds.
 """
 
 from __future__ import annotations
@@ -56,18 +63,26 @@ def forget_unrecorded(store: Store, entry_id: int) -> None:
     unrecorded(store).pop(entry_id, None)
 
 
-async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntry,
-                        held: float | None = None) -> bool:
+async def restore_entry(client: HeatPumpClient, store: Store | OwnerValuesJournal,
+                        entry: JournalEntry, held: float | None = None) -> bool:
     """Restore one journal entry; True when the read-back shows the owner's value and the
     journal records it, False when the heat pump is restored but the store could not record
     it (the entry stays pending, see :func:`unrecorded`). ``held``: the value impctl last left
-    in the register (physical unit), when known: a register that holds neither it nor the
-    journaled value was set by the owner since, and is kept (the entry closed as theirs)."""
+    in the register (physical unit), when this process knows it; else the one kept beside the
+    entry is used. A register that holds neither it nor the journaled value was set by the
+    owner since, and is kept (the entry closed as theirs)."""
     forget_unrecorded(store, entry.id)
     if held is not None:
         reading = await client.read(entry.address + 1)
         if (reading.raw is not None and reading.value is not None
                 and int(reading.raw) != entry.raw_value and abs(reading.value - held) > 1e-6):
+            _owner_set(store, entry, int(reading.raw))
+            return True
+    elif entry.confirmed_raw is not None:
+        reading = await client.read(entry.address + 1)
+        if (reading.raw is not None and reading.value is not None
+                and int(reading.raw) not in (entry.raw_value, entry.confirmed_raw)
+                and _confirmed(store, entry) == entry.confirmed_raw):
             _owner_set(store, entry, int(reading.raw))
             return True
     await client.restore_raw(entry.address + 1, entry.raw_value)
@@ -76,7 +91,18 @@ async def restore_entry(client: HeatPumpClient, store: Store, entry: JournalEntr
     return record_restored(store, entry)
 
 
-def _owner_set(store: Store, entry: JournalEntry, raw: int) -> None:
+def _confirmed(store: Store | OwnerValuesJournal, entry: JournalEntry) -> int | None:
+    """What impctl holds in ``entry``'s register as recorded now, after the register was read:
+    a night of another process (the daemon's, while ``impctl restore`` runs) clears it before
+    each write, so a value it wrote since reads as not confirmed and the owner's value goes
+    back rather than keeping the experiment's. None when it cannot be read."""
+    try:
+        return store.journal_confirmed(entry.id)
+    except sqlite3.Error:
+        return None
+
+
+def _owner_set(store: Store | OwnerValuesJournal, entry: JournalEntry, raw: int) -> None:
     """The owner set ``entry``'s register (to ``raw``) after impctl last wrote it: kept."""
     owner_kept(store).add(entry.id)
     what = (f"{entry.register} (register {entry.address + 1}) set to raw {raw} after "
@@ -150,7 +176,8 @@ async def restore_all(client: HeatPumpClient, store: Store | OwnerValuesJournal,
     retry_s : pause between attempts [wall s]
     keep : register names whose pending entries are left pending
     held : register name → the value impctl last left there (physical unit; a night's own
-        restore): a register set to anything else since, by the owner, is kept
+        restore): a register set to anything else since, by the owner, is kept; for a
+        register not in it, the value kept beside its journal entry is used
 
     Returns
     -------

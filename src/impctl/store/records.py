@@ -90,7 +90,9 @@ class JournalEntry:
     """The owner's value of one register, recorded BEFORE impctl first wrote it.
 
     ``raw_value`` is the register's raw 16-bit content (restored verbatim); ``restored`` is
-    None until a read-back confirmed the restore.
+    None until a read-back confirmed the restore. ``confirmed_raw``: what impctl last wrote
+    into the register and read back (raw), None while a write is not read back or nothing is
+    known; a restore after the process died tells the owner's later change by it.
     """
 
     id: int
@@ -100,6 +102,7 @@ class JournalEntry:
     raw_value: int
     recorded: datetime
     restored: datetime | None = None
+    confirmed_raw: int | None = None
 
 
 @dataclass(frozen=True)

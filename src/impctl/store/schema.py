@@ -163,6 +163,13 @@ MIGRATIONS: tuple[str, ...] = (
     ALTER TABLE samples ADD COLUMN system_on INTEGER;
     ALTER TABLE samples ADD COLUMN snapshots INTEGER;
     """,
+    # 7: beside a pending journal entry, what impctl last wrote into its register and read
+    # back (raw; NULL while a write is unconfirmed): a restart tells the owner's change made
+    # while impctl was down from impctl's own value. NULL in older rows: the owner's value
+    # is restored, as before.
+    """
+    ALTER TABLE journal ADD COLUMN confirmed_raw INTEGER;
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 

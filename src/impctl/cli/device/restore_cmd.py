@@ -1,5 +1,7 @@
 """``impctl restore``: the owner's settings back, verified by read-back — from the store's
 journal, or from the copy kept next to it (owner-values.json) when the store is unusable.
+A register the owner set since impctl last wrote it and read it back (also while impctl was
+down) is left as the owner set it (:func:`impctl.controller.restore.restore_entry`).
 
 Also systemd's ``ExecStopPost=``, so it runs however the daemon ended, with the disk full too:
 it needs no free space (what it cannot record, the next start or restore records).
@@ -10,7 +12,9 @@ from __future__ import annotations
 import asyncio
 import sqlite3
 import sys
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -18,6 +22,9 @@ from ...errors import InputError
 from .. import cli
 from .commands import _load, _setup_logging
 from .options import config_option
+
+if TYPE_CHECKING:
+    from ...store import JournalEntry
 
 
 @cli.command("restore")
@@ -27,11 +34,12 @@ from .options import config_option
 def restore_command(config_path: Path, timeout_s: float) -> None:
     """Restore the journaled owner's settings now (also systemd's ExecStopPost).
 
-    Verified by read-back; needs no free disk space. When the store is unusable (truncated,
-    not a database) the copy of the journal kept next to it (owner-values.json) is used; when
+    Verified by read-back; needs no free disk space. A register the owner set since impctl's
+    last write is left as the owner set it. When the store is unusable (truncated, not a
+    database) the copy of the journal kept next to it (owner-values.json) is used; when
     neither is usable, one line names the registers to check by hand.
     """
-    from ...controller.restore import unrecorded
+    from ...controller.restore import owner_kept, unrecorded
     from ...store import Store
     from ...store.restore.owner_file import OWNER_FILE
 
@@ -60,6 +68,7 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
                 return
             left = asyncio.run(_restore(cfg, store, timeout_s))
             why = sorted(set(unrecorded(store).values()))
+            kept = [e for e in pending if e.id in owner_kept(store)]
     if pending is None:
         _restore_from_copy(cfg, copy, problem, timeout_s)
         return
@@ -73,12 +82,21 @@ def restore_command(config_path: Path, timeout_s: float) -> None:
     if why:
         note += (f"; the store cannot record it ({', '.join(why)}): the next start or impctl "
                  "restore closes the journal")
-    click.echo("restored and verified" + note)
+    click.echo("restored and verified" + note + _kept_note(kept))
+
+
+def _kept_note(kept: Sequence[JournalEntry]) -> str:
+    """"; loop1_setpoint left as the owner set it" for the entries the owner changed since
+    impctl's last write (kept, not restored); "" when none."""
+    if not kept:
+        return ""
+    return f"; {', '.join(e.register for e in kept)} left as the owner set it"
 
 
 def _restore_from_copy(cfg, copy: Path, problem: str, timeout_s: float) -> None:
     """Restore from the owner-values file when the store is unusable; else one line saying
     what to set by hand (exit 1)."""
+    from ...controller.restore import owner_kept
     from ...store.restore.owner_file import OwnerValuesJournal
 
     try:
@@ -92,10 +110,12 @@ def _restore_from_copy(cfg, copy: Path, problem: str, timeout_s: float) -> None:
                    f"since {journal.updated:%Y-%m-%d %H:%M} UTC)")
         return
     left = asyncio.run(_restore(cfg, journal, timeout_s))
+    kept = [e for e in journal.entries if e.id in owner_kept(journal)]
+    back = [e for e in journal.entries if e not in kept]
     if left:
-        _by_hand(problem, journal.entries, "the heat pump did not take the owner's values")
+        _by_hand(problem, back, "the heat pump did not take the owner's values")
     click.echo(f"restored and verified from {copy} (the store is unusable): "
-               + ", ".join(_described(e) for e in journal.entries))
+               + (", ".join(_described(e) for e in back) or "nothing") + _kept_note(kept))
 
 
 def _described(entry) -> str:

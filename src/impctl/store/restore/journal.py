@@ -3,7 +3,9 @@ the database (:mod:`.owner_file`), kept equal to the pending entries after every
 
 The journal holds the owner's value of every register impctl writes, recorded before the
 first write; an entry is pending until a read-back confirmed its restore (or the owner changed
-the register, whose newer value then stands).
+the register, whose newer value then stands). Beside a pending entry is what impctl last wrote
+into the register and read back (:meth:`JournalTables.journal_confirm`): a restore after the
+process died keeps a value that is neither, the owner's.
 """
 
 from __future__ import annotations
@@ -32,12 +34,15 @@ class JournalTables:
     _immediate: Callable[[], contextlib.AbstractContextManager[None]]  # Store's
 
     def journal_record(self, night_id: int | None, register: str, address: int,
-                       raw_value: int) -> JournalEntry:
+                       raw_value: int, confirmed_raw: int | None = None) -> JournalEntry:
         """Record the owner's value of ``register`` before the first write.
 
         If an unrestored entry for the register already exists (an earlier restore did not
         complete), that entry is kept and returned: the owner's value is the one recorded
         before impctl ever touched the register, never a value impctl wrote itself.
+        ``confirmed_raw``: what the caller read there now and holds as its own until it
+        writes (:meth:`journal_confirm`); None claims nothing, so a restore puts the owner's
+        value back whatever it finds.
 
         The pending journal is then copied to :attr:`owner_file`.
 
@@ -52,11 +57,15 @@ class JournalTables:
                 (register,)).fetchone()
             if row is None:
                 cur = self._db.execute(
-                    "INSERT INTO journal (night_id, register, address, raw_value, recorded)"
-                    " VALUES (?, ?, ?, ?, ?)",
-                    (night_id, register, address, raw_value, _iso(_now())))
-                row = self._db.execute("SELECT * FROM journal WHERE id = ?",
-                                       (cur.lastrowid,)).fetchone()
+                    "INSERT INTO journal (night_id, register, address, raw_value, recorded,"
+                    " confirmed_raw) VALUES (?, ?, ?, ?, ?, ?)",
+                    (night_id, register, address, raw_value, _iso(_now()), confirmed_raw))
+                row_id = cur.lastrowid
+            else:  # what the register holds now, not what an earlier night left claimed
+                row_id = row["id"]
+                self._db.execute("UPDATE journal SET confirmed_raw = ? WHERE id = ?",
+                                 (confirmed_raw, row_id))
+            row = self._db.execute("SELECT * FROM journal WHERE id = ?", (row_id,)).fetchone()
         write_owner_values(self.owner_file, self.journal_pending())
         return _journal(row)
 
@@ -64,6 +73,31 @@ class JournalTables:
         """Entries whose restore has not been confirmed by read-back."""
         rows = self._db.execute("SELECT * FROM journal WHERE restored IS NULL ORDER BY id")
         return [_journal(r) for r in rows]
+
+    def journal_confirm(self, entry_id: int, raw: int | None) -> None:
+        """Keep beside pending entry ``entry_id`` what impctl last wrote into its register and
+        read back (``raw``), or None just before a write: until the read-back, what the
+        register holds is not known, and a restore after the process died must put the
+        owner's value back whatever it finds. One row, and the copy only when the value
+        changes (a night calls this twice per write).
+
+        Raises
+        ------
+        sqlite3.Error
+            Not recorded: before a write, do not write (the old value still holds).
+        """
+        cur = self._db.execute(
+            "UPDATE journal SET confirmed_raw = ? WHERE id = ? AND restored IS NULL"
+            " AND confirmed_raw IS NOT ?", (raw, entry_id, raw))
+        if cur.rowcount:
+            self._mirror_journal()
+
+    def journal_confirmed(self, entry_id: int) -> int | None:
+        """What impctl last wrote into ``entry_id``'s register and read back (raw), as
+        recorded now; None when unknown."""
+        row = self._db.execute("SELECT confirmed_raw FROM journal WHERE id = ?",
+                               (entry_id,)).fetchone()
+        return None if row is None else row["confirmed_raw"]
 
     def journal_mark_restored(self, entry_id: int) -> None:
         """Mark an entry restored (after the read-back matched)."""
@@ -102,10 +136,10 @@ class JournalTables:
                 night_known = e.night_id is not None and self._db.execute(
                     "SELECT 1 FROM nights WHERE id = ?", (e.night_id,)).fetchone()
                 cur = self._db.execute(
-                    "INSERT INTO journal (id, night_id, register, address, raw_value, recorded)"
-                    " VALUES (?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO journal (id, night_id, register, address, raw_value, recorded,"
+                    " confirmed_raw) VALUES (?, ?, ?, ?, ?, ?, ?)",
                     (e.id if id_free else None, e.night_id if night_known else None,
-                     e.register, e.address, e.raw_value, _iso(e.recorded)))
+                     e.register, e.address, e.raw_value, _iso(e.recorded), e.confirmed_raw))
                 taken.append(_journal(self._db.execute(
                     "SELECT * FROM journal WHERE id = ?", (cur.lastrowid,)).fetchone()))
         if taken or {e.id for e in kept} != {e.id for e in self.journal_pending()}:
@@ -130,5 +164,6 @@ class JournalTables:
 def _journal(row: sqlite3.Row) -> JournalEntry:
     return JournalEntry(id=row["id"], night_id=row["night_id"], register=row["register"],
                         address=row["address"], raw_value=row["raw_value"],
-                        recorded=_dt(row["recorded"]), restored=_dt(row["restored"]))
+                        recorded=_dt(row["recorded"]), restored=_dt(row["restored"]),
+                        confirmed_raw=row["confirmed_raw"])
 
