@@ -29,13 +29,21 @@ def _bytecode_dirs() -> set[Path]:
 
 
 def pytest_configure(config) -> None:
+    """Bytecode is written this run (:func:`_write_bytecode_this_run`), and the tests' asserts
+    are rewritten once before the xdist workers start (:func:`_rewrite_tests_once`)."""
+    if hasattr(config, "workerinput"):
+        return
+    if sys.dont_write_bytecode:
+        _write_bytecode_this_run(config)
+    _rewrite_tests_once(config)
+
+
+def _write_bytecode_this_run(config) -> None:
     """Where the environment says not to write bytecode (``PYTHONDONTWRITEBYTECODE``), the run
-    writes it all the same and removes what it wrote when it ends: the suite starts about 250
+    writes it all the same and removes what it wrote when it ends: the suite starts about 300
     Python processes (xdist workers, daemons, simulators, commands), and each compiled
     impctl's sources and rewrote the tests' asserts anew — about 25 CPU-s a run. The tree is
     left as it was found."""
-    if hasattr(config, "workerinput") or not sys.dont_write_bytecode:
-        return
     before = _bytecode_dirs()
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)   # the workers and every process they start
     sys.dont_write_bytecode = False
@@ -46,6 +54,49 @@ def pytest_configure(config) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
     config.add_cleanup(remove_written)
+
+
+def _rewrite_one(path: Path) -> None:
+    """Rewrite one test module's asserts as pytest does at import and keep the result where
+    pytest looks for it (its own functions, whose names are not public: on another pytest
+    they may be gone, and then each worker rewrites as usual)."""
+    from _pytest.assertion.rewrite import (
+        PYC_TAIL,
+        _rewrite_test,
+        _write_pyc,
+        assertstate_key,
+        get_cache_dir,
+    )
+
+    pyc = get_cache_dir(path) / (path.name[:-3] + PYC_TAIL)
+    if pyc.exists():
+        return
+    pyc.parent.mkdir(exist_ok=True)
+    source, code = _rewrite_test(path, _CONFIG)
+    _write_pyc(_CONFIG.stash[assertstate_key], code, source, pyc)
+
+
+_CONFIG = None
+
+
+def _rewrite_tests_once(config) -> None:
+    """The xdist workers start together and each rewrote every test module's asserts before
+    any of them had kept it: about 6 CPU-s a worker, the same work four times. The main
+    process does it once first, on two processes; the workers then load what it kept."""
+    global _CONFIG
+    if (config.getoption("numprocesses", None) or 0) < 2:
+        return
+    import concurrent.futures
+    import multiprocessing
+
+    _CONFIG = config
+    paths = sorted(Path(__file__).parent.glob("test_*.py")) + [Path(__file__)]
+    try:
+        with concurrent.futures.ProcessPoolExecutor(
+                2, mp_context=multiprocessing.get_context("fork")) as pool:
+            list(pool.map(_rewrite_one, paths, chunksize=8))
+    except Exception:  # noqa: BLE001 - only a saving: the workers rewrite what is missing
+        pass
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,8 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+import pytest
+
 import impctl
 
 SRC = Path(impctl.__file__).parent
@@ -57,7 +59,10 @@ def _graph() -> dict[str, set[str]]:
     return edges
 
 
-GRAPH = _graph()
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    # built when a test asks for it, not at import: every xdist worker imports this module
+    return _graph()
 
 
 def _rooms(package: str) -> dict[str, set[str]]:
@@ -75,38 +80,38 @@ def _rooms(package: str) -> dict[str, set[str]]:
     return edges
 
 
-def test_the_graph_is_read_from_the_source():
+def test_the_graph_is_read_from_the_source(graph):
     # Known edges: if these are not found, the reader is broken and every rule below is void.
-    assert {"modbus", "errors"} <= GRAPH["heatpump"]
-    assert {"heatpump", "store"} <= GRAPH["controller"]
-    assert "model" in GRAPH["fit"]
+    assert {"modbus", "errors"} <= graph["heatpump"]
+    assert {"heatpump", "store"} <= graph["controller"]
+    assert "model" in graph["fit"]
 
 
-def test_the_modbus_transport_knows_no_device():
+def test_the_modbus_transport_knows_no_device(graph):
     """impctl.modbus is generic: it knows nothing of Kronoterm, the night or the daemon."""
-    assert GRAPH["modbus"] <= {"errors"}
+    assert graph["modbus"] <= {"errors"}
 
 
-def test_the_device_side_imports_only_towards_the_transport():
+def test_the_device_side_imports_only_towards_the_transport(graph):
     for i, part in enumerate(DEVICE):
         later = set(DEVICE[i + 1:])
-        assert not GRAPH[part] & later, f"{part} imports {sorted(GRAPH[part] & later)}"
-    assert "impctl_sim" not in set().union(*(GRAPH[p] for p in DEVICE[:-1]))
+        assert not graph[part] & later, f"{part} imports {sorted(graph[part] & later)}"
+    assert "impctl_sim" not in set().union(*(graph[p] for p in DEVICE[:-1]))
 
 
-def test_the_pipeline_imports_only_earlier_stages():
+def test_the_pipeline_imports_only_earlier_stages(graph):
     for i, stage in enumerate(PIPELINE):
         later = set(PIPELINE[i + 1:])
-        assert not GRAPH[stage] & later, f"{stage} imports {sorted(GRAPH[stage] & later)}"
+        assert not graph[stage] & later, f"{stage} imports {sorted(graph[stage] & later)}"
 
 
-def test_the_heat_pump_and_the_model_stay_apart_from_the_fit():
+def test_the_heat_pump_and_the_model_stay_apart_from_the_fit(graph):
     heavy = {"fit", "classifiers", "population", "fleet", "report"}
     for part in ("modbus", "heatpump", "controller", "daemon", "model"):
-        assert not GRAPH[part] & heavy, f"{part} imports {sorted(GRAPH[part] & heavy)}"
+        assert not graph[part] & heavy, f"{part} imports {sorted(graph[part] & heavy)}"
 
 
-def test_no_cycles_between_packages():
+def test_no_cycles_between_packages(graph):
     state: dict[str, int] = {}  # 1 on the path, 2 done
 
     def visit(node: str, path: list[str]) -> None:
@@ -114,11 +119,11 @@ def test_no_cycles_between_packages():
             return
         assert state.get(node) != 1, "import cycle: " + " → ".join([*path, node])
         state[node] = 1
-        for nxt in sorted(GRAPH.get(node, ())):
+        for nxt in sorted(graph.get(node, ())):
             visit(nxt, [*path, node])
         state[node] = 2
 
-    for node in sorted(GRAPH):
+    for node in sorted(graph):
         visit(node, [])
 
 
