@@ -45,6 +45,7 @@ from ..store import Night, Store
 from .assess import record_end
 from .held import Held
 from .incidents import Incidents
+from .limits import NightAbort, SampleLimits
 from .owner import (
     fmt_register,
     journal_owner,
@@ -52,19 +53,13 @@ from .owner import (
     owner_changes,
     taken_back,
 )
-from .plan import NightPolicy, NightRefused, NightRequest, anticipated_end, preheat_short
-from .poll import alarm_reason, readings_problem, sample_from_snapshot, status_line, unfit
+from .plan import NightPolicy, NightRefused, NightRequest, preheat_short
+from .poll import readings_problem, sample_from_snapshot, status_line, unfit
 from .restore import journal_to_restore, restore_all
 from .timing import NightTime, describe_step
 
 _LOG = logging.getLogger(__name__)
 _SETPOINT, _MODE = 2187, 2042
-
-
-class _Abort(Exception):
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
 
 
 class NightController:
@@ -95,8 +90,7 @@ class NightController:
         self.last_good_read: datetime | None = None
         self.last_t_air: datetime | None = None  # time of the last sample with T_air
         self._incidents = Incidents(store)
-        self._floor_c: float | None = None
-        self._trend: list[tuple[float, float]] = []  # (POSIX s, T_air °C) since switch-off
+        self._limits = SampleLimits(policy)
         self._held = Held()  # register → the value impctl last wrote there and read back
         self._entries: dict[int, int] = {}  # register → this night's journal entry
         self._abort_reason: str | None = None  # a household's stop request (abort())
@@ -131,10 +125,10 @@ class NightController:
             _LOG.warning("progress line not shown (%s): %s", exc, text)
 
     def _clock_check(self) -> None:
-        """End the night (raises ``_Abort``) when the wall clock stepped since the last look."""
+        """End the night (raises ``NightAbort``) when the wall clock stepped since the last look."""
         step = self._time.step_s()
         if step is not None:
-            raise _Abort(f"system clock stepped by {describe_step(step)}")
+            raise NightAbort(f"system clock stepped by {describe_step(step)}")
 
     async def _sleep_until(self, when: datetime) -> None:
         """Sleep until ``when``, one sample interval at most, or a stop or an abort."""
@@ -165,6 +159,7 @@ class NightController:
         self._abort_reason, self._running = None, True
         self._aborted.clear()
         self._time = NightTime(self.clock, self.policy.sample_interval_s)
+        self._limits = SampleLimits(self.policy)
         self._last_stored = None
         try:
             self.store.set_night_state(night_id, "preparing")
@@ -176,7 +171,7 @@ class NightController:
         except NightRefused as exc:
             state, reasons = "refused", [str(exc)]
             log.warning("night refused: %s", exc)
-        except _Abort as exc:
+        except NightAbort as exc:
             state, reasons = "aborted", [exc.reason]
             log.warning("night aborted: %s", exc.reason)
         except asyncio.CancelledError:
@@ -235,7 +230,7 @@ class NightController:
     async def _snapshot(self, night_id: int | None, log: logging.Logger) -> Snapshot | None:
         """One poll; stores it as a sample; None when the link failed (the incident is
         logged once, when it starts). A wall-clock step since the last poll ends the night
-        before anything is stored (raises ``_Abort``)."""
+        before anything is stored (raises ``NightAbort``)."""
         self._clock_check()
         polled = self.clock.now()
         try:
@@ -280,7 +275,7 @@ class NightController:
             raise NightRefused(str(exc)) from None
         while True:
             if self._abort_reason is not None:
-                raise _Abort(self._abort_reason)
+                raise NightAbort(self._abort_reason)
             if self.stop.is_set():
                 raise NightRefused("stopped before the night started")
             problem = None
@@ -309,11 +304,11 @@ class NightController:
         """Write the night's settings and sample until the end; returns why it ended."""
         policy = self.policy
         if self._abort_reason is not None:   # asked while the night prepared: no write
-            raise _Abort(self._abort_reason)
+            raise NightAbort(self._abort_reason)
         if self.stop.is_set():
-            raise _Abort("stop requested (signal)")
+            raise NightAbort("stop requested (signal)")
         if self._time.reached(req.window_end):   # a late start (a resume from suspend)
-            raise _Abort("the night's window had ended before its first write")
+            raise NightAbort("the night's window had ended before its first write")
         preheat_target = req.t_max_c if req.kind == "constrained" else req.setpoint_c
         result = await self._held.write(
             _SETPOINT, lambda: self.client.set_loop1_setpoint(preheat_target))
@@ -323,12 +318,7 @@ class NightController:
         if first.loop1_mode.value == 2:
             # A schedule could drop to ECO mid-night; hold loop 1 in plain "on" instead.
             await self._held.write(_MODE, lambda: self.client.set_loop1_mode(1))
-        # The comfort floor: T_min − margin, but never above the owner's own setpoint − ΔT. A
-        # normal night at 24 °C starts from a house held at the owner's 21 °C; that is not
-        # a cold house and must not abort the night.
-        owner = first.loop1_setpoint_c.value
-        floor = req.t_min_c if owner is None else min(req.t_min_c, owner - req.comfort_band_k)
-        self._floor_c = floor - policy.abort_margin_k
+        self._limits.set_floor(req, first.loop1_setpoint_c.value)
         switched_off = False
         deadline = req.window_end + timedelta(seconds=policy.deadline_grace_s)
         interval = timedelta(seconds=policy.sample_interval_s)
@@ -336,13 +326,13 @@ class NightController:
         next_at = self.clock.now()
         while True:
             if self._abort_reason is not None:
-                raise _Abort(self._abort_reason)
+                raise NightAbort(self._abort_reason)
             if self.stop.is_set():
-                raise _Abort("stop requested (signal)")
+                raise NightAbort("stop requested (signal)")
             self._clock_check()  # before the deadline: a step forward is named as such
             now = self.clock.now()
             if self._time.reached(deadline):
-                raise _Abort("hard deadline passed")
+                raise NightAbort("hard deadline passed")
             if (req.kind == "constrained" and not switched_off
                     and self._time.reached(req.window_start)
                     and not self._time.reached(req.window_end)):
@@ -352,7 +342,7 @@ class NightController:
                 await self._still_ours(log)
                 await self._switch_off(log)
                 switched_off = True
-                self._trend = []
+                self._limits.trend = []
             snap = await self._snapshot(night_id, log)
             self._owner_check(snap, log)
             reason = self._check(snap, req, switched_off, now)
@@ -370,7 +360,7 @@ class NightController:
             await self._sleep_until(next_at)
 
     def _owner_check(self, snap: Snapshot | None, log) -> None:
-        """End the night when the owner changed what impctl holds (raises ``_Abort``).
+        """End the night when the owner changed what impctl holds (raises ``NightAbort``).
 
         The changed registers' journal entries are closed, so the restore that follows puts
         back only what the owner did not touch, and never overwrites their new choice.
@@ -378,16 +368,16 @@ class NightController:
         self._owner_changed(owner_changes(snap, self._held))
 
     async def _still_ours(self, log) -> None:
-        """Before the switch-off (:func:`.owner.taken_back`): raises ``_Abort``, nothing
+        """Before the switch-off (:func:`.owner.taken_back`): raises ``NightAbort``, nothing
         written, when the owner's values were put back since the last sample."""
         why = await taken_back(self.client, self.store, self._entries, self._held, log)
         if why is not None:
-            raise _Abort(why)
+            raise NightAbort(why)
 
     def _owner_changed(self, changes) -> None:
         why = keep_owner_changes(self.store, changes)
         if why is not None:
-            raise _Abort(why)
+            raise NightAbort(why)
 
     async def _switch_off(self, log) -> None:
         if self.policy.constrained_action == "loop_off":
@@ -401,31 +391,5 @@ class NightController:
     def _check(self, snap: Snapshot | None, req: NightRequest, switched_off: bool,
                now: datetime) -> str | None:
         """Abort (raises) or end (returns the reason) conditions after a poll."""
-        if snap is None:
-            lost_s = (now - (self.last_good_read or now)).total_seconds()
-            if lost_s > self.policy.link_lost_limit_s:
-                raise _Abort(f"heat-pump link lost for {lost_s / 60:.0f} min")
-            return None
-        alarm = alarm_reason(snap)
-        if alarm:
-            raise _Abort(alarm)
-        t_air = snap.t_air_c.value
-        if t_air is None:
-            # A missing sample is judged by the assessment (coverage); a night without its
-            # indoor temperature for as long as the link-lost limit is aborted (blind).
-            blind_s = (now - (self.last_t_air or now)).total_seconds()
-            if blind_s > self.policy.link_lost_limit_s:
-                raise _Abort(f"no indoor temperature for {blind_s / 60:.0f} min "
-                             f"({snap.t_air_c.reason})")
-            return None
-        floor = self._floor_c
-        if floor is None:
-            floor = req.t_min_c - self.policy.abort_margin_k
-        if t_air < floor:
-            raise _Abort(f"T_air {t_air:.1f} °C below T_min − margin ({floor:.1f} °C)")
-        if req.kind == "constrained" and switched_off and t_air <= req.t_min_c:
-            return f"reached T_min {req.t_min_c:.1f} °C"
-        if req.kind == "constrained" and switched_off:
-            self._trend.append((now.timestamp(), t_air))
-            return anticipated_end(self._trend, self.policy, req.t_min_c)
-        return None
+        return self._limits.judge(snap, req, switched_off, now, self.last_good_read,
+                                  self.last_t_air)
