@@ -15,6 +15,7 @@ from ..kronoterm.generation import GenerationReport, detect
 from ..kronoterm.registers import Generation, Register, register
 from ..kronoterm.snapshot import SNAPSHOT_REGISTERS, Snapshot, plan_blocks
 from ..modbus import LinkConfig, ModbusDeviceError, ModbusLink, to_int16, uint32
+from .attributed import TRIES, attributed, unattributable
 from .budget import WriteBudget
 from .config import ExternalRegister, HeatPumpConfig
 from .errors import HeatPumpError, UnsupportedFeature, WriteRefused
@@ -22,13 +23,6 @@ from .writes import WriteResult, check_restore, safe_write
 
 _LOG = logging.getLogger(__name__)
 
-#: Reads of one snapshot (or of one register) before it is given up as unattributable.
-_SNAPSHOT_TRIES = 3
-
-
-def _unattributable(link: ModbusLink) -> str:
-    return ("unattributable answers on the link (" + ", ".join(link.quirks)
-            + "); sample marked missing")
 _NO_Q_HC = ("compact (TT3000) controller has no heat-power register (2329) and no heat meter "
             "is configured")
 #: A room temperature an external sensor may report [°C] (a sensor's error code, e.g. −60.0
@@ -178,26 +172,11 @@ class HeatPumpClient:
             return Reading.unavailable(reg.name, reg.unit, now,
                                        f"not on a {self.generation.value} controller",
                                        f"register {reg.ma}")
-        words = await self._attributed(self.link, lambda: self.link.read(reg.address, reg.words))
+        words = await attributed(self.link, lambda: self.link.read(reg.address, reg.words))
         if words is None:
             return Reading.unavailable(reg.name, reg.unit, self.clock.now(),
-                                       _unattributable(self.link), f"register {reg.ma}")
+                                       unattributable(self.link), f"register {reg.ma}")
         return decode(reg, words, self.clock.now())
-
-    async def _attributed(self, link: ModbusLink, read) -> list[int] | None:
-        """The words of ``read()`` (a read on ``link``), or None when an answer on the link
-        could not be attributed to its request while it ran, :data:`_SNAPSHOT_TRIES` times
-        (RTU: another master's answer of the right length came first; the settle lets the
-        real one arrive and be counted, as a snapshot's blocks do). Such words are never
-        used: the reading is missing."""
-        for _ in range(_SNAPSHOT_TRIES):
-            before = link.anomalies
-            words = await read()
-            await link.settle()
-            if link.anomalies == before:
-                return words
-            link.reset()
-        return None
 
     async def read_external(self, ext: ExternalRegister, name: str, unit: str,
                             plausible: tuple[float, float] = (-1e9, 1e9)) -> Reading:
@@ -206,12 +185,12 @@ class HeatPumpClient:
         link = self._link_for(ext)
         source = f"external {ext.describe()}"
         try:
-            words = await self._attributed(link, lambda: link.read(
+            words = await attributed(link, lambda: link.read(
                 ext.address, ext.words, device_id=ext.device_id))
         except ModbusDeviceError as exc:
             return Reading.unavailable(name, unit, self.clock.now(), str(exc), source)
         if words is None:
-            return Reading.unavailable(name, unit, self.clock.now(), _unattributable(link),
+            return Reading.unavailable(name, unit, self.clock.now(), unattributable(link),
                                        source)
         raw = to_int16(words[0]) if ext.datatype == "int16" else words[0]
         if ext.words == 2:
@@ -249,7 +228,7 @@ class HeatPumpClient:
         if self.config.heat_meter is None:
             regs.append(register("power_thermal"))
         blocks = plan_blocks([r for r in regs if r.in_generation(gen)], gen)
-        for _ in range(_SNAPSHOT_TRIES):
+        for _ in range(TRIES):
             before = self.link.anomalies
             words, failed = await self._read_blocks(blocks)
             await self.link.settle()
@@ -260,7 +239,7 @@ class HeatPumpClient:
             # it is used.
             self.link.reset()
         else:
-            why = _unattributable(self.link)
+            why = unattributable(self.link)
             words, failed = {}, {ma: why for first, count in blocks
                                  for ma in range(first, first + count)}
         def from_register(reg: Register) -> Reading:
