@@ -12,6 +12,12 @@ The order matters and is the safety argument:
 5. FC 06, then read back (after a pause; the first answer may still be the old value) until
    it matches, else :class:`WriteVerifyError`.
 
+Both reads take an answer only when it can be attributed to its request
+(:func:`.attributed.attributed`: on an RTU line shared with another master, the other master's
+answer of the right length may come first). A compare that cannot be attributed writes
+nothing; a read-back that cannot be attributed is not a verification: the write is in doubt
+and raises (as when the read-back is lost), so the caller never claims its value.
+
 Every write whose answer is lost or is a Modbus exception is followed by the read-back, which
 decides whether it executed (a gateway's exception 10/11 can hide an executed write). The
 budget counts what the read-back shows: a write whose answer was lost or an exception and that
@@ -37,6 +43,7 @@ from ..errors import InputError
 from ..kronoterm.decode import decode, encode, raw_value
 from ..kronoterm.registers import FORBIDDEN_WRITES, Kind, Register
 from ..modbus import ModbusDeviceError, ModbusLink, ModbusLinkError
+from .attributed import attributed, unattributable
 from .budget import WriteBudget
 from .config import CURVE_FLOW_BOUNDS_C, WritePolicy
 from .errors import HeatPumpError, WriteRefused, WriteVerifyError
@@ -178,9 +185,11 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
     ModbusDeviceError
         The device rejected the write (exception response).
     ModbusLinkError
-        The link failed before the write, or both the write and every read-back failed.
+        The link failed before the write, the register's value before it could not be
+        attributed (nothing was sent), or both the write and every read-back failed.
     WriteVerifyError
-        The value read back differs from the value written.
+        The value read back differs from the value written, or no read-back answer could be
+        attributed to its request.
     """
     limited = (check_restore if restore else check_target)(reg, value, policy)
     if budget is None:
@@ -191,7 +200,13 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
                      reg.unit, limited, reg.unit)
     word = encode(reg, limited)
     target = raw_value(reg, word)
-    current = (await link.read(reg.address, 1))[0]
+    before = await attributed(link, lambda: link.read(reg.address, 1))
+    if before is None:
+        # Another master's answer may hold anything, the target too: "already there" taken
+        # from it would skip the write and claim a value the register never held.
+        raise ModbusLinkError(f"register {reg.ma} ({reg.name}): " + unattributable(
+            link, "its value before the write is unknown; nothing written"))
+    current = before[0]
     previous = raw_value(reg, current)
     if current == word:
         _LOG.info("register %d (%s) already %s %s; not written", reg.ma, reg.name, target,
@@ -206,7 +221,7 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
     for attempt in range(link.config.attempts):
         used = budget.consume(reg.ma, day, reserve=reserve, best_effort=restore)
         write_error = await _send(link, reg, word, loud)
-        read_back = await _read_back(link, reg, word, policy, loud)
+        read_back, crossed = await _read_back(link, reg, word, policy, loud)
         if read_back == word:
             break
         if read_back == current and (restore or write_error is not None):
@@ -222,7 +237,8 @@ async def safe_write(link: ModbusLink, reg: Register, value: float, policy: Writ
         link.failed_writes.add(reg.ma)
         if isinstance(write_error, ModbusDeviceError) and read_back in (current, None):
             raise write_error  # the caller reports the device's answer
-        shown = "nothing" if read_back is None else f"{raw_value(reg, read_back)} {reg.unit}"
+        shown = ("nothing" if read_back is None else f"{raw_value(reg, read_back)} {reg.unit}")
+        shown += " attributable" if crossed else ""
         msg = (f"register {reg.ma} ({reg.name}): wrote {target} {reg.unit}, read back {shown} "
                f"after {policy.verify_attempts} attempt(s)")
         _LOG.log(logging.ERROR if loud == logging.WARNING else loud, msg)
@@ -262,16 +278,28 @@ async def _send(link: ModbusLink, reg: Register, word: int, loud: int) -> HeatPu
     return None
 
 
-async def _read_back(link: ModbusLink, reg: Register, word: int,
-                     policy: WritePolicy, level: int = logging.WARNING) -> int | None:
+async def _read_back(link: ModbusLink, reg: Register, word: int, policy: WritePolicy,
+                     level: int = logging.WARNING) -> tuple[int | None, bool]:
+    """The register's word after the write — ``word`` once an attributable answer shows it,
+    else the last attributable word read, or None when none was — and whether an attempt's
+    answers could not be attributed."""
     seen: int | None = None
+    crossed = False
     for _ in range(policy.verify_attempts):
         await asyncio.sleep(policy.verify_delay_s)
         try:
-            seen = (await link.read(reg.address, 1))[0]
+            words = await attributed(link, lambda: link.read(reg.address, 1))
         except HeatPumpError as exc:
             _LOG.log(level, "register %d read-back failed: %s", reg.ma, exc)
             continue
+        if words is None:
+            # Another master's answer of the right length may carry the written word: an
+            # attempt that proves nothing, like a lost answer.
+            crossed = True
+            _LOG.log(level, "register %d read-back failed: %s", reg.ma,
+                     unattributable(link, "not taken as the register's value"))
+            continue
+        seen = words[0]
         if seen == word:
-            return seen
-    return seen
+            return seen, crossed
+    return seen, crossed
