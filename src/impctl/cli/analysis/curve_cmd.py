@@ -107,8 +107,8 @@ def _on_gateway(config_path: Path, apply_: bool) -> None:
     """--apply / --restore: the owner's word to the daemon; --restore without a running
     daemon gives the owner's points back itself."""
     from ...config import load_config
+    from ...daemon.curve.intent import set_intent
     from ...daemon.curve.state import load_curve
-    from ...daemon.curve.watch import set_intent
     from ...daemon.locks.store import probe
     from ...heatpump.health import read_health
 
@@ -160,7 +160,7 @@ async def _restore_curve(cfg):
     from ...clock import VirtualClock
     from ...controller import restore_all
     from ...daemon.configured import open_client
-    from ...daemon.curve.watch import KEEP
+    from ...daemon.curve.intent import KEEP
     from ...daemon.locks.heat_pump import HeatPumpLock
     from ...heatpump import ModbusLinkError
     from ...store import Store

@@ -2,8 +2,8 @@
 watch that follows it.
 
 The owner asks with ``[curve] apply = true`` or ``impctl curve --apply`` (and takes it back
-with ``impctl curve --restore``; the command's word wins over the configuration). Then, while
-no night runs, the daemon:
+with ``impctl curve --restore``; the command's word wins over the configuration, :mod:`.intent`).
+Then, while no night runs, the daemon:
 
 1. **sets** the kept curve (:mod:`.state`) when it lowers the running one: only on an
    extended controller (a compact one has no curve register) whose adaptive curve (2320) is
@@ -34,52 +34,26 @@ the watch then sets the curve again). A night's own restore leaves them
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import sqlite3
 from collections import deque
 from dataclasses import replace
-from pathlib import Path
 
-from ...atomic import replacing
 from ...heatpump import HeatPumpError
 from ...heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
 from ...heatpump.writes import write_rules
 from ...kronoterm.registers import Generation
 from ...store import JournalEntry
 from ..running import RunningDaemon
+from .intent import CURVE_REGISTERS, KEEP, intent, no_curve
 from .state import line_flow_c, load_curve
 
 _LOG = logging.getLogger("impctl.daemon")
-#: The curve points: documented number → journal name.
-CURVE_REGISTERS = {2309: "loop1_curve_cold", 2314: "loop1_curve_mild"}
-KEEP = frozenset(CURVE_REGISTERS.values())
-#: The owner's word at run time (``impctl curve --apply`` / ``--restore``).
-INTENT_FILE = "curve-intent.json"
 #: How far the controller's flow target may have moved otherwise than the line [K] (a
 #: controller's own curve need not be straight between its points).
 FOLLOW_TOL_K = 1.5
 #: A new kept curve replaces the one set when a point moves by at least this [K].
 MOVE_K = 0.5
-
-
-def intent(state_dir: str | Path) -> bool | None:
-    """The owner's last word (True: set the curve; False: give mine back), or None."""
-    try:
-        data = json.loads((Path(state_dir) / INTENT_FILE).read_text())
-    except (OSError, ValueError):
-        return None
-    value = data.get("apply") if isinstance(data, dict) else None
-    return value if isinstance(value, bool) else None
-
-
-def set_intent(state_dir: str | Path, apply: bool, why: str) -> Path:
-    """Record the owner's word (atomically; read by the daemon at its next look)."""
-    target = Path(state_dir) / INTENT_FILE
-    # readable by the daemon's own user when root wrote it
-    with replacing(target, mode=0o644) as tmp:
-        tmp.write_text(json.dumps({"apply": apply, "why": why}))
-    return target
 
 
 def wanted(daemon: RunningDaemon) -> bool:
@@ -251,13 +225,7 @@ class CurveWatch:
         _LOG.warning(text)
 
     def _intent_off(self, why: str) -> None:
-        """Keep the decision to set no curve; a file that cannot be written (a full disk) does
-        not stop the owner's points going back."""
-        try:
-            set_intent(self.daemon.cfg.state_dir, False, why)
-        except OSError as exc:
-            _LOG.error("cannot keep the decision to set no heating curve (%s: %s); the "
-                       "owner's points go back all the same", why, exc)
+        no_curve(self.daemon.cfg.state_dir, why)
 
     def _keep(self, held: bool) -> None:
         ctl = self.daemon.controller
