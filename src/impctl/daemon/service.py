@@ -17,11 +17,13 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from ..clock import VirtualClock
 from ..config import Config
 from ..controller import NightController, NightRefused, NightRequest, restore_all
+from ..controller.restore import on_owner_kept
 from ..heatpump import HeatPumpClient, HeatPumpError
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from .configured import clock_from_config, open_client, policy_from_config
 from .curve.intent import KEEP as CURVE_KEEP
+from .curve.intent import owner_kept_point
 from .curve.watch import start_curve_watch
 from .fitting import fit_ready, needs_fit, refresh_season, run_fit
 from .locks.heat_pump import HeatPumpLock
@@ -92,6 +94,10 @@ class Daemon:
         for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
             loop.add_signal_handler(sig, self._request_stop, sig)
         self.store = Store(self.cfg.db_path)
+        # a curve point the owner set while impctl's curve was on, kept by any restore of this
+        # process (the start's, the background one, a night's, the stop's): no curve until
+        # the owner asks again
+        on_owner_kept(self.store, owner_kept_point(self.cfg.state_dir))
         try:
             self._lock = DaemonLock(self.cfg.state_dir).acquire()
         except BaseException:

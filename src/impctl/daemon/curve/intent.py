@@ -4,16 +4,19 @@ The owner asks with ``[curve] apply = true`` or ``impctl curve --apply`` and tak
 ``impctl curve --restore``; the command's word (``<state_dir>/curve-intent.json``) wins over
 the configuration. impctl also records "no curve" itself when the curve must not be set again
 until the owner asks: it proved too low, the controller did not follow it, or the owner set a
-point of their own.
+point of their own — seen by the watch while it runs, or by a restore that kept the owner's
+point (a restart after the daemon died, ``impctl restore``; :func:`owner_kept_point`).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 from ...atomic import replacing
+from ...store import JournalEntry
 
 _LOG = logging.getLogger("impctl.daemon")
 #: The curve points: documented number → journal name.
@@ -51,3 +54,16 @@ def no_curve(state_dir: str | Path, why: str) -> None:
         _LOG.error("cannot keep the decision to set no heating curve (%s: %s); the "
                    "owner's points go back all the same", why, exc)
 
+
+def owner_kept_point(state_dir: str | Path) -> Callable[[JournalEntry], None]:
+    """What a restore does when it keeps the owner's value of a register
+    (:func:`impctl.controller.restore.on_owner_kept`): for a curve point, impctl sets no
+    curve until asked again — set over the owner's point at the next look, it would undo the
+    owner's choice, as the watch's own check of the points (running) never does."""
+    def kept(entry: JournalEntry) -> None:
+        if entry.register not in KEEP or intent(state_dir) is False:
+            return
+        no_curve(state_dir, "the owner changed the curve points")
+        _LOG.info("the owner changed the heating curve (%s): impctl sets no curve until asked "
+                  "again (impctl curve --apply)", entry.register)
+    return kept

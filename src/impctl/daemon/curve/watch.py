@@ -28,7 +28,10 @@ Then, while no night runs, the daemon:
 The owner's points come back on ``impctl curve --restore``, on ``impctl restore`` and the
 unit's ``ExecStopPost``, on every stop of the daemon and at its next start (the orphan sweep;
 the watch then sets the curve again). A night's own restore leaves them
-(:attr:`impctl.controller.NightController.keep_registers`).
+(:attr:`impctl.controller.NightController.keep_registers`). Beside each point's journal entry
+is what impctl last wrote there and read back (given up before each write, :meth:`CurveWatch.
+_write`): a restore after the daemon died keeps a point the owner set while it was down, and
+then impctl sets no curve until asked again (:func:`.intent.owner_kept_point`).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import sqlite3
 from collections import deque
 from dataclasses import replace
 
+from ...controller.held import Held
 from ...heatpump import HeatPumpError
 from ...heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
 from ...heatpump.writes import write_rules
@@ -167,6 +171,8 @@ class CurveWatch:
         if why is not None:
             return self._refuse(why)
         for ma, name in CURVE_REGISTERS.items():
+            # claims nothing yet (an entry kept from before this look is given up too): what
+            # the points hold is impctl's only once its writes are read back (:meth:`_write`)
             d.store.journal_record(None, name, ma - 1, int(before[ma].raw))
         self.owner, self._owner_raw = owner, owner_raw
         self._keep(True)
@@ -211,13 +217,25 @@ class CurveWatch:
         points are read back: a write that may have landed unseen (the link dropped before
         its read-back) leaves a point that is neither impctl's held one nor the owner's, and
         it must never be read as the owner's change. Let go, the owner's points are the
-        daemon's restorer's to put back, or the next look sets the curve anew."""
+        daemon's restorer's to put back, or the next look sets the curve anew.
+
+        So it is beside each point's journal entry, which outlives the process: given up
+        before the point's write, kept again once read back (:class:`~impctl.controller.held.
+        Held`). A restore after the daemon died (its restart, ``impctl restore``) then keeps a
+        point the owner set meanwhile, and puts the owner's back into one written unseen.
+
+        Raises
+        ------
+        sqlite3.Error
+            The store cannot give a point up: that point is not written."""
         self.held = None
-        client = self.daemon.client
+        d = self.daemon
+        client = d.client
         # whitelisted while the owner asks for the curve, up to these bounds
         client.config = replace(client.config, writes=self._policy(self.owner))
+        held = Held(d.store, {e.address + 1: e.id for e in curve_entries(d.store)})
         for ma, value in zip(CURVE_REGISTERS, points, strict=True):
-            await client.write(ma, value)
+            await held.write(ma, lambda ma=ma, value=value: client.write(ma, value))
 
     def _say(self, level: str, text: str) -> None:
         # stored before it is logged: whoever reads the log finds the event already there
