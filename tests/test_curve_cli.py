@@ -139,8 +139,8 @@ def test_the_owners_word_is_readable_by_the_daemons_user(tmp_path):
     (and the kept curve) must be readable by others, not mkstemp's 0600."""
     import stat
 
+    from impctl.daemon.curve.intent import intent, set_intent
     from impctl.daemon.curve.state import keep_curve
-    from impctl.daemon.curve.watch import intent, set_intent
 
     path = set_intent(tmp_path, True, "test")
     assert stat.S_IMODE(path.stat().st_mode) == 0o644 and intent(tmp_path) is True

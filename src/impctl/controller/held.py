@@ -1,5 +1,5 @@
-"""What impctl holds in the registers a night writes: the value it last wrote into each and
-read back.
+"""What impctl holds in the registers a night (or the heating curve's watch,
+:mod:`impctl.daemon.curve.watch`) writes: the value it last wrote into each and read back.
 
 A night tells the owner's change from its own by it (:mod:`.owner`), and so does its restore
 (:func:`.restore.restore_entry`). The process may die mid-night (SIGKILL, a power cut) and
@@ -24,12 +24,13 @@ from .owner import JOURNAL_NAMES
 
 class Held(dict[int, float]):
     """Register number → the value impctl last wrote there and read back (physical unit), for
-    one night; the night's journal entries (register → entry id) keep it beside them.
+    one night (or one setting of the curve); its journal entries (register → entry id) keep it
+    beside them.
 
     Parameters
     ----------
     store : the store holding the night's journal (None: kept in memory only)
-    entries : register number → the night's journal entry id
+    entries : register number → its journal entry id
     values : register number → the value read there when the night journaled it
     """
 

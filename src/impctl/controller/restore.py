@@ -25,7 +25,7 @@ import asyncio
 import logging
 import sqlite3
 import weakref
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 from ..clock import VirtualClock
@@ -43,12 +43,23 @@ _UNRECORDED: weakref.WeakKeyDictionary[Any, dict[int, str]] = weakref.WeakKeyDic
 #: restored), so that no later restore of this process writes over them when the store could
 #: not record it.
 _OWNER_KEPT: weakref.WeakKeyDictionary[Any, set[int]] = weakref.WeakKeyDictionary()
+#: Per journal: told of each entry whose register the owner set (see :func:`on_owner_kept`).
+_ON_OWNER_KEPT: weakref.WeakKeyDictionary[Any, list[Callable[[JournalEntry], None]]] = (
+    weakref.WeakKeyDictionary())
 
 
 def owner_kept(store) -> set[int]:
     """Entries of ``store``'s journal whose register the owner set after impctl's last write:
     this process never restores them (their record may have failed)."""
     return _OWNER_KEPT.setdefault(store, set())
+
+
+def on_owner_kept(store, hook: Callable[[JournalEntry], None]) -> None:
+    """Call ``hook(entry)`` whenever a restore from ``store``'s journal keeps the owner's value
+    of ``entry``'s register. The restore does not know what else impctl drives that register
+    by: the heating curve's watch must not set its curve over the owner's point at its next
+    look (:func:`impctl.daemon.curve.intent.owner_kept_point`)."""
+    _ON_OWNER_KEPT.setdefault(store, []).append(hook)
 
 
 def unrecorded(store: Store) -> dict[int, str]:
@@ -108,6 +119,10 @@ def _owner_set(store: Store | OwnerValuesJournal, entry: JournalEntry, raw: int)
     what = (f"{entry.register} (register {entry.address + 1}) set to raw {raw} after "
             f"impctl's last write: the owner's value kept, raw {entry.raw_value} not restored")
     _LOG.warning("%s", what)
+    # told before the entry closes: a process dying between the two leaves the entry pending
+    # (the next restore keeps the point again), never a closed entry nobody acted on
+    for hook in _ON_OWNER_KEPT.get(store, ()):
+        hook(entry)
     try:
         store.journal_mark_owner_changed(entry.id, raw)
     except sqlite3.Error as exc:  # kept all the same: this process never restores it

@@ -17,11 +17,13 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from ..clock import VirtualClock
 from ..config import Config
 from ..controller import NightController, NightRefused, NightRequest, restore_all
+from ..controller.restore import on_owner_kept
 from ..heatpump import HeatPumpClient, HeatPumpError
 from ..heatpump.health import HEALTH_FILE
 from ..store import Store
 from .configured import clock_from_config, open_client, policy_from_config
-from .curve.watch import KEEP as CURVE_KEEP
+from .curve.intent import KEEP as CURVE_KEEP
+from .curve.intent import owner_kept_point
 from .curve.watch import start_curve_watch
 from .fitting import fit_ready, needs_fit, refresh_season, run_fit
 from .locks.heat_pump import HeatPumpLock
@@ -42,6 +44,7 @@ from .nights.schedule import (
     window_after_act,
 )
 from .restoring import restore_pending, sweep_orphans
+from .stopping import shut_down
 from .systemd import Notifier
 
 _LOG = logging.getLogger("impctl.daemon")
@@ -91,6 +94,10 @@ class Daemon:
         for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
             loop.add_signal_handler(sig, self._request_stop, sig)
         self.store = Store(self.cfg.db_path)
+        # a curve point the owner set while impctl's curve was on, kept by any restore of this
+        # process (the start's, the background one, a night's, the stop's): no curve until
+        # the owner asks again
+        on_owner_kept(self.store, owner_kept_point(self.cfg.state_dir))
         try:
             self._lock = DaemonLock(self.cfg.state_dir).acquire()
         except BaseException:
@@ -149,7 +156,7 @@ class Daemon:
                 await self.stop.wait()
         finally:
             restorer.cancel()
-            await self._shutdown()
+            await shut_down(self)
             watchdog.cancel()
             hp_lock.release()
             self._lock.release()
@@ -202,43 +209,6 @@ class Daemon:
             return False
         work.result()
         return True
-
-    async def _shutdown(self) -> None:
-        if self.curve is not None:  # before the restore below, which gives the curve back
-            self.curve.task.cancel()
-            await asyncio.gather(self.curve.task, return_exceptions=True)
-        if self._night_task is not None and not self._night_task.done():
-            # The controller sees the stop event, aborts and restores; wait for it.
-            try:
-                await asyncio.wait_for(asyncio.shield(self._night_task), timeout=80.0)
-            except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
-                _LOG.error("night did not finish cleanly on stop: %r", exc)
-        for task in self._polls:
-            task.cancel()
-        if self._recorder_task is not None:  # its last row stored, its snapshot done
-            try:
-                await asyncio.wait_for(asyncio.shield(self._recorder_task), timeout=30.0)
-            except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
-                _LOG.error("owner recording did not stop cleanly: %r", exc)
-                self._recorder_task.cancel()
-        if self.store is not None and self.store.journal_pending() and self._connected.is_set():
-            await restore_all(self.client, self.store, clock=self.clock, timeout_s=60.0,
-                              retry_s=1.0)
-        if self.scheduler is not None and self.scheduler.running:
-            self.scheduler.shutdown(wait=False)
-        if self._accelerated_task is not None:  # after the night above has finished
-            self._accelerated_task.cancel()
-            await asyncio.gather(self._accelerated_task, return_exceptions=True)
-        if self._fit_task is not None:  # kill the fit subprocess and reap it
-            self._fit_task.cancel()
-            await asyncio.gather(self._fit_task, return_exceptions=True)
-        if self.mqtt is not None:  # MQTT hook: "offline" after the restore, before closing
-            await self.mqtt.stop()
-        if self.client is not None:
-            self.client.close()
-        if self.store is not None:
-            self.store.close()
-        _LOG.info("impctl daemon stopped")
 
     def _restorable(self) -> list:
         """Pending journal entries but the heating curve's while the owner has it set."""

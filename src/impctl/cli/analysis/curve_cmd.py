@@ -107,8 +107,8 @@ def _on_gateway(config_path: Path, apply_: bool) -> None:
     """--apply / --restore: the owner's word to the daemon; --restore without a running
     daemon gives the owner's points back itself."""
     from ...config import load_config
+    from ...daemon.curve.intent import set_intent
     from ...daemon.curve.state import load_curve
-    from ...daemon.curve.watch import set_intent
     from ...daemon.locks.store import probe
     from ...heatpump.health import read_health
 
@@ -144,23 +144,27 @@ def _on_gateway(config_path: Path, apply_: bool) -> None:
         return
     import asyncio
 
-    left = asyncio.run(_restore_curve(cfg))
-    if left is None:
+    done = asyncio.run(_restore_curve(cfg))
+    if done is None:
         click.echo("nothing to restore: impctl has not set a heating curve")
-    elif left:
+        return
+    left, kept = done
+    if left:
         click.echo("still pending: " + ", ".join(e.register for e in left), err=True)
         raise SystemExit(1)
-    else:
-        click.echo("your heating curve is back, verified by read-back")
+    note = f"; {', '.join(kept)} left as you set it" if kept else ""
+    click.echo("your heating curve is back, verified by read-back" + note)
 
 
 async def _restore_curve(cfg):
-    """Restore the curve points' pending journal entries (no daemon runs); None when there
-    are none."""
+    """Restore the curve points' pending journal entries (no daemon runs): (the entries still
+    pending, the points left as the owner set them since impctl's last write); None when
+    there are none."""
     from ...clock import VirtualClock
     from ...controller import restore_all
+    from ...controller.restore import owner_kept
     from ...daemon.configured import open_client
-    from ...daemon.curve.watch import KEEP
+    from ...daemon.curve.intent import KEEP
     from ...daemon.locks.heat_pump import HeatPumpLock
     from ...heatpump import ModbusLinkError
     from ...store import Store
@@ -179,8 +183,9 @@ async def _restore_curve(cfg):
                     await client.connect(max_wait_s=60.0)
                 except ModbusLinkError as exc:
                     click.echo(f"heat pump not reachable: {exc}", err=True)
-                    return entries
-                return await restore_all(client, store, clock=VirtualClock.real(),
+                    return entries, []
+                left = await restore_all(client, store, clock=VirtualClock.real(),
                                          timeout_s=60.0, retry_s=1.0, keep=others)
+                return left, [e.register for e in entries if e.id in owner_kept(store)]
             finally:
                 client.close()

@@ -1,7 +1,8 @@
 """``impctl restore``: the owner's settings back, verified by read-back — from the store's
 journal, or from the copy kept next to it (owner-values.json) when the store is unusable.
 A register the owner set since impctl last wrote it and read it back (also while impctl was
-down) is left as the owner set it (:func:`impctl.controller.restore.restore_entry`).
+down) is left as the owner set it (:func:`impctl.controller.restore.restore_entry`); when it
+is a heating-curve point, impctl sets no curve until asked again.
 
 Also systemd's ``ExecStopPost=``, so it runs however the daemon ended, with the disk full too:
 it needs no free space (what it cannot record, the next start or restore records).
@@ -143,9 +144,14 @@ def _by_hand(problem: str, entries, why: str) -> None:
 async def _restore(cfg, journal, timeout_s: float):
     from ...clock import VirtualClock
     from ...controller import restore_all
+    from ...controller.restore import on_owner_kept
     from ...daemon.configured import clock_from_config, open_client
+    from ...daemon.curve.intent import owner_kept_point
     from ...heatpump import ModbusLinkError
 
+    # a curve point the owner set while impctl's curve was on, kept: the daemon (restarted
+    # after this, as systemd does) must not set its curve over it
+    on_owner_kept(journal, owner_kept_point(cfg.state_dir))
     clock = clock_from_config(cfg)
     client = open_client(cfg, clock)
     try:

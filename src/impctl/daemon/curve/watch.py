@@ -2,8 +2,8 @@
 watch that follows it.
 
 The owner asks with ``[curve] apply = true`` or ``impctl curve --apply`` (and takes it back
-with ``impctl curve --restore``; the command's word wins over the configuration). Then, while
-no night runs, the daemon:
+with ``impctl curve --restore``; the command's word wins over the configuration, :mod:`.intent`).
+Then, while no night runs, the daemon:
 
 1. **sets** the kept curve (:mod:`.state`) when it lowers the running one: only on an
    extended controller (a compact one has no curve register) whose adaptive curve (2320) is
@@ -28,58 +28,36 @@ no night runs, the daemon:
 The owner's points come back on ``impctl curve --restore``, on ``impctl restore`` and the
 unit's ``ExecStopPost``, on every stop of the daemon and at its next start (the orphan sweep;
 the watch then sets the curve again). A night's own restore leaves them
-(:attr:`impctl.controller.NightController.keep_registers`).
+(:attr:`impctl.controller.NightController.keep_registers`). Beside each point's journal entry
+is what impctl last wrote there and read back (given up before each write, :meth:`CurveWatch.
+_write`): a restore after the daemon died keeps a point the owner set while it was down, and
+then impctl sets no curve until asked again (:func:`.intent.owner_kept_point`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import sqlite3
 from collections import deque
 from dataclasses import replace
-from pathlib import Path
 
-from ...atomic import replacing
+from ...controller.held import Held
 from ...heatpump import HeatPumpError
 from ...heatpump.config import CURVE_FLOW_BOUNDS_C, CURVE_OWNER_MAX_C
 from ...heatpump.writes import write_rules
 from ...kronoterm.registers import Generation
 from ...store import JournalEntry
 from ..running import RunningDaemon
+from .intent import CURVE_REGISTERS, KEEP, intent, no_curve
 from .state import line_flow_c, load_curve
 
 _LOG = logging.getLogger("impctl.daemon")
-#: The curve points: documented number → journal name.
-CURVE_REGISTERS = {2309: "loop1_curve_cold", 2314: "loop1_curve_mild"}
-KEEP = frozenset(CURVE_REGISTERS.values())
-#: The owner's word at run time (``impctl curve --apply`` / ``--restore``).
-INTENT_FILE = "curve-intent.json"
 #: How far the controller's flow target may have moved otherwise than the line [K] (a
 #: controller's own curve need not be straight between its points).
 FOLLOW_TOL_K = 1.5
 #: A new kept curve replaces the one set when a point moves by at least this [K].
 MOVE_K = 0.5
-
-
-def intent(state_dir: str | Path) -> bool | None:
-    """The owner's last word (True: set the curve; False: give mine back), or None."""
-    try:
-        data = json.loads((Path(state_dir) / INTENT_FILE).read_text())
-    except (OSError, ValueError):
-        return None
-    value = data.get("apply") if isinstance(data, dict) else None
-    return value if isinstance(value, bool) else None
-
-
-def set_intent(state_dir: str | Path, apply: bool, why: str) -> Path:
-    """Record the owner's word (atomically; read by the daemon at its next look)."""
-    target = Path(state_dir) / INTENT_FILE
-    # readable by the daemon's own user when root wrote it
-    with replacing(target, mode=0o644) as tmp:
-        tmp.write_text(json.dumps({"apply": apply, "why": why}))
-    return target
 
 
 def wanted(daemon: RunningDaemon) -> bool:
@@ -193,6 +171,8 @@ class CurveWatch:
         if why is not None:
             return self._refuse(why)
         for ma, name in CURVE_REGISTERS.items():
+            # claims nothing yet (an entry kept from before this look is given up too): what
+            # the points hold is impctl's only once its writes are read back (:meth:`_write`)
             d.store.journal_record(None, name, ma - 1, int(before[ma].raw))
         self.owner, self._owner_raw = owner, owner_raw
         self._keep(True)
@@ -237,13 +217,25 @@ class CurveWatch:
         points are read back: a write that may have landed unseen (the link dropped before
         its read-back) leaves a point that is neither impctl's held one nor the owner's, and
         it must never be read as the owner's change. Let go, the owner's points are the
-        daemon's restorer's to put back, or the next look sets the curve anew."""
+        daemon's restorer's to put back, or the next look sets the curve anew.
+
+        So it is beside each point's journal entry, which outlives the process: given up
+        before the point's write, kept again once read back (:class:`~impctl.controller.held.
+        Held`). A restore after the daemon died (its restart, ``impctl restore``) then keeps a
+        point the owner set meanwhile, and puts the owner's back into one written unseen.
+
+        Raises
+        ------
+        sqlite3.Error
+            The store cannot give a point up: that point is not written."""
         self.held = None
-        client = self.daemon.client
+        d = self.daemon
+        client = d.client
         # whitelisted while the owner asks for the curve, up to these bounds
         client.config = replace(client.config, writes=self._policy(self.owner))
+        held = Held(d.store, {e.address + 1: e.id for e in curve_entries(d.store)})
         for ma, value in zip(CURVE_REGISTERS, points, strict=True):
-            await client.write(ma, value)
+            await held.write(ma, lambda ma=ma, value=value: client.write(ma, value))
 
     def _say(self, level: str, text: str) -> None:
         # stored before it is logged: whoever reads the log finds the event already there
@@ -251,13 +243,7 @@ class CurveWatch:
         _LOG.warning(text)
 
     def _intent_off(self, why: str) -> None:
-        """Keep the decision to set no curve; a file that cannot be written (a full disk) does
-        not stop the owner's points going back."""
-        try:
-            set_intent(self.daemon.cfg.state_dir, False, why)
-        except OSError as exc:
-            _LOG.error("cannot keep the decision to set no heating curve (%s: %s); the "
-                       "owner's points go back all the same", why, exc)
+        no_curve(self.daemon.cfg.state_dir, why)
 
     def _keep(self, held: bool) -> None:
         ctl = self.daemon.controller
