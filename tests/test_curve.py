@@ -160,6 +160,10 @@ def test_the_plant_runs_a_two_point_flow_curve():
     last = slice(-1440, None)
     on = run["heat_pump_w"][last, 0] > 0
     assert abs(np.mean(run["t_supply_c"][last, 0][on]) - 37.5) < 1.5
+    # taken off (the owner's own points back), the house's target is its built-in curve's
+    # again: the last curve's flow is not left standing
+    core.set_flow_curve(np.nan, np.nan, 21.0)
+    assert not np.isfinite(core.controller.flow_target_c).any()
     # the built-in curve elsewhere: NaN points leave a house on its own curve
     core2 = PlantCore(house, params, seed=0, n=1)
     core2.set_flow_curve(np.nan, np.nan, 21.0)

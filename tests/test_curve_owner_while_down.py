@@ -18,7 +18,8 @@ What is promised:
 * a point holding neither what impctl last wrote there and read back nor the owner's
   journaled point is the owner's: kept, its journal entry closed as theirs, one warning line;
   the other point comes back, and impctl sets no curve until asked again;
-* with no change by the owner, both points come back and the daemon sets its curve again;
+* with no change by the owner, both points come back and the daemon sets its curve again,
+  and finds that the controller follows it;
 * a point impctl wrote and could not read back before it died claims nothing: the owner's
   journaled point goes back into it whatever it holds;
 * so too for a point the owner sets just before a stop, between two looks of the watch: the
@@ -224,6 +225,9 @@ def test_without_a_change_by_the_owner_the_points_come_back_and_the_curve_is_set
         assert outcomes(killed.state) == {"loop1_curve_cold": "restored",
                                           "loop1_curve_mild": "restored"}
         assert said.count(CURVE_SET) == 1, said   # the owner's word still stands
+        # set over the owner's points just put back, it is judged against the flow target
+        # they give, not one still saying what impctl's curve asked for before the kill
+        assert "heating curve followed" in said and "did not follow" not in said, said
         # the stop gave the owner's points back again
         assert killed.points() == killed.owner
 

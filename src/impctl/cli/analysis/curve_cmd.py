@@ -130,9 +130,10 @@ def _on_gateway(config_path: Path, apply_: bool) -> None:
         if generation == "compact":
             click.echo("this is a compact controller (TT3000): it has no heating-curve "
                        "registers, so the curve stays advice — set it in the controller's menu")
-        click.echo("recorded: the daemon sets the curve at its next look, checks that the heat "
-                   "pump follows it and raises it if the rooms stay short; `impctl curve "
-                   "--restore` gives your curve back")
+        click.echo("recorded: the daemon sets the curve once the heat pump has run its "
+                   "present curve points for five minutes, checks that it follows them and "
+                   "raises the curve if the rooms stay short; `impctl curve --restore` gives "
+                   "your curve back")
         if not daemon:
             click.echo(f"impctl: warning: daemon {info.describe()}; the curve is set when a "
                        "daemon runs on this state directory", err=True)

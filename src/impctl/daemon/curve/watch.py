@@ -12,10 +12,11 @@ Then, while no night runs, the daemon:
    read-back) — each point within 20–55 °C or up to the owner's own point where that is
    higher (``[heatpump.writes] loop1_curve_c`` where the installer set limits), checked before
    the write: a curve outside them is refused, never clamped;
-2. **checks** at the next look that the controller follows: its own flow target (2128) must
-   have moved as the line moved at the outdoor temperature now (the new line less the
-   owner's), within :data:`FOLLOW_TOL_K`; if it has not, the owner's points come back and the
-   curve stays advice (the points' meaning is the controller document's, not measured);
+2. **checks** that the controller follows (:mod:`.follow`): its own flow target (2128) must
+   have moved as the line moved at the outdoor temperature now, within :data:`FOLLOW_TOL_K`,
+   both read once the points have stood :data:`~.follow.SETTLE_S` (set once the points found
+   have, judged once impctl's have); if not, the owner's points come back and the curve stays
+   advice (the points' meaning is the controller document's, not measured);
 3. **watches comfort**: a room on average more than ``[curve] short_k`` below its setpoint
    over ``short_h`` (the mean of the looks, so that a room short most of the time but crossing
    the line every few minutes counts) raises both points by ``raise_k`` (said in the log
@@ -49,13 +50,11 @@ from ...heatpump.writes import write_rules
 from ...kronoterm.registers import Generation
 from ...store import JournalEntry
 from ..running import RunningDaemon
+from .follow import FOLLOW_TOL_K, FollowCheck, Settling
 from .intent import CURVE_REGISTERS, KEEP, intent, no_curve
-from .state import line_flow_c, load_curve
+from .state import load_curve
 
 _LOG = logging.getLogger("impctl.daemon")
-#: How far the controller's flow target may have moved otherwise than the line [K] (a
-#: controller's own curve need not be straight between its points).
-FOLLOW_TOL_K = 1.5
 #: A new kept curve replaces the one set when a point moves by at least this [K].
 MOVE_K = 0.5
 
@@ -79,7 +78,9 @@ class CurveWatch:
         self.held: tuple[float, float] | None = None   # points impctl wrote [°C]
         self.owner: tuple[float, float] | None = None  # the owner's points [°C]
         self._owner_raw: dict[int, int] = {}             # … as journaled (raw words)
-        self._verify: float | None = None                # 2128 before the write [°C]
+        self._verify: FollowCheck | None = None          # the follow check waiting
+        self._written_s: float | None = None             # impctl's last write read back
+        self._settle = Settling()                        # the points found, unchanged since
         # the room's looks since the watch began this window: (simulated s, K below setpoint)
         self._looks: deque[tuple[float, float]] = deque()
         self._since: float | None = None                # simulated s this window began
@@ -131,6 +132,7 @@ class CurveWatch:
         curve is set until asked again."""
         d = self.daemon
         self._intent_off("the owner's settings were put back from outside")
+        self._settle.forget()
         for ma, raw in self._owner_raw.items():
             await d.client.restore_raw(ma, raw)
         self.held, self._verify = None, None
@@ -163,6 +165,9 @@ class CurveWatch:
         before = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
         if any(before[ma].raw is None for ma in CURVE_REGISTERS):
             return self._refuse("the curve points cannot be read")
+        found = tuple(int(before[ma].raw) for ma in CURVE_REGISTERS)
+        if not self._settle.settled(found, d.clock.monotonic_s()):
+            return None   # 2128 may still say what points written just before asked for
         # the points before impctl ever wrote: journaled (kept across restarts), else now
         pending = {e.address + 1: e.raw_value for e in curve_entries(d.store)}
         owner_raw = {ma: pending.get(ma, int(before[ma].raw)) for ma in CURVE_REGISTERS}
@@ -177,7 +182,9 @@ class CurveWatch:
         self.owner, self._owner_raw = owner, owner_raw
         self._keep(True)
         await self._write(points)
-        self._verify = before[2128].value
+        target = before[2128].value
+        self._verify = None if target is None else FollowCheck(
+            target, (found[0] / 10.0, found[1] / 10.0))
         self.held, self.raised_k, self._refused = points, 0.0, None
         text = (f"heating curve set to {points[0]:.1f} °C at −15 °C and {points[1]:.1f} °C at "
                 f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
@@ -234,8 +241,10 @@ class CurveWatch:
         # whitelisted while the owner asks for the curve, up to these bounds
         client.config = replace(client.config, writes=self._policy(self.owner))
         held = Held(d.store, {e.address + 1: e.id for e in curve_entries(d.store)})
+        self._settle.forget()
         for ma, value in zip(CURVE_REGISTERS, points, strict=True):
             await held.write(ma, lambda ma=ma, value=value: client.write(ma, value))
+        self._written_s = d.clock.monotonic_s()
 
     def _say(self, level: str, text: str) -> None:
         # stored before it is logged: whoever reads the log finds the event already there
@@ -262,6 +271,7 @@ class CurveWatch:
         self._looks.clear()
         self._since = None
         self._keep(False)
+        self._settle.forget()
         for entry in curve_entries(d.store):
             await restore_entry(d.client, d.store, entry, held.get(entry.address + 1))
         text = f"the owner's heating curve restored ({why})"
@@ -282,25 +292,8 @@ class CurveWatch:
             return None
         if any(abs(v - h) > 0.05 for v, h in zip(seen, self.held, strict=True)):
             return self._owner_changed(now)
-        if self._verify is not None:
-            t_out, target = now[2103].value, now[2128].value
-            if t_out is not None and target is not None:
-                moved = target - self._verify
-                expected = line_flow_c(self.held, t_out) - line_flow_c(self.owner, t_out)
-                self._verify = None
-                if abs(moved - expected) > FOLLOW_TOL_K:
-                    # The decision is kept first: a restart between the two finds the
-                    # journal and restores, and does not set the curve again.
-                    self._intent_off("the controller did not follow")
-                    await self._give_back(
-                        f"the controller did not follow the curve points: its flow target "
-                        f"moved {moved:+.1f} K where the line moved {expected:+.1f} K at "
-                        f"{t_out:.1f} °C outside")
-                    self._refuse("the controller does not follow its curve points as "
-                                 "documented")
-                    return
-                _LOG.info("heating curve followed: the flow target moved %+.1f K where the "
-                          "line moved %+.1f K at %.1f °C outside", moved, expected, t_out)
+        if self._verify is not None and not await self._judge(now):
+            return None
         if curve is None or not curve.get("lowers"):
             return await self._give_back("the kept curve no longer lowers the running one")
         new = tuple(float(v) + self.raised_k for v in curve["recommended"]["flow_c"])
@@ -313,6 +306,30 @@ class CurveWatch:
             self._say("info", f"heating curve moved to {new[0]:.1f} / {new[1]:.1f} °C "
                               "(a new fit)")
         await self._comfort()
+
+    async def _judge(self, now: dict) -> bool:
+        """The follow check (:mod:`.follow`), once impctl's points have stood long enough:
+        False when the controller did not follow (the owner's points are back), else True (the
+        look goes on; a check not yet due, or without a reading now, waits for a later one)."""
+        t_out, target = now[2103].value, now[2128].value
+        if (t_out is None or target is None
+                or not FollowCheck.due(self._written_s, self.daemon.clock.monotonic_s())):
+            return True
+        moved, expected = self._verify.moves(self.held, t_out, target)
+        self._verify = None
+        if abs(moved - expected) > FOLLOW_TOL_K:
+            # The decision is kept first: a restart between the two finds the journal and
+            # restores, and does not set the curve again.
+            self._intent_off("the controller did not follow")
+            await self._give_back(
+                f"the controller did not follow the curve points: its flow target moved "
+                f"{moved:+.1f} K where the line moved {expected:+.1f} K at {t_out:.1f} °C "
+                "outside")
+            self._refuse("the controller does not follow its curve points as documented")
+            return False
+        _LOG.info("heating curve followed: the flow target moved %+.1f K where the line "
+                  "moved %+.1f K at %.1f °C outside", moved, expected, t_out)
+        return True
 
     def _owner_changed(self, now: dict) -> None:
         d = self.daemon

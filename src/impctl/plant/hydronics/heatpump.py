@@ -169,6 +169,10 @@ class Controller:
         fa, fb, ref, lag = b(flow_a_c), b(flow_b_c), b(setpoint_ref_c), b(lag_k_per_w)
         self._has_curve = np.isfinite(fa) & np.isfinite(fb)
         self._curve = (fa, fb, ref, lag) if self._has_curve.any() else None
+        # A house back on its built-in curve aims at that curve's target from its next step
+        # (read from the step's water target): without this its last two-point flow would
+        # stand for ever, as the step only updates the flow target while a curve runs.
+        self.flow_target_c = np.where(self._has_curve, self.flow_target_c, np.nan)
 
     @property
     def flow_curve_set(self) -> NDArray[np.bool_]:
