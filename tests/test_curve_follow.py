@@ -104,3 +104,30 @@ def test_the_owners_points_put_back_just_before_the_curve_is_set_again_are_not_i
             assert rig.daemon.curve.held == points
             assert (rig.sim.rw[2309], rig.sim.rw[2314]) == (owner[0] - 40, owner[1] - 20)
     run_virtual(body(), 600)
+
+
+def test_a_setpoint_changed_before_the_verdict_voids_the_check_instead_of_failing_it(tmp_path):
+    """The owner raises the loop-1 setpoint 2.5 K right after impctl sets its curve: the
+    controller's flow target moves with the setpoint as well as with the points, so the move
+    says nothing of whether it follows them — the check is not judged, the curve stays."""
+    state = tmp_path / "state"
+    state.mkdir()
+    set_intent(state, True, "the test")
+
+    async def body():
+        async with daemon_rig(tmp_path, speed=SPEED) as rig:
+            rig.sim.config.step_s = QUICK_STEP_S
+            owner, points = _lowered(rig)
+            _kept(state, points)
+            await rig.until(lambda: (rig.sim.rw[2309], rig.sim.rw[2314])
+                            == (owner[0] - 40, owner[1] - 20), 60)
+            # the owner's panel: the setpoint and the plant it drives (not a Modbus write)
+            rig.sim.rw[2187] += 25
+            rig.sim.plant.setpoint_c = rig.sim.rw[2187] / 10.0
+            await rig.until(lambda: _said(rig, "follow check not judged")
+                            or _said(rig, FOLLOWED) or _said(rig, NOT_FOLLOWED), 60)
+            assert _said(rig, NOT_FOLLOWED) == 0, rig.logs.lines(level=logging.INFO)
+            assert _said(rig, "follow check not judged") == 1
+            assert rig.daemon.curve.held == points
+            assert (rig.sim.rw[2309], rig.sim.rw[2314]) == (owner[0] - 40, owner[1] - 20)
+    run_virtual(body(), 600)

@@ -10,13 +10,15 @@ wait starting again whenever they change or the watch itself writes), the one it
 that long after impctl's last write was read back. Otherwise a restore just before (the
 daemon's start putting the owner's points back, ``impctl curve --restore`` and ``--apply``)
 leaves a baseline that is still impctl's own curve, and a controller that follows looks as if
-it did not.
+it did not. The loop-1 setpoint moves 2128 too: a setpoint that changed between the two reads
+(the owner's, a night's) voids the check rather than failing it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .intent import CURVE_REGISTERS
 from .state import line_flow_c
 
 #: How far the controller's flow target may have moved otherwise than the line [K] (a
@@ -26,6 +28,9 @@ FOLLOW_TOL_K = 1.5
 #: controller works it out each model step (a minute); a real one's cycle is not documented,
 #: so a margin of several.
 SETTLE_S = 300.0
+#: What the watch reads at a look: the points, the controller's flow target, the outdoor
+#: temperature, and the loop-1 setpoint, which moves the flow target too.
+LOOKED_AT = (*CURVE_REGISTERS, 2128, 2103, 2187)
 
 
 class Settling:
@@ -49,10 +54,18 @@ class Settling:
 
 @dataclass(frozen=True)
 class FollowCheck:
-    """A check waiting: 2128 [°C] read under the points ``under`` [°C], both settled."""
+    """A check waiting: 2128 [°C] read under the points ``under`` [°C], both settled, and
+    the loop-1 setpoint then [°C] (None: unknown)."""
 
     target_c: float
     under: tuple[float, float]
+    setpoint_c: float | None = None
+
+    def void(self, setpoint_c: float | None) -> bool:
+        """Whether the setpoint now (``setpoint_c`` [°C]) is not the one 2128 was first read
+        under: its move would then not be the curve's alone."""
+        return (self.setpoint_c is None or setpoint_c is None
+                or abs(setpoint_c - self.setpoint_c) > 0.05)
 
     def moves(self, held: tuple[float, float], t_out_c: float,
               target_c: float) -> tuple[float, float]:

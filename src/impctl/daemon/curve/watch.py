@@ -50,7 +50,7 @@ from ...heatpump.writes import write_rules
 from ...kronoterm.registers import Generation
 from ...store import JournalEntry
 from ..running import RunningDaemon
-from .follow import FOLLOW_TOL_K, FollowCheck, Settling
+from .follow import FOLLOW_TOL_K, LOOKED_AT, FollowCheck, Settling
 from .intent import CURVE_REGISTERS, KEEP, intent, no_curve
 from .state import load_curve
 
@@ -162,7 +162,7 @@ class CurveWatch:
         if adaptive.value is None or adaptive.value != 0:
             return self._refuse("the controller's adaptive curve (2320) is on or unknown: "
                                 "it changes the points itself")
-        before = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
+        before = {ma: await client.read(ma) for ma in LOOKED_AT}
         if any(before[ma].raw is None for ma in CURVE_REGISTERS):
             return self._refuse("the curve points cannot be read")
         found = tuple(int(before[ma].raw) for ma in CURVE_REGISTERS)
@@ -184,7 +184,7 @@ class CurveWatch:
         await self._write(points)
         target = before[2128].value
         self._verify = None if target is None else FollowCheck(
-            target, (found[0] / 10.0, found[1] / 10.0))
+            target, (found[0] / 10.0, found[1] / 10.0), before[2187].value)
         self.held, self.raised_k, self._refused = points, 0.0, None
         text = (f"heating curve set to {points[0]:.1f} °C at −15 °C and {points[1]:.1f} °C at "
                 f"+15 °C outside (was {owner[0]:.1f} / {owner[1]:.1f} °C)")
@@ -281,7 +281,7 @@ class CurveWatch:
     async def _follow(self, curve: dict | None) -> None:
         d = self.daemon
         client = d.client
-        now = {ma: await client.read(ma) for ma in (*CURVE_REGISTERS, 2128, 2103)}
+        now = {ma: await client.read(ma) for ma in LOOKED_AT}
         seen = tuple(now[ma].value for ma in CURVE_REGISTERS)
         if any(v is None for v in seen):
             # a point that reads as missing (a sentinel, a word out of range) says nothing of
@@ -315,8 +315,11 @@ class CurveWatch:
         if (t_out is None or target is None
                 or not FollowCheck.due(self._written_s, self.daemon.clock.monotonic_s())):
             return True
-        moved, expected = self._verify.moves(self.held, t_out, target)
-        self._verify = None
+        check, self._verify = self._verify, None
+        if check.void(now[2187].value):   # the setpoint moved 2128 too: nothing to judge
+            _LOG.info("heating curve: the loop-1 setpoint changed; follow check not judged")
+            return True
+        moved, expected = check.moves(self.held, t_out, target)
         if abs(moved - expected) > FOLLOW_TOL_K:
             # The decision is kept first: a restart between the two finds the journal and
             # restores, and does not set the curve again.
