@@ -275,6 +275,25 @@ def run_cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess:
                           timeout=timeout_s)
 
 
+def cut_store(db: Path, size: int | None = None) -> None:
+    """Cut the store short, as a power cut on an SD card can (``None``: to half its size);
+    its WAL and index are lost too."""
+    for suffix in ("-wal", "-shm"):
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(f"{db}{suffix}")
+    os.truncate(db, db.stat().st_size // 2 if size is None else size)
+
+
+def restored_by_cli(config: Path) -> subprocess.CompletedProcess:
+    """``impctl restore --config CONFIG`` as a process: it must succeed with its one line
+    ``restored and verified…`` and no traceback."""
+    done = run_cli("restore", "--config", str(config))
+    assert done.returncode == 0 and "Traceback" not in done.stderr, (done.stdout, done.stderr)
+    lines = done.stdout.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("restored and verified"), lines
+    return done
+
+
 def stop_process(proc: subprocess.Popen, timeout_s: float = 20.0) -> int | None:
     """SIGTERM, then SIGKILL if it does not exit in time; returns the exit status."""
     if proc.poll() is None:

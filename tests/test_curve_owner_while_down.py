@@ -31,7 +31,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import os
 import sqlite3
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -43,10 +42,11 @@ import pytest
 from cli_fixtures import run_impctl
 from daemon_fixtures import (
     SimProcess,
+    cut_store,
     daemon_mapping,
     modbus_read,
     modbus_write,
-    run_cli,
+    restored_by_cli,
     sim_process,
     start_daemon,
     stop_process,
@@ -140,14 +140,8 @@ def restart(killed: Killed, how: str, log: Path) -> str:
         assert done.returncode == 0, (done.stdout, done.stderr)
         return done.stdout + done.stderr
     if how == "restore-no-store":
-        for suffix in ("-wal", "-shm"):
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(f"{db}{suffix}")
-        os.truncate(db, 100)
-    done = run_cli("restore", "--config", str(killed.config))
-    assert done.returncode == 0 and "Traceback" not in done.stderr, (done.stdout, done.stderr)
-    lines = done.stdout.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("restored and verified"), lines
+        cut_store(db, 100)
+    done = restored_by_cli(killed.config)
     return done.stdout + done.stderr
 
 

@@ -11,7 +11,8 @@ register that holds the same value), so a misattributed answer looks exactly rig
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import AsyncIterator, Callable
 
 import pytest
 from impctl_sim import KronotermSimulator, SimConfig, constant_weather, parse_faults
@@ -41,6 +42,21 @@ LATE_S = 0.08
 def _sim() -> KronotermSimulator:
     return KronotermSimulator(SimConfig(clock=clock(1.0), faults=parse_faults("freeze"),
                                         weather=constant_weather(-5.0), seed=3))
+
+
+@contextlib.asynccontextmanager
+async def _on_rtu(tmp_path) -> AsyncIterator[tuple[KronotermSimulator, HeatPumpClient]]:
+    """A frozen simulator on RTU over ``socket://`` and a client connected to it; both
+    stopped when done."""
+    sim = _sim()
+    try:
+        hp = await _rtu(sim, tmp_path)
+        try:
+            yield sim, hp
+        finally:
+            hp.close()
+    finally:
+        await sim.stop()
 
 
 async def _rtu(sim: KronotermSimulator, tmp_path) -> HeatPumpClient:
@@ -89,9 +105,7 @@ def test_a_write_not_executed_is_not_verified_by_another_masters_answer(tmp_path
     leave impctl holding a value the register never had: the read-back is not attributable,
     the write stays in doubt and a night's claim stays given up."""
     async def body():
-        sim = _sim()
-        try:
-            hp = await _rtu(sim, tmp_path)
+        async with _on_rtu(tmp_path) as (sim, hp):
             owner = (await hp.read(SETPOINT)).value
             target = owner - 3.0
             sim.faults.ignore_writes = True
@@ -104,9 +118,6 @@ def test_a_write_not_executed_is_not_verified_by_another_masters_answer(tmp_path
             assert sim.plant.setpoint_c == owner and sim.stats.writes[SETPOINT] == 1
             assert sim.gateway.counts["foreign"] >= 3
             assert "second_master" in hp.link.quirks
-            hp.close()
-        finally:
-            await sim.stop()
     run(body(), 60)
 
 
@@ -115,9 +126,7 @@ def test_an_acknowledged_write_whose_read_backs_are_all_crossed_is_in_doubt(tmp_
     master's answer: the value is not verified — the write raises with nothing read back and
     impctl claims nothing (the owner's value goes back at the restore)."""
     async def body():
-        sim = _sim()
-        try:
-            hp = await _rtu(sim, tmp_path)
+        async with _on_rtu(tmp_path) as (sim, hp):
             owner = (await hp.read(SETPOINT)).value
             target = owner - 3.0
             _other_master(sim, encode(register(SETPOINT), target),
@@ -128,9 +137,6 @@ def test_an_acknowledged_write_whose_read_backs_are_all_crossed_is_in_doubt(tmp_
             assert info.value.read_back is None
             assert SETPOINT not in held
             assert sim.plant.setpoint_c == target and sim.stats.writes[SETPOINT] == 1
-            hp.close()
-        finally:
-            await sim.stop()
     run(body(), 60)
 
 
@@ -139,9 +145,7 @@ def test_the_compare_before_a_write_takes_no_other_masters_answer(tmp_path):
     written: taken for the register's value, the write would be skipped as "already there"
     and the value claimed. Unattributable, nothing is written and nothing is claimed."""
     async def body():
-        sim = _sim()
-        try:
-            hp = await _rtu(sim, tmp_path)
+        async with _on_rtu(tmp_path) as (sim, hp):
             owner = (await hp.read(SETPOINT)).value
             target = owner - 3.0
             _other_master(sim, encode(register(SETPOINT), target), lambda *_: True)
@@ -150,9 +154,6 @@ def test_the_compare_before_a_write_takes_no_other_masters_answer(tmp_path):
                 await held.write(SETPOINT, lambda: hp.set_loop1_setpoint(target))
             assert SETPOINT not in held
             assert sim.plant.setpoint_c == owner and sim.stats.writes[SETPOINT] == 0
-            hp.close()
-        finally:
-            await sim.stop()
     run(body(), 60)
 
 
@@ -160,9 +161,7 @@ def test_a_read_back_crossed_once_is_read_again_and_verified(tmp_path):
     """One foreign answer on the first read-back (a word that is not the target): the read is
     made again and the write verified with the register's true value."""
     async def body():
-        sim = _sim()
-        try:
-            hp = await _rtu(sim, tmp_path)
+        async with _on_rtu(tmp_path) as (sim, hp):
             owner = (await hp.read(SETPOINT)).value
             target = owner - 3.0
             first: list[int] = []
@@ -177,9 +176,6 @@ def test_a_read_back_crossed_once_is_read_again_and_verified(tmp_path):
             assert result.written and result.read_back == target
             assert sim.plant.setpoint_c == target and sim.stats.writes[SETPOINT] == 1
             assert sim.gateway.counts["foreign"] == 1
-            hp.close()
-        finally:
-            await sim.stop()
     run(body(), 60)
 
 
@@ -188,12 +184,8 @@ def test_a_write_on_a_clean_line_costs_three_requests(tmp_path, transport):
     """Compare, write, read back: no re-read on a clean line (TCP waits for no settle)."""
     async def body():
         if transport == "rtu":
-            sim = _sim()
-            try:
-                hp = await _rtu(sim, tmp_path)
+            async with _on_rtu(tmp_path) as (sim, hp):
                 await _three_requests(hp, sim)
-            finally:
-                await sim.stop()
             return
         async with started(_sim().config) as sim:
             async with client(sim, budget=budget(tmp_path)) as hp:

@@ -29,7 +29,6 @@ import asyncio
 import contextlib
 import hashlib
 import json
-import os
 import sqlite3
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -40,9 +39,11 @@ from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
     SimProcess,
+    cut_store,
     daemon_mapping,
     modbus_write,
     owner_state,
+    restored_by_cli,
     run_cli,
     sim_process,
     start_daemon,
@@ -140,14 +141,8 @@ def restart(killed: Killed, how: str, log: Path) -> str:
             assert stop_process(daemon.proc) == 0
         return daemon.output()
     if how == "restore-no-store":
-        for suffix in ("-wal", "-shm"):
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(f"{db}{suffix}")
-        os.truncate(db, 100)
-    done = run_cli("restore", "--config", str(killed.config))
-    assert done.returncode == 0 and "Traceback" not in done.stderr, (done.stdout, done.stderr)
-    lines = done.stdout.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("restored and verified"), lines
+        cut_store(db, 100)
+    done = restored_by_cli(killed.config)
     return done.stdout + done.stderr
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -28,8 +27,10 @@ from daemon_fixtures import (
     OWNER_MODE,
     OWNER_SETPOINT_RAW,
     SimProcess,
+    cut_store,
     daemon_mapping,
     owner_state,
+    restored_by_cli,
     run_cli,
     sim_process,
     start_daemon,
@@ -72,15 +73,6 @@ def power_cut_mid_night(tmp_path: Path) -> Iterator[tuple[SimProcess, Path, Path
         yield sim, config, state
 
 
-def _truncate(state: Path, size: int | None) -> None:
-    """Cut the store short (``None``: to half its size); its WAL and index are lost too."""
-    db = state / "impctl.db"
-    for suffix in ("-wal", "-shm"):
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(f"{db}{suffix}")
-    os.truncate(db, db.stat().st_size // 2 if size is None else size)
-
-
 @pytest.mark.parametrize("size", [None, 100, 0], ids=["half", "header-cut", "empty"])
 def test_impctl_restore_without_the_store(tmp_path, size):
     with power_cut_mid_night(tmp_path) as (sim, config, state):
@@ -88,17 +80,13 @@ def test_impctl_restore_without_the_store(tmp_path, size):
         assert {e["register"]: e["raw_value"] for e in copy["entries"]} == {
             "loop1_setpoint": OWNER_SETPOINT_RAW, "loop1_mode": OWNER_MODE}
         assert (state / "owner-values.json").stat().st_mode & 0o777 == 0o640
-        _truncate(state, size)
+        cut_store(state / "impctl.db", size)
         if size == 100:  # the store does not open: status says what is still to restore
             status = run_impctl("status", "--config", str(config))
             assert status.returncode == 2 and status.stderr.count("\n") == 1, status
             assert "lists loop1_setpoint, loop1_mode to restore (run impctl restore)" in \
                 status.stderr, status.stderr
-        done = run_cli("restore", "--config", str(config))
-        assert done.returncode == 0, (done.stdout, done.stderr)
-        assert "Traceback" not in done.stderr, done.stderr
-        lines = done.stdout.splitlines()
-        assert len(lines) == 1 and lines[0].startswith("restored and verified"), lines
+        restored_by_cli(config)
         assert owner_state(sim.port) == OWNER
         assert json.loads((state / "owner-values.json").read_text())["entries"] == []
         again = run_cli("restore", "--config", str(config))  # nothing left to put back
@@ -113,7 +101,7 @@ def test_a_copy_that_fails_its_checksum_is_never_used(tmp_path):
         data = json.loads(path.read_text())
         data["entries"][0]["raw_value"] = 300  # 30.0 °C, not the owner's 21.0 °C
         path.write_text(json.dumps(data))
-        _truncate(state, 100)
+        cut_store(state / "impctl.db", 100)
         done = run_cli("restore", "--config", str(config))
         assert done.returncode == 1, (done.stdout, done.stderr)
         assert "Traceback" not in done.stderr and done.stdout == "", done
