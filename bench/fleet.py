@@ -321,8 +321,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--households", type=int, default=1000)
     ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "impctl-bench")
-    ap.add_argument("--throughput", type=int, default=256)
-    ap.add_argument("--alone", type=int, default=16)
+    ap.add_argument("--throughput", type=int, default=256,
+                    help="households of the throughput runs (0: skip them)")
+    ap.add_argument("--alone", type=int, default=16,
+                    help="households fitted alone and in one batch (0: skip)")
     ap.add_argument("--batch-size", type=int, default=DEFAULT_BATCH,
                     help="households per task [default: impctl fleet fit's]")
     ap.add_argument("--plant", choices=("realistic", "iso"), default="realistic")
@@ -353,14 +355,15 @@ def main() -> None:
         return
     work = Path(tempfile.mkdtemp(prefix="impctl-fleet-bench-"))
     try:
-        if not args.full_only:
+        if not args.full_only and args.throughput > 0:
             print(f"\n1. throughput on {args.throughput} households")
             small = subset(data, args.throughput, work)
             for w in (1, 2):
                 run_fleet(small, w, args.batch_size, work)
+        if not args.full_only and args.alone > 0:
             print(f"\n2. per household alone vs in a batch ({args.alone} households, one "
                   "thread)")
-            batch_vs_alone(small, args.alone)
+            batch_vs_alone(data, args.alone)
         print(f"\n3. {args.households} households, default local cluster, batch "
               f"{args.batch_size} (target ≤ 120 s)")
         if not args.skip_full:
