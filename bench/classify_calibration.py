@@ -103,7 +103,7 @@ def main() -> None:
         eces = " / ".join(f"{ece(p, y):.3f}" for p in (p_out, p_cal, p_votes))
         det = "yes" if getattr(model, "determined_", True) else "no"
         if hasattr(model, "cv_margin_low_"):
-            det += (f" (out-of-fold {model.cv_accuracy_:.1%} vs {model.cv_majority_:.1%}, "
+            det += (f" (held-out {model.cv_accuracy_:.1%} vs {model.cv_majority_:.1%}, "
                     f"margin ≥ {100 * model.cv_margin_low_:+.1f})")
         print(f"| {name} | {det} | {ci(hit_out)} | {ci(hit_cal)} | "
               f"{major.mean() * 100:.1f} | {ci(hit_cal - major, fmt='+.1f')} | {briers} | "

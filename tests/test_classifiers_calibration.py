@@ -40,10 +40,48 @@ def _data(n_houses: int, seed: int, rows_per_house: int = 4):
 @pytest.fixture(scope="module")
 def fitted():
     x, y, groups = _data(300, 0)
-    # leaves of one row: overconfident vote shares, which the calibration must temper
+    # leaves of one row: overconfident vote shares, which the calibration must temper; five
+    # folds, whose forests see four fifths of the houses (the bag's trees see half: on 300
+    # houses with leaves of one row their votes are too weak a stand-in, see below)
     return {name: RangeClassifier(rs, n_estimators=40, min_samples_leaf=1, random_state=3,
-                                  calibration=method).fit(x, y[name], groups=groups)
+                                  calibration=method, cv=5).fit(x, y[name], groups=groups)
             for name, rs, method in (("floor_area", AREA, "isotonic"), ("c_f", CF, "sigmoid"))}
+
+
+def test_out_of_bag_votes_never_come_from_a_tree_that_saw_the_house():
+    # every house told apart by its first feature, its class drawn at random: a tree that saw
+    # a house knows its class (leaves of one row), a tree that did not can only guess
+    rng = np.random.default_rng(11)
+    n_houses, per = 300, 4
+    area = np.repeat(rng.choice([80.0, 150.0, 250.0], n_houses), per)
+    groups = np.repeat(np.arange(n_houses), per)
+    x = pd.DataFrame(np.zeros((len(area), len(NAMES))), columns=NAMES)
+    x[NAMES[0]] = groups + rng.uniform(-0.1, 0.1, len(groups))   # the only feature that varies
+    model = RangeClassifier(AREA, n_estimators=30, min_samples_leaf=1, max_features=None,
+                            random_state=0).fit(x, area, groups=groups)
+    # held-out accuracy at chance (three classes about equally often), not the ~100 % a
+    # row-level bag would give (the house's other campaigns in the tree)
+    assert model.cv_accuracy_ < 0.45
+    assert not model.determined_
+    # the same data with the forest's own out-of-bag rows would leak: the check can fail
+    leaky = RangeClassifier(AREA, n_estimators=30, min_samples_leaf=1, max_features=None,
+                            random_state=0).fit(x, area, groups=np.arange(len(area)))
+    assert leaky.cv_accuracy_ > 0.9 and leaky.determined_
+
+
+def test_out_of_bag_calibration_is_as_good_as_five_folds_at_the_products_settings():
+    x, y, groups = _data(600, 12)
+    xt, yt, _ = _data(400, 13, rows_per_house=1)
+    truth = bin_values(yt["floor_area"], AREA)
+    score = {}
+    for cv in (5, "oob"):
+        model = RangeClassifier(AREA, n_estimators=100, min_samples_leaf=8, max_samples=0.5,
+                                random_state=2, cv=cv).fit(x, y["floor_area"], groups=groups)
+        assert model.calibrated_ and model.determined_
+        cal = model.predict_calibrated(xt)
+        np.testing.assert_allclose(cal.sum(axis=1), 1.0, atol=1e-12)
+        score[cv] = brier_score(cal, truth)
+    assert score["oob"] < score[5] + 0.01
 
 
 def test_calibration_beats_the_vote_shares_on_new_houses(fitted):

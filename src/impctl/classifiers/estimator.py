@@ -12,11 +12,11 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 
 from ..population.ranges import DEFAULT_RANGES, bin_values, labels_of
 
-#: Fewest training households worth calibrating on (each is held out once, in one of the
-#: cross-validation folds); below that the forest keeps its vote shares (a calibration map
+#: Fewest training households worth calibrating on (each is left out of about half the
+#: calibration's trees); below that the forest keeps its vote shares (a calibration map
 #: fitted to a handful of houses is noise).
 MIN_CALIBRATION_GROUPS = 200
-#: Accuracy over the majority class [fraction] the cross-validated calibrated classes must reach
+#: Accuracy over the majority class [fraction] the held-out calibrated classes must reach
 #: with 95 % confidence (the lower bound of a bootstrap over households) for the classifier to
 #: report them; below it the parameter is not determined by the nights and its probabilities
 #: are the training prior (class frequencies), said so. The bound, not the point margin: c_f on
@@ -27,7 +27,7 @@ MIN_MARGIN = 0.05
 
 class VoteShares(ClassifierMixin, BaseEstimator):
     """Passes precomputed vote shares through as ``predict_proba``: lets scikit-learn's
-    ``CalibratedClassifierCV`` fit its calibration map on out-of-fold votes."""
+    ``CalibratedClassifierCV`` fit its calibration map on held-out votes."""
 
     def fit(self, X: ArrayLike, y: ArrayLike) -> VoteShares:
         """Record the classes (the columns of ``X``)."""
@@ -69,15 +69,24 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     calibration : {"sigmoid", "isotonic"} or None, default "isotonic"
         A forest's vote shares are not probabilities (they crowd towards the middle). With
         ``groups`` given to :meth:`fit` (at least :data:`MIN_CALIBRATION_GROUPS`), the groups
-        (households) are split into ``cv`` folds; each fold's votes come from a forest trained
-        on the other folds (whole households, so no campaign of a house votes on its own
-        calibration), and scikit-learn's ``CalibratedClassifierCV`` fits its map from these
-        out-of-fold votes to class frequencies; the forest itself is then trained on every
-        row. Without enough groups the forest keeps its vote shares (``calibrated_`` False).
-    cv : int, default 5
-        Cross-validation folds of the calibration (by group, stratified by range).
+        (households) give held-out votes (``cv``: each row voted on only by trees that never
+        saw its household, so no campaign of a house votes on its own calibration), and
+        scikit-learn's ``CalibratedClassifierCV`` fits its map from these held-out votes to
+        class frequencies; the forest itself is then trained on every row. Without enough
+        groups the forest keeps its vote shares (``calibrated_`` False).
+    cv : int or "oob", default "oob"
+        Where the calibration's held-out votes come from. "oob": out of the bag by group —
+        ``oob_trees`` trees, each grown as the forest grows its trees but on a random half of
+        the groups (every row of those households), and each row's votes the mean of the trees
+        that never saw its household (about half of them); an int: that many
+        cross-validation folds by group, stratified by range, each voted on by a whole forest
+        trained on the other folds (five forests' work against the bag's two).
+    oob_trees : int or None, default None
+        Trees of the "oob" votes; None: twice ``n_estimators``, so that each row is voted on
+        by about as many trees as a new house is by the forest (its votes as fine-grained as
+        the ones the calibration map will be applied to).
     min_margin : float, default :data:`MIN_MARGIN`
-        The out-of-fold calibrated classes must beat the majority class by this much accuracy
+        The held-out calibrated classes must beat the majority class by this much accuracy
         with 95 % confidence (on the rows ``score_rows`` of :meth:`fit`, bootstrapped over
         groups); otherwise the parameter is *not determined* by the features
         (``determined_`` False) and :meth:`predict_proba` returns the training prior for
@@ -95,7 +104,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         Training class frequencies, per range.
     determined_ : bool
     cv_accuracy_, cv_majority_ : float
-        Out-of-fold accuracy of the calibrated classes, and the majority class's, on the
+        Held-out accuracy (``cv``) of the calibrated classes, and the majority class's, on the
         score rows (NaN when not calibrated).
     cv_margin_low_ : float
         Lower bound of the 95 % bootstrap interval of their difference (NaN when not
@@ -104,8 +113,11 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
     feature_names_in_ : ndarray of str (when fitted on a DataFrame)
     """
 
-    #: models pickled before this setting existed unpickle without it: theirs was None
+    #: models pickled before these settings existed unpickle without them: theirs were
+    #: None, 5 folds and no bag
     max_samples: int | float | None = None
+    cv: int | str = 5
+    oob_trees: int | None = None
 
     def __init__(
         self,
@@ -117,7 +129,8 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         random_state: int | None = None,
         n_jobs: int | None = None,
         calibration: str | None = "isotonic",
-        cv: int = 5,
+        cv: int | str = "oob",
+        oob_trees: int | None = None,
         min_margin: float = MIN_MARGIN,
     ):
         self.ranges = ranges
@@ -129,6 +142,7 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         self.n_jobs = n_jobs
         self.calibration = calibration
         self.cv = cv
+        self.oob_trees = oob_trees
         self.min_margin = min_margin
 
     def fit(self, X: ArrayLike, y: ArrayLike, groups: ArrayLike | None = None,
@@ -172,10 +186,14 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
 
         if len(np.unique(index)) < 2:
             return
-        split = StratifiedGroupKFold(self.cv, shuffle=True, random_state=self.random_state)
-        folds = list(split.split(np.zeros(len(index)), index, groups))
         # columns: the classes present in ``index``, in order (as the final forest's)
-        votes = cross_val_predict(clone(forest), X, index, cv=folds, method="predict_proba")
+        if self.cv == "oob":
+            votes = self._out_of_bag_votes(X, index, groups)
+        else:
+            split = StratifiedGroupKFold(self.cv, shuffle=True, random_state=self.random_state)
+            folds = list(split.split(np.zeros(len(index)), index, groups))
+            votes = cross_val_predict(clone(forest), X, index, cv=folds,
+                                      method="predict_proba")
         passthrough = FrozenEstimator(VoteShares().fit(votes, index))
         self.calibrator_ = CalibratedClassifierCV(passthrough, method=self.calibration).fit(
             votes, index)
@@ -192,6 +210,52 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         draws = np.random.default_rng(0).integers(0, len(per_group), (2000, len(per_group)))
         self.cv_margin_low_ = float(np.percentile(per_group[draws].mean(axis=1), 2.5))
         self.determined_ = bool(self.cv_margin_low_ >= self.min_margin)
+
+    def _out_of_bag_votes(self, X, index, groups) -> NDArray[np.float64]:
+        """Each row's vote shares from the trees grown on a random half of the groups that
+        left its group out (``cv="oob"``); columns: the classes present in ``index``."""
+        from joblib import Parallel, delayed
+        from sklearn.tree import DecisionTreeClassifier
+
+        present = np.unique(index)
+        _, group = np.unique(groups, return_inverse=True)
+        n_groups = int(group.max()) + 1
+        n_trees = self.oob_trees or 2 * self.n_estimators
+        rng = np.random.default_rng(self.random_state)
+        # exactly half the groups in each tree's bag: every tree as strong as the next
+        bags = np.argsort(rng.random((n_trees, n_groups)), axis=1) < n_groups // 2
+        seeds = rng.integers(0, 2**31 - 1, n_trees)
+        x = X.to_numpy(dtype=float) if hasattr(X, "to_numpy") else np.asarray(X, float)
+
+        # each tree draws its rows as the forest's trees draw theirs (with replacement, as many
+        # as ``max_samples`` asks of all rows), from its bag's rows
+        n_rows = len(index)
+        draws = (n_rows if self.max_samples is None else int(self.max_samples)
+                 if isinstance(self.max_samples, int | np.integer)
+                 else max(1, round(self.max_samples * n_rows)))
+
+        def grow(t: int):
+            seen = bags[t][group]
+            rows = np.flatnonzero(seen)
+            tree_rng = np.random.default_rng(seeds[t])
+            weight = np.bincount(tree_rng.integers(0, len(rows), draws), minlength=len(rows))
+            tree = DecisionTreeClassifier(min_samples_leaf=self.min_samples_leaf,
+                                          max_features=self.max_features,
+                                          random_state=int(seeds[t]))
+            tree.fit(x[rows], index[rows], sample_weight=weight.astype(float))
+            votes = np.zeros((int((~seen).sum()), len(present)))
+            votes[:, np.searchsorted(present, tree.classes_)] = tree.predict_proba(x[~seen])
+            return ~seen, votes
+
+        total = np.zeros((len(index), len(present)))
+        count = np.zeros(len(index))
+        for left_out, votes in Parallel(n_jobs=self.n_jobs, prefer="threads")(
+                delayed(grow)(t) for t in range(n_trees)):
+            total[left_out] += votes
+            count[left_out] += 1
+        # a row no tree left out (P = 2^-trees) gets the prior's shares: no vote of its own
+        prior = np.bincount(index, minlength=int(present.max()) + 1)[present] / len(index)
+        return np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], prior)
 
     def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
         """Probability of each range, shape (n_samples, n_ranges), as the product reports it:

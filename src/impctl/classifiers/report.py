@@ -79,8 +79,8 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
             ece = (f"{r.ece:>10.3f}{r.ece_votes:>8.3f}" if r.ece is not None else " " * 18)
             notes.append(f"{name:<12}{r.brier:>11.3f}{r.brier_votes:>8.3f}{r.brier_prior:>8.3f}"
                          f"{ece}   {acc:<24}{margin}{flag}")
-        notes.append("cal.: calibrated probabilities (the forest's out-of-fold votes of the "
-                     "training households mapped to")
+        notes.append("cal.: calibrated probabilities (the held-out votes of the training "
+                     "households, out of the bag by household, mapped to")
         notes.append("class frequencies); votes: the forest's vote shares; prior: the "
                      "training class frequencies.")
         for n, r in reports.items():
@@ -88,7 +88,7 @@ def format_report(reports: Mapping[str, ParameterReport], *, small: tuple[int, i
                 continue
             verdict = ("determined" if r.determined else
                        "NOT DETERMINED by the nights: reported as the prior (class frequencies)")
-            notes.append(f"{n}: {verdict} — out-of-fold accuracy {100 * r.cv_accuracy:.0f} % "
+            notes.append(f"{n}: {verdict} — held-out accuracy {100 * r.cv_accuracy:.0f} % "
                          f"against the majority's {100 * r.cv_majority:.0f} % on the training "
                          f"households' {small[0]}+{small[1]} campaigns, margin ≥ "
                          f"{100 * r.cv_margin_low:+.1f} points (95 %)")

@@ -15,7 +15,8 @@
   with fewer).
 * Baselines: the training majority class, and the same forest trained on labels shuffled across
   training households (what the features add beyond the class priors).
-* Probabilities: calibrated on out-of-fold votes of the training households
+* Probabilities: calibrated on held-out votes of the training households (out of the bag by
+  household)
   (:class:`RangeClassifier`); on the small-campaign test rows the Brier score and expected
   calibration error of the calibrated probabilities, the raw vote shares and the training
   prior, and their reliability bins. Accuracies with 95 % bootstrap intervals over test
@@ -65,6 +66,12 @@ class TrainConfig:
     #: chosen on a development population (seed 1): mean Brier 0.334 against sigmoid's 0.338,
     #: ECE 0.037 against 0.038 over both plants' three classes (bench/classify_calibration.py)
     calibration: str | None = "isotonic"
+    #: where the calibration's held-out votes come from (:class:`RangeClassifier`'s ``cv``):
+    #: "oob", trees grown on half the households each, every row voted on by those that left
+    #: its household out — the classes, probabilities and search ranges of five-fold
+    #: cross-validation at about half the training CPU (bench/classify_paired.py; decision
+    #: record 0030)
+    cv: int | str = "oob"
     #: campaign features the forests use (:data:`~.campaign.CAMPAIGN_FEATURE_NAMES` order);
     #: None: all of them. For measuring what a feature adds (bench/classify_compare.py).
     features: tuple[str, ...] | None = None
@@ -98,7 +105,7 @@ class ParameterReport:
     brier_prior: float | None = None
     calibrated: bool = False
     #: the classifier reports its classes (else the prior: not determined by the nights), and
-    #: the out-of-fold accuracy and majority it was judged on (training households)
+    #: the held-out accuracy and majority it was judged on (training households)
     determined: bool = True
     cv_accuracy: float | None = None
     cv_majority: float | None = None
@@ -180,7 +187,7 @@ def _forest(cfg: TrainConfig, ranges, seed: int) -> RangeClassifier:
     return RangeClassifier(ranges, n_estimators=cfg.n_estimators,
                            min_samples_leaf=cfg.min_samples_leaf,
                            max_samples=cfg.max_samples, random_state=seed,
-                           n_jobs=cfg.n_jobs, calibration=cfg.calibration)
+                           n_jobs=cfg.n_jobs, calibration=cfg.calibration, cv=cfg.cv)
 
 
 def train_classifiers(
