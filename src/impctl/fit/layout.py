@@ -106,7 +106,7 @@ def layout(n: int, with_prior: bool, nuisance_box, class_box, prior_box, *, n_st
     if with_prior:
         kinds += [("prior", j, -1) for j in range(min(s, PRIOR_STARTS))]
     if per_night:
-        # the paper's per-night mode is a comparison, not the result: two starts suffice
+        # the paper's per-night mode is a comparison, not the result: at most two starts
         kinds += [("night", j, i) for j in range(min(s, 2)) for i in range(n)]
     boxes = {"class": nuisance_box, "simple": class_box, "prior": prior_box,
              "night": class_box}
