@@ -35,6 +35,23 @@ FOLLOWED = "heating curve followed"
 NOT_FOLLOWED = "did not follow"
 
 
+def _curve_asked(tmp_path: Path) -> Path:
+    """A state directory in which the owner has asked for the curve."""
+    state = tmp_path / "state"
+    state.mkdir()
+    set_intent(state, True, "the test")
+    return state
+
+
+def _kept_quick(rig, state: Path) -> tuple[tuple[int, int], tuple[float, float]]:
+    """A controller that updates every few seconds, and a curve below the owner's points
+    kept for it: (the owner's raw points, the curve [°C])."""
+    rig.sim.config.step_s = QUICK_STEP_S
+    owner, points = _lowered(rig)
+    _kept(state, points)
+    return owner, points
+
+
 def _kept(state: Path, points: tuple[float, float]) -> None:
     state.mkdir(parents=True, exist_ok=True)
     (state / "curve.json").write_text(json.dumps({
@@ -61,9 +78,7 @@ def _said(rig, text: str) -> int:
 
 def test_a_controller_slower_than_the_looks_is_judged_once_it_has_worked_out_its_target(
         tmp_path):
-    state = tmp_path / "state"
-    state.mkdir()
-    set_intent(state, True, "the test")
+    state = _curve_asked(tmp_path)
 
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED) as rig:
@@ -80,15 +95,11 @@ def test_a_controller_slower_than_the_looks_is_judged_once_it_has_worked_out_its
 
 def test_the_owners_points_put_back_just_before_the_curve_is_set_again_are_not_its_baseline(
         tmp_path):
-    state = tmp_path / "state"
-    state.mkdir()
-    set_intent(state, True, "the test")
+    state = _curve_asked(tmp_path)
 
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED) as rig:
-            rig.sim.config.step_s = QUICK_STEP_S
-            owner, points = _lowered(rig)
-            _kept(state, points)
+            owner, points = _kept_quick(rig, state)
             await rig.until(lambda: _said(rig, FOLLOWED) or _said(rig, NOT_FOLLOWED), 60)
             assert _said(rig, FOLLOWED) == 1 and _said(rig, NOT_FOLLOWED) == 0
             # from now on the controller works its target out each 4 minutes: the owner's
@@ -110,15 +121,11 @@ def test_a_setpoint_changed_before_the_verdict_voids_the_check_instead_of_failin
     """The owner raises the loop-1 setpoint 2.5 K right after impctl sets its curve: the
     controller's flow target moves with the setpoint as well as with the points, so the move
     says nothing of whether it follows them — the check is not judged, the curve stays."""
-    state = tmp_path / "state"
-    state.mkdir()
-    set_intent(state, True, "the test")
+    state = _curve_asked(tmp_path)
 
     async def body():
         async with daemon_rig(tmp_path, speed=SPEED) as rig:
-            rig.sim.config.step_s = QUICK_STEP_S
-            owner, points = _lowered(rig)
-            _kept(state, points)
+            owner, points = _kept_quick(rig, state)
             await rig.until(lambda: (rig.sim.rw[2309], rig.sim.rw[2314])
                             == (owner[0] - 40, owner[1] - 20), 60)
             # the owner's panel: the setpoint and the plant it drives (not a Modbus write)

@@ -76,9 +76,9 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
         groups the forest keeps its vote shares (``calibrated_`` False).
     cv : int or "oob", default "oob"
         Where the calibration's held-out votes come from. "oob": out of the bag by group —
-        ``oob_trees`` trees, each grown as the forest grows its trees but on a random half of
-        the groups (every row of those households), and each row's votes the mean of the trees
-        that never saw its household (about half of them); an int: that many
+        ``oob_trees`` trees, each grown as the forest grows its trees but from the rows of a
+        random half of the groups, and each row's votes the mean of the trees that never saw
+        its household (about half of them); an int: that many
         cross-validation folds by group, stratified by range, each voted on by a whole forest
         trained on the other folds (five forests' work against the bag's two).
     oob_trees : int or None, default None
@@ -229,10 +229,12 @@ class RangeClassifier(ClassifierMixin, BaseEstimator):
 
         # each tree draws its rows as the forest's trees draw theirs (with replacement, as many
         # as ``max_samples`` asks of all rows), from its bag's rows
-        n_rows = len(index)
-        draws = (n_rows if self.max_samples is None else int(self.max_samples)
-                 if isinstance(self.max_samples, int | np.integer)
-                 else max(1, round(self.max_samples * n_rows)))
+        if self.max_samples is None:
+            draws = len(index)
+        elif isinstance(self.max_samples, int | np.integer):
+            draws = int(self.max_samples)
+        else:
+            draws = max(1, round(self.max_samples * len(index)))
 
         def grow(t: int):
             seen = bags[t][group]
