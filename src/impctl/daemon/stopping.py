@@ -14,6 +14,19 @@ from .running import RunningDaemon
 
 _LOG = logging.getLogger("impctl.daemon")
 
+#: The whole stop's budget [s of the event loop's monotonic time]: inside the unit's
+#: ``TimeoutStopSec=90s`` (deploy/impctl.service) with room left for the MQTT "offline" and
+#: closing the link and the store. Past it systemd kills the process, and the unit's
+#: ``ExecStopPost`` (``impctl restore``) puts back whatever is still pending.
+STOP_BUDGET_S = 75.0
+#: Of the budget, what the night's own abort and restore leave for the rest: the owner
+#: recording's last row and the stop's own restore of a journal the night left pending [s].
+AFTER_NIGHT_S = 20.0
+#: Longest wait for the owner recording's last row and snapshot [s].
+RECORDER_S = 30.0
+#: Shortest try the stop's own restore gets, whatever is left of the budget [s].
+RESTORE_MIN_S = 5.0
+
 
 class Stopping(RunningDaemon, Protocol):
     """What the stop ends of the daemon (:class:`~impctl.daemon.service.Daemon`), besides
@@ -29,27 +42,35 @@ class Stopping(RunningDaemon, Protocol):
 
 
 async def shut_down(daemon: Stopping) -> None:
-    """Stop ``daemon``'s tasks, restore the pending journal, close the link and the store."""
+    """Stop ``daemon``'s tasks, restore the pending journal, close the link and the store,
+    all within :data:`STOP_BUDGET_S`."""
     d = daemon
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + STOP_BUDGET_S
     if d.curve is not None:  # before the restore below, which gives the curve back
         d.curve.task.cancel()
         await asyncio.gather(d.curve.task, return_exceptions=True)
     if d._night_task is not None and not d._night_task.done():
         # The controller sees the stop event, aborts and restores; wait for it.
         try:
-            await asyncio.wait_for(asyncio.shield(d._night_task), timeout=80.0)
+            await asyncio.wait_for(asyncio.shield(d._night_task),
+                                   timeout=max(0.0, deadline - AFTER_NIGHT_S - loop.time()))
         except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
             _LOG.error("night did not finish cleanly on stop: %r", exc)
     for task in d._polls:
         task.cancel()
     if d._recorder_task is not None:  # its last row stored, its snapshot done
         try:
-            await asyncio.wait_for(asyncio.shield(d._recorder_task), timeout=30.0)
+            await asyncio.wait_for(asyncio.shield(d._recorder_task), timeout=max(0.0, min(
+                RECORDER_S, deadline - RESTORE_MIN_S - loop.time())))
         except (TimeoutError, asyncio.CancelledError, Exception) as exc:  # noqa: BLE001
             _LOG.error("owner recording did not stop cleanly: %r", exc)
             d._recorder_task.cancel()
     if d.store is not None and d.store.journal_pending() and d._connected.is_set():
-        await restore_all(d.client, d.store, clock=d.clock, timeout_s=60.0, retry_s=1.0)
+        # the rest of the budget, in the daemon clock's seconds (restore_all counts on it)
+        left_s = max(RESTORE_MIN_S, deadline - loop.time())
+        await restore_all(d.client, d.store, clock=d.clock,
+                          timeout_s=d.clock.sim_seconds(left_s), retry_s=1.0)
     if d.scheduler is not None and d.scheduler.running:
         d.scheduler.shutdown(wait=False)
     if d._accelerated_task is not None:  # after the night above has finished
