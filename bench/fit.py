@@ -279,7 +279,8 @@ def main() -> None:
     ap.add_argument("--normal-model", default="demand")
     ap.add_argument("--model-dir", default=None,
                     help="trained classifiers (default: impctl's per-user model directory)")
-    ap.add_argument("--starts", type=int, default=4)
+    ap.add_argument("--starts", type=int, default=None,
+                    help="starts per problem (default: the product's, NightFit's n_starts)")
     ap.add_argument("--no-lsq", dest="lsq", action="store_false")
     ap.add_argument("--quick", action="store_true", help="10 households, 5-min samples only")
     ap.add_argument("--verbose", action="store_true")
@@ -375,6 +376,8 @@ def main() -> None:
     ap.add_argument("--no-anticipate", dest="anticipate", action="store_false",
                     help="stop exactly at T_min, not where the gateway anticipates it")
     args = ap.parse_args()
+    if args.starts is None:
+        args.starts = NightFit().n_starts
     if args.quick:
         args.households, args.steps = 10, "300"
     torch.set_num_threads(1)
