@@ -6,7 +6,9 @@ Run:  .venv/bin/python bench/classify_compare.py [--seed 0] [--campaigns 5] [--p
           [--campaigns-as gateway|random]
 
 ``--a`` / ``--b`` are :class:`impctl.population.imp_run.setup.ImpSimConfig` keyword arguments
-(JSON).
+(JSON) on top of the nights the gateway records on ``--plant`` (``ImpSimConfig.for_plant``, as
+``impctl train`` makes its population: on the realistic plant constrained nights stop at T_min;
+``{"stop_at_t_min": false}`` lets them cool to the window's end).
 Each population is generated (900 households, same seed: same households and test split) and
 the classifiers trained on it as ``impctl train`` does. Every test household is then scored on
 ``--campaigns`` random campaigns of 2 constrained + 6 normal nights drawn from its nights with
@@ -50,7 +52,7 @@ def _dataset(kw: dict, args):
     key = json.dumps(kw, sort_keys=True)
     if key not in _DATASETS:
         _DATASETS[key] = generate_dataset(args.households, args.seed, plant=args.plant,
-                                          imp=ImpSimConfig(**kw))
+                                          imp=ImpSimConfig.for_plant(args.plant, **kw))
     return _DATASETS[key]
 
 

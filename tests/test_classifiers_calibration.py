@@ -155,3 +155,28 @@ def test_classification_says_not_determined_and_keeps_the_prior(fitted, tmp_path
         assert area.probability_text().endswith("(calibrated probability)")
         for r in result.values():
             assert sum(r.probabilities.values()) == pytest.approx(1.0)
+
+
+def test_the_report_says_when_a_verdict_sits_at_the_rules_edge():
+    """A determination bound within two points of the rule's +5 is the training seed's
+    verdict as much as the nights' (c_f on the realistic plant: +1.4 … +5.1 over seeds 0–5):
+    the report says so; a clear one is reported plainly."""
+    from impctl.classifiers.report import format_report
+    from impctl.classifiers.training import ParameterReport
+
+    def report(name: str, bound: float) -> ParameterReport:
+        return ParameterReport(
+            name, ["0.8-1.65", "1.65-3.7"], 0.9, 0.8, 0.75, 0.7, 0.5, [[5, 1], [2, 4]], [6, 6],
+            None, None, 100, 12, list(range(12)), brier=0.3, brier_votes=0.32, brier_prior=0.42,
+            calibrated=True, determined=bound >= 0.05, cv_accuracy=0.78, cv_majority=0.69,
+            cv_margin_low=bound)
+
+    text = format_report({"c_f": report("c_f", 0.051), "u_walls": report("u_walls", 0.2),
+                          "floor_area": report("floor_area", 0.035)})
+    verdicts = {line.split(":")[0]: line for line in text.splitlines()
+                if line.startswith(("c_f:", "u_walls:", "floor_area:"))}
+    assert set(verdicts) == {"c_f", "u_walls", "floor_area"}
+    assert "c_f: determined" in verdicts["c_f"] and "+5.1 points" in verdicts["c_f"]
+    assert "the rule asks +5.0" in verdicts["c_f"] and "rule's edge" in verdicts["c_f"]
+    assert "NOT DETERMINED" in verdicts["floor_area"] and "rule's edge" in verdicts["floor_area"]
+    assert "rule's edge" not in verdicts["u_walls"]
