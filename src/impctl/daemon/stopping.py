@@ -14,11 +14,12 @@ from .running import RunningDaemon
 
 _LOG = logging.getLogger("impctl.daemon")
 
-#: The whole stop's budget [s of the event loop's monotonic time]: inside the unit's
-#: ``TimeoutStopSec=90s`` (deploy/impctl.service) with room left for the MQTT "offline" and
-#: closing the link and the store. Past it systemd kills the process, and the unit's
+#: The budget [s of the event loop's monotonic time] of the stop's work on the heat pump: inside
+#: the unit's ``TimeoutStopSec=90s`` (deploy/impctl.service) with room left for a last Modbus
+#: try running over it, the MQTT "offline" (:data:`~impctl.mqtt.bridge.STOP_TIMEOUT_S`) and
+#: closing the link and the store. Past the unit's timeout systemd kills the process, and its
 #: ``ExecStopPost`` (``impctl restore``) puts back whatever is still pending.
-STOP_BUDGET_S = 75.0
+STOP_BUDGET_S = 70.0
 #: Of the budget, what the night's own abort and restore leave for the rest: the owner
 #: recording's last row and the stop's own restore of a journal the night left pending [s].
 AFTER_NIGHT_S = 20.0

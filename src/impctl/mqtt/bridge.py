@@ -39,6 +39,8 @@ from .tls import SocketErrors, connect_hint
 from .tls import context as tls_context
 
 _LOG = logging.getLogger("impctl.mqtt")
+#: Longest wait for the bridge's "offline" and disconnect at the daemon's stop [s].
+STOP_TIMEOUT_S = 8.0
 #: The MQTT client library's own log (paho through aiomqtt).
 _CLIENT_LOG = logging.getLogger("impctl.mqtt.client")
 #: A publish or subscribe the broker does not acknowledge in this time counts as an outage [s].
@@ -160,7 +162,7 @@ class MqttBridge:
         """New values: publish the state now (never blocks)."""
         self._wake.set()
 
-    async def stop(self, timeout_s: float = 8.0) -> None:
+    async def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
         """Publish ``offline`` (if connected), disconnect and end the task."""
         if self._task is None:
             return
