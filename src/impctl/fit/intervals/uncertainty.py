@@ -85,7 +85,7 @@ def laplace(ctx: lm.Context, sub: lm.Rows, u: torch.Tensor, t_m0: torch.Tensor,
               else terms.normal(scaled, u[None], ctx))
         s_mat, _, _ = lm.schur(ne, scaled)
     cov = torch.linalg.pinv(s_mat[0], hermitian=True)   # posterior when ctx.prior is set
-    fisher = s_mat[0] - lm.penalty(ctx, u[None], sub.box)[1][0]   # the data's alone
+    fisher = s_mat[0] - ne.penalty_h[0]   # the data's alone
     box = sub.box[0]
     # Night-clustered sandwich: S⁻¹·(Σ_nights g̃ g̃ᵀ)·S⁻¹ with g̃ each night's score after its
     # θ_m,0 is eliminated. It grows when the nights disagree in a way the model cannot

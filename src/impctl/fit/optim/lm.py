@@ -52,6 +52,9 @@ class _Normal:
     g_rows: torch.Tensor | None = None  # (R, 7) Jθᵀ r per row (for the sandwich covariance)
     r: torch.Tensor | None = None       # (R, K) scaled residuals
     jtj: torch.Tensor | None = None     # (R, 7, 7) Jθᵀ Jθ per row
+    #: (P, 7, 7) the share of ``h`` that is not the rows' (the ridge and the priors,
+    #: :func:`penalty`): the data's own curvature is ``h`` without it
+    penalty_h: torch.Tensor | None = None
 
 
 @dataclass
@@ -96,7 +99,7 @@ class RowTerms:
         loss = sum_rows((self.r ** 2).sum(1) * f, rows) + p_loss
         h = sum_rows(jtj, rows) + p_h
         return _Normal(loss, h, sum_rows(g_rows, rows) + p_g, self.c * f[:, None],
-                       self.d * f, self.gm * f, g_rows)
+                       self.d * f, self.gm * f, g_rows, penalty_h=p_h)
 
 
 def penalty(ctx: Context, u: torch.Tensor, box: torch.Tensor):
@@ -138,7 +141,7 @@ def _normal_equations(ctx: Context, rows: Rows, u: torch.Tensor, t_m0: torch.Ten
     loss = sum_rows(sq, rows) + p_loss
     h = sum_rows(jtj, rows) + p_h
     g = sum_rows(g_rows, rows) + p_g
-    return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj)
+    return _Normal(loss, h, g, c, d, gm, g_rows, r0, jtj, p_h)
 
 
 def _take(rows: Rows, keep: torch.Tensor) -> tuple[Rows, torch.Tensor, torch.Tensor]:
