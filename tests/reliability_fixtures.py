@@ -61,6 +61,10 @@ from impctl.model import HouseParameters
 TZ = ZoneInfo("Europe/Ljubljana")
 #: 03:00 local: manual nights are far from the scheduled 22:00 one and from the UTC day's end.
 MORNING = datetime(2026, 1, 12, 3, 0, tzinfo=TZ)
+#: Test-sized link timings (``[heatpump]``, wall clock): a failed try costs a fraction of a
+#: second.
+QUICK_LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02,
+              "connect_backoff_s": [0.05, 0.2]}
 MODES = ("pass", "down", "drop-read", "drop-write", "lose-write", "busy-write", "stall",
          "garbage", "slow-write", "down-after-write")
 #: Which rig (``daemon_rig(name=…)``) the running code belongs to: every task the daemon

@@ -18,11 +18,10 @@ import sqlite3
 from datetime import timedelta
 from pathlib import Path
 
-from reliability_fixtures import daemon_rig, run_virtual
+from reliability_fixtures import QUICK_LINK, daemon_rig, run_virtual
 
 SPEED = 600.0
-LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02,
-        "connect_backoff_s": [0.05, 0.2], "writes": {"verify_delay_s": 0.0}}
+LINK = {**QUICK_LINK, "writes": {"verify_delay_s": 0.0}}
 
 
 def _asked(state: Path) -> None:

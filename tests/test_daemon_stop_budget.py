@@ -14,14 +14,12 @@ import asyncio
 import re
 from pathlib import Path
 
-from reliability_fixtures import daemon_rig, run_virtual
+from reliability_fixtures import QUICK_LINK, daemon_rig, run_virtual
 
 from impctl.daemon import stopping
 from impctl.store import Store
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Test-sized link timings [s]: a failed try costs a fraction of a second.
-LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02, "connect_backoff_s": [0.05, 0.2]}
 
 
 def _unit_stop_timeout_s() -> float:
@@ -49,7 +47,7 @@ def test_a_stop_while_the_link_is_down_ends_within_its_budget_and_keeps_the_jour
 
     async def body() -> None:
         loop = asyncio.get_running_loop()
-        async with daemon_rig(tmp_path, speed=1.0, name="stop", heatpump=LINK,
+        async with daemon_rig(tmp_path, speed=1.0, name="stop", heatpump=QUICK_LINK,
                               night={"window": "22:00-02:00", "link_lost_limit_s": 3600}
                               ) as rig:
             nid = await rig.trigger("constrained")

@@ -31,11 +31,18 @@ from dataclasses import dataclass, field
 from datetime import timedelta
 
 from impctl_sim.faults import DEFAULT_GREETING
-from reliability_fixtures import WRITE_AUDIT, DaemonRig, daemon_rig, loop_wall, run_virtual
+from reliability_fixtures import (
+    QUICK_LINK,
+    WRITE_AUDIT,
+    DaemonRig,
+    daemon_rig,
+    loop_wall,
+    run_virtual,
+)
 
 SPEED = 600.0
 #: Test-sized link timings (wall clock): a failed try costs 2 simulated minutes at 600×.
-LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02, "connect_backoff_s": [0.05, 0.2]}
+LINK = QUICK_LINK
 OWNER = (21.0, 1)
 QUIRK = r"^WARNING impctl\.modbus\.link: Modbus quirk recognised: "
 LINK_LOST = r"^WARNING impctl\.controller\.night\.night1: heat-pump link lost: "

@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from datetime import timedelta
 
-from reliability_fixtures import OWNER_SETPOINT_C, daemon_rig, run_virtual
+from reliability_fixtures import OWNER_SETPOINT_C, QUICK_LINK, daemon_rig, run_virtual
 
 from impctl.controller import restore_all
 from impctl.daemon.configured import open_client
@@ -27,8 +27,7 @@ from impctl.store import Store
 from impctl.store.restore.owner_file import read_owner_values
 
 SPEED = 600.0
-LINK = {"timeout_s": 0.2, "attempts": 2, "retry_delay_s": 0.02,
-        "connect_backoff_s": [0.05, 0.2], "writes": {"verify_delay_s": 0.0}}
+LINK = {**QUICK_LINK, "writes": {"verify_delay_s": 0.0}}
 OWNER = (OWNER_SETPOINT_C, 1)
 
 

@@ -53,7 +53,9 @@ class _Normal:
     r: torch.Tensor | None = None       # (R, K) scaled residuals
     jtj: torch.Tensor | None = None     # (R, 7, 7) Jθᵀ Jθ per row
     #: (P, 7, 7) the share of ``h`` that is not the rows' (the ridge and the priors,
-    #: :func:`penalty`): the data's own curvature is ``h`` without it
+    #: :func:`penalty`): the data's own curvature is ``h`` without it. Set where the normal
+    #: equations are built at one point (:func:`_normal_equations`, :meth:`RowTerms.normal`);
+    #: None in the optimiser's trial states, whose problems come from different points
     penalty_h: torch.Tensor | None = None
 
 
